@@ -1,0 +1,33 @@
+# astrodyn: set-up, tests, demo.  Everything runs inside .venv at the repo root.
+PYTHON ?= python3
+VENV   ?= .venv
+PY     := $(VENV)/bin/python
+STAMP  := $(VENV)/.installed-stamp
+
+.PHONY: install test test-all demo bench clean
+
+$(STAMP): pyproject.toml
+	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install -q --upgrade pip
+	$(PY) -m pip install -q -e '.[test,plot]'
+	@touch $(STAMP)
+
+install: $(STAMP)
+
+# Representative suite (slow exhaustive sweeps excluded); CI runs this.
+test: $(STAMP)
+	$(PY) -m pytest -q
+
+# Everything, slow sweeps included.
+test-all: $(STAMP)
+	$(PY) -m pytest -q -m ''
+
+# The main job: the demo scenario.
+demo: $(STAMP)
+	$(VENV)/bin/astrodyn demo
+
+bench: $(STAMP)
+	$(VENV)/bin/astrodyn bench all
+
+clean:
+	rm -rf $(VENV) build *.egg-info src/*.egg-info .pytest_cache

@@ -1,0 +1,5 @@
+import sys
+
+from astrodyn.cli import main
+
+sys.exit(main())

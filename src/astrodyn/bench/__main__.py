@@ -1,0 +1,5 @@
+import sys
+
+from astrodyn.bench import main
+
+sys.exit(main())

@@ -1,0 +1,53 @@
+"""The ``astrodyn`` command.
+
+Each sub-command lives in its own module and exposes ``main(argv) -> int``; this
+file only dispatches, so ``astrodyn --help`` stays fast (nothing heavy is imported
+until a sub-command runs).
+"""
+
+from __future__ import annotations
+
+import importlib
+import sys
+
+# sub-command -> (module, one-line help)
+COMMANDS: dict[str, tuple[str, str]] = {
+    "demo": ("astrodyn.demo", "run the demo scene (the README's main job)"),
+    "bench": ("astrodyn.bench", "speed-against-error benchmarks: orbit | attitude | service | all"),
+    "run": ("astrodyn.runner", "run a scenario headless into an MCAP file"),
+    "serve": ("astrodyn.serve", "long-running real-time service controlled over Zenoh"),
+    "replay": ("astrodyn.recording.replay", "republish a recorded MCAP on Zenoh"),
+    "analyze": ("astrodyn.analysis", "report and plots from an MCAP file"),
+    "recover": ("astrodyn.recording.recover", "rewrite a crashed writer's MCAP with a summary"),
+    "validate": ("astrodyn.scenario", "check a scenario config and print what it would run"),
+}
+
+
+def _usage() -> str:
+    width = max(len(c) for c in COMMANDS)
+    lines = ["usage: astrodyn COMMAND [ARGS...]", "", "commands:"]
+    lines += [f"  {name:<{width}}  {help_}" for name, (_, help_) in COMMANDS.items()]
+    lines += ["", "`astrodyn COMMAND --help` for the options of one command."]
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if not argv or argv[0] in ("-h", "--help", "help"):
+        print(_usage())
+        return 0
+    if argv[0] in ("-V", "--version"):
+        from astrodyn import __version__
+
+        print(f"astrodyn {__version__}")
+        return 0
+    name, rest = argv[0], argv[1:]
+    if name not in COMMANDS:
+        print(f"astrodyn: unknown command {name!r}; expected one of: {', '.join(COMMANDS)}", file=sys.stderr)
+        return 2
+    module = importlib.import_module(COMMANDS[name][0])
+    return int(module.main(rest) or 0)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
