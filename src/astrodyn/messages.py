@@ -1,0 +1,880 @@
+"""Message types of the astrodyn bus and logs: keys, JSON Schemas, encode/decode.
+
+One source for the Zenoh bus and the MCAP files (design.md section 3). Pure Python
+and numpy; no zenoh or mcap import, so every layer can use it.
+
+Keys
+----
+Every message lives under ``astrodyn/<scenario>/``::
+
+    astrodyn/<scenario>/<body>/orbit        OrbitState      (one channel per body)
+    astrodyn/<scenario>/<body>/attitude     AttitudeState
+    astrodyn/<scenario>/<body>/crosscheck   CrossCheck      (``--cross-check`` mode)
+    astrodyn/<scenario>/@status             Status          (``serve``)
+    astrodyn/<scenario>/@event              Event           (start, stop, restart, error ...)
+    astrodyn/<scenario>/@control/<verb>     queryables      (status, pause, resume, rate, stop)
+    astrodyn/<scenario>/@alive/<process>    liveliness tokens
+    astrodyn/<scenario>/@batch/<process>    batch envelope  (see :func:`encode_batch`)
+
+Scenario, body, process and verb names match ``[A-Za-z0-9_.-]{1,128}`` and are not
+``.`` or ``..``: no ``/``, no Zenoh wildcards ``*``, ``**``, ``$*``, and never a leading
+``@`` (which marks the special keys above). :func:`parse_key` returns
+``(scenario, body_or_special, kind)``:
+
+====================================  ===============================================
+``astrodyn/s/sat1/orbit``             ``("s", "sat1", "orbit")``
+``astrodyn/s/@status``                ``("s", "@status", "status")``
+``astrodyn/s/@event``                 ``("s", "@event", "event")``
+``astrodyn/s/@control/pause``         ``("s", "@control", "pause")``
+``astrodyn/s/@alive/orbit``           ``("s", "@alive", "orbit")``
+``astrodyn/s/@batch/orbit``           ``("s", "@batch", "orbit")``
+====================================  ===============================================
+
+Payloads
+--------
+State messages are compact UTF-8 JSON objects (no spaces, keys in a fixed order), floats
+written with Python's ``repr`` (the shortest string that round-trips to the same float64),
+NaN and infinities rejected. Every object is described by a JSON Schema (draft 2020-12)
+that the MCAP logger stores with the channel. Times ``t`` are seconds since the scenario
+epoch, ``seq`` counts the messages of one channel from 0 without gaps. SI units: r in m,
+v in m/s, mu in m^3/s^2, w in rad/s (body components), q = (e0, e1, e2, e3) scalar first
+(Baruh ch. 7 Euler parameters, ``v_body = C(q) @ v_inertial``).
+
+:func:`decode` checks a payload against its schema with a hand-written validator (about
+as fast as ``json.loads`` itself; no jsonschema dependency) plus two checks a JSON
+Schema cannot state: ``|q| = 1`` within :data:`QUAT_NORM_TOL` and, for cross-checks,
+``dr_norm``/``dv_norm`` non-negative (which the schema does state). Errors are
+:class:`MessageError` whose text names the field and what was expected, e.g.
+``orbit.r: expected array of 3 finite numbers, got [1.0, "x"]``.
+
+Batch envelope
+--------------
+A publisher may send many per-body payloads in one Zenoh sample on
+``astrodyn/<scenario>/@batch/<process>``; the receiver splits it back into
+``(key, payload)`` pairs with :func:`decode_batch` and can write each payload to its own
+MCAP channel without re-encoding. Binary layout, all integers little-endian unsigned::
+
+    magic    4 bytes  b"ADB1"
+    count    u32      number of entries
+    entries  count x  { key_len u16, key (UTF-8, key_len bytes),
+                        payload_len u32, payload (payload_len bytes) }
+
+Nothing may follow the last entry.
+"""
+
+from __future__ import annotations
+
+import functools
+import json
+import math
+import re
+import struct
+from typing import Any, Iterable, Sequence
+
+import numpy as np
+
+__all__ = [
+    "MessageError",
+    "ORBIT_MODELS",
+    "ATTITUDE_MODELS",
+    "ORBIT_SCHEMA",
+    "ATTITUDE_SCHEMA",
+    "CROSSCHECK_SCHEMA",
+    "EVENT_SCHEMA",
+    "STATUS_SCHEMA",
+    "SCHEMAS",
+    "QUAT_NORM_TOL",
+    "NAME_PATTERN",
+    "check_name",
+    "orbit_key",
+    "attitude_key",
+    "crosscheck_key",
+    "control_key",
+    "status_key",
+    "alive_key",
+    "event_key",
+    "batch_key",
+    "parse_key",
+    "schema_for_key",
+    "kind_of_key",
+    "encode",
+    "decode",
+    "validate",
+    "is_valid",
+    "orbit_message",
+    "attitude_message",
+    "crosscheck_message",
+    "event_message",
+    "status_message",
+    "encode_orbit_batch",
+    "encode_attitude_batch",
+    "encode_batch",
+    "decode_batch",
+]
+
+
+class MessageError(ValueError):
+    """A key or payload that does not match its message type; ``str`` names the field."""
+
+
+# ---------------------------------------------------------------------------------------
+# Names and keys
+
+#: Models a state message may name.  The scenario loader accepts the same names (plus
+#: "none" for attitude, which publishes nothing).
+ORBIT_MODELS: tuple[str, ...] = ("kepler", "j2", "zonal", "third_body")
+ATTITUDE_MODELS: tuple[str, ...] = ("torque_free", "gravity_gradient", "gyrostat", "heavy_top", "user")
+CROSSCHECK_REFERENCES: tuple[str, ...] = ("rebound-ias15",)
+STATUS_STATES: tuple[str, ...] = ("starting", "running", "paused", "stopping", "stopped", "error")
+
+PREFIX = "astrodyn"
+NAME_PATTERN = r"[A-Za-z0-9_.-]{1,128}"
+_NAME_RE = re.compile(NAME_PATTERN)
+_BODY_KINDS = ("orbit", "attitude", "crosscheck")
+_SPECIAL_WITH_NAME = ("@control", "@alive", "@batch")
+_SPECIAL_PLAIN = {"@status": "status", "@event": "event"}
+
+#: |q| may differ from 1 by at most this much in a message (integrators keep |q| at
+#: round-off, ~1e-15; JSON repr round-trips floats exactly, so 1e-9 only rejects garbage).
+QUAT_NORM_TOL = 1e-9
+
+#: Largest seq / integer accepted: 2**53 - 1, exact in every JSON reader (doubles).
+MAX_SEQ = 2**53 - 1
+
+
+def check_name(name: Any, what: str = "name") -> str:
+    """Return ``name`` if it is a valid scenario/body/process name, else raise MessageError.
+
+    Valid: 1-128 characters from ``[A-Za-z0-9_.-]``, not ``.`` or ``..``.
+    """
+    if not isinstance(name, str) or not _NAME_RE.fullmatch(name) or name in (".", ".."):
+        raise MessageError(f"{what}: expected a name matching {NAME_PATTERN} (not '.' or '..'), got {name!r}")
+    return name
+
+
+def orbit_key(scenario: str, body: str) -> str:
+    """``astrodyn/<scenario>/<body>/orbit``."""
+    return f"{PREFIX}/{check_name(scenario, 'scenario')}/{check_name(body, 'body')}/orbit"
+
+
+def attitude_key(scenario: str, body: str) -> str:
+    """``astrodyn/<scenario>/<body>/attitude``."""
+    return f"{PREFIX}/{check_name(scenario, 'scenario')}/{check_name(body, 'body')}/attitude"
+
+
+def crosscheck_key(scenario: str, body: str) -> str:
+    """``astrodyn/<scenario>/<body>/crosscheck``."""
+    return f"{PREFIX}/{check_name(scenario, 'scenario')}/{check_name(body, 'body')}/crosscheck"
+
+
+def control_key(scenario: str, verb: str) -> str:
+    """``astrodyn/<scenario>/@control/<verb>`` (verbs: status, pause, resume, rate, stop)."""
+    return f"{PREFIX}/{check_name(scenario, 'scenario')}/@control/{check_name(verb, 'verb')}"
+
+
+def status_key(scenario: str) -> str:
+    """``astrodyn/<scenario>/@status``."""
+    return f"{PREFIX}/{check_name(scenario, 'scenario')}/@status"
+
+
+def alive_key(scenario: str, process: str) -> str:
+    """``astrodyn/<scenario>/@alive/<process>`` (liveliness token of one process)."""
+    return f"{PREFIX}/{check_name(scenario, 'scenario')}/@alive/{check_name(process, 'process')}"
+
+
+def event_key(scenario: str) -> str:
+    """``astrodyn/<scenario>/@event``."""
+    return f"{PREFIX}/{check_name(scenario, 'scenario')}/@event"
+
+
+def batch_key(scenario: str, process: str) -> str:
+    """``astrodyn/<scenario>/@batch/<process>`` (carries :func:`encode_batch` envelopes)."""
+    return f"{PREFIX}/{check_name(scenario, 'scenario')}/@batch/{check_name(process, 'process')}"
+
+
+def parse_key(key: Any) -> tuple[str, str, str]:
+    """Split a key into ``(scenario, body_or_special, kind)``; see the module docstring.
+
+    Raises MessageError for anything that is not an astrodyn key.
+    """
+    if not isinstance(key, str):
+        raise MessageError(f"key: expected a string, got {type(key).__name__}")
+    parts = key.split("/")
+    bad = f"key: expected astrodyn/<scenario>/<body>/(orbit|attitude|crosscheck) or a special key, got {key!r}"
+    if len(parts) < 3 or parts[0] != PREFIX:
+        raise MessageError(bad)
+    scenario = parts[1]
+    check_name(scenario, "key scenario")
+    second = parts[2]
+    if len(parts) == 3 and second in _SPECIAL_PLAIN:
+        return scenario, second, _SPECIAL_PLAIN[second]
+    if len(parts) == 4 and second in _SPECIAL_WITH_NAME:
+        return scenario, second, check_name(parts[3], f"key {second[1:]} name")
+    if len(parts) == 4 and parts[3] in _BODY_KINDS:
+        return scenario, check_name(second, "key body"), parts[3]
+    raise MessageError(bad)
+
+
+def kind_of_key(key: str) -> str | None:
+    """Message kind for a key ("orbit", "attitude", "crosscheck", "event", "status"), else None."""
+    _, _, kind = parse_key(key)
+    return kind if kind in _VALIDATORS else None
+
+
+# ---------------------------------------------------------------------------------------
+# JSON Schemas (draft 2020-12)
+
+_DRAFT = "https://json-schema.org/draft/2020-12/schema"
+_FINITE = {"type": "number"}  # JSON has no NaN/inf; decode() also rejects the Python extensions
+_T = {"type": "number", "description": "time since the scenario epoch, s"}
+_SEQ = {
+    "type": "integer",
+    "minimum": 0,
+    "maximum": MAX_SEQ,
+    "description": "message counter of this channel: 0, 1, 2, ... without gaps",
+}
+
+
+def _vec(n: int, description: str) -> dict:
+    return {"type": "array", "items": _FINITE, "minItems": n, "maxItems": n, "description": description}
+
+
+def _name_string(description: str) -> dict:
+    return {"type": "string", "pattern": f"^{NAME_PATTERN}$", "description": description}
+
+
+ORBIT_SCHEMA: dict = {
+    "$schema": _DRAFT,
+    "$id": "https://astrodyn.invalid/schemas/OrbitState.json",
+    "title": "astrodyn.OrbitState",
+    "description": "Translational state of one body relative to the central body, SI units.",
+    "type": "object",
+    "properties": {
+        "t": _T,
+        "seq": _SEQ,
+        "model": {"enum": list(ORBIT_MODELS), "description": "model that produced the state"},
+        "r": _vec(3, "position, m, in `frame`"),
+        "v": _vec(3, "velocity, m/s, in `frame`"),
+        "mu": {"type": "number", "exclusiveMinimum": 0, "description": "gravitational parameter, m^3/s^2"},
+        "frame": _name_string("inertial frame of r and v, e.g. GCRF"),
+    },
+    "required": ["t", "seq", "model", "r", "v", "mu", "frame"],
+    "additionalProperties": False,
+}
+
+ATTITUDE_SCHEMA: dict = {
+    "$schema": _DRAFT,
+    "$id": "https://astrodyn.invalid/schemas/AttitudeState.json",
+    "title": "astrodyn.AttitudeState",
+    "description": (
+        "Rotational state of one body: Euler parameters q = (e0, e1, e2, e3), scalar first, "
+        "unit norm, v_body = C(q) v_inertial (Baruh ch. 7); w body angular velocity in body axes."
+    ),
+    "type": "object",
+    "properties": {
+        "t": _T,
+        "seq": _SEQ,
+        "model": {"enum": list(ATTITUDE_MODELS), "description": "model that produced the state"},
+        "q": _vec(4, "Euler parameters, scalar first, |q| = 1"),
+        "w": _vec(3, "angular velocity in body axes, rad/s"),
+    },
+    "required": ["t", "seq", "model", "q", "w"],
+    "additionalProperties": False,
+}
+
+CROSSCHECK_SCHEMA: dict = {
+    "$schema": _DRAFT,
+    "$id": "https://astrodyn.invalid/schemas/CrossCheck.json",
+    "title": "astrodyn.CrossCheck",
+    "description": "astrodyn state minus the reference integrator's state for one body.",
+    "type": "object",
+    "properties": {
+        "t": _T,
+        "seq": _SEQ,
+        "dr": _vec(3, "position difference, m"),
+        "dv": _vec(3, "velocity difference, m/s"),
+        "dr_norm": {"type": "number", "minimum": 0, "description": "|dr|, m"},
+        "dv_norm": {"type": "number", "minimum": 0, "description": "|dv|, m/s"},
+        "reference": {"enum": list(CROSSCHECK_REFERENCES), "description": "reference integrator"},
+    },
+    "required": ["t", "seq", "dr", "dv", "dr_norm", "dv_norm", "reference"],
+    "additionalProperties": False,
+}
+
+EVENT_SCHEMA: dict = {
+    "$schema": _DRAFT,
+    "$id": "https://astrodyn.invalid/schemas/Event.json",
+    "title": "astrodyn.Event",
+    "description": "Something that happened to a process of the run (start, restart, stop, error, ...).",
+    "type": "object",
+    "properties": {
+        "t": _T,
+        "seq": _SEQ,
+        "process": _name_string("process name, e.g. orbit, attitude, logger, runner"),
+        "kind": {
+            "type": "string",
+            "pattern": "^[a-z][a-z_]{0,31}$",
+            "description": "start, restart, stop, error, pause, resume, rate, gap, ... (lower case)",
+        },
+        "detail": {"type": "string", "maxLength": 4096, "description": "human-readable detail"},
+    },
+    "required": ["t", "seq", "process", "kind", "detail"],
+    "additionalProperties": False,
+}
+
+STATUS_SCHEMA: dict = {
+    "$schema": _DRAFT,
+    "$id": "https://astrodyn.invalid/schemas/Status.json",
+    "title": "astrodyn.Status",
+    "description": "State of a running `serve` (also the reply of the status queryable).",
+    "type": "object",
+    "properties": {
+        "t": {"type": "number", "description": "simulation time reached, s since the scenario epoch"},
+        "seq": _SEQ,
+        "state": {"enum": list(STATUS_STATES)},
+        "real_time_factor": {"type": "number", "minimum": 0, "description": "sim seconds per wall second"},
+        "rate": {"type": "number", "exclusiveMinimum": 0, "description": "output rate, Hz"},
+        "messages": {"type": "integer", "minimum": 0, "maximum": MAX_SEQ, "description": "messages published"},
+        "processes": {
+            "type": "object",
+            "description": "process name -> its state (e.g. alive, dead, restarting)",
+            "propertyNames": {"pattern": f"^{NAME_PATTERN}$"},
+            "additionalProperties": {"type": "string", "maxLength": 64},
+        },
+        "detail": {"type": "string", "maxLength": 4096},
+    },
+    "required": ["t", "seq", "state", "real_time_factor"],
+    "additionalProperties": False,
+}
+
+#: schema name -> schema; the names are the schema titles.
+SCHEMAS: dict[str, dict] = {
+    s["title"]: s for s in (ORBIT_SCHEMA, ATTITUDE_SCHEMA, CROSSCHECK_SCHEMA, EVENT_SCHEMA, STATUS_SCHEMA)
+}
+_SCHEMA_OF_KIND = {
+    "orbit": ORBIT_SCHEMA,
+    "attitude": ATTITUDE_SCHEMA,
+    "crosscheck": CROSSCHECK_SCHEMA,
+    "event": EVENT_SCHEMA,
+    "status": STATUS_SCHEMA,
+}
+
+
+def schema_for_key(key: str) -> tuple[str, dict] | None:
+    """``(schema_name, schema_dict)`` of the messages on ``key``, or None (control, alive, batch).
+
+    Raises MessageError if ``key`` is not an astrodyn key at all.
+    """
+    _, _, kind = parse_key(key)
+    schema = _SCHEMA_OF_KIND.get(kind)
+    return None if schema is None else (schema["title"], schema)
+
+
+# ---------------------------------------------------------------------------------------
+# Validation (hand-written: the same rules as the schemas above, tested against jsonschema)
+
+
+def _show(value: Any) -> str:
+    """Short JSON-ish rendering of a bad value for error messages."""
+    try:
+        text = json.dumps(value, allow_nan=True, default=repr)
+    except Exception:  # pragma: no cover - default=repr handles anything
+        text = repr(value)
+    return text if len(text) <= 80 else text[:77] + "..."
+
+
+def _is_number(x: Any) -> bool:
+    return (type(x) is float or type(x) is int) and math.isfinite(x)
+
+
+def _number(msg: dict, kind: str, field: str, lo: float | None = None, lo_strict: bool = False) -> None:
+    x = msg[field]
+    if type(x) is not float and type(x) is not int or not math.isfinite(x):
+        raise MessageError(f"{kind}.{field}: expected a finite number, got {_show(x)}")
+    if lo is not None and (x <= lo if lo_strict else x < lo):
+        raise MessageError(f"{kind}.{field}: expected {'>' if lo_strict else '>='} {lo}, got {_show(x)}")
+
+
+def _seq(msg: dict, kind: str, field: str = "seq") -> None:
+    x = msg[field]
+    if type(x) is float and x.is_integer():  # JSON Schema's "integer" admits 3.0
+        x = msg[field] = int(x)
+    if type(x) is not int or not 0 <= x <= MAX_SEQ:
+        raise MessageError(f"{kind}.{field}: expected an integer 0 <= {field} <= 2**53-1, got {_show(x)}")
+
+
+def _vector(msg: dict, kind: str, field: str, n: int) -> None:
+    x = msg[field]
+    if type(x) is not list or len(x) != n:
+        raise MessageError(f"{kind}.{field}: expected array of {n} finite numbers, got {_show(x)}")
+    for c in x:
+        if type(c) is not float and type(c) is not int or not math.isfinite(c):
+            raise MessageError(f"{kind}.{field}: expected array of {n} finite numbers, got {_show(x)}")
+
+
+def _enum(msg: dict, kind: str, field: str, allowed: Sequence[str]) -> None:
+    x = msg[field]
+    if type(x) is not str or x not in allowed:
+        raise MessageError(f"{kind}.{field}: expected one of {', '.join(allowed)}, got {_show(x)}")
+
+
+def _string(msg: dict, kind: str, field: str, pattern: re.Pattern | None, what: str, max_len: int = 4096) -> None:
+    x = msg[field]
+    if type(x) is not str or len(x) > max_len or (pattern is not None and not pattern.search(x)):
+        raise MessageError(f"{kind}.{field}: expected {what}, got {_show(x)}")
+
+
+def _keys(msg: Any, kind: str, required: tuple[str, ...], optional: tuple[str, ...] = ()) -> None:
+    if type(msg) is not dict:
+        raise MessageError(f"{kind}: expected a JSON object, got {_show(msg)}")
+    for k in required:
+        if k not in msg:
+            raise MessageError(f"{kind}.{k}: expected a value (required field), got nothing")
+    if len(msg) != len(required):
+        extra = sorted(k for k in msg if k not in required and k not in optional)
+        if extra:
+            raise MessageError(f"{kind}: expected only fields {', '.join(required + optional)}, got extra {', '.join(map(str, extra))}")
+
+
+_NAME_FULL = re.compile(f"^{NAME_PATTERN}$")
+_EVENT_KIND = re.compile("^[a-z][a-z_]{0,31}$")
+_ORBIT_FIELDS = ("t", "seq", "model", "r", "v", "mu", "frame")
+_ATTITUDE_FIELDS = ("t", "seq", "model", "q", "w")
+_CROSSCHECK_FIELDS = ("t", "seq", "dr", "dv", "dr_norm", "dv_norm", "reference")
+_EVENT_FIELDS = ("t", "seq", "process", "kind", "detail")
+_STATUS_FIELDS = ("t", "seq", "state", "real_time_factor")
+_STATUS_OPTIONAL = ("rate", "messages", "processes", "detail")
+
+
+def _check_orbit(m: Any) -> None:
+    _keys(m, "orbit", _ORBIT_FIELDS)
+    _number(m, "orbit", "t")
+    _seq(m, "orbit")
+    _enum(m, "orbit", "model", ORBIT_MODELS)
+    _vector(m, "orbit", "r", 3)
+    _vector(m, "orbit", "v", 3)
+    _number(m, "orbit", "mu", 0.0, lo_strict=True)
+    _string(m, "orbit", "frame", _NAME_FULL, f"a frame name matching {NAME_PATTERN}", 128)
+
+
+def _check_attitude(m: Any) -> None:
+    _keys(m, "attitude", _ATTITUDE_FIELDS)
+    _number(m, "attitude", "t")
+    _seq(m, "attitude")
+    _enum(m, "attitude", "model", ATTITUDE_MODELS)
+    _vector(m, "attitude", "q", 4)
+    _vector(m, "attitude", "w", 3)
+    q = m["q"]
+    norm = math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
+    if not abs(norm - 1.0) <= QUAT_NORM_TOL:
+        raise MessageError(f"attitude.q: expected a unit quaternion (| |q| - 1 | <= {QUAT_NORM_TOL:g}), got |q| = {norm!r}")
+
+
+def _check_crosscheck(m: Any) -> None:
+    _keys(m, "crosscheck", _CROSSCHECK_FIELDS)
+    _number(m, "crosscheck", "t")
+    _seq(m, "crosscheck")
+    _vector(m, "crosscheck", "dr", 3)
+    _vector(m, "crosscheck", "dv", 3)
+    _number(m, "crosscheck", "dr_norm", 0.0)
+    _number(m, "crosscheck", "dv_norm", 0.0)
+    _enum(m, "crosscheck", "reference", CROSSCHECK_REFERENCES)
+
+
+def _check_event(m: Any) -> None:
+    _keys(m, "event", _EVENT_FIELDS)
+    _number(m, "event", "t")
+    _seq(m, "event")
+    _string(m, "event", "process", _NAME_FULL, f"a process name matching {NAME_PATTERN}", 128)
+    _string(m, "event", "kind", _EVENT_KIND, "a lower-case word matching ^[a-z][a-z_]{0,31}$", 32)
+    _string(m, "event", "detail", None, "a string of at most 4096 characters")
+
+
+def _check_status(m: Any) -> None:
+    _keys(m, "status", _STATUS_FIELDS, _STATUS_OPTIONAL)
+    _number(m, "status", "t")
+    _seq(m, "status")
+    _enum(m, "status", "state", STATUS_STATES)
+    _number(m, "status", "real_time_factor", 0.0)
+    if "rate" in m:
+        _number(m, "status", "rate", 0.0, lo_strict=True)
+    if "messages" in m:
+        _seq(m, "status", "messages")
+    if "processes" in m:
+        procs = m["processes"]
+        if type(procs) is not dict or not all(
+            _NAME_FULL.search(k) and type(v) is str and len(v) <= 64 for k, v in procs.items()
+        ):
+            raise MessageError(f"status.processes: expected an object name -> state string, got {_show(procs)}")
+    if "detail" in m:
+        _string(m, "status", "detail", None, "a string of at most 4096 characters")
+
+
+_VALIDATORS = {
+    "orbit": _check_orbit,
+    "attitude": _check_attitude,
+    "crosscheck": _check_crosscheck,
+    "event": _check_event,
+    "status": _check_status,
+}
+
+
+def _kind(key_or_kind: str) -> str:
+    if not isinstance(key_or_kind, str):
+        raise MessageError(f"key: expected a key or message kind string, got {type(key_or_kind).__name__}")
+    return _kind_of_str(key_or_kind)
+
+
+@functools.lru_cache(maxsize=65536)
+def _kind_of_str(key_or_kind: str) -> str:
+    if key_or_kind in _VALIDATORS:
+        return key_or_kind
+    if isinstance(key_or_kind, str) and key_or_kind in SCHEMAS:  # a schema name works too
+        return next(k for k, s in _SCHEMA_OF_KIND.items() if s["title"] == key_or_kind)
+    kind = kind_of_key(key_or_kind)
+    if kind is None:
+        raise MessageError(f"key: expected a key that carries messages (orbit, attitude, crosscheck, @event, @status), got {key_or_kind!r}")
+    return kind
+
+
+def validate(msg: Any, key_or_kind: str) -> dict:
+    """Check a decoded message against its type; return it (seq normalized to int) or raise.
+
+    ``key_or_kind``: a key (``astrodyn/s/sat1/orbit``), a kind (``"orbit"``, ``"attitude"``,
+    ``"crosscheck"``, ``"event"``, ``"status"``) or a schema name (``"astrodyn.OrbitState"``).
+    """
+    _VALIDATORS[_kind(key_or_kind)](msg)
+    return msg
+
+
+def _reject_constant(name: str) -> Any:
+    raise MessageError(f"payload: expected JSON numbers, got {name}")
+
+
+def decode(data: bytes | bytearray | memoryview, key_or_kind: str) -> dict:
+    """Parse a payload and validate it (see :func:`validate`); raise MessageError if bad.
+
+    NaN / Infinity literals (a Python json extension) are rejected, as are invalid UTF-8,
+    invalid JSON and anything that is not the message type of ``key_or_kind``.
+    """
+    validator = _VALIDATORS[_kind(key_or_kind)]
+    try:
+        msg = json.loads(bytes(data), parse_constant=_reject_constant)
+    except MessageError:
+        raise
+    except (ValueError, TypeError, RecursionError) as exc:  # JSONDecodeError, UnicodeDecodeError
+        raise MessageError(f"payload: expected UTF-8 JSON, got {_show(bytes(data[:40]).decode('utf-8', 'replace'))} ({exc})") from None
+    validator(msg)
+    return msg
+
+
+def is_valid(data: bytes | dict, key_or_kind: str) -> bool:
+    """True if ``data`` (payload bytes, or an already decoded dict) is a valid message."""
+    try:
+        if isinstance(data, dict):
+            validate(data, key_or_kind)
+        else:
+            decode(data, key_or_kind)
+    except MessageError:
+        return False
+    return True
+
+
+# ---------------------------------------------------------------------------------------
+# Encoding
+
+
+def _to_json_default(x: Any) -> Any:
+    if isinstance(x, np.ndarray):
+        return x.tolist()
+    if isinstance(x, np.integer):
+        return int(x)
+    if isinstance(x, np.floating):
+        return float(x)
+    if isinstance(x, np.bool_):
+        return bool(x)
+    raise TypeError(f"expected JSON-serializable values, got {type(x).__name__}")
+
+
+def _find_nonfinite(obj: Any, path: str) -> str | None:
+    if isinstance(obj, float) or isinstance(obj, np.floating):
+        return None if math.isfinite(obj) else path
+    if isinstance(obj, dict):
+        for k, v in obj.items():
+            found = _find_nonfinite(v, f"{path}.{k}" if path else str(k))
+            if found:
+                return found
+    if isinstance(obj, (list, tuple, np.ndarray)):
+        for i, v in enumerate(obj.tolist() if isinstance(obj, np.ndarray) else obj):
+            found = _find_nonfinite(v, f"{path}[{i}]")
+            if found:
+                return found
+    return None
+
+
+_ENCODER = json.JSONEncoder(separators=(",", ":"), allow_nan=False, ensure_ascii=False, default=_to_json_default)
+
+
+def encode(msg: dict, kind: str | None = None) -> bytes:
+    """Compact UTF-8 JSON of ``msg``; floats by ``repr`` (exact round trip).
+
+    numpy arrays and scalars are accepted. NaN/inf anywhere raise MessageError naming the
+    field. With ``kind`` (or a key / schema name) the message is also validated first.
+    """
+    if kind is not None:
+        validate(msg, kind)
+    try:
+        return _ENCODER.encode(msg).encode("utf-8")
+    except ValueError:
+        where = _find_nonfinite(msg, kind or "message") or kind or "message"
+        raise MessageError(f"{where}: expected a finite number, got a NaN or infinity") from None
+    except TypeError as exc:
+        raise MessageError(f"{kind or 'message'}: {exc}") from None
+
+
+def _floats(x: Any, n: int, kind: str, field: str) -> list[float]:
+    a = np.asarray(x, dtype=float)
+    if a.shape != (n,) or not np.all(np.isfinite(a)):
+        raise MessageError(f"{kind}.{field}: expected array of {n} finite numbers, got {_show(np.asarray(x).tolist() if np.ndim(x) else x)}")
+    return a.tolist()
+
+
+def _float(x: Any, kind: str, field: str) -> float:
+    try:
+        f = float(x)
+    except (TypeError, ValueError):
+        raise MessageError(f"{kind}.{field}: expected a finite number, got {_show(x)}") from None
+    if not math.isfinite(f):
+        raise MessageError(f"{kind}.{field}: expected a finite number, got {f!r}")
+    return f
+
+
+def _int(x: Any, kind: str, field: str) -> int:
+    expected = f"{kind}.{field}: expected an integer 0 <= {field} <= 2**53-1, got "
+    if isinstance(x, (bool, np.bool_)):
+        raise MessageError(expected + _show(x))
+    if isinstance(x, (float, np.floating)):
+        if not (math.isfinite(x) and float(x).is_integer()):
+            raise MessageError(expected + _show(float(x)))
+    elif not isinstance(x, (int, np.integer)):
+        raise MessageError(expected + _show(x))
+    i = int(x)
+    if not 0 <= i <= MAX_SEQ:
+        raise MessageError(expected + str(i))
+    return i
+
+
+def orbit_message(t: float, seq: int, model: str, r: Any, v: Any, mu: float, frame: str = "GCRF") -> dict:
+    """An ``astrodyn.OrbitState`` dict (validated): r in m, v in m/s, mu in m^3/s^2."""
+    msg = {
+        "t": _float(t, "orbit", "t"),
+        "seq": _int(seq, "orbit", "seq"),
+        "model": model,
+        "r": _floats(r, 3, "orbit", "r"),
+        "v": _floats(v, 3, "orbit", "v"),
+        "mu": _float(mu, "orbit", "mu"),
+        "frame": frame,
+    }
+    _check_orbit(msg)
+    return msg
+
+
+def attitude_message(t: float, seq: int, model: str, q: Any, w: Any) -> dict:
+    """An ``astrodyn.AttitudeState`` dict (validated): q scalar first, unit; w body rad/s."""
+    msg = {
+        "t": _float(t, "attitude", "t"),
+        "seq": _int(seq, "attitude", "seq"),
+        "model": model,
+        "q": _floats(q, 4, "attitude", "q"),
+        "w": _floats(w, 3, "attitude", "w"),
+    }
+    _check_attitude(msg)
+    return msg
+
+
+def crosscheck_message(t: float, seq: int, dr: Any, dv: Any, reference: str = "rebound-ias15") -> dict:
+    """An ``astrodyn.CrossCheck`` dict: dr = r_astrodyn - r_reference (m), dv likewise (m/s)."""
+    dr_list = _floats(dr, 3, "crosscheck", "dr")
+    dv_list = _floats(dv, 3, "crosscheck", "dv")
+    msg = {
+        "t": _float(t, "crosscheck", "t"),
+        "seq": _int(seq, "crosscheck", "seq"),
+        "dr": dr_list,
+        "dv": dv_list,
+        "dr_norm": math.hypot(*dr_list),
+        "dv_norm": math.hypot(*dv_list),
+        "reference": reference,
+    }
+    _check_crosscheck(msg)
+    return msg
+
+
+def event_message(t: float, seq: int, process: str, kind: str, detail: str = "") -> dict:
+    """An ``astrodyn.Event`` dict, e.g. ``event_message(12.5, 3, "orbit", "restart", "...")``."""
+    msg = {"t": _float(t, "event", "t"), "seq": _int(seq, "event", "seq"), "process": process, "kind": kind, "detail": detail}
+    _check_event(msg)
+    return msg
+
+
+def status_message(t: float, seq: int, state: str, real_time_factor: float, **optional: Any) -> dict:
+    """An ``astrodyn.Status`` dict; optional fields: rate (Hz), messages, processes, detail."""
+    msg = {
+        "t": _float(t, "status", "t"),
+        "seq": _int(seq, "status", "seq"),
+        "state": state,
+        "real_time_factor": _float(real_time_factor, "status", "real_time_factor"),
+    }
+    msg.update(optional)
+    _check_status(msg)
+    return msg
+
+
+# ---------------------------------------------------------------------------------------
+# Fast batch encoders: one payload per body (per-body channels stay intact)
+
+
+def _batch_arrays(kind: str, seqs: Any, arrays: dict[str, tuple[Any, int]]) -> tuple[list, dict[str, list]]:
+    n = None
+    out = {}
+    for field, (x, width) in arrays.items():
+        a = np.asarray(x, dtype=float)
+        if a.ndim != 2 or a.shape[1] != width or (n is not None and a.shape[0] != n):
+            raise MessageError(f"{kind}.{field}: expected an array of shape (N, {width}) with the same N for every field, got shape {a.shape}")
+        n = a.shape[0]
+        if not np.isfinite(a).all():
+            bad = int(np.argwhere(~np.isfinite(a))[0, 0])
+            raise MessageError(f"{kind}.{field}[{bad}]: expected array of {width} finite numbers, got {_show(a[bad].tolist())}")
+        out[field] = a.tolist()
+    s = np.asarray(seqs)
+    if s.ndim == 0:
+        s = np.full(n, s)
+    if s.shape != (n,) or not (np.issubdtype(s.dtype, np.integer) or (np.issubdtype(s.dtype, np.floating) and np.all(np.isfinite(s)) and np.all(s == np.round(s)))):
+        raise MessageError(f"{kind}.seq: expected an integer or an array of {n} integers, got {_show(s.tolist())}")
+    if n and (s.min() < 0 or s.max() > MAX_SEQ):
+        raise MessageError(f"{kind}.seq: expected integers 0 <= seq <= 2**53-1, got range [{s.min()}, {s.max()}]")
+    return s.astype(np.int64).tolist(), out
+
+
+def encode_orbit_batch(t: float, seqs: Any, model: str, r: Any, v: Any, mu: float, frame: str = "GCRF") -> list[bytes]:
+    """Encode N orbit states at one time ``t``: one JSON payload per body, in order.
+
+    ``seqs`` is one integer (the same for every body) or N integers; ``r``, ``v`` shape
+    (N, 3) in m and m/s. The bytes equal ``encode(orbit_message(...))`` for each body
+    (tested), written by string formatting for speed (a few us per body, see the bench).
+    """
+    tf = _float(t, "orbit", "t")
+    muf = _float(mu, "orbit", "mu")
+    if muf <= 0:
+        raise MessageError(f"orbit.mu: expected > 0, got {muf!r}")
+    if model not in ORBIT_MODELS:
+        raise MessageError(f"orbit.model: expected one of {', '.join(ORBIT_MODELS)}, got {_show(model)}")
+    if not isinstance(frame, str) or not _NAME_FULL.search(frame):
+        raise MessageError(f"orbit.frame: expected a frame name matching {NAME_PATTERN}, got {_show(frame)}")
+    seq_list, a = _batch_arrays("orbit", seqs, {"r": (r, 3), "v": (v, 3)})
+    head = f'{{"t":{tf!r},"seq":'
+    mid = f',"model":"{model}","r":['
+    tail = f'],"mu":{muf!r},"frame":"{frame}"}}'
+    return [
+        f"{head}{s}{mid}{ri[0]!r},{ri[1]!r},{ri[2]!r}],\"v\":[{vi[0]!r},{vi[1]!r},{vi[2]!r}{tail}".encode()
+        for s, ri, vi in zip(seq_list, a["r"], a["v"])
+    ]
+
+
+def encode_attitude_batch(t: float, seqs: Any, model: str, q: Any, w: Any) -> list[bytes]:
+    """Encode N attitude states at one time ``t``: one JSON payload per body, in order.
+
+    ``q`` shape (N, 4) scalar first, unit norm (checked to :data:`QUAT_NORM_TOL`); ``w``
+    shape (N, 3) rad/s body axes. Bytes equal ``encode(attitude_message(...))`` per body.
+    """
+    tf = _float(t, "attitude", "t")
+    if model not in ATTITUDE_MODELS:
+        raise MessageError(f"attitude.model: expected one of {', '.join(ATTITUDE_MODELS)}, got {_show(model)}")
+    seq_list, a = _batch_arrays("attitude", seqs, {"q": (q, 4), "w": (w, 3)})
+    qa = np.asarray(a["q"])
+    if qa.size:
+        err = np.abs(np.sqrt(np.einsum("ij,ij->i", qa, qa)) - 1.0)
+        if not np.all(err <= QUAT_NORM_TOL):
+            bad = int(np.argmax(err))
+            raise MessageError(f"attitude.q[{bad}]: expected a unit quaternion (| |q| - 1 | <= {QUAT_NORM_TOL:g}), got |q| = {float(np.linalg.norm(qa[bad]))!r}")
+    head = f'{{"t":{tf!r},"seq":'
+    mid = f',"model":"{model}","q":['
+    return [
+        f"{head}{s}{mid}{qi[0]!r},{qi[1]!r},{qi[2]!r},{qi[3]!r}],\"w\":[{wi[0]!r},{wi[1]!r},{wi[2]!r}]}}".encode()
+        for s, qi, wi in zip(seq_list, a["q"], a["w"])
+    ]
+
+
+# ---------------------------------------------------------------------------------------
+# Batch envelope (binary framing of many (key, payload) pairs in one bus sample)
+
+BATCH_MAGIC = b"ADB1"
+_U32 = struct.Struct("<I")
+_U16 = struct.Struct("<H")
+_MAX_KEY = 0xFFFF
+_MAX_PAYLOAD = 0xFFFFFFFF
+
+
+def encode_batch(items: Iterable[tuple[str, bytes]]) -> bytes:
+    """Frame ``(key, payload)`` pairs into one envelope (layout in the module docstring)."""
+    parts = [BATCH_MAGIC, b""]
+    count = 0
+    pack16, pack32 = _U16.pack, _U32.pack
+    for item in items:
+        try:
+            key, payload = item
+        except (TypeError, ValueError):
+            raise MessageError(f"batch[{count}]: expected a (key, payload) pair, got {_show(item)}") from None
+        if not isinstance(key, str):
+            raise MessageError(f"batch[{count}].key: expected a string, got {_show(key)}")
+        if not isinstance(payload, (bytes, bytearray, memoryview)):
+            raise MessageError(f"batch[{count}].payload: expected bytes, got {type(payload).__name__}")
+        kb = key.encode("utf-8")
+        if len(kb) > _MAX_KEY or len(payload) > _MAX_PAYLOAD:
+            raise MessageError(f"batch[{count}]: expected key <= 65535 bytes and payload < 4 GiB, got {len(kb)} and {len(payload)}")
+        parts += (pack16(len(kb)), kb, pack32(len(payload)), payload)
+        count += 1
+    parts[1] = pack32(count)
+    return b"".join(parts)
+
+
+def decode_batch(data: bytes | bytearray | memoryview) -> list[tuple[str, bytes]]:
+    """Split an envelope back into ``(key, payload)`` pairs; MessageError on any damage.
+
+    Errors name the entry and what was missing, e.g.
+    ``batch[3].payload: expected 120 bytes, got 40 (truncated)``.
+    """
+    buf = bytes(data)
+    size = len(buf)
+    if size < 8:
+        raise MessageError(f"batch: expected at least 8 header bytes, got {size} (truncated)")
+    if buf[:4] != BATCH_MAGIC:
+        raise MessageError(f"batch: expected magic {BATCH_MAGIC!r}, got {buf[:4]!r}")
+    (count,) = _U32.unpack_from(buf, 4)
+    if count > (size - 8) // 6:  # every entry needs at least 6 bytes of lengths
+        raise MessageError(f"batch: expected at most {(size - 8) // 6} entries in {size} bytes, header says {count} (truncated or corrupt)")
+    out = []
+    pos = 8
+    unpack16, unpack32 = _U16.unpack_from, _U32.unpack_from
+    for i in range(count):
+        if pos + 2 > size:
+            raise MessageError(f"batch[{i}].key_len: expected 2 bytes, got {size - pos} (truncated)")
+        (klen,) = unpack16(buf, pos)
+        pos += 2
+        if pos + klen > size:
+            raise MessageError(f"batch[{i}].key: expected {klen} bytes, got {size - pos} (truncated)")
+        try:
+            key = buf[pos : pos + klen].decode("utf-8")
+        except UnicodeDecodeError:
+            raise MessageError(f"batch[{i}].key: expected UTF-8, got {buf[pos:pos + klen][:40]!r}") from None
+        pos += klen
+        if pos + 4 > size:
+            raise MessageError(f"batch[{i}].payload_len: expected 4 bytes, got {size - pos} (truncated)")
+        (plen,) = unpack32(buf, pos)
+        pos += 4
+        if pos + plen > size:
+            raise MessageError(f"batch[{i}].payload: expected {plen} bytes, got {size - pos} (truncated)")
+        out.append((key, buf[pos : pos + plen]))
+        pos += plen
+    if pos != size:
+        raise MessageError(f"batch: expected {count} entries ending at byte {pos}, got {size - pos} trailing bytes")
+    return out
