@@ -217,8 +217,8 @@ def parse_key(key: Any) -> tuple[str, str, str]:
 
 def kind_of_key(key: str) -> str | None:
     """Message kind for a key ("orbit", "attitude", "crosscheck", "event", "status"), else None."""
-    _, _, kind = parse_key(key)
-    return kind if kind in _VALIDATORS else None
+    _, who, kind = parse_key(key)
+    return None if who in _SPECIAL_WITH_NAME else kind
 
 
 # ---------------------------------------------------------------------------------------
@@ -365,9 +365,11 @@ def schema_for_key(key: str) -> tuple[str, dict] | None:
 
     Raises MessageError if ``key`` is not an astrodyn key at all.
     """
-    _, _, kind = parse_key(key)
-    schema = _SCHEMA_OF_KIND.get(kind)
-    return None if schema is None else (schema["title"], schema)
+    kind = kind_of_key(key)
+    if kind is None:
+        return None
+    schema = _SCHEMA_OF_KIND[kind]
+    return schema["title"], schema
 
 
 # ---------------------------------------------------------------------------------------
@@ -619,17 +621,18 @@ def encode(msg: dict, kind: str | None = None) -> bytes:
     """Compact UTF-8 JSON of ``msg``; floats by ``repr`` (exact round trip).
 
     numpy arrays and scalars are accepted. NaN/inf anywhere raise MessageError naming the
-    field. With ``kind`` (or a key / schema name) the message is also validated first.
+    field. With ``kind`` (a kind, key or schema name) the encoded bytes are also validated.
     """
-    if kind is not None:
-        validate(msg, kind)
     try:
-        return _ENCODER.encode(msg).encode("utf-8")
+        data = _ENCODER.encode(msg).encode("utf-8")
     except ValueError:
         where = _find_nonfinite(msg, kind or "message") or kind or "message"
         raise MessageError(f"{where}: expected a finite number, got a NaN or infinity") from None
     except TypeError as exc:
         raise MessageError(f"{kind or 'message'}: {exc}") from None
+    if kind is not None:
+        decode(data, kind)  # validates exactly what goes out (numpy values included)
+    return data
 
 
 def _floats(x: Any, n: int, kind: str, field: str) -> list[float]:
