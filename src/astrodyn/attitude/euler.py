@@ -1,0 +1,169 @@
+"""Euler's equations of rigid-body motion in state form, with torques and rotors.
+
+Following H. Baruh, *Analytical Dynamics*, ch. 8 (Euler's equations, sec. 8.5-8.7;
+state form for numerical integration) and ch. 10 (gyrostats).  Conventions are
+those of ``design.md``:
+
+* ``w``: body angular velocity in **body** components, rad/s.
+* Euler parameters ``q = (e0, e1, e2, e3)``, scalar first, with
+  ``v_body = C(q) @ v_inertial`` and ``dC/dt = -[w x] C``; the kinematic equation
+  is then ``dq/dt = 1/2 q (x) (0, w)`` (Hamilton product), i.e. Baruh eq. (7.9x)
+  ``e0' = -1/2 w.e``, ``e' = 1/2 (e0 w + e x w)``.
+* ``inertia``: either the three principal moments ``(I1, I2, I3)`` (body axes are
+  principal axes) or a full symmetric inertia tensor ``(3, 3)`` in body axes,
+  kg m^2, about the centre of mass (or about the fixed point for a top).
+* ``torque``: external torque in body components, N m.
+* ``rotor_momentum`` ``h``: angular momentum of the rotors (momentum wheels,
+  dual-spin rotor) *relative to the body*, body components, N m s.  The total
+  angular momentum in body components is ``H = I w + h`` and Euler's equations of
+  a gyrostat read (Baruh ch. 10; Hughes, *Spacecraft Attitude Dynamics*, ch. 7)::
+
+      I w' + w x (I w + h) = tau - h'
+
+  or, in momentum form, ``H' = H x w + tau`` with ``w = I^{-1} (H - h)``.
+
+Everything is vectorized over leading axes ``(..., 3)``; a single state returns
+``(3,)``.  NaN inputs give NaN outputs.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = [
+    "inertia_tensor",
+    "principal_axes",
+    "euler_rates",
+    "body_momentum_rates",
+    "attitude_state_rates",
+]
+
+
+def _as_vec3(x, name):
+    a = np.asarray(x, dtype=np.float64)
+    if a.shape[-1:] != (3,):
+        raise ValueError(f"{name}: expected an array of shape (..., 3), got shape {a.shape}")
+    return a
+
+
+def inertia_tensor(inertia) -> np.ndarray:
+    """The ``(3, 3)`` inertia tensor from principal moments ``(3,)`` or a tensor ``(3, 3)``.
+
+    Checks that the tensor is symmetric (to 1e-12 relative) and physically
+    realisable: positive moments satisfying the triangle inequalities
+    ``I1 + I2 >= I3`` (cyclic), with a 1e-12 relative slack for round-off.
+    Raises ``ValueError`` naming ``inertia`` otherwise.
+    """
+    a = np.asarray(inertia, dtype=np.float64)
+    if a.shape == (3,):
+        J = np.diag(a)
+    elif a.shape == (3, 3):
+        J = a.copy()
+    else:
+        raise ValueError(f"inertia: expected principal moments (3,) or a tensor (3, 3), got shape {a.shape}")
+    if not np.all(np.isfinite(J)):
+        raise ValueError("inertia: must be finite")
+    scale = np.max(np.abs(J))
+    if np.max(np.abs(J - J.T)) > 1e-12 * scale:
+        raise ValueError("inertia: tensor must be symmetric")
+    J = 0.5 * (J + J.T)
+    m = np.linalg.eigvalsh(J)
+    if m[0] <= 0.0:
+        raise ValueError(f"inertia: principal moments must be positive, got {m}")
+    if m[0] + m[1] < m[2] * (1.0 - 1e-12):
+        raise ValueError(f"inertia: principal moments {m} violate the triangle inequality I1 + I2 >= I3")
+    return J
+
+
+def principal_axes(inertia):
+    """Principal moments and axes: ``inertia = P @ diag(moments) @ P.T``.
+
+    Returns ``(moments (3,), P (3, 3))``.  The columns of ``P`` are the principal
+    axes in body components and ``det P = +1`` (a proper rotation), so a body
+    vector maps to principal-axis components as ``v_principal = P.T @ v_body``.
+    For a diagonal input ``P`` is the identity and the moments keep their order.
+    """
+    J = inertia_tensor(inertia)
+    if np.count_nonzero(J - np.diag(np.diag(J))) == 0:
+        return np.diag(J).copy(), np.eye(3)
+    m, P = np.linalg.eigh(J)
+    if np.linalg.det(P) < 0.0:
+        P[:, 2] = -P[:, 2]
+    return m, P
+
+
+def euler_rates(inertia, w, torque=0.0, rotor_momentum=0.0, rotor_momentum_rate=0.0):
+    """Body angular acceleration ``w'`` from Euler's equations (rad/s^2).
+
+    ``I w' = tau - h' - w x (I w + h)`` (Baruh eq. 8.5x for ``h = 0``; gyrostat
+    form of ch. 10).  ``inertia`` principal moments ``(3,)`` (the classic
+    component form ``I1 w1' = (I2 - I3) w2 w3 + tau1`` ...) or a full tensor
+    ``(3, 3)``; ``w, torque, rotor_momentum, rotor_momentum_rate`` broadcast over
+    leading axes ``(..., 3)``.
+    """
+    w = _as_vec3(w, "w")
+    tau = np.asarray(torque, dtype=np.float64)
+    h = np.asarray(rotor_momentum, dtype=np.float64)
+    hd = np.asarray(rotor_momentum_rate, dtype=np.float64)
+    a = np.asarray(inertia, dtype=np.float64)
+    if a.shape == (3,):
+        H = a * w + h
+        rhs = tau - hd - np.cross(w, H)
+        return rhs / a
+    J = inertia_tensor(a)
+    H = w @ J.T + h
+    rhs = tau - hd - np.cross(w, H)
+    return rhs @ np.linalg.inv(J).T
+
+
+def body_momentum_rates(inertia, H, torque=0.0, rotor_momentum=0.0):
+    """``H' = H x w + tau`` with ``w = I^{-1} (H - h)``: Euler's equations in momentum form.
+
+    ``H`` total angular momentum in body components (N m s), ``rotor_momentum``
+    ``h`` the rotors' momentum relative to the body.  Returns ``(H', w)``.  This
+    form needs no ``h'`` (a commanded rotor speed enters only through ``h(t)``)
+    and is the Lie-Poisson form the splitting integrator preserves.
+    """
+    H = _as_vec3(H, "H")
+    a = np.asarray(inertia, dtype=np.float64)
+    rel = H - np.asarray(rotor_momentum, dtype=np.float64)
+    if a.shape == (3,):
+        w = rel / a
+    else:
+        J = inertia_tensor(a)
+        w = rel @ np.linalg.inv(J).T
+    return np.cross(H, w) + np.asarray(torque, dtype=np.float64), w
+
+
+def _quat_rates(q, w):
+    """``dq/dt = 1/2 q (x) (0, w)``, scalar first (private; see astrodyn.rotation)."""
+    e0 = q[..., :1]
+    e = q[..., 1:]
+    d0 = -0.5 * np.sum(e * w, axis=-1, keepdims=True)
+    dv = 0.5 * (e0 * w + np.cross(e, w))
+    return np.concatenate([d0, dv], axis=-1)
+
+
+def attitude_state_rates(t, state, inertia, torque=None, rotor_momentum=None):
+    """State-form right-hand side ``x' = f(t, x)`` with ``x = (q, w)`` of shape ``(..., 7)``.
+
+    Baruh ch. 8 state form: Euler parameters (scalar first) and body rates.
+    ``torque`` is ``None`` or a callable ``torque(t, q, w) -> (..., 3)`` body
+    torque (N m); ``rotor_momentum`` is ``None``, a constant ``(3,)`` or a
+    callable ``h(t) -> (3,)`` (its rate is then taken by a central difference
+    of step ``1e-6 * max(1, |t|)`` s; pass constant rotors where possible).
+    """
+    x = np.asarray(state, dtype=np.float64)
+    if x.shape[-1:] != (7,):
+        raise ValueError(f"state: expected shape (..., 7) = (q, w), got {x.shape}")
+    q, w = x[..., :4], x[..., 4:]
+    tau = 0.0 if torque is None else torque(t, q, w)
+    h, hd = 0.0, 0.0
+    if callable(rotor_momentum):
+        d = 1e-6 * max(1.0, abs(t))
+        h = np.asarray(rotor_momentum(t), dtype=np.float64)
+        hd = (np.asarray(rotor_momentum(t + d)) - np.asarray(rotor_momentum(t - d))) / (2 * d)
+    elif rotor_momentum is not None:
+        h = np.asarray(rotor_momentum, dtype=np.float64)
+    wd = euler_rates(inertia, w, tau, h, hd)
+    return np.concatenate([_quat_rates(q, w), wd], axis=-1)

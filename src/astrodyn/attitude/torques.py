@@ -1,0 +1,134 @@
+"""External torques on a rigid body, as callables ``torque(t, q, w) -> body torque``.
+
+Every torque model here is a small object with the hook signature of
+:mod:`astrodyn.attitude.euler`: ``model(t, q, w)`` returns the torque in **body**
+components (N m) for time ``t`` (s), Euler parameters ``q`` (scalar first,
+``v_body = C(q) @ v_inertial``) and body rates ``w`` (rad/s).  The models below
+depend only on ``(t, q)``, which lets :func:`astrodyn.attitude.integrators.propagate_attitude`
+apply them as exact momentum kicks inside its compiled kernel; any other callable
+works too (through a slower Python path).
+
+* :class:`GravityGradientTorque`: ``tau = 3 mu / |r|^5  r_b x (I r_b)`` with
+  ``r_b = C r`` the orbit position (from the attracting body's centre to the
+  spacecraft) in body axes.  Baruh, *Analytical Dynamics*, sec. 8.x
+  (gravity-gradient moment); Hughes, *Spacecraft Attitude Dynamics*, ch. 8,
+  eq. (8.1.x).  The position comes from a callable ``r(t)``, e.g. the orbit core
+  ``lambda t: astrodyn.orbit.propagate(r0, v0, t, mu)[0]``.
+* :class:`UniformGravityTorque`: a uniform field acting at a body-fixed centre of
+  mass, ``tau = r_c x (C m g)`` about a fixed point (the heavy top, Baruh 10.5).
+* :class:`ConstantTorque`: fixed in body or in inertial axes.
+* :class:`TorqueSum`: the sum of several models.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from astrodyn.attitude.euler import inertia_tensor
+
+__all__ = [
+    "gravity_gradient_torque",
+    "GravityGradientTorque",
+    "UniformGravityTorque",
+    "ConstantTorque",
+    "TorqueSum",
+]
+
+
+def _dcm_apply(q, v):
+    """``C(q) @ v`` (inertial -> body), scalar-first q; private until astrodyn.rotation lands."""
+    q = np.asarray(q, dtype=np.float64)
+    e0 = q[..., :1]
+    e = q[..., 1:]
+    return (e0 * e0 - np.sum(e * e, -1, keepdims=True)) * v + 2.0 * e * np.sum(e * v, -1, keepdims=True) - 2.0 * e0 * np.cross(e, v)
+
+
+def gravity_gradient_torque(r_body, inertia, mu):
+    """Gravity-gradient torque ``3 mu / |r|^5 (r_b x I r_b)`` in body axes (N m).
+
+    ``r_body`` ``(..., 3)``: position of the body's centre of mass relative to the
+    attracting centre, in body components (m); ``inertia`` ``(3,)`` principal
+    moments or ``(3, 3)`` tensor about the centre of mass (kg m^2); ``mu``
+    gravitational parameter (m^3/s^2).  First-order term of the expansion of the
+    gravity field over the body (Hughes, ch. 8; Baruh ch. 8).
+    """
+    rb = np.asarray(r_body, dtype=np.float64)
+    J = inertia_tensor(inertia)
+    r2 = np.sum(rb * rb, axis=-1, keepdims=True)
+    return 3.0 * mu / (r2 * r2 * np.sqrt(r2)) * np.cross(rb, rb @ J.T)
+
+
+class GravityGradientTorque:
+    """Gravity-gradient torque from an orbit ``r(t)``.
+
+    Parameters
+    ----------
+    mu : float
+        Gravitational parameter of the attracting body, m^3/s^2.
+    position : callable
+        ``position(t) -> r`` inertial position of the spacecraft (m) relative to
+        the attracting centre; must accept a 1-D array of times and return
+        ``(len(t), 3)`` (the integrator evaluates all kick times at once).
+    inertia : array_like
+        ``(3,)`` principal moments or ``(3, 3)`` tensor in body axes, kg m^2
+        (the full mass distribution, rotors included).
+    """
+
+    def __init__(self, mu, position, inertia):
+        if not callable(position):
+            raise ValueError("position: expected a callable r(t) -> (..., 3) inertial position in m")
+        self.mu = float(mu)
+        if not self.mu > 0.0:
+            raise ValueError(f"mu: expected a positive gravitational parameter in m^3/s^2, got {mu}")
+        self.position = position
+        self.inertia = inertia_tensor(inertia)
+
+    def __call__(self, t, q, w=None):
+        r = np.asarray(self.position(np.asarray(t, dtype=np.float64)), dtype=np.float64)
+        return gravity_gradient_torque(_dcm_apply(q, r), self.inertia, self.mu)
+
+
+class UniformGravityTorque:
+    """Torque of a uniform gravity field about a fixed point: ``tau = r_c x (m C g)``.
+
+    ``mass`` kg; ``center_of_mass`` ``(3,)`` position of the centre of mass
+    relative to the fixed point, body axes (m); ``gravity`` ``(3,)`` field in
+    inertial axes (m/s^2), default ``(0, 0, -9.80665)`` (inertial Z up).
+    For the heavy symmetric top of Baruh sec. 10.5 ``center_of_mass = (0, 0, l)``.
+    """
+
+    def __init__(self, mass, center_of_mass, gravity=(0.0, 0.0, -9.80665)):
+        self.mass = float(mass)
+        self.center_of_mass = np.asarray(center_of_mass, dtype=np.float64).reshape(3)
+        self.gravity = np.asarray(gravity, dtype=np.float64).reshape(3)
+
+    def __call__(self, t, q, w=None):
+        return np.cross(self.center_of_mass, self.mass * _dcm_apply(q, self.gravity))
+
+
+class ConstantTorque:
+    """A constant torque ``(3,)`` N m, fixed in ``frame="body"`` or ``"inertial"`` axes."""
+
+    def __init__(self, torque, frame="body"):
+        if frame not in ("body", "inertial"):
+            raise ValueError(f"frame: expected 'body' or 'inertial', got {frame!r}")
+        self.torque = np.asarray(torque, dtype=np.float64).reshape(3)
+        self.frame = frame
+
+    def __call__(self, t, q, w=None):
+        if self.frame == "body":
+            return np.broadcast_to(self.torque, np.shape(q)[:-1] + (3,)).copy()
+        return _dcm_apply(q, self.torque)
+
+
+class TorqueSum:
+    """Sum of torque models (each a callable ``torque(t, q, w)``)."""
+
+    def __init__(self, *models):
+        self.models = tuple(models)
+        for m in self.models:
+            if not callable(m):
+                raise ValueError(f"TorqueSum: every term must be callable torque(t, q, w), got {m!r}")
+
+    def __call__(self, t, q, w=None):
+        return sum(m(t, q, w) for m in self.models)
