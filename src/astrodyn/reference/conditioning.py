@@ -56,6 +56,14 @@ def _reference_propagator(dps: int) -> Callable:
     return prop
 
 
+def _broadcast(r0, v0, dt):
+    r0 = np.asarray(r0, dtype=np.float64)
+    v0 = np.asarray(v0, dtype=np.float64)
+    lead = np.broadcast_shapes(r0.shape[:-1], v0.shape[:-1], np.shape(dt))
+    dt = np.broadcast_to(np.asarray(dt, dtype=np.float64), lead)
+    return np.broadcast_to(r0, (*lead, 3)), np.broadcast_to(v0, (*lead, 3)), dt, lead
+
+
 def _one_state(r0, v0, dt, mu, prop):
     r0 = np.asarray(r0, dtype=np.float64)
     v0 = np.asarray(v0, dtype=np.float64)
@@ -100,12 +108,7 @@ def ulp_sensitivity(r0, v0, dt, mu: float, *, propagate: Callable | None = None,
     (dr, dv) : arrays of the leading shape, in m and m/s.
     """
     prop = propagate if propagate is not None else _reference_propagator(dps)
-    r0 = np.asarray(r0, dtype=np.float64)
-    v0 = np.asarray(v0, dtype=np.float64)
-    lead = np.broadcast_shapes(r0.shape[:-1], v0.shape[:-1], np.shape(dt))
-    r0 = np.broadcast_to(r0, (*lead, 3))
-    v0 = np.broadcast_to(v0, (*lead, 3))
-    dt = np.broadcast_to(np.asarray(dt, dtype=np.float64), lead)
+    r0, v0, dt, lead = _broadcast(r0, v0, dt)
     dr = np.empty(lead)
     dv = np.empty(lead)
     for idx in np.ndindex(*lead):
@@ -160,12 +163,7 @@ def path_sensitivity(r0, v0, dt, mu: float, *, propagate: Callable | None = None
     Same arguments and returns as :func:`ulp_sensitivity`.
     """
     prop = propagate if propagate is not None else _reference_propagator(dps)
-    r0 = np.asarray(r0, dtype=np.float64)
-    v0 = np.asarray(v0, dtype=np.float64)
-    lead = np.broadcast_shapes(r0.shape[:-1], v0.shape[:-1], np.shape(dt))
-    r0 = np.broadcast_to(r0, (*lead, 3))
-    v0 = np.broadcast_to(v0, (*lead, 3))
-    dt = np.broadcast_to(np.asarray(dt, dtype=np.float64), lead)
+    r0, v0, dt, lead = _broadcast(r0, v0, dt)
     dr, dv = ulp_sensitivity(r0, v0, dt, mu, propagate=prop)
     dr, dv = np.array(dr, ndmin=0), np.array(dv, ndmin=0)
     for idx in np.ndindex(*lead):
