@@ -93,6 +93,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from astrodyn._jit import jit
+from astrodyn.orbit.kepler import _sinh_parts, _x_minus_sin, solve_kepler, solve_kepler_hyperbolic
+
 __all__ = [
     "SINGULAR_TOLERANCE",
     "Elements",
@@ -370,32 +373,31 @@ def _unwrap_like(angle, reference):
     return angle + _TWO_PI * np.round((reference - angle) / _TWO_PI)
 
 
-_ODD_INV_FACTORIALS = tuple(1.0 / math.factorial(n) for n in range(3, 23, 2))  # 1/3!, 1/5!, ..., 1/21!
+# Kepler's equation residual pieces: the series kernels of astrodyn.orbit.kepler
+# (``_x_minus_sin``: E - sin E; ``_sinh_parts``: sinh F - F) keep every digit
+# near e -> 1, M -> 0.
 
 
-def _odd_series_tail(x, sign):
-    """``x^3/3! + sign x^5/5! + x^7/7! ...`` (signs alternate if sign = -1),
-    i.e. ``sinh x - x`` (sign +1) or ``x - sin x`` (sign -1), by Horner in
-    ``sign * x^2``; terms up to x^21, enough for |x| < 1 (the next term is
-    below 1e-19 of the first)."""
-    t = sign * x * x
-    s = np.zeros_like(x)
-    for c in reversed(_ODD_INV_FACTORIALS):
-        s = c + t * s
-    return x * x * x * s
+@jit
+def _mean_from_eccentric_flat(E, e, out):
+    for j in range(E.size):
+        x = E[j]
+        out[j] = (1.0 - e[j]) * x + e[j] * _x_minus_sin(x, math.sin(x))
 
 
-def _x_minus_sin_x(x):
-    """``x - sin x`` without cancellation: series for |x| < 1, direct formula
-    otherwise (cancellation there is at most a factor 6)."""
-    x = np.asarray(x, dtype=np.float64)
-    return np.where(np.abs(x) < 1.0, _odd_series_tail(x, -1.0), x - np.sin(x))
+@jit
+def _mean_from_hyperbolic_flat(F, e, out):
+    for j in range(F.size):
+        sh, _, sh_minus_x = _sinh_parts(F[j])
+        out[j] = (e[j] - 1.0) * sh + sh_minus_x
 
 
-def _sinh_x_minus_x(x):
-    """``sinh x - x`` without cancellation (series for |x| < 1, as above)."""
-    x = np.asarray(x, dtype=np.float64)
-    return np.where(np.abs(x) < 1.0, _odd_series_tail(x, 1.0), np.sinh(x) - x)
+def _flat_kernel(kernel, x, e):
+    """Run a compiled per-element kernel over broadcast ``(x, e)``."""
+    x, e = np.broadcast_arrays(np.asarray(x, dtype=np.float64), np.asarray(e, dtype=np.float64))
+    out = np.empty(x.shape)
+    kernel(np.ascontiguousarray(x).ravel(), np.ascontiguousarray(e).ravel(), out.reshape(-1))
+    return _out(out)
 
 
 def eccentric_from_true(nu, e):
@@ -440,15 +442,13 @@ def mean_from_eccentric(E, e):
     """Kepler's equation ``M = E - e sin E``, written as
     ``(1 - e) E + e (E - sin E)`` so that near e -> 1, E -> 0 no digits are
     lost (the naive form loses about 3 there)."""
-    E, e = np.asarray(E, dtype=np.float64), np.asarray(e, dtype=np.float64)
-    return _out((1.0 - e) * E + e * _x_minus_sin_x(E))
+    return _flat_kernel(_mean_from_eccentric_flat, E, e)
 
 
 def mean_from_hyperbolic(F, e):
     """Hyperbolic Kepler equation ``M = e sinh F - F``, written as
     ``(e - 1) sinh F + (sinh F - F)`` (no cancellation near e -> 1, F -> 0)."""
-    F, e = np.asarray(F, dtype=np.float64), np.asarray(e, dtype=np.float64)
-    return _out((e - 1.0) * np.sinh(F) + _sinh_x_minus_x(F))
+    return _flat_kernel(_mean_from_hyperbolic_flat, F, e)
 
 
 def _per_conic(x, e, ellipse, parabola, hyperbola):
@@ -503,8 +503,6 @@ def true_from_mean(M, e):
     (-pi, pi)), parabola via the closed-form root of Barker's cubic
     ``D = 2 sinh(asinh(3 M / 2) / 3)`` (Cardano's hyperbolic form; no
     cancellation for small or large M)."""
-    from astrodyn.orbit.kepler import solve_kepler, solve_kepler_hyperbolic
-
     return _per_conic(
         M,
         e,
