@@ -1,0 +1,1228 @@
+"""Scenario files: load and validate a TOML scene, and plan what it needs to run.
+
+A scenario is a TOML file (parsed with :mod:`tomllib`: data only, nothing in it is ever
+executed). This module is the *edge* of astrodyn: it is the one place where astropy
+turns epochs and quantities with units into the plain SI numbers the numeric core
+takes. The result is a :class:`Scenario` of frozen dataclasses with numpy arrays ready
+for the core (``r0, v0`` in m, m/s; ``q0`` scalar first; ``w0`` rad/s; inertia kg m^2).
+
+A small example (``configs/demo.toml`` is a complete one)::
+
+    [scenario]
+    name = "demo"
+    epoch = "2026-03-20T12:00:00 TDB"   # any astropy scale: UTC (default), TAI, TT, TDB, ...
+    duration = "90 min"
+    rate = "10 Hz"                      # output rate: one state per body per 0.1 s
+    real_time_factor = 1.0              # pacing of `astrodyn serve` (sim s per wall s)
+
+    [central_body]
+    name = "earth"                      # mu, radius, J2..J6 from the built-in table
+
+    [[bodies]]
+    name = "iss"
+    [bodies.orbit]                      # state vector (r, v) or elements
+    a = "6790 km"                       # a | p | rp  (size), e, i, raan, argp, nu | M
+    e = 0.0005
+    i = "51.6 deg"
+    model = "kepler"                    # kepler | j2 | zonal | third_body
+    [bodies.attitude]
+    q = [1, 0, 0, 0]                    # Euler parameters, scalar first (or euler + seq)
+    w = ["0.1 deg/s", "0 deg/s", "0.5 deg/s"]
+    inertia = ["1.2e8 kg m2", "1.0e8 kg m2", "2.0e8 kg m2"]   # principal moments, or 3x3
+    model = "torque_free"               # none | torque_free | gravity_gradient | gyrostat | heavy_top | user
+
+Quantities are strings with a unit (``"7000 km"``, ``"51.6 deg"``, ``"0.1 rad/s"``,
+``"10 Hz"``, ``"90 min"``, ``"3.986e14 m3/s2"``, ``"60 rpm"``) parsed by astropy and
+converted to SI; a bare number is taken to be in SI units already (m, s, rad, Hz, ...).
+A vector is a list of such values or one string ``"[7000, 0, 0] km"``.
+
+Sections and keys (every other key is an error, with a "did you mean" suggestion):
+
+``[scenario]``
+    ``name`` (``[A-Za-z0-9_.-]+``), ``epoch`` (string ``"<ISO time> [SCALE]"`` or a TOML
+    date-time, taken as UTC), ``duration`` (> 0, at most 250 years), ``rate`` (output
+    rate, :data:`MIN_RATE_HZ` to :data:`MAX_RATE_HZ`), ``real_time_factor`` (default 1,
+    up to 1e6), ``frame`` (default "GCRF" around the Earth, else "ICRF"),
+    ``description``.
+``[central_body]``
+    ``name`` (a key of :data:`CENTRAL_BODIES`, or any name if ``mu`` and ``radius`` are
+    given), optional overrides ``mu``, ``radius``, ``j2`` ... ``j6``.
+``[[bodies]]``
+    ``name``, ``cross_check`` (bool: also run REBOUND and publish the difference),
+    ``[bodies.orbit]`` and/or ``[bodies.attitude]``.
+``orbit``
+    ``r`` and ``v``, or elements: one of ``a`` (negative for a hyperbola), ``p``, ``rp``
+    (periapsis radius; works for every conic), ``e`` (default 0), ``i``, ``raan``,
+    ``argp`` (default 0), ``nu`` or ``M`` (default nu = 0); ``model`` (default kepler),
+    ``degree`` (zonal: 2..6, default 6), ``perturbers`` (third_body: names from the table).
+``attitude``
+    ``q`` (unit, scalar first) or ``euler`` + ``seq`` (e.g. ``"321"``), ``w`` (body rad/s),
+    ``inertia`` (3 principal moments or a symmetric 3x3 tensor, positive, obeying the
+    triangle inequality), ``rotors`` (list of ``{axis, h}`` or ``{axis, speed, inertia}``),
+    ``model`` (default torque_free, or gyrostat when rotors are given), ``mass``, ``cm``
+    (distance fixed point to centre of mass along body axis 3) and ``g`` (default
+    9.80665 m/s^2) for heavy_top, ``torque`` (constant body-axis torque, N m) for user.
+``[walker]``
+    Walker delta constellation ``i: t/p/f`` (Walker 1984, J. Br. Interplanet. Soc. 37,
+    559): ``i``, ``t`` satellites in ``p`` equally spaced planes, phasing ``f`` (0..p-1),
+    ``altitude`` or ``a``, ``raan0``, ``prefix``, ``model``, ``cross_check`` and an
+    ``[walker.attitude]`` table shared by every satellite. Satellite ``k`` of plane ``j``
+    has ``raan = raan0 + 2 pi j / p`` and argument of latitude ``u = 2 pi k / s + 2 pi f j / t``
+    (``s = t / p``); circular orbits (e = 0, argp = 0, nu = u).
+``[output]``
+    ``path`` (the MCAP file; resolved relative to the config file, never a URL),
+    ``roll_size`` (e.g. ``"256 MB"``), ``roll_interval`` (e.g. ``"1 h"``).
+
+Errors are :class:`ScenarioError` with the text ``<file>: <key path>: expected <...>,
+got <...>``, for example ``configs/x.toml: bodies[2].orbit.e: expected 0 <= e, got
+-0.1``. Loading never raises anything else, never touches the network (astropy's IERS
+auto-download is switched off; bundled tables only), and rejects oversized input.
+
+:func:`plan` decides what a run needs ("model only what a scene needs"): per body the
+cheapest exact model (analytic Kepler unless a perturbation is listed and non-zero;
+exact torque-free unless a torque model is listed and the torque is not identically
+zero) and which processes to start. ``astrodyn validate CONFIG`` prints it.
+
+The built-in central-body table lives here until ``astrodyn.orbit.perturbations``
+exposes one (then this module should import it).
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import datetime as _dt
+import difflib
+import functools
+import json
+import math
+import re
+import sys
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable
+
+import numpy as np
+
+from astrodyn.messages import ATTITUDE_MODELS, NAME_PATTERN, ORBIT_MODELS
+
+__all__ = [
+    "ScenarioError",
+    "CentralBody",
+    "OrbitSpec",
+    "Rotor",
+    "AttitudeSpec",
+    "Body",
+    "Scenario",
+    "BodyPlan",
+    "Plan",
+    "CENTRAL_BODIES",
+    "load",
+    "loads",
+    "load_dict",
+    "plan",
+    "main",
+]
+
+# --------------------------------------------------------------------------- limits
+
+MIN_RATE_HZ = 1e-6  #: slowest output rate (one state every ~11.6 days)
+MAX_RATE_HZ = 1000.0  #: fastest output rate; above this the bus, not physics, is the limit
+MAX_DURATION_S = 250 * 365.25 * 86400.0  #: 250 Julian years (MCAP log_time, uint64 ns, ends in 2554)
+MAX_OUTPUT_STEPS = 10**10  #: duration * rate
+MAX_REAL_TIME_FACTOR = 1e6
+MAX_BODIES = 100_000
+MAX_FILE_BYTES = 16 * 2**20
+MAX_STRING = 256  #: longest accepted quantity / epoch string
+QUAT_TOL = 1e-6  #: a given q must have | |q| - 1 | <= this; it is then normalized
+TRIANGLE_RTOL = 1e-12  #: I3 <= I1 + I2 (1 + rtol): a flat plate (equality) is allowed
+SYMMETRY_RTOL = 1e-12  #: |I - I^T| <= rtol max|I| for a full tensor
+ATTITUDE_MODELS_ALL = ("none",) + ATTITUDE_MODELS
+G0 = 9.80665  #: standard gravity, m/s^2 (default g of a heavy top)
+
+_ORBIT_ANALYTIC = "kepler"
+_ATTITUDE_EXACT = "torque_free"
+
+
+class ScenarioError(ValueError):
+    """A scenario that cannot be loaded; ``str`` is ``<file>: <key path>: expected ..., got ...``."""
+
+
+# --------------------------------------------------------------------------- central bodies
+
+
+@dataclass(frozen=True)
+class CentralBody:
+    """Gravitating body at the origin: ``mu`` m^3/s^2, equatorial ``radius`` m, zonal
+    coefficients ``j = (J2, J3, J4, J5, J6)`` (unnormalized), inertial ``frame`` name."""
+
+    name: str
+    mu: float
+    radius: float
+    j: tuple[float, float, float, float, float]
+    frame: str
+
+
+# mu in m^3/s^2, radius in m, (J2..J6).
+# Earth: mu EGM2008/WGS 84 (3.986004418e14), R = 6378.137 km, J2..J6 of JGM-3 as listed in
+#   Vallado, Fundamentals of Astrodynamics and Applications, 4th ed., Table D-3 / eq. 8-16.
+# Moon: GM from DE440 (Park et al. 2021, AJ 161, 105), R = 1738.0 km, J2 of LP165P
+#   (Konopliv et al. 2001), higher zonals omitted.
+# Sun: GM DE440, R = 695 700 km (IAU 2015 B3 nominal), J2 = 2.2e-7 (helioseismology).
+# Mars: GM DE440 (system), R = 3396.19 km, J2 = 1.96045e-3, J3 = 3.6e-5 (Vallado Table D-4).
+# Venus: GM DE440, R = 6051.8 km, J2 = 4.458e-6 (Vallado Table D-4).
+# Jupiter: GM DE440 (system), R = 71 492 km, J2 = 1.4736e-2, J4 = -5.87e-4 (Juno, Iess 2018).
+CENTRAL_BODIES: dict[str, tuple[float, float, tuple[float, float, float, float, float]]] = {
+    "earth": (3.986004418e14, 6378137.0, (1.08262668355e-3, -2.53265648533e-6, -1.61962159137e-6, -2.27296082869e-7, 5.40681239107e-7)),
+    "moon": (4.9028000661e12, 1738000.0, (2.0330530e-4, 0.0, 0.0, 0.0, 0.0)),
+    "sun": (1.32712440041279e20, 695700000.0, (2.2e-7, 0.0, 0.0, 0.0, 0.0)),
+    "mars": (4.282837362e13, 3396190.0, (1.96045e-3, 3.6e-5, 0.0, 0.0, 0.0)),
+    "venus": (3.2485859200e14, 6051800.0, (4.458e-6, 0.0, 0.0, 0.0, 0.0)),
+    "jupiter": (1.26712764100e17, 71492000.0, (1.4736e-2, 0.0, -5.87e-4, 0.0, 0.0)),
+}
+
+# --------------------------------------------------------------------------- validated result
+
+
+@dataclass(frozen=True, eq=False)
+class OrbitSpec:
+    """Initial translational state and the requested orbit model.
+
+    ``r0`` (m) and ``v0`` (m/s) relative to the central body in the scenario frame;
+    ``elements`` holds the elements as given (SI, radians) when the orbit was specified by
+    elements, else None. ``degree`` is the zonal degree (2 for j2), ``perturbers`` the
+    third bodies.
+    """
+
+    model: str
+    r0: np.ndarray
+    v0: np.ndarray
+    elements: dict[str, float] | None = None
+    degree: int = 0
+    perturbers: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True, eq=False)
+class Rotor:
+    """A symmetric rotor (flywheel) of a gyrostat: unit ``axis`` in body axes, axial
+    angular momentum ``h`` relative to the body (N m s) = ``inertia`` (kg m^2) x
+    ``speed`` (rad/s) when those were given."""
+
+    axis: np.ndarray
+    h: float
+    speed: float | None = None
+    inertia: float | None = None
+
+
+@dataclass(frozen=True, eq=False)
+class AttitudeSpec:
+    """Initial rotational state, mass properties and the requested attitude model.
+
+    ``q0`` Euler parameters (scalar first, unit; ``v_body = C(q0) v_inertial``), ``w0``
+    body angular velocity (rad/s, body axes), ``inertia`` the 3x3 tensor in body axes
+    (kg m^2), ``principal_moments`` its eigenvalues and ``principal_axes`` the matrix whose
+    columns are the principal axes in body components (identity when the inertia was
+    given as principal moments or a diagonal tensor; then the moments keep the given
+    order). Heavy top: ``mass`` kg, ``cm`` m along body axis 3 from the fixed point,
+    ``g`` m/s^2. User torque: ``torque`` N m, body axes.
+    """
+
+    model: str
+    q0: np.ndarray
+    w0: np.ndarray
+    inertia: np.ndarray
+    principal_moments: np.ndarray
+    principal_axes: np.ndarray
+    rotors: tuple[Rotor, ...] = ()
+    mass: float | None = None
+    cm: float | None = None
+    g: float | None = None
+    torque: np.ndarray | None = None
+
+
+@dataclass(frozen=True, eq=False)
+class Body:
+    """One body of the scene: a name, an orbit and/or an attitude, options."""
+
+    name: str
+    orbit: OrbitSpec | None
+    attitude: AttitudeSpec | None
+    cross_check: bool = False
+
+
+@dataclass(frozen=True, eq=False)
+class Scenario:
+    """A validated scenario, SI units throughout.
+
+    ``epoch`` is the string as given, ``epoch_scale`` its astropy time scale,
+    ``epoch_unix_ns`` the same instant as integer ns since 1970-01-01T00:00:00 UTC
+    (POSIX, leap seconds not counted; MCAP ``log_time = epoch_unix_ns + round(t * 1e9)``).
+    ``duration`` s, ``rate`` Hz (outputs at ``t = k / rate``, k = 0 .. ``n_steps - 1``).
+    ``config`` is the parsed TOML (JSON-safe) as given, ``source`` the file it came from.
+    """
+
+    name: str
+    epoch: str
+    epoch_scale: str
+    epoch_unix_ns: int
+    duration: float
+    rate: float
+    real_time_factor: float
+    frame: str
+    central_body: CentralBody
+    bodies: tuple[Body, ...]
+    description: str = ""
+    output_path: Path | None = None
+    roll_size: int | None = None
+    roll_interval: float | None = None
+    walker: dict[str, Any] | None = None
+    source: str = "<string>"
+    config: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def n_steps(self) -> int:
+        """Number of output instants ``t = k / rate`` with ``t <= duration`` (k from 0)."""
+        return int(math.floor(self.duration * self.rate * (1 + 4 * 2.2e-16))) + 1
+
+    def output_times(self) -> np.ndarray:
+        """The output instants ``k / rate`` (s since the epoch), shape ``(n_steps,)``."""
+        return np.arange(self.n_steps, dtype=np.float64) / self.rate
+
+    def body(self, name: str) -> Body:
+        """The body called ``name`` (KeyError if none)."""
+        for b in self.bodies:
+            if b.name == name:
+                return b
+        raise KeyError(name)
+
+    def orbit_arrays(self, model: str | None = None) -> tuple[list[str], np.ndarray, np.ndarray]:
+        """``(names, r0 (N, 3), v0 (N, 3))`` of the bodies with an orbit (optionally one model)."""
+        sel = [b for b in self.bodies if b.orbit is not None and (model is None or b.orbit.model == model)]
+        r0 = np.array([b.orbit.r0 for b in sel], dtype=np.float64).reshape(-1, 3)
+        v0 = np.array([b.orbit.v0 for b in sel], dtype=np.float64).reshape(-1, 3)
+        return [b.name for b in sel], r0, v0
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-safe dict of the scenario as run (for the MCAP metadata record "scenario").
+
+        ``config`` is the file as given; the other keys are the resolved SI values, the
+        initial states, and the plan (model actually used per body).
+        """
+        p = plan(self)
+        return {
+            "format": "astrodyn.scenario/1",
+            "source": self.source,
+            "name": self.name,
+            "description": self.description,
+            "epoch": self.epoch,
+            "epoch_scale": self.epoch_scale,
+            "epoch_unix_ns": self.epoch_unix_ns,
+            "duration": self.duration,
+            "rate": self.rate,
+            "n_steps": self.n_steps,
+            "real_time_factor": self.real_time_factor,
+            "frame": self.frame,
+            "central_body": dataclasses.asdict(self.central_body),
+            "bodies": [_body_dict(b, bp) for b, bp in zip(self.bodies, p.bodies)],
+            "processes": list(p.processes),
+            "walker": self.walker,
+            "output": {
+                "path": None if self.output_path is None else str(self.output_path),
+                "roll_size": self.roll_size,
+                "roll_interval": self.roll_interval,
+            },
+            "config": self.config,
+        }
+
+    def to_metadata(self) -> dict[str, str]:
+        """String-to-string map for an MCAP Metadata record (whose values must be strings)."""
+        d = self.to_dict()
+        return {
+            "name": self.name,
+            "epoch": self.epoch,
+            "epoch_scale": self.epoch_scale,
+            "epoch_unix_ns": str(self.epoch_unix_ns),
+            "source": self.source,
+            "json": json.dumps(d, separators=(",", ":"), allow_nan=False),
+        }
+
+
+def _jsonable(x: Any) -> Any:
+    if isinstance(x, np.ndarray):
+        return x.tolist()
+    if isinstance(x, (np.floating, np.integer)):
+        return x.item()
+    if isinstance(x, dict):
+        return {k: _jsonable(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_jsonable(v) for v in x]
+    if isinstance(x, (_dt.datetime, _dt.date, _dt.time)):
+        return x.isoformat()
+    if isinstance(x, float) and not math.isfinite(x):  # pragma: no cover - validated away
+        return repr(x)
+    return x
+
+
+def _body_dict(b: Body, bp: "BodyPlan") -> dict[str, Any]:
+    out: dict[str, Any] = {"name": b.name, "cross_check": b.cross_check}
+    if b.orbit is not None:
+        out["orbit"] = _jsonable(dataclasses.asdict(b.orbit)) | {"model_used": bp.orbit_model}
+    if b.attitude is not None:
+        a = b.attitude
+        out["attitude"] = _jsonable(
+            {f.name: getattr(a, f.name) for f in dataclasses.fields(a) if f.name != "rotors"}
+            | {"rotors": [dataclasses.asdict(r) for r in a.rotors], "model_used": bp.attitude_model}
+        )
+    return out
+
+
+# --------------------------------------------------------------------------- error helpers
+
+
+def _show(value: Any) -> str:
+    """The offending value as the user wrote it (JSON-like, shortened)."""
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, float):
+        return repr(value) if math.isfinite(value) else {True: "inf", False: "-inf"}.get(value > 0, "nan") if not math.isnan(value) else "nan"
+    if isinstance(value, int):
+        text = str(value) if abs(value) < 10**30 else f"an integer of {len(str(abs(value)))} digits"
+        return text
+    if isinstance(value, dict):
+        return "a table"
+    if isinstance(value, (_dt.datetime, _dt.date, _dt.time)):
+        return value.isoformat()
+    if isinstance(value, np.ndarray):
+        value = value.tolist()
+    try:
+        text = json.dumps(_jsonable(value), ensure_ascii=False)
+    except (TypeError, ValueError):  # pragma: no cover - TOML values are always JSON-able
+        text = repr(value)
+    return text if len(text) <= 100 else text[:97] + "..."
+
+
+class _Ctx:
+    """Carries the file name for error messages."""
+
+    def __init__(self, source: str):
+        self.source = source
+
+    def error(self, path: str, expected: str, got: Any, raw: bool = False) -> ScenarioError:
+        shown = got if raw else _show(got)
+        return ScenarioError(f"{self.source}: {path}: expected {expected}, got {shown}")
+
+
+_MISSING = object()
+
+
+class _Table:
+    """A TOML table being read: remembers which keys were used, rejects the rest."""
+
+    def __init__(self, ctx: _Ctx, data: Any, path: str, allowed: tuple[str, ...]):
+        if not isinstance(data, dict):
+            raise ctx.error(path, "a table", data)
+        self.ctx, self.data, self.path, self.allowed = ctx, data, path, allowed
+        for key in data:
+            if key not in allowed:
+                close = difflib.get_close_matches(str(key), allowed, n=1, cutoff=0.6)
+                hint = f' (did you mean "{close[0]}"?)' if close else ""
+                raise ctx.error(self.sub(key), f"one of the keys {', '.join(allowed)}{hint}", f'unknown key "{key}"', raw=True)
+
+    def sub(self, key: str) -> str:
+        return f"{self.path}.{key}" if self.path else str(key)
+
+    def has(self, key: str) -> bool:
+        return key in self.data
+
+    def get(self, key: str, default: Any = _MISSING) -> Any:
+        if key in self.data:
+            return self.data[key]
+        if default is _MISSING:
+            raise self.ctx.error(self.sub(key), "a value (required)", "nothing", raw=True)
+        return default
+
+
+# --------------------------------------------------------------------------- quantities
+
+_RPM = None
+
+
+def _units():
+    """astropy.units with network access off and ``rpm`` defined (imported lazily)."""
+    global _RPM
+    import astropy.units as u
+
+    if _RPM is None:
+        _RPM = u.def_unit("rpm", u.cycle / u.min)
+        u.add_enabled_units([_RPM])
+    return u
+
+
+# kind -> (SI unit string, description for errors)
+_KINDS: dict[str, tuple[str, str]] = {
+    "length": ("m", 'a length, e.g. "7000 km"'),
+    "angle": ("rad", 'an angle, e.g. "51.6 deg"'),
+    "time": ("s", 'a time, e.g. "90 min"'),
+    "frequency": ("Hz", 'a rate, e.g. "10 Hz"'),
+    "speed": ("m / s", 'a speed, e.g. "7.5 km/s"'),
+    "angular_velocity": ("rad / s", 'an angular velocity, e.g. "0.1 rad/s"'),
+    "gm": ("m3 / s2", 'a gravitational parameter, e.g. "3.986004418e14 m3/s2"'),
+    "inertia": ("kg m2", 'a moment of inertia, e.g. "100 kg m2"'),
+    "angular_momentum": ("kg m2 / s", 'an angular momentum, e.g. "10 N m s"'),
+    "mass": ("kg", 'a mass, e.g. "500 kg"'),
+    "acceleration": ("m / s2", 'an acceleration, e.g. "9.81 m/s2"'),
+    "torque": ("N m", 'a torque, e.g. "0.01 N m"'),
+    "bytes": ("byte", 'a size, e.g. "256 MB"'),
+    "dimensionless": ("", "a number"),
+}
+
+
+@functools.lru_cache(maxsize=4096)
+def _parse_quantity_string(text: str, kind: str) -> float | str:
+    """SI value of a quantity string, or an error description (str)."""
+    u = _units()
+    unit = u.Unit(_KINDS[kind][0]) if _KINDS[kind][0] else u.dimensionless_unscaled
+    try:
+        q = u.Quantity(text)
+    except Exception:  # astropy raises ValueError, TypeError, UnitsError... on garbage
+        return "unparsable"
+    try:
+        value = q.to_value(unit)
+    except Exception:
+        return f"a quantity in {q.unit.to_string() or 'no unit'}"
+    if np.ndim(value) != 0:
+        return "not a scalar"
+    return float(value)
+
+
+def _quantity(ctx: _Ctx, value: Any, kind: str, path: str) -> float:
+    """A finite SI float from a bare number (already SI) or a quantity string."""
+    desc = _KINDS[kind][1]
+    if isinstance(value, bool):
+        raise ctx.error(path, desc, value)
+    if isinstance(value, (int, float)):
+        try:
+            x = float(value)
+        except OverflowError:
+            raise ctx.error(path, f"{desc} (finite)", value) from None
+    elif isinstance(value, str):
+        if len(value) > MAX_STRING:
+            raise ctx.error(path, f"{desc} (at most {MAX_STRING} characters)", value)
+        parsed = _parse_quantity_string(value.strip(), kind)
+        if isinstance(parsed, str):
+            raise ctx.error(path, desc, value)
+        x = parsed
+    else:
+        raise ctx.error(path, desc, value)
+    if not math.isfinite(x):
+        raise ctx.error(path, f"{desc} (finite)", value)
+    return x
+
+
+_VECTOR_STRING = re.compile(r"^\s*[\[(]([^\])]*)[\])]\s*(.*?)\s*$")
+
+
+def _vector(ctx: _Ctx, value: Any, kind: str, n: int, path: str) -> np.ndarray:
+    """n SI floats from a list of quantities or one string ``"[a, b, c] unit"``."""
+    desc = f"a list of {n} values, each {_KINDS[kind][1]}"
+    if isinstance(value, str) and len(value) <= MAX_STRING:
+        m = _VECTOR_STRING.match(value)
+        if m:
+            parts = [p.strip() for p in m.group(1).split(",")]
+            if len(parts) == n and all(parts):
+                unit = m.group(2)
+                return np.array([_quantity(ctx, f"{p} {unit}" if unit else _number_or_str(p), kind, f"{path}[{i}]") for i, p in enumerate(parts)])
+        raise ctx.error(path, f'{desc}, or a string like "[7000, 0, 0] km"', value)
+    if not isinstance(value, list) or len(value) != n:
+        raise ctx.error(path, desc, value)
+    return np.array([_quantity(ctx, v, kind, f"{path}[{i}]") for i, v in enumerate(value)], dtype=np.float64)
+
+
+def _number_or_str(text: str) -> float | str:
+    try:
+        return float(text)
+    except ValueError:
+        return text
+
+
+def _check(ctx: _Ctx, ok: bool, path: str, expected: str, got: Any) -> None:
+    if not ok:
+        raise ctx.error(path, expected, got)
+
+
+def _name(ctx: _Ctx, value: Any, path: str) -> str:
+    if not isinstance(value, str) or not re.fullmatch(NAME_PATTERN, value) or value in (".", ".."):
+        raise ctx.error(path, f"a name matching {NAME_PATTERN}", value)
+    return value
+
+
+def _choice(ctx: _Ctx, value: Any, allowed: tuple[str, ...], path: str) -> str:
+    if not isinstance(value, str) or value not in allowed:
+        close = difflib.get_close_matches(value, allowed, n=1, cutoff=0.6) if isinstance(value, str) else []
+        hint = f' (did you mean "{close[0]}"?)' if close else ""
+        raise ctx.error(path, f"one of {', '.join(allowed)}{hint}", value)
+    return value
+
+
+def _bool(ctx: _Ctx, value: Any, path: str) -> bool:
+    if not isinstance(value, bool):
+        raise ctx.error(path, "true or false", value)
+    return value
+
+
+def _int(ctx: _Ctx, value: Any, path: str, lo: int, hi: int) -> int:
+    if isinstance(value, bool) or not isinstance(value, int) or not lo <= value <= hi:
+        raise ctx.error(path, f"an integer {lo} <= n <= {hi}", value)
+    return value
+
+
+def _string(ctx: _Ctx, value: Any, path: str, max_len: int = 4096) -> str:
+    if not isinstance(value, str) or len(value) > max_len:
+        raise ctx.error(path, f"a string of at most {max_len} characters", value)
+    return value
+
+
+# --------------------------------------------------------------------------- epoch
+
+_SCALES = ("utc", "tai", "tt", "tdb", "tcg", "tcb", "ut1")
+
+
+def _epoch(ctx: _Ctx, value: Any, path: str) -> tuple[str, str, int]:
+    """(epoch string as given, scale, unix ns) from ``"<ISO> [SCALE]"`` or a TOML datetime."""
+    from astropy.time import Time
+    from astropy.utils import iers
+
+    iers.conf.auto_download = False  # bundled tables only: never the network
+    expected = 'an epoch like "2026-03-20T12:00:00 TDB" (scales: ' + ", ".join(s.upper() for s in _SCALES) + ")"
+    if isinstance(value, _dt.datetime):
+        if value.tzinfo is not None:
+            value = value.astimezone(_dt.timezone.utc).replace(tzinfo=None)
+        text, scale = value.isoformat(), "utc"
+        given = text + " UTC"
+    elif isinstance(value, str) and 0 < len(value) <= 64:
+        given = value.strip()
+        parts = given.split()
+        scale = "utc"
+        if len(parts) == 2 and parts[1].lower() in _SCALES:
+            text, scale = parts[0], parts[1].lower()
+        elif len(parts) == 1:
+            text = parts[0]
+        else:
+            raise ctx.error(path, expected, value)
+        if not re.fullmatch(r"[0-9]{4}-[0-9]{2}-[0-9]{2}([T ][0-9]{2}:[0-9]{2}(:[0-9]{2}(\.[0-9]{1,12})?)?)?", text):
+            raise ctx.error(path, expected, value)
+    else:
+        raise ctx.error(path, expected, value)
+    try:
+        t = Time(text, format="isot" if "T" in text else "iso", scale=scale)
+        utc = t.utc
+        jd1, jd2 = float(utc.jd1), float(utc.jd2)
+    except Exception as exc:  # astropy: bad dates, UT1 outside the bundled IERS table, ...
+        raise ctx.error(path, f"{expected} that astropy can convert offline", f"{_show(value)} ({type(exc).__name__}: {str(exc)[:120]})", raw=True) from None
+    if not (math.isfinite(jd1) and math.isfinite(jd2)):  # pragma: no cover - regex makes it finite
+        raise ctx.error(path, expected, value)
+    # jd1 - 2440587.5 is exact (both are multiples of 0.5 within 2**52); jd2 is the
+    # fraction of a day, |jd2| <= 0.5, so jd2 * 86400e9 carries < 1e-5 ns of rounding.
+    unix_ns = int(round((jd1 - 2440587.5) * 86400)) * 10**9 + int(round(jd2 * 86400e9))
+    if not 0 <= unix_ns < 2**63:
+        raise ctx.error(path, "an epoch after 1970-01-01 and before 2262 (ns since 1970 must fit an int64)", value)
+    return given, scale, unix_ns
+
+
+# --------------------------------------------------------------------------- sections
+
+
+def _central_body(ctx: _Ctx, data: Any) -> CentralBody:
+    tb = _Table(ctx, data, "central_body", ("name", "mu", "radius", "j2", "j3", "j4", "j5", "j6", "frame"))
+    name = tb.get("name")
+    if not isinstance(name, str):
+        raise ctx.error("central_body.name", f"one of {', '.join(CENTRAL_BODIES)} or a name with mu and radius", name)
+    key = name.lower()
+    if key in CENTRAL_BODIES:
+        mu, radius, j = CENTRAL_BODIES[key]
+        j = list(j)
+    else:
+        if not (tb.has("mu") and tb.has("radius")):
+            close = difflib.get_close_matches(key, list(CENTRAL_BODIES), n=1, cutoff=0.6)
+            hint = f' (did you mean "{close[0]}"?)' if close else ""
+            raise ctx.error("central_body.name", f"one of {', '.join(CENTRAL_BODIES)}{hint}, or mu and radius given explicitly", name)
+        _name(ctx, name, "central_body.name")
+        mu, radius, j = 0.0, 0.0, [0.0] * 5
+    if tb.has("mu"):
+        mu = _quantity(ctx, tb.get("mu"), "gm", "central_body.mu")
+        _check(ctx, mu > 0, "central_body.mu", "mu > 0", tb.get("mu"))
+    if tb.has("radius"):
+        radius = _quantity(ctx, tb.get("radius"), "length", "central_body.radius")
+        _check(ctx, radius > 0, "central_body.radius", "radius > 0", tb.get("radius"))
+    for n in range(2, 7):
+        if tb.has(f"j{n}"):
+            jn = _quantity(ctx, tb.get(f"j{n}"), "dimensionless", f"central_body.j{n}")
+            _check(ctx, abs(jn) < 1.0, f"central_body.j{n}", f"|j{n}| < 1 (an unnormalized zonal coefficient)", tb.get(f"j{n}"))
+            j[n - 2] = jn
+    frame = _name(ctx, tb.get("frame", "GCRF" if key == "earth" else "ICRF"), "central_body.frame")
+    return CentralBody(name=key if key in CENTRAL_BODIES else name, mu=mu, radius=radius, j=tuple(j), frame=frame)
+
+
+_ORBIT_KEYS = ("model", "r", "v", "a", "p", "rp", "e", "i", "raan", "argp", "nu", "M", "degree", "perturbers")
+_ELEMENT_KEYS = ("a", "p", "rp", "e", "i", "raan", "argp", "nu", "M")
+
+
+def _orbit(ctx: _Ctx, data: Any, path: str, cb: CentralBody) -> OrbitSpec:
+    tb = _Table(ctx, data, path, _ORBIT_KEYS)
+    model = _choice(ctx, tb.get("model", _ORBIT_ANALYTIC), ORBIT_MODELS, f"{path}.model")
+    has_state = tb.has("r") or tb.has("v")
+    has_elements = any(tb.has(k) for k in _ELEMENT_KEYS)
+    if has_state and has_elements:
+        first = next(k for k in _ELEMENT_KEYS if tb.has(k))
+        raise ctx.error(f"{path}.{first}", "either a state vector (r, v) or elements, not both", tb.get(first))
+    if has_state:
+        r0 = _vector(ctx, tb.get("r"), "length", 3, f"{path}.r")
+        v0 = _vector(ctx, tb.get("v"), "speed", 3, f"{path}.v")
+        _check(ctx, float(np.linalg.norm(r0)) > 0, f"{path}.r", "|r| > 0 (not at the centre of the central body)", tb.get("r"))
+        elements = None
+    elif has_elements:
+        r0, v0, elements = _elements(ctx, tb, path, cb.mu)
+    else:
+        raise ctx.error(path, "a state vector (r, v) or elements (a | p | rp, e, i, raan, argp, nu | M)", "neither", raw=True)
+    degree, perturbers = 0, ()
+    if tb.has("degree"):
+        _check(ctx, model == "zonal", f"{path}.degree", 'no degree unless model = "zonal"', tb.get("degree"))
+        degree = _int(ctx, tb.get("degree"), f"{path}.degree", 2, 6)
+    elif model == "zonal":
+        degree = 6
+    elif model == "j2":
+        degree = 2
+    if tb.has("perturbers"):
+        _check(ctx, model == "third_body", f"{path}.perturbers", 'no perturbers unless model = "third_body"', tb.get("perturbers"))
+        raw = tb.get("perturbers")
+        if not isinstance(raw, list) or not raw:
+            raise ctx.error(f"{path}.perturbers", f"a non-empty list of names from {', '.join(CENTRAL_BODIES)}", raw)
+        perturbers = tuple(_choice(ctx, p, tuple(CENTRAL_BODIES), f"{path}.perturbers[{k}]") for k, p in enumerate(raw))
+    elif model == "third_body":
+        perturbers = ("moon", "sun") if cb.name == "earth" else ()
+        if not perturbers:
+            raise ctx.error(f"{path}.perturbers", "a list of third bodies for model third_body (the default moon, sun is for the Earth only)", "nothing", raw=True)
+    for k, pb in enumerate(perturbers):
+        _check(ctx, pb != cb.name, f"{path}.perturbers[{k}]", "a body other than the central body", pb)
+        _check(ctx, pb not in perturbers[:k], f"{path}.perturbers[{k}]", "each perturber once", pb)
+    return OrbitSpec(model=model, r0=r0, v0=v0, elements=elements, degree=degree, perturbers=perturbers)
+
+
+def _elements(ctx: _Ctx, tb: _Table, path: str, mu: float) -> tuple[np.ndarray, np.ndarray, dict[str, float]]:
+    """Classical elements -> (r0, v0, elements as SI dict) via astrodyn.orbit.state_from_elements."""
+    sizes = [k for k in ("a", "p", "rp") if tb.has(k)]
+    if len(sizes) != 1:
+        raise ctx.error(path, "exactly one of a, p, rp (the size of the conic)", "none" if not sizes else ", ".join(sizes), raw=True)
+    if tb.has("nu") and tb.has("M"):
+        raise ctx.error(f"{path}.M", "either nu or M, not both", tb.get("M"))
+    e = _quantity(ctx, tb.get("e", 0.0), "dimensionless", f"{path}.e")
+    _check(ctx, e >= 0, f"{path}.e", "0 <= e", tb.get("e", 0.0))
+    _check(ctx, e <= 1e6, f"{path}.e", "e <= 1e6", tb.get("e", 0.0))
+    size_key = sizes[0]
+    size = _quantity(ctx, tb.get(size_key), "length", f"{path}.{size_key}")
+    spath = f"{path}.{size_key}"
+    if size_key == "a":
+        _check(ctx, e != 1.0, spath, "p or rp for a parabola (e = 1: a is infinite)", tb.get("a"))
+        if e < 1:
+            _check(ctx, size > 0, spath, "a > 0 for an ellipse (e < 1)", tb.get("a"))
+        else:
+            _check(ctx, size < 0, spath, "a < 0 for a hyperbola (e > 1)", tb.get("a"))
+        p = size * (1.0 - e) * (1.0 + e)
+    elif size_key == "p":
+        _check(ctx, size > 0, spath, "p > 0", tb.get("p"))
+        p = size
+    else:
+        _check(ctx, size > 0, spath, "rp > 0", tb.get("rp"))
+        p = size * (1.0 + e)
+    _check(ctx, math.isfinite(p) and p > 0, spath, "a conic of finite positive size", tb.get(size_key))
+    i = _angle(ctx, tb, "i", path)
+    _check(ctx, 0.0 <= i <= math.pi, f"{path}.i", "0 <= i <= 180 deg", tb.get("i", 0.0))
+    raan = _angle(ctx, tb, "raan", path)
+    argp = _angle(ctx, tb, "argp", path)
+    if tb.has("M"):
+        M = _angle(ctx, tb, "M", path)
+        from astrodyn.orbit.elements import true_from_mean
+
+        try:
+            nu = float(true_from_mean(M, e))
+        except (ValueError, ArithmeticError) as exc:
+            raise ctx.error(f"{path}.M", "a mean anomaly the Kepler solver converts", f"{_show(tb.get('M'))} ({exc})", raw=True) from None
+        _check(ctx, math.isfinite(nu), f"{path}.M", "a mean anomaly the Kepler solver converts", tb.get("M"))
+    else:
+        nu = _angle(ctx, tb, "nu", path)
+    if e > 1:
+        limit = math.acos(-1.0 / e)
+        nu_red = math.remainder(nu, 2 * math.pi)
+        _check(ctx, 1.0 + e * math.cos(nu) > 0 and abs(nu_red) < limit, f"{path}.nu",
+               f"|nu| < {math.degrees(limit):.6g} deg (between the asymptotes of e = {e!r})", tb.get("nu", nu))
+    from astrodyn.orbit.elements import state_from_elements
+
+    try:
+        r0, v0 = state_from_elements(p, e, i, raan, argp, nu, mu)
+    except ValueError as exc:  # pragma: no cover - every precondition is checked above
+        raise ctx.error(path, "elements that define a state", str(exc), raw=True) from None
+    r0, v0 = np.asarray(r0, dtype=np.float64).reshape(3), np.asarray(v0, dtype=np.float64).reshape(3)
+    if not (np.all(np.isfinite(r0)) and np.all(np.isfinite(v0))):
+        raise ctx.error(path, "elements that give a finite state", f"r = {r0.tolist()}, v = {v0.tolist()}", raw=True)
+    elements = {"p": p, "e": e, "i": i, "raan": raan, "argp": argp, "nu": nu}
+    if size_key == "a":
+        elements["a"] = size
+    if tb.has("M"):
+        elements["M"] = M
+    return r0, v0, elements
+
+
+def _angle(ctx: _Ctx, tb: _Table, key: str, path: str) -> float:
+    raw = tb.get(key, 0.0)
+    x = _quantity(ctx, raw, "angle", f"{path}.{key}")
+    if not isinstance(raw, str) and abs(x) > 2 * math.pi * (1 + 1e-12) and key != "M":
+        raise ctx.error(f"{path}.{key}", f'an angle in rad (bare numbers are SI) or with a unit like "{raw} deg"', raw)
+    return x
+
+
+_ATT_KEYS = ("model", "q", "euler", "seq", "w", "inertia", "rotors", "mass", "cm", "g", "torque")
+
+
+def _attitude(ctx: _Ctx, data: Any, path: str) -> AttitudeSpec:
+    tb = _Table(ctx, data, path, _ATT_KEYS)
+    rotors = _rotors(ctx, tb.get("rotors", []), f"{path}.rotors")
+    default_model = "gyrostat" if rotors else _ATTITUDE_EXACT
+    model = _choice(ctx, tb.get("model", default_model), ATTITUDE_MODELS_ALL, f"{path}.model")
+    if rotors and model != "gyrostat":
+        raise ctx.error(f"{path}.rotors", 'no rotors unless model = "gyrostat"', f'{len(rotors)} rotor(s) with model = "{model}"', raw=True)
+    if model == "gyrostat" and not rotors:
+        raise ctx.error(f"{path}.rotors", "at least one rotor for model gyrostat", "none", raw=True)
+    # orientation
+    if tb.has("q") and tb.has("euler"):
+        raise ctx.error(f"{path}.euler", "either q or euler (+ seq), not both", tb.get("euler"))
+    if tb.has("seq") and not tb.has("euler"):
+        raise ctx.error(f"{path}.seq", "seq only together with euler", tb.get("seq"))
+    if tb.has("euler"):
+        from astrodyn.rotation import EULER_SEQUENCES, quat_from_euler
+
+        angles = _vector(ctx, tb.get("euler"), "angle", 3, f"{path}.euler")
+        seq = tb.get("seq", _MISSING) if tb.has("seq") else None
+        if seq is None:
+            raise ctx.error(f"{path}.seq", f"a rotation sequence with euler, one of {', '.join(EULER_SEQUENCES)}", "nothing", raw=True)
+        if isinstance(seq, int) and not isinstance(seq, bool):
+            seq = str(seq)
+        _choice(ctx, seq, EULER_SEQUENCES, f"{path}.seq")
+        q0 = np.asarray(quat_from_euler(angles, seq), dtype=np.float64)
+        q0 = q0 / np.linalg.norm(q0)
+    elif tb.has("q"):
+        q0 = _vector(ctx, tb.get("q"), "dimensionless", 4, f"{path}.q")
+        norm = float(np.linalg.norm(q0))
+        _check(ctx, abs(norm - 1.0) <= QUAT_TOL, f"{path}.q", f"a unit quaternion, scalar first (| |q| - 1 | <= {QUAT_TOL:g}; |q| = {norm:.9g})", tb.get("q"))
+        q0 = q0 / norm
+    else:
+        q0 = np.array([1.0, 0.0, 0.0, 0.0])
+    w0 = _vector(ctx, tb.get("w", [0.0, 0.0, 0.0]), "angular_velocity", 3, f"{path}.w")
+    if model != "none" and not tb.has("inertia"):
+        raise ctx.error(f"{path}.inertia", f"the inertia (3 principal moments or a 3x3 tensor) for model {model}", "nothing", raw=True)
+    inertia, moments, axes = _inertia(ctx, tb.get("inertia", [1.0, 1.0, 1.0]), f"{path}.inertia")
+    # model-specific parameters
+    mass = cm = g = torque = None
+    for key, needs in (("mass", "heavy_top"), ("cm", "heavy_top"), ("g", "heavy_top"), ("torque", "user")):
+        if tb.has(key) and model != needs:
+            raise ctx.error(f"{path}.{key}", f'no {key} unless model = "{needs}"', tb.get(key))
+    if model == "heavy_top":
+        mass = _quantity(ctx, tb.get("mass"), "mass", f"{path}.mass")
+        _check(ctx, mass > 0, f"{path}.mass", "mass > 0", tb.get("mass"))
+        cm = _quantity(ctx, tb.get("cm"), "length", f"{path}.cm")
+        _check(ctx, cm >= 0, f"{path}.cm", "cm >= 0 (distance from the fixed point along body axis 3)", tb.get("cm"))
+        g = _quantity(ctx, tb.get("g", G0), "acceleration", f"{path}.g")
+        _check(ctx, g >= 0, f"{path}.g", "g >= 0", tb.get("g", G0))
+    if model == "user":
+        torque = _vector(ctx, tb.get("torque"), "torque", 3, f"{path}.torque")
+    return AttitudeSpec(model=model, q0=q0, w0=w0, inertia=inertia, principal_moments=moments, principal_axes=axes,
+                        rotors=rotors, mass=mass, cm=cm, g=g, torque=torque)
+
+
+def _inertia(ctx: _Ctx, value: Any, path: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    desc = "3 principal moments or a 3x3 symmetric tensor"
+    if isinstance(value, list) and len(value) == 3 and all(isinstance(row, list) for row in value):
+        tensor = np.array([_vector(ctx, row, "inertia", 3, f"{path}[{k}]") for k, row in enumerate(value)])
+        scale = float(np.max(np.abs(tensor)))
+        _check(ctx, scale > 0, path, "a non-zero inertia tensor", value)
+        _check(ctx, bool(np.all(np.abs(tensor - tensor.T) <= SYMMETRY_RTOL * scale)), path, "a symmetric tensor (I[i][j] = I[j][i])", value)
+        tensor = 0.5 * (tensor + tensor.T)
+        if np.count_nonzero(tensor - np.diag(np.diag(tensor))) == 0:
+            moments, axes = np.diag(tensor).copy(), np.eye(3)
+        else:
+            moments, axes = np.linalg.eigh(tensor)
+            if np.linalg.det(axes) < 0:
+                axes[:, 2] = -axes[:, 2]
+    elif isinstance(value, (list, str)):
+        moments = _vector(ctx, value, "inertia", 3, path)
+        tensor, axes = np.diag(moments), np.eye(3)
+    else:
+        raise ctx.error(path, desc, value)
+    for k in range(3):
+        _check(ctx, moments[k] > 0, path, "positive principal moments (a singular or negative inertia is not a rigid body)",
+               value if moments is None else moments.tolist())
+    total = float(np.sum(moments))
+    for k in range(3):
+        _check(ctx, moments[k] <= (total - moments[k]) * (1 + TRIANGLE_RTOL), path,
+               "principal moments obeying the triangle inequality (each <= the sum of the other two)", moments.tolist())
+    return tensor, moments, axes
+
+
+def _rotors(ctx: _Ctx, value: Any, path: str) -> tuple[Rotor, ...]:
+    if not isinstance(value, list) or len(value) > 64:
+        raise ctx.error(path, "a list of at most 64 rotor tables {axis, h} or {axis, speed, inertia}", value)
+    out = []
+    for k, item in enumerate(value):
+        p = f"{path}[{k}]"
+        tb = _Table(ctx, item, p, ("axis", "h", "speed", "inertia"))
+        axis = _vector(ctx, tb.get("axis"), "dimensionless", 3, f"{p}.axis")
+        n = float(np.linalg.norm(axis))
+        _check(ctx, n > 0, f"{p}.axis", "a non-zero axis (body components; normalized on load)", tb.get("axis"))
+        if tb.has("h"):
+            if tb.has("speed") or tb.has("inertia"):
+                raise ctx.error(f"{p}.h", "either h or speed + inertia, not both", tb.get("h"))
+            out.append(Rotor(axis=axis / n, h=_quantity(ctx, tb.get("h"), "angular_momentum", f"{p}.h")))
+        else:
+            speed = _quantity(ctx, tb.get("speed"), "angular_velocity", f"{p}.speed")
+            j = _quantity(ctx, tb.get("inertia"), "inertia", f"{p}.inertia")
+            _check(ctx, j > 0, f"{p}.inertia", "inertia > 0 (axial moment of the rotor)", tb.get("inertia"))
+            out.append(Rotor(axis=axis / n, h=j * speed, speed=speed, inertia=j))
+    return tuple(out)
+
+
+def _body(ctx: _Ctx, data: Any, path: str, cb: CentralBody) -> Body:
+    tb = _Table(ctx, data, path, ("name", "orbit", "attitude", "cross_check"))
+    name = _name(ctx, tb.get("name"), f"{path}.name")
+    orbit = _orbit(ctx, tb.get("orbit"), f"{path}.orbit", cb) if tb.has("orbit") else None
+    attitude = _attitude(ctx, tb.get("attitude"), f"{path}.attitude") if tb.has("attitude") else None
+    if orbit is None and attitude is None:
+        raise ctx.error(path, "an orbit table, an attitude table or both", f'body "{name}" with neither', raw=True)
+    if attitude is not None and attitude.model == "heavy_top" and orbit is not None:
+        raise ctx.error(f"{path}.orbit", "no orbit for a heavy_top body (a top spins about a fixed point in uniform gravity)", "an orbit table", raw=True)
+    if attitude is not None and attitude.model == "gravity_gradient" and orbit is None:
+        raise ctx.error(f"{path}.attitude.model", "an orbit table with gravity_gradient (the torque depends on the position)", '"gravity_gradient" without an orbit', raw=True)
+    cross = _bool(ctx, tb.get("cross_check", False), f"{path}.cross_check")
+    if cross and orbit is None:
+        raise ctx.error(f"{path}.cross_check", "an orbit to cross-check", "true without an orbit", raw=True)
+    return Body(name=name, orbit=orbit, attitude=attitude, cross_check=cross)
+
+
+_WALKER_KEYS = ("prefix", "i", "t", "p", "f", "altitude", "a", "raan0", "model", "cross_check", "attitude")
+
+
+def _walker(ctx: _Ctx, data: Any, cb: CentralBody) -> tuple[list[Body], dict[str, Any]]:
+    tb = _Table(ctx, data, "walker", _WALKER_KEYS)
+    prefix = _name(ctx, tb.get("prefix", "sat"), "walker.prefix")
+    i = _angle(ctx, tb, "i", "walker")
+    _check(ctx, 0.0 <= i <= math.pi, "walker.i", "0 <= i <= 180 deg", tb.get("i"))
+    t = _int(ctx, tb.get("t"), "walker.t", 1, MAX_BODIES)
+    p = _int(ctx, tb.get("p"), "walker.p", 1, t)
+    _check(ctx, t % p == 0, "walker.p", f"a divisor of t = {t} (equal planes)", tb.get("p"))
+    f = _int(ctx, tb.get("f", 0), "walker.f", 0, p - 1)
+    if tb.has("altitude") == tb.has("a"):
+        raise ctx.error("walker", "exactly one of altitude, a", "both" if tb.has("a") else "neither", raw=True)
+    if tb.has("a"):
+        a = _quantity(ctx, tb.get("a"), "length", "walker.a")
+    else:
+        a = cb.radius + _quantity(ctx, tb.get("altitude"), "length", "walker.altitude")
+    _check(ctx, a > 0, "walker.a" if tb.has("a") else "walker.altitude", "an orbit radius a > 0", tb.get("a", tb.get("altitude", None)))
+    raan0 = _angle(ctx, tb, "raan0", "walker")
+    model = _choice(ctx, tb.get("model", _ORBIT_ANALYTIC), ORBIT_MODELS, "walker.model")
+    cross = _bool(ctx, tb.get("cross_check", False), "walker.cross_check")
+    attitude = _attitude(ctx, tb.get("attitude"), "walker.attitude") if tb.has("attitude") else None
+    if attitude is not None and attitude.model == "heavy_top":
+        raise ctx.error("walker.attitude.model", "an orbiting model (not heavy_top)", "heavy_top")
+    from astrodyn.orbit.elements import state_from_elements
+
+    s = t // p
+    j_idx, k_idx = np.divmod(np.arange(t), s)
+    raan = raan0 + 2 * np.pi * j_idx / p
+    u = 2 * np.pi * k_idx / s + 2 * np.pi * f * j_idx / t
+    r0, v0 = state_from_elements(np.full(t, a), np.zeros(t), np.full(t, i), raan, np.zeros(t), u, cb.mu)
+    r0, v0 = np.asarray(r0).reshape(t, 3), np.asarray(v0).reshape(t, 3)
+    wp, ws = len(str(p - 1)), len(str(s - 1))
+    degree = {"j2": 2, "zonal": 6}.get(model, 0)
+    perturbers = ("moon", "sun") if model == "third_body" and cb.name == "earth" else ()
+    if model == "third_body" and not perturbers:
+        raise ctx.error("walker.model", "third_body only around the Earth (default perturbers moon, sun)", model)
+    bodies = []
+    for n in range(t):
+        name = f"{prefix}-{j_idx[n]:0{wp}d}-{k_idx[n]:0{ws}d}"
+        elements = {"p": a, "a": a, "e": 0.0, "i": i, "raan": float(raan[n]), "argp": 0.0, "nu": float(u[n])}
+        orbit = OrbitSpec(model=model, r0=r0[n].copy(), v0=v0[n].copy(), elements=elements, degree=degree, perturbers=perturbers)
+        bodies.append(Body(name=name, orbit=orbit, attitude=attitude, cross_check=cross))
+    summary = {"prefix": prefix, "i": i, "t": t, "p": p, "f": f, "a": a, "raan0": raan0, "model": model}
+    return bodies, summary
+
+
+def _output(ctx: _Ctx, data: Any, base: Path | None) -> tuple[Path | None, int | None, float | None]:
+    tb = _Table(ctx, data, "output", ("path", "roll_size", "roll_interval"))
+    path = None
+    if tb.has("path"):
+        raw = _string(ctx, tb.get("path"), "output.path", 1024)
+        if re.match(r"^[A-Za-z][A-Za-z0-9+.-]*:", raw) and not re.match(r"^[A-Za-z]:[\\/]", raw):
+            raise ctx.error("output.path", "a file path (resolved relative to the config file), not a URL", raw)
+        _check(ctx, bool(raw.strip()) and "\x00" not in raw, "output.path", "a non-empty file path", raw)
+        path = Path(raw)
+        if not path.is_absolute() and base is not None:
+            path = base / path
+    roll_size = roll_interval = None
+    if tb.has("roll_size"):
+        size = _quantity(ctx, tb.get("roll_size"), "bytes", "output.roll_size")
+        _check(ctx, 2**20 <= size <= 2**50, "output.roll_size", "1 MiB <= roll_size <= 1 PiB", tb.get("roll_size"))
+        roll_size = int(size)
+    if tb.has("roll_interval"):
+        roll_interval = _quantity(ctx, tb.get("roll_interval"), "time", "output.roll_interval")
+        _check(ctx, 1.0 <= roll_interval <= MAX_DURATION_S, "output.roll_interval", "1 s <= roll_interval", tb.get("roll_interval"))
+    return path, roll_size, roll_interval
+
+
+# --------------------------------------------------------------------------- loading
+
+
+def load(path: str | Path) -> Scenario:
+    """Load and validate a scenario file; raise :class:`ScenarioError` on any problem."""
+    source = str(path)
+    ctx = _Ctx(source)
+    try:
+        p = Path(path)
+        with open(p, "rb") as fh:
+            raw = fh.read(MAX_FILE_BYTES + 1)
+    except OSError as exc:
+        raise ctx.error("file", "a readable TOML file", f"{type(exc).__name__}: {exc.strerror or exc}", raw=True) from None
+    if len(raw) > MAX_FILE_BYTES:
+        raise ctx.error("file", f"at most {MAX_FILE_BYTES // 2**20} MiB of TOML", "a larger file", raw=True)
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise ctx.error("file", "UTF-8 text", f"invalid byte at offset {exc.start}", raw=True) from None
+    return loads(text, source=source, base_dir=p.resolve().parent)
+
+
+def loads(text: str, source: str = "<string>", base_dir: str | Path | None = None) -> Scenario:
+    """Load a scenario from TOML text; ``source`` names it in errors, ``base_dir`` anchors
+    relative file paths (default: the current directory)."""
+    ctx = _Ctx(source)
+    if not isinstance(text, str):
+        raise ctx.error("file", "TOML text", type(text).__name__, raw=True)
+    if len(text) > MAX_FILE_BYTES:
+        raise ctx.error("file", f"at most {MAX_FILE_BYTES // 2**20} MiB of TOML", "a larger text", raw=True)
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ctx.error("toml", "valid TOML", str(exc), raw=True) from None
+    except RecursionError:
+        raise ctx.error("toml", "valid TOML", "nesting too deep", raw=True) from None
+    return load_dict(data, source=source, base_dir=base_dir)
+
+
+def load_dict(data: dict[str, Any], source: str = "<dict>", base_dir: str | Path | None = None) -> Scenario:
+    """Validate an already parsed config (e.g. the ``config`` of :meth:`Scenario.to_dict`)."""
+    ctx = _Ctx(source)
+    top = _Table(ctx, data, "", ("scenario", "central_body", "bodies", "walker", "output"))
+    sc = _Table(ctx, top.get("scenario"), "scenario", ("name", "description", "epoch", "duration", "rate", "real_time_factor", "frame"))
+    name = _name(ctx, sc.get("name"), "scenario.name")
+    description = _string(ctx, sc.get("description", ""), "scenario.description")
+    epoch, scale, epoch_ns = _epoch(ctx, sc.get("epoch"), "scenario.epoch")
+    duration = _quantity(ctx, sc.get("duration"), "time", "scenario.duration")
+    _check(ctx, duration > 0, "scenario.duration", "duration > 0", sc.get("duration"))
+    _check(ctx, duration <= MAX_DURATION_S, "scenario.duration", "duration <= 250 years", sc.get("duration"))
+    _check(ctx, epoch_ns + duration * 1e9 < 2.0**64, "scenario.duration", "an end before 2554 (MCAP log_time is uint64 ns since 1970)", sc.get("duration"))
+    rate = _quantity(ctx, sc.get("rate"), "frequency", "scenario.rate")
+    _check(ctx, MIN_RATE_HZ <= rate <= MAX_RATE_HZ, "scenario.rate", f"{MIN_RATE_HZ:g} Hz <= rate <= {MAX_RATE_HZ:g} Hz", sc.get("rate"))
+    _check(ctx, duration * rate <= MAX_OUTPUT_STEPS, "scenario.rate", f"duration x rate <= {MAX_OUTPUT_STEPS:.0e} output steps", sc.get("rate"))
+    rtf = _quantity(ctx, sc.get("real_time_factor", 1.0), "dimensionless", "scenario.real_time_factor")
+    _check(ctx, 0 < rtf <= MAX_REAL_TIME_FACTOR, "scenario.real_time_factor", f"0 < real_time_factor <= {MAX_REAL_TIME_FACTOR:g}", sc.get("real_time_factor", 1.0))
+    cb = _central_body(ctx, top.get("central_body", {"name": "earth"}))
+    frame = _name(ctx, sc.get("frame", cb.frame), "scenario.frame")
+
+    bodies: list[Body] = []
+    raw_bodies = top.get("bodies", [])
+    if not isinstance(raw_bodies, list):
+        raise ctx.error("bodies", "an array of tables [[bodies]]", raw_bodies)
+    if len(raw_bodies) > MAX_BODIES:
+        raise ctx.error("bodies", f"at most {MAX_BODIES} bodies", f"{len(raw_bodies)} bodies", raw=True)
+    for k, item in enumerate(raw_bodies):
+        bodies.append(_body(ctx, item, f"bodies[{k}]", cb))
+    walker = None
+    if top.has("walker"):
+        generated, walker = _walker(ctx, top.get("walker"), cb)
+        bodies += generated
+    if not bodies:
+        raise ctx.error("bodies", "at least one body ([[bodies]] or [walker])", "none", raw=True)
+    if len(bodies) > MAX_BODIES:
+        raise ctx.error("bodies", f"at most {MAX_BODIES} bodies", f"{len(bodies)} bodies", raw=True)
+    seen: dict[str, int] = {}
+    for k, b in enumerate(bodies):
+        where = f"bodies[{k}].name" if k < len(raw_bodies) else "walker.prefix"
+        if b.name in seen:
+            raise ctx.error(where, f"a unique body name (also bodies[{seen[b.name]}])", b.name)
+        seen[b.name] = k
+    out_path = roll_size = roll_interval = None
+    if top.has("output"):
+        out_path, roll_size, roll_interval = _output(ctx, top.get("output"), Path(base_dir) if base_dir is not None else Path.cwd())
+    return Scenario(
+        name=name, epoch=epoch, epoch_scale=scale, epoch_unix_ns=epoch_ns, duration=duration, rate=rate,
+        real_time_factor=rtf, frame=frame, central_body=cb, bodies=tuple(bodies), description=description,
+        output_path=out_path, roll_size=roll_size, roll_interval=roll_interval, walker=walker,
+        source=source, config=_jsonable(data),
+    )
+
+
+# --------------------------------------------------------------------------- plan
+
+
+@dataclass(frozen=True)
+class BodyPlan:
+    """What runs for one body: orbit/attitude model used (None if absent), the method, notes."""
+
+    name: str
+    orbit_model: str | None
+    orbit_method: str
+    attitude_model: str | None
+    attitude_method: str
+    notes: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
+class Plan:
+    """Processes to start and per-body models; :meth:`text` is the human-readable form."""
+
+    scenario: str
+    processes: tuple[str, ...]
+    bodies: tuple[BodyPlan, ...]
+    n_steps: int
+    messages: int
+
+    def text(self, max_bodies: int = 20) -> str:
+        lines = [f"scenario {self.scenario}: {len(self.bodies)} bodies, {self.n_steps} output steps, {self.messages} state messages",
+                 f"processes: {', '.join(self.processes)}"]
+        groups: dict[tuple, list[str]] = {}
+        for bp in self.bodies:
+            groups.setdefault((bp.orbit_model, bp.orbit_method, bp.attitude_model, bp.attitude_method, bp.notes), []).append(bp.name)
+        shown = 0
+        for (om, ometh, am, ameth, notes), names in groups.items():
+            if shown >= max_bodies:
+                lines.append(f"  ... {len(self.bodies) - shown} more bodies")
+                break
+            who = names[0] if len(names) == 1 else f"{names[0]} .. {names[-1]} ({len(names)} bodies)"
+            lines.append(f"  {who}:")
+            lines.append(f"    orbit:    {om or '-'}{' (' + ometh + ')' if om else ''}")
+            lines.append(f"    attitude: {am or '-'}{' (' + ameth + ')' if am else ''}")
+            lines += [f"    note: {n}" for n in notes]
+            shown += len(names)
+        return "\n".join(lines)
+
+
+_ORBIT_METHOD = {
+    "kepler": "analytic two-body, universal variables: exact",
+    "j2": "numerical, two-body + J2",
+    "zonal": "numerical, two-body + zonal harmonics",
+    "third_body": "numerical, two-body + third bodies",
+}
+_ATTITUDE_METHOD = {
+    "torque_free": "analytic, Jacobi elliptic functions: exact",
+    "gravity_gradient": "numerical splitting, gravity-gradient torque from the published orbit",
+    "gyrostat": "numerical splitting, gyrostat with rotors",
+    "heavy_top": "numerical splitting, heavy top in uniform gravity",
+    "user": "numerical splitting, constant body torque",
+}
+
+
+def plan(scenario: Scenario) -> Plan:
+    """The cheapest exact model per body and the processes a run needs.
+
+    A perturbation that is identically zero for the scene is dropped: j2/zonal with all
+    needed J_n = 0 -> kepler; gravity gradient on an inertially spherical body, a heavy
+    top with cm = 0 or g = 0, a user torque of 0, or a gyrostat whose rotors have h = 0
+    -> torque_free. Processes: ``orbit`` if any body has an orbit, ``attitude`` if any
+    attitude is propagated, ``logger`` always.
+    """
+    cb = scenario.central_body
+    out = []
+    for b in scenario.bodies:
+        notes: list[str] = []
+        om = am = None
+        if b.orbit is not None:
+            om = b.orbit.model
+            if om in ("j2", "zonal") and not any(cb.j[: b.orbit.degree - 1]):
+                notes.append(f"{om} requested but J2..J{b.orbit.degree} of {cb.name} are 0: analytic kepler is exact")
+                om = "kepler"
+            rp = _periapsis(b.orbit, cb.mu)
+            if rp is not None and rp < cb.radius:
+                notes.append(f"periapsis {rp / 1e3:.6g} km is below the surface of {cb.name} (radius {cb.radius / 1e3:.6g} km)")
+            if b.cross_check:
+                notes.append("cross-checked against REBOUND IAS15")
+        if b.attitude is not None and b.attitude.model != "none":
+            a = b.attitude
+            am = a.model
+            pm = a.principal_moments
+            if am == "gravity_gradient" and np.ptp(pm) <= 1e-15 * np.max(pm):
+                notes.append("gravity gradient on a spherical inertia is zero: exact torque_free")
+                am = _ATTITUDE_EXACT
+            elif am == "heavy_top" and (a.cm == 0 or a.g == 0):
+                notes.append("heavy top with cm = 0 or g = 0 has no torque: exact torque_free")
+                am = _ATTITUDE_EXACT
+            elif am == "user" and a.torque is not None and not np.any(a.torque):
+                notes.append("user torque is zero: exact torque_free")
+                am = _ATTITUDE_EXACT
+            elif am == "gyrostat" and all(r.h == 0 for r in a.rotors):
+                notes.append("all rotors have h = 0: exact torque_free")
+                am = _ATTITUDE_EXACT
+        out.append(BodyPlan(
+            name=b.name, orbit_model=om, orbit_method=_ORBIT_METHOD.get(om, ""),
+            attitude_model=am, attitude_method=_ATTITUDE_METHOD.get(am, ""), notes=tuple(notes),
+        ))
+    processes = []
+    if any(bp.orbit_model for bp in out):
+        processes.append("orbit")
+    if any(bp.attitude_model for bp in out):
+        processes.append("attitude")
+    processes.append("logger")
+    n = scenario.n_steps
+    per_step = sum((bp.orbit_model is not None) + (bp.attitude_model is not None) + bool(b.cross_check) for bp, b in zip(out, scenario.bodies))
+    return Plan(scenario=scenario.name, processes=tuple(processes), bodies=tuple(out), n_steps=n, messages=n * per_step)
+
+
+def _periapsis(orbit: OrbitSpec, mu: float) -> float | None:
+    """Periapsis radius of the initial osculating conic (m), from r0, v0 (Vallado eq. 2-?)."""
+    r, v = orbit.r0, orbit.v0
+    h = np.cross(r, v)
+    h2 = float(h @ h)
+    rn = float(np.linalg.norm(r))
+    if rn == 0:
+        return None
+    e_vec = np.cross(v, h) / mu - r / rn
+    e = float(np.linalg.norm(e_vec))
+    p = h2 / mu
+    return p / (1.0 + e)
+
+
+# --------------------------------------------------------------------------- CLI
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``astrodyn validate CONFIG [--json]``: print the plan; exit 2 on a bad config."""
+    parser = argparse.ArgumentParser(prog="astrodyn validate", description="Check a scenario config and print what it would run.")
+    parser.add_argument("config", help="scenario TOML file")
+    parser.add_argument("--json", action="store_true", help="print the scenario as run (JSON) instead of the plan")
+    parser.add_argument("--all", action="store_true", help="list every body in the plan")
+    args = parser.parse_args(argv)
+    try:
+        scn = load(args.config)
+        if args.json:
+            print(json.dumps(scn.to_dict(), indent=1))
+        else:
+            print(f"{args.config}: ok")
+            print(plan(scn).text(max_bodies=10**9 if args.all else 20))
+    except ScenarioError as exc:
+        print(f"astrodyn validate: {exc}", file=sys.stderr)
+        return 2
+    except Exception as exc:  # pragma: no cover - a bug: report it without a traceback wall
+        print(f"astrodyn validate: internal error ({type(exc).__name__}: {exc}); please report it", file=sys.stderr)
+        return 3
+    return 0
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())
