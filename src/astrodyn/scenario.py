@@ -1105,7 +1105,7 @@ class Plan:
             if shown >= max_bodies:
                 lines.append(f"  ... {len(self.bodies) - shown} more bodies")
                 break
-            who = names[0] if len(names) == 1 else f"{names[0]} .. {names[-1]} ({len(names)} bodies)"
+            who = ", ".join(names) if len(names) <= 3 else f"{names[0]}, {names[1]}, ..., {names[-1]} ({len(names)} bodies)"
             lines.append(f"  {who}:")
             lines.append(f"    orbit:    {om or '-'}{' (' + ometh + ')' if om else ''}")
             lines.append(f"    attitude: {am or '-'}{' (' + ameth + ')' if am else ''}")
