@@ -30,6 +30,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from astrodyn.rotation import quat_rate
+
 __all__ = [
     "inertia_tensor",
     "principal_axes",
@@ -135,15 +137,6 @@ def body_momentum_rates(inertia, H, torque=0.0, rotor_momentum=0.0):
     return np.cross(H, w) + np.asarray(torque, dtype=np.float64), w
 
 
-def _quat_rates(q, w):
-    """``dq/dt = 1/2 q (x) (0, w)``, scalar first (private; see astrodyn.rotation)."""
-    e0 = q[..., :1]
-    e = q[..., 1:]
-    d0 = -0.5 * np.sum(e * w, axis=-1, keepdims=True)
-    dv = 0.5 * (e0 * w + np.cross(e, w))
-    return np.concatenate([d0, dv], axis=-1)
-
-
 def attitude_state_rates(t, state, inertia, torque=None, rotor_momentum=None):
     """State-form right-hand side ``x' = f(t, x)`` with ``x = (q, w)`` of shape ``(..., 7)``.
 
@@ -166,4 +159,4 @@ def attitude_state_rates(t, state, inertia, torque=None, rotor_momentum=None):
     elif rotor_momentum is not None:
         h = np.asarray(rotor_momentum, dtype=np.float64)
     wd = euler_rates(inertia, w, tau, h, hd)
-    return np.concatenate([_quat_rates(q, w), wd], axis=-1)
+    return np.concatenate([quat_rate(q, w), wd], axis=-1)

@@ -57,6 +57,7 @@ import numpy as np
 
 from astrodyn._jit import jit
 from astrodyn.attitude.euler import inertia_tensor, principal_axes
+from astrodyn.rotation import quat_conjugate, quat_from_dcm, quat_multiply
 from astrodyn.attitude.torques import (
     ConstantTorque,
     GravityGradientTorque,
@@ -90,9 +91,13 @@ def _rotate_about_axis(M, q, axis, angle):
     This is the exact flow of ``H_i = (M_i - h_i)^2 / (2 I_i)`` with
     ``angle = (M_i - h_i) dt / I_i`` (rotation of the body about principal axis i).
     """
-    half = 0.5 * angle
-    s = math.sin(half)
-    c = math.cos(half)
+    # one transcendental: u = tan(angle/4) gives the half-angle pair exactly
+    # (c, s) = ((1 - u^2), 2u) / (1 + u^2) to a few ulp; |angle| < pi per sub-step
+    u = math.tan(0.25 * angle)
+    u2 = u * u
+    d = 1.0 / (1.0 + u2)
+    c = (1.0 - u2) * d
+    s = 2.0 * u * d
     ca = (c - s) * (c + s)
     sa = 2.0 * s * c
     j = axis + 1
@@ -240,40 +245,6 @@ def free_rigid_body_step(inertia, M, q, dt, rotor_momentum=(0.0, 0.0, 0.0)):
 
 
 # ---------------------------------------------------------------------------
-# quaternion helpers (private; astrodyn.rotation supersedes them once it lands)
-# ---------------------------------------------------------------------------
-
-
-def _quat_mul(p, r):
-    """Hamilton product ``p (x) r`` (scalar first); ``C(p (x) r) = C(r) @ C(p)``."""
-    p0, pv = p[..., :1], p[..., 1:]
-    r0, rv = r[..., :1], r[..., 1:]
-    return np.concatenate([p0 * r0 - np.sum(pv * rv, -1, keepdims=True), p0 * rv + r0 * pv + np.cross(pv, rv)], -1)
-
-
-def _quat_from_dcm(C):
-    """Euler parameters of a single proper DCM (Shepperd's method), e0 >= 0."""
-    C = np.asarray(C, dtype=np.float64)
-    tr = np.trace(C)
-    cands = np.array([tr, C[0, 0], C[1, 1], C[2, 2]])
-    i = int(np.argmax(cands))
-    if i == 0:
-        e0 = 0.5 * math.sqrt(1.0 + tr)
-        q = [e0, (C[1, 2] - C[2, 1]) / (4 * e0), (C[2, 0] - C[0, 2]) / (4 * e0), (C[0, 1] - C[1, 0]) / (4 * e0)]
-    elif i == 1:
-        e1 = 0.5 * math.sqrt(1.0 + 2 * C[0, 0] - tr)
-        q = [(C[1, 2] - C[2, 1]) / (4 * e1), e1, (C[0, 1] + C[1, 0]) / (4 * e1), (C[2, 0] + C[0, 2]) / (4 * e1)]
-    elif i == 2:
-        e2 = 0.5 * math.sqrt(1.0 + 2 * C[1, 1] - tr)
-        q = [(C[2, 0] - C[0, 2]) / (4 * e2), (C[0, 1] + C[1, 0]) / (4 * e2), e2, (C[1, 2] + C[2, 1]) / (4 * e2)]
-    else:
-        e3 = 0.5 * math.sqrt(1.0 + 2 * C[2, 2] - tr)
-        q = [(C[0, 1] - C[1, 0]) / (4 * e3), (C[2, 0] + C[0, 2]) / (4 * e3), (C[1, 2] + C[2, 1]) / (4 * e3), e3]
-    q = np.array(q)
-    return q if q[0] >= 0 else -q
-
-
-# ---------------------------------------------------------------------------
 # set-up: frames, torques, rotors, step tables
 # ---------------------------------------------------------------------------
 
@@ -285,7 +256,7 @@ class _Frame:
         self.J = inertia_tensor(inertia)
         self.moments, self.P = principal_axes(self.J)
         self.identity = bool(np.array_equal(self.P, np.eye(3)))
-        self.r = _quat_from_dcm(self.P.T)  # C(r) = P^T
+        self.r = quat_from_dcm(self.P.T)  # C(r) = P^T
         self.r_inv = self.r * np.array([1.0, -1.0, -1.0, -1.0])
 
     def vec_to_p(self, v):
@@ -295,10 +266,10 @@ class _Frame:
         return v if self.identity else v @ self.P.T
 
     def quat_to_p(self, q):
-        return q if self.identity else _quat_mul(q, self.r)
+        return q if self.identity else quat_multiply(self.r, q)
 
     def quat_from_p(self, q):
-        return q if self.identity else _quat_mul(q, self.r_inv)
+        return q if self.identity else quat_multiply(self.r_inv, q)
 
 
 def _flatten_torque(torque):
@@ -482,7 +453,7 @@ def _run_split_python(frame, M, q, starts, n, dt, weights, bounds, mids, torque,
 
 def _attitude_difference(qa, qb):
     """Rotation angle (rad) between two attitudes (sign of q irrelevant)."""
-    d = _quat_mul(qa * np.array([1.0, -1.0, -1.0, -1.0]), qb)
+    d = quat_multiply(qb, quat_conjugate(qa))
     return 2.0 * np.arctan2(np.linalg.norm(d[..., 1:], axis=-1), np.abs(d[..., 0]))
 
 

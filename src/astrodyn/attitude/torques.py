@@ -25,6 +25,7 @@ from __future__ import annotations
 import numpy as np
 
 from astrodyn.attitude.euler import inertia_tensor
+from astrodyn.rotation import quat_rotate
 
 __all__ = [
     "gravity_gradient_torque",
@@ -33,14 +34,6 @@ __all__ = [
     "ConstantTorque",
     "TorqueSum",
 ]
-
-
-def _dcm_apply(q, v):
-    """``C(q) @ v`` (inertial -> body), scalar-first q; private until astrodyn.rotation lands."""
-    q = np.asarray(q, dtype=np.float64)
-    e0 = q[..., :1]
-    e = q[..., 1:]
-    return (e0 * e0 - np.sum(e * e, -1, keepdims=True)) * v + 2.0 * e * np.sum(e * v, -1, keepdims=True) - 2.0 * e0 * np.cross(e, v)
 
 
 def gravity_gradient_torque(r_body, inertia, mu):
@@ -85,7 +78,7 @@ class GravityGradientTorque:
 
     def __call__(self, t, q, w=None):
         r = np.asarray(self.position(np.asarray(t, dtype=np.float64)), dtype=np.float64)
-        return gravity_gradient_torque(_dcm_apply(q, r), self.inertia, self.mu)
+        return gravity_gradient_torque(quat_rotate(q, r), self.inertia, self.mu)
 
 
 class UniformGravityTorque:
@@ -103,7 +96,7 @@ class UniformGravityTorque:
         self.gravity = np.asarray(gravity, dtype=np.float64).reshape(3)
 
     def __call__(self, t, q, w=None):
-        return np.cross(self.center_of_mass, self.mass * _dcm_apply(q, self.gravity))
+        return np.cross(self.center_of_mass, self.mass * quat_rotate(q, self.gravity))
 
 
 class ConstantTorque:
@@ -118,7 +111,7 @@ class ConstantTorque:
     def __call__(self, t, q, w=None):
         if self.frame == "body":
             return np.broadcast_to(self.torque, np.shape(q)[:-1] + (3,)).copy()
-        return _dcm_apply(q, self.torque)
+        return quat_rotate(q, self.torque)
 
 
 class TorqueSum:
