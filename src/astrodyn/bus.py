@@ -1,0 +1,600 @@
+"""The Zenoh bus: sessions with safe defaults, state publishers, liveliness, heartbeats, control.
+
+Every astrodyn process talks over one Zenoh session opened with :func:`open_session`.
+The defaults keep a scenario private to the machine:
+
+* ``listen`` on ``tcp/127.0.0.1:<port>`` (an explicit loopback endpoint; :func:`free_port`
+  picks the port), never the Zenoh default ``tcp/[::]:0`` that binds every interface;
+* multicast scouting **off** (nothing is announced on the LAN);
+* gossip scouting **on**: peers that meet through one hub (the runner's session) learn
+  each other's loopback locators and connect directly, so a hub-and-spoke start-up gives
+  a full mesh.
+
+Multi-host set-ups are explicit: ``connect=["tcp/10.0.0.5:7447"]`` joins a router (or
+another peer) and ``listen=["tcp/0.0.0.0:7447"]`` opens a port to the network; put TLS
+(``tls/host:port`` endpoints plus the ``transport/link/tls`` settings) and access control
+(``access_control`` in the Zenoh config) in front of anything that leaves the machine.
+``mode="client"`` makes a session that only connects (it never listens).
+
+Facts measured on eclipse-zenoh 1.10.2 that this module is built around:
+
+* The default congestion control ``DROP`` silently lost half the messages of a subscriber
+  that could not keep up.  State publishers therefore use ``CongestionControl.BLOCK`` and
+  ``Reliability.RELIABLE`` (:func:`declare_state_publisher`): a slow logger slows the
+  propagators down instead of losing states.
+* A session left open with a callback subscriber hangs interpreter exit.  Use every session
+  as a context manager (``with open_session() as session: ...``); this module only declares
+  channel (FIFO) handlers, which are polled from the owner's loop, never Python callbacks.
+* A child created by ``fork`` after the parent opened a session hangs.  Start processes with
+  ``subprocess`` (or ``multiprocessing`` with the ``spawn`` start method), never ``fork``.
+* Liveliness tokens survive a hung Python process (Zenoh's Rust threads keep them alive),
+  so a stuck propagator is detected with the application :class:`Heartbeat` as well as with
+  :func:`declare_alive` / :class:`AliveWatcher` (which catch a process that exits or is killed).
+
+Key layout (design.md section 3; builders live in :mod:`astrodyn.messages`)::
+
+    astrodyn/<scenario>/<body>/orbit | attitude | crosscheck   state messages (JSON)
+    astrodyn/<scenario>/@batch/<process>                       batch envelopes of state messages
+    astrodyn/<scenario>/@event                                 events (start, stop, restart, error)
+    astrodyn/<scenario>/@alive/<process>                       liveliness tokens
+    astrodyn/<scenario>/@heartbeat/<process>                   application heartbeats (JSON)
+    astrodyn/<scenario>/@control/<verb>                        queryables: status pause resume rate stop
+    astrodyn/<scenario>/@status                                the logger's status queryable
+"""
+
+from __future__ import annotations
+
+import json
+import socket
+import time
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import zenoh
+
+from astrodyn import messages
+
+__all__ = [
+    "DEFAULT_HOST",
+    "CONTROL_VERBS",
+    "BusError",
+    "free_port",
+    "loopback_endpoint",
+    "make_config",
+    "open_session",
+    "add_bus_arguments",
+    "session_from_args",
+    "declare_state_publisher",
+    "Publisher",
+    "BatchPublisher",
+    "EventPublisher",
+    "END_EVENT",
+    "heartbeat_key",
+    "declare_alive",
+    "wait_for_process",
+    "AliveWatcher",
+    "Heartbeat",
+    "HeartbeatMonitor",
+    "ControlRequest",
+    "ControlServer",
+    "send_control",
+    "query_json",
+]
+
+DEFAULT_HOST = "127.0.0.1"
+#: The control verbs every long-running astrodyn service answers (``serve``, ``replay``).
+CONTROL_VERBS = ("status", "pause", "resume", "rate", "stop")
+_MODES = ("peer", "client", "router")
+
+
+class BusError(RuntimeError):
+    """A Zenoh session could not be opened or a bus operation failed (message says which)."""
+
+
+# --------------------------------------------------------------------------- sessions
+
+
+def free_port(host: str = DEFAULT_HOST) -> int:
+    """A TCP port on ``host`` that is free right now (the OS picks it; bind then release).
+
+    Another process could take it before Zenoh binds it; :func:`open_session` retries with a
+    new port when that happens to a port it chose itself.
+    """
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as sock:
+        sock.bind((host, 0))
+        return int(sock.getsockname()[1])
+
+
+def loopback_endpoint(port: int | None = None) -> str:
+    """``tcp/127.0.0.1:<port>`` (a free port when ``port`` is None)."""
+    return f"tcp/{DEFAULT_HOST}:{free_port() if port is None else int(port)}"
+
+
+def _endpoint_list(name: str, value: str | Sequence[str] | None) -> list[str]:
+    if value is None:
+        return []
+    items = [value] if isinstance(value, str) else list(value)
+    for item in items:
+        if not isinstance(item, str) or "/" not in item or ":" not in item.split("/", 1)[1]:
+            raise BusError(
+                f"{name}: expected Zenoh endpoints like 'tcp/127.0.0.1:7447', got {item!r}"
+            )
+    return items
+
+
+def make_config(
+    listen: str | Sequence[str] | None = None,
+    connect: str | Sequence[str] | None = None,
+    mode: str = "peer",
+) -> zenoh.Config:
+    """The Zenoh configuration astrodyn uses (see the module docstring for the defaults).
+
+    ``listen=None`` means one loopback endpoint on a free port (ignored in client mode,
+    where a session never listens); ``connect`` lists endpoints to join (a router, the
+    runner's hub).  Endpoints are Zenoh locators, e.g. ``tcp/127.0.0.1:7447``.
+    """
+    if mode not in _MODES:
+        raise BusError(f"mode: expected one of {', '.join(_MODES)}, got {mode!r}")
+    listen_list = _endpoint_list("listen", listen)
+    connect_list = _endpoint_list("connect", connect)
+    if listen is None and mode != "client":
+        listen_list = [loopback_endpoint()]
+    config = zenoh.Config()
+    config.insert_json5("mode", json.dumps(mode))
+    if mode != "client":
+        config.insert_json5("listen/endpoints", json.dumps(listen_list))
+    config.insert_json5("connect/endpoints", json.dumps(connect_list))
+    config.insert_json5("scouting/multicast/enabled", "false")
+    config.insert_json5("scouting/gossip/enabled", "true")
+    return config
+
+
+def open_session(
+    listen: str | Sequence[str] | None = None,
+    connect: str | Sequence[str] | None = None,
+    mode: str = "peer",
+) -> zenoh.Session:
+    """Open a Zenoh session with astrodyn's defaults; use it as a context manager.
+
+    >>> with open_session(listen=loopback_endpoint(7447)) as hub: ...        # doctest: +SKIP
+    >>> with open_session(connect="tcp/127.0.0.1:7447") as child: ...       # doctest: +SKIP
+
+    The first form is the runner's hub; children connect to it and, through gossip, to each
+    other.  Raises :class:`BusError` naming the endpoints when Zenoh refuses the config
+    (port taken, unreachable ``connect`` endpoint).
+    """
+    attempts = 3 if listen is None else 1  # only retry ports we picked ourselves
+    last: Exception | None = None
+    for _ in range(attempts):
+        config = make_config(listen, connect, mode)
+        try:
+            return zenoh.open(config)
+        except zenoh.ZError as exc:
+            last = exc
+    raise BusError(
+        f"cannot open a Zenoh session (mode={mode}, listen={listen!r}, connect={connect!r}): {last}"
+    )
+
+
+def add_bus_arguments(parser: Any) -> None:
+    """Add ``--listen``, ``--connect`` and ``--mode`` to an argparse parser (for services)."""
+    parser.add_argument(
+        "--listen", action="append", default=None, metavar="ENDPOINT",
+        help="Zenoh endpoint to listen on (repeatable); default tcp/127.0.0.1:<free port>",
+    )
+    parser.add_argument(
+        "--connect", action="append", default=None, metavar="ENDPOINT",
+        help="Zenoh endpoint to connect to (repeatable), e.g. the runner's hub or a router",
+    )
+    parser.add_argument("--mode", choices=_MODES, default="peer", help="Zenoh mode (default peer)")
+
+
+def session_from_args(args: Any) -> zenoh.Session:
+    """:func:`open_session` from the options added by :func:`add_bus_arguments`."""
+    return open_session(listen=args.listen, connect=args.connect, mode=args.mode)
+
+
+# --------------------------------------------------------------------------- publishing
+
+
+class _Declared:
+    """Mixin: ``close()`` undeclares the Zenoh entity in ``_entity``; usable with ``with``."""
+
+    _entity: Any
+
+    def close(self) -> None:
+        self._entity.undeclare()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def heartbeat_key(scenario: str, process: str) -> str:
+    """``astrodyn/<scenario>/@heartbeat/<process>``: application heartbeats of one process.
+
+    (Not a message key of :mod:`astrodyn.messages`: heartbeats are bus-only, never logged.)
+    """
+    # alive_key validates both names, so heartbeat keys follow the same naming rules
+    return messages.alive_key(scenario, process).replace("/@alive/", "/@heartbeat/", 1)
+
+
+def declare_state_publisher(session: zenoh.Session, key: str) -> zenoh.Publisher:
+    """A raw Zenoh publisher for state data: reliable, ``CongestionControl.BLOCK``, JSON."""
+    return session.declare_publisher(
+        key,
+        encoding=zenoh.Encoding.APPLICATION_JSON,
+        congestion_control=zenoh.CongestionControl.BLOCK,
+        reliability=zenoh.Reliability.RELIABLE,
+    )
+
+
+class Publisher(_Declared):
+    """A state publisher for one channel that stamps the per-channel ``seq`` (0, 1, 2, ...).
+
+    ``publish(msg)`` sets ``msg["seq"]``, encodes with :func:`astrodyn.messages.encode` and
+    puts; ``publish_encoded(payload, seq)`` sends a payload already encoded (with its seq),
+    e.g. from :func:`astrodyn.messages.encode_orbit_batch`, and checks that ``seq`` is the
+    next one.  Reliable delivery, blocking congestion control.  Use as a context manager
+    or call :meth:`close`.
+    """
+
+    def __init__(self, session: zenoh.Session, key: str, *, first_seq: int = 0):
+        self.key = key
+        self.next_seq = int(first_seq)
+        self._entity = declare_state_publisher(session, key)
+
+    @property
+    def last_seq(self) -> int | None:
+        """The seq of the last message sent (None before the first)."""
+        return self.next_seq - 1 if self.next_seq > 0 else None
+
+    def publish(self, msg: dict) -> int:
+        seq = self.next_seq
+        msg["seq"] = seq
+        self._entity.put(messages.encode(msg))
+        self.next_seq = seq + 1
+        return seq
+
+    def publish_encoded(self, payload: bytes, seq: int) -> None:
+        if seq != self.next_seq:
+            raise ValueError(f"{self.key}: seq: expected {self.next_seq}, got {seq}")
+        self._entity.put(payload)
+        self.next_seq = seq + 1
+
+    def matching(self) -> bool:
+        """True when at least one subscriber matches this channel."""
+        return bool(self._entity.matching_status)
+
+
+
+class BatchPublisher(_Declared):
+    """Publishes many per-body messages as one batch envelope on ``@batch/<process>``.
+
+    The envelope (:func:`astrodyn.messages.encode_batch`) carries ``(key, payload)`` pairs;
+    the logger splits it back into per-body channels without re-encoding the payloads, so
+    the per-body channel contract holds while the bus carries one sample per step.
+    ``last_seq`` tracks the highest seq sent per key (for the end-of-run event).
+    """
+
+    def __init__(self, session: zenoh.Session, scenario: str, process: str):
+        self.key = messages.batch_key(scenario, process)
+        self.last_seq: dict[str, int] = {}
+        self._entity = session.declare_publisher(
+            self.key,
+            encoding=zenoh.Encoding.APPLICATION_OCTET_STREAM,
+            congestion_control=zenoh.CongestionControl.BLOCK,
+            reliability=zenoh.Reliability.RELIABLE,
+        )
+
+    def publish(self, items: Sequence[tuple[str, bytes]], seqs: Iterable[int] | None = None) -> None:
+        """Send ``items`` (key, payload) as one envelope; ``seqs`` (same order) updates ``last_seq``."""
+        self._entity.put(messages.encode_batch(list(items)))
+        if seqs is not None:
+            for (key, _), seq in zip(items, seqs):
+                self.last_seq[key] = int(seq)
+
+
+
+#: Event kind a publishing process sends last; its detail is JSON ``{"messages": M}``,
+#: the number of state messages the process published (all its channels).
+END_EVENT = "stop"
+
+
+class EventPublisher(_Declared):
+    """Publishes ``astrodyn.Event`` messages of one process on ``astrodyn/<scenario>/@event``.
+
+    Each process numbers its own events (seq 0, 1, ...); the logger accounts event seqs
+    per (channel, process).  :meth:`end` sends the end-of-run marker: kind
+    :data:`END_EVENT` with ``{"messages": M}`` so the logger can tell when it holds every
+    state message of the run (see :mod:`astrodyn.recording.logger`).
+    """
+
+    def __init__(self, session: zenoh.Session, scenario: str, process: str):
+        self.process = messages.check_name(process, "process")
+        self.key = messages.event_key(scenario)
+        self.next_seq = 0
+        self._entity = declare_state_publisher(session, self.key)
+
+    def emit(self, kind: str, t: float, detail: str = "") -> None:
+        msg = messages.event_message(t, self.next_seq, self.process, kind, detail)
+        self._entity.put(messages.encode(msg))
+        self.next_seq += 1
+
+    def end(self, t: float, messages_published: int, **extra: Any) -> None:
+        """The end-of-run marker: this process published ``messages_published`` states."""
+        detail = {"messages": int(messages_published), **extra}
+        self.emit(END_EVENT, t, json.dumps(detail, separators=(",", ":")))
+
+
+
+# --------------------------------------------------------------------------- liveliness
+
+
+def declare_alive(session: zenoh.Session, scenario: str, process: str) -> zenoh.LivelinessToken:
+    """Declare ``astrodyn/<scenario>/@alive/<process>``; it vanishes when the process dies.
+
+    Keep the returned token referenced for the life of the process (or use it as a context
+    manager).  It disappears when the session closes or the process exits or is killed,
+    but *not* when the Python code hangs: pair it with a :class:`Heartbeat`.
+    """
+    return session.liveliness().declare_token(messages.alive_key(scenario, process))
+
+
+def _process_from_alive_key(key: str) -> str:
+    return key.rsplit("/@alive/", 1)[-1]
+
+
+def alive_processes(session: zenoh.Session, scenario: str, timeout_s: float = 1.0) -> set[str]:
+    """The processes whose liveliness token is present now (a liveliness query)."""
+    pattern = messages.alive_key(scenario, "x").rsplit("/", 1)[0] + "/*"
+    found = set()
+    for reply in session.liveliness().get(pattern, timeout=timeout_s):
+        if reply.ok is not None:
+            found.add(_process_from_alive_key(str(reply.ok.key_expr)))
+    return found
+
+
+def wait_for_process(
+    session: zenoh.Session, scenario: str, process: str, timeout_s: float = 10.0
+) -> None:
+    """Block until ``process``'s liveliness token is visible, or raise :class:`BusError`.
+
+    A process declares its token after its subscribers, and declarations travel in order on
+    a link, so once the logger's token is visible its subscriber is too: publish after this.
+    """
+    deadline = time.monotonic() + timeout_s
+    key = messages.alive_key(scenario, process)
+    while True:
+        for reply in session.liveliness().get(key, timeout=min(1.0, timeout_s)):
+            if reply.ok is not None:
+                return
+        if time.monotonic() >= deadline:
+            raise BusError(f"process {process!r} of scenario {scenario!r} not alive after {timeout_s} s")
+        time.sleep(0.02)
+
+
+class AliveWatcher(_Declared):
+    """Tracks which processes of a scenario are alive, from their liveliness tokens.
+
+    ``poll()`` returns the changes since the last call as ``[(process, alive), ...]`` and
+    updates ``alive`` (set of names) and ``died`` (name -> monotonic time it vanished).
+    With ``history=True`` tokens already present are reported at the first poll.
+    Polled, not a callback: call it from the owner's loop.
+    """
+
+    def __init__(self, session: zenoh.Session, scenario: str, *, history: bool = True):
+        pattern = messages.alive_key(scenario, "x").rsplit("/", 1)[0] + "/*"
+        self.alive: set[str] = set()
+        self.died: dict[str, float] = {}
+        self._entity = session.liveliness().declare_subscriber(
+            pattern, zenoh.handlers.FifoChannel(1024), history=history
+        )
+
+    def poll(self) -> list[tuple[str, bool]]:
+        changes = []
+        while (sample := self._entity.try_recv()) is not None:
+            process = _process_from_alive_key(str(sample.key_expr))
+            is_alive = sample.kind == zenoh.SampleKind.PUT
+            if is_alive:
+                self.alive.add(process)
+                self.died.pop(process, None)
+            else:
+                self.alive.discard(process)
+                self.died[process] = time.monotonic()
+            changes.append((process, is_alive))
+        return changes
+
+
+
+# --------------------------------------------------------------------------- heartbeats
+
+
+class Heartbeat(_Declared):
+    """Application heartbeat: call :meth:`beat` from the process's main loop.
+
+    At most one message per ``period_s`` is sent on ``@heartbeat/<process>`` (JSON: process,
+    wall-clock ``time_ns``, a counter ``n`` and any progress fields given, e.g. sim ``t``).
+    Because it is driven by the application loop, a hung loop stops the heartbeat even
+    though the liveliness token stays alive.
+    """
+
+    def __init__(self, session: zenoh.Session, scenario: str, process: str, period_s: float = 0.5):
+        self.process = process
+        self.period_s = float(period_s)
+        self.count = 0
+        self._next = 0.0
+        self._entity = session.declare_publisher(
+            heartbeat_key(scenario, process), encoding=zenoh.Encoding.APPLICATION_JSON
+        )
+
+    def beat(self, force: bool = False, **progress: Any) -> bool:
+        """Send a heartbeat if ``period_s`` has passed (or ``force``); returns whether it sent."""
+        now = time.monotonic()
+        if not force and now < self._next:
+            return False
+        self._next = now + self.period_s
+        self.count += 1
+        body = {"process": self.process, "time_ns": time.time_ns(), "n": self.count, **progress}
+        self._entity.put(json.dumps(body, separators=(",", ":")))
+        return True
+
+
+
+class HeartbeatMonitor(_Declared):
+    """Watches the heartbeats of a scenario; :meth:`stale` lists processes silent too long.
+
+    ``last[process]`` holds the last heartbeat body received (dict) and ``seen[process]``
+    the monotonic time it arrived.  Call :meth:`poll` from the owner's loop.
+    """
+
+    def __init__(self, session: zenoh.Session, scenario: str, timeout_s: float = 2.0):
+        self.timeout_s = float(timeout_s)
+        self.last: dict[str, dict] = {}
+        self.seen: dict[str, float] = {}
+        pattern = heartbeat_key(scenario, "x").rsplit("/", 1)[0] + "/*"
+        self._entity = session.declare_subscriber(pattern, zenoh.handlers.FifoChannel(1024))
+
+    def poll(self) -> None:
+        while (sample := self._entity.try_recv()) is not None:
+            process = str(sample.key_expr).rsplit("/", 1)[-1]
+            try:
+                body = json.loads(sample.payload.to_bytes())
+            except ValueError:
+                continue
+            self.last[process] = body if isinstance(body, dict) else {}
+            self.seen[process] = time.monotonic()
+
+    def stale(self, now: float | None = None) -> list[str]:
+        """Processes whose last heartbeat is older than ``timeout_s`` (sorted)."""
+        self.poll()
+        now = time.monotonic() if now is None else now
+        return sorted(p for p, seen in self.seen.items() if now - seen > self.timeout_s)
+
+
+
+# --------------------------------------------------------------------------- control verbs
+
+
+@dataclass
+class ControlRequest:
+    """One control query: ``verb`` and its JSON ``args`` (dict; {} when none were sent).
+
+    Answer exactly once with :meth:`reply` (a JSON-serialisable object) or :meth:`error`.
+    A request may be kept and answered later (within the caller's timeout), e.g. ``stop``
+    answered once the file is finished.
+    """
+
+    verb: str
+    args: dict
+    key: str
+    _query: Any = field(repr=False)
+    answered: bool = False
+
+    def reply(self, body: Any) -> None:
+        self._query.reply(self.key, json.dumps(body, separators=(",", ":")))
+        self._finish()
+
+    def error(self, message: str) -> None:
+        self._query.reply_err(json.dumps({"error": message}))
+        self._finish()
+
+    def _finish(self) -> None:
+        self.answered = True
+        self._query.drop()
+
+
+def _parse_query_args(query: Any) -> dict:
+    args: dict = {}
+    for name, value in query.parameters:
+        args[name] = value
+    payload = query.payload
+    if payload is not None and len(payload):
+        try:
+            body = json.loads(payload.to_bytes())
+        except ValueError as exc:
+            raise ValueError(f"payload: expected a JSON object, got invalid JSON ({exc})") from None
+        if not isinstance(body, dict):
+            raise ValueError(f"payload: expected a JSON object, got {type(body).__name__}")
+        args.update(body)
+    return args
+
+
+class ControlServer(_Declared):
+    """Queryables for control verbs on ``astrodyn/<scenario>/@control/<verb>``.
+
+    ``poll()`` returns pending :class:`ControlRequest` objects (FIFO handlers, so the owner
+    handles them in its own loop and thread).  ``extra_keys`` adds queryables on other keys
+    (e.g. the logger's ``@status``); their requests carry the last key segment as verb.
+    """
+
+    def __init__(
+        self,
+        session: zenoh.Session,
+        scenario: str,
+        verbs: Iterable[str] = CONTROL_VERBS,
+        extra_keys: Mapping[str, str] | None = None,
+    ):
+        keys = {messages.control_key(scenario, verb): verb for verb in verbs}
+        keys.update(extra_keys or {})
+        self._queryables = [
+            (key, verb, session.declare_queryable(key, zenoh.handlers.FifoChannel(256)))
+            for key, verb in keys.items()
+        ]
+
+    def poll(self) -> list[ControlRequest]:
+        requests = []
+        for key, verb, queryable in self._queryables:
+            while (query := queryable.try_recv()) is not None:
+                try:
+                    args = _parse_query_args(query)
+                except ValueError as exc:
+                    query.reply_err(json.dumps({"error": f"{verb}: {exc}"}))
+                    query.drop()
+                    continue
+                requests.append(ControlRequest(verb, args, key, query))
+        return requests
+
+    def close(self) -> None:
+        for _, _, queryable in self._queryables:
+            queryable.undeclare()
+
+
+def query_json(
+    session: zenoh.Session, key: str, args: Mapping[str, Any] | None = None, timeout_s: float = 5.0
+) -> list[dict]:
+    """Query ``key`` (all matching queryables) and return the JSON replies.
+
+    An error reply becomes ``{"error": ...}``; no replies within ``timeout_s`` gives [].
+    """
+    payload = json.dumps(dict(args)) if args else None
+    replies = []
+    handler = session.get(
+        key, target=zenoh.QueryTarget.ALL, payload=payload, timeout=timeout_s,
+        consolidation=zenoh.QueryConsolidation(zenoh.ConsolidationMode.NONE),
+    )
+    for reply in handler:
+        sample = reply.ok
+        raw = sample.payload.to_bytes() if sample is not None else reply.err.payload.to_bytes()
+        try:
+            body = json.loads(raw)
+        except ValueError:
+            body = {"error": raw.decode("utf-8", "replace")}
+        if sample is None and not (isinstance(body, dict) and "error" in body):
+            body = {"error": body}
+        replies.append(body if isinstance(body, dict) else {"value": body})
+    return replies
+
+
+def send_control(
+    session: zenoh.Session, scenario: str, verb: str, args: Mapping[str, Any] | None = None,
+    timeout_s: float = 5.0,
+) -> list[dict]:
+    """Send a control verb (``status``, ``pause``, ``resume``, ``rate``, ``stop``) to a scenario.
+
+    ``rate`` takes ``{"factor": 2.0}``.  Returns every answering process's JSON reply.
+    """
+    return query_json(session, messages.control_key(scenario, verb), args, timeout_s)
