@@ -40,6 +40,11 @@ Key layout (design.md section 3; builders live in :mod:`astrodyn.messages`)::
     astrodyn/<scenario>/@heartbeat/<process>                   application heartbeats (JSON)
     astrodyn/<scenario>/@control/<verb>                        queryables: status pause resume rate stop
     astrodyn/<scenario>/@status                                the logger's status queryable
+
+Zenoh wildcards never match a chunk that starts with ``@`` (a "verbatim" chunk): the
+subscription ``astrodyn/<scenario>/**`` receives the state keys but not ``@batch/...``,
+``@event`` or ``@heartbeat/...``.  :func:`scenario_keys` lists the subscriptions that
+together cover everything a scenario publishes.
 """
 
 from __future__ import annotations
@@ -71,6 +76,7 @@ __all__ = [
     "EventPublisher",
     "END_EVENT",
     "heartbeat_key",
+    "scenario_keys",
     "declare_alive",
     "wait_for_process",
     "AliveWatcher",
@@ -211,6 +217,13 @@ class _Declared:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+
+def scenario_keys(scenario: str) -> list[str]:
+    """Subscriptions that together receive every put of a scenario (states, batches,
+    events, status, heartbeats); needed because ``**`` does not match ``@`` chunks."""
+    base = messages.event_key(scenario).rsplit("/", 1)[0]
+    return [f"{base}/**", f"{base}/@batch/*", f"{base}/@event", f"{base}/@status", f"{base}/@heartbeat/*"]
 
 
 def heartbeat_key(scenario: str, process: str) -> str:

@@ -1,0 +1,75 @@
+"""Logger process: record one scenario from the Zenoh bus into an MCAP file.
+
+    python services/logger.py --scenario demo --out demo.mcap --epoch-ns 1774008000000000000 \
+        --connect tcp/127.0.0.1:7447 --expect orbit --expect attitude --config configs/demo.toml
+
+Prints a one-line JSON summary on stdout when it finishes (end of run, ``stop`` control
+verb, SIGTERM or Ctrl-C).  Exit status: 0 file finished, 1 recording or bus error,
+2 bad arguments.  Behaviour and the end-of-run protocol: astrodyn.recording.logger.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+
+from astrodyn import bus
+from astrodyn.recording.logger import Logger
+from astrodyn.recording.writer import McapRecorder, RecordingError
+
+
+def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
+    p = argparse.ArgumentParser(prog="services/logger.py", description=__doc__.split("\n\n")[0])
+    p.add_argument("--scenario", required=True, help="scenario name (the <scenario> in astrodyn/<scenario>/**)")
+    p.add_argument("--out", required=True, help="MCAP file to write")
+    p.add_argument("--epoch-ns", type=int, required=True, help="scenario epoch as integer ns since the Unix epoch")
+    p.add_argument("--config", help="scenario config file; its text is stored in the 'scenario' metadata record")
+    p.add_argument("--metadata", help="JSON file with extra 'scenario' metadata (an object)")
+    p.add_argument("--expect", action="append", default=[], metavar="PROCESS",
+                   help="process whose end-of-run event ends the recording (repeatable)")
+    p.add_argument("--chunk-size", type=int, default=1 << 20, help="uncompressed bytes per zstd chunk")
+    p.add_argument("--flush-interval", type=float, default=1.0, help="max seconds between flushes (crash-loss bound)")
+    p.add_argument("--queue", type=int, default=65536, help="bounded receive queue (samples)")
+    p.add_argument("--max-seconds", type=float, default=None, help="stop after this many wall seconds")
+    bus.add_bus_arguments(p)
+    return p.parse_args(argv)
+
+
+def scenario_metadata(args: argparse.Namespace) -> dict:
+    meta: dict = {"name": args.scenario}
+    if args.metadata:
+        with open(args.metadata, encoding="utf-8") as f:
+            extra = json.load(f)
+        if not isinstance(extra, dict):
+            raise ValueError(f"--metadata {args.metadata}: expected a JSON object, got {type(extra).__name__}")
+        meta.update(extra)
+    if args.config:
+        with open(args.config, encoding="utf-8") as f:
+            meta["config"] = f.read()
+        meta["config_path"] = args.config
+    return meta
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = parse_args(argv)
+    try:
+        meta = scenario_metadata(args)
+    except (OSError, ValueError) as exc:
+        print(f"logger: {exc}", file=sys.stderr)
+        return 2
+    try:
+        with bus.session_from_args(args) as session:
+            recorder = McapRecorder(args.out, meta, epoch_ns=args.epoch_ns,
+                                    chunk_size=args.chunk_size, flush_interval_s=args.flush_interval)
+            logger = Logger(session, args.scenario, recorder, expect=args.expect, queue_capacity=args.queue)
+            summary = logger.run(max_seconds=args.max_seconds)
+    except (RecordingError, bus.BusError) as exc:
+        print(f"logger: {exc}", file=sys.stderr)
+        return 1
+    print(json.dumps(summary, separators=(",", ":")), flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

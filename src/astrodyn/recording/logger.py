@@ -1,0 +1,343 @@
+"""The logger process: everything published under ``astrodyn/<scenario>/**`` into one MCAP.
+
+What it does with each sample (keys in :mod:`astrodyn.bus`):
+
+* ``<body>/orbit|attitude|crosscheck``, ``@event``, ``@status``: decoded and validated with
+  :func:`astrodyn.messages.decode`; valid messages are written as received (no re-encoding)
+  by :class:`~astrodyn.recording.writer.McapRecorder`, which accounts ``seq`` per channel
+  (gaps, late arrivals, duplicates -- duplicates are not written).  Event seqs are
+  accounted per (channel, process), since every process numbers its own events.
+* ``@batch/<process>``: split with :func:`astrodyn.messages.decode_batch`; each entry is
+  handled as if it had arrived on its own key.
+* ``@heartbeat/<process>``: not recorded; a process whose heartbeat stops while its
+  liveliness token stays is reported as ``stalled`` (an ``error`` event in the file).
+* anything else, and any payload that fails validation: counted as malformed with the
+  reason (the first 20 kept as examples), never written, never fatal.
+
+A process that loses its liveliness token before its end-of-run event is reported as
+``died``; the logger writes an ``error`` event (process "logger") saying so and keeps
+recording the others.
+
+**How the runner knows the logger has every message.**  Each publishing process ends with
+an ``@event`` of kind ``stop`` whose detail is JSON ``{"messages": M}``: the number of state
+messages it published (:meth:`astrodyn.bus.EventPublisher.end`).  Started with
+``expect=("orbit", "attitude")``, the logger finishes on its own once every expected
+process has ended (or died) and it holds at least the sum of the announced counts with no
+open gap, or, failing that, once the bus has been quiet for ``drain_idle_s`` (bounded by
+``drain_timeout_s``).  The runner can also watch progress with a query on
+``astrodyn/<scenario>/@status`` (the logger's counts as JSON; add ``?channels=1`` for
+per-channel detail) and stop the logger with the ``stop`` control verb; the reply to
+``stop`` is the final summary, sent after the file is finished.
+
+SIGTERM / SIGINT / ``stop``: the logger drains what is already queued, finishes the file
+(summary, indexes, footer) and prints its one-line JSON summary on stdout.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import signal
+import sys
+import threading
+import time
+from typing import Any, Iterable
+
+import zenoh
+
+from astrodyn import bus, messages
+from astrodyn.recording.writer import DUPLICATE, McapRecorder
+
+__all__ = ["Logger"]
+
+_STATE_KINDS = frozenset(("orbit", "attitude", "crosscheck"))
+_MAX_EXAMPLES = 20
+_MAX_KEY_CACHE = 100_000
+
+
+class Logger:
+    """Subscribe to one scenario and record it with ``recorder`` (see the module docstring).
+
+    Parameters
+    ----------
+    session : an open Zenoh session (the caller owns and closes it).
+    scenario : scenario name.
+    recorder : an open :class:`McapRecorder`; :meth:`run` closes it.
+    expect : processes whose end-of-run events end the recording.
+    queue_capacity : bound of the subscriber's FIFO; when full, Zenoh blocks the publishers
+        (they use ``CongestionControl.BLOCK``), so memory stays bounded and nothing is lost.
+    stall_timeout_s : a heartbeat older than this marks a live process as stalled.
+    """
+
+    def __init__(
+        self,
+        session: zenoh.Session,
+        scenario: str,
+        recorder: McapRecorder,
+        *,
+        expect: Iterable[str] = (),
+        queue_capacity: int = 65536,
+        drain_idle_s: float = 0.3,
+        drain_timeout_s: float = 10.0,
+        stall_timeout_s: float = 5.0,
+        name: str = "logger",
+    ):
+        self.session = session
+        self.scenario = messages.check_name(scenario, "scenario")
+        self.recorder = recorder
+        self.expect = tuple(messages.check_name(p, "expect process") for p in expect)
+        self.queue_capacity = int(queue_capacity)
+        self.drain_idle_s = float(drain_idle_s)
+        self.drain_timeout_s = float(drain_timeout_s)
+        self.stall_timeout_s = float(stall_timeout_s)
+        self.name = messages.check_name(name, "name")
+        self.prefix = f"{messages.PREFIX}/{self.scenario}/"
+        self.event_key = messages.event_key(self.scenario)
+        # counters
+        self.received = 0  # samples off the bus
+        self.states = 0  # valid, non-duplicate state messages written
+        self.malformed = 0
+        self.malformed_examples: list[str] = []
+        self.heartbeats: dict[str, float] = {}
+        self.ended: dict[str, int | None] = {}
+        self.died: dict[str, str] = {}
+        self.stalled: set[str] = set()
+        self.max_t = 0.0
+        self._own_event_seq = 0
+        self._key_kind: dict[str, str | None] = {}
+        self._stop_reason: str | None = None
+        self._stop_requested_at: float | None = None
+        self._stop_requests: list[bus.ControlRequest] = []
+        self._all_ended_at: float | None = None
+        self._last_sample_at = time.monotonic()
+        self._started = time.monotonic()
+        self.reason = ""
+
+    # ------------------------------------------------------------------ control
+
+    def request_stop(self, reason: str) -> None:
+        """Ask the loop to drain and finish (safe from a signal handler)."""
+        if self._stop_reason is None:
+            self._stop_reason = reason
+
+    # ------------------------------------------------------------------ message handling
+
+    def _bad(self, key: str, why: str) -> None:
+        self.malformed += 1
+        if len(self.malformed_examples) < _MAX_EXAMPLES:
+            self.malformed_examples.append(f"{key}: {why}")
+
+    def _kind(self, key: str) -> str | None:
+        """Message kind of a key of this scenario ("orbit", ..., "event", "status"), else None."""
+        kind = self._key_kind.get(key, "")
+        if kind != "":
+            return kind
+        kind = None
+        if key.startswith(self.prefix):
+            try:
+                kind = messages.kind_of_key(key)
+            except messages.MessageError:
+                kind = None
+        if len(self._key_kind) < _MAX_KEY_CACHE:
+            self._key_kind[key] = kind
+        return kind
+
+    def _record(self, key: str, payload: bytes, now_ns: int) -> None:
+        kind = self._kind(key)
+        if kind is None:
+            self._bad(key, "not a message key of this scenario")
+            return
+        try:
+            msg = messages.decode(payload, kind)
+        except messages.MessageError as exc:
+            self._bad(key, str(exc))
+            return
+        track = None
+        if kind == "event":
+            track = f"{key}#{msg['process']}"
+        try:
+            status = self.recorder.write_encoded(key, payload, msg["t"], msg["seq"], now_ns, track)
+        except ValueError as exc:  # t outside MCAP's log_time range
+            self._bad(key, str(exc))
+            return
+        if status == DUPLICATE:
+            return
+        if msg["t"] > self.max_t:
+            self.max_t = msg["t"]
+        if kind in _STATE_KINDS:
+            self.states += 1
+        elif kind == "event":
+            self._on_event(msg)
+
+    def _on_event(self, msg: dict) -> None:
+        process = msg["process"]
+        if msg["kind"] == bus.END_EVENT:
+            count = None
+            try:
+                detail = json.loads(msg["detail"]) if msg["detail"] else {}
+                if isinstance(detail, dict) and isinstance(detail.get("messages"), int):
+                    count = detail["messages"]
+            except ValueError:
+                pass
+            self.ended[process] = count
+
+    def handle(self, key: str, payload: bytes) -> None:
+        """Handle one sample (exposed for tests and for replaying captured traffic)."""
+        self.received += 1
+        now_ns = time.time_ns()
+        rest = key[len(self.prefix):] if key.startswith(self.prefix) else None
+        if rest is not None and rest.startswith("@batch/"):
+            try:
+                items = messages.decode_batch(payload)
+            except messages.MessageError as exc:
+                self._bad(key, str(exc))
+                return
+            for item_key, item_payload in items:
+                self._record(item_key, item_payload, now_ns)
+        elif rest is not None and rest.startswith("@heartbeat/"):
+            self.heartbeats[rest[len("@heartbeat/"):]] = time.monotonic()
+        else:
+            self._record(key, payload, now_ns)
+
+    def _own_event(self, kind: str, detail: str) -> None:
+        msg = messages.event_message(self.max_t, self._own_event_seq, self.name, kind, detail[:4096])
+        self._own_event_seq += 1
+        self.recorder.write_encoded(
+            self.event_key, messages.encode(msg), msg["t"], msg["seq"], time.time_ns(), f"{self.event_key}#{self.name}"
+        )
+        print(f"logger: {detail}", file=sys.stderr, flush=True)
+
+    # ------------------------------------------------------------------ status
+
+    def status(self, channels: bool = False) -> dict:
+        """Counts so far (the reply of the ``@status`` query and the basis of the summary)."""
+        totals = self.recorder.seq.totals()
+        expected = self.expected_messages()
+        elapsed = time.monotonic() - self._started
+        out: dict[str, Any] = {
+            "process": self.name,
+            "scenario": self.scenario,
+            "out": self.recorder.path,
+            "received": self.received,
+            "messages": self.recorder.message_count,
+            "states": self.states,
+            "missing": totals["missing"],
+            "duplicates": totals["duplicates"],
+            "out_of_order": totals["out_of_order"],
+            "malformed": self.malformed,
+            "malformed_examples": list(self.malformed_examples),
+            "ended": dict(self.ended),
+            "died": dict(self.died),
+            "stalled": sorted(self.stalled),
+            "expected_states": expected,
+            "complete": self.is_complete(),
+            "t": self.max_t,
+            "elapsed_s": round(elapsed, 3),
+            "rate_msg_s": round(self.received / elapsed, 1) if elapsed > 0 else 0.0,
+        }
+        if channels:
+            report = self.recorder.seq.report()
+            out["channels"] = {k: r["count"] for k, r in report.items()}
+            out["gaps"] = {k: r["gaps"] for k, r in report.items() if r["gaps"]}
+        return out
+
+    def expected_messages(self) -> int | None:
+        """Sum of the end-of-run counts of the expected processes, once all have ended."""
+        if not self.expect or any(self.ended.get(p) is None for p in self.expect):
+            return None
+        return sum(self.ended[p] for p in self.expect)  # type: ignore[misc]
+
+    def is_complete(self) -> bool:
+        """Every expected process ended and every state it announced is recorded, no gaps."""
+        expected = self.expected_messages()
+        return expected is not None and self.states >= expected and self.recorder.seq.totals()["missing"] == 0
+
+    # ------------------------------------------------------------------ housekeeping
+
+    def _housekeeping(self, control: bus.ControlServer, alive: bus.AliveWatcher, heartbeat: bus.Heartbeat) -> bool:
+        """Queries, liveliness, heartbeats, flushing; returns True when the loop should end."""
+        now = time.monotonic()
+        for request in control.poll():
+            if request.verb == "stop":
+                self.request_stop("stop requested")
+                self._stop_requests.append(request)
+            else:
+                request.reply(self.status(channels=bool(request.args.get("channels"))))
+        for process, is_alive in alive.poll():
+            if not is_alive and process not in self.ended and process != self.name:
+                self.died[process] = f"liveliness lost at sim t = {self.max_t!r} s"
+                self._own_event("error", f"process {process} died (liveliness token lost) before its end-of-run event; "
+                                f"{self.states} states recorded so far, sim t reached {self.max_t!r} s")
+        for process, seen in self.heartbeats.items():
+            if (now - seen > self.stall_timeout_s and process in alive.alive and process not in self.ended
+                    and process not in self.stalled):
+                self.stalled.add(process)
+                self._own_event("error", f"process {process} stalled: alive but no heartbeat for {now - seen:.1f} s")
+        heartbeat.beat(messages=self.recorder.message_count, t=self.max_t)
+        self.recorder.maybe_flush()
+
+        idle = now - self._last_sample_at
+        if self._stop_reason is not None:
+            if self._stop_requested_at is None:
+                self._stop_requested_at = now
+            if self.is_complete() or idle >= min(self.drain_idle_s, 0.1) or now - self._stop_requested_at > self.drain_timeout_s:
+                self.reason = self._stop_reason
+                return True
+            return False
+        if self.expect and all(p in self.ended or p in self.died for p in self.expect):
+            if self._all_ended_at is None:
+                self._all_ended_at = now
+            if self.is_complete():
+                self.reason = "end of run: every expected message recorded"
+                return True
+            if idle >= self.drain_idle_s or now - self._all_ended_at > self.drain_timeout_s:
+                self.reason = "end of run: expected processes ended or died; bus quiet"
+                return True
+        return False
+
+    # ------------------------------------------------------------------ main loop
+
+    def run(self, max_seconds: float | None = None, install_signal_handlers: bool = True) -> dict:
+        """Record until the run ends or a stop; finish the file; return the summary dict."""
+        if install_signal_handlers and threading.current_thread() is threading.main_thread():
+            for sig in (signal.SIGTERM, signal.SIGINT):
+                signal.signal(sig, lambda signum, frame: self.request_stop(signal.Signals(signum).name))
+        deadline = None if max_seconds is None else time.monotonic() + max_seconds
+        with contextlib.ExitStack() as stack:
+            subs = [
+                stack.enter_context(self.session.declare_subscriber(key, zenoh.handlers.FifoChannel(self.queue_capacity)))
+                for key in bus.scenario_keys(self.scenario)
+            ]
+            control = stack.enter_context(bus.ControlServer(
+                self.session, self.scenario, verbs=("stop",), extra_keys={messages.status_key(self.scenario): "status"}))
+            alive = stack.enter_context(bus.AliveWatcher(self.session, self.scenario))
+            heartbeat = stack.enter_context(bus.Heartbeat(self.session, self.scenario, self.name))
+            stack.enter_context(bus.declare_alive(self.session, self.scenario, self.name))  # last: ready
+            receivers = [sub.try_recv for sub in subs]
+            handle = self.handle
+            next_housekeeping = 0.0
+            while True:
+                n = 0
+                for try_recv in receivers:
+                    while n < 2048 and (sample := try_recv()) is not None:
+                        handle(str(sample.key_expr), sample.payload.to_bytes())
+                        n += 1
+                now = time.monotonic()
+                if n:
+                    self._last_sample_at = now
+                if n == 0 or now >= next_housekeeping:
+                    next_housekeeping = now + 0.05
+                    if self._housekeeping(control, alive, heartbeat):
+                        break
+                    if deadline is not None and now > deadline:
+                        self.reason = f"max_seconds={max_seconds} reached"
+                        break
+                if n == 0:
+                    time.sleep(0.002)
+            summary = self.status(channels=True)
+            summary["reason"] = self.reason
+            self.recorder.close()
+            summary["file_complete"] = True
+            for request in self._stop_requests:
+                request.reply(summary)
+        return summary
