@@ -1,0 +1,468 @@
+"""Kepler's equation, elliptic and hyperbolic, solved to the float64 floor.
+
+Elliptic (``0 <= e < 1``): given the mean anomaly ``M`` [rad], find the
+eccentric anomaly ``E`` [rad] with ``M = E - e sin E`` (Vallado 4th ed.
+eq. 2-4 / Curtis eq. 3.14).  Hyperbolic (``e > 1``): find ``F`` with
+``M = e sinh F - F`` (Vallado eq. 2-5 / Curtis eq. 3.40).
+
+How the accuracy is obtained (every piece is exercised by ``tests/test_kepler.py``):
+
+* **Range reduction.** ``M`` is reduced to ``[-pi, pi]`` by Cody-Waite
+  reduction with ``2 pi`` split into three float64 parts and exact
+  (Dekker/Veltkamp) products, so the remainder carries a double-double low
+  word.  The reduction itself adds no error beyond one rounding of the
+  remainder for ``|M| < 2**52``; plain ``fmod(M, float(2 pi))`` would drift by
+  ``N x 2.4e-16`` after ``N`` revolutions.  The returned ``E`` keeps the
+  revolution: ``E = M + (E_red - M_red)``, so ``E - e sin E = M``.
+* **Starter.** Markley (1995), "Kepler equation solver", Celest. Mech. Dyn.
+  Astr. 63, 101-111: a cubic starter followed by his fifth-order correction
+  (about 1e-15 relative already).  For the hyperbola, an upper bound from the
+  cubic ``(e - 1) F + e F^3 / 6 = M`` or ``asinh(M / (e - 1))``, tightened by
+  one fixed-point step ``F = asinh((M + F) / e)``, so Newton/Halley converge
+  monotonically from above.
+* **Residual without cancellation.** ``(1 - e) E + e (E - sin E) - M`` with a
+  series for ``E - sin E`` when ``|E| < 1`` (and ``(e - 1) F + e (sinh F - F) -
+  M`` for the hyperbola); ``1 - e cos E = (1 - e) + e (1 - cos E)``.  The naive
+  ``E - e sin E - M`` loses about three digits near ``e -> 1, M -> 0``.
+* **Stopping.** Safeguarded (bracketed) Halley/Newton iterations stop when the
+  residual is at its own rounding-noise level, not on a step size; at most
+  ``MAX_ITER`` iterations, so NaN or pathological inputs never hang.
+
+NaN in ``M`` or ``e`` gives NaN; ``M = +-inf`` gives NaN.  ``e`` outside the
+allowed range (finite) raises ``ValueError``.
+
+The scalar kernels (``_reduce_2pi``, ``_solve_diff_ell``, ``_kepler_start``,
+``_kepler_hyp_scalar``, ``_x_minus_sin``, ``_sinh_minus_x`` ...) are shared
+with :mod:`astrodyn.orbit.universal`.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from astrodyn._jit import jit, pjit, prange
+
+__all__ = ["solve_kepler", "solve_kepler_hyperbolic"]
+
+EPS = 2.220446049250313e-16
+MAX_ITER = 12
+PARALLEL_MIN = 4096  # below this many elements the serial kernel is faster
+
+# 2*pi = TWO_PI_1 + TWO_PI_2 + TWO_PI_3 to about 160 bits (mpmath, 60 digits).
+TWO_PI_1 = 6.283185307179586
+TWO_PI_2 = 2.4492935982947064e-16
+TWO_PI_3 = -5.989539619436679e-33
+PI = math.pi
+_SPLIT = 134217729.0  # 2**27 + 1, Veltkamp splitter
+
+# Taylor coefficients 1/(2k+1)! for k = 1..10: x - sin x = sum (-1)^(k+1) x^(2k+1)/(2k+1)!
+_INV_ODD_FACT = (
+    1.0 / 6.0,
+    1.0 / 120.0,
+    1.0 / 5040.0,
+    1.0 / 362880.0,
+    1.0 / 39916800.0,
+    1.0 / 6227020800.0,
+    1.0 / 1307674368000.0,
+    1.0 / 355687428096000.0,
+    1.0 / 121645100408832000.0,
+    1.0 / 51090942171709440000.0,
+)
+
+
+# ---------------------------------------------------------------------------
+# error-free transformations and range reduction
+# ---------------------------------------------------------------------------
+@jit(inline="always")
+def _two_sum(a, b):
+    """Knuth's TwoSum: ``s + t == a + b`` exactly."""
+    s = a + b
+    bb = s - a
+    t = (a - (s - bb)) + (b - bb)
+    return s, t
+
+
+@jit(inline="always")
+def _two_prod(a, b):
+    """Dekker's product with Veltkamp splitting: ``p + t == a * b`` exactly (no FMA needed).
+
+    Valid while ``|a|, |b| < 1e290`` (the splitter must not overflow).
+    """
+    p = a * b
+    ca = _SPLIT * a
+    ah = ca - (ca - a)
+    al = a - ah
+    cb = _SPLIT * b
+    bh = cb - (cb - b)
+    bl = b - bh
+    t = ((ah * bh - p) + ah * bl + al * bh) + al * bl
+    return p, t
+
+
+@jit
+def _reduce_2pi(hi, lo):
+    """Reduce the double-double angle ``hi + lo`` [rad] to ``[-pi, pi]``.
+
+    Cody-Waite reduction with ``2 pi`` in three parts and exact products.
+    Returns ``(k, rh, rl)`` with ``hi + lo = k 2 pi + rh + rl`` (``rh + rl``
+    normalized, ``|rh| <= pi`` up to rounding).  Exact to about 1e-32
+    absolute for ``|hi| < 2**52``.
+    """
+    if -PI <= hi <= PI:
+        s, t = _two_sum(hi, lo)
+        return 0.0, s, t
+    k = math.floor(hi / TWO_PI_1 + 0.5)
+    p1, e1 = _two_prod(k, TWO_PI_1)
+    s = hi - p1  # exact (Sterbenz): p1 is within a factor 2 of hi
+    p2, e2 = _two_prod(k, TWO_PI_2)
+    s, t = _two_sum(s, -p2)
+    t = t + (lo - e1 - e2 - k * TWO_PI_3)
+    s, t = _two_sum(s, t)
+    # one more wrap if the floor landed on the wrong side
+    if s > PI:
+        k += 1.0
+        s, u = _two_sum(s, -TWO_PI_1)
+        s, t = _two_sum(s, t + u - TWO_PI_2)
+    elif s < -PI:
+        k -= 1.0
+        s, u = _two_sum(s, TWO_PI_1)
+        s, t = _two_sum(s, t + u + TWO_PI_2)
+    return k, s, t
+
+
+# ---------------------------------------------------------------------------
+# cancellation-free pieces
+# ---------------------------------------------------------------------------
+@jit(inline="always")
+def _odd_series(x, sign):
+    """sum_{k>=1} sign^(k+1) x^(2k+1)/(2k+1)!  (x - sin x for sign=+1... see callers)."""
+    x2 = x * x
+    c = _INV_ODD_FACT
+    # Horner in x^2, highest term first; sign=-1 alternates (x - sin x), +1 not (sinh x - x)
+    acc = c[9]
+    acc = c[8] + sign * x2 * acc
+    acc = c[7] + sign * x2 * acc
+    acc = c[6] + sign * x2 * acc
+    acc = c[5] + sign * x2 * acc
+    acc = c[4] + sign * x2 * acc
+    acc = c[3] + sign * x2 * acc
+    acc = c[2] + sign * x2 * acc
+    acc = c[1] + sign * x2 * acc
+    acc = c[0] + sign * x2 * acc
+    return x * x2 * acc
+
+
+@jit(inline="always")
+def _x_minus_sin(x, s):
+    """``x - sin x`` without cancellation; ``s = sin x`` already known (used for |x| >= 1).
+
+    Series through x^21 for |x| < 1 (truncation < 1e-19 relative).
+    """
+    if abs(x) < 1.0:
+        return _odd_series(x, -1.0)
+    return x - s
+
+
+@jit(inline="always")
+def _one_minus_cos(s, c):
+    """``1 - cos x`` from ``s = sin x`` and ``c = cos x`` without cancellation."""
+    if c > 0.0:
+        return s * s / (1.0 + c)
+    return 1.0 - c
+
+
+@jit(inline="always")
+def _sinh_parts(x):
+    """Return ``(sinh x, cosh x - 1, sinh x - x)`` accurate to a few ulp each."""
+    if abs(x) < 1.0:
+        shmx = _odd_series(x, 1.0)
+        sh = x + shmx
+        chm1 = sh * sh / (1.0 + math.sqrt(1.0 + sh * sh))
+        return sh, chm1, shmx
+    ex = math.exp(x)
+    iex = 1.0 / ex
+    sh = 0.5 * (ex - iex)
+    return sh, 0.5 * (ex + iex) - 1.0, sh - x
+
+
+# ---------------------------------------------------------------------------
+# elliptic
+# ---------------------------------------------------------------------------
+@jit
+def _kepler_start(M, e):
+    """Markley (1995) starter + fifth-order correction for ``M`` in ``[-pi, pi]``, ``0 <= e < 1``.
+
+    Markley eqs. (20)-(21) (cubic starter) and (29)-(31) (fifth-order
+    correction), with the residual and derivative written without cancellation.
+    Accurate to ~1e-15 relative; callers polish with :func:`_solve_diff_ell`.
+    """
+    sgn = 1.0
+    if M < 0.0:
+        M = -M
+        sgn = -1.0
+    ome = 1.0 - e
+    alpha = (3.0 * PI * PI + 1.6 * PI * (PI - M) / (1.0 + e)) / (PI * PI - 6.0)
+    d = 3.0 * ome + alpha * e
+    q = 2.0 * alpha * d * ome - M * M
+    r = 3.0 * alpha * d * (d - 1.0 + e) * M + M * M * M
+    disc = q * q * q + r * r
+    if disc < 0.0:
+        disc = 0.0
+    w = (abs(r) + math.sqrt(disc)) ** (2.0 / 3.0)
+    den = w * w + w * q + q * q
+    if den > 0.0:
+        E = (2.0 * r * w / den + M) / d
+    else:
+        E = M / d
+    s = math.sin(E)
+    c = math.cos(E)
+    f0 = ome * E + e * _x_minus_sin(E, s) - M
+    f1 = ome + e * _one_minus_cos(s, c)
+    f2 = e * s
+    f3 = 1.0 - f1
+    f4 = -f2
+    d3 = -f0 / (f1 - 0.5 * f0 * f2 / f1)
+    d4 = -f0 / (f1 + 0.5 * d3 * f2 + d3 * d3 * f3 / 6.0)
+    d5 = -f0 / (f1 + 0.5 * d4 * f2 + d4 * d4 * f3 / 6.0 + d4 * d4 * d4 * f4 / 24.0)
+    return sgn * (E + d5)
+
+
+@jit
+def _solve_diff_ell(q, C, S, mh, ml, x, lo, hi):
+    """Solve the difference form of Kepler's equation for ``x`` [rad].
+
+        q x + C (x - sin x) + S (1 - cos x) = mh + ml
+
+    with ``q = r0 / a = 1 - e cos E0``, ``C = e cos E0``, ``S = e sin E0``
+    (``E = E0 + x``; Vallado 4th ed. alg. 8 / Battin sec. 4.5 in terms of the
+    eccentric-anomaly change).  ``E0 = 0, q = 1 - e, C = e, S = 0`` is the
+    classical equation.  The left side is increasing (derivative ``r / a > 0``);
+    ``[lo, hi]`` must bracket the root, ``x`` is the starter.
+
+    Returns ``(x, sin x, cos x, 1 - cos x, r / a)`` consistent to first order.
+    """
+    s = 0.0
+    c = 1.0
+    omc = 0.0
+    Fp = 1.0
+    for _ in range(MAX_ITER):
+        s = math.sin(x)
+        c = math.cos(x)
+        omc = _one_minus_cos(s, c)
+        xms = _x_minus_sin(x, s)
+        Fp = q + C * omc + S * s  # r / a
+        F = (q * x + C * xms + S * omc - mh) - ml
+        noise = EPS * (abs(q * x) + abs(C * xms) + abs(S * omc) + abs(mh))
+        if abs(F) <= 2.0 * noise:
+            dx = -F / Fp
+            x += dx
+            s, c = s + c * dx, c - s * dx
+            omc += s * dx
+            Fp += (C * s + S * c) * dx
+            return x, s, c, omc, Fp
+        if F > 0.0:
+            hi = min(hi, x)
+        else:
+            lo = max(lo, x)
+        dx = -F / Fp
+        den = Fp + 0.5 * dx * (C * s + S * c)  # Halley
+        if den > 0.5 * Fp:
+            dx = -F / den
+        xn = x + dx
+        if not (lo <= xn <= hi):
+            xn = 0.5 * (lo + hi)
+        if xn == x:
+            break
+        x = xn
+    s = math.sin(x)
+    c = math.cos(x)
+    omc = _one_minus_cos(s, c)
+    return x, s, c, omc, q + C * omc + S * s
+
+
+@jit
+def _kepler_ell_scalar(M, e):
+    """Eccentric anomaly ``E`` [rad] for any finite ``M`` [rad] and ``0 <= e < 1``."""
+    if not (math.isfinite(M) and e >= 0.0 and e < 1.0):
+        return math.nan
+    k, mh, ml = _reduce_2pi(M, 0.0)
+    x0 = _kepler_start(mh, e)
+    if mh >= 0.0:
+        lo, hi = mh, mh + e
+    else:
+        lo, hi = mh - e, mh
+    x = _solve_diff_ell(1.0 - e, e, 0.0, mh, ml, x0, lo, hi)[0]
+    if k == 0.0:
+        return x
+    return M + ((x - mh) - ml)
+
+
+@jit
+def _kepler_ell_loop(M, e, out):
+    for i in range(M.shape[0]):
+        out[i] = _kepler_ell_scalar(M[i], e[i])
+
+
+@pjit
+def _kepler_ell_loop_par(M, e, out):
+    for i in prange(M.shape[0]):
+        out[i] = _kepler_ell_scalar(M[i], e[i])
+
+
+# ---------------------------------------------------------------------------
+# hyperbolic
+# ---------------------------------------------------------------------------
+@jit
+def _hyp_residual(F, e, em1, M):
+    """``(e - 1) F + e (sinh F - F) - M``, its derivative ``e cosh F - 1``, ``e sinh F``, noise."""
+    sh, chm1, shmx = _sinh_parts(F)
+    R = (em1 * F + e * shmx) - M
+    noise = EPS * (abs(em1 * F) + abs(e * shmx) + abs(M))
+    return R, em1 + e * chm1, e * sh, noise
+
+
+@jit
+def _kepler_hyp_scalar(M, e, em1):
+    """Hyperbolic anomaly ``F`` [rad] with ``e sinh F - F = M``; ``em1 = e - 1`` given accurately.
+
+    Converges monotonically from an upper bound (the residual is convex for
+    ``F > 0``); odd symmetry handles ``M < 0``.
+    """
+    if not (math.isfinite(M) and e >= 1.0 and em1 >= 0.0):
+        return math.nan
+    sgn = 1.0
+    if M < 0.0:
+        M = -M
+        sgn = -1.0
+    if M == 0.0:
+        return 0.0
+    lo = math.asinh(M / e)  # e sinh F = M + F > M
+    # upper bounds: the cubic (sinh F - F >= F^3/6), and (e - 1) sinh F <= M
+    if M < 1e100:
+        p3 = 2.0 * em1 / e  # p/3 with p = 6 (e - 1)/e
+        qh = 3.0 * M / e  # qq/2 with qq = 6 M / e
+        u = (qh + math.sqrt(qh * qh + p3 * p3 * p3)) ** (1.0 / 3.0)
+        v = p3 / u
+        Fu = 2.0 * qh / (u * u + u * v + v * v)
+    else:
+        Fu = math.inf
+    if em1 > 0.0:
+        Fu = min(Fu, math.asinh(M / em1))
+    if not math.isfinite(Fu):  # e == 1 and huge M: log bound
+        Fu = math.log(2.0 * (M + 1.0)) + math.log1p(M) + 1.0
+    Fu = math.asinh((M + Fu) / e)  # still an upper bound, much tighter
+    F = Fu
+    hi = Fu
+    for _ in range(MAX_ITER + 8):
+        R, Rp, Rpp, noise = _hyp_residual(F, e, em1, M)
+        if abs(R) <= 2.0 * noise:
+            return sgn * (F - R / Rp)
+        if R > 0.0:
+            hi = min(hi, F)
+        else:
+            lo = max(lo, F)
+        dF = -R / Rp
+        den = Rp + 0.5 * dF * Rpp
+        if den > 0.5 * Rp:
+            dF = -R / den
+        Fn = F + dF
+        if not (lo <= Fn <= hi):
+            Fn = 0.5 * (lo + hi)
+        if Fn == F:
+            break
+        F = Fn
+    return sgn * F
+
+
+@jit
+def _kepler_hyp_loop(M, e, out):
+    for i in range(M.shape[0]):
+        out[i] = _kepler_hyp_scalar(M[i], e[i], e[i] - 1.0)
+
+
+@pjit
+def _kepler_hyp_loop_par(M, e, out):
+    for i in prange(M.shape[0]):
+        out[i] = _kepler_hyp_scalar(M[i], e[i], e[i] - 1.0)
+
+
+# ---------------------------------------------------------------------------
+# public, vectorized
+# ---------------------------------------------------------------------------
+def _broadcast_flat(M, e):
+    M = np.asarray(M, dtype=np.float64)
+    e = np.asarray(e, dtype=np.float64)
+    shape = np.broadcast_shapes(M.shape, e.shape)
+    Mf = np.ascontiguousarray(np.broadcast_to(M, shape)).reshape(-1)
+    ef = np.ascontiguousarray(np.broadcast_to(e, shape)).reshape(-1)
+    return shape, Mf, ef
+
+
+def _run(serial, parallel, Mf, ef, shape):
+    out = np.empty(Mf.shape[0])
+    (parallel if Mf.shape[0] >= PARALLEL_MIN else serial)(Mf, ef, out)
+    out = out.reshape(shape)
+    return out[()] if out.ndim == 0 else out
+
+
+def solve_kepler(M, e):
+    """Eccentric anomaly ``E`` [rad] solving ``M = E - e sin E`` (elliptic orbits).
+
+    Parameters
+    ----------
+    M : array_like
+        Mean anomaly [rad], any finite real value (the revolution count is kept:
+        ``solve_kepler(M + 2 pi k, e) = solve_kepler(M, e) + 2 pi k``).
+    e : array_like
+        Eccentricity, ``0 <= e < 1``; broadcast against ``M``.
+
+    Returns
+    -------
+    E : ndarray or float
+        Same broadcast shape; a Python-float-like 0-d result for scalar input.
+        Accurate to the conditioning limit ``eps (|M| + e) / (1 - e cos E)``
+        (Markley 1995 starter, residual-stopped Halley polish; see module doc).
+        NaN where ``M`` or ``e`` is NaN or ``M`` is infinite.
+
+    Raises
+    ------
+    ValueError
+        If a finite ``e`` is outside ``[0, 1)``.
+    """
+    shape, Mf, ef = _broadcast_flat(M, e)
+    bad = np.isfinite(ef) & ~((ef >= 0.0) & (ef < 1.0))
+    if bad.any():
+        raise ValueError(f"solve_kepler: e must satisfy 0 <= e < 1 (elliptic); got e = {ef[bad][0]!r}")
+    return _run(_kepler_ell_loop, _kepler_ell_loop_par, Mf, ef, shape)
+
+
+def solve_kepler_hyperbolic(M, e):
+    """Hyperbolic anomaly ``F`` [rad] solving ``M = e sinh F - F`` (hyperbolic orbits).
+
+    Parameters
+    ----------
+    M : array_like
+        Hyperbolic mean anomaly [rad], any finite real value.
+    e : array_like
+        Eccentricity, ``e > 1``; broadcast against ``M``.
+
+    Returns
+    -------
+    F : ndarray or float
+        Accurate to the conditioning limit ``eps |M| / (e cosh F - 1)``
+        (cancellation-free residual ``(e - 1) F + e (sinh F - F) - M``,
+        monotone Halley/Newton from an upper bound).  NaN where ``M`` or ``e``
+        is NaN or ``M`` is infinite.
+
+    Raises
+    ------
+    ValueError
+        If a finite ``e`` is not ``> 1``.
+    """
+    shape, Mf, ef = _broadcast_flat(M, e)
+    bad = np.isfinite(ef) & ~(ef > 1.0)
+    if bad.any():
+        raise ValueError(f"solve_kepler_hyperbolic: e must satisfy e > 1 (hyperbolic); got e = {ef[bad][0]!r}")
+    return _run(_kepler_hyp_loop, _kepler_hyp_loop_par, Mf, ef, shape)

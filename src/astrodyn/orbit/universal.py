@@ -1,0 +1,438 @@
+"""Exact two-body propagation on every conic: ``propagate(r0, v0, dt, mu) -> (r, v)``.
+
+The state moves along the Kepler conic through the Lagrange coefficients
+(Vallado 4th ed. sec. 2.3, alg. 8; Curtis sec. 3.7, eqs. 3.69):
+
+    r = f r0 + g v0,        v = fdot r0 + gdot v0.
+
+Units are SI (m, m/s, s, m^3/s^2); any inertial frame (the result is in the
+frame of ``r0, v0``).  Vectorized over leading axes: ``r0, v0`` have shape
+``(..., 3)``, ``dt`` and ``mu`` broadcast against the leading shape.
+
+Each state picks the formulation that is best conditioned for it (all are the
+same universal-variable equation in different scalings, ``x = sqrt(|alpha|) chi``
+with ``alpha = 1 / a = 2 / r0 - v0^2 / mu``):
+
+* **Ellipse** (``r0 alpha > 0`` outside the near-parabolic window): the mean
+  anomaly change ``n dt`` is formed as an exact double-double product and
+  reduced modulo ``2 pi`` exactly (:func:`astrodyn.orbit.kepler._reduce_2pi`),
+  then the *difference form* of Kepler's equation in the eccentric-anomaly change
+  ``x`` is solved, ``(r0/a) x + C (x - sin x) + S (1 - cos x) = n dt mod 2 pi``
+  with ``C = e cos E0 = 1 - r0/a`` and ``S = e sin E0 = r0.v0 / sqrt(mu a)``.
+  Any number of revolutions costs the same and loses no accuracy beyond the
+  conditioning of ``n``.
+* **Hyperbola** (``r0 alpha < 0`` outside the window): Kepler's equation in
+  the absolute hyperbolic anomaly ``F1`` (well conditioned for long arcs that
+  start far out on the incoming asymptote), polished in the difference form
+  when the arc is short (``|F1 - F0| < 1``).  ``g`` is taken from whichever of
+  three equivalent expressions has the least cancellation (the plain
+  ``dt - (sinh x - x)/n`` loses ~700x on such arcs).
+* **Near-parabolic and parabolic** (``|r0 alpha| <= 0.05`` and ``|n dt| <= 1``):
+  the universal variable ``chi`` with the Stumpff functions ``c2, c3`` (series
+  for ``|z| < 1``), Laguerre-Conway iteration safeguarded by a bracket (Conway
+  1986, Celest. Mech. 39, 199).  ``alpha = 0`` exactly is a parabola.
+
+All iterations stop on the residual of the time equation at its rounding-noise
+level and are capped, so they never hang.  NaN or infinite input, ``|r0| = 0``
+or ``mu <= 0`` inside the kernel give NaN (the Python wrappers raise
+``ValueError`` for finite ``mu <= 0`` and for wrong shapes).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from astrodyn._jit import jit, pjit, prange
+from astrodyn.orbit.kepler import (
+    _INV_ODD_FACT,
+    EPS,
+    MAX_ITER,
+    PARALLEL_MIN,
+    PI,
+    TWO_PI_1,
+    _kepler_hyp_scalar,
+    _kepler_start,
+    _one_minus_cos,
+    _reduce_2pi,
+    _sinh_parts,
+    _solve_diff_ell,
+    _two_prod,
+    _x_minus_sin,
+)
+
+__all__ = ["propagate", "lagrange_coefficients", "stumpff"]
+
+Q_UNIVERSAL = 0.05  # |r0 / a| at or below which near-parabolic arcs use chi
+M_UNIVERSAL = 1.0  # ... provided the mean-motion angle |n dt| is at most this
+
+# 1/(2k+2)! for k = 0..9 (series of c2)
+_INV_EVEN_FACT = (
+    1.0 / 2.0,
+    1.0 / 24.0,
+    1.0 / 720.0,
+    1.0 / 40320.0,
+    1.0 / 3628800.0,
+    1.0 / 479001600.0,
+    1.0 / 87178291200.0,
+    1.0 / 20922789888000.0,
+    1.0 / 6402373705728000.0,
+    1.0 / 2432902008176640000.0,
+)
+
+
+# ---------------------------------------------------------------------------
+# Stumpff functions
+# ---------------------------------------------------------------------------
+@jit
+def _stumpff(z):
+    """Stumpff functions ``(c2(z), c3(z))`` (Vallado 4th ed. eq. 2-52 / Curtis eqs. 3.52-3.53).
+
+    ``c2 = (1 - cos sqrt z) / z``, ``c3 = (sqrt z - sin sqrt z) / sqrt(z)^3`` for
+    ``z > 0``, the hyperbolic forms for ``z < 0``; Taylor series
+    ``c2 = sum (-z)^k / (2k+2)!``, ``c3 = sum (-z)^k / (2k+3)!`` for ``|z| < 1``
+    (ten terms, truncation below 1e-19 relative).
+    """
+    if abs(z) < 1.0:
+        a = _INV_EVEN_FACT
+        b = _INV_ODD_FACT
+        c2 = a[9]
+        c3 = b[9]
+        for k in range(8, -1, -1):
+            c2 = a[k] - z * c2
+            c3 = b[k] - z * c3
+        return c2, c3
+    if z > 0.0:
+        s = math.sqrt(z)
+        sh = math.sin(0.5 * s)
+        return 2.0 * sh * sh / z, _x_minus_sin(s, math.sin(s)) / (z * s)
+    s = math.sqrt(-z)
+    sh, chm1, shmx = _sinh_parts(s)
+    return chm1 / (-z), shmx / (-z * s)
+
+
+@jit
+def _stumpff_loop(z, c2, c3):
+    for i in range(z.shape[0]):
+        c2[i], c3[i] = _stumpff(z[i])
+
+
+def stumpff(z):
+    """Stumpff functions ``c2(z), c3(z)`` of the universal variable, vectorized.
+
+    ``z = alpha chi^2`` (dimensionless); ``c2(0) = 1/2``, ``c3(0) = 1/6``.
+    Series near ``z = 0``, closed forms elsewhere (Vallado 4th ed. eq. 2-52).
+    Returns two arrays of the shape of ``z`` (floats for scalar ``z``).
+    """
+    z = np.asarray(z, dtype=np.float64)
+    zf = np.ascontiguousarray(z).reshape(-1)
+    c2 = np.empty_like(zf)
+    c3 = np.empty_like(zf)
+    _stumpff_loop(zf, c2, c3)
+    if z.ndim == 0:
+        return float(c2[0]), float(c3[0])
+    return c2.reshape(z.shape), c3.reshape(z.shape)
+
+
+# ---------------------------------------------------------------------------
+# the three formulations
+# ---------------------------------------------------------------------------
+@jit
+def _fg_elliptic(r0, sig, q, alpha, n, dt, mu):
+    """Lagrange coefficients on an ellipse via the exactly reduced difference form."""
+    sqa = math.sqrt(alpha / mu)  # 1 / sqrt(mu a)
+    C = 1.0 - q  # e cos E0
+    S = sig * sqa  # e sin E0
+    mh, ml = _two_prod(n, dt)
+    _, mh, ml = _reduce_2pi(mh, ml)
+    e = min(math.hypot(C, S), 1.0 - EPS)
+    E0 = math.atan2(S, C)
+    M1 = E0 - S + mh
+    if M1 > PI:
+        M1 -= TWO_PI_1
+    elif M1 < -PI:
+        M1 += TWO_PI_1
+    x0 = _kepler_start(M1, e) - E0
+    c0 = mh - S  # the root obeys |x - (m - S)| <= e
+    x0 += TWO_PI_1 * math.floor((c0 - x0) / TWO_PI_1 + 0.5)
+    pad = 4.0 * EPS * (abs(c0) + 1.0)
+    x, s, c, omc, rda = _solve_diff_ell(q, C, S, mh, ml, x0, c0 - e - pad, c0 + e + pad)
+    f = 1.0 - omc / q
+    g = (q * s + S * omc) / n  # from the time equation: no m, no cancellation with dt
+    r = rda / alpha
+    fdot = -s / (sqa * r * r0)
+    gdot = 1.0 - omc / rda
+    return f, g, fdot, gdot
+
+
+@jit
+def _fg_hyperbolic(r0, sig, q, beta, n, dt, mu, h2):
+    """Lagrange coefficients on a hyperbola (absolute anomaly, difference-form polish)."""
+    sqb = math.sqrt(beta / mu)  # 1 / sqrt(mu |a|)
+    p = -q  # r0 / |a| = e cosh F0 - 1
+    Ch = 1.0 + p  # e cosh F0
+    Sh = sig * sqb  # e sinh F0
+    e2m1 = beta * h2 / mu  # e^2 - 1 (Vallado eq. 2-67 rearranged), no cancellation
+    e = math.sqrt(1.0 + e2m1)
+    em1 = e2m1 / (1.0 + e)
+    m = n * dt
+    F0 = math.asinh(Sh / e)
+    F1 = _kepler_hyp_scalar((Sh - F0) + m, e, em1)
+    x = F1 - F0
+    sh1, chm1_1, _ = _sinh_parts(F1)
+    sh, chm1, shmx = _sinh_parts(x)
+    if abs(x) < 1.0:
+        # short arc: the difference form G(x) = p x + Ch (sinh x - x) + Sh (cosh x - 1) = m
+        # is better conditioned than F1 - F0 (Newton, stopped on the residual)
+        for _ in range(MAX_ITER):
+            G = (p * x + Ch * shmx + Sh * chm1) - m
+            Gp = p + Ch * chm1 + Sh * sh
+            noise = EPS * (abs(p * x) + abs(Ch * shmx) + abs(Sh * chm1) + abs(m))
+            dx = -G / Gp
+            if not (abs(dx) < 0.5):
+                break
+            x += dx
+            sh, chm1, shmx = _sinh_parts(x)
+            if abs(G) <= 2.0 * noise:
+                break
+        rb = p + Ch * chm1 + Sh * sh  # r / |a|
+    else:
+        rb = em1 + e * chm1_1  # e cosh F1 - 1
+    # n g from three equivalent forms; take the one with the smallest terms
+    t1 = abs(p * sh) + abs(Sh * chm1)
+    t2 = abs(e * sh1) + abs(Sh) + abs(sh)
+    t3 = abs(m) + abs(shmx)
+    if t1 <= t2 and t1 <= t3:
+        ng = p * sh + Sh * chm1
+    elif t2 <= t3:
+        ng = (e * sh1 - Sh) - sh
+    else:
+        ng = m - shmx
+    r = rb / beta
+    f = 1.0 - chm1 / p
+    g = ng / n
+    fdot = -sh / (sqb * r * r0)
+    gdot = 1.0 - chm1 / rb
+    return f, g, fdot, gdot
+
+
+@jit
+def _fg_universal(r0, sg, q, alpha, dt, sqmu):
+    """Lagrange coefficients from the universal variable chi (near-parabolic, parabolic).
+
+    Solves ``sqrt(mu) dt = r0 chi + sg chi^2 c2 + (1 - q) chi^3 c3`` (Vallado eq.
+    2-50 / Curtis eq. 3.49) with ``sg = r0.v0 / sqrt(mu)``, ``z = alpha chi^2``.
+    """
+    tau = sqmu * dt
+    omq = 1.0 - q
+    chi = tau / r0
+    cub = (6.0 * abs(tau) / omq) ** (1.0 / 3.0)
+    if abs(chi) > cub:
+        chi = math.copysign(cub, tau)
+    if tau > 0.0:
+        lo, hi = 0.0, math.inf
+    else:
+        lo, hi = -math.inf, 0.0
+    c2 = 0.5
+    c3 = 1.0 / 6.0
+    z = 0.0
+    rr = r0
+    for _ in range(MAX_ITER + 28):
+        chi2 = chi * chi
+        z = alpha * chi2
+        c2, c3 = _stumpff(z)
+        T = (r0 * chi + sg * chi2 * c2 + omq * chi * chi2 * c3) - tau
+        rr = chi2 * c2 + sg * chi * (1.0 - z * c3) + r0 * (1.0 - z * c2)
+        noise = EPS * (abs(r0 * chi) + abs(sg * chi2 * c2) + abs(omq * chi * chi2 * c3) + abs(tau))
+        if abs(T) <= 2.0 * noise:
+            chi -= T / rr
+            chi2 = chi * chi
+            z = alpha * chi2
+            c2, c3 = _stumpff(z)
+            rr = chi2 * c2 + sg * chi * (1.0 - z * c3) + r0 * (1.0 - z * c2)
+            break
+        if T > 0.0:
+            hi = min(hi, chi)
+        else:
+            lo = max(lo, chi)
+        drr = sg * (1.0 - z * c2) + omq * chi * (1.0 - z * c3)  # dr/dchi
+        disc = abs(16.0 * rr * rr - 20.0 * T * drr)
+        dchi = -5.0 * T / (rr + math.sqrt(disc))  # Laguerre-Conway, n = 5; rr > 0
+        chin = chi + dchi
+        if not (lo < chin < hi):
+            if math.isinf(hi):
+                chin = 2.0 * max(chi, lo) + 1.0
+            elif math.isinf(lo):
+                chin = 2.0 * min(chi, hi) - 1.0
+            else:
+                chin = 0.5 * (lo + hi)
+        if chin == chi:
+            break
+        chi = chin
+    chi2 = chi * chi
+    # g: the time equation form or dt - chi^3 c3 / sqrt(mu), whichever cancels less
+    ta = abs(sg * chi2 * c2) + abs(r0 * chi * (1.0 - z * c3))
+    tb = abs(tau) + abs(chi * chi2 * c3)
+    if ta <= tb:
+        g = (sg * chi2 * c2 + r0 * chi * (1.0 - z * c3)) / sqmu
+    else:
+        g = dt - chi * chi2 * c3 / sqmu
+    f = 1.0 - chi2 * c2 / r0
+    fdot = sqmu * chi * (z * c3 - 1.0) / (rr * r0)
+    gdot = 1.0 - chi2 * c2 / rr
+    return f, g, fdot, gdot
+
+
+@jit
+def _lagrange_scalar(rx, ry, rz, vx, vy, vz, dt, mu):
+    """``(f, g, fdot, gdot)`` for one state; picks the formulation (see module doc)."""
+    nan = math.nan
+    if not (
+        math.isfinite(rx)
+        and math.isfinite(ry)
+        and math.isfinite(rz)
+        and math.isfinite(vx)
+        and math.isfinite(vy)
+        and math.isfinite(vz)
+        and math.isfinite(dt)
+        and math.isfinite(mu)
+        and mu > 0.0
+    ):
+        return nan, nan, nan, nan
+    r0 = math.sqrt(rx * rx + ry * ry + rz * rz)
+    if r0 == 0.0:
+        return nan, nan, nan, nan
+    if dt == 0.0:
+        return 1.0, 0.0, 0.0, 1.0
+    v2 = vx * vx + vy * vy + vz * vz
+    sig = rx * vx + ry * vy + rz * vz
+    q = 2.0 - r0 * v2 / mu  # r0 / a
+    alpha = q / r0
+    if q > 0.0:
+        n = alpha * math.sqrt(mu * alpha)
+    else:
+        n = -alpha * math.sqrt(-mu * alpha)
+    if abs(q) <= Q_UNIVERSAL and abs(n * dt) <= M_UNIVERSAL:
+        sqmu = math.sqrt(mu)
+        return _fg_universal(r0, sig / sqmu, q, alpha, dt, sqmu)
+    if q > 0.0:
+        return _fg_elliptic(r0, sig, q, alpha, n, dt, mu)
+    hx = ry * vz - rz * vy
+    hy = rz * vx - rx * vz
+    hz = rx * vy - ry * vx
+    return _fg_hyperbolic(r0, sig, q, -alpha, n, dt, mu, hx * hx + hy * hy + hz * hz)
+
+
+# ---------------------------------------------------------------------------
+# loops (serial for small batches, parallel for large ones)
+# ---------------------------------------------------------------------------
+@jit(inline="always")
+def _propagate_one(r0, v0, dt, mu, r, v, i):
+    f, g, fd, gd = _lagrange_scalar(r0[i, 0], r0[i, 1], r0[i, 2], v0[i, 0], v0[i, 1], v0[i, 2], dt[i], mu[i])
+    for j in range(3):
+        r[i, j] = f * r0[i, j] + g * v0[i, j]
+        v[i, j] = fd * r0[i, j] + gd * v0[i, j]
+
+
+@jit
+def _propagate_loop(r0, v0, dt, mu, r, v):
+    for i in range(r0.shape[0]):
+        _propagate_one(r0, v0, dt, mu, r, v, i)
+
+
+@pjit
+def _propagate_loop_par(r0, v0, dt, mu, r, v):
+    for i in prange(r0.shape[0]):
+        _propagate_one(r0, v0, dt, mu, r, v, i)
+
+
+@jit
+def _lagrange_loop(r0, v0, dt, mu, out):
+    for i in range(r0.shape[0]):
+        out[i, 0], out[i, 1], out[i, 2], out[i, 3] = _lagrange_scalar(
+            r0[i, 0], r0[i, 1], r0[i, 2], v0[i, 0], v0[i, 1], v0[i, 2], dt[i], mu[i]
+        )
+
+
+# ---------------------------------------------------------------------------
+# public API
+# ---------------------------------------------------------------------------
+def _prepare(r0, v0, dt, mu, who):
+    """Validate and broadcast; returns the leading shape and flat contiguous arrays."""
+    r0 = np.asarray(r0, dtype=np.float64)
+    v0 = np.asarray(v0, dtype=np.float64)
+    if r0.ndim == 0 or r0.shape[-1] != 3:
+        raise ValueError(f"{who}: r0 must have shape (..., 3) [m]; got shape {r0.shape}")
+    if v0.ndim == 0 or v0.shape[-1] != 3:
+        raise ValueError(f"{who}: v0 must have shape (..., 3) [m/s]; got shape {v0.shape}")
+    dt = np.asarray(dt, dtype=np.float64)
+    mu = np.asarray(mu, dtype=np.float64)
+    if np.any(mu <= 0.0):  # NaN mu is let through and gives NaN
+        raise ValueError(f"{who}: mu must be > 0 [m^3/s^2]; got {mu[mu <= 0.0].ravel()[0]!r}")
+    try:
+        lead = np.broadcast_shapes(r0.shape[:-1], v0.shape[:-1], dt.shape, mu.shape)
+    except ValueError:
+        raise ValueError(
+            f"{who}: leading shapes do not broadcast: r0 {r0.shape}, v0 {v0.shape}, dt {dt.shape}, mu {mu.shape}"
+        ) from None
+    n = math.prod(lead)
+    r0f = np.ascontiguousarray(np.broadcast_to(r0, lead + (3,))).reshape(n, 3)
+    v0f = np.ascontiguousarray(np.broadcast_to(v0, lead + (3,))).reshape(n, 3)
+    dtf = np.ascontiguousarray(np.broadcast_to(dt, lead)).reshape(n)
+    muf = np.ascontiguousarray(np.broadcast_to(mu, lead)).reshape(n)
+    return lead, r0f, v0f, dtf, muf
+
+
+def propagate(r0, v0, dt, mu):
+    """Two-body (Kepler) propagation of position and velocity by ``dt``.
+
+    Parameters
+    ----------
+    r0 : array_like, shape (..., 3)
+        Initial position [m] in any inertial frame centred on the primary.
+    v0 : array_like, shape (..., 3)
+        Initial velocity [m/s], same frame.
+    dt : array_like
+        Time of flight [s], positive or negative, any number of revolutions;
+        scalar or broadcastable to the leading shape.
+    mu : array_like
+        Gravitational parameter ``G M`` [m^3/s^2] (> 0), scalar or broadcastable.
+
+    Returns
+    -------
+    r, v : ndarray, shape (lead..., 3)
+        Position [m] and velocity [m/s] after ``dt``, same frame; ``(3,)`` for a
+        single state.  Accurate to the problem's conditioning on every conic
+        (module doc; tests/test_propagate.py checks against a 50-digit mpmath
+        reference).  NaN rows where an input of that state is NaN/inf or
+        ``r0 = 0``.
+
+    Raises
+    ------
+    ValueError
+        Wrong shapes (names the argument) or a finite ``mu <= 0``.
+    """
+    lead, r0f, v0f, dtf, muf = _prepare(r0, v0, dt, mu, "propagate")
+    r = np.empty_like(r0f)
+    v = np.empty_like(v0f)
+    (_propagate_loop_par if r0f.shape[0] >= PARALLEL_MIN else _propagate_loop)(r0f, v0f, dtf, muf, r, v)
+    return r.reshape(lead + (3,)), v.reshape(lead + (3,))
+
+
+def lagrange_coefficients(r0, v0, dt, mu):
+    """Lagrange coefficients ``f, g, fdot, gdot`` of the two-body flow.
+
+    ``r = f r0 + g v0`` and ``v = fdot r0 + gdot v0`` (Vallado 4th ed. eqs.
+    2-65..2-68, Curtis eqs. 3.69).  ``f, gdot`` dimensionless, ``g`` [s],
+    ``fdot`` [1/s].  Inputs as in :func:`propagate`; each output has the
+    leading shape (floats for a single state).  ``f gdot - fdot g = 1``.
+    """
+    lead, r0f, v0f, dtf, muf = _prepare(r0, v0, dt, mu, "lagrange_coefficients")
+    out = np.empty((r0f.shape[0], 4))
+    _lagrange_loop(r0f, v0f, dtf, muf, out)
+    out = out.reshape(lead + (4,))
+    f, g, fdot, gdot = (out[..., k] for k in range(4))
+    if not lead:
+        return float(f), float(g), float(fdot), float(gdot)
+    return f, g, fdot, gdot
