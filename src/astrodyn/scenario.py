@@ -416,6 +416,14 @@ class _Ctx:
 _MISSING = object()
 
 
+def _did_you_mean(word: str, options: tuple[str, ...]) -> str:
+    """' (did you mean "x"?)' for the closest option (difflib, or a prefix), else ''."""
+    close = difflib.get_close_matches(word, options, n=1, cutoff=0.6)
+    if not close:
+        close = [o for o in options if word.lower().startswith(o.lower()) or o.lower().startswith(word.lower())][:1] if word else []
+    return f' (did you mean "{close[0]}"?)' if close else ""
+
+
 class _Table:
     """A TOML table being read: remembers which keys were used, rejects the rest."""
 
@@ -425,8 +433,7 @@ class _Table:
         self.ctx, self.data, self.path, self.allowed = ctx, data, path, allowed
         for key in data:
             if key not in allowed:
-                close = difflib.get_close_matches(str(key), allowed, n=1, cutoff=0.6)
-                hint = f' (did you mean "{close[0]}"?)' if close else ""
+                hint = _did_you_mean(str(key), allowed)
                 raise ctx.error(self.sub(key), f"one of the keys {', '.join(allowed)}{hint}", f'unknown key "{key}"', raw=True)
 
     def sub(self, key: str) -> str:
@@ -559,8 +566,7 @@ def _name(ctx: _Ctx, value: Any, path: str) -> str:
 
 def _choice(ctx: _Ctx, value: Any, allowed: tuple[str, ...], path: str) -> str:
     if not isinstance(value, str) or value not in allowed:
-        close = difflib.get_close_matches(value, allowed, n=1, cutoff=0.6) if isinstance(value, str) else []
-        hint = f' (did you mean "{close[0]}"?)' if close else ""
+        hint = _did_you_mean(value, allowed) if isinstance(value, str) else ""
         raise ctx.error(path, f"one of {', '.join(allowed)}{hint}", value)
     return value
 
@@ -644,8 +650,7 @@ def _central_body(ctx: _Ctx, data: Any) -> CentralBody:
         j = list(j)
     else:
         if not (tb.has("mu") and tb.has("radius")):
-            close = difflib.get_close_matches(key, list(CENTRAL_BODIES), n=1, cutoff=0.6)
-            hint = f' (did you mean "{close[0]}"?)' if close else ""
+            hint = _did_you_mean(key, tuple(CENTRAL_BODIES))
             raise ctx.error("central_body.name", f"one of {', '.join(CENTRAL_BODIES)}{hint}, or mu and radius given explicitly", name)
         _name(ctx, name, "central_body.name")
         mu, radius, j = 0.0, 0.0, [0.0] * 5
