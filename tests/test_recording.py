@@ -1,0 +1,276 @@
+"""MCAP recorder and reader: layout (design.md section 3), round trips, crashes, bad files.
+
+References are independent of the code under test: the plain ``mcap`` library reads
+the files back; log_time is checked with integer arithmetic on times that are exact
+binary fractions; what a cut file must still contain comes from the complete file's
+own chunk index (written by mcap, read by mcap); seq accounting is checked against a
+set-based model.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import random
+import signal
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from mcap.reader import make_reader
+from mcap.stream_reader import StreamReader, breakup_chunk
+
+from astrodyn import messages
+from astrodyn.recording import DUPLICATE, GAP, LATE, OK, McapRecorder, RecordingError, SeqTracker, gap_report, load
+
+EPOCH_NS = 1_774_008_000_000_000_000  # 2026-03-20T12:00:00 UTC as Unix ns
+SCENARIO = "rt"
+BODIES = ("sat1", "sat2")
+N = 120
+DT_S = 0.25  # exact in binary, so t * 1e9 is an exact integer number of ns
+CHILD = Path(__file__).with_name("_bus_child.py")
+
+
+def _orbit(body: int, seq: int) -> dict:
+    r = [7.0e6 + 1000.0 * body + 0.1 * seq, -1234.5678901234567 * (seq + 1), 3.0e5 / (seq + 1)]
+    v = [1.0 / 3.0 + seq, 7.5e3 - body, -2.0 ** -30 * seq]
+    return messages.orbit_message(seq * DT_S, seq, "kepler", r, v, 3.986004418e14)
+
+
+def _attitude(seq: int) -> dict:
+    a = 0.013 * seq
+    q = [np.cos(a), np.sin(a) / np.sqrt(3), np.sin(a) / np.sqrt(3), np.sin(a) / np.sqrt(3)]
+    return messages.attitude_message(seq * DT_S, seq, "torque_free", q, [0.1, -0.2, 0.3 + seq])
+
+
+def _expected_messages() -> list[tuple[str, dict]]:
+    out = []
+    for seq in range(N):
+        for i, body in enumerate(BODIES):
+            out.append((messages.orbit_key(SCENARIO, body), _orbit(i, seq)))
+            out.append((messages.attitude_key(SCENARIO, body), _attitude(seq)))
+    out.append((messages.event_key(SCENARIO), messages.event_message(N * DT_S, 0, "orbit", "stop", '{"messages":480}')))
+    return out
+
+
+METADATA = {"name": SCENARIO, "config": "[scenario]\nname = 'rt'\n", "bodies": ["sat1", "sat2"]}
+
+
+@pytest.fixture(scope="module")
+def recorded(tmp_path_factory) -> Path:
+    path = tmp_path_factory.mktemp("rec") / "rt.mcap"
+    with McapRecorder(path, METADATA, epoch_ns=EPOCH_NS, chunk_size=4096) as rec:
+        for key, msg in _expected_messages():
+            assert rec.write(key, dict(msg)) == OK
+    return path
+
+
+def test_layout_read_by_plain_mcap_reader(recorded):
+    expected = _expected_messages()
+    with open(recorded, "rb") as f:
+        reader = make_reader(f)
+        summary = reader.get_summary()
+        assert summary.statistics.message_count == len(expected)
+        got = list(reader.iter_messages(log_time_order=False))
+        metadata = {m.name: m.metadata for m in reader.iter_metadata()}
+    assert len(got) == len(expected)
+    for (schema, channel, message), (key, msg) in zip(got, expected):
+        kind = key.rsplit("/", 1)[-1] if "@" not in key else "event"
+        assert channel.topic == key
+        assert channel.message_encoding == "json"
+        assert schema.encoding == "jsonschema"
+        name, schema_dict = messages.schema_for_key(key)
+        assert schema.name == name == f"astrodyn.{ {'orbit': 'OrbitState', 'attitude': 'AttitudeState', 'event': 'Event'}[kind] }"
+        assert json.loads(schema.data) == schema_dict
+        # log_time = epoch + t in integer ns: t is a multiple of 0.25 s, so exact
+        assert message.log_time == EPOCH_NS + int(msg["t"] * 4) * 250_000_000
+        assert message.sequence == msg["seq"]
+        assert json.loads(message.data) == msg  # JSON floats round-trip exactly (repr)
+    # every chunk is zstd-compressed
+    assert summary.chunk_indexes and all(ci.compression == "zstd" for ci in summary.chunk_indexes)
+    assert metadata["scenario"] == {"name": "rt", "config": METADATA["config"], "bodies": '["sat1", "sat2"]'}
+    assert metadata["recording"]["epoch_unix_ns"] == str(EPOCH_NS)
+
+
+def test_load_round_trip(recorded):
+    run = load(recorded)
+    assert not run.truncated and run.complete and run.truncation == ""
+    assert run.messages == 4 * N + 1
+    assert run.scenario["name"] == "rt" and run.scenario["config"] == METADATA["config"]
+    assert sorted(run.bodies) == list(BODIES)
+    for i, body in enumerate(BODIES):
+        orbit = run.bodies[body].orbit
+        ref = [_orbit(i, s) for s in range(N)]
+        np.testing.assert_array_equal(orbit.seq, np.arange(N))
+        np.testing.assert_array_equal(orbit.t, [m["t"] for m in ref])
+        np.testing.assert_array_equal(orbit.r, [m["r"] for m in ref])  # bit-exact: JSON repr round trip
+        np.testing.assert_array_equal(orbit.v, [m["v"] for m in ref])
+        np.testing.assert_array_equal(orbit.mu, 3.986004418e14)
+        assert set(orbit.model) == {"kepler"} and set(orbit.frame) == {"GCRF"}
+        np.testing.assert_array_equal(orbit.log_time, EPOCH_NS + np.arange(N) * 250_000_000)
+        att = run.bodies[body].attitude
+        np.testing.assert_array_equal(att.q, [_attitude(s)["q"] for s in range(N)])
+        np.testing.assert_array_equal(att.w, [_attitude(s)["w"] for s in range(N)])
+        assert run.bodies[body].crosscheck is None
+    assert all(g["missing"] == 0 and g["duplicates"] == 0 for g in run.gaps.values())
+    assert [e["kind"] for e in run.events] == ["stop"]
+
+
+def _chunk_ends_and_counts(path: Path) -> list[tuple[int, int]]:
+    """(end offset, messages inside) of each chunk, from mcap's own index of the complete file."""
+    out = []
+    with open(path, "rb") as f:
+        for ci in make_reader(f).get_summary().chunk_indexes:
+            f.seek(ci.chunk_start_offset)
+            chunk = next(iter(StreamReader(f, skip_magic=True, emit_chunks=True).records))
+            count = sum(type(r).__name__ == "Message" for r in breakup_chunk(chunk))
+            out.append((ci.chunk_start_offset + ci.chunk_length, count))
+    return out
+
+
+def test_truncated_at_random_offsets(recorded, tmp_path):
+    data = recorded.read_bytes()
+    chunks = _chunk_ends_and_counts(recorded)
+    assert sum(c for _, c in chunks) == 4 * N + 1 and len(chunks) > 10
+    rng = random.Random(20260320)
+    cuts = sorted({1, 7, 8, 9, 40, len(data) - 1, *(rng.randrange(8, len(data)) for _ in range(60))})
+    cut_path = tmp_path / "cut.mcap"
+    previous = 0
+    for cut in cuts:
+        cut_path.write_bytes(data[:cut])
+        run = load(cut_path)
+        assert run.truncated and not run.complete and run.truncation, cut
+        must_have = sum(c for end, c in chunks if end <= cut)  # every chunk completely before the cut
+        assert run.messages >= must_have, (cut, run.messages, must_have)
+        assert run.messages >= previous  # a longer prefix never reads less
+        previous = run.messages
+        for i, body in enumerate(BODIES):
+            orbit = run.bodies[body].orbit if body in run.bodies else None
+            if orbit is None:
+                continue
+            n = len(orbit)  # chunks hold whole steps in order: seqs are a prefix 0..n-1
+            np.testing.assert_array_equal(orbit.seq, np.arange(n))
+            np.testing.assert_array_equal(orbit.r, np.array([_orbit(i, s)["r"] for s in range(n)]).reshape(n, 3))
+        assert run.invalid == 0 and run.corrupt_chunks == 0
+
+
+def test_corrupt_chunk_is_skipped_and_reported(recorded, tmp_path):
+    data = bytearray(recorded.read_bytes())
+    chunks = _chunk_ends_and_counts(recorded)
+    with open(recorded, "rb") as f:
+        ci = make_reader(f).get_summary().chunk_indexes[3]
+    middle = ci.chunk_start_offset + ci.chunk_length - 20  # inside the compressed data
+    data[middle] ^= 0xFF
+    bad = tmp_path / "bad.mcap"
+    bad.write_bytes(bytes(data))
+    run = load(bad)
+    assert run.corrupt_chunks == 1 and not run.complete
+    assert "corrupt chunk" in run.truncation
+    assert run.messages == 4 * N + 1 - chunks[3][1]
+
+
+def test_not_mcap_and_unreadable_files(tmp_path):
+    text = tmp_path / "notes.mcap"
+    text.write_text("hello, this is not MCAP\n")
+    with pytest.raises(RecordingError) as err:
+        load(text)
+    assert str(err.value) == f"{text}: not an MCAP file (bad magic)"
+    empty = tmp_path / "empty.mcap"
+    empty.write_bytes(b"")
+    with pytest.raises(RecordingError, match=r"empty\.mcap: not an MCAP file \(empty file\)"):
+        load(empty)
+    with pytest.raises(RecordingError, match=r"missing\.mcap: cannot open: No such file"):
+        load(tmp_path / "missing.mcap")
+
+
+def test_unwritable_path_and_full_disk(tmp_path):
+    target = tmp_path / "no" / "such" / "dir" / "x.mcap"
+    with pytest.raises(RecordingError, match=r"x\.mcap: cannot open for writing: No such file or directory"):
+        McapRecorder(target, {}, epoch_ns=EPOCH_NS)
+    assert not target.exists()
+    if not os.path.exists("/dev/full"):
+        pytest.skip("no /dev/full on this system")
+    with pytest.raises(RecordingError, match=r"/dev/full: write failed: No space left on device"):
+        McapRecorder("/dev/full", {}, epoch_ns=EPOCH_NS)
+
+
+def test_bad_arguments_and_log_time_range(tmp_path):
+    with pytest.raises(TypeError, match="epoch_ns: expected an integer"):
+        McapRecorder(tmp_path / "a.mcap", {}, epoch_ns=1.5e18)
+    with pytest.raises(ValueError, match="flush_interval_s: expected > 0"):
+        McapRecorder(tmp_path / "a.mcap", {}, epoch_ns=0, flush_interval_s=0)
+    with McapRecorder(tmp_path / "a.mcap", {}, epoch_ns=EPOCH_NS) as rec:
+        key = messages.orbit_key("s", "a")
+        # t before 1970: log_time would be negative, which MCAP's uint64 cannot hold
+        with pytest.raises(ValueError, match=r"t: expected epoch \+ t within"):
+            rec.write_encoded(key, b"{}", -EPOCH_NS / 1e9 - 1.0, 0)
+        with pytest.raises(ValueError, match="t: expected a finite number"):
+            rec.write_encoded(key, b"{}", float("nan"), 0)
+        assert rec.message_count == 0 and rec.seq.totals()["count"] == 0  # nothing was consumed
+    assert not load(tmp_path / "a.mcap").truncated
+
+
+def test_sigkilled_writer_keeps_everything_flushed(tmp_path):
+    path = tmp_path / "killed.mcap"
+    n = 300
+    child = subprocess.Popen([sys.executable, str(CHILD), "mcapkill", str(path), str(n)], stdout=subprocess.PIPE, text=True)
+    try:
+        assert child.stdout.readline().strip() == "flushed"
+    finally:
+        os.kill(child.pid, signal.SIGKILL)
+        child.wait(timeout=10)
+    assert child.returncode == -signal.SIGKILL
+    # the seeking reader needs the footer that a killed writer never wrote
+    with open(path, "rb") as f, pytest.raises(Exception):
+        list(make_reader(f).iter_messages())
+    run = load(path)
+    assert run.truncated and "without data end and footer" in run.truncation
+    orbit = run.bodies["a"].orbit
+    np.testing.assert_array_equal(orbit.seq, np.arange(n))  # everything flushed, nothing of the open chunk
+    assert run.scenario == {"name": "kill"}
+
+
+def _model_accounting(arrivals: list[int]) -> dict:
+    """Reference: a message is recorded iff its seq was not recorded before."""
+    seen: set[int] = set()
+    dup = late = 0
+    top = -1
+    for s in arrivals:
+        if s in seen:
+            dup += 1
+            continue
+        if s < top:
+            late += 1
+        seen.add(s)
+        top = max(top, s)
+    missing = top + 1 - len(seen)
+    return {"count": len(seen), "duplicates": dup, "out_of_order": late, "missing": missing}
+
+
+def test_seq_tracker_against_set_model():
+    assert [SeqTracker().add("k", s) for s in [0]] == [OK]
+    tr = SeqTracker()
+    assert [tr.add("k", s) for s in [0, 1, 4, 2, 2, 3, 5, 0]] == [OK, OK, GAP, LATE, DUPLICATE, LATE, OK, DUPLICATE]
+    assert tr.report()["k"]["gaps"] == [] and tr.report()["k"]["missing"] == 0
+    rng = random.Random(7)
+    for trial in range(300):
+        n = rng.randrange(1, 60)
+        arrivals = [s for s in range(n) if rng.random() > 0.2]
+        for _ in range(rng.randrange(0, 10)):  # local swaps and duplicates
+            i, j = rng.randrange(len(arrivals) or 1), rng.randrange(len(arrivals) or 1)
+            if arrivals:
+                arrivals[i], arrivals[j] = arrivals[j], arrivals[i]
+                arrivals.insert(rng.randrange(len(arrivals) + 1), arrivals[rng.randrange(len(arrivals))])
+        tr = SeqTracker()
+        for s in arrivals:
+            tr.add("k", s)
+        ref = _model_accounting(arrivals)
+        got = tr.totals() if arrivals else {"count": 0, "duplicates": 0, "out_of_order": 0, "missing": 0}
+        assert got == ref, (arrivals, got, ref)
+        if arrivals:
+            gaps = tr.report()["k"]["gaps"]
+            absent = sorted(set(range(max(arrivals) + 1)) - set(arrivals))
+            assert [s for a, b in gaps for s in range(a, b + 1)] == absent
+            assert gap_report(np.array(arrivals))["gaps"] == gaps  # the reader's batch version agrees
