@@ -1,0 +1,21 @@
+"""Rigid-body attitude dynamics (numeric core: numpy/numba, SI units, no I/O).
+
+Conventions (design.md section 2; H. Baruh, *Analytical Dynamics*, ch. 7-10):
+principal moments of inertia in kg m^2, body angular velocity ``w`` in rad/s
+(body components), Euler parameters ``q = (e0, e1, e2, e3)`` scalar first with
+``v_body = C(q) @ v_inertial`` and ``dC/dt = -[w x] C``.
+
+* :func:`torque_free` -- exact torque-free motion (Jacobi elliptic functions
+  and Carlson integrals; valid on every polhode, the separatrix and the
+  intermediate-axis spin included), with :func:`polhode`, :func:`herpolhode`,
+  :func:`rate_period`, :func:`flip_period` for analysis
+  (:mod:`astrodyn.attitude.torque_free`).
+* :mod:`astrodyn.attitude.elliptic` -- ``sn, cn, dn``, ``K``, ``F``, ``Pi`` and
+  Carlson ``R_F, R_D, R_J`` taking ``m`` and ``m1 = 1 - m`` separately.
+"""
+
+from astrodyn.attitude.torque_free import flip_period, herpolhode, polhode, rate_period, torque_free
+
+__all__ = ["torque_free", "polhode", "herpolhode", "rate_period", "flip_period"]
+
+# --- other attitude modules: append their imports (and extend __all__) below this line ---

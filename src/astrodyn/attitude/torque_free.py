@@ -1,0 +1,514 @@
+"""Exact torque-free motion of a rigid body: rates and attitude in closed form.
+
+:func:`torque_free` returns the body rates ``w(t)`` and Euler parameters
+``q(t)`` of a free rigid body for any array of times, without integrating.
+Cost per (body, time) is the same at ``t = 1 s`` and ``t = 1e9 s``.
+
+Conventions (design.md section 2): principal moments ``inertia`` (kg m^2, any
+order), body rates ``w`` (rad/s, body components), Euler parameters
+``q = (e0, e1, e2, e3)`` scalar first with ``v_body = C(q) @ v_inertial`` and
+``dC/dt = -[w x] C`` (H. Baruh, *Analytical Dynamics*, ch. 7).
+
+The solution (Baruh ch. 10; Landau & Lifshitz, *Mechanics*, sec. 37; Celledoni,
+Fasso, Safstrom & Zanna, SIAM J. Sci. Comput. 30 (2008) 2084):
+
+1. **Rates.**  Order the axes so that ``A <= B <= C`` along the polhode family
+   that holds: if ``H^2 > 2 T B`` the rates circulate about the major axis
+   (it plays "3"), otherwise about the minor axis (the axes are relabelled
+   ``(3, 2, 1)`` with one sign flipped to keep a right-handed frame, and every
+   formula below holds with all moment differences negative).  Then
+   ``w1 = e a1 cn(tau)``, ``w2 = rho e s a2 sn(tau)``, ``w3 = s a3 dn(tau)``
+   with ``tau = tau0 + wp t``, ``s = sign w3``, ``rho = sign(C - B)`` (``-1``
+   on the relabelled family), ``e = +-1`` (``+1`` except on the separatrix
+   itself), parameter ``m`` and complement ``m1`` (Landau eq. 37.10):
+
+   * ``a1^2 = w1^2 + B(C-B)/(A(C-A)) w2^2``, ``a2^2 = w2^2 + A(C-A)/(B(C-B)) w1^2``,
+     ``a3^2 = w3^2 + B(B-A)/(C(C-A)) w2^2`` (sums of like-signed terms);
+   * ``wp^2 = (C-B)(H^2 - 2TA)/(ABC)``, ``m = (B-A)(2TC - H^2)/((C-B)(H^2 - 2TA))``;
+   * ``m1 = (C-A)(H^2 - 2TB)/((C-B)(H^2 - 2TA))`` with
+     ``H^2 - 2TB = C(C-B) w3^2 - A(B-A) w1^2`` formed from the inputs, so the
+     separatrix distance is never ``1 - m`` (it reaches 1e-18 for
+     ``w0 = (1e-9, 1, 1e-9)``, ``I = (1, 2, 3)``).
+
+   The initial phase ``tau0`` comes from ``(sn, cn, dn)`` at ``t = 0`` through
+   Carlson's ``R_F`` (``F(phi) = sn R_F(cn^2, dn^2, 1)``, DLMF 19.25.5) with the
+   quadrant from the sign of ``cn``; no amplitude angle is formed.
+
+2. **Attitude.**  ``C(t) = Q(t) @ C_a(psi(t)) @ C_B0``: ``Q(t)`` is the
+   smallest rotation taking the circulation axis ``a = s e3`` to the unit
+   angular momentum ``h = I w / H`` in body components (it never degenerates:
+   ``a . h > 0`` on every polhode), ``C_a(psi)`` is the frame rotation by
+   ``psi`` about ``a``, and ``C_B0`` is fixed by ``q0``.  Kinematics give
+   ``psi' = (2T + H |w3|)/(H + C |w3|)``; the decomposition
+   ``1/(H + C a3 dn) = (H - C a3 dn)/(A^2 a1^2 (1 - n sn^2))`` integrates it
+   exactly:
+
+   ``psi = H t / A + k [ (H/C) (J(tau) - J(tau0)) - a3 (G(tau) - G(tau0)) ]``
+
+   with ``k = (C - A)/(A wp)``, the constant characteristic
+   ``n = -C(B - A)/(A(C - B)) <= 0`` (independent of the initial state),
+   ``J(tau) = Pi(n; am tau|m) - tau = (n/3) sn^3 R_J(cn^2, dn^2, 1, 1 - n sn^2)``
+   (DLMF 19.25.14; the ``R_F`` part of ``Pi`` is ``tau`` itself) and
+   ``G = int dphi/(1 - n sin^2 phi) = atan2(sqrt(1-n) sn, cn)/sqrt(1-n)``.
+
+3. **Any t at fixed cost.**  ``tau`` is reduced by the half period ``2K``
+   (``sn, cn`` change sign); each half period adds the constants
+   ``2(Pi(n|m) - K) = (2n/3) R_J(0, m1, 1, 1 - n)`` to ``J`` and
+   ``pi/sqrt(1 - n)`` to ``G``, computed once per body.
+
+Special cases: zero rates and every uniform rotation (``w x I w = 0`` exactly:
+pure spin about any principal axis, the intermediate one included, any spin of
+a sphere, spin in the degenerate plane of an axisymmetric body) rotate
+uniformly, ``C(t) = exp(-[w x] t) C0``.  Axisymmetric bodies give ``m = n = 0``
+(closed form); a sphere perturbed by one ulp keeps exact moment differences
+(Sterbenz) and finite coefficients.  On the separatrix itself (``m1 == 0``)
+``sn = tanh``, ``cn = dn = sech``, ``J`` is elementary and nothing is periodic.
+
+NaN in ``w0``, ``q0`` or ``t`` gives NaN rows; non-positive or non-finite
+moments raise ``ValueError``.  ``q0`` is normalised.
+
+Example (Dzhanibekov flip: spin near the intermediate axis reverses every half
+period)::
+
+    >>> import numpy as np
+    >>> from astrodyn.attitude.torque_free import torque_free, flip_period
+    >>> I, w0 = [1.0, 2.0, 3.0], [1e-3, 1.0, 1e-3]
+    >>> T = flip_period(I, w0)
+    >>> w, q = torque_free(I, w0, [1.0, 0, 0, 0], [0.0, T / 2, T])
+    >>> np.round(w[:, 1], 6)
+    array([ 1., -1.,  1.])
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from astrodyn._jit import jit, pjit, prange
+from astrodyn.attitude.elliptic import _ellipk, _rf, _rj, _sncndn_half
+
+__all__ = ["torque_free", "polhode", "herpolhode", "rate_period", "flip_period"]
+
+# parameter vector layout (one row per body)
+_MODE = 0  # 0: NaN, 1: uniform rotation, 2: elliptic
+_IA, _IB, _IC = 1, 2, 3  # body indices of the ordered axes (ic = circulation axis)
+_SB = 4  # sign applied to the body's ib component (keeps the ordered frame right-handed)
+_SIG = 5  # s = sign of the circulation-axis rate
+_EPS1 = 6  # e = sign of cn branch (+1 except on the separatrix)
+_SNS = 35  # sign of the sn component: rho e s, rho = sign(C - B) (-1 on the minor-axis family)
+_A1, _A2, _A3 = 7, 8, 9
+_WP = 10
+_M, _M1, _K = 11, 12, 13
+_TAU0 = 14
+_HMAG = 15  # |H|
+_LIN = 16  # H / A
+_KJ = 17  # k H / C
+_KG = 18  # k a3
+_N = 19
+_SQ1N = 20  # sqrt(1 - n)
+_J0, _G0 = 21, 22
+_DJ, _DG = 23, 24  # increments of J and G per half period 2K
+_QB0 = 25  # 4 entries: q of C_B0 (uniform mode: q0)
+_W = 29  # 3 entries: constant rates (uniform mode)
+_INER = 32  # 3 entries: body principal moments
+_NPAR = 36
+
+
+# ---------------------------------------------------------------------------
+# private quaternion helpers (Hamilton product p (x) q; C(p (x) q) = C(q) @ C(p)).
+# astrodyn.rotation has the numpy versions (quat_multiply(q2, q1) = q1 (x) q2);
+# these scalar numba forms live here because the kernel needs them inline.
+
+
+@jit
+def _hmul(p0, p1, p2, p3, q0, q1, q2, q3):
+    return (
+        p0 * q0 - p1 * q1 - p2 * q2 - p3 * q3,
+        p0 * q1 + p1 * q0 + p2 * q3 - p3 * q2,
+        p0 * q2 - p1 * q3 + p2 * q0 + p3 * q1,
+        p0 * q3 + p1 * q2 - p2 * q1 + p3 * q0,
+    )
+
+
+# ---------------------------------------------------------------------------
+# the two integrals of the precession angle
+
+
+@jit
+def _j_g(s, c, d, r, n, sq1n, m1):
+    """J = Pi(n; am r|m) - r and G = int_0^{am r} dphi/(1 - n sin^2 phi) for |r| <= K."""
+    if m1 == 0.0:  # separatrix: Pi(n; r|1) = r/(1-n) - n/(1-n) atan(sqrt(-n) tanh r)/sqrt(-n)
+        if n == 0.0:
+            jv = 0.0
+        else:
+            sn_ = math.sqrt(-n)
+            jv = n / (1.0 - n) * (r - math.atan(sn_ * s) / sn_)
+    elif n == 0.0 or s == 0.0:
+        jv = 0.0
+    else:
+        jv = n / 3.0 * s * s * s * _rj(c * c, d * d, 1.0, 1.0 - n * s * s)
+    gv = math.atan2(sq1n * s, c) / sq1n
+    return jv, gv
+
+
+@jit
+def _phase(par, t):
+    """Reduced phase: (sn, cn, dn) at tau = tau0 + wp t with J(tau), G(tau) including whole half periods."""
+    tau = par[_TAU0] + par[_WP] * t
+    K = par[_K]
+    m = par[_M]
+    m1 = par[_M1]
+    n = par[_N]
+    sq1n = par[_SQ1N]
+    if m1 == 0.0:
+        th = math.tanh(tau)
+        sech = 1.0 / math.cosh(tau) if abs(tau) < 710.0 else 0.0
+        jv, gv = _j_g(th, sech, sech, tau, n, sq1n, m1)
+        return th, sech, sech, jv, gv
+    twoK = 2.0 * K
+    j = math.floor(tau / twoK + 0.5)
+    r = tau - j * twoK
+    if r > K:
+        r -= twoK
+        j += 1.0
+    elif r < -K:
+        r += twoK
+        j -= 1.0
+    s, c, d = _sncndn_half(r, m, m1)
+    jv, gv = _j_g(s, c, d, r, n, sq1n, m1)
+    jv += j * par[_DJ]
+    gv += j * par[_DG]
+    if j % 2.0 != 0.0:
+        s = -s
+        c = -c
+    return s, c, d, jv, gv
+
+
+@jit
+def _evaluate(par, t, w, q):
+    """Rates (3,) and Euler parameters (4,) at time t into w, q."""
+    mode = par[_MODE]
+    if mode == 0.0 or not (t == t):
+        for i in range(3):
+            w[i] = math.nan
+        for i in range(4):
+            q[i] = math.nan
+        return
+    if mode == 1.0:  # uniform rotation: C(t) = exp(-[w x] t) C0, q = q0 (x) (cos, n sin)
+        w0, w1, w2 = par[_W], par[_W + 1], par[_W + 2]
+        w[0], w[1], w[2] = w0, w1, w2
+        wn = math.sqrt(w0 * w0 + w1 * w1 + w2 * w2)
+        if wn == 0.0:
+            for i in range(4):
+                q[i] = par[_QB0 + i]
+            return
+        half = 0.5 * wn * t
+        sh = math.sin(half) / wn
+        r0, r1, r2, r3 = _hmul(
+            par[_QB0], par[_QB0 + 1], par[_QB0 + 2], par[_QB0 + 3], math.cos(half), w0 * sh, w1 * sh, w2 * sh
+        )
+        nrm = math.sqrt(r0 * r0 + r1 * r1 + r2 * r2 + r3 * r3)
+        q[0], q[1], q[2], q[3] = r0 / nrm, r1 / nrm, r2 / nrm, r3 / nrm
+        return
+    s, c, d, jv, gv = _phase(par, t)
+    ia = int(par[_IA])
+    ib = int(par[_IB])
+    ic = int(par[_IC])
+    sig = par[_SIG]
+    e1 = par[_EPS1]
+    w[ia] = e1 * par[_A1] * c
+    w[ib] = par[_SB] * par[_SNS] * par[_A2] * s
+    w[ic] = sig * par[_A3] * d
+    # precession angle about the circulation axis
+    psi = par[_LIN] * t + par[_KJ] * (jv - par[_J0]) - par[_KG] * (gv - par[_G0])
+    # Q(t): smallest rotation a -> h, as Euler parameters (1 + a.h, h x a) / norm
+    hm = par[_HMAG]
+    h0 = par[_INER] * w[0] / hm
+    h1 = par[_INER + 1] * w[1] / hm
+    h2 = par[_INER + 2] * w[2] / hm
+    h = (h0, h1, h2)
+    j1 = (ic + 1) % 3
+    j2 = (ic + 2) % 3
+    qm = np.zeros(4)
+    qm[0] = 1.0 + sig * h[ic]
+    qm[1 + j1] = sig * h[j2]
+    qm[1 + j2] = -sig * h[j1]
+    # C_a(psi): frame rotation by psi about a = sig e_ic
+    half = 0.5 * psi
+    qc = np.zeros(4)
+    qc[0] = math.cos(half)
+    qc[1 + ic] = sig * math.sin(half)
+    # q = qB0 (x) qc (x) qm   <=>   C = Q C_a(psi) C_B0
+    x0, x1, x2, x3 = _hmul(qc[0], qc[1], qc[2], qc[3], qm[0], qm[1], qm[2], qm[3])
+    r0, r1, r2, r3 = _hmul(par[_QB0], par[_QB0 + 1], par[_QB0 + 2], par[_QB0 + 3], x0, x1, x2, x3)
+    nrm = math.sqrt(r0 * r0 + r1 * r1 + r2 * r2 + r3 * r3)
+    q[0], q[1], q[2], q[3] = r0 / nrm, r1 / nrm, r2 / nrm, r3 / nrm
+
+
+@jit
+def _setup(inertia, w0, q0, par):
+    """Per-body constants of the exact solution into par (see the layout above)."""
+    for i in range(_NPAR):
+        par[i] = 0.0
+    for i in range(3):
+        par[_INER + i] = inertia[i]
+    ok = True
+    for i in range(3):
+        if not (math.isfinite(w0[i]) and math.isfinite(inertia[i])):
+            ok = False
+    qn = 0.0
+    for i in range(4):
+        if not math.isfinite(q0[i]):
+            ok = False
+        qn += q0[i] * q0[i]
+    if not ok or qn == 0.0:
+        par[_MODE] = 0.0
+        return
+    qn = math.sqrt(qn)
+    I0, I1, I2 = inertia[0], inertia[1], inertia[2]
+    W0, W1, W2 = w0[0], w0[1], w0[2]
+    # uniform rotation iff w x (I w) == 0 exactly
+    cx = W1 * I2 * W2 - W2 * I1 * W1
+    cy = W2 * I0 * W0 - W0 * I2 * W2
+    cz = W0 * I1 * W1 - W1 * I0 * W0
+    if cx == 0.0 and cy == 0.0 and cz == 0.0:
+        par[_MODE] = 1.0
+        for i in range(4):
+            par[_QB0 + i] = q0[i] / qn
+        for i in range(3):
+            par[_W + i] = w0[i]
+        return
+    par[_MODE] = 2.0
+    # ascending order i1, i2, i3 (stable)
+    i1, i2, i3 = 0, 1, 2
+    if inertia[i2] < inertia[i1]:
+        i1, i2 = i2, i1
+    if inertia[i3] < inertia[i2]:
+        i2, i3 = i3, i2
+    if inertia[i2] < inertia[i1]:
+        i1, i2 = i2, i1
+    A, B, Cc = inertia[i1], inertia[i2], inertia[i3]
+    sep = Cc * (Cc - B) * w0[i3] ** 2 - A * (B - A) * w0[i1] ** 2  # H^2 - 2TB
+    if sep >= 0.0:
+        ia, ib, ic = i1, i2, i3
+    else:
+        ia, ib, ic = i3, i2, i1
+    # sign making (ia, ib, ic) right-handed: even permutation of (0, 1, 2) <=> ib == (ia + 1) % 3
+    sb = 1.0 if ib == (ia + 1) % 3 else -1.0
+    Ia, Ib, Ic = inertia[ia], inertia[ib], inertia[ic]
+    wa, wb, wc = w0[ia], sb * w0[ib], w0[ic]
+    d31 = Ic - Ia
+    d32 = Ic - Ib
+    d21 = Ib - Ia
+    p13 = Ia * d31 * wa * wa + Ib * d32 * wb * wb  # 2TC - H^2
+    p31 = Ib * d21 * wb * wb + Ic * d31 * wc * wc  # H^2 - 2TA
+    a1 = math.sqrt(wa * wa + (Ib * d32) / (Ia * d31) * wb * wb)
+    a2 = math.sqrt(wb * wb + (Ia * d31) / (Ib * d32) * wa * wa)
+    a3 = math.sqrt(wc * wc + (Ib * d21) / (Ic * d31) * wb * wb)
+    wp = math.sqrt(d32 * p31 / (Ia * Ib * Ic))
+    m = d21 * p13 / (d32 * p31)
+    m1 = d31 * sep / (d32 * p31)
+    m = min(max(m, 0.0), 1.0)
+    m1 = min(max(m1, 0.0), 1.0)
+    K = _ellipk(m1)
+    sig = 1.0 if wc > 0.0 else -1.0
+    e1 = 1.0
+    if m1 == 0.0 and wa < 0.0:
+        e1 = -1.0
+    # initial phase from (sn, cn, dn): F = sn R_F(cn^2, dn^2, 1), quadrant from cn
+    cn0 = e1 * wa / a1
+    rho = 1.0 if d32 > 0.0 else -1.0
+    sns = rho * e1 * sig
+    sn0 = sns * wb / a2
+    nr = math.sqrt(cn0 * cn0 + sn0 * sn0)
+    cn0 /= nr
+    sn0 /= nr
+    dn0 = min(abs(wc) / a3, 1.0)
+    f = sn0 * _rf(cn0 * cn0, dn0 * dn0, 1.0)
+    if cn0 >= 0.0:
+        tau0 = f
+    else:
+        tau0 = math.copysign(2.0 * K, sn0) - f
+    n = -Ic * d21 / (Ia * d32)
+    sq1n = math.sqrt(1.0 - n)
+    hmag = math.sqrt((I0 * W0) ** 2 + (I1 * W1) ** 2 + (I2 * W2) ** 2)
+    kco = d31 / (Ia * wp)
+    par[_IA], par[_IB], par[_IC] = ia, ib, ic
+    par[_SB] = sb
+    par[_SIG] = sig
+    par[_EPS1] = e1
+    par[_SNS] = sns
+    par[_A1], par[_A2], par[_A3] = a1, a2, a3
+    par[_WP] = wp
+    par[_M], par[_M1], par[_K] = m, m1, K
+    par[_TAU0] = tau0
+    par[_HMAG] = hmag
+    par[_LIN] = hmag / Ia
+    par[_KJ] = kco * hmag / Ic
+    par[_KG] = kco * a3
+    par[_N] = n
+    par[_SQ1N] = sq1n
+    if m1 > 0.0:
+        par[_DJ] = 2.0 * n / 3.0 * _rj(0.0, m1, 1.0, 1.0 - n) if n != 0.0 else 0.0
+        par[_DG] = math.pi / sq1n
+    # J, G at tau0 through the same reduction as every later time (psi(0) == 0 exactly)
+    s_, c_, d_, j0, g0 = _phase(par, 0.0)
+    par[_J0] = j0
+    par[_G0] = g0
+    # C_B0 = Q(0)^T C(q0): evaluate q at t = 0 with qB0 = identity, then qB0 = q0 (x) conj(qm0)
+    par[_QB0] = 1.0
+    wtmp = np.empty(3)
+    qm0 = np.empty(4)
+    _evaluate(par, 0.0, wtmp, qm0)
+    r0, r1, r2, r3 = _hmul(q0[0] / qn, q0[1] / qn, q0[2] / qn, q0[3] / qn, qm0[0], -qm0[1], -qm0[2], -qm0[3])
+    par[_QB0], par[_QB0 + 1], par[_QB0 + 2], par[_QB0 + 3] = r0, r1, r2, r3
+
+
+@jit
+def _setup_all(inertia, w0, q0, par):
+    for b in range(inertia.shape[0]):
+        _setup(inertia[b], w0[b], q0[b], par[b])
+
+
+@pjit
+def _evaluate_all(par, t, w_out, q_out):
+    nb = par.shape[0]
+    nt = t.shape[0]
+    for k in prange(nb * nt):
+        b = k // nt
+        i = k - b * nt
+        _evaluate(par[b], t[i], w_out[b, i], q_out[b, i])
+
+
+# ---------------------------------------------------------------------------
+# public API
+
+
+def _prepare(inertia, w0, q0):
+    inertia = np.asarray(inertia, dtype=np.float64)
+    w0 = np.asarray(w0, dtype=np.float64)
+    q0 = np.asarray(q0, dtype=np.float64)
+    if inertia.ndim < 1 or inertia.shape[-1] != 3:
+        raise ValueError(f"inertia: expected principal moments of shape (..., 3), got shape {inertia.shape}")
+    if w0.ndim < 1 or w0.shape[-1] != 3:
+        raise ValueError(f"w0: expected body rates of shape (..., 3) rad/s, got shape {w0.shape}")
+    if q0.ndim < 1 or q0.shape[-1] != 4:
+        raise ValueError(f"q0: expected Euler parameters of shape (..., 4), scalar first, got shape {q0.shape}")
+    if not np.all(np.isfinite(inertia)) or np.any(inertia <= 0):
+        raise ValueError(f"inertia: expected finite positive principal moments (kg m^2), got {inertia.tolist()}")
+    batch = np.broadcast_shapes(inertia.shape[:-1], w0.shape[:-1], q0.shape[:-1])
+    I_ = np.ascontiguousarray(np.broadcast_to(inertia, batch + (3,))).reshape(-1, 3)
+    w_ = np.ascontiguousarray(np.broadcast_to(w0, batch + (3,))).reshape(-1, 3)
+    q_ = np.ascontiguousarray(np.broadcast_to(q0, batch + (4,))).reshape(-1, 4)
+    par = np.empty((I_.shape[0], _NPAR))
+    _setup_all(I_, w_, q_, par)
+    return batch, par
+
+
+def torque_free(inertia, w0, q0, t):
+    """Exact torque-free rates and attitude of a rigid body at the times ``t``.
+
+    Parameters
+    ----------
+    inertia : array_like, shape (..., 3)
+        Principal moments of inertia (kg m^2), any order, finite and positive.
+    w0 : array_like, shape (..., 3)
+        Body angular velocity at ``t = 0`` (rad/s, body principal axes).
+    q0 : array_like, shape (..., 4)
+        Euler parameters at ``t = 0``, scalar first, ``v_body = C(q0) @ v_inertial``
+        (normalised internally).
+    t : array_like, shape (N,) or scalar
+        Times (s) relative to the initial state; any sign, any order.
+
+    Returns
+    -------
+    w : ndarray, shape (..., N, 3)   (``(..., 3)`` for scalar ``t``)
+        Body rates (rad/s).
+    q : ndarray, shape (..., N, 4)   (``(..., 4)`` for scalar ``t``)
+        Euler parameters, unit to rounding.
+
+    Leading (batch) axes of ``inertia``, ``w0``, ``q0`` broadcast; a single
+    body gives ``(N, 3)`` and ``(N, 4)`` as in design.md section 2.  The method
+    and its accuracy are described in the module docstring.
+    """
+    batch, par = _prepare(inertia, w0, q0)
+    t_arr = np.asarray(t, dtype=np.float64)
+    scalar_t = t_arr.ndim == 0
+    if t_arr.ndim > 1:
+        raise ValueError(f"t: expected a scalar or a 1-D array of times (s), got shape {t_arr.shape}")
+    t_flat = np.ascontiguousarray(t_arr.reshape(-1))
+    nb, nt = par.shape[0], t_flat.shape[0]
+    w = np.empty((nb, nt, 3))
+    q = np.empty((nb, nt, 4))
+    _evaluate_all(par, t_flat, w, q)
+    if scalar_t:
+        return w.reshape(batch + (3,)), q.reshape(batch + (4,))
+    return w.reshape(batch + (nt, 3)), q.reshape(batch + (nt, 4))
+
+
+def rate_period(inertia, w0):
+    """Period ``4 K(m) / wp`` (s) of the body rates along their polhode.
+
+    ``inf`` on the separatrix (``m1 = 0``) and for uniform rotation (constant
+    rates).  For an axisymmetric body it is ``2 pi / wp``, the period of the
+    rates' precession about the symmetry axis.  Shape: the broadcast leading
+    shape of ``inertia`` and ``w0``.
+    """
+    batch, par = _prepare(inertia, w0, np.array([1.0, 0.0, 0.0, 0.0]))
+    out = np.where(
+        par[:, _MODE] == 2.0,
+        4.0 * par[:, _K] / np.where(par[:, _WP] > 0, par[:, _WP], np.nan),
+        np.where(par[:, _MODE] == 1.0, np.inf, np.nan),
+    )
+    return out.reshape(batch) if batch else float(out[0])
+
+
+def flip_period(inertia, w0):
+    """Flip period ``4 K(m) / wp`` (s) of a spin near the intermediate axis (Dzhanibekov effect).
+
+    The time for the rate along the intermediate axis to reverse and return;
+    successive reversals are half of it apart.  The same number as
+    :func:`rate_period` (given its own name for the intermediate-axis case).
+    """
+    return rate_period(inertia, w0)
+
+
+def polhode(inertia, w0, n=256):
+    """The polhode: ``n`` body-rate samples (rad/s, shape ``(n, 3)``) over one rate period.
+
+    The curve traced by ``w`` on the intersection of the energy ellipsoid
+    ``w . I w = 2T`` and the momentum sphere ``|I w| = H`` (Baruh ch. 10),
+    equally spaced in time from ``w0``.  On the separatrix (infinite period)
+    the samples cover ``tau0 +- 20`` in elliptic argument, which reaches the
+    intermediate-axis equilibria to 1e-8; a uniform rotation gives ``n``
+    copies of ``w0``.
+    """
+    inertia = np.asarray(inertia, dtype=np.float64)
+    w0 = np.asarray(w0, dtype=np.float64)
+    if inertia.shape != (3,) or w0.shape != (3,):
+        raise ValueError("inertia, w0: expected shape (3,) each (one body)")
+    n = int(n)
+    if n < 1:
+        raise ValueError(f"n: expected a positive number of samples, got {n}")
+    _, par = _prepare(inertia, w0, np.array([1.0, 0.0, 0.0, 0.0]))
+    p = par[0]
+    if p[_MODE] != 2.0:
+        return np.tile(w0, (n, 1)) if p[_MODE] == 1.0 else np.full((n, 3), np.nan)
+    if p[_M1] == 0.0:
+        t = (np.linspace(-20.0, 20.0, n) - p[_TAU0]) / p[_WP]
+    else:
+        t = np.arange(n) * (4.0 * p[_K] / p[_WP] / n)
+    return torque_free(inertia, w0, np.array([1.0, 0.0, 0.0, 0.0]), t)[0]
+
+
+def herpolhode(inertia, w0, q0, t):
+    """The herpolhode: angular velocity in inertial components ``C(q)^T w`` (rad/s) at ``t``.
+
+    Its tip stays on the invariable plane ``w_inertial . H_hat = 2T / |H|``
+    (Poinsot's construction, Baruh ch. 10).  Shape ``(len(t), 3)``.
+    """
+    from astrodyn.rotation import quat_conjugate, quat_rotate
+
+    w, q = torque_free(inertia, w0, q0, t)
+    return quat_rotate(quat_conjugate(q), w)
