@@ -1,0 +1,320 @@
+"""The propagator process loop shared by ``services/orbit.py`` and ``services/attitude.py``.
+
+One loop, two kinds: it asks an engine of :mod:`astrodyn.simulate` for the states of a
+block of output instants, encodes one JSON payload per body per instant
+(:func:`astrodyn.messages.encode_orbit_batch` / ``encode_attitude_batch``), and publishes
+each instant's payloads as one batch envelope on ``astrodyn/<scenario>/@batch/<kind>``
+(the logger splits it back into the per-body channels of design.md section 3; ``seq`` of
+every channel is the output step index ``k``, so 0, 1, 2, ... with no gaps).
+
+Around the loop:
+
+* a liveliness token ``@alive/<kind>`` and an application heartbeat with the sim time
+  reached (a hung loop stops beating although the token stays);
+* ``start`` and end-of-run (``stop`` with ``{"messages": M}``) events, so the logger knows
+  when it holds everything;
+* pacing: ``real_time_factor = inf`` runs as fast as the bus lets it (``astrodyn run``);
+  a finite factor paces sim time against the wall clock (``astrodyn serve``);
+* commands (``serve`` only): JSON puts on ``astrodyn/<scenario>/@command`` from the
+  supervisor -- ``{"verb": "pause" | "resume" | "stop"}`` or ``{"verb": "rate",
+  "factor": x}`` -- applied between instants;
+* cross-check (orbit only): REBOUND IAS15 runs the same bodies alongside and the
+  difference is published on ``<body>/crosscheck``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import signal
+import sys
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from astrodyn import bus, messages
+from astrodyn.scenario import Scenario, plan as make_plan
+from astrodyn.simulate import AttitudeEngine, OrbitEngine
+
+__all__ = ["Pacer", "PropagatorOptions", "run_propagator", "command_key"]
+
+KINDS = ("orbit", "attitude")
+
+
+def command_key(scenario: str) -> str:
+    """``astrodyn/<scenario>/@command``: the supervisor's commands to its propagators."""
+    return messages.event_key(scenario).rsplit("/", 1)[0] + "/@command"
+
+
+class Pacer:
+    """Paces sim time against the wall clock at ``factor`` sim seconds per wall second.
+
+    ``factor = inf``: never waits.  :meth:`set_factor` and :meth:`pause` / :meth:`resume`
+    re-anchor the clock, so a rate change applies from the current instant on.
+    """
+
+    def __init__(self, factor: float = math.inf):
+        self.factor = float(factor)
+        self.paused = False
+        self._anchor_wall = time.monotonic()
+        self._anchor_sim: float | None = None
+
+    def _reanchor(self, t_sim: float | None) -> None:
+        self._anchor_wall = time.monotonic()
+        self._anchor_sim = t_sim
+
+    def set_factor(self, factor: float, t_sim: float | None) -> None:
+        if not (factor > 0):
+            raise ValueError(f"rate factor: expected a number > 0 (or inf), got {factor!r}")
+        self.factor = float(factor)
+        self._reanchor(t_sim)
+
+    def pause(self) -> None:
+        self.paused = True
+
+    def resume(self, t_sim: float | None) -> None:
+        self.paused = False
+        self._reanchor(t_sim)
+
+    def wait_time(self, t_sim: float) -> float:
+        """Wall seconds to wait before publishing the instant ``t_sim`` (0 if due)."""
+        if math.isinf(self.factor):
+            return 0.0
+        if self._anchor_sim is None:
+            self._reanchor(t_sim)
+        due = self._anchor_wall + (t_sim - self._anchor_sim) / self.factor
+        return max(0.0, due - time.monotonic())
+
+
+@dataclass
+class PropagatorOptions:
+    """How one propagator process runs (see the module docstring)."""
+
+    kind: str
+    real_time_factor: float = math.inf
+    block: int = 0  # output instants per engine call; 0 = automatic
+    cross_check: bool = False
+    wait_logger_s: float = 30.0
+    start_step: int = 0
+    max_steps: int | None = None  # stop after this many instants (tests)
+
+
+class _Stop(Exception):
+    pass
+
+
+def _auto_block(n_bodies: int) -> int:
+    """About 2e5 states per engine call (memory ~ 10 MB), at least 1, at most 1000 instants."""
+    return int(max(1, min(1000, 200_000 // max(1, n_bodies))))
+
+
+def run_propagator(scenario: Scenario, session, opts: PropagatorOptions, log=print) -> dict:
+    """Publish the states of ``opts.kind`` for the whole scenario; returns a summary dict."""
+    if opts.kind not in KINDS:
+        raise ValueError(f"kind: expected one of {KINDS}, got {opts.kind!r}")
+    p = make_plan(scenario)
+    if opts.kind == "orbit":
+        engine = OrbitEngine(scenario, p)
+        key_of = messages.orbit_key
+    else:
+        engine = AttitudeEngine(scenario, p)
+        key_of = messages.attitude_key
+    names, models = engine.names, engine.models
+    keys = [key_of(scenario.name, n) for n in names]
+    groups: dict[str, np.ndarray] = {}
+    for i, m in enumerate(models):
+        groups.setdefault(m, []).append(i)  # type: ignore[arg-type]
+    groups = {m: np.asarray(ix) for m, ix in groups.items()}
+    times = scenario.output_times()
+    n_total = times.shape[0]
+    start = int(opts.start_step)
+    stop_at = n_total if opts.max_steps is None else min(n_total, start + int(opts.max_steps))
+    block = opts.block or _auto_block(len(names))
+
+    cross = None
+    if opts.kind == "orbit" and (opts.cross_check or any(scenario.body(n).cross_check for n in names)):
+        cross = _CrossCheck(scenario, engine, all_bodies=opts.cross_check)
+
+    pacer = Pacer(opts.real_time_factor)
+    stopping = {"why": None}
+
+    def on_signal(signum, frame):
+        stopping["why"] = signal.Signals(signum).name
+
+    for sig in (signal.SIGTERM, signal.SIGINT):
+        signal.signal(sig, on_signal)
+
+    published = 0
+    t_reached = times[start] if start < n_total else 0.0
+    wall0 = time.monotonic()
+    with bus.declare_alive(session, scenario.name, opts.kind), \
+            bus.Heartbeat(session, scenario.name, opts.kind) as heartbeat, \
+            bus.BatchPublisher(session, scenario.name, opts.kind) as batch, \
+            bus.EventPublisher(session, scenario.name, opts.kind) as events, \
+            session.declare_subscriber(command_key(scenario.name), _fifo()) as commands:
+        bus.wait_for_process(session, scenario.name, "logger", timeout_s=opts.wait_logger_s)
+        events.emit("start", float(t_reached), json.dumps({"bodies": len(names), "first_step": start,
+                                                           "steps": stop_at - start}))
+        k = start
+        try:
+            while k < stop_at:
+                tb = times[k : min(stop_at, k + block)]
+                a, b = engine.states(tb)
+                xc = cross.block(tb, a, b) if cross is not None else None
+                for j in range(tb.shape[0]):
+                    t = float(tb[j])
+                    _obey(commands, pacer, t, stopping, heartbeat)
+                    wait = pacer.wait_time(t)
+                    while wait > 0 or pacer.paused:
+                        time.sleep(min(wait, 0.05) if wait > 0 else 0.05)
+                        heartbeat.beat(t=t_reached, paused=pacer.paused)
+                        _obey(commands, pacer, t, stopping, heartbeat)
+                        wait = pacer.wait_time(t)
+                    if stopping["why"]:
+                        raise _Stop
+                    items = []
+                    for model, ix in groups.items():
+                        if opts.kind == "orbit":
+                            payloads = messages.encode_orbit_batch(t, k, model, a[j, ix], b[j, ix], engine.mu, engine.frame)
+                        else:
+                            payloads = messages.encode_attitude_batch(t, k, model, a[j, ix], b[j, ix])
+                        items.extend(zip((keys[i] for i in ix), payloads))
+                    if xc is not None:
+                        items.extend(xc(j, k, t))
+                    batch.publish(items)
+                    published += len(items)
+                    t_reached = t
+                    k += 1
+                    heartbeat.beat(t=t_reached, step=k)
+        except _Stop:
+            pass
+        wall = time.monotonic() - wall0
+        extra = {"last_step": k - 1, "t_reached": float(t_reached), "reason": stopping["why"] or "end of scenario"}
+        if cross is not None:
+            extra["crosscheck_max_dr"] = cross.max_dr
+        events.end(float(t_reached), published, **extra)
+        heartbeat.beat(force=True, t=t_reached, step=k, done=True)
+        time.sleep(0.05)  # let the end event leave before the token goes
+    summary = {"process": opts.kind, "bodies": len(names), "steps": k - start, "messages": published,
+               "t": float(t_reached), "wall_s": wall, "reason": extra["reason"]}
+    if cross is not None:
+        summary["crosscheck_max_dr"] = cross.max_dr
+    return summary
+
+
+def _fifo():
+    import zenoh
+
+    return zenoh.handlers.FifoChannel(256)
+
+
+def _obey(commands, pacer: Pacer, t: float, stopping: dict, heartbeat) -> None:
+    """Apply pending supervisor commands (malformed ones are ignored with a note on stderr)."""
+    while (sample := commands.try_recv()) is not None:
+        try:
+            cmd = json.loads(sample.payload.to_bytes())
+            verb = cmd["verb"]
+            if verb == "pause":
+                pacer.pause()
+            elif verb == "resume":
+                pacer.resume(t)
+            elif verb == "rate":
+                pacer.set_factor(float(cmd["factor"]), t)
+            elif verb == "stop":
+                stopping["why"] = "stop requested"
+                pacer.resume(t)
+            else:
+                raise ValueError(f"verb: expected pause | resume | rate | stop, got {verb!r}")
+        except (ValueError, KeyError, TypeError) as exc:
+            print(f"propagator: ignored a malformed command: {exc}", file=sys.stderr)
+
+
+class _CrossCheck:
+    """REBOUND IAS15 alongside the orbit engine; differences per body as crosscheck messages.
+
+    Bodies flagged ``cross_check`` in the config (every orbit with ``all_bodies``) whose
+    model REBOUND can run here: ``kepler`` (point mass) and ``j2`` (REBOUND with the J2
+    force of :mod:`astrodyn.crosscheck`).  Others are listed in ``skipped``.
+    """
+
+    def __init__(self, scenario: Scenario, engine: OrbitEngine, all_bodies: bool = False):
+        from astrodyn.crosscheck import ReboundScene
+
+        cb = scenario.central_body
+        self.scenes = []  # (indices into engine bodies, keys, ReboundScene)
+        self.skipped = []
+        self.max_dr = 0.0
+        chosen = [i for i, b in enumerate(engine.names) if all_bodies or scenario.body(b).cross_check]
+        for model in ("kepler", "j2"):
+            idx = [i for i in chosen if engine.models[i] == model]
+            if not idx:
+                continue
+            kw = dict(model="j2", j2=cb.j[0], body_radius=cb.radius) if model == "j2" else {}
+            scene = ReboundScene(engine.r0[idx], engine.v0[idx], engine.mu, **kw)
+            keys = [messages.crosscheck_key(scenario.name, engine.names[i]) for i in idx]
+            self.scenes.append((np.asarray(idx), keys, scene))
+        self.skipped = [engine.names[i] for i in chosen if engine.models[i] not in ("kepler", "j2")]
+
+    def block(self, tb, r, v):
+        if not self.scenes:
+            return None
+        parts = []
+        for idx, keys, scene in self.scenes:
+            refs = [scene.advance_to(float(t)) for t in tb]
+            dr = np.stack([r[j, idx] - refs[j][0] for j in range(len(tb))])
+            dv = np.stack([v[j, idx] - refs[j][1] for j in range(len(tb))])
+            self.max_dr = max(self.max_dr, float(np.max(np.linalg.norm(dr, axis=-1))))
+            parts.append((keys, dr, dv))
+
+        def items(j, k, t):
+            return [(key, messages.encode(messages.crosscheck_message(t, k, dr[j, n], dv[j, n])))
+                    for keys, dr, dv in parts for n, key in enumerate(keys)]
+
+        return items
+
+
+# --------------------------------------------------------------------------- process entry
+
+
+def service_main(kind: str, argv: list[str] | None = None) -> int:
+    """Entry point of ``services/<kind>.py``: parse, load the scenario, wire, run.
+
+    Exit status: 0 done (or stopped cleanly), 1 runtime/bus error, 2 bad arguments or config.
+    Prints a one-line JSON summary on stdout.
+    """
+    import argparse
+
+    from astrodyn.scenario import ScenarioError, load
+
+    ap = argparse.ArgumentParser(prog=f"services/{kind}.py",
+                                 description=f"astrodyn {kind} propagator: publish the scenario's {kind} states on Zenoh")
+    ap.add_argument("config", help="scenario TOML file")
+    ap.add_argument("--real-time-factor", type=float, default=math.inf,
+                    help="sim seconds per wall second (default inf: as fast as possible)")
+    ap.add_argument("--cross-check", action="store_true", help="orbit: run REBOUND IAS15 alongside for every body")
+    ap.add_argument("--start-step", type=int, default=0, help="first output step to publish (resume)")
+    ap.add_argument("--max-steps", type=int, default=None, help="publish at most this many steps")
+    ap.add_argument("--block", type=int, default=0, help="output steps per engine call (default automatic)")
+    ap.add_argument("--wait-logger", type=float, default=30.0, help="seconds to wait for the logger's liveliness token")
+    bus.add_bus_arguments(ap)
+    args = ap.parse_args(argv)
+    try:
+        scenario = load(args.config)
+    except ScenarioError as exc:
+        print(f"{kind}: {exc}", file=sys.stderr)
+        return 2
+    if not (args.real_time_factor > 0):
+        print(f"{kind}: --real-time-factor: expected a number > 0, got {args.real_time_factor}", file=sys.stderr)
+        return 2
+    opts = PropagatorOptions(kind=kind, real_time_factor=args.real_time_factor, block=args.block,
+                             cross_check=args.cross_check, wait_logger_s=args.wait_logger,
+                             start_step=args.start_step, max_steps=args.max_steps)
+    try:
+        with bus.session_from_args(args) as session:
+            summary = run_propagator(scenario, session, opts)
+    except bus.BusError as exc:
+        print(f"{kind}: {exc}", file=sys.stderr)
+        return 1
+    print(json.dumps(summary, separators=(",", ":")), flush=True)
+    return 0

@@ -1,0 +1,340 @@
+"""``astrodyn run CONFIG --out FILE.mcap``: a scenario headless, as fast as the machine allows.
+
+What happens, in order:
+
+1. The config is loaded and validated (:func:`astrodyn.scenario.load`); a bad config or an
+   unwritable output path exits 2 before anything is started or written.
+2. The runner opens a Zenoh session on a free loopback port (the hub, multicast scouting
+   off) and starts, as separate OS processes (``subprocess``, never ``fork``):
+   ``services/logger.py`` first, then only the propagators the plan needs
+   (``services/orbit.py``, ``services/attitude.py``).  Children connect to the hub and
+   meet each other through gossip.
+3. While they run it prints progress on stderr (sim time reached, messages/s) from the
+   processes' heartbeats, and watches their liveliness tokens and exit codes: a
+   propagator that dies is reported (which process, which bodies, how far it got), the
+   logger is told to finish the file (everything logged so far stays readable) and the
+   run exits 1.
+4. The logger ends by itself once it holds every message the propagators announced
+   (end-of-run protocol of :mod:`astrodyn.recording.logger`); the runner then reads the
+   file back and prints a summary per body: model, steps, states logged, and the drift of
+   the conserved quantities (orbit: specific energy and angular momentum, exact for
+   two-body models; attitude: |q| - 1, and for torque-free bodies rotational energy and
+   inertial angular momentum).
+
+Exit status: 0 complete, 1 a process failed or messages were lost, 2 bad config/arguments.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from astrodyn import bus
+from astrodyn.scenario import Scenario, ScenarioError, load, plan as make_plan
+
+__all__ = ["main", "run_scenario", "services_dir", "drift_summary"]
+
+
+def services_dir() -> Path:
+    """The ``services/`` folder beside ``src/`` (the repository layout ``make`` installs)."""
+    here = Path(__file__).resolve()
+    for parent in here.parents:
+        cand = parent / "services"
+        if (cand / "logger.py").is_file():
+            return cand
+    raise FileNotFoundError("services/: not found beside the astrodyn sources; install with `make install` "
+                            "(an editable install of the repository)")
+
+
+def _check_output(path: Path) -> None:
+    parent = path.resolve().parent
+    if not parent.is_dir():
+        raise ScenarioError(f"--out {path}: expected a file in an existing directory, got missing directory {parent}")
+    if not os.access(parent, os.W_OK):
+        raise ScenarioError(f"--out {path}: expected a writable directory, {parent} is not writable")
+    if path.is_dir():
+        raise ScenarioError(f"--out {path}: expected a file path, got a directory")
+
+
+class _Child:
+    def __init__(self, name: str, argv: list[str], log_dir: Path):
+        self.name = name
+        self.stdout_path = log_dir / f"{name}.out"
+        self.stderr_path = log_dir / f"{name}.err"
+        self._out = open(self.stdout_path, "wb")
+        self._err = open(self.stderr_path, "wb")
+        self.proc = subprocess.Popen(argv, stdout=self._out, stderr=self._err, stdin=subprocess.DEVNULL,
+                                     start_new_session=True)
+
+    @property
+    def pid(self) -> int:
+        return self.proc.pid
+
+    def poll(self):
+        return self.proc.poll()
+
+    def stop(self, sig=signal.SIGTERM, timeout: float = 10.0) -> int | None:
+        """Signal this child by PID, wait, SIGKILL if it does not go."""
+        if self.proc.poll() is None:
+            try:
+                os.kill(self.proc.pid, sig)
+                self.proc.wait(timeout=timeout)
+            except subprocess.TimeoutExpired:
+                os.kill(self.proc.pid, signal.SIGKILL)
+                self.proc.wait(timeout=5)
+            except ProcessLookupError:
+                pass
+        return self.proc.returncode
+
+    def close(self) -> None:
+        self._out.close()
+        self._err.close()
+
+    def summary(self) -> dict | None:
+        """The one-line JSON summary the process printed last on stdout, if any."""
+        try:
+            lines = self.stdout_path.read_text(errors="replace").strip().splitlines()
+        except OSError:
+            return None
+        for line in reversed(lines):
+            try:
+                obj = json.loads(line)
+            except ValueError:
+                continue
+            if isinstance(obj, dict):
+                return obj
+        return None
+
+    def stderr_tail(self, n: int = 5) -> str:
+        try:
+            return "\n".join(self.stderr_path.read_text(errors="replace").strip().splitlines()[-n:])
+        except OSError:
+            return ""
+
+
+def run_scenario(scenario: Scenario, config_path: Path, out: Path, *, cross_check: bool = False,
+                 real_time_factor: float = math.inf, connect: list[str] | None = None,
+                 progress: bool = True, timeout_s: float | None = None, extra_args: dict | None = None) -> dict:
+    """Run ``scenario`` with real processes; return the result dict (see :func:`main`)."""
+    services = services_dir()
+    p = make_plan(scenario)
+    propagators = [k for k in p.processes if k != "logger"]
+    port = bus.free_port()
+    hub = bus.loopback_endpoint(port)
+    connect_args = sum((["--connect", e] for e in [hub, *(connect or [])]), [])
+    py = sys.executable
+    started = time.monotonic()
+    result: dict = {"scenario": scenario.name, "out": str(out), "processes": {}, "ok": False}
+    with tempfile.TemporaryDirectory(prefix="astrodyn-run-") as tmp, \
+            bus.open_session(listen=[hub]) as session, \
+            bus.HeartbeatMonitor(session, scenario.name) as beats, \
+            bus.AliveWatcher(session, scenario.name) as alive:
+        tmpd = Path(tmp)
+        meta_path = tmpd / "scenario.json"
+        meta_path.write_text(json.dumps(scenario.to_metadata()))
+        children: dict[str, _Child] = {}
+        try:
+            logger_argv = [py, str(services / "logger.py"), "--scenario", scenario.name, "--out", str(out),
+                           "--epoch-ns", str(scenario.epoch_unix_ns), "--metadata", str(meta_path),
+                           "--config", str(config_path), *sum((["--expect", k] for k in propagators), []),
+                           *connect_args]
+            children["logger"] = _Child("logger", logger_argv, tmpd)
+            bus.wait_for_process(session, scenario.name, "logger", timeout_s=30.0)
+            for kind in propagators:
+                argv = [py, str(services / f"{kind}.py"), str(config_path), *connect_args]
+                if not math.isinf(real_time_factor):
+                    argv += ["--real-time-factor", str(real_time_factor)]
+                if cross_check and kind == "orbit":
+                    argv.append("--cross-check")
+                for k, v in (extra_args or {}).get(kind, {}).items():
+                    argv += [k, str(v)]
+                children[kind] = _Child(kind, argv, tmpd)
+            failure = _watch(scenario, p, children, beats, alive, progress, timeout_s)
+            logger = children["logger"]
+            if failure:
+                for kind in propagators:
+                    children[kind].stop()
+                logger.stop(signal.SIGTERM, timeout=30)
+            else:
+                try:
+                    logger.proc.wait(timeout=60)
+                except subprocess.TimeoutExpired:
+                    failure = "logger did not finish within 60 s of the end of the run; stopped it (file finished)"
+                    logger.stop(signal.SIGTERM, timeout=30)
+            for name, ch in children.items():
+                result["processes"][name] = {"pid": ch.pid, "exit": ch.poll(), "summary": ch.summary(),
+                                             "stderr": ch.stderr_tail()}
+            if logger.poll() not in (0, None) and not failure:
+                failure = f"logger exited with status {logger.poll()}: {logger.stderr_tail()}"
+            result["failure"] = failure
+        finally:
+            for ch in children.values():
+                ch.stop()
+                ch.close()
+    result["wall_s"] = time.monotonic() - started
+    log = (result["processes"].get("logger") or {}).get("summary") or {}
+    result["logger"] = log
+    lost = log.get("missing", 0) if isinstance(log, dict) else 0
+    result["ok"] = not result.get("failure") and bool(log) and not lost
+    if not result.get("failure") and lost:
+        result["failure"] = f"{lost} messages missing in the recording"
+    return result
+
+
+def _watch(scenario: Scenario, p, children: dict, beats, alive, progress: bool, timeout_s: float | None) -> str | None:
+    """Wait for the propagators to finish; return a failure description or None."""
+    propagators = [k for k in children if k != "logger"]
+    duration = scenario.output_times()[-1] if scenario.n_steps else 0.0
+    last_print = 0.0
+    t0 = time.monotonic()
+    last_msgs, last_time = 0, t0
+    while True:
+        now = time.monotonic()
+        beats.poll()
+        alive.poll()
+        for name, ch in children.items():
+            rc = ch.poll()
+            if rc is not None and (name == "logger" or rc != 0):
+                if name == "logger":
+                    # the logger ends by itself once it holds everything: give the
+                    # propagators a moment to exit after their end-of-run event
+                    deadline = time.monotonic() + 10.0
+                    while time.monotonic() < deadline and any(children[k].poll() is None for k in propagators):
+                        time.sleep(0.05)
+                    if all(children[k].poll() == 0 for k in propagators):
+                        return None if rc == 0 else f"logger exited with status {rc}: {ch.stderr_tail()}"
+                how_far = beats.last.get(name, {}).get("t")
+                where = f", sim t reached {how_far:.6g} s of {duration:.6g} s" if how_far is not None else ""
+                bodies = [b.name for b in p.bodies if (b.orbit_model if name == "orbit" else b.attitude_model)]
+                who = f" (bodies: {', '.join(bodies[:5])}{', ...' if len(bodies) > 5 else ''})" if name != "logger" else ""
+                sig = f"killed by signal {-rc}" if rc < 0 else f"exited with status {rc}"
+                return f"process {name} (pid {ch.pid}) {sig}{who}{where}: {ch.stderr_tail(3)}"
+        if all(children[k].poll() == 0 for k in propagators):
+            return None
+        if progress and now - last_print >= (0.5 if sys.stderr.isatty() else 5.0):
+            ts = [beats.last.get(k, {}).get("t", 0.0) for k in propagators]
+            msgs = beats.last.get("logger", {}).get("messages", 0)
+            rate = (msgs - last_msgs) / max(1e-9, now - last_time)
+            last_msgs, last_time = msgs, now
+            t_min = min(ts) if ts else 0.0
+            tty = sys.stderr.isatty()
+            print(("\r" if tty else "") + f"  sim t {t_min:10.1f} / {duration:.1f} s  ({100 * t_min / max(duration, 1e-300):5.1f} %)"
+                  f"  logged {msgs:>9d}  {rate:9.0f} msg/s", end="" if tty else "\n", file=sys.stderr, flush=True)
+            last_print = now
+        if timeout_s is not None and now - t0 > timeout_s:
+            return f"timeout: the run took longer than {timeout_s} s"
+        time.sleep(0.05)
+
+
+# --------------------------------------------------------------------------- summary
+
+
+def drift_summary(path: Path, scenario: Scenario) -> list[dict]:
+    """Per body: model, steps and states logged, conserved-quantity drift, read from the file."""
+    from astrodyn.recording import load as load_run
+
+    run = load_run(path)
+    p = {bp.name: bp for bp in make_plan(scenario).bodies}
+    mu = scenario.central_body.mu
+    rows = []
+    for b in scenario.bodies:
+        rec = run.bodies.get(b.name)
+        bp = p[b.name]
+        row = {"body": b.name, "orbit_model": bp.orbit_model, "attitude_model": bp.attitude_model}
+        if rec is not None and rec.orbit is not None and len(rec.orbit):
+            r, v = rec.orbit.r, rec.orbit.v
+            rn = np.linalg.norm(r, axis=1)
+            energy = 0.5 * np.einsum("ij,ij->i", v, v) - mu / rn
+            h = np.linalg.norm(np.cross(r, v), axis=1)
+            # relative to mu/|r0| (the size of the terms), not to the energy itself, which is
+            # ~0 near parabolic orbits and would turn round-off into a huge "relative drift"
+            row.update(orbit_states=len(rec.orbit), orbit_last_seq=int(rec.orbit.seq[-1]),
+                       energy_drift=float(np.max(np.abs(energy - energy[0])) * rn[0] / mu),
+                       momentum_drift=float(np.max(np.abs(h - h[0])) / h[0]) if h[0] else 0.0)
+        if rec is not None and rec.attitude is not None and len(rec.attitude):
+            q, w = rec.attitude.q, rec.attitude.w
+            row.update(attitude_states=len(rec.attitude),
+                       quat_norm_error=float(np.max(np.abs(np.linalg.norm(q, axis=1) - 1.0))))
+            if bp.attitude_model == "torque_free" and b.attitude is not None:
+                from astrodyn.rotation import dcm_from_quat
+
+                J = np.asarray(b.attitude.inertia, dtype=np.float64)
+                Hb = w @ J.T
+                T = 0.5 * np.einsum("ij,ij->i", w, Hb)
+                Hi = np.einsum("nji,nj->ni", dcm_from_quat(q), Hb)  # C^T H_body
+                hn = np.linalg.norm(Hi[0])
+                row.update(rot_energy_drift=float(np.max(np.abs(T - T[0])) / T[0]) if T[0] else 0.0,
+                           inertial_momentum_drift=float(np.max(np.linalg.norm(Hi - Hi[0], axis=1)) / hn) if hn else 0.0)
+        if rec is not None and rec.crosscheck is not None and len(rec.crosscheck):
+            row["crosscheck_max_dr"] = float(np.max(rec.crosscheck.dr_norm))
+        rows.append(row)
+    return rows
+
+
+def _print_summary(result: dict, rows: list[dict], scenario: Scenario) -> None:
+    log = result.get("logger") or {}
+    print(f"\nscenario {scenario.name}: {result['out']}")
+    print(f"  wall {result['wall_s']:.2f} s for {scenario.duration:.6g} s of sim time "
+          f"(real-time factor {scenario.duration / max(result['wall_s'], 1e-9):.1f}x); "
+          f"states logged {log.get('states', '?')}, missing {log.get('missing', '?')}, malformed {log.get('malformed', '?')}")
+    hdr = f"  {'body':<16} {'orbit model':<12} {'att. model':<17} {'states':>8} {'energy drift':>12} {'h drift':>9} {'|q|-1':>9} {'xcheck dr':>10}"
+    print(hdr)
+    shown = rows if len(rows) <= 25 else rows[:20]
+    for r in shown:
+        states = r.get("orbit_states", 0) + r.get("attitude_states", 0)
+        e = r.get("energy_drift", r.get("rot_energy_drift"))
+        h = r.get("momentum_drift", r.get("inertial_momentum_drift"))
+        qn = r.get("quat_norm_error")
+        xc = r.get("crosscheck_max_dr")
+        f = lambda x, spec: "-" if x is None else format(x, spec)  # noqa: E731
+        print(f"  {r['body']:<16} {r['orbit_model'] or '-':<12} {r['attitude_model'] or '-':<17} {states:>8d}"
+              f" {f(e, '12.2e')} {f(h, '9.1e')} {f(qn, '9.1e')} {f(xc, '10.2e')}")
+    if len(rows) > len(shown):
+        print(f"  ... {len(rows) - len(shown)} more bodies (all in the --json summary)")
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog="astrodyn run", description="Run a scenario headless into an MCAP file.")
+    ap.add_argument("config", help="scenario TOML file (see configs/)")
+    ap.add_argument("--out", help="MCAP file to write (default: the config's [output] path, else <scenario>.mcap)")
+    ap.add_argument("--cross-check", action="store_true", help="run REBOUND IAS15 alongside every orbit; report the difference")
+    ap.add_argument("--connect", action="append", metavar="ENDPOINT", help="also connect to this Zenoh endpoint (router)")
+    ap.add_argument("--timeout", type=float, default=None, help="fail if the run takes longer than this many wall seconds")
+    ap.add_argument("--quiet", action="store_true", help="no progress line")
+    ap.add_argument("--json", metavar="FILE", help="write the full result (per-body summary included) as JSON")
+    args = ap.parse_args(argv)
+    try:
+        scenario = load(args.config)
+        out = Path(args.out) if args.out else (scenario.output_path or Path(f"{scenario.name}.mcap"))
+        _check_output(out)
+    except ScenarioError as exc:
+        print(f"astrodyn run: {exc}", file=sys.stderr)
+        return 2
+    print(make_plan(scenario).text(), file=sys.stderr)
+    result = run_scenario(scenario, Path(args.config), out, cross_check=args.cross_check, connect=args.connect,
+                          progress=not args.quiet, timeout_s=args.timeout)
+    print("", file=sys.stderr)
+    rows = []
+    if out.exists():
+        try:
+            rows = drift_summary(out, scenario)
+        except Exception as exc:  # the file is still there; say why the summary is missing
+            print(f"astrodyn run: could not read back {out} for the summary: {exc}", file=sys.stderr)
+    result["bodies"] = rows
+    _print_summary(result, rows, scenario)
+    if args.json:
+        Path(args.json).write_text(json.dumps(result, indent=1, default=str))
+    if result.get("failure"):
+        print(f"astrodyn run: FAILED: {result['failure']}", file=sys.stderr)
+        return 1
+    return 0

@@ -1,0 +1,321 @@
+"""A scenario's dynamics, in process: the glue between a validated
+:class:`~astrodyn.scenario.Scenario` and the numeric core.
+
+Both propagator processes (``services/orbit.py``, ``services/attitude.py``), the
+in-process headless run and the tests use the same engines, so what the bus carries is
+exactly what :func:`simulate` returns for the same scenario.
+
+* :class:`OrbitEngine` -- every orbit of the scene at a block of output times.  Bodies
+  whose model is ``kepler`` (after :func:`astrodyn.scenario.plan` dropped perturbations
+  that are identically zero) are evaluated exactly from their initial state at each
+  time, vectorized over bodies (no accumulated error, cost independent of t).  Perturbed
+  bodies (``j2``, ``zonal``, ``third_body``) are integrated with
+  :func:`astrodyn.orbit.perturbations.propagate_perturbed`, block after block, each
+  block continuing from the last state of the previous one.
+* :class:`AttitudeEngine` -- every attitude.  ``torque_free`` bodies use the exact
+  solution :func:`astrodyn.attitude.torque_free` from the initial state (never
+  integrated); torqued bodies (gravity gradient, gyrostat, heavy top, user torque) use
+  :func:`astrodyn.attitude.integrators.propagate_attitude` (structure-preserving
+  splitting) block after block.  Gravity-gradient torque takes the body's position from
+  the same :class:`OrbitEngine` code the orbit process publishes from, evaluated at the
+  integrator's own kick times (between output instants too), so the attitude sees exactly
+  the published orbit.
+
+Third bodies (``model = "third_body"``) move on the two-body conic fitted to their
+geocentric (central-body-centric) state at the epoch, taken from astropy's built-in
+ephemeris (ERFA ``epv00`` / ``moon98``): a deliberate approximation, stated in the run
+summary, that needs no ephemeris download.
+
+Units: SI; times in s since the scenario epoch; quaternions scalar first with
+``v_body = C(q) v_inertial``; body rates in body axes (the axes the config used).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from astrodyn.orbit import propagate
+from astrodyn.orbit.perturbations import KeplerOrbit, ThirdBody, Zonal, propagate_perturbed
+from astrodyn.rotation import dcm_from_quat, quat_from_dcm
+from astrodyn.scenario import CENTRAL_BODIES, Plan, Scenario, plan as make_plan
+
+__all__ = ["OrbitEngine", "AttitudeEngine", "SimulationResult", "simulate", "third_body_state"]
+
+
+# --------------------------------------------------------------------------- orbits
+
+
+def third_body_state(name: str, central: str, epoch_unix_ns: int) -> tuple[np.ndarray, np.ndarray]:
+    """Position (m) and velocity (m/s) of body ``name`` relative to ``central`` at the
+    epoch (ns since the Unix epoch), ICRS-aligned axes, from astropy's built-in
+    ephemeris (no download)."""
+    from astropy.coordinates import get_body_barycentric_posvel, solar_system_ephemeris
+    from astropy.time import Time
+
+    t = Time(epoch_unix_ns // 1_000_000_000, epoch_unix_ns % 1_000_000_000 * 1e-9, format="unix")
+    with solar_system_ephemeris.set("builtin"):
+        p3, v3 = get_body_barycentric_posvel(name, t)
+        pc, vc = get_body_barycentric_posvel(central, t)
+    r = (p3 - pc).xyz.to_value("m")
+    v = (v3 - vc).xyz.to_value("m/s")
+    return np.asarray(r, dtype=np.float64), np.asarray(v, dtype=np.float64)
+
+
+@dataclass
+class _PerturbedGroup:
+    """Bodies sharing one perturbation set, integrated together from (t0, r0, v0)."""
+
+    index: np.ndarray
+    perturbations: tuple
+    t0: float
+    r0: np.ndarray
+    v0: np.ndarray
+    error_r: np.ndarray = field(default_factory=lambda: np.zeros(0))
+
+
+class OrbitEngine:
+    """Orbits of the bodies of ``scenario`` that have one (in scenario order).
+
+    ``names``, ``models`` (per body, as the plan decided), ``mu``, ``frame``.
+    :meth:`states` returns positions and velocities at a block of increasing times.
+    """
+
+    def __init__(self, scenario: Scenario, plan: Plan | None = None, rtol: float = 1e-12, atol: float = 1e-14):
+        plan = plan or make_plan(scenario)
+        models = {bp.name: bp.orbit_model for bp in plan.bodies}
+        bodies = [b for b in scenario.bodies if b.orbit is not None]
+        self.scenario = scenario
+        self.names = [b.name for b in bodies]
+        self.models = [models[b.name] for b in bodies]
+        self.mu = scenario.central_body.mu
+        self.frame = scenario.frame
+        self.rtol, self.atol = rtol, atol
+        self.r0 = np.array([b.orbit.r0 for b in bodies], dtype=np.float64).reshape(-1, 3)
+        self.v0 = np.array([b.orbit.v0 for b in bodies], dtype=np.float64).reshape(-1, 3)
+        self.kepler = np.array([m == "kepler" for m in self.models], dtype=bool)
+        self.groups: list[_PerturbedGroup] = []
+        self.notes: list[str] = []
+        groups: dict[tuple, list[int]] = {}
+        for k, b in enumerate(bodies):
+            if not self.kepler[k]:
+                groups.setdefault((self.models[k], b.orbit.degree, b.orbit.perturbers), []).append(k)
+        for (model, degree, perturbers), idx in groups.items():
+            perts = self._perturbations(model, degree, perturbers)
+            index = np.array(idx)
+            self.groups.append(_PerturbedGroup(index, perts, 0.0, self.r0[index].copy(), self.v0[index].copy()))
+
+    def _perturbations(self, model: str, degree: int, perturbers: tuple[str, ...]) -> tuple:
+        cb = self.scenario.central_body
+        if model == "j2":
+            return (Zonal(cb.mu, cb.radius, cb.j[:1]),)
+        if model == "zonal":
+            return (Zonal(cb.mu, cb.radius, cb.j[: max(1, degree - 1)]),)
+        if model == "third_body":
+            out = []
+            for name in perturbers:
+                mu3 = CENTRAL_BODIES[name][0]
+                r3, v3 = third_body_state(name, cb.name, self.scenario.epoch_unix_ns)
+                out.append(ThirdBody(mu3, KeplerOrbit(r3, v3, cb.mu + mu3)))
+                self.notes.append(f"third body {name}: two-body conic fitted to astropy's built-in ephemeris at the epoch")
+            return tuple(out)
+        raise ValueError(f"orbit model: expected kepler | j2 | zonal | third_body, got {model!r}")
+
+    def states(self, times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(r, v)`` of shape ``(len(times), n_bodies, 3)`` at increasing ``times`` (s).
+
+        Perturbed groups continue from the last block's final state, so blocks must come
+        in increasing time order (a time before the last block's end raises ValueError).
+        """
+        times = np.asarray(times, dtype=np.float64).reshape(-1)
+        T, N = times.shape[0], len(self.names)
+        r = np.empty((T, N, 3))
+        v = np.empty((T, N, 3))
+        if T == 0 or N == 0:
+            return r, v
+        if self.kepler.any():
+            k = self.kepler
+            rk, vk = propagate(self.r0[k][None, :, :], self.v0[k][None, :, :], times[:, None], self.mu)
+            r[:, k], v[:, k] = rk, vk
+        for g in self.groups:
+            if times[0] < g.t0:
+                raise ValueError(f"times: perturbed orbits continue forward only; got {times[0]} s before {g.t0} s")
+            out = propagate_perturbed(g.r0, g.v0, times - g.t0, self.mu, g.perturbations,
+                                      method="cowell", rtol=self.rtol, atol=self.atol, error_estimate=False)
+            r[:, g.index] = np.moveaxis(out.r, -2, 0)
+            v[:, g.index] = np.moveaxis(out.v, -2, 0)
+            g.t0, g.r0, g.v0 = float(times[-1]), r[-1, g.index].copy(), v[-1, g.index].copy()
+        return r, v
+
+    def position_function(self, body: str):
+        """``r(t)`` (m) of one body at an array of times, from the same code as :meth:`states`.
+
+        Kepler bodies: exact at any t.  Perturbed bodies: integrated from the epoch with a
+        cache of the last state, so increasing calls cost only the new span.
+        """
+        k = self.names.index(body)
+        r0, v0, mu = self.r0[k], self.v0[k], self.mu
+        if self.kepler[k]:
+            return lambda t: propagate(r0, v0, np.asarray(t, dtype=np.float64)[..., None], mu)[0]
+        group = next(g for g in self.groups if k in g.index)
+        cache = {"t": 0.0, "r": r0.copy(), "v": v0.copy()}
+
+        def position(t):
+            t = np.asarray(t, dtype=np.float64)
+            flat = t.reshape(-1)
+            start = cache["t"] if flat.size and flat.min() >= cache["t"] else 0.0
+            rs, vs = (cache["r"], cache["v"]) if start else (r0, v0)
+            out = propagate_perturbed(rs, vs, flat - start, mu, group.perturbations, method="cowell",
+                                      rtol=self.rtol, atol=self.atol, error_estimate=False)
+            if flat.size:
+                last = int(np.argmax(flat))
+                cache.update(t=float(flat[last]), r=out.r[last].copy(), v=out.v[last].copy())
+            return out.r.reshape(t.shape + (3,))
+
+        return position
+
+
+# --------------------------------------------------------------------------- attitudes
+
+
+@dataclass
+class _AttitudeBody:
+    name: str
+    model: str
+    inertia: np.ndarray  # principal moments (3,)
+    axes: np.ndarray  # body components of the principal axes (columns); identity if diagonal
+    w0: np.ndarray  # principal-frame rates at t0
+    q0: np.ndarray  # principal-frame Euler parameters at t0
+    t0: float = 0.0
+    torque: object = None
+    rotor_momentum: np.ndarray | None = None
+    error: float = 0.0
+    steps: int = 0
+
+
+class AttitudeEngine:
+    """Attitudes of the bodies of ``scenario`` that are propagated (model != none).
+
+    Internally every body is propagated in its principal frame (the exact solution and
+    the splitting both want principal moments); :meth:`states` returns ``q`` and ``w`` in
+    the body axes of the config.
+    """
+
+    def __init__(self, scenario: Scenario, plan: Plan | None = None, orbits: OrbitEngine | None = None,
+                 step: float | None = None):
+        plan = plan or make_plan(scenario)
+        models = {bp.name: bp.attitude_model for bp in plan.bodies}
+        self.scenario = scenario
+        self.step = step
+        self.bodies: list[_AttitudeBody] = []
+        for b in scenario.bodies:
+            model = models.get(b.name)
+            if b.attitude is None or model is None:
+                continue
+            a = b.attitude
+            axes = np.asarray(a.principal_axes, dtype=np.float64)
+            c_pb = axes.T  # body -> principal components
+            q0 = quat_from_dcm(c_pb @ dcm_from_quat(a.q0))
+            body = _AttitudeBody(b.name, model, np.asarray(a.principal_moments, dtype=np.float64), axes,
+                                 c_pb @ a.w0, q0)
+            if model == "gravity_gradient":
+                from astrodyn.attitude.torques import GravityGradientTorque
+
+                if b.orbit is None:
+                    raise ValueError(f"bodies.{b.name}.attitude.model: gravity_gradient needs an orbit for the body")
+                orbits = orbits or OrbitEngine(scenario, plan)
+                body.torque = GravityGradientTorque(scenario.central_body.mu, orbits.position_function(b.name), body.inertia)
+            elif model == "heavy_top":
+                from astrodyn.attitude.torques import UniformGravityTorque
+
+                body.torque = UniformGravityTorque(a.mass, c_pb @ np.array([0.0, 0.0, a.cm]), (0.0, 0.0, -a.g))
+            elif model == "user":
+                from astrodyn.attitude.torques import ConstantTorque
+
+                body.torque = ConstantTorque(c_pb @ a.torque, frame="body")
+            elif model == "gyrostat":
+                h = sum((r.h * np.asarray(r.axis, dtype=np.float64) for r in a.rotors), np.zeros(3))
+                body.rotor_momentum = c_pb @ h
+            self.bodies.append(body)
+        self.names = [b.name for b in self.bodies]
+        self.models = [b.model for b in self.bodies]
+
+    def states(self, times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(q, w)`` of shapes ``(len(times), n_bodies, 4)`` and ``(..., 3)`` at increasing times."""
+        from astrodyn.attitude.torque_free import torque_free
+        from astrodyn.attitude.integrators import propagate_attitude
+
+        times = np.asarray(times, dtype=np.float64).reshape(-1)
+        T, N = times.shape[0], len(self.bodies)
+        q = np.empty((T, N, 4))
+        w = np.empty((T, N, 3))
+        for k, b in enumerate(self.bodies):
+            if T == 0:
+                break
+            if b.model == "torque_free":
+                wp, qp = torque_free(b.inertia, b.w0, b.q0, times)
+            else:
+                if times[0] < b.t0:
+                    raise ValueError(f"times: torqued attitudes continue forward only; got {times[0]} s before {b.t0} s")
+                torque = None
+                if b.torque is not None:
+                    t_start, model = b.t0, b.torque
+                    torque = _Shifted(model, t_start)
+                wp, qp, info = propagate_attitude(b.inertia, b.w0, b.q0, times - b.t0, torque=torque,
+                                                  rotor_momentum=b.rotor_momentum, method="split4", step=self.step,
+                                                  error_estimate=False)
+                b.t0, b.w0, b.q0 = float(times[-1]), wp[-1].copy(), qp[-1].copy()
+                b.steps += int(info.get("n_steps", 0))
+            # principal -> body axes: C_BI = C_BP C_PI with C_BP = axes
+            if np.array_equal(b.axes, np.eye(3)):
+                q[:, k], w[:, k] = qp, wp
+            else:
+                q[:, k] = quat_from_dcm(b.axes @ dcm_from_quat(qp))
+                w[:, k] = wp @ b.axes.T
+        return q, w
+
+
+class _Shifted:
+    """A torque model seen from a block that starts at ``t0``: ``model(t + t0, q, w)``."""
+
+    def __init__(self, model, t0: float):
+        self.model, self.t0 = model, t0
+
+    def __call__(self, t, q, w=None):
+        return self.model(np.asarray(t, dtype=np.float64) + self.t0, q, w)
+
+
+# --------------------------------------------------------------------------- whole run
+
+
+@dataclass
+class SimulationResult:
+    """Arrays of a whole run: ``t (T,)``; ``orbit_names``, ``r, v (T, N, 3)``;
+    ``attitude_names``, ``q (T, M, 4)``, ``w (T, M, 3)``; ``plan``."""
+
+    t: np.ndarray
+    orbit_names: list[str]
+    r: np.ndarray
+    v: np.ndarray
+    attitude_names: list[str]
+    q: np.ndarray
+    w: np.ndarray
+    plan: Plan
+
+
+def simulate(scenario: Scenario, block: int = 1000) -> SimulationResult:
+    """Run ``scenario`` in this process (no bus, no file) and return every output state."""
+    p = make_plan(scenario)
+    orbits = OrbitEngine(scenario, p)
+    attitudes = AttitudeEngine(scenario, p)
+    t = scenario.output_times()
+    rs, vs, qs, ws = [], [], [], []
+    for s in range(0, t.shape[0], block):
+        tb = t[s : s + block]
+        r, v = orbits.states(tb)
+        q, w = attitudes.states(tb)
+        rs.append(r), vs.append(v), qs.append(q), ws.append(w)
+    cat = lambda xs, n, d: np.concatenate(xs) if xs else np.empty((0, n, d))  # noqa: E731
+    return SimulationResult(t, orbits.names, cat(rs, len(orbits.names), 3), cat(vs, len(orbits.names), 3),
+                            attitudes.names, cat(qs, len(attitudes.names), 4), cat(ws, len(attitudes.names), 3), p)
