@@ -620,17 +620,24 @@ def _epoch(ctx: _Ctx, value: Any, path: str) -> tuple[str, str, int]:
             raise ctx.error(path, expected, value)
     else:
         raise ctx.error(path, expected, value)
+    year = int(text[:4])
+    if not 1970 <= year <= 2261:
+        raise ctx.error(path, "an epoch after 1970-01-01 and before 2262 (ns since 1970 must fit an int64)", value)
     try:
         t = Time(text, format="isot" if "T" in text else "iso", scale=scale)
-        utc = t.utc
-        jd1, jd2 = float(utc.jd1), float(utc.jd2)
+        ymdhms = t.utc.ymdhms
+        y, mo, d, h, mi = (int(ymdhms[k]) for k in ("year", "month", "day", "hour", "minute"))
+        sec = float(ymdhms["second"])
     except Exception as exc:  # astropy: bad dates, UT1 outside the bundled IERS table, ...
         raise ctx.error(path, f"{expected} that astropy can convert offline", f"{_show(value)} ({type(exc).__name__}: {str(exc)[:120]})", raw=True) from None
-    if not (math.isfinite(jd1) and math.isfinite(jd2)):  # pragma: no cover - regex makes it finite
+    if not math.isfinite(sec):  # pragma: no cover - the regex makes it finite
         raise ctx.error(path, expected, value)
-    # jd1 - 2440587.5 is exact (both are multiples of 0.5 within 2**52); jd2 is the
-    # fraction of a day, |jd2| <= 0.5, so jd2 * 86400e9 carries < 1e-5 ns of rounding.
-    unix_ns = int(round((jd1 - 2440587.5) * 86400)) * 10**9 + int(round(jd2 * 86400e9))
+    # POSIX time from the UTC calendar fields (ERFA's quasi-JD stretches leap-second days,
+    # so jd1/jd2 or astropy's "unix" would be off by up to 1 s on such a day); a leap
+    # second 23:59:60 maps onto the next day's 00:00:00, as POSIX clocks do. Resolution:
+    # astropy's two-double time, a few ns.
+    days = _dt.date(y, mo, d).toordinal() - _dt.date(1970, 1, 1).toordinal()
+    unix_ns = (days * 86400 + h * 3600 + mi * 60) * 10**9 + int(round(sec * 1e9))
     if not 0 <= unix_ns < 2**63:
         raise ctx.error(path, "an epoch after 1970-01-01 and before 2262 (ns since 1970 must fit an int64)", value)
     return given, scale, unix_ns
@@ -1190,7 +1197,8 @@ def plan(scenario: Scenario) -> Plan:
 
 
 def _periapsis(orbit: OrbitSpec, mu: float) -> float | None:
-    """Periapsis radius of the initial osculating conic (m), from r0, v0 (Vallado eq. 2-?)."""
+    """Periapsis radius p / (1 + e) of the initial osculating conic (m), from r0, v0
+    (h = r x v, p = h^2 / mu, e from the eccentricity vector; Vallado sec. 2.5)."""
     r, v = orbit.r0, orbit.v0
     h = np.cross(r, v)
     h2 = float(h @ h)
