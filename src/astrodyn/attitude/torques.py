@@ -45,8 +45,10 @@ def gravity_gradient_torque(r_body, inertia, mu):
     gravitational parameter (m^3/s^2).  First-order term of the expansion of the
     gravity field over the body (Hughes, ch. 8; Baruh ch. 8).
     """
-    rb = np.asarray(r_body, dtype=np.float64)
-    J = inertia_tensor(inertia)
+    return _gravity_gradient(np.asarray(r_body, dtype=np.float64), inertia_tensor(inertia), float(mu))
+
+
+def _gravity_gradient(rb, J, mu):
     r2 = np.sum(rb * rb, axis=-1, keepdims=True)
     return 3.0 * mu / (r2 * r2 * np.sqrt(r2)) * np.cross(rb, rb @ J.T)
 
@@ -78,7 +80,7 @@ class GravityGradientTorque:
 
     def __call__(self, t, q, w=None):
         r = np.asarray(self.position(np.asarray(t, dtype=np.float64)), dtype=np.float64)
-        return gravity_gradient_torque(quat_rotate(q, r), self.inertia, self.mu)
+        return _gravity_gradient(quat_rotate(q, r), self.inertia, self.mu)
 
 
 class UniformGravityTorque:
