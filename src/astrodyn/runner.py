@@ -45,15 +45,24 @@ from astrodyn.scenario import Scenario, ScenarioError, load, plan as make_plan
 __all__ = ["main", "run_scenario", "services_dir", "drift_summary"]
 
 
-def services_dir() -> Path:
-    """The ``services/`` folder beside ``src/`` (the repository layout ``make`` installs)."""
+def repo_dir(name: str, marker: str) -> Path:
+    """The folder ``name`` (holding ``marker``) of the repository these sources live in.
+
+    ``services/`` and ``configs/`` sit beside ``src/``; ``make install`` installs the
+    package in editable mode, so they are found from the package's own path.
+    """
     here = Path(__file__).resolve()
     for parent in here.parents:
-        cand = parent / "services"
-        if (cand / "logger.py").is_file():
+        cand = parent / name
+        if (cand / marker).is_file():
             return cand
-    raise FileNotFoundError("services/: not found beside the astrodyn sources; install with `make install` "
+    raise FileNotFoundError(f"{name}/: not found beside the astrodyn sources; install with `make install` "
                             "(an editable install of the repository)")
+
+
+def services_dir() -> Path:
+    """The ``services/`` folder (process entry points)."""
+    return repo_dir("services", "logger.py")
 
 
 def _check_output(path: Path) -> None:
