@@ -1,0 +1,206 @@
+"""Kepler's equation (astrodyn.orbit.kepler) against a 50-digit mpmath root.
+
+Reference: bisection followed by Newton polishing, in mpmath at 50 digits, on
+the exact rational value of each float64 input (shares no code with the solver).
+
+Tolerances come from conditioning.  A one-ulp change of the inputs moves the root by
+
+    elliptic:    dE = (ulp(M) + ulp(e) |sin E|) / (1 - e cos E)
+    hyperbolic:  dF = (ulp(M) + ulp(e) |sinh F|) / (e cosh F - 1)
+
+(implicit differentiation of M = E - e sin E and M = e sinh F - F), and the
+answer itself cannot be closer than half an ulp of E.  Each assertion allows
+100 x (dE + ulp(E)), computed from the mpmath root.
+"""
+
+import math
+
+import mpmath as mp
+import numpy as np
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from astrodyn.orbit import solve_kepler, solve_kepler_hyperbolic
+
+mp.mp.dps = 50
+
+
+def ulp(x):
+    return float(np.spacing(abs(float(x))))
+
+
+def ref_elliptic(M, e):
+    """E with E - e sin E = M, 50 digits (bisection on the reduced angle, then Newton)."""
+    M, e = mp.mpf(float(M)), mp.mpf(float(e))
+    k = mp.floor(M / (2 * mp.pi) + mp.mpf(1) / 2)
+    Mr = M - 2 * mp.pi * k
+    lo, hi = Mr - 1, Mr + 1  # |E - M| <= e < 1
+    for _ in range(200):
+        mid = (lo + hi) / 2
+        if mid - e * mp.sin(mid) - Mr > 0:
+            hi = mid
+        else:
+            lo = mid
+    E = (lo + hi) / 2
+    for _ in range(40):  # polishes tiny roots to full relative precision
+        E -= (E - e * mp.sin(E) - Mr) / (1 - e * mp.cos(E))
+    return E + 2 * mp.pi * k
+
+
+def ref_hyperbolic(M, e):
+    """F with e sinh F - F = M, 50 digits."""
+    M, e = mp.mpf(float(M)), mp.mpf(float(e))
+    sgn = 1 if M >= 0 else -1
+    M = abs(M)
+    lo, hi = mp.mpf(0), mp.asinh(M / (e - 1)) + 1 if e > 1 else mp.mpf(800)
+    for _ in range(200):
+        mid = (lo + hi) / 2
+        if e * mp.sinh(mid) - mid - M > 0:
+            hi = mid
+        else:
+            lo = mid
+    F = (lo + hi) / 2
+    for _ in range(40):
+        F -= (e * mp.sinh(F) - F - M) / (e * mp.cosh(F) - 1)
+    return sgn * F
+
+
+def tol_elliptic(M, e, E):
+    dE = (ulp(M) + ulp(e) * abs(float(mp.sin(E)))) / float(1 - mp.mpf(e) * mp.cos(E))
+    return 100 * (dE + ulp(E))  # 100 x conditioning (module doc)
+
+
+def tol_hyperbolic(M, e, F):
+    dF = (ulp(M) + ulp(e) * abs(float(mp.sinh(F)))) / float(mp.mpf(e) * mp.cosh(F) - 1)
+    return 100 * (dF + ulp(F))  # 100 x conditioning (module doc)
+
+
+E_VALUES = [0.0, 1e-10, 0.1, 0.5, 0.9, 0.99, 0.999999, 1 - 1e-12, 1 - 1e-15]
+M_VALUES = [1e-300, 1e-100, 1e-20, 1e-8, 1e-3, 0.3, 1.0, 3.14, 3.141592653589793, 4.0, -2.0, 10.0, 1e3, 1e5, 1e7]
+
+
+@pytest.mark.parametrize("e", E_VALUES)
+def test_elliptic_grid_against_mpmath(e):
+    M = np.array(M_VALUES)
+    E = solve_kepler(M, e)  # one vectorized call per e
+    for Mi, Ei in zip(M, E):
+        ref = ref_elliptic(Mi, e)
+        assert abs(Ei - float(ref)) <= tol_elliptic(Mi, e, ref), (Mi, e, Ei, float(ref))
+
+
+@pytest.mark.parametrize("M", [1e9, 1e12, 2.0**50, 1e15])
+def test_elliptic_huge_mean_anomaly_is_reduced_exactly(M):
+    # plain fmod(M, float(2 pi)) is off by k * 2.4e-16 rad: 0.04 rad at M = 1e15,
+    # far beyond these tolerances (100 x (ulp(M) + ulp(E)) / (1 - e cos E)).
+    for e in (0.0, 0.3, 0.97):
+        ref = ref_elliptic(M, e)
+        assert abs(solve_kepler(M, e) - float(ref)) <= tol_elliptic(M, e, ref)
+
+
+def test_elliptic_reduced_remainder_keeps_tiny_angles():
+    # M = 2 pi k + 1e-12: a solver that reduces via M + pi (or fmod) loses the 1e-12.
+    # Compare E - 2 pi k (in mpmath) with the reference; conditioning of E is ulp(M)/(1-e).
+    M = float(mp.mpf(2) * mp.pi * 1000 + mp.mpf("1e-12"))
+    e = 0.999
+    ref = ref_elliptic(M, e)
+    assert abs(solve_kepler(M, e) - float(ref)) <= tol_elliptic(M, e, ref)
+
+
+@pytest.mark.parametrize("e", [0.0, 0.2, 0.9, 0.999999, 1 - 1e-15])
+def test_elliptic_inversion(e):
+    # E -> M = E - e sin E (50 digits, rounded to float) -> solve: returns E within
+    # the conditioning of the rounded M (tol_elliptic evaluated at the exact root).
+    for E_true in [1e-200, 1e-9, 1e-3, 0.5, 2.0, 3.1, -1.0, 100.0]:
+        M = float(mp.mpf(E_true) - mp.mpf(e) * mp.sin(mp.mpf(E_true)))
+        ref = ref_elliptic(M, e)
+        assert abs(solve_kepler(M, e) - float(ref)) <= tol_elliptic(M, e, ref)
+        # and the reference root is the true E up to the rounding of M
+        assert abs(float(ref) - E_true) <= tol_elliptic(M, e, ref)
+
+
+def test_elliptic_odd_symmetry_and_zero():
+    M = np.array([1e-30, 0.5, 2.9, 1e4])
+    for e in (0.0, 0.5, 0.999999):
+        assert np.array_equal(solve_kepler(-M, e), -solve_kepler(M, e))
+        assert solve_kepler(0.0, e) == 0.0
+
+
+@given(
+    st.floats(min_value=-1e6, max_value=1e6, allow_nan=False),
+    st.floats(min_value=0.0, max_value=1 - 1e-15),
+)
+def test_elliptic_residual_property(M, e):
+    E = solve_kepler(M, e)
+    ref = ref_elliptic(M, e)
+    assert abs(E - float(ref)) <= tol_elliptic(M, e, ref)
+
+
+HYP_E = [1 + 1e-15, 1 + 1e-12, 1 + 1e-8, 1.0001, 1.5, 2.0, 10.0, 100.0, 1000.0]
+HYP_M = [1e-300, 1e-100, 1e-20, 1e-8, 1e-3, 0.3, 1.0, 3.14, -2.0, 10.0, 1e3, 1e5, 1e7, 1e12, 1e50]
+
+
+@pytest.mark.parametrize("e", HYP_E)
+def test_hyperbolic_grid_against_mpmath(e):
+    M = np.array(HYP_M)
+    F = solve_kepler_hyperbolic(M, e)
+    for Mi, Fi in zip(M, F):
+        ref = ref_hyperbolic(Mi, e)
+        assert abs(Fi - float(ref)) <= tol_hyperbolic(Mi, e, ref), (Mi, e, Fi, float(ref))
+
+
+@given(
+    st.floats(min_value=-1e8, max_value=1e8, allow_nan=False),
+    st.floats(min_value=1 + 1e-14, max_value=1e3),
+)
+def test_hyperbolic_residual_property(M, e):
+    F = solve_kepler_hyperbolic(M, e)
+    ref = ref_hyperbolic(M, e)
+    assert abs(F - float(ref)) <= tol_hyperbolic(M, e, ref)
+
+
+def test_shapes_and_scalars():
+    assert isinstance(solve_kepler(1.0, 0.5), float)
+    M = np.linspace(-4, 4, 12).reshape(4, 3)
+    assert solve_kepler(M, 0.3).shape == (4, 3)
+    assert solve_kepler(M, np.array([0.1, 0.2, 0.3])).shape == (4, 3)
+    assert solve_kepler_hyperbolic(M, 2.0).shape == (4, 3)
+    # the parallel kernel (large arrays) gives the same bits as the serial one
+    big = np.linspace(-50, 50, 10001)
+    small = np.concatenate([solve_kepler(big[i : i + 1000], 0.7) for i in range(0, big.size, 1000)])
+    assert np.array_equal(solve_kepler(big, 0.7), small)
+
+
+def test_bad_and_nan_input():
+    with pytest.raises(ValueError, match="e must satisfy 0 <= e < 1"):
+        solve_kepler(1.0, 1.0)
+    with pytest.raises(ValueError, match="e must satisfy 0 <= e < 1"):
+        solve_kepler([1.0, 2.0], [-0.1, 0.5])
+    with pytest.raises(ValueError, match="e must satisfy e > 1"):
+        solve_kepler_hyperbolic(1.0, 1.0)
+    out = solve_kepler([math.nan, math.inf, 1.0, 1.0], [0.5, 0.5, math.nan, 0.5])
+    assert np.isnan(out[:3]).all() and np.isfinite(out[3])
+    out = solve_kepler_hyperbolic([math.nan, -math.inf, 1.0], [2.0, 2.0, math.nan])
+    assert np.isnan(out).all()
+
+
+@pytest.mark.slow
+def test_elliptic_dense_sweep():
+    rng = np.random.default_rng(7)
+    e = np.concatenate([rng.uniform(0, 1, 300), 1 - 10.0 ** rng.uniform(-15, -1, 300)])
+    M = np.concatenate([10.0 ** rng.uniform(-300, 7, 300), rng.uniform(-np.pi, np.pi, 300)])
+    E = solve_kepler(M, e)
+    for Mi, ei, Ei in zip(M, e, E):
+        ref = ref_elliptic(Mi, ei)
+        assert abs(Ei - float(ref)) <= tol_elliptic(Mi, ei, ref)
+
+
+@pytest.mark.slow
+def test_hyperbolic_dense_sweep():
+    rng = np.random.default_rng(8)
+    e = 1 + 10.0 ** rng.uniform(-15, 3, 600)
+    M = 10.0 ** rng.uniform(-300, 12, 600) * rng.choice([-1, 1], 600)
+    F = solve_kepler_hyperbolic(M, e)
+    for Mi, ei, Fi in zip(M, e, F):
+        ref = ref_hyperbolic(Mi, ei)
+        assert abs(Fi - float(ref)) <= tol_hyperbolic(Mi, ei, ref)
