@@ -98,6 +98,7 @@ class PropagatorOptions:
     wait_logger_s: float = 30.0
     start_step: int = 0
     max_steps: int | None = None  # stop after this many instants (tests)
+    endless: bool = False  # serve: keep going past the scenario's duration until stopped
 
 
 class _Stop(Exception):
@@ -126,10 +127,10 @@ def run_propagator(scenario: Scenario, session, opts: PropagatorOptions, log=pri
     for i, m in enumerate(models):
         groups.setdefault(m, []).append(i)  # type: ignore[arg-type]
     groups = {m: np.asarray(ix) for m, ix in groups.items()}
-    times = scenario.output_times()
-    n_total = times.shape[0]
+    n_total = scenario.n_steps if not opts.endless else 2**53
     start = int(opts.start_step)
     stop_at = n_total if opts.max_steps is None else min(n_total, start + int(opts.max_steps))
+    rate = scenario.rate
     block = opts.block or _auto_block(len(names))
 
     cross = None
@@ -146,7 +147,7 @@ def run_propagator(scenario: Scenario, session, opts: PropagatorOptions, log=pri
         signal.signal(sig, on_signal)
 
     published = 0
-    t_reached = times[start] if start < n_total else 0.0
+    t_reached = start / rate
     wall0 = time.monotonic()
     with bus.declare_alive(session, scenario.name, opts.kind), \
             bus.Heartbeat(session, scenario.name, opts.kind) as heartbeat, \
@@ -159,7 +160,7 @@ def run_propagator(scenario: Scenario, session, opts: PropagatorOptions, log=pri
         k = start
         try:
             while k < stop_at:
-                tb = times[k : min(stop_at, k + block)]
+                tb = np.arange(k, min(stop_at, k + block), dtype=np.float64) / rate
                 a, b = engine.states(tb)
                 xc = cross.block(tb, a, b) if cross is not None else None
                 for j in range(tb.shape[0]):
@@ -295,6 +296,7 @@ def service_main(kind: str, argv: list[str] | None = None) -> int:
     ap.add_argument("--cross-check", action="store_true", help="orbit: run REBOUND IAS15 alongside for every body")
     ap.add_argument("--start-step", type=int, default=0, help="first output step to publish (resume)")
     ap.add_argument("--max-steps", type=int, default=None, help="publish at most this many steps")
+    ap.add_argument("--endless", action="store_true", help="keep going past the scenario's duration until stopped (serve)")
     ap.add_argument("--block", type=int, default=0, help="output steps per engine call (default automatic)")
     ap.add_argument("--wait-logger", type=float, default=30.0, help="seconds to wait for the logger's liveliness token")
     bus.add_bus_arguments(ap)
@@ -309,7 +311,7 @@ def service_main(kind: str, argv: list[str] | None = None) -> int:
         return 2
     opts = PropagatorOptions(kind=kind, real_time_factor=args.real_time_factor, block=args.block,
                              cross_check=args.cross_check, wait_logger_s=args.wait_logger,
-                             start_step=args.start_step, max_steps=args.max_steps)
+                             start_step=args.start_step, max_steps=args.max_steps, endless=args.endless)
     try:
         with bus.session_from_args(args) as session:
             summary = run_propagator(scenario, session, opts)
