@@ -359,9 +359,20 @@ def zonal_potential(r, mu, R, J):
 
 
 def _kepler_propagate():
-    from astrodyn.orbit import propagate  # the other helper's exact two-body propagator
+    from astrodyn.orbit.universal import propagate  # exact two-body propagation on every conic
 
     return propagate
+
+
+def _propagate_loop(r0, v0, dt, mu, r, v):
+    """Row-wise exact Kepler propagation into preallocated (N, 3) arrays
+    (the compiled kernel behind astrodyn.orbit.propagate; imported on first
+    use because astrodyn.orbit imports this module)."""
+    global _propagate_loop
+    from astrodyn.orbit.universal import _propagate_loop as kernel
+
+    _propagate_loop = kernel
+    kernel(r0, v0, dt, mu, r, v)
 
 
 @dataclass(frozen=True)
@@ -526,14 +537,25 @@ class _System:
         self.nfev = 0
         self.ref = None  # Encke reference: (r_ref, v_ref, t_ref)
         n = self.n
+        self._mu_rows = np.full(n, float(mu))
+        self._dt_rows = np.empty(n)
         self._x = np.empty((n, 3))  # r (Cowell) or delta (Encke)
         self._xd = np.empty((n, 3))  # v (Cowell) or delta-dot (Encke)
         self._a = np.empty((n, 3))
 
+    def set_reference(self, r_ref, v_ref, t_ref):
+        self.ref = (np.ascontiguousarray(r_ref, dtype=np.float64), np.ascontiguousarray(v_ref, dtype=np.float64), t_ref)
+
     def _reference(self, t):
+        """Kepler reference (rho, rho_dot) at t.  Calls the universal-variable
+        kernel of astrodyn.orbit.universal directly: the public ``propagate``
+        validates and broadcasts on every call (~75 us), which would dominate
+        Encke's right-hand side."""
         r_ref, v_ref, t_ref = self.ref
-        rho, rho_dot = _kepler_propagate()(r_ref, v_ref, t - t_ref, self.mu)
-        return np.ascontiguousarray(rho, dtype=np.float64), np.ascontiguousarray(rho_dot, dtype=np.float64)
+        rho, rho_dot = np.empty((self.n, 3)), np.empty((self.n, 3))
+        self._dt_rows.fill(t - t_ref)
+        _propagate_loop(r_ref, v_ref, self._dt_rows, self._mu_rows, rho, rho_dot)
+        return rho, rho_dot
 
     def state(self, t, y):
         """Physical (r, v), each (N, 3), from the scaled vector y at time t."""
@@ -583,7 +605,7 @@ def _integrate_direction(system, r0, v0, taus, direction, rtol, atol, rectify_ra
 
     def start(t0, r_start, v_start):
         if system.method == "encke":
-            system.ref = (r_start.copy(), v_start.copy(), t0)
+            system.set_reference(r_start, v_start, t0)
             y0 = np.zeros(6 * n)
         else:
             y0 = np.concatenate([r_start / system.L[:, None], v_start / system.V[:, None]], axis=1).reshape(-1)
