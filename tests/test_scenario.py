@@ -28,8 +28,7 @@ from astrodyn.scenario import ScenarioError
 CONFIGS = sorted((Path(__file__).resolve().parent.parent / "configs").glob("*.toml"))
 REQUIRED = {"demo", "leo-gravity-gradient", "molniya-j2", "hyperbolic-flyby", "near-parabolic-comet",
             "dzhanibekov", "spinning-top", "dual-spin", "constellation-1000"}
-MU_E = 3.986004418e14
-R_E = 6378137.0
+MU_E, R_E = S.CENTRAL_BODIES["earth"][:2]
 
 
 # --------------------------------------------------------------------------- a tiny TOML writer

@@ -83,8 +83,8 @@ cheapest exact model (analytic Kepler unless a perturbation is listed and non-ze
 exact torque-free unless a torque model is listed and the torque is not identically
 zero) and which processes to start. ``astrodyn validate CONFIG`` prints it.
 
-The built-in central-body table lives here until ``astrodyn.orbit.perturbations``
-exposes one (then this module should import it).
+The built-in central-body table takes the Earth, Moon and Sun from
+``astrodyn.orbit.perturbations`` and adds Mars, Venus and Jupiter.
 """
 
 from __future__ import annotations
@@ -106,6 +106,9 @@ from typing import Any, Callable
 import numpy as np
 
 from astrodyn.messages import ATTITUDE_MODELS, NAME_PATTERN, ORBIT_MODELS
+from astrodyn.orbit.perturbations import EARTH_EGM2008 as _EARTH
+from astrodyn.orbit.perturbations import MOON as _MOON
+from astrodyn.orbit.perturbations import SUN as _SUN
 
 __all__ = [
     "ScenarioError",
@@ -164,22 +167,25 @@ class CentralBody:
     frame: str
 
 
-# mu in m^3/s^2, radius in m, (J2..J6).
-# Earth: mu EGM2008/WGS 84 (3.986004418e14), R = 6378.137 km, J2..J6 of JGM-3 as listed in
-#   Vallado, Fundamentals of Astrodynamics and Applications, 4th ed., Table D-3 / eq. 8-16.
-# Moon: GM from DE440 (Park et al. 2021, AJ 161, 105), R = 1738.0 km, J2 of LP165P
-#   (Konopliv et al. 2001), higher zonals omitted.
-# Sun: GM DE440, R = 695 700 km (IAU 2015 B3 nominal), J2 = 2.2e-7 (helioseismology).
-# Mars: GM DE440 (system), R = 3396.19 km, J2 = 1.96045e-3, J3 = 3.6e-5 (Vallado Table D-4).
+def _j5(J: tuple[float, ...]) -> tuple[float, float, float, float, float]:
+    J = tuple(float(x) for x in J[:5])
+    return J + (0.0,) * (5 - len(J))  # type: ignore[return-value]
+
+
+# name -> (mu m^3/s^2, equatorial radius m, (J2..J6) unnormalized).
+# Earth, Moon, Sun: the constants of astrodyn.orbit.perturbations (one source; their
+#   citations are there): Earth is the self-consistent EGM2008 tide-free set (GM, a, J2..J6).
+# Mars: GM JPL DE440 (Park et al. 2021, AJ 161, 105; system), R = 3396.19 km (IAU 2015),
+#   J2 = 1.96045e-3 (Vallado, Fundamentals of Astrodynamics, 4th ed., Table D-4).
 # Venus: GM DE440, R = 6051.8 km, J2 = 4.458e-6 (Vallado Table D-4).
-# Jupiter: GM DE440 (system), R = 71 492 km, J2 = 1.4736e-2, J4 = -5.87e-4 (Juno, Iess 2018).
+# Jupiter: GM DE440 (system), R = 71 492 km, J2 = 1.4736e-2 (Vallado Table D-4).
 CENTRAL_BODIES: dict[str, tuple[float, float, tuple[float, float, float, float, float]]] = {
-    "earth": (3.986004418e14, 6378137.0, (1.08262668355e-3, -2.53265648533e-6, -1.61962159137e-6, -2.27296082869e-7, 5.40681239107e-7)),
-    "moon": (4.9028000661e12, 1738000.0, (2.0330530e-4, 0.0, 0.0, 0.0, 0.0)),
-    "sun": (1.32712440041279e20, 695700000.0, (2.2e-7, 0.0, 0.0, 0.0, 0.0)),
-    "mars": (4.282837362e13, 3396190.0, (1.96045e-3, 3.6e-5, 0.0, 0.0, 0.0)),
+    "earth": (_EARTH.mu, _EARTH.radius, _j5(_EARTH.J)),
+    "moon": (_MOON.mu, _MOON.radius, _j5(_MOON.J)),
+    "sun": (_SUN.mu, _SUN.radius, _j5(_SUN.J)),
+    "mars": (4.282837362e13, 3396190.0, (1.96045e-3, 0.0, 0.0, 0.0, 0.0)),
     "venus": (3.2485859200e14, 6051800.0, (4.458e-6, 0.0, 0.0, 0.0, 0.0)),
-    "jupiter": (1.26712764100e17, 71492000.0, (1.4736e-2, 0.0, -5.87e-4, 0.0, 0.0)),
+    "jupiter": (1.26712764100e17, 71492000.0, (1.4736e-2, 0.0, 0.0, 0.0, 0.0)),
 }
 
 # --------------------------------------------------------------------------- validated result
