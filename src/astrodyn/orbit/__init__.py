@@ -24,3 +24,8 @@ __all__ = [
 
 # --- elements and perturbations (astrodyn.orbit.elements / .perturbations) -------------
 # Another module owner appends its imports and extends __all__ below this line.
+from astrodyn.orbit import elements as _elements, perturbations as _perturbations  # noqa: E402
+from astrodyn.orbit.elements import *  # noqa: E402,F401,F403
+from astrodyn.orbit.perturbations import *  # noqa: E402,F401,F403
+
+__all__ += _elements.__all__ + _perturbations.__all__
