@@ -79,7 +79,8 @@ chosen per element by ``e``: eccentric anomaly ``E`` (``e < 1``, solved with
 :func:`astrodyn.orbit.kepler.solve_kepler`), hyperbolic anomaly ``F``
 (``e > 1``, :func:`astrodyn.orbit.kepler.solve_kepler_hyperbolic``) and, for
 ``e == 1``, Barker's equation ``M = D + D**3 / 3`` with ``D = tan(nu/2)``
-(Vallado sec. 2.2, eq. 2-xx; mean motion ``n_p = 2 sqrt(mu / p**3)``).
+(Vallado 4th ed. sec. 2.2, Algorithm 3 KEPEQTP; mean motion
+``n_p = 2 sqrt(mu / p**3)``).
 Each conic uses its own mean anomaly: ``M = n (t - t_p)`` with
 ``n = sqrt(mu / |a|**3)`` for the ellipse and hyperbola.  The conversions keep
 the revolution count: ``nu = 2 pi k + nu0`` maps to ``M = 2 pi k + M0`` on an
@@ -246,7 +247,8 @@ def elements_from_state(r, v, mu) -> Elements:
 
 def _perifocal_basis(i, raan, argp):
     """Unit vectors P (to periapsis) and Q (90 deg ahead in the direction of
-    motion), Vallado eq. 2-xx (rotation R3(-raan) R1(-i) R3(-argp))."""
+    motion): the columns of the rotation R3(-raan) R1(-i) R3(-argp) of
+    Vallado 4th ed. Algorithm 10 (COE2RV)."""
     ci, si = np.cos(i), np.sin(i)
     cO, sO = np.cos(raan), np.sin(raan)
     cw, sw = np.cos(argp), np.sin(argp)
@@ -403,7 +405,7 @@ def _flat_kernel(kernel, x, e):
 def eccentric_from_true(nu, e):
     """Eccentric anomaly ``E`` (rad) from true anomaly ``nu`` on an ellipse
     (0 <= e < 1): ``E = atan2(sqrt(1 - e^2) sin nu, e + cos nu)`` (Vallado
-    eq. 2-xx, the atan2 form valid in every quadrant), in the same
+    sec. 2.2, in the atan2 form valid in every quadrant), in the same
     revolution as ``nu``."""
     nu, e = np.asarray(nu, dtype=np.float64), np.asarray(e, dtype=np.float64)
     E = np.arctan2(np.sqrt((1.0 - e) * (1.0 + e)) * np.sin(nu), e + np.cos(nu))
@@ -421,7 +423,7 @@ def true_from_eccentric(E, e):
 
 def hyperbolic_from_true(nu, e):
     """Hyperbolic anomaly ``F`` from true anomaly on a hyperbola (e > 1):
-    ``sinh F = sqrt(e^2 - 1) sin nu / (1 + e cos nu)`` (Vallado eq. 2-xx), so
+    ``sinh F = sqrt(e^2 - 1) sin nu / (1 + e cos nu)`` (Vallado sec. 2.2), so
     ``F = asinh(...)`` with no loss near ``nu = 0``.  ``nu`` is taken modulo
     2 pi into (-pi, pi] and must lie between the asymptotes (else NaN)."""
     nu, e = np.asarray(nu, dtype=np.float64), np.asarray(e, dtype=np.float64)

@@ -61,7 +61,7 @@ Kepler reference ``rho(t)`` (exact, from ``astrodyn.orbit.propagate``)::
 
     delta'' = -(mu / |r|^3) (delta - f(q) rho) + sum a_p(t, rho + delta),  q = delta.(delta + 2 rho) / rho.rho
 
-(Battin sec. 9.3, eq. 9.x: the same ``f(q)`` removes the cancellation of the
+(Battin sec. 9.3, Encke's method: the same ``f(q)`` removes the cancellation of the
 two nearly equal central-body terms), and *rectifies* (restarts the reference
 from the current osculating state, ``delta = 0``) when
 ``|delta| / |rho|`` exceeds ``rectify_ratio``.
