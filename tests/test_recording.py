@@ -13,12 +13,14 @@ import json
 import os
 import random
 import signal
+import struct
 import subprocess
 import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
+import zstandard
 from mcap.reader import make_reader
 from mcap.stream_reader import StreamReader, breakup_chunk
 
@@ -70,11 +72,17 @@ def recorded(tmp_path_factory) -> Path:
 def test_layout_read_by_plain_mcap_reader(recorded):
     expected = _expected_messages()
     with open(recorded, "rb") as f:
-        reader = make_reader(f)
+        reader = make_reader(f, validate_crcs=True)
         summary = reader.get_summary()
         assert summary.statistics.message_count == len(expected)
+        assert sum(summary.statistics.channel_message_counts.values()) == len(expected)
         got = list(reader.iter_messages(log_time_order=False))
         metadata = {m.name: m.metadata for m in reader.iter_metadata()}
+        in_time_order = [m.log_time for _, _, m in reader.iter_messages(log_time_order=True)]
+        f.seek(0)
+        records = list(StreamReader(f, validate_crcs=True).records)  # every CRC, footer and magic
+    assert in_time_order == sorted(in_time_order) and len(in_time_order) == len(expected)
+    assert type(records[-1]).__name__ == "Footer"
     assert len(got) == len(expected)
     for (schema, channel, message), (key, msg) in zip(got, expected):
         kind = key.rsplit("/", 1)[-1] if "@" not in key else "event"
@@ -128,6 +136,23 @@ def _chunk_ends_and_counts(path: Path) -> list[tuple[int, int]]:
             count = sum(type(r).__name__ == "Message" for r in breakup_chunk(chunk))
             out.append((ci.chunk_start_offset + ci.chunk_length, count))
     return out
+
+
+def test_message_indexes_point_at_their_messages(recorded):
+    """The per-chunk message indexes (used by seeking readers) are consistent with the chunks."""
+    with open(recorded, "rb") as f:
+        summary = make_reader(f).get_summary()
+        for ci in summary.chunk_indexes:
+            f.seek(ci.chunk_start_offset)
+            chunk = next(iter(StreamReader(f, skip_magic=True, emit_chunks=True).records))
+            data = zstandard.decompress(chunk.data, chunk.uncompressed_size)
+            for cid, offset in ci.message_index_offsets.items():
+                f.seek(offset)
+                index = next(iter(StreamReader(f, skip_magic=True).records))
+                assert index.channel_id == cid
+                for log_time, at in index.records:
+                    opcode, _, channel_id, _, stamped = struct.unpack_from("<BQHIQ", data, at)
+                    assert (opcode, channel_id, stamped) == (5, cid, log_time)
 
 
 def test_truncated_at_random_offsets(recorded, tmp_path):

@@ -270,7 +270,7 @@ class Logger:
                                 f"{self.states} states recorded so far, sim t reached {self.max_t!r} s")
         for process, seen in self.heartbeats.items():
             if (now - seen > self.stall_timeout_s and process in alive.alive and process not in self.ended
-                    and process not in self.stalled):
+                    and process not in self.stalled and process != self.name):
                 self.stalled.add(process)
                 self._own_event("error", f"process {process} stalled: alive but no heartbeat for {now - seen:.1f} s")
         heartbeat.beat(messages=self.recorder.message_count, t=self.max_t)
@@ -318,8 +318,11 @@ class Logger:
             next_housekeeping = 0.0
             while True:
                 n = 0
-                for try_recv in receivers:
-                    while n < 2048 and (sample := try_recv()) is not None:
+                for try_recv in receivers:  # a budget per subscription: none starves the others
+                    for _ in range(2048):
+                        sample = try_recv()
+                        if sample is None:
+                            break
                         handle(str(sample.key_expr), sample.payload.to_bytes())
                         n += 1
                 now = time.monotonic()

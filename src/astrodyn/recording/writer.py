@@ -40,9 +40,9 @@ import os
 import time
 from typing import Any, Mapping
 
-from mcap.writer import CompressionType, Writer
 
 from astrodyn import __version__, messages
+from astrodyn.recording._mcapfast import ChunkedWriter
 
 __all__ = ["RecordingError", "McapRecorder", "SeqTracker", "OK", "GAP", "LATE", "DUPLICATE"]
 
@@ -205,9 +205,8 @@ class McapRecorder:
             self._stream = open(self.path, "wb")
         except OSError as exc:
             raise RecordingError(f"{self.path}: cannot open for writing: {exc.strerror or exc}") from None
-        self._writer = Writer(self._stream, chunk_size=chunk_size, compression=CompressionType.ZSTD)
         try:
-            self._writer.start(profile="", library=f"astrodyn {__version__}")
+            self._writer = ChunkedWriter(self._stream, chunk_size=chunk_size, library=f"astrodyn {__version__}")
             self._writer.add_metadata("scenario", scenario)
             self._writer.add_metadata(
                 "recording",
