@@ -820,7 +820,7 @@ def _attitude(ctx: _Ctx, data: Any, path: str) -> AttitudeSpec:
         from astrodyn.rotation import EULER_SEQUENCES, quat_from_euler
 
         angles = _vector(ctx, tb.get("euler"), "angle", 3, f"{path}.euler")
-        seq = tb.get("seq", _MISSING) if tb.has("seq") else None
+        seq = tb.get("seq", None)
         if seq is None:
             raise ctx.error(f"{path}.seq", f"a rotation sequence with euler, one of {', '.join(EULER_SEQUENCES)}", "nothing", raw=True)
         if isinstance(seq, int) and not isinstance(seq, bool):
@@ -877,8 +877,7 @@ def _inertia(ctx: _Ctx, value: Any, path: str) -> tuple[np.ndarray, np.ndarray, 
     else:
         raise ctx.error(path, desc, value)
     for k in range(3):
-        _check(ctx, moments[k] > 0, path, "positive principal moments (a singular or negative inertia is not a rigid body)",
-               value if moments is None else moments.tolist())
+        _check(ctx, moments[k] > 0, path, "positive principal moments (a singular or negative inertia is not a rigid body)", moments.tolist())
     total = float(np.sum(moments))
     for k in range(3):
         _check(ctx, moments[k] <= (total - moments[k]) * (1 + TRIANGLE_RTOL), path,
