@@ -3,6 +3,7 @@
     python tests/_bus_child.py alive     CONNECT SCENARIO PROCESS        token, then sleep until killed
     python tests/_bus_child.py rogue     CONNECT SCENARIO N              valid + bad traffic, then end event
     python tests/_bus_child.py ordered   CONNECT SCENARIO N              N orbit messages of body "a", BLOCK
+    python tests/_bus_child.py flood     CONNECT SCENARIO STEPS          1000 bodies x 2 kinds per step, batched
     python tests/_bus_child.py mcapkill  PATH N                          write N messages, flush, print, sleep
 
 Every session is closed (context managers); the process never forks.
@@ -96,6 +97,26 @@ def cmd_rogue(connect: str, scenario: str, n: int) -> None:
         events.close()
 
 
+def cmd_flood(connect: str, scenario: str, steps: int) -> None:
+    """1000 bodies x (orbit + attitude) per step in batch envelopes, as fast as possible."""
+    nb = 1000
+    rng = np.random.default_rng(1)
+    r, v, w = rng.normal(size=(nb, 3)) * 7e6, rng.normal(size=(nb, 3)) * 7e3, rng.normal(size=(nb, 3))
+    q = rng.normal(size=(nb, 4))
+    q /= np.linalg.norm(q, axis=1)[:, None]
+    okeys = [messages.orbit_key(scenario, f"s{i}") for i in range(nb)]
+    akeys = [messages.attitude_key(scenario, f"s{i}") for i in range(nb)]
+    with bus.open_session(connect=connect) as session:
+        bus.wait_for_process(session, scenario, "logger", timeout_s=20)
+        with bus.BatchPublisher(session, scenario, "orbit") as batch, bus.EventPublisher(session, scenario, "orbit") as ev:
+            for k in range(steps):
+                orbit = messages.encode_orbit_batch(0.1 * k, k, "kepler", r, v, 3.986004418e14)
+                att = messages.encode_attitude_batch(0.1 * k, k, "torque_free", q, w)
+                batch.publish(list(zip(okeys, orbit)) + list(zip(akeys, att)))
+            ev.end(0.1 * steps, 2 * nb * steps)
+            time.sleep(0.5)
+
+
 def cmd_mcapkill(path: str, n: int) -> None:
     with McapRecorder(path, {"name": "kill"}, epoch_ns=EPOCH_NS, flush_interval_s=3600) as rec:
         for seq in range(n):
@@ -115,6 +136,8 @@ if __name__ == "__main__":
         cmd_ordered(rest[0], rest[1], int(rest[2]))
     elif cmd == "rogue":
         cmd_rogue(rest[0], rest[1], int(rest[2]))
+    elif cmd == "flood":
+        cmd_flood(rest[0], rest[1], int(rest[2]))
     elif cmd == "mcapkill":
         cmd_mcapkill(rest[0], int(rest[1]))
     else:

@@ -263,3 +263,23 @@ def test_logger_notices_dead_process_and_finishes_on_sigterm(hub, spawn, tmp_pat
     assert not run.truncated
     assert [(e["process"], e["kind"]) for e in run.events] == [("logger", "error")]
     assert "process orbit died" in run.events[0]["detail"]
+
+
+@pytest.mark.slow
+def test_logger_keeps_up_with_a_flood_without_loss(hub, spawn, tmp_path):
+    """100k state messages in batches from one process as fast as it can: none lost."""
+    session, endpoint = hub
+    steps = 50
+    out = tmp_path / "flood.mcap"
+    logger = _start_logger(spawn, endpoint, "flood", out, "--expect", "orbit")
+    bus.wait_for_process(session, "flood", "logger", timeout_s=20)
+    publisher = spawn(CHILD, "flood", endpoint, "flood", steps)
+    assert publisher.wait(timeout=120) == 0
+    stdout, stderr = logger.communicate(timeout=120)
+    summary = json.loads(stdout)
+    print(f"\nlogger: {summary['states']} states in {summary['elapsed_s']} s (including start-up)")
+    assert summary["complete"] and summary["states"] == 2000 * steps
+    assert summary["missing"] == 0 and summary["malformed"] == 0 and summary["duplicates"] == 0
+    run = load(out)
+    assert run.complete and len(run.bodies) == 1000
+    assert all(len(b.orbit) == steps and len(b.attitude) == steps for b in run.bodies.values())
