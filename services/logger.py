@@ -31,6 +31,10 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument("--chunk-size", type=int, default=1 << 20, help="uncompressed bytes per zstd chunk")
     p.add_argument("--flush-interval", type=float, default=1.0, help="max seconds between flushes (crash-loss bound)")
     p.add_argument("--queue", type=int, default=65536, help="bounded receive queue (samples)")
+    p.add_argument("--no-control", action="store_true",
+                   help="do not answer the stop verb (a supervisor such as `astrodyn serve` ends the run)")
+    p.add_argument("--roll-size", type=int, default=None, help="start a new file after this many bytes")
+    p.add_argument("--roll-interval", type=float, default=None, help="start a new file after this many wall seconds")
     p.add_argument("--max-seconds", type=float, default=None, help="stop after this many wall seconds")
     bus.add_bus_arguments(p)
     return p.parse_args(argv)
@@ -61,8 +65,10 @@ def main(argv: list[str] | None = None) -> int:
     try:
         with bus.session_from_args(args) as session:
             recorder = McapRecorder(args.out, meta, epoch_ns=args.epoch_ns,
-                                    chunk_size=args.chunk_size, flush_interval_s=args.flush_interval)
-            logger = Logger(session, args.scenario, recorder, expect=args.expect, queue_capacity=args.queue)
+                                    chunk_size=args.chunk_size, flush_interval_s=args.flush_interval,
+                                    roll_size=args.roll_size, roll_interval_s=args.roll_interval)
+            logger = Logger(session, args.scenario, recorder, expect=args.expect, queue_capacity=args.queue,
+                            control=not args.no_control)
             summary = logger.run(max_seconds=args.max_seconds)
     except (RecordingError, bus.BusError) as exc:
         print(f"logger: {exc}", file=sys.stderr)

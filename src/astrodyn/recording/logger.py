@@ -81,6 +81,7 @@ class Logger:
         drain_timeout_s: float = 10.0,
         stall_timeout_s: float = 5.0,
         name: str = "logger",
+        control: bool = True,
     ):
         self.session = session
         self.scenario = messages.check_name(scenario, "scenario")
@@ -91,6 +92,8 @@ class Logger:
         self.drain_timeout_s = float(drain_timeout_s)
         self.stall_timeout_s = float(stall_timeout_s)
         self.name = messages.check_name(name, "name")
+        self.control = bool(control)  # False under a supervisor (serve): it ends the run, not us
+        self._lost: dict[str, float] = {}  # liveliness lost, death not yet confirmed
         self.prefix = f"{messages.PREFIX}/{self.scenario}/"
         self.event_key = messages.event_key(self.scenario)
         # counters
@@ -110,6 +113,7 @@ class Logger:
         self._stop_requests: list[bus.ControlRequest] = []
         self._all_ended_at: float | None = None
         self._last_sample_at = time.monotonic()
+        self._drained_at = 0.0  # last time a receive pass found every queue empty
         self._started = time.monotonic()
         self.reason = ""
 
@@ -265,6 +269,17 @@ class Logger:
                 request.reply(self.status(channels=bool(request.args.get("channels"))))
         for process, is_alive in alive.poll():
             if not is_alive and process not in self.ended and process != self.name:
+                self._lost.setdefault(process, now)
+            elif is_alive:
+                self._lost.pop(process, None)
+        # A token can vanish while the process's last samples (its end-of-run event among
+        # them) still wait in our queue: confirm a death only once the queue was drained
+        # after the loss (or 5 s later if it never drains).
+        for process, lost_at in list(self._lost.items()):
+            if process in self.ended:
+                del self._lost[process]
+            elif self._drained_at >= lost_at or now - lost_at > 5.0:
+                del self._lost[process]
                 self.died[process] = f"liveliness lost at sim t = {self.max_t!r} s"
                 self._own_event("error", f"process {process} died (liveliness token lost) before its end-of-run event; "
                                 f"{self.states} states recorded so far, sim t reached {self.max_t!r} s")
@@ -309,7 +324,8 @@ class Logger:
                 for key in bus.scenario_keys(self.scenario)
             ]
             control = stack.enter_context(bus.ControlServer(
-                self.session, self.scenario, verbs=("stop",), extra_keys={messages.status_key(self.scenario): "status"}))
+                self.session, self.scenario, verbs=("stop",) if self.control else (),
+                extra_keys={messages.status_key(self.scenario): "status"}))
             alive = stack.enter_context(bus.AliveWatcher(self.session, self.scenario))
             heartbeat = stack.enter_context(bus.Heartbeat(self.session, self.scenario, self.name))
             stack.enter_context(bus.declare_alive(self.session, self.scenario, self.name))  # last: ready
@@ -328,6 +344,8 @@ class Logger:
                 now = time.monotonic()
                 if n:
                     self._last_sample_at = now
+                else:
+                    self._drained_at = now
                 if n == 0 or now >= next_housekeeping:
                     next_housekeeping = now + 0.05
                     if self._housekeeping(control, alive, heartbeat):

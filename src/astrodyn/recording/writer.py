@@ -167,6 +167,11 @@ class McapRecorder:
     chunk_size : uncompressed bytes per zstd chunk (1 MiB default).
     flush_interval_s : longest time (s) between flushes while messages arrive; bounds what
         a SIGKILL can lose.
+    roll_size, roll_interval_s : for long runs (``astrodyn serve``): finish the file and
+        continue in ``<stem>-0001.mcap``, ``<stem>-0002.mcap``, ... once it holds
+        ``roll_size`` bytes or is ``roll_interval_s`` old (checked at each flush).  Every
+        finished part is a complete MCAP with both metadata records; seq accounting spans
+        all parts; ``paths`` lists them.
 
     Errors: :class:`RecordingError` naming the path for an unwritable path, a full disk or
     any other write failure; after such an error the file is left without footer (it does
@@ -183,6 +188,8 @@ class McapRecorder:
         epoch_ns: int,
         chunk_size: int = 1 << 20,
         flush_interval_s: float = 1.0,
+        roll_size: int | None = None,
+        roll_interval_s: float | None = None,
     ):
         self.path = os.fspath(path)
         if isinstance(epoch_ns, bool) or not isinstance(epoch_ns, int):
@@ -191,36 +198,68 @@ class McapRecorder:
             raise ValueError(f"chunk_size: expected a positive integer number of bytes, got {chunk_size!r}")
         if not (flush_interval_s > 0):
             raise ValueError(f"flush_interval_s: expected > 0 s, got {flush_interval_s!r}")
+        if roll_size is not None and not (isinstance(roll_size, int) and roll_size > 0):
+            raise ValueError(f"roll_size: expected a positive integer number of bytes, got {roll_size!r}")
+        if roll_interval_s is not None and not (roll_interval_s > 0):
+            raise ValueError(f"roll_interval_s: expected > 0 s, got {roll_interval_s!r}")
         self.epoch_ns = epoch_ns
         self.flush_interval_s = float(flush_interval_s)
+        self.chunk_size = chunk_size
+        self.roll_size = roll_size
+        self.roll_interval_s = roll_interval_s
         self.seq = SeqTracker()
         self.message_count = 0
         self.flushes = 0
         self.closed = False
+        self.paths: list[str] = []  # every file written, in order (more than one when rolling)
         self._error: RecordingError | None = None
+        self._scenario = _metadata_strings("scenario_metadata", scenario_metadata)
+        self._open(self.path)
+
+    def _open(self, path: str) -> None:
+        """Start a new file at ``path`` with both metadata records (channels are re-registered lazily)."""
         self._channels: dict[str, int] = {}
         self._schemas: dict[str, int] = {}
-        scenario = _metadata_strings("scenario_metadata", scenario_metadata)
+        self.path = path
         try:
             self._stream = open(self.path, "wb")
         except OSError as exc:
             raise RecordingError(f"{self.path}: cannot open for writing: {exc.strerror or exc}") from None
+        self.paths.append(self.path)
+        self._opened_at = time.monotonic()
         try:
-            self._writer = ChunkedWriter(self._stream, chunk_size=chunk_size, library=f"astrodyn {__version__}")
-            self._writer.add_metadata("scenario", scenario)
+            self._writer = ChunkedWriter(self._stream, chunk_size=self.chunk_size, library=f"astrodyn {__version__}")
+            self._writer.add_metadata("scenario", self._scenario)
             self._writer.add_metadata(
                 "recording",
                 {
-                    "epoch_unix_ns": str(epoch_ns),
+                    "epoch_unix_ns": str(self.epoch_ns),
                     "log_time": "epoch_unix_ns + round(t * 1e9)",
                     "sequence": "seq mod 2**32",
                     "astrodyn_version": __version__,
+                    "part": str(len(self.paths) - 1),
                 },
             )
             self._flush()
         except OSError as exc:
             self._fail(exc)
         self._next_flush = time.monotonic() + self.flush_interval_s
+
+    def _roll_path(self, n: int) -> str:
+        root, ext = os.path.splitext(self.paths[0])
+        return f"{root}-{n:04d}{ext or '.mcap'}"
+
+    def _maybe_roll(self) -> None:
+        """Finish this file and start the next one when it is over ``roll_size`` bytes or
+        ``roll_interval_s`` old (checked at each flush: a file overshoots by < 1 flush)."""
+        if self.closed or (self.roll_size is None and self.roll_interval_s is None):
+            return
+        big = self.roll_size is not None and self._stream.tell() >= self.roll_size
+        old = self.roll_interval_s is not None and time.monotonic() - self._opened_at >= self.roll_interval_s
+        if not (big or old):
+            return
+        self._finish_file()
+        self._open(self._roll_path(len(self.paths)))
 
     # -- channels ------------------------------------------------------------------------
 
@@ -300,6 +339,7 @@ class McapRecorder:
         except OSError as exc:
             self._fail(exc)
         self._next_flush = time.monotonic() + self.flush_interval_s
+        self._maybe_roll()
 
     def maybe_flush(self) -> None:
         """Flush if ``flush_interval_s`` has passed since the last flush (call when idle)."""
@@ -319,18 +359,21 @@ class McapRecorder:
         self.closed = True
         raise self._error from None
 
+    def _finish_file(self) -> None:
+        try:
+            self._writer.finish()
+            self._stream.flush()
+            os.fsync(self._stream.fileno())
+            self._stream.close()
+        except OSError as exc:
+            self._fail(exc)
+
     def close(self) -> dict:
         """Finish the file (summary, indexes, footer), fsync, close; returns :meth:`stats`."""
         if self._error is not None:
             raise self._error
         if not self.closed:
-            try:
-                self._writer.finish()
-                self._stream.flush()
-                os.fsync(self._stream.fileno())
-                self._stream.close()
-            except OSError as exc:
-                self._fail(exc)
+            self._finish_file()
             self.closed = True
         return self.stats()
 
@@ -338,6 +381,7 @@ class McapRecorder:
         """Messages written, flushes, and the seq accounting totals and per-channel report."""
         return {
             "path": self.path,
+            "paths": list(self.paths),
             "messages": self.message_count,
             "channels": len(self._channels),
             "flushes": self.flushes,
