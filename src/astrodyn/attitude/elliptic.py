@@ -34,7 +34,10 @@ Algorithms:
   elliptic integrals", Numer. Algorithms 10 (1995) 13-26, duplication
   algorithms with the paper's stopping rule ``4^-n Q < |A_n|`` for a relative
   error ``r = 1e-16`` and the paper's fifth-order series.  ``R_J`` here takes
-  ``p > 0`` (no Cauchy principal value).
+  ``p > 0`` (no Cauchy principal value); it is at a few ulp for
+  ``p >= min(x, y, z)`` (the torque-free attitude has ``p >= 1 >= x, y, z``)
+  and loses up to about 1e-13 relative when ``p`` is below ``1e-6 min(x, y, z)``
+  (its ``R_C(1, 1 + e)`` terms then have ``e`` near -1).
 * ``F`` and ``Pi`` (:func:`ellipf`, :func:`ellippi`): DLMF 19.25.5 and
   19.25.14 for ``|phi| <= pi/2``, extended by ``F(phi + j pi) = F(phi) + 2 j K``
   (likewise with the complete ``Pi``); ``Pi`` for ``n < 1``.
@@ -243,9 +246,28 @@ def _sncndn_reduced(u, m, m1):
 def _sncndn_half(r, m, m1):
     """sn, cn, dn for |r| <= K (K finite): parity (sn odd, cn and dn even)."""
     s, c, d = _sncndn_reduced(abs(r), m, m1)
+    # rounding can leave |sn|, |cn|, dn one ulp above 1 (e.g. cn(0) from the Landen steps)
+    s = min(s, 1.0)
+    c = min(max(c, -1.0), 1.0)
+    d = min(d, 1.0)
     if r < 0.0:
         s = -s
     return s, c, d
+
+
+@jit
+def _reduce_half_period(u, K):
+    """u = j 2K + r with |r| <= K (K finite); returns (j as float, r)."""
+    twoK = 2.0 * K
+    j = math.floor(u / twoK + 0.5)
+    r = u - j * twoK
+    if r > K:  # rounding at the half-period boundary
+        r -= twoK
+        j += 1.0
+    elif r < -K:
+        r += twoK
+        j -= 1.0
+    return j, r
 
 
 @jit
@@ -259,15 +281,7 @@ def _sncndn(u, m, m1, K):
         return th, sech, sech
     if m == 0.0:
         return math.sin(u), math.cos(u), 1.0
-    twoK = 2.0 * K
-    j = math.floor(u / twoK + 0.5)
-    r = u - j * twoK
-    if r > K:  # rounding at the half-period boundary
-        r -= twoK
-        j += 1.0
-    elif r < -K:
-        r += twoK
-        j -= 1.0
+    j, r = _reduce_half_period(u, K)
     s, c, d = _sncndn_half(r, m, m1)
     if j % 2.0 != 0.0:
         s = -s

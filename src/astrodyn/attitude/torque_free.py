@@ -86,7 +86,7 @@ import math
 import numpy as np
 
 from astrodyn._jit import jit, pjit, prange
-from astrodyn.attitude.elliptic import _ellipk, _rf, _rj, _sncndn_half
+from astrodyn.attitude.elliptic import _ellipk, _reduce_half_period, _rf, _rj, _sncndn_half
 
 __all__ = ["torque_free", "polhode", "herpolhode", "rate_period", "flip_period"]
 
@@ -166,15 +166,7 @@ def _phase(par, t):
         sech = 1.0 / math.cosh(tau) if abs(tau) < 710.0 else 0.0
         jv, gv = _j_g(th, sech, sech, tau, n, sq1n, m1)
         return th, sech, sech, jv, gv
-    twoK = 2.0 * K
-    j = math.floor(tau / twoK + 0.5)
-    r = tau - j * twoK
-    if r > K:
-        r -= twoK
-        j += 1.0
-    elif r < -K:
-        r += twoK
-        j -= 1.0
+    j, r = _reduce_half_period(tau, K)
     s, c, d = _sncndn_half(r, m, m1)
     jv, gv = _j_g(s, c, d, r, n, sq1n, m1)
     jv += j * par[_DJ]
@@ -227,18 +219,20 @@ def _evaluate(par, t, w, q):
     h0 = par[_INER] * w[0] / hm
     h1 = par[_INER + 1] * w[1] / hm
     h2 = par[_INER + 2] * w[2] / hm
-    h = (h0, h1, h2)
-    j1 = (ic + 1) % 3
-    j2 = (ic + 2) % 3
-    qm = np.zeros(4)
-    qm[0] = 1.0 + sig * h[ic]
-    qm[1 + j1] = sig * h[j2]
-    qm[1 + j2] = -sig * h[j1]
-    # C_a(psi): frame rotation by psi about a = sig e_ic
+    # qm = (1 + s h_c, s h x e_c) with (h x e_c)[j1] = h[j2], [j2] = -h[j1] (j1, j2 cyclic after c)
     half = 0.5 * psi
-    qc = np.zeros(4)
-    qc[0] = math.cos(half)
-    qc[1 + ic] = sig * math.sin(half)
+    cps = math.cos(half)
+    sps = sig * math.sin(half)
+    if ic == 0:
+        qm = (1.0 + sig * h0, 0.0, sig * h2, -sig * h1)
+        qc = (cps, sps, 0.0, 0.0)
+    elif ic == 1:
+        qm = (1.0 + sig * h1, -sig * h2, 0.0, sig * h0)
+        qc = (cps, 0.0, sps, 0.0)
+    else:
+        qm = (1.0 + sig * h2, sig * h1, -sig * h0, 0.0)
+        qc = (cps, 0.0, 0.0, sps)
+    # C_a(psi) above: frame rotation by psi about a = s e_c
     # q = qB0 (x) qc (x) qm   <=>   C = Q C_a(psi) C_B0
     x0, x1, x2, x3 = _hmul(qc[0], qc[1], qc[2], qc[3], qm[0], qm[1], qm[2], qm[3])
     r0, r1, r2, r3 = _hmul(par[_QB0], par[_QB0 + 1], par[_QB0 + 2], par[_QB0 + 3], x0, x1, x2, x3)
