@@ -1,0 +1,423 @@
+"""``astrodyn replay FILE.mcap``: republish a recorded run on Zenoh, paced like the original.
+
+Every recorded message is put on its own key (the MCAP topic *is* the Zenoh key, design.md
+section 3) with its payload bytes unchanged, in ``log_time`` order, at ``--rate`` times
+real time (``--rate inf``: as fast as the bus takes them).  State keys use the same
+publisher settings as the live service (reliable, ``CongestionControl.BLOCK``, JSON
+encoding), so a consumer subscribed to ``astrodyn/<scenario>/**`` (and ``@event``) sees
+the same keys, payloads, order and pacing it would see from the live service.
+``--batch`` additionally mimics the propagators' transport: the state messages of one
+instant are sent as one batch envelope on ``astrodyn/<scenario>/@batch/orbit`` (orbit and
+crosscheck keys) or ``.../@batch/attitude`` (:func:`astrodyn.messages.encode_batch`)
+instead of one put per key.
+
+Options: ``--start T`` / ``--end T`` (s since the scenario epoch, inclusive), ``--topics
+GLOB`` (repeatable, shell-style, ``*`` crosses ``/``), ``--wait S`` (wait up to S s for
+a subscriber before the clock starts), ``--hold`` (after the end, keep answering control
+queries until ``stop``; a ``seek`` replays again), ``--listen`` / ``--connect`` /
+``--mode`` / ``--port`` (Zenoh endpoints; default one loopback endpoint, multicast
+scouting off, as every astrodyn process).
+
+Control, mirroring ``astrodyn serve`` (:mod:`astrodyn.serve`), as Zenoh queryables on
+``astrodyn/<scenario>/@control/<verb>`` (``--control-scenario`` to use another name):
+
+=========  ==================================  =========================================
+verb       arguments (JSON payload)            reply
+=========  ==================================  =========================================
+status     --                                  state, rate, t, messages published, progress
+pause      --                                  the new status (nothing is sent while paused)
+resume     --                                  the new status (pacing re-anchored at t)
+rate       ``{"factor": x}`` (x > 0 or "inf")  the new status
+seek       ``{"t": T}`` (s since the epoch)    the new status; replay continues from T
+stop       --                                  the final summary
+=========  ==================================  =========================================
+
+Pacing: the message with log time ``L`` goes out at wall time ``w0 + (L - L0) / rate``
+where ``(w0, L0)`` is the anchor set at start, resume, rate change and seek; messages
+with the same log time go out together.  A seek back in time republishes earlier seqs
+(a consumer sees them again, as it would from a new run).
+
+Bad files: a file that is not MCAP is an error (exit 1, nothing published); a cut file
+(writer killed) is replayed up to its last complete chunk and the summary says so
+(``"complete": false`` and the reason; exit 0).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import signal
+import sys
+import time
+from typing import Any
+
+from astrodyn import bus, messages
+from astrodyn.recording.stream import McapStream, RawMessage
+from astrodyn.recording.writer import RecordingError
+
+__all__ = ["Replayer", "main", "REPLAY_VERBS"]
+
+REPLAY_VERBS = (*bus.CONTROL_VERBS, "seek")
+_BATCH_PROCESS = {"orbit": "orbit", "crosscheck": "orbit", "attitude": "attitude"}
+_POLL_S = 0.02  # control queries are answered within about this long
+
+
+def parse_rate(raw: Any, what: str = "rate") -> float:
+    """A real-time factor: a number > 0, or "inf" (as fast as possible)."""
+    try:
+        factor = float(raw)
+    except (TypeError, ValueError):
+        factor = math.nan
+    if not factor > 0:
+        raise ValueError(f'{what}: expected a real-time factor > 0 or "inf", got {raw!r}')
+    return factor
+
+
+def scenario_of(stream: McapStream) -> str:
+    """The scenario name: the "scenario" metadata ``name``, else the first astrodyn topic's."""
+    name = stream.metadata.get("scenario", {}).get("name")
+    if name:
+        return name
+    for topic in stream.topics():
+        try:
+            return messages.parse_key(topic)[0]
+        except messages.MessageError:
+            continue
+    # channels inside chunks are only known once read: peek at the first message
+    for msg in stream.messages():
+        try:
+            return messages.parse_key(msg.topic)[0]
+        except messages.MessageError:
+            continue
+    raise RecordingError(f"{stream.path}: no astrodyn topic and no scenario metadata; give --control-scenario")
+
+
+class Replayer:
+    """Publishes the messages of one :class:`McapStream` on a Zenoh session (module docstring).
+
+    Drive it with :meth:`step` from a loop (it returns False once finished), answer
+    :class:`astrodyn.bus.ControlRequest` objects with :meth:`handle`.
+    """
+
+    def __init__(self, session, stream: McapStream, *, rate: float = 1.0, start_t: float | None = None,
+                 end_t: float | None = None, topics=None, batch: bool = False):
+        self.session = session
+        self.stream = stream
+        self.rate = parse_rate(rate)
+        self.topics = topics
+        self.batch = batch
+        self.lo = stream.t_to_ns(start_t, "start") if start_t is not None else stream.start_ns
+        self.hi = stream.t_to_ns(end_t, "end") if end_t is not None else stream.end_ns
+        if self.hi is not None and stream.end_ns is not None:
+            self.hi = min(self.hi, stream.end_ns)
+        if self.lo is not None and self.hi is not None and self.hi < self.lo:
+            raise ValueError(f"end: expected end >= start, got start={start_t}, end={end_t}")
+        self.state = "running"
+        self.published = 0
+        self.skipped: dict[str, str] = {}
+        self.last_ns: int | None = None
+        self._publishers: dict[str, Any] = {}
+        self._pending: dict[str, list[tuple[str, bytes]]] = {}
+        self._pending_ns: int | None = None
+        self._seek(self.lo)
+        self.started = time.monotonic()
+
+    # ------------------------------------------------------------------ clock
+
+    def _seek(self, ns: int | None) -> None:
+        self._flush_batches()
+        self._iter = self.stream.messages(self.topics, start_ns=ns, end_ns=self.hi)
+        self._next: RawMessage | None = next(self._iter, None)
+        base = ns if ns is not None else (self._next.log_time if self._next else 0)
+        self._anchor(base)
+
+    def _anchor(self, ns: int) -> None:
+        self._anchor_ns = ns
+        self._anchor_wall = time.monotonic()
+
+    def virtual_ns(self, now: float | None = None) -> float:
+        """The replay clock: log time (ns) that corresponds to the wall time ``now``."""
+        if self.state != "running":
+            return float(self._anchor_ns)
+        if math.isinf(self.rate):
+            return math.inf
+        now = time.monotonic() if now is None else now
+        return self._anchor_ns + (now - self._anchor_wall) * self.rate * 1e9
+
+    def wait_time(self) -> float:
+        """Seconds until the next message is due (0 when due, inf when paused or done)."""
+        if self._next is None or self.state != "running":
+            return math.inf
+        if math.isinf(self.rate):
+            return 0.0
+        return max(0.0, (self._next.log_time - self._anchor_ns) / (self.rate * 1e9) - (time.monotonic() - self._anchor_wall))
+
+    # ------------------------------------------------------------------ publishing
+
+    def _publisher(self, key: str):
+        pub = self._publishers.get(key)
+        if pub is None and key not in self.skipped:
+            try:
+                pub = self._publishers[key] = bus.declare_state_publisher(self.session, key)
+            except Exception as exc:  # not a valid Zenoh key expression (e.g. "/tf")
+                self.skipped[key] = f"not a Zenoh key: {exc}"
+        return pub
+
+    def _batch_key(self, topic: str) -> str | None:
+        if not self.batch:
+            return None
+        try:
+            scenario, body, kind = messages.parse_key(topic)
+        except messages.MessageError:
+            return None
+        process = _BATCH_PROCESS.get(kind)
+        return None if process is None or body.startswith("@") else messages.batch_key(scenario, process)
+
+    def _flush_batches(self) -> None:
+        for key, items in self._pending.items():
+            if items:
+                pub = self._publisher(key)
+                pub.put(messages.encode_batch(items))
+        self._pending.clear()
+        self._pending_ns = None
+
+    def _publish(self, msg: RawMessage) -> None:
+        bkey = self._batch_key(msg.topic)
+        if bkey is not None:
+            if self._pending_ns is not None and msg.log_time != self._pending_ns:
+                self._flush_batches()
+            self._pending.setdefault(bkey, []).append((msg.topic, msg.data))
+            self._pending_ns = msg.log_time
+        else:
+            if self._pending:
+                self._flush_batches()
+            pub = self._publisher(msg.topic)
+            if pub is None:
+                return
+            pub.put(msg.data)
+        self.published += 1
+        self.last_ns = msg.log_time
+
+    def wait_for_subscriber(self, timeout_s: float) -> bool:
+        """Wait up to ``timeout_s`` until the first topic to replay has a subscriber."""
+        if self._next is None or timeout_s <= 0:
+            return False
+        key = self._batch_key(self._next.topic) or self._next.topic
+        pub = self._publisher(key)
+        deadline = time.monotonic() + timeout_s
+        while pub is not None and time.monotonic() < deadline:
+            if pub.matching_status.matching:
+                self._anchor(self._anchor_ns)
+                return True
+            time.sleep(0.01)
+        self._anchor(self._anchor_ns)
+        return False
+
+    def step(self, budget_s: float = _POLL_S) -> bool:
+        """Publish what is due within the next ``budget_s`` of wall time; False when done."""
+        if self.state in ("stopped",):
+            return False
+        deadline = time.monotonic() + budget_s
+        while self.state == "running" and self._next is not None:
+            wait = self.wait_time()
+            if wait > 0:
+                remaining = deadline - time.monotonic()
+                if wait > remaining:
+                    time.sleep(max(0.0, remaining))
+                    return True
+                time.sleep(wait)
+            msg = self._next
+            self._publish(msg)
+            self._next = next(self._iter, None)
+            if self._next is None or self._next.log_time != msg.log_time:
+                self._flush_batches()
+            if time.monotonic() >= deadline:
+                return True
+        if self._next is None and self.state == "running":
+            self._flush_batches()
+            self.state = "finished"
+        return self.state != "finished"
+
+    # ------------------------------------------------------------------ control
+
+    def status(self) -> dict:
+        lo, hi = self.lo or 0, self.hi or 0
+        now_ns = self.last_ns if self.last_ns is not None else lo
+        span = max(hi - lo, 1)
+        return {
+            "file": self.stream.path,
+            "state": self.state,
+            "real_time_factor": "inf" if math.isinf(self.rate) else self.rate,
+            "t": self.stream.ns_to_t(now_ns),
+            "t_start": self.stream.ns_to_t(lo),
+            "t_end": self.stream.ns_to_t(hi),
+            "progress": round(min(1.0, max(0.0, (now_ns - lo) / span)), 6),
+            "messages": self.published,
+            "wall_s": round(time.monotonic() - self.started, 3),
+            "complete": not self.stream.truncated and not self.stream.corrupt_chunks,
+            "file_report": self.stream.report(),
+            "skipped_topics": dict(self.skipped),
+        }
+
+    def pause(self) -> None:
+        if self.state == "running":
+            v = self.virtual_ns()
+            self._flush_batches()
+            self.state = "paused"
+            self._anchor(int(v) if math.isfinite(v) else (self.last_ns or self._anchor_ns))
+
+    def resume(self) -> None:
+        if self.state == "paused":
+            self.state = "running"
+            self._anchor(self._anchor_ns)
+
+    def set_rate(self, factor: float) -> None:
+        v = self.virtual_ns()
+        self.rate = parse_rate(factor)
+        self._anchor(int(v) if math.isfinite(v) else (self.last_ns or self._anchor_ns))
+
+    def seek(self, t: Any) -> None:
+        ns = self.stream.t_to_ns(float(t) if isinstance(t, (int, float, str)) else t, "seek.t")
+        ns = max(ns, self.lo) if self.lo is not None else ns
+        if self.hi is not None and ns > self.hi:
+            raise ValueError(f"seek.t: expected t <= end ({self.stream.ns_to_t(self.hi)} s), got {t!r}")
+        paused = self.state == "paused"
+        self.state = "running"
+        self.last_ns = None
+        self._seek(ns)
+        if paused:
+            self.state = "paused"
+
+    def handle(self, request: bus.ControlRequest) -> bool:
+        """Answer one control request; True when it was ``stop`` (answered by the caller)."""
+        verb = request.verb
+        try:
+            if verb == "status":
+                pass
+            elif verb == "pause":
+                self.pause()
+            elif verb == "resume":
+                self.resume()
+            elif verb == "rate":
+                self.set_rate(parse_rate(request.args.get("factor"), 'rate: {"factor": x}'))
+            elif verb == "seek":
+                if "t" not in request.args:
+                    raise ValueError('seek: expected {"t": T} with T in s since the scenario epoch')
+                self.seek(request.args["t"])
+            elif verb == "stop":
+                self._flush_batches()
+                self.state = "stopped"
+                return True
+            else:
+                raise ValueError(f"{verb}: expected one of {', '.join(REPLAY_VERBS)}")
+        except (ValueError, TypeError, RecordingError) as exc:
+            request.error(str(exc))
+            return False
+        request.reply(self.status())
+        return False
+
+    def close(self) -> None:
+        for pub in self._publishers.values():
+            pub.undeclare()
+        self._publishers.clear()
+
+
+def _progress_line(rep: Replayer) -> str:
+    s = rep.status()
+    return (f"replay t {s['t']:10.1f} / {s['t_end']:.1f} s ({100 * s['progress']:5.1f} %)  "
+            f"{s['messages']} messages  {s['state']}  x{s['real_time_factor']}")
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog="astrodyn replay", description="Republish a recorded MCAP file on Zenoh.")
+    ap.add_argument("file", help="MCAP file recorded by astrodyn (or any MCAP whose topics are Zenoh keys)")
+    ap.add_argument("--rate", default="1", help='real-time factor (default 1; "inf" = as fast as possible)')
+    ap.add_argument("--start", type=float, default=None, help="start at this t (s since the scenario epoch)")
+    ap.add_argument("--end", type=float, default=None, help="end at this t (s since the scenario epoch, inclusive)")
+    ap.add_argument("--topics", action="append", default=None, metavar="GLOB", help="only topics matching (repeatable)")
+    ap.add_argument("--batch", action="store_true", help="send states as batch envelopes on @batch/<process> like the propagators")
+    ap.add_argument("--wait", type=float, default=5.0, help="wait up to this many s for a subscriber before starting (default 5)")
+    ap.add_argument("--hold", action="store_true", help="after the end, keep answering control queries until stop")
+    ap.add_argument("--control-scenario", default=None, help="scenario name of the control keys (default: the recorded one)")
+    ap.add_argument("--port", type=int, default=None, help="loopback port to listen on (default: a free one)")
+    ap.add_argument("--quiet", action="store_true", help="no progress line")
+    bus.add_bus_arguments(ap)
+    args = ap.parse_args(argv)
+    try:
+        rate = parse_rate(args.rate, "--rate")
+        if args.wait < 0 or not math.isfinite(args.wait):
+            raise ValueError(f"--wait: expected a finite number of seconds >= 0, got {args.wait}")
+        for name in ("start", "end"):
+            value = getattr(args, name)
+            if value is not None and not math.isfinite(value):
+                raise ValueError(f"--{name}: expected a finite number of seconds, got {value}")
+        stream = McapStream(args.file)
+    except (ValueError, RecordingError) as exc:
+        print(f"astrodyn replay: error: {exc}", file=sys.stderr)
+        return 1 if isinstance(exc, RecordingError) else 2
+    listen = args.listen
+    if listen is None and args.mode != "client":
+        listen = [bus.loopback_endpoint(args.port)]
+    stop_signal = {"why": None}
+    for sig in (signal.SIGTERM, signal.SIGINT):
+        signal.signal(sig, lambda s, f: stop_signal.update(why=signal.Signals(s).name))
+    tty = sys.stderr.isatty()
+    with stream:
+        try:
+            scenario = args.control_scenario or scenario_of(stream)
+            messages.check_name(scenario, "--control-scenario")
+            session = bus.open_session(listen=listen, connect=args.connect, mode=args.mode)
+        except (RecordingError, messages.MessageError, bus.BusError) as exc:
+            print(f"astrodyn replay: error: {exc}", file=sys.stderr)
+            return 1
+        with session:
+            try:
+                rep = Replayer(session, stream, rate=rate, start_t=args.start, end_t=args.end,
+                               topics=args.topics, batch=args.batch)
+            except (ValueError, RecordingError) as exc:
+                print(f"astrodyn replay: error: {exc}", file=sys.stderr)
+                return 2
+            if stream.truncated or stream.corrupt_chunks:
+                print(f"astrodyn replay: warning: {stream.path}: {stream.report()}", file=sys.stderr, flush=True)
+            print(json.dumps({"replaying": stream.path, "scenario": scenario, "listen": listen, "connect": args.connect,
+                              "control": f"astrodyn/{scenario}/@control/*", "real_time_factor": args.rate}), flush=True)
+            stop_requests: list[bus.ControlRequest] = []
+            try:
+                with bus.ControlServer(session, scenario, verbs=REPLAY_VERBS) as control:
+                    rep.wait_for_subscriber(args.wait)
+                    last_print = 0.0
+                    while True:
+                        for req in control.poll():
+                            if rep.handle(req):
+                                stop_requests.append(req)
+                        if rep.state == "stopped" or stop_signal["why"]:
+                            break
+                        more = rep.step()
+                        if not more and rep.state == "finished" and not args.hold:
+                            break
+                        if rep.state != "running":
+                            time.sleep(_POLL_S)
+                        now = time.monotonic()
+                        if not args.quiet and now - last_print >= (0.5 if tty else 5.0):
+                            last_print = now
+                            print(("\r" if tty else "") + _progress_line(rep), end="" if tty else "\n",
+                                  file=sys.stderr, flush=True)
+                    rep._flush_batches()
+                    if stop_signal["why"]:
+                        rep.state = "stopped"
+                    summary = rep.status()
+                    if not stream.truncated and not stream.corrupt_chunks:
+                        summary["file_report"] = "complete"
+                    for req in stop_requests:
+                        req.reply(summary)
+                    time.sleep(0.05)  # let the last puts and replies leave before the session closes
+            finally:
+                rep.close()
+    if not args.quiet:
+        print(("\r" if tty else "") + _progress_line(rep), file=sys.stderr, flush=True)
+        if not summary["complete"]:
+            print(f"astrodyn replay: {stream.path} is incomplete ({summary['file_report']}); "
+                  f"replayed the {rep.published} complete messages", file=sys.stderr)
+    print(json.dumps(summary), flush=True)
+    return 0

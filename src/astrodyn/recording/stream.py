@@ -1,0 +1,319 @@
+"""Raw messages of an MCAP file in log-time order, chunk by chunk, for replay and export.
+
+>>> with open_stream("demo.mcap") as s:                              # doctest: +SKIP
+...     for m in s.messages(topics="astrodyn/demo/*/orbit", start_t=60.0):
+...         m.topic, m.log_time, m.data      # str, int ns since the Unix epoch, payload bytes
+
+:func:`astrodyn.recording.load` turns a whole file into arrays; this module hands out
+the records themselves (payload bytes untouched) in ``log_time`` order, which is what a
+replay needs.  It works on complete files and on files whose writer was killed:
+
+1. *Index pass*: the top-level records are walked by their length prefixes, reading only
+   the 28-byte head of each Chunk record (start/end log time) and seeking over its data.
+   Metadata, Schema and Channel records outside chunks are read.  The walk stops at the
+   footer, or at the first record that does not fit in what is left of the file (a cut
+   file: ``truncated`` is set and ``truncation`` says where).  A file that does not start
+   with the MCAP magic raises :class:`RecordingError`.
+2. *Merge*: chunks sorted by their start time are opened lazily (decompressed, CRC
+   checked) only when the merge reaches their start time; one head message per open chunk
+   sits in a heap.  Memory is the chunks that overlap the current log time, never the
+   file.  A chunk that fails to decompress is skipped and counted in ``corrupt_chunks``.
+
+Ties in ``log_time`` keep file order.  A channel record is looked up when its message is
+handed out, not when its chunk is opened, so a channel defined in an earlier chunk (the
+astrodyn writer puts each definition in the first chunk that needs it) is always known
+by then.  Messages on channels never defined are counted in ``orphans``.
+
+Times: ``start_t`` / ``end_t`` are seconds since the scenario epoch (the ``t`` of the
+messages), converted with ``epoch_unix_ns`` of the "recording" metadata record
+(``log_time = epoch_unix_ns + round(t * 1e9)``); ``start_ns`` / ``end_ns`` are raw
+log times.  The end is inclusive.
+"""
+
+from __future__ import annotations
+
+import fnmatch
+import heapq
+import io
+import os
+import struct
+from dataclasses import dataclass
+from typing import BinaryIO, Iterator, Sequence
+
+from mcap.data_stream import ReadDataStream
+from mcap.opcode import Opcode
+from mcap.records import Channel, Chunk, Message, Metadata, Schema
+from mcap.stream_reader import breakup_chunk
+
+from astrodyn.recording.reader import MCAP_MAGIC
+from astrodyn.recording.writer import RecordingError
+
+__all__ = ["RawMessage", "McapStream", "open_stream", "topic_matcher"]
+
+_HEADER = struct.Struct("<BQ")
+_CHUNK_HEAD = struct.Struct("<QQ")  # message_start_time, message_end_time
+_UNKNOWN = object()
+
+
+@dataclass(frozen=True)
+class RawMessage:
+    """One recorded message: topic, schema name, encoding, times (ns), MCAP sequence, payload."""
+
+    topic: str
+    schema_name: str
+    message_encoding: str
+    log_time: int
+    publish_time: int
+    sequence: int
+    data: bytes
+
+
+@dataclass
+class _ChunkRef:
+    start: int
+    end: int
+    offset: int  # of the record's opcode byte
+    length: int  # record body length
+    single: Message | None = None  # a top-level (unchunked) message
+
+
+def topic_matcher(topics: str | Sequence[str] | None):
+    """A predicate on topics from shell-style globs (``*`` matches across ``/``); None: all."""
+    if topics is None:
+        return lambda topic: True
+    patterns = [topics] if isinstance(topics, str) else list(topics)
+    for p in patterns:
+        if not isinstance(p, str) or not p:
+            raise ValueError(f"topics: expected non-empty glob strings like 'astrodyn/demo/*/orbit', got {p!r}")
+    return lambda topic: any(fnmatch.fnmatchcase(topic, p) for p in patterns)
+
+
+class McapStream:
+    """An indexed MCAP file (see the module docstring); use as a context manager."""
+
+    def __init__(self, path: str | os.PathLike):
+        self.path = os.fspath(path)
+        try:
+            self._f: BinaryIO = open(self.path, "rb")
+            self.size = os.fstat(self._f.fileno()).st_size
+        except OSError as exc:
+            raise RecordingError(f"{self.path}: cannot open: {exc.strerror or exc}") from None
+        self.schemas: dict[int, Schema] = {}
+        self.channels: dict[int, Channel] = {}
+        self.metadata: dict[str, dict[str, str]] = {}
+        self.chunks: list[_ChunkRef] = []
+        self.truncated = True
+        self.truncation = ""
+        self.corrupt_chunks = 0
+        self.orphans = 0
+        self.notes: list[str] = []
+        try:
+            self._index()
+        except BaseException:
+            self._f.close()
+            raise
+
+    # ------------------------------------------------------------------ index pass
+
+    def _index(self) -> None:
+        f, size, path = self._f, self.size, self.path
+        head = f.read(8)
+        if head != MCAP_MAGIC:
+            if size == 0:
+                raise RecordingError(f"{path}: not an MCAP file (empty file)")
+            if len(head) < 8 and MCAP_MAGIC.startswith(head):
+                self.truncation = f"file ends inside the opening magic ({size} bytes)"
+                return
+            raise RecordingError(f"{path}: not an MCAP file (bad magic)")
+        pos = 8
+        while True:
+            if pos == size:
+                self.truncation = f"file ends at byte {pos} without data end and footer (writer did not finish)"
+                return
+            if size - pos < 9:
+                self.truncation = f"file ends inside a record header at byte {pos}"
+                return
+            f.seek(pos)
+            opcode, length = _HEADER.unpack(f.read(9))
+            if length > size - pos - 9:
+                name = Opcode(opcode).name if opcode in Opcode._value2member_map_ else f"opcode {opcode:#x}"
+                self.truncation = f"{name} record at byte {pos} needs {length} bytes, only {size - pos - 9} left (cut or corrupt)"
+                return
+            if opcode == Opcode.CHUNK:
+                if length < _CHUNK_HEAD.size:
+                    self.notes.append(f"chunk record at byte {pos} too short ({length} bytes), skipped")
+                    self.corrupt_chunks += 1
+                else:
+                    start, end = _CHUNK_HEAD.unpack(f.read(_CHUNK_HEAD.size))
+                    self.chunks.append(_ChunkRef(start, end, pos, length))
+            elif opcode in (Opcode.SCHEMA, Opcode.CHANNEL, Opcode.METADATA, Opcode.MESSAGE):
+                body = f.read(length)
+                try:
+                    self._top_level(opcode, body, pos, length)
+                except Exception as exc:  # damaged record whose framing is intact
+                    self.notes.append(f"damaged {Opcode(opcode).name} record at byte {pos}: {exc}")
+            elif opcode == Opcode.FOOTER:
+                f.seek(pos + 9 + length)
+                if f.read(8) == MCAP_MAGIC:
+                    self.truncated = False
+                else:
+                    self.truncation = "footer not followed by the closing magic"
+                return
+            pos += 9 + length
+
+    def _top_level(self, opcode: int, body: bytes, pos: int, length: int) -> None:
+        stream = ReadDataStream(io.BytesIO(body))
+        if opcode == Opcode.SCHEMA:
+            rec = Schema.read(stream)
+            self.schemas[rec.id] = rec
+        elif opcode == Opcode.CHANNEL:
+            rec = Channel.read(stream)
+            self.channels.setdefault(rec.id, rec)
+        elif opcode == Opcode.METADATA:
+            rec = Metadata.read(stream)
+            self.metadata[rec.name] = dict(rec.metadata)
+        else:
+            rec = Message.read(stream, len(body))
+            self.chunks.append(_ChunkRef(rec.log_time, rec.log_time, pos, length, single=rec))
+
+    # ------------------------------------------------------------------ properties
+
+    @property
+    def epoch_ns(self) -> int | None:
+        """``epoch_unix_ns`` of the "recording" (or "scenario") metadata record, if any."""
+        for name in ("recording", "scenario"):
+            raw = self.metadata.get(name, {}).get("epoch_unix_ns")
+            if raw is not None:
+                try:
+                    return int(raw)
+                except ValueError:
+                    pass
+        return None
+
+    @property
+    def start_ns(self) -> int | None:
+        """Smallest chunk start log time (None for a file without messages)."""
+        return min((c.start for c in self.chunks), default=None)
+
+    @property
+    def end_ns(self) -> int | None:
+        """Largest chunk end log time (None for a file without messages)."""
+        return max((c.end for c in self.chunks), default=None)
+
+    def t_to_ns(self, t: float, what: str = "t") -> int:
+        """Seconds since the scenario epoch -> log time ns (needs the epoch metadata)."""
+        epoch = self.epoch_ns
+        if epoch is None:
+            raise RecordingError(f"{self.path}: {what}: the file has no epoch_unix_ns metadata, give log times in ns instead")
+        if not isinstance(t, (int, float)) or t != t or t in (float("inf"), float("-inf")):
+            raise ValueError(f"{what}: expected a finite number of seconds since the scenario epoch, got {t!r}")
+        return epoch + round(t * 1e9)
+
+    def ns_to_t(self, ns: int) -> float:
+        epoch = self.epoch_ns
+        return (ns - (epoch or 0)) / 1e9
+
+    # ------------------------------------------------------------------ merge
+
+    def _open_chunk(self, ref: _ChunkRef) -> list:
+        if ref.single is not None:
+            return [ref.single]
+        self._f.seek(ref.offset + 9)
+        body = self._f.read(ref.length)
+        try:
+            chunk = Chunk.read(ReadDataStream(io.BytesIO(body)))
+            records = breakup_chunk(chunk, validate_crc=True)
+        except Exception as exc:  # zstd error, CRC mismatch, cut inner record
+            self.corrupt_chunks += 1
+            self.notes.append(f"corrupt chunk at byte {ref.offset} skipped: {type(exc).__name__}: {exc}")
+            return []
+        out = []
+        for rec in records:
+            if isinstance(rec, Message):
+                out.append(rec)
+            elif isinstance(rec, Schema):
+                self.schemas.setdefault(rec.id, rec)
+            elif isinstance(rec, Channel):
+                self.channels.setdefault(rec.id, rec)
+        return out
+
+    def messages(
+        self,
+        topics: str | Sequence[str] | None = None,
+        *,
+        start_t: float | None = None,
+        end_t: float | None = None,
+        start_ns: int | None = None,
+        end_ns: int | None = None,
+    ) -> Iterator[RawMessage]:
+        """Messages with ``start <= log_time <= end`` on matching topics, in log-time order."""
+        match = topic_matcher(topics)
+        lo = self.t_to_ns(start_t, "start") if start_t is not None else start_ns
+        hi = self.t_to_ns(end_t, "end") if end_t is not None else end_ns
+        lo = -1 if lo is None else lo
+        hi = 2**64 if hi is None else hi
+        refs = sorted(
+            (c for c in self.chunks if c.end >= lo and c.start <= hi),
+            key=lambda c: (c.start, c.offset),
+        )
+        heap: list = []
+        nxt = 0
+        cache: dict[int, tuple[str, str, str] | None] = {}
+        while True:
+            while nxt < len(refs) and (not heap or refs[nxt].start <= heap[0][0]):
+                msgs = [m for m in self._open_chunk(refs[nxt]) if lo <= m.log_time <= hi]
+                msgs.sort(key=lambda m: m.log_time)  # stable: file order within equal times
+                if msgs:
+                    it = iter(msgs)
+                    first = next(it)
+                    heapq.heappush(heap, (first.log_time, nxt, 0, first, it))
+                nxt += 1
+            if not heap:
+                return
+            log_time, order, pos, msg, it = heap[0]
+            follower = next(it, None)
+            if follower is None:
+                heapq.heappop(heap)
+            else:
+                heapq.heapreplace(heap, (follower.log_time, order, pos + 1, follower, it))
+            info = cache.get(msg.channel_id, _UNKNOWN)
+            if info is _UNKNOWN:
+                ch = self.channels.get(msg.channel_id)
+                if ch is None:
+                    self.orphans += 1
+                    continue
+                schema = self.schemas.get(ch.schema_id)
+                info = cache[msg.channel_id] = (
+                    (ch.topic, schema.name if schema is not None else "", ch.message_encoding) if match(ch.topic) else None
+                )
+            if info is None:
+                continue
+            yield RawMessage(info[0], info[1], info[2], msg.log_time, msg.publish_time, msg.sequence, msg.data)
+
+    def topics(self) -> list[str]:
+        """Topics of the channels known so far (all of them after a full pass or a summary)."""
+        return sorted({c.topic for c in self.channels.values()})
+
+    def report(self) -> str:
+        """One line: complete, or why not (truncation, corrupt chunks, orphans)."""
+        parts = []
+        if self.truncated:
+            parts.append(f"truncated: {self.truncation}; replayed/exported what is complete")
+        parts += self.notes
+        if self.orphans:
+            parts.append(f"{self.orphans} messages on channels whose definition was lost")
+        return "; ".join(parts) if parts else "complete"
+
+    def close(self) -> None:
+        self._f.close()
+
+    def __enter__(self) -> McapStream:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def open_stream(path: str | os.PathLike) -> McapStream:
+    """Index ``path`` (a complete or cut MCAP file); :class:`RecordingError` if it is not MCAP."""
+    return McapStream(path)
