@@ -353,6 +353,9 @@ def main(argv: list[str] | None = None) -> int:
             if value is not None and not math.isfinite(value):
                 raise ValueError(f"--{name}: expected a finite number of seconds, got {value}")
         stream = McapStream(args.file)
+        if not stream.chunks:
+            stream.close()
+            raise RecordingError(f"{stream.path}: nothing to replay ({stream.truncation if stream.truncated else 'no messages'})")
     except (ValueError, RecordingError) as exc:
         print(f"astrodyn replay: error: {exc}", file=sys.stderr)
         return 1 if isinstance(exc, RecordingError) else 2

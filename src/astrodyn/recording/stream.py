@@ -298,7 +298,7 @@ class McapStream:
         """One line: complete, or why not (truncation, corrupt chunks, orphans)."""
         parts = []
         if self.truncated:
-            parts.append(f"truncated: {self.truncation}; replayed/exported what is complete")
+            parts.append(f"truncated: {self.truncation}")
         parts += self.notes
         if self.orphans:
             parts.append(f"{self.orphans} messages on channels whose definition was lost")
