@@ -168,6 +168,8 @@ def run_scenario(scenario: Scenario, config_path: Path, out: Path, *, cross_chec
                 for k, v in (extra_args or {}).get(kind, {}).items():
                     argv += [k, str(v)]
                 children[kind] = _Child(kind, argv, tmpd)
+            if progress:
+                print("  started " + ", ".join(f"{n} (pid {c.pid})" for n, c in children.items()), file=sys.stderr, flush=True)
             failure = _watch(scenario, p, children, beats, alive, progress, timeout_s)
             logger = children["logger"]
             if failure:
