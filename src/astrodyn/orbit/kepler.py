@@ -16,7 +16,9 @@ How the accuracy is obtained (every piece is exercised by ``tests/test_kepler.py
   revolution: ``E = M + (E_red - M_red)``, so ``E - e sin E = M``.
 * **Starter.** Markley (1995), "Kepler equation solver", Celest. Mech. Dyn.
   Astr. 63, 101-111: a cubic starter followed by his fifth-order correction
-  (about 1e-15 relative already).  For the hyperbola, an upper bound from the
+  (about 1e-15 relative already), here applied to the cancellation-free
+  residual; sine and cosine at the corrected point come from a Taylor
+  rotation, so a typical solve makes one libm sin/cos call.  For the hyperbola, an upper bound from the
   cubic ``(e - 1) F + e F^3 / 6 = M`` or ``asinh(M / (e - 1))``, tightened by
   one fixed-point step ``F = asinh((M + F) / e)``, so Newton/Halley converge
   monotonically from above.
@@ -192,11 +194,11 @@ def _sinh_parts(x):
 # ---------------------------------------------------------------------------
 @jit
 def _kepler_start(M, e):
-    """Markley (1995) starter + fifth-order correction for ``M`` in ``[-pi, pi]``, ``0 <= e < 1``.
+    """Markley (1995) cubic starter for ``M`` in ``[-pi, pi]``, ``0 <= e < 1`` (his eqs. 20-21).
 
-    Markley eqs. (20)-(21) (cubic starter) and (29)-(31) (fifth-order
-    correction), with the residual and derivative written without cancellation.
-    Accurate to ~1e-15 relative; callers polish with :func:`_solve_diff_ell`.
+    Relative error below about 1e-3; :func:`_solve_diff_ell` then applies
+    Markley's fifth-order correction (eqs. 29-31) to the cancellation-free
+    residual and polishes.
     """
     sgn = 1.0
     if M < 0.0:
@@ -216,17 +218,20 @@ def _kepler_start(M, e):
         E = (2.0 * r * w / den + M) / d
     else:
         E = M / d
-    s = math.sin(E)
-    c = math.cos(E)
-    f0 = ome * E + e * _x_minus_sin(E, s) - M
-    f1 = ome + e * _one_minus_cos(s, c)
-    f2 = e * s
-    f3 = 1.0 - f1
-    f4 = -f2
-    d3 = -f0 / (f1 - 0.5 * f0 * f2 / f1)
-    d4 = -f0 / (f1 + 0.5 * d3 * f2 + d3 * d3 * f3 / 6.0)
-    d5 = -f0 / (f1 + 0.5 * d4 * f2 + d4 * d4 * f3 / 6.0 + d4 * d4 * d4 * f4 / 24.0)
-    return sgn * (E + d5)
+    return sgn * E
+
+
+@jit(inline="always")
+def _rotate(s, c, d):
+    """``(sin(x + d), cos(x + d))`` from ``s = sin x``, ``c = cos x`` for ``|d| <= 0.05``.
+
+    Taylor series of ``sin d`` and ``1 - cos d`` (truncation below 1e-19), so
+    a small correction needs no further libm call.
+    """
+    d2 = d * d
+    sd = d * (1.0 - d2 / 6.0 * (1.0 - d2 / 20.0 * (1.0 - d2 / 42.0 * (1.0 - d2 / 72.0))))
+    omcd = 0.5 * d2 * (1.0 - d2 / 12.0 * (1.0 - d2 / 30.0 * (1.0 - d2 / 56.0)))
+    return s + (c * sd - s * omcd), c - (s * sd + c * omcd)
 
 
 @jit
@@ -241,40 +246,51 @@ def _solve_diff_ell(q, C, S, mh, ml, x, lo, hi):
     classical equation.  The left side is increasing (derivative ``r / a > 0``);
     ``[lo, hi]`` must bracket the root, ``x`` is the starter.
 
+    Steps: Markley's fifth-order correction (his eqs. 29-31 with this
+    residual's derivatives), Newton or bisection when that leaves the bracket;
+    stop when the residual is at its rounding-noise level.  After a step of at
+    most 0.05 rad the new sine and cosine come from :func:`_rotate`.
+
     Returns ``(x, sin x, cos x, 1 - cos x, r / a)`` consistent to first order.
     """
-    s = 0.0
-    c = 1.0
-    omc = 0.0
-    Fp = 1.0
+    s = math.sin(x)
+    c = math.cos(x)
     for _ in range(MAX_ITER):
-        s = math.sin(x)
-        c = math.cos(x)
         omc = _one_minus_cos(s, c)
         xms = _x_minus_sin(x, s)
         Fp = q + C * omc + S * s  # r / a
         F = (q * x + C * xms + S * omc - mh) - ml
         noise = EPS * (abs(q * x) + abs(C * xms) + abs(S * omc) + abs(mh))
+        F2 = C * s + S * c
         if abs(F) <= 2.0 * noise:
             dx = -F / Fp
             x += dx
             s, c = s + c * dx, c - s * dx
             omc += s * dx
-            Fp += (C * s + S * c) * dx
+            Fp += F2 * dx
             return x, s, c, omc, Fp
         if F > 0.0:
             hi = min(hi, x)
         else:
             lo = max(lo, x)
-        dx = -F / Fp
-        den = Fp + 0.5 * dx * (C * s + S * c)  # Halley
-        if den > 0.5 * Fp:
-            dx = -F / den
+        # derivatives: F' = Fp, F'' = F2, F''' = F3, F'''' = -F2
+        F3 = C * c - S * s
+        d3 = -F / (Fp - 0.5 * F * F2 / Fp)
+        d4 = -F / (Fp + 0.5 * d3 * F2 + d3 * d3 * F3 / 6.0)
+        dx = -F / (Fp + 0.5 * d4 * F2 + d4 * d4 * F3 / 6.0 - d4 * d4 * d4 * F2 / 24.0)
         xn = x + dx
         if not (lo <= xn <= hi):
-            xn = 0.5 * (lo + hi)
+            xn = x - F / Fp  # Newton, then bisection if even that leaves the bracket
+            if not (lo <= xn <= hi):
+                xn = 0.5 * (lo + hi)
         if xn == x:
             break
+        d = xn - x
+        if abs(d) <= 0.05:
+            s, c = _rotate(s, c, d)
+        else:
+            s = math.sin(xn)
+            c = math.cos(xn)
         x = xn
     s = math.sin(x)
     c = math.cos(x)
