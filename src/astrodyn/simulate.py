@@ -258,10 +258,7 @@ class AttitudeEngine:
             else:
                 if times[0] < b.t0:
                     raise ValueError(f"times: torqued attitudes continue forward only; got {times[0]} s before {b.t0} s")
-                torque = None
-                if b.torque is not None:
-                    t_start, model = b.t0, b.torque
-                    torque = _Shifted(model, t_start)
+                torque = _shifted(b.torque, b.t0)
                 wp, qp, info = propagate_attitude(b.inertia, b.w0, b.q0, times - b.t0, torque=torque,
                                                   rotor_momentum=b.rotor_momentum, method="split4", step=self.step,
                                                   error_estimate=False)
@@ -276,14 +273,21 @@ class AttitudeEngine:
         return q, w
 
 
-class _Shifted:
-    """A torque model seen from a block that starts at ``t0``: ``model(t + t0, q, w)``."""
+def _shifted(model, t0: float):
+    """The torque model as seen from a block starting at ``t0`` (block-relative times).
 
-    def __init__(self, model, t0: float):
-        self.model, self.t0 = model, t0
+    The built-in models stay built-in types so the integrator keeps its compiled path:
+    uniform gravity and body-fixed constant torques do not depend on t; gravity gradient
+    gets its orbit position shifted by ``t0``.
+    """
+    from astrodyn.attitude.torques import GravityGradientTorque
 
-    def __call__(self, t, q, w=None):
-        return self.model(np.asarray(t, dtype=np.float64) + self.t0, q, w)
+    if model is None or t0 == 0.0:
+        return model
+    if isinstance(model, GravityGradientTorque):
+        position = model.position
+        return GravityGradientTorque(model.mu, lambda t: position(np.asarray(t, dtype=np.float64) + t0), model.inertia)
+    return model
 
 
 # --------------------------------------------------------------------------- whole run
