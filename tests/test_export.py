@@ -1,0 +1,213 @@
+"""Exports (CSV, Parquet, CCSDS OEM / AEM, Foxglove copy) read back independently.
+
+The OEM and AEM files are read with a small KVN parser written here (not the exporter's
+code), their epochs with ``datetime`` (UTC epoch without leap second in the span, so
+calendar arithmetic is exact), and compared with the states the core produced before
+they were recorded.  The attitude direction is checked physically: for torque-free
+motion the angular momentum ``I w`` (body) mapped to frame A must stay constant, which
+holds only if the quaternion is applied in the documented direction.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import subprocess
+import sys
+from datetime import datetime
+from pathlib import Path
+
+import numpy as np
+import pytest
+from mcap.reader import make_reader
+
+from astrodyn.recording.export import ExportError, export, parse_ccsds_epoch
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _recordings import LEO_TWO_BODIES, leo_recording, record  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def recording(tmp_path_factory):
+    path = tmp_path_factory.mktemp("export") / "ex.mcap"
+    sc, res = leo_recording(path, name="ex", duration="600 s", rate="0.5 Hz")
+    return path, sc, res
+
+
+def parse_kvn(text: str) -> tuple[dict, dict, list[list[str]]]:
+    """(header, metadata, data rows) of a one-segment CCSDS KVN ephemeris message."""
+    header, meta, rows = {}, {}, []
+    section = "header"
+    for raw in text.splitlines():
+        line = raw.strip()
+        if not line or line.startswith("COMMENT"):
+            continue
+        if line in ("META_START", "META_STOP", "DATA_START", "DATA_STOP"):
+            section = {"META_START": "meta", "META_STOP": "data", "DATA_START": "data", "DATA_STOP": "end"}[line]
+            continue
+        if section in ("header", "meta"):
+            key, _, value = line.partition("=")
+            (header if section == "header" else meta)[key.strip()] = value.strip()
+        elif section == "data":
+            rows.append(line.split())
+    return header, meta, rows
+
+
+def _seconds_from(epoch: str, start: datetime) -> float:
+    return (datetime.strptime(epoch, "%Y-%m-%dT%H:%M:%S.%f") - start).total_seconds()
+
+
+def test_oem_parses_back_to_the_recorded_states(recording, tmp_path):
+    path, sc, res = recording
+    files = export(path, "oem", tmp_path)
+    assert sorted(f.name for f in files) == ["geo.oem", "leo.oem"]
+    for i, name in enumerate(res.orbit_names):
+        header, meta, rows = parse_kvn((tmp_path / f"{name}.oem").read_text())
+        assert header["CCSDS_OEM_VERS"] == "3.0" and header["ORIGINATOR"]
+        assert meta["OBJECT_NAME"] == name and meta["CENTER_NAME"] == "EARTH"
+        assert meta["REF_FRAME"] == "GCRF" and meta["TIME_SYSTEM"] == "UTC"
+        assert meta["START_TIME"] == "2026-03-20T12:00:00.000000" and len(rows) == res.t.size
+        start = datetime(2026, 3, 20, 12)
+        t = np.array([_seconds_from(row[0], start) for row in rows])
+        np.testing.assert_array_equal(t, res.t)  # whole seconds: exact in the 1 us format
+        state = np.array([[float(x) for x in row[1:]] for row in rows]) * 1e3  # km -> m
+        # km written with repr of r/1e3: the round trip r -> r/1e3 -> *1e3 costs <= 2 ulp
+        np.testing.assert_allclose(state[:, :3], res.r[:, i], rtol=5e-16, atol=0)
+        np.testing.assert_allclose(state[:, 3:], res.v[:, i], rtol=5e-16, atol=1e-18)
+    assert meta["STOP_TIME"] == "2026-03-20T12:10:00.000000"
+
+
+def test_oem_time_system_follows_the_epoch_scale(tmp_path):
+    path = tmp_path / "tdb.mcap"
+    record(path, LEO_TWO_BODIES.format(name="tdb", duration="10 s", rate="1 Hz").replace(":00 UTC", ":00 TDB"))
+    export(path, "oem", tmp_path)
+    _, meta, rows = parse_kvn((tmp_path / "leo.oem").read_text())
+    # epoch + t stays in the epoch's own scale: TDB 12:00:00 + 10 s = TDB 12:00:10
+    assert meta["TIME_SYSTEM"] == "TDB" and rows[0][0] == "2026-03-20T12:00:00.000000" and rows[-1][0] == "2026-03-20T12:00:10.000000"
+
+
+def _ccsds_dcm_a_to_b(q1, q2, q3, qc):
+    """CCSDS 504.0-B-2 quaternion (vector part q1..q3, scalar qc) -> matrix M with v_B = M v_A."""
+    return np.array([
+        [qc * qc + q1 * q1 - q2 * q2 - q3 * q3, 2 * (q1 * q2 + q3 * qc), 2 * (q1 * q3 - q2 * qc)],
+        [2 * (q1 * q2 - q3 * qc), qc * qc - q1 * q1 + q2 * q2 - q3 * q3, 2 * (q2 * q3 + q1 * qc)],
+        [2 * (q1 * q3 + q2 * qc), 2 * (q2 * q3 - q1 * qc), qc * qc - q1 * q1 - q2 * q2 + q3 * q3],
+    ])
+
+
+def test_aem_parses_back_with_documented_order_and_direction(recording, tmp_path):
+    path, sc, res = recording
+    files = export(path, "aem", tmp_path)
+    assert [f.name for f in files] == ["leo.aem"]
+    text = files[0].read_text()
+    header, meta, rows = parse_kvn(text)
+    assert header["CCSDS_AEM_VERS"] == "2.0"
+    assert meta["ATTITUDE_TYPE"] == "QUATERNION" and meta["REF_FRAME_A"] == "GCRF" and meta["REF_FRAME_B"] == "SC_BODY_1"
+    assert "scalar QC last" in text and len(rows) == res.t.size
+    quat = np.array([[float(x) for x in row[1:]] for row in rows])
+    # Q1 Q2 Q3 QC = e1 e2 e3 e0, values unchanged (repr round trip: exact)
+    np.testing.assert_array_equal(quat, np.concatenate([res.q[:, 0, 1:], res.q[:, 0, :1]], axis=1))
+    # direction: torque-free => H_A = M^T (I w) constant.  |I w| ~ 1e-2; M is built from
+    # the file's values to ~1 ulp, so H_A is constant to ~1e-15 relative; 1e-12 leaves room
+    # for the exact torque-free solution's own error (elliptic functions, ~1e-14).
+    inertia = np.diag([0.03, 0.035, 0.01])
+    h_a = np.array([_ccsds_dcm_a_to_b(*qk).T @ (inertia @ wk) for qk, wk in zip(quat, res.w[:, 0])])
+    scale = np.linalg.norm(h_a[0])
+    assert np.max(np.abs(h_a - h_a[0])) < 1e-12 * scale
+    # ... and the other direction would not be constant (the check can fail)
+    h_wrong = np.array([_ccsds_dcm_a_to_b(*qk) @ (inertia @ wk) for qk, wk in zip(quat, res.w[:, 0])])
+    assert np.max(np.abs(h_wrong - h_wrong[0])) > 1e-3 * scale
+
+
+def test_csv_round_trip_is_exact(recording, tmp_path):
+    path, sc, res = recording
+    files = export(path, "csv", tmp_path)
+    assert sorted(f.name for f in files) == ["geo.orbit.csv", "leo.attitude.csv", "leo.orbit.csv"]
+    with open(tmp_path / "leo.orbit.csv") as f:
+        rows = list(csv.DictReader(f))
+    assert len(rows) == res.t.size
+    assert [int(r["seq"]) for r in rows] == list(range(res.t.size))
+    np.testing.assert_array_equal([float(r["t"]) for r in rows], res.t)
+    r = np.array([[float(row[f"r_{c}"]) for c in "xyz"] for row in rows])
+    v = np.array([[float(row[f"v_{c}"]) for c in "xyz"] for row in rows])
+    np.testing.assert_array_equal(r, res.r[:, 0])
+    np.testing.assert_array_equal(v, res.v[:, 0])
+    assert {row["model"] for row in rows} == {"kepler"} and {row["frame"] for row in rows} == {"GCRF"}
+    epoch_ns = sc.epoch_unix_ns
+    assert [int(row["log_time_ns"]) for row in rows] == [epoch_ns + round(t * 1e9) for t in res.t]
+    with open(tmp_path / "leo.attitude.csv") as f:
+        rows = list(csv.DictReader(f))
+    q = np.array([[float(row[f"q_{i}"]) for i in range(4)] for row in rows])
+    np.testing.assert_array_equal(q, res.q[:, 0])
+
+
+def test_parquet_round_trip_or_clear_error(recording, tmp_path, monkeypatch):
+    path, _, res = recording
+    try:
+        import pyarrow.parquet as pq
+    except ImportError:
+        with pytest.raises(ExportError, match=r"needs the optional package pyarrow: pip install 'astrodyn\[parquet\]'"):
+            export(path, "parquet", tmp_path)
+        return
+    export(path, "parquet", tmp_path)
+    tab = pq.read_table(tmp_path / "leo.orbit.parquet").to_pydict()
+    np.testing.assert_array_equal(np.array([tab[f"r_{c}"] for c in "xyz"]).T, res.r[:, 0])
+
+
+def test_parquet_without_pyarrow_names_the_extra(recording, tmp_path, monkeypatch):
+    path, _, _ = recording
+    monkeypatch.setitem(sys.modules, "pyarrow", None)  # import pyarrow -> ImportError
+    with pytest.raises(ExportError, match="pyarrow"):
+        export(path, "parquet", tmp_path)
+
+
+def test_ccsds_day_of_year_epochs_are_converted():
+    doy = parse_ccsds_epoch("2026-079T12:00:00.5")
+    cal = parse_ccsds_epoch("2026-03-20T12:00:00.5")
+    assert datetime.strptime("2026-079", "%Y-%j").date().isoformat() == "2026-03-20"  # independent
+    assert abs((doy - cal).sec) < 1e-9 and doy.isot == "2026-03-20T12:00:00.500"
+    assert parse_ccsds_epoch("2026-001T00:00:00Z", "tdb").scale == "tdb"
+    with pytest.raises(ValueError, match="epoch: expected a CCSDS date"):
+        parse_ccsds_epoch("20 March 2026")
+
+
+def _rotate_active(xyzw, v):
+    """Hamilton active rotation of v by the unit quaternion (x, y, z, w) (written here)."""
+    x, y, z, w = xyzw
+    u = np.array([x, y, z])
+    return v + 2 * w * np.cross(u, v) + 2 * np.cross(u, np.cross(u, v))
+
+
+def test_foxglove_copy_has_frame_transforms_in_km_and_body_to_inertial(recording, tmp_path):
+    path, _, res = recording
+    (out,) = export(path, "foxglove", tmp_path)
+    with open(out, "rb") as f:
+        reader = make_reader(f)
+        summary = reader.get_summary()
+        names = {c.topic: summary.schemas[c.schema_id].name for c in summary.channels.values()}
+        counts = {c.topic: summary.statistics.channel_message_counts[c.id] for c in summary.channels.values()}
+        tf = [json.loads(m.data) for _, _, m in reader.iter_messages(topics=["foxglove/leo/tf"], log_time_order=True)]
+    assert names["foxglove/leo/tf"] == "foxglove.FrameTransform" and names["foxglove/geo/tf"] == "foxglove.FrameTransform"
+    assert names["astrodyn/ex/leo/orbit"] == "astrodyn.OrbitState" and counts["astrodyn/ex/leo/orbit"] == res.t.size
+    assert len(tf) == res.t.size and tf[0]["parent_frame_id"] == "GCRF" and tf[0]["child_frame_id"] == "leo"
+    trans = np.array([[m["translation"][c] for c in "xyz"] for m in tf])
+    np.testing.assert_allclose(trans * 1e3, res.r[:, 0], rtol=5e-16)
+    # rotation maps body components to inertial ones: H_inertial = R (I w) is constant
+    inertia = np.diag([0.03, 0.035, 0.01])
+    h = np.array([_rotate_active([m["rotation"][c] for c in "xyzw"], inertia @ w) for m, w in zip(tf, res.w[:, 0])])
+    assert np.max(np.abs(h - h[0])) < 1e-12 * np.linalg.norm(h[0])  # same reasoning as the AEM test
+
+
+def test_export_errors_are_clear(tmp_path, recording):
+    bad = tmp_path / "bad.mcap"
+    bad.write_text("not mcap")
+    proc = subprocess.run([sys.executable, "-m", "astrodyn.recording.export", str(bad), "--format", "csv", "--out", str(tmp_path)],
+                          capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 1 and "not an MCAP file" in proc.stderr and "Traceback" not in proc.stderr
+    only_orbits = tmp_path / "orb.mcap"
+    record(only_orbits, LEO_TWO_BODIES.format(name="orb", duration="4 s", rate="1 Hz").split("[bodies.attitude]")[0]
+           + LEO_TWO_BODIES.split('inertia = ["0.03 kg m2", "0.035 kg m2", "0.01 kg m2"]')[1])
+    with pytest.raises(ExportError, match="no attitude channels to export as aem"):
+        export(only_orbits, "aem", tmp_path / "aem")
+    with pytest.raises(ExportError, match="format: expected one of"):
+        export(recording[0], "xlsx", tmp_path)
