@@ -357,6 +357,9 @@ class Logger:
                     time.sleep(0.002)
             summary = self.status(channels=True)
             summary["reason"] = self.reason
+            # how far the run got, in the file itself (read back by load().metadata["end"])
+            self.recorder.add_metadata("end", {k: summary[k] for k in (
+                "reason", "t", "states", "missing", "duplicates", "malformed", "ended", "died", "stalled", "complete")})
             self.recorder.close()
             summary["file_complete"] = True
             for request in self._stop_requests:

@@ -319,6 +319,16 @@ class McapRecorder:
             self.flush()
         return status
 
+    def add_metadata(self, name: str, data: Mapping[str, Any]) -> None:
+        """Write one more metadata record into the current file (e.g. the logger's "end":
+        why and where the run stopped).  Values as for ``scenario_metadata``."""
+        if self._error is not None:
+            raise self._error
+        try:
+            self._writer.add_metadata(name, _metadata_strings(name, data))
+        except OSError as exc:
+            self._fail(exc)
+
     def write(self, key: str, msg: dict, publish_time: int | None = None) -> int:
         """Encode ``msg`` (validated against the key's schema) and record it."""
         payload = messages.encode(msg, key)
