@@ -280,9 +280,13 @@ class ReboundScene:
         direction = 1.0 if remaining > 0 else -1.0
         if sim.dt * direction <= 0.0:
             sim.dt = abs(sim.dt) * direction if sim.dt != 0.0 else remaining
+        # WHFast advances sim.t in two half steps, so a remainder of one ulp can
+        # round away to nothing and never close; a gap of a few ulp of the target
+        # is left (elapsed, not sim.t, is the time of the state anyway).
+        close_enough = 4.0 * math.ulp(target)
         for _ in range(self.max_steps):
             remaining = target - sim.t
-            if remaining * direction <= 0.0:
+            if remaining * direction <= 0.0 or abs(remaining) <= close_enough:
                 break
             proposal = sim.dt  # IAS15: its adaptive proposal; WHFast: the fixed step
             last = abs(proposal) >= abs(remaining)
@@ -433,7 +437,8 @@ def crosscheck(
         :func:`astrodyn.orbit.propagate`; otherwise pass ``propagator``.
     separate : bool
         If True, every body gets its own REBOUND simulation (its own adaptive IAS15
-        step; in one shared simulation the hardest body sets everyone's step).
+        step).  In one shared simulation the hardest body sets everyone's step
+        (more steps, more cost; the accuracy of the others stays at their floor).
     propagator : callable(r0, v0, dt, mu) -> (r, v), optional
         astrodyn's side of the comparison, vectorized over bodies like ``propagate``.
     whfast_dt : float, optional
@@ -453,6 +458,12 @@ def crosscheck(
         raise ValueError(f"times: expected a scalar or a 1-D array of elapsed times in s, got shape {np.shape(times)}")
     if not np.all(np.isfinite(t)):
         raise ValueError("times: every time must be finite")
+    if integrator not in INTEGRATORS:
+        raise ValueError(f"integrator: expected one of {INTEGRATORS}, got {integrator!r}")
+    if model not in MODELS:
+        raise ValueError(f"model: expected one of {MODELS}, got {model!r}")
+    if model == "j2" and (j2 is None or body_radius is None):
+        raise ValueError("model='j2' needs j2 (dimensionless) and body_radius (m)")
     prop = propagator if propagator is not None else _default_propagator(model)
     scene_kwargs = dict(
         integrator=integrator,

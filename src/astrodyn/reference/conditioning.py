@@ -22,10 +22,12 @@ tolerances as a multiple (about 100x) of it.
 
 One-ulp step: ``eps * |r|`` for position components, ``eps * |v|`` for velocity
 components (an upper bound of the ulp of any component), ``ulp(dt)`` for time.
-The response is measured with a 64x larger step and divided by 64, so that it
-stands well above the rounding of the reference's float64 output; the map is
-linear at that scale except where the sensitivity is of the order of the orbit
-itself, where any float64 answer is equally (un)informative.
+With the mpmath reference the responses are differenced in mpmath, so the step
+is exactly one ulp.  With a float64 ``propagate`` the step is 64 ulp and the
+response is divided by 64, so that it stands above the rounding of the
+outputs; the map is linear at that scale except where the sensitivity is of
+the order of the orbit itself, where any float64 answer is equally
+(un)informative.
 
 These functions use :func:`astrodyn.reference.orbit_mp.propagate_mp` (50-digit
 universal-variable propagation, independent of :mod:`astrodyn.orbit`) unless
@@ -38,22 +40,28 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 
+import mpmath as mp
 import numpy as np
 
 __all__ = ["ulp_sensitivity", "path_sensitivity", "time_to_periapsis"]
 
 _EPS = float(np.finfo(np.float64).eps)
-_STEP_SCALE = 64.0  # measure with 64 ulp and divide (see module docstring)
+_FLOAT_STEP_SCALE = 64.0  # float64 propagators: measure with 64 ulp and divide (module docstring)
 
 
 def _reference_propagator(dps: int) -> Callable:
+    """The mpmath reference, returning mpf results (differences taken in mpmath)."""
     from astrodyn.reference.orbit_mp import propagate_mp
 
     def prop(r0, v0, dt, mu):
-        r, v = propagate_mp(r0, v0, dt, mu, dps=dps)
-        return np.asarray(r, dtype=np.float64), np.asarray(v, dtype=np.float64)
+        return propagate_mp(r0, v0, dt, mu, dps=dps, as_float=False)
 
+    prop.dps = dps
     return prop
+
+
+def _as_float_state(rv):
+    return np.array([float(x) for x in rv], dtype=np.float64)
 
 
 def _broadcast(r0, v0, dt):
@@ -65,14 +73,24 @@ def _broadcast(r0, v0, dt):
 
 
 def _one_state(r0, v0, dt, mu, prop):
+    """(max |dr|, max |dv|) over the seven one-ulp input perturbations of one state."""
+    dps = getattr(prop, "dps", None)
+    scale = 1.0 if dps else _FLOAT_STEP_SCALE
     r0 = np.asarray(r0, dtype=np.float64)
     v0 = np.asarray(v0, dtype=np.float64)
     dt = float(dt)
     r_base, v_base = prop(r0, v0, dt, mu)
+    step_r = scale * _EPS * float(np.linalg.norm(r0))
+    step_v = scale * _EPS * float(np.linalg.norm(v0))
+    step_t = scale * float(np.spacing(abs(dt))) if dt != 0.0 else 0.0
+
+    def dist(a, b):
+        if dps:
+            with mp.workdps(dps + 20):
+                return float(mp.sqrt(sum((x - y) ** 2 for x, y in zip(a, b))))
+        return float(np.linalg.norm(np.asarray(a) - np.asarray(b)))
+
     dr = dv = 0.0
-    step_r = _STEP_SCALE * _EPS * float(np.linalg.norm(r0))
-    step_v = _STEP_SCALE * _EPS * float(np.linalg.norm(v0))
-    step_t = _STEP_SCALE * float(np.spacing(abs(dt))) if dt != 0.0 else 0.0
     for j in range(7):
         r1, v1, t1 = r0.copy(), v0.copy(), dt
         if j < 3:
@@ -84,9 +102,14 @@ def _one_state(r0, v0, dt, mu, prop):
         else:
             continue
         r2, v2 = prop(r1, v1, t1, mu)
-        dr = max(dr, float(np.linalg.norm(r2 - r_base)))
-        dv = max(dv, float(np.linalg.norm(v2 - v_base)))
-    return dr / _STEP_SCALE, dv / _STEP_SCALE
+        dr = max(dr, dist(r2, r_base))
+        dv = max(dv, dist(v2, v_base))
+    if not (np.isfinite(dr) and np.isfinite(dv)):
+        raise FloatingPointError(
+            f"the reference propagation of r0={r0.tolist()}, v0={v0.tolist()}, dt={dt!r} is not finite; "
+            "no sensitivity (and no tolerance) can be derived from it"
+        )
+    return dr / scale, dv / scale
 
 
 def ulp_sensitivity(r0, v0, dt, mu: float, *, propagate: Callable | None = None, dps: int = 50):
@@ -123,7 +146,7 @@ def time_to_periapsis(r0, v0, mu: float, dt: float) -> float | None:
     not pass periapsis (strictly inside).  Closed forms, float64 (only needed to
     a fraction of the passage time): the eccentric anomaly for ellipses
     (Vallado 4th ed. eq. 2-50), the hyperbolic anomaly for hyperbolas (eq. 2-53),
-    Barker's equation for |e - 1| < 1e-6 (eq. 2-36): t - t_p = (p D + D^3/3) /
+    Barker's equation when r / |a| < 1e-6 (eq. 2-36): t - t_p = (p D + D^3/3) /
     (2 sqrt(mu)) with D = r.v / sqrt(mu).
     """
     r0 = np.asarray(r0, dtype=np.float64)
@@ -134,7 +157,8 @@ def time_to_periapsis(r0, v0, mu: float, dt: float) -> float | None:
     h = float(np.linalg.norm(np.cross(r0, v0)))
     e = math.sqrt(max(0.0, 1.0 + 2.0 * energy * h * h / (mu * mu)))
     period = None
-    if abs(e - 1.0) < 1e-6:
+    # Branch on the energy, not on e: a nearly radial ellipse has e ~ 1 but a finite a.
+    if abs(2.0 * energy * rn / mu) < 1e-6:  # r / |a| < 1e-6: parabolic to float64 working accuracy
         d = rv / math.sqrt(mu)
         since = (h * h / mu * d + d**3 / 3.0) / (2.0 * math.sqrt(mu))
     elif e < 1.0:
@@ -170,8 +194,8 @@ def path_sensitivity(r0, v0, dt, mu: float, *, propagate: Callable | None = None
         tp = time_to_periapsis(r0[idx], v0[idx], mu, float(dt[idx]))
         if tp is None:
             continue
-        rp, vp = prop(r0[idx], v0[idx], tp, mu)
-        sr, sv = _one_state(rp, vp, float(dt[idx]) - tp, mu, prop)
+        rp, vp = prop(r0[idx], v0[idx], tp, mu)  # the integrator holds this state rounded to float64
+        sr, sv = _one_state(_as_float_state(rp), _as_float_state(vp), float(dt[idx]) - tp, mu, prop)
         dr[idx] = max(dr[idx], sr)
         dv[idx] = max(dv[idx], sv)
     return dr, dv
