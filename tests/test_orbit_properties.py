@@ -24,6 +24,7 @@ from hypothesis import assume, given
 from hypothesis import strategies as st
 
 from astrodyn.orbit import propagate
+from astrodyn.orbit.elements import state_from_elements
 from astrodyn.reference.conditioning import ulp_sensitivity
 
 EPS = np.finfo(float).eps
@@ -31,22 +32,10 @@ MU = 3.986004418e14
 
 
 def state(rp, e, i, raan, argp, nu_frac):
-    """Initial state from periapsis radius and angles (Curtis eqs. 4.45-4.49); nu kept inside the conic."""
+    """Initial state from periapsis radius and angles (``state_from_elements``); nu kept inside the conic."""
     nu_max = math.pi if e < 1 else 0.9 * math.acos(-1 / e)
-    nu = nu_frac * nu_max
-    p = rp * (1 + e)
-    r = p / (1 + e * math.cos(nu))
-    rp_ = np.array([r * math.cos(nu), r * math.sin(nu), 0.0])
-    vp_ = math.sqrt(MU / p) * np.array([-math.sin(nu), e + math.cos(nu), 0.0])
-    cO, sO, ci, si, cw, sw = (math.cos(raan), math.sin(raan), math.cos(i), math.sin(i), math.cos(argp), math.sin(argp))
-    Q = np.array(
-        [
-            [cO * cw - sO * sw * ci, -cO * sw - sO * cw * ci, sO * si],
-            [sO * cw + cO * sw * ci, -sO * sw + cO * cw * ci, -cO * si],
-            [sw * si, cw * si, ci],
-        ]
-    )
-    return Q @ rp_, Q @ vp_
+    r, v = state_from_elements(rp * (1 + e), e, i, raan, argp, nu_frac * nu_max, MU)
+    return np.asarray(r, dtype=float), np.asarray(v, dtype=float)
 
 
 def amplification(r0, v0, dt):

@@ -25,6 +25,7 @@ import numpy as np
 import pytest
 
 from astrodyn.orbit import lagrange_coefficients, propagate, stumpff
+from astrodyn.orbit.elements import state_from_elements
 from astrodyn.reference.conditioning import ulp_sensitivity
 from astrodyn.reference.orbit_mp import propagate_mp, stumpff_mp
 
@@ -35,23 +36,13 @@ AU = 1.495978707e11
 
 
 def perifocal_state(p, e, nu, mu, i=0.0, raan=0.0, argp=0.0):
-    """State from (p, e, nu) and orientation by the textbook formulas (Curtis eqs. 4.45, 4.46, 4.49).
+    """Test input from conic elements (``astrodyn.orbit.elements.state_from_elements``).
 
-    Used only to *construct* test inputs; the reference propagates the
-    resulting float64 state exactly, so any rounding here does not matter.
+    Only *constructs* inputs: the reference propagates the resulting float64
+    state exactly, so the accuracy of this construction does not matter.
     """
-    r = p / (1 + e * math.cos(nu))
-    rp = np.array([r * math.cos(nu), r * math.sin(nu), 0.0])
-    vp = math.sqrt(mu / p) * np.array([-math.sin(nu), e + math.cos(nu), 0.0])
-    cO, sO, ci, si, cw, sw = (math.cos(raan), math.sin(raan), math.cos(i), math.sin(i), math.cos(argp), math.sin(argp))
-    Q = np.array(
-        [
-            [cO * cw - sO * sw * ci, -cO * sw - sO * cw * ci, sO * si],
-            [sO * cw + cO * sw * ci, -sO * sw + cO * cw * ci, -cO * si],
-            [sw * si, cw * si, ci],
-        ]
-    )
-    return Q @ rp, Q @ vp
+    r, v = state_from_elements(p, e, i, raan, argp, nu, mu)
+    return np.asarray(r, dtype=float), np.asarray(v, dtype=float)
 
 
 def period(a, mu):
