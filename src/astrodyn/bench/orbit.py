@@ -235,11 +235,11 @@ def _parse(argv):
     ap.add_argument("--compare", type=int, default=40, help="of those, states run through REBOUND and DOP853 (default 40)")
     ap.add_argument("--seed", type=int, default=20240601, help="random seed of the states")
     ap.add_argument("--repeats", type=int, default=7, help="timing repeats, best is reported (default 7)")
-    ap.add_argument("--quick", action="store_true", help="smoke test: sizes 1,1000, sample 12, compare 6, repeats 2")
+    ap.add_argument("--quick", action="store_true", help="smoke test: sizes 1,1000, sample 8, compare 4, repeats 2")
     ap.add_argument("--markdown", metavar="FILE", help="also write the table (markdown) with the machine description")
     args = ap.parse_args(argv)
     if args.quick:
-        args.sizes, args.sample, args.compare, args.repeats = "1,1000", 12, 6, 2
+        args.sizes, args.sample, args.compare, args.repeats = "1,1000", 8, 4, 2
     try:
         args.sizes = [int(float(s)) for s in args.sizes.split(",") if s.strip()]
     except ValueError:
