@@ -1,0 +1,192 @@
+"""``astrodyn analyze FILE.mcap [--out DIR] [--seq 321]``: a report with plots from a recording.
+
+>>> from astrodyn.analysis import analyze
+>>> report = analyze("demo.mcap", "demo-report")         # doctest: +SKIP
+>>> report["bodies"]["iss"]["orbit"]["energy_drift_max"]  # the numbers of the report
+
+Writes into ``DIR`` (default ``<file>-report``):
+
+* ``report.md``   -- per body a table of numbers and the figures (Markdown);
+* ``report.html`` -- the same page for a browser, PNGs embedded by relative path;
+* ``report.json`` -- every number of the report (what the tests check);
+* ``<body>-<figure>.png`` -- per body with an orbit: ``orbit3d``, ``groundtrack``
+  (Earth-centred runs), ``elements``, ``orbit-drift``, ``crosscheck`` (if recorded);
+  with an attitude: ``euler``, ``quaternion``, ``rates``, and when the inertia is in the
+  scenario metadata ``polhode`` and ``attitude-drift``; for heavy tops ``top-angles``.
+
+Definitions of every number: :mod:`astrodyn.analysis.metrics`.  A cut or damaged file is
+analysed up to what is complete and the report says so at the top.
+"""
+
+from __future__ import annotations
+
+import argparse
+import html
+import json
+import os
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from astrodyn.recording import RecordingError, load
+
+__all__ = ["analyze", "main", "FIGURES"]
+
+#: figure name -> what it shows (report captions)
+FIGURES = {
+    "orbit3d": "orbit in 3D (inertial frame, km)",
+    "groundtrack": "ground track",
+    "elements": "osculating orbital elements",
+    "orbit-drift": "specific energy and angular momentum drift",
+    "crosscheck": "difference to the REBOUND cross-check",
+    "euler": "Euler angles",
+    "quaternion": "Euler parameters",
+    "rates": "body angular velocity",
+    "polhode": "polhode on the momentum sphere",
+    "attitude-drift": "kinetic energy and inertial angular momentum drift",
+    "top-angles": "precession and nutation",
+}
+
+_SEQS = ("121", "123", "131", "132", "212", "213", "231", "232", "312", "313", "321", "323")
+
+
+def _fmt(x) -> str:
+    if isinstance(x, float):
+        return f"{x:.6g}"
+    return str(x)
+
+
+def analyze(path: str | os.PathLike, out: str | os.PathLike | None = None, seq: str = "321") -> dict:
+    """Write the report of ``path`` into ``out``; returns the numbers (as in report.json)."""
+    from astrodyn.analysis import figures as fg
+    from astrodyn.analysis import metrics as mt
+
+    if seq not in _SEQS:
+        raise ValueError(f"seq: expected one of {', '.join(_SEQS)}, got {seq!r}")
+    run = load(path)
+    out = Path(out) if out is not None else Path(os.fspath(path)).with_suffix("").with_name(Path(path).stem + "-report")
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise RecordingError(f"{out}: cannot create the report directory: {exc.strerror or exc}") from None
+    central = mt.central_body_from_scenario(run.scenario)
+    inertias = mt.inertia_from_scenario(run.scenario)
+    earth = str(central.get("name", "")).lower() == "earth"
+    report: dict = {
+        "file": run.path, "scenario": run.scenario.get("name", "?"), "epoch": run.scenario.get("epoch", "?"),
+        "messages": run.messages, "complete": run.complete, "file_report": run.truncation,
+        "euler_sequence": seq, "bodies": {}, "figures": {},
+    }
+    for name, body in sorted(run.bodies.items()):
+        numbers: dict = {}
+        figs: list[tuple[str, Path]] = []
+        stem = out / name
+        if body.orbit is not None and len(body.orbit) > 0:
+            tr = body.orbit
+            mu = float(tr.mu[0])
+            om = mt.orbit_metrics(tr.t, tr.r, tr.v, mu)
+            numbers["orbit"] = {**om["summary"], "models": sorted(set(tr.model)), "frame": sorted(set(tr.frame))[0]}
+            figs.append(("orbit3d", fg.orbit_3d(name, tr.r, central.get("radius"), Path(f"{stem}-orbit3d.png"))))
+            if earth:
+                lon, lat = mt.ground_track(tr.r, tr.log_time)
+                figs.append(("groundtrack", fg.ground_track(name, lon, lat, Path(f"{stem}-groundtrack.png"))))
+            figs.append(("elements", fg.elements(name, tr.t, om["elements"], Path(f"{stem}-elements.png"))))
+            figs.append(("orbit-drift", fg.orbit_drift(name, tr.t, om["energy_drift"], om["h_drift"], Path(f"{stem}-orbit-drift.png"))))
+        if body.crosscheck is not None and len(body.crosscheck) > 0:
+            cc = body.crosscheck
+            numbers["crosscheck"] = {"dr_max_m": float(np.max(cc.dr_norm)), "dv_max_m_s": float(np.max(cc.dv_norm)),
+                                     "reference": sorted(set(cc.reference))[0]}
+            figs.append(("crosscheck", fg.crosscheck(name, cc.t, cc.dr_norm, cc.dv_norm, Path(f"{stem}-crosscheck.png"))))
+        if body.attitude is not None and len(body.attitude) > 0:
+            tr = body.attitude
+            inertia = inertias.get(name)
+            am = mt.attitude_metrics(tr.t, tr.q, tr.w, seq, inertia)
+            numbers["attitude"] = {**am["summary"], "models": sorted(set(tr.model))}
+            figs.append(("euler", fg.euler_angles(name, tr.t, am["euler"], seq, Path(f"{stem}-euler.png"))))
+            figs.append(("quaternion", fg.quaternion(name, tr.t, tr.q, Path(f"{stem}-quaternion.png"))))
+            figs.append(("rates", fg.body_rates(name, tr.t, tr.w, Path(f"{stem}-rates.png"))))
+            if inertia is not None:
+                figs.append(("polhode", fg.polhode(name, am["h_body"], inertia.inertia, Path(f"{stem}-polhode.png"))))
+                figs.append(("attitude-drift", fg.attitude_drift(name, tr.t, am["energy_drift"], am["h_inertial_drift"],
+                                                                 Path(f"{stem}-attitude-drift.png"))))
+                if inertia.is_top:
+                    figs.append(("top-angles", fg.top_angles(name, tr.t, am["precession"], am["nutation"], Path(f"{stem}-top-angles.png"))))
+        report["bodies"][name] = numbers
+        report["figures"][name] = {kind: p.name for kind, p in figs}
+    _write_markdown(report, out / "report.md")
+    _write_html(report, out / "report.html")
+    (out / "report.json").write_text(json.dumps(report, indent=1, default=str))
+    return report
+
+
+_LABELS = {
+    "states": "states", "t_span_s": "time span (s)", "energy_drift_max": "max |E - E0| / |E0|",
+    "h_drift_max": "max |h - h0| / |h0|", "r_min_m": "min radius (m)", "r_max_m": "max radius (m)",
+    "models": "models", "frame": "frame", "dr_max_m": "max |dr| to REBOUND (m)", "dv_max_m_s": "max |dv| to REBOUND (m/s)",
+    "reference": "reference", "quat_norm_error_max": "max ||q| - 1|", "rate_max_rad_s": "max |w| (rad/s)",
+    "kinetic_energy_drift_max": "max |T - T0| / |T0|", "h_inertial_drift_max": "max |Hi - Hi0| / |Hi0|",
+    "nutation_min_deg": "min nutation (deg)", "nutation_max_deg": "max nutation (deg)",
+}
+
+
+def _rows(section: dict) -> list[tuple[str, str]]:
+    return [(_LABELS.get(k, k), ", ".join(v) if isinstance(v, list) else _fmt(v)) for k, v in section.items()]
+
+
+def _write_markdown(report: dict, path: Path) -> None:
+    lines = [f"# astrodyn report: {report['scenario']}", "",
+             f"File `{report['file']}`, epoch {report['epoch']}, {report['messages']} messages, "
+             f"Euler sequence {report['euler_sequence']}.", ""]
+    if not report["complete"]:
+        lines += [f"**Incomplete file**: {report['file_report'] or 'invalid messages skipped'}.", ""]
+    for name, numbers in report["bodies"].items():
+        lines += [f"## {name}", ""]
+        for section, values in numbers.items():
+            lines += [f"### {section}", "", "| quantity | value |", "| --- | --- |"]
+            lines += [f"| {k.replace('|', chr(92) + '|')} | {v} |" for k, v in _rows(values)] + [""]
+        for kind, file in report["figures"][name].items():
+            lines += [f"![{name}: {FIGURES[kind]}]({file})", ""]
+    path.write_text("\n".join(lines))
+
+
+def _write_html(report: dict, path: Path) -> None:
+    e = html.escape
+    parts = ["<!doctype html><html><head><meta charset='utf-8'>",
+             f"<title>astrodyn report: {e(report['scenario'])}</title>",
+             "<style>body{font-family:sans-serif;max-width:980px;margin:auto}table{border-collapse:collapse}"
+             "td,th{border:1px solid #ccc;padding:2px 8px}img{max-width:100%}</style></head><body>",
+             f"<h1>astrodyn report: {e(report['scenario'])}</h1>",
+             f"<p>File <code>{e(report['file'])}</code>, epoch {e(report['epoch'])}, {report['messages']} messages, "
+             f"Euler sequence {e(report['euler_sequence'])}.</p>"]
+    if not report["complete"]:
+        parts.append(f"<p><b>Incomplete file</b>: {e(report['file_report'] or 'invalid messages skipped')}.</p>")
+    for name, numbers in report["bodies"].items():
+        parts.append(f"<h2>{e(name)}</h2>")
+        for section, values in numbers.items():
+            parts.append(f"<h3>{e(section)}</h3><table><tr><th>quantity</th><th>value</th></tr>")
+            parts += [f"<tr><td>{e(k)}</td><td>{e(v)}</td></tr>" for k, v in _rows(values)]
+            parts.append("</table>")
+        for kind, file in report["figures"][name].items():
+            parts.append(f"<figure><img src='{e(file)}' alt='{e(name)}: {e(FIGURES[kind])}'>"
+                         f"<figcaption>{e(name)}: {e(FIGURES[kind])}</figcaption></figure>")
+    parts.append("</body></html>")
+    path.write_text("\n".join(parts))
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog="astrodyn analyze", description="Report (Markdown, HTML, PNG) from an MCAP recording.")
+    ap.add_argument("file", help="MCAP file recorded by astrodyn")
+    ap.add_argument("--out", default=None, help="report directory (default <file>-report)")
+    ap.add_argument("--seq", default="321", help="Euler angle sequence for the attitude plots (default 321)")
+    args = ap.parse_args(argv)
+    try:
+        report = analyze(args.file, args.out, args.seq)
+    except (RecordingError, ValueError) as exc:
+        print(f"astrodyn analyze: error: {exc}", file=sys.stderr)
+        return 1
+    out = Path(args.out) if args.out else Path(args.file).with_name(Path(args.file).stem + "-report")
+    if not report["complete"]:
+        print(f"astrodyn analyze: warning: {args.file}: {report['file_report']}; analysed what is complete", file=sys.stderr)
+    print(out / "report.html")
+    return 0

@@ -1,0 +1,174 @@
+"""Figures of the analysis report (matplotlib, Agg backend), one PNG per function.
+
+Every function takes the arrays of :mod:`astrodyn.analysis.metrics`, writes one PNG and
+returns its path.  Axes carry units; the time axis is in s, min, h or days, chosen from
+the span (:func:`time_axis`) so tick labels stay short.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+__all__ = ["time_axis", "orbit_3d", "ground_track", "elements", "orbit_drift", "crosscheck",
+           "euler_angles", "quaternion", "body_rates", "polhode", "attitude_drift", "top_angles"]
+
+_DPI = 110
+plt.rcParams.update({"font.size": 9, "axes.grid": True, "grid.alpha": 0.3, "figure.autolayout": False})
+
+
+def time_axis(t: np.ndarray) -> tuple[np.ndarray, str]:
+    """(t scaled, label) in s, min, h or days depending on the span."""
+    span = float(t[-1] - t[0]) if t.size > 1 else 0.0
+    for limit, factor, unit in ((600, 1.0, "s"), (3 * 3600, 60.0, "min"), (3 * 86400, 3600.0, "h")):
+        if span <= limit:
+            return t / factor, f"t ({unit} since epoch)"
+    return t / 86400.0, "t (days since epoch)"
+
+
+def _save(fig, path: Path) -> Path:
+    fig.savefig(path, dpi=_DPI)
+    plt.close(fig)
+    return path
+
+
+def _stacked(t, series, labels, title, path, sharey=False):
+    ts, tl = time_axis(t)
+    fig, axes = plt.subplots(len(series), 1, figsize=(7.5, 1.6 + 1.45 * len(series)), sharex=True, sharey=sharey,
+                             constrained_layout=True)
+    axes = np.atleast_1d(axes)
+    for ax, y, label in zip(axes, series, labels):
+        ax.plot(ts, y, lw=1.0)
+        ax.set_ylabel(label)
+    axes[-1].set_xlabel(tl)
+    fig.suptitle(title)
+    return _save(fig, path)
+
+
+def orbit_3d(name: str, r: np.ndarray, radius: float | None, path: Path) -> Path:
+    """Trajectory in the inertial frame (km) with the central body as a wire sphere."""
+    fig = plt.figure(figsize=(6.5, 6.0), constrained_layout=True)
+    ax = fig.add_subplot(projection="3d")
+    km = r / 1e3
+    ax.plot(km[:, 0], km[:, 1], km[:, 2], lw=1.0, label=name)
+    ax.scatter(*km[0], s=14, color="green", label="start")
+    ax.scatter(*km[-1], s=14, color="red", label="end")
+    extent = np.max(np.abs(km))
+    if radius:
+        u, v = np.mgrid[0:2 * np.pi:24j, 0:np.pi:12j]
+        rk = radius / 1e3
+        ax.plot_wireframe(rk * np.cos(u) * np.sin(v), rk * np.sin(u) * np.sin(v), rk * np.cos(v), color="0.6", lw=0.4)
+        extent = max(extent, rk)
+    for set_lim in (ax.set_xlim, ax.set_ylim, ax.set_zlim):
+        set_lim(-extent, extent)
+    ax.set_box_aspect((1, 1, 1))
+    ax.set_xlabel("x (km)")
+    ax.set_ylabel("y (km)")
+    ax.set_zlabel("z (km)")
+    ax.legend(loc="upper left", fontsize=8)
+    ax.set_title(f"{name}: orbit, inertial frame")
+    return _save(fig, path)
+
+
+def ground_track(name: str, lon: np.ndarray, lat: np.ndarray, path: Path) -> Path:
+    """Longitude / latitude (deg) with breaks where the track wraps at +-180 deg."""
+    fig, ax = plt.subplots(figsize=(8.0, 4.2), constrained_layout=True)
+    lo, la = np.degrees(lon), np.degrees(lat)
+    breaks = np.flatnonzero(np.abs(np.diff(lo)) > 180.0) + 1
+    for seg_lo, seg_la in zip(np.split(lo, breaks), np.split(la, breaks)):
+        ax.plot(seg_lo, seg_la, lw=1.0, color="C0")
+    ax.scatter(lo[0], la[0], s=16, color="green", label="start", zorder=3)
+    ax.scatter(lo[-1], la[-1], s=16, color="red", label="end", zorder=3)
+    ax.set_xlim(-180, 180)
+    ax.set_ylim(-90, 90)
+    ax.set_xticks(range(-180, 181, 60))
+    ax.set_yticks(range(-90, 91, 30))
+    ax.set_xlabel("longitude (deg)")
+    ax.set_ylabel("geocentric latitude (deg)")
+    ax.legend(loc="lower left", fontsize=8)
+    ax.set_title(f"{name}: ground track (GMST IAU 1982, UT1 = UTC)")
+    return _save(fig, path)
+
+
+def elements(name: str, t: np.ndarray, el, path: Path) -> Path:
+    """a (km), e, i, RAAN, argument of periapsis, true anomaly (deg) over time."""
+    deg = np.degrees
+    series = [el.a / 1e3, el.e, deg(el.i), deg(el.raan), deg(el.argp), deg(el.nu)]
+    labels = ["a (km)", "e (-)", "i (deg)", "RAAN (deg)", "arg. periapsis (deg)", "true anomaly (deg)"]
+    return _stacked(t, series, labels, f"{name}: osculating elements", path)
+
+
+def orbit_drift(name: str, t: np.ndarray, energy_drift, h_drift, path: Path) -> Path:
+    """Relative energy and angular-momentum drift (dimensionless)."""
+    return _stacked(t, [energy_drift, h_drift], ["|E - E0| / |E0| (-)", "|h - h0| / |h0| (-)"],
+                    f"{name}: specific energy and angular momentum drift", path)
+
+
+def crosscheck(name: str, t: np.ndarray, dr_norm, dv_norm, path: Path) -> Path:
+    """Difference to the REBOUND cross-check (m, m/s)."""
+    return _stacked(t, [dr_norm, dv_norm], ["|dr| (m)", "|dv| (m/s)"], f"{name}: difference to REBOUND", path)
+
+
+def euler_angles(name: str, t: np.ndarray, angles, seq: str, path: Path) -> Path:
+    deg = np.degrees(angles)
+    labels = [f"angle {i + 1}, axis {seq[i]} (deg)" for i in range(3)]
+    return _stacked(t, [deg[:, 0], deg[:, 1], deg[:, 2]], labels, f"{name}: Euler angles, body sequence {seq}", path)
+
+
+def quaternion(name: str, t: np.ndarray, q, path: Path) -> Path:
+    ts, tl = time_axis(t)
+    fig, ax = plt.subplots(figsize=(7.5, 3.6), constrained_layout=True)
+    for i in range(4):
+        ax.plot(ts, q[:, i], lw=1.0, label=f"e{i}")
+    ax.set_xlabel(tl)
+    ax.set_ylabel("Euler parameter (-)")
+    ax.set_ylim(-1.05, 1.05)
+    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8)
+    ax.set_title(f"{name}: Euler parameters (scalar e0 first)")
+    return _save(fig, path)
+
+
+def body_rates(name: str, t: np.ndarray, w, path: Path) -> Path:
+    return _stacked(t, [w[:, 0], w[:, 1], w[:, 2]], ["w1 (rad/s)", "w2 (rad/s)", "w3 (rad/s)"],
+                    f"{name}: body angular velocity", path)
+
+
+def polhode(name: str, h_body: np.ndarray, inertia: np.ndarray, path: Path) -> Path:
+    """The polhode: the body-frame angular momentum on the momentum sphere |H| = const.
+
+    It is the intersection of that sphere with the energy ellipsoid H . I^-1 H = 2T; the
+    sphere is drawn as a wire frame, the recorded path over it.
+    """
+    hn = np.linalg.norm(h_body[0])
+    fig = plt.figure(figsize=(6.0, 5.6), constrained_layout=True)
+    ax = fig.add_subplot(projection="3d")
+    u, v = np.mgrid[0:2 * np.pi:28j, 0:np.pi:14j]
+    ax.plot_wireframe(np.cos(u) * np.sin(v), np.sin(u) * np.sin(v), np.cos(v), color="0.75", lw=0.4)
+    hh = h_body / hn
+    ax.plot(hh[:, 0], hh[:, 1], hh[:, 2], lw=1.4, color="C3", label="polhode")
+    ax.scatter(*hh[0], s=14, color="green", label="start")
+    moments = np.diag(inertia)
+    for i in range(3):
+        ax.text(*(1.25 * np.eye(3)[i]), f"b{i + 1} (I={moments[i]:.3g})", fontsize=7)
+    ax.set_box_aspect((1, 1, 1))
+    ax.set_xlabel("H1 / |H| (-)")
+    ax.set_ylabel("H2 / |H| (-)")
+    ax.set_zlabel("H3 / |H| (-)")
+    ax.legend(loc="upper left", fontsize=8)
+    ax.set_title(f"{name}: polhode on the momentum sphere (|H| = {hn:.4g} kg m²/s)")
+    return _save(fig, path)
+
+
+def attitude_drift(name: str, t: np.ndarray, energy_drift, h_drift, path: Path) -> Path:
+    return _stacked(t, [energy_drift, h_drift], ["|T - T0| / |T0| (-)", "|Hi - Hi0| / |Hi0| (-)"],
+                    f"{name}: kinetic energy and inertial angular momentum drift", path)
+
+
+def top_angles(name: str, t: np.ndarray, precession, nutation, path: Path) -> Path:
+    return _stacked(t, [np.degrees(precession), np.degrees(nutation)], ["precession phi (deg)", "nutation theta (deg)"],
+                    f"{name}: precession and nutation (3-1-3 angles, gravity along -Z)", path)

@@ -1,0 +1,166 @@
+"""Numbers of the analysis report, computed from the recorded arrays (no plotting here).
+
+Orbit (two-body invariants, Vallado 4th ed. sec. 1.3 / 2.2): specific energy
+``E = |v|^2 / 2 - mu / |r|`` (J/kg) and specific angular momentum ``h = r x v`` (m^2/s);
+their drifts are ``max_k |E_k - E_0| / |E_0|`` and ``max_k |h_k - h_0| / |h_0|``
+(exact constants for a Kepler orbit; for a perturbed orbit the drift *is* the
+perturbation's effect, reported as such).  Elements: :func:`astrodyn.orbit.elements_from_state`.
+
+Attitude (Baruh ch. 7-8): kinetic energy ``T = w . I w / 2`` (J), body angular momentum
+``H_b = I w`` (kg m^2/s), inertial ``H_i = C(q)^T H_b`` (``v_body = C(q) v_inertial``);
+for torque-free motion ``T`` and ``H_i`` are constants and their drifts are relative
+like the orbit's.  ``|q| - 1`` is reported as the largest absolute deviation.  Tops
+(body axis 3 the symmetry axis, gravity along -Z inertial): the 3-1-3 Euler angles of
+``C(q)`` are precession ``phi``, nutation ``theta`` and spin ``psi`` (Baruh sec. 10.x,
+Goldstein sec. 5.7).
+
+Ground track (Earth only): geocentric latitude ``asin(z / r)`` and longitude
+``atan2(y, x) - GMST``, with GMST from the IAU 1982 formula (Vallado 4th ed. eq. 3-47)
+of UT1 taken equal to UTC (the POSIX log time), and the inertial frame treated as the
+true-of-date frame: precession since J2000 shifts longitudes by up to about 0.4 deg
+in 2026, invisible on a whole-Earth map.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+
+import numpy as np
+
+from astrodyn.orbit import elements_from_state
+from astrodyn.rotation import dcm_from_quat, euler_from_quat
+
+__all__ = [
+    "relative_drift", "orbit_metrics", "attitude_metrics", "gmst_rad", "ground_track",
+    "BodyInertia", "inertia_from_scenario", "central_body_from_scenario",
+]
+
+_J2000_JD = 2451545.0
+_UNIX_EPOCH_JD = 2440587.5
+
+
+def relative_drift(x: np.ndarray) -> np.ndarray:
+    """``|x_k - x_0| / |x_0|`` per sample (vectors: Euclidean norms); 0/0 -> 0."""
+    x = np.asarray(x, dtype=np.float64)
+    d = x - x[:1]
+    num = np.linalg.norm(d, axis=-1) if x.ndim > 1 else np.abs(d)
+    den = np.linalg.norm(x[0]) if x.ndim > 1 else abs(x[0])
+    if den == 0:
+        return np.where(num == 0, 0.0, np.inf)
+    return num / den
+
+
+def orbit_metrics(t: np.ndarray, r: np.ndarray, v: np.ndarray, mu: float) -> dict:
+    """Energy, angular momentum (and their drifts), elements over time."""
+    rn = np.linalg.norm(r, axis=-1)
+    energy = 0.5 * np.einsum("ij,ij->i", v, v) - mu / rn
+    h = np.cross(r, v)
+    el = elements_from_state(r, v, mu)
+    e_drift = relative_drift(energy)
+    h_drift = relative_drift(h)
+    return {
+        "t": t, "energy": energy, "h": h, "energy_drift": e_drift, "h_drift": h_drift, "elements": el,
+        "radius": rn,
+        "summary": {
+            "states": int(t.size),
+            "t_span_s": float(t[-1] - t[0]) if t.size else 0.0,
+            "energy_drift_max": float(e_drift.max()) if t.size else 0.0,
+            "h_drift_max": float(h_drift.max()) if t.size else 0.0,
+            "r_min_m": float(rn.min()) if t.size else 0.0,
+            "r_max_m": float(rn.max()) if t.size else 0.0,
+        },
+    }
+
+
+@dataclass
+class BodyInertia:
+    """Inertia (body frame, kg m^2), and for heavy tops m, cm distance (m) and g (m/s^2)."""
+
+    inertia: np.ndarray
+    model: str = ""
+    mass: float | None = None
+    cm: float | None = None
+    g: float | None = None
+
+    @property
+    def is_top(self) -> bool:
+        return self.model == "heavy_top" or (self.mass is not None and self.cm is not None)
+
+
+def _scenario_json(scenario: dict) -> dict:
+    try:
+        data = json.loads(scenario.get("json", "{}"))
+        return data if isinstance(data, dict) else {}
+    except ValueError:
+        return {}
+
+
+def inertia_from_scenario(scenario: dict) -> dict[str, BodyInertia]:
+    """Per body with an attitude: its inertia (and top parameters) from the scenario metadata."""
+    out = {}
+    for b in _scenario_json(scenario).get("bodies", []):
+        att = b.get("attitude") if isinstance(b, dict) else None
+        if not att or att.get("inertia") is None:
+            continue
+        try:
+            inertia = np.array(att["inertia"], dtype=np.float64).reshape(3, 3)
+        except (ValueError, TypeError):
+            continue
+        out[b["name"]] = BodyInertia(inertia, str(att.get("model_used") or att.get("model") or ""),
+                                     att.get("mass"), att.get("cm"), att.get("g"))
+    return out
+
+
+def central_body_from_scenario(scenario: dict) -> dict:
+    """``{"name", "mu", "radius"}`` of the scenario's central body ({} when unknown)."""
+    cb = _scenario_json(scenario).get("central_body") or {}
+    return {k: cb[k] for k in ("name", "mu", "radius") if k in cb}
+
+
+def attitude_metrics(t: np.ndarray, q: np.ndarray, w: np.ndarray, seq: str,
+                     body: BodyInertia | None = None) -> dict:
+    """Euler angles (``seq``), ``|q| - 1``, and with the inertia: T, H_b, H_i and drifts."""
+    angles = euler_from_quat(q, seq)
+    out = {"t": t, "euler": angles, "seq": seq}
+    summary = {
+        "states": int(t.size),
+        "quat_norm_error_max": float(np.max(np.abs(np.linalg.norm(q, axis=-1) - 1.0))) if t.size else 0.0,
+        "rate_max_rad_s": float(np.max(np.linalg.norm(w, axis=-1))) if t.size else 0.0,
+    }
+    if body is not None:
+        hb = w @ body.inertia.T
+        energy = 0.5 * np.einsum("ij,ij->i", w, hb)
+        hi = np.einsum("kji,kj->ki", dcm_from_quat(q), hb)  # C^T H_b
+        out.update(kinetic_energy=energy, h_body=hb, h_inertial=hi,
+                   energy_drift=relative_drift(energy), h_inertial_drift=relative_drift(hi))
+        summary.update(kinetic_energy_drift_max=float(out["energy_drift"].max()),
+                       h_inertial_drift_max=float(out["h_inertial_drift"].max()))
+        if body.is_top:
+            e313 = euler_from_quat(q, "313")
+            out.update(precession=np.unwrap(e313[:, 0]), nutation=e313[:, 1])
+            summary.update(nutation_min_deg=float(np.degrees(e313[:, 1].min())),
+                           nutation_max_deg=float(np.degrees(e313[:, 1].max())))
+    out["summary"] = summary
+    return out
+
+
+def gmst_rad(unix_ns: np.ndarray) -> np.ndarray:
+    """Greenwich mean sidereal time (rad, in [0, 2 pi)) at POSIX times, UT1 = UTC.
+
+    IAU 1982 (Vallado 4th ed. eq. 3-47): GMST = 67310.54841 s + (876600 h + 8640184.812866 s) T
+    + 0.093104 s T^2 - 6.2e-6 s T^3, T Julian centuries of UT1 from J2000.
+    """
+    ns = np.asarray(unix_ns, dtype=np.int64)
+    days = (ns // 86_400_000_000_000).astype(np.float64) + (ns % 86_400_000_000_000) / 8.64e13
+    tu = (days + (_UNIX_EPOCH_JD - _J2000_JD)) / 36525.0
+    sec = 67310.54841 + (876600.0 * 3600.0 + 8640184.812866) * tu + 0.093104 * tu**2 - 6.2e-6 * tu**3
+    return np.mod(np.radians(np.mod(sec, 86400.0) / 240.0), 2 * np.pi)
+
+
+def ground_track(r: np.ndarray, unix_ns: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(longitude, geocentric latitude) in rad, longitude in [-pi, pi) (see module docstring)."""
+    lon = np.arctan2(r[:, 1], r[:, 0]) - gmst_rad(unix_ns)
+    lon = np.mod(lon + np.pi, 2 * np.pi) - np.pi
+    lat = np.arcsin(np.clip(r[:, 2] / np.linalg.norm(r, axis=-1), -1.0, 1.0))
+    return lon, lat
