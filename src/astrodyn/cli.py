@@ -20,6 +20,8 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "analyze": ("astrodyn.analysis", "report and plots from an MCAP file"),
     "recover": ("astrodyn.recording.recover", "rewrite a crashed writer's MCAP with a summary"),
     "validate": ("astrodyn.scenario", "check a scenario config and print what it would run"),
+    "sweep": ("astrodyn.sweep", "Monte Carlo dispersions / parameter sweeps of a scenario on Dask"),
+    "router": ("astrodyn.router", "a Zenoh router so processes on several hosts meet"),
 }
 
 

@@ -1,0 +1,1056 @@
+"""``astrodyn sweep``: Monte Carlo dispersions and parameter sweeps of a scenario, on Dask.
+
+    astrodyn sweep configs/leo.toml --vary 'bodies.sat1.orbit.e=uniform(0.1, 0.9)' \\
+        --vary 'bodies.sat1.attitude.w=normal([0, 0, 0.1], 0.01)' -n 1000 --seed 7 --out sweep-leo
+
+Each *case* is the scenario with some config values replaced by draws.  A case is run
+headless in one process with the numeric core (:func:`astrodyn.simulate.simulate`, no
+Zenoh), reduced to one row of summary metrics, and optionally recorded as its own MCAP.
+Cases run on **Dask distributed**: a ``LocalCluster`` of ``--workers`` processes (default
+2, one thread each) on this machine, or any running Dask scheduler given with
+``--scheduler tcp://HOST:8786`` (reached with dask-jobqueue, dask-kubernetes, ``dask
+scheduler`` + ``dask worker`` by hand: see ``docs/sweeps.md``).  ``--workers 0`` runs
+serially in this process without importing Dask.
+
+Dispersion specs (``--vary PATH=DIST [UNIT]``, parsed by a tiny parser: nothing is
+evaluated)
+    ``PATH`` is a key path into the config as the TOML file spells it:
+    ``scenario.duration``, ``central_body.mu``, ``bodies[2].orbit.e`` (index) or
+    ``bodies.sat1.orbit.e`` / ``bodies[sat.1].orbit.e`` (the body named so), and a
+    trailing ``[k]`` picks one element of a vector (``bodies.sat1.attitude.w[2]``).
+    ``DIST`` is one of
+
+    * ``uniform(low, high)`` -- ``rng.uniform``; scalars or equal-length vectors;
+    * ``normal(mean, sigma)`` -- ``rng.normal``; ``mean`` a scalar or vector, ``sigma``
+      a scalar or a vector of the same length (sigma >= 0);
+    * ``choice(v1, v2, ...)`` -- one of the values, equally likely (numbers, vectors,
+      bare words or quoted strings such as ``choice(kepler, j2)``);
+    * ``grid(low, high, n)`` -- ``n`` evenly spaced values (``numpy.linspace``) or
+      ``grid([v1, v2, ...])`` -- these values; several grids form their Cartesian
+      product (the first ``--vary`` varies slowest) and case ``k`` takes grid point
+      ``k mod G`` (``G`` points); ``-n`` defaults to ``G``;
+    * a plain value (``scenario.rate=5``): the same in every case.
+
+    An optional ``UNIT`` after the distribution (``uniform(6800, 7200) km``) makes each
+    drawn value the quantity string ``"<x> km"`` the scenario loader converts to SI;
+    without it a draw is taken to be in SI units, like a bare number in the config.
+``--cases FILE.csv``
+    One case per row: the header holds key paths, each cell a value in the same syntax
+    as a ``choice`` item (``0.3``, ``[0, 0, 0.1]``, ``"6800 km"``, ``j2``); an empty cell
+    keeps the config's value.  Combines with random ``--vary`` draws (not with grids).
+
+Reproducibility: case ``k`` draws from ``numpy.random.default_rng([seed, k])``, one
+``--vary`` after the other in the order given, so it gets the same values on any machine
+and with any number of workers, and ``--case k`` reruns exactly that case.
+
+Each case: the draws are applied to a copy of the config dict and validated with
+:func:`astrodyn.scenario.load_dict` -- an invalid draw makes the case *fail* with the
+:class:`~astrodyn.scenario.ScenarioError` text (``... case 7: bodies[0].orbit.e: expected
+0 <= e, got -0.1``) -- then simulated; any exception fails that case only.  Metrics per
+row (:data:`METRIC_UNITS` gives the unit of each column suffix):
+
+* orbit, per body ``<b>``: osculating elements at the last output time
+  (``<b>.a_final``, ``e_final``, ``i_final``, ``raan_final``, ``argp_final``,
+  ``nu_final``; Vallado RV2COE via :func:`astrodyn.orbit.elements_from_state`), the
+  smallest and largest sampled radius ``r_min``, ``r_max`` and altitude ``alt_min`` over
+  the central body's equatorial radius (sampled at the output rate, not refined between
+  samples), and the two-body conservation drifts ``energy_drift`` (max |E - E0| relative
+  to mu / |r0|, the size of the terms) and ``h_drift`` (max ||h| - |h0|| / |h0|);
+* pairs of bodies (2 to 100 orbits): ``min_separation`` (m, the miss distance over the
+  sampled times), ``min_separation_t`` (s) and ``min_separation_pair``;
+* attitude, per body: ``w_max`` and ``w_final`` (|w|, rad/s), ``q_norm_err``
+  (max ||q| - 1|) and, for torque-free bodies, ``rot_energy_drift`` (max |T - T0| / T0)
+  and ``H_drift`` (max |H_i - H_i0| / |H_i0|, inertial angular momentum);
+* ``n_steps`` and ``wall_s`` (wall time of the case, s).
+
+Output in ``--out DIR``: ``summary.csv`` (one row per case, sorted by case; floats
+written with ``repr`` so they read back bit for bit), ``summary.parquet`` when pyarrow
+is installed, ``failures.csv`` (case, error, the draws), ``failures/case-K.txt`` (the
+traceback of an unexpected exception), ``sweep.json`` (the spec: config, dispersions,
+seed, n, column units, versions, counts) and with ``--mcap`` one ``mcap/case-K.mcap``
+per case.  ``--case K`` (repeatable) reruns those cases serially and updates the tables
+in ``DIR``.  ``astrodyn analyze DIR`` plots the table (:mod:`astrodyn.analysis.sweep`).
+
+Exit status: 0 every case ran, 1 some cases failed, 2 bad arguments, spec or config,
+130 interrupted (the finished cases are written).
+"""
+
+from __future__ import annotations
+
+import argparse
+import copy
+import csv
+import itertools
+import json
+import math
+import os
+import re
+import sys
+import time
+import traceback
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Iterable, Iterator
+
+import numpy as np
+
+__all__ = [
+    "SweepError",
+    "Vary",
+    "SweepSpec",
+    "parse_vary",
+    "parse_value",
+    "parse_path",
+    "read_cases_csv",
+    "make_spec",
+    "run_case",
+    "case_metrics",
+    "run_cases",
+    "write_tables",
+    "read_table",
+    "METRIC_UNITS",
+    "main",
+]
+
+MAX_CASES = 10_000_000  #: upper bound on -n (a sanity limit, not a resource estimate)
+MAX_GRID = 1_000_000  #: most points a grid(...) may have
+MAX_SPEC = 4096  #: longest --vary text
+
+#: Unit of each metric column, by the suffix after the last "." of the column name.
+METRIC_UNITS: dict[str, str] = {
+    "a_final": "m", "e_final": "1", "i_final": "rad", "raan_final": "rad", "argp_final": "rad",
+    "nu_final": "rad", "r_min": "m", "r_max": "m", "alt_min": "m", "energy_drift": "1", "h_drift": "1",
+    "min_separation": "m", "min_separation_t": "s", "min_separation_pair": "",
+    "w_max": "rad/s", "w_final": "rad/s", "q_norm_err": "1", "rot_energy_drift": "1", "H_drift": "1",
+    "n_steps": "1", "wall_s": "s",
+}
+_FIXED_COLUMNS = ("case", "status")
+
+
+class SweepError(ValueError):
+    """A bad sweep specification or argument; the text names the argument and what was expected."""
+
+
+# --------------------------------------------------------------------------- tiny parser
+
+_TOKEN = re.compile(
+    r"""\s*(?:
+        (?P<num>[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?(?![A-Za-z0-9_]))
+      | (?P<word>[A-Za-z_][A-Za-z0-9_.\-]*)
+      | "(?P<dq>[^"\\]*)"
+      | '(?P<sq>[^'\\]*)'
+      | (?P<punct>[\[\](),])
+    )""",
+    re.VERBOSE,
+)
+
+
+class _Tokens:
+    """Tokens of a value / distribution expression: numbers, words, strings, ``[ ] ( ) ,``."""
+
+    def __init__(self, text: str, what: str):
+        self.text, self.what, self.pos = text, what, 0
+
+    def error(self, expected: str) -> SweepError:
+        rest = self.text[self.pos:].strip()
+        got = repr(rest[:20]) if rest else "the end"
+        return SweepError(f"{self.what}: expected {expected} at character {self.pos + 1}, got {got}")
+
+    def peek(self) -> tuple[str, Any] | None:
+        m = _TOKEN.match(self.text, self.pos)
+        if not m or m.end() == self.pos:
+            return None
+        kind = m.lastgroup
+        raw = m.group(kind)
+        if kind == "num":
+            value: Any = float(raw) if any(c in raw for c in ".eE") else int(raw)
+        elif kind in ("dq", "sq"):
+            kind, value = "str", raw
+        else:
+            value = raw
+        return kind, value
+
+    def take(self) -> tuple[str, Any]:
+        tok = self.peek()
+        if tok is None:
+            raise self.error("a number, a word, a string, '[', ']', '(', ')' or ','")
+        self.pos = _TOKEN.match(self.text, self.pos).end()
+        return tok
+
+    def expect(self, punct: str) -> None:
+        tok = self.peek()
+        if tok != ("punct", punct):
+            raise self.error(repr(punct))
+        self.take()
+
+    def at_end(self) -> bool:
+        return not self.text[self.pos:].strip()
+
+
+def _value(tk: _Tokens, depth: int = 0) -> Any:
+    """value := number | word | string | '[' value (',' value)* ']'"""
+    if depth > 8:
+        raise tk.error("at most 8 nested lists")
+    kind, value = tk.take()
+    if kind in ("num", "str"):
+        return value
+    if kind == "word":
+        if value in ("true", "false"):
+            return value == "true"
+        return value
+    if value == "[":
+        items = []
+        if tk.peek() == ("punct", "]"):
+            tk.take()
+            return items
+        while True:
+            items.append(_value(tk, depth + 1))
+            kind, value = tk.take()
+            if value == "]" and kind == "punct":
+                return items
+            if value != "," or kind != "punct":
+                raise tk.error("',' or ']'")
+    raise tk.error("a value (number, [list], word or string)")
+
+
+def parse_value(text: str, what: str = "value") -> Any:
+    """A literal in the sweep syntax: ``0.3``, ``-2e3``, ``[0, 0, 0.1]``, ``j2``, ``"6800 km"``.
+
+    Numbers become int or float, bare words and quoted strings str, ``[...]`` lists.
+    SweepError (naming ``what``) for anything else; nothing is ever evaluated.
+    """
+    tk = _Tokens(str(text), what)
+    if tk.at_end():
+        raise tk.error("a value")
+    out = _value(tk)
+    if not tk.at_end():
+        raise tk.error("the end of the value")
+    return out
+
+
+_PATH_SEGMENT = re.compile(r"\s*(?:\.?(?P<key>[A-Za-z_][A-Za-z0-9_\-]*)|\[(?P<idx>[^\[\]]+)\])")
+
+
+def parse_path(text: str, what: str = "path") -> tuple[str | int, ...]:
+    """Split a key path into segments: ``bodies[2].orbit.e`` -> ``("bodies", 2, "orbit", "e")``.
+
+    ``[k]`` with an integer is a list index; ``[name]`` (or ``.name`` right after
+    ``bodies``) is kept as a str and resolved against the config by :func:`make_spec`.
+    """
+    text = str(text).strip()
+    if not text:
+        raise SweepError(f"{what}: expected a key path like bodies.sat1.orbit.e, got ''")
+    segs: list[str | int] = []
+    pos = 0
+    while pos < len(text):
+        m = _PATH_SEGMENT.match(text, pos)
+        if not m or (m.group("key") and pos > 0 and text[pos] != "." and not text[pos].isspace()) \
+                or (m.group("key") and pos == 0 and text[0] == "."):
+            raise SweepError(f"{what}: expected a key path like bodies.sat1.orbit.e or bodies[2].orbit.e, "
+                             f"got {text!r} (bad at character {pos + 1})")
+        if m.group("key") is not None:
+            segs.append(m.group("key"))
+        else:
+            inner = m.group("idx").strip()
+            segs.append(int(inner) if re.fullmatch(r"\d+", inner) else inner)
+        pos = m.end()
+    if not isinstance(segs[0], str):
+        raise SweepError(f"{what}: expected a key path starting with a section name, got {text!r}")
+    return tuple(segs)
+
+
+# --------------------------------------------------------------------------- dispersions
+
+_DISTRIBUTIONS = ("uniform", "normal", "choice", "grid")
+
+
+def _is_number(x: Any) -> bool:
+    return isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
+
+
+def _numeric(x: Any, what: str) -> np.ndarray:
+    """A finite float scalar or 1-D vector from a parsed value."""
+    if _is_number(x):
+        return np.float64(x)
+    if isinstance(x, list) and x and all(_is_number(v) for v in x):
+        return np.array(x, dtype=np.float64)
+    raise SweepError(f"{what}: expected a finite number or a list of numbers, got {x!r}")
+
+
+@dataclass(frozen=True)
+class Vary:
+    """One dispersion: ``path`` (as written and as segments), ``kind`` (uniform, normal,
+    choice, grid, const), ``args`` (parsed literals), optional ``unit``."""
+
+    text: str
+    path: str
+    segments: tuple
+    kind: str
+    args: tuple
+    unit: str | None = None
+    values: tuple = ()  #: grid points / choice options / (const,)
+
+    @property
+    def random(self) -> bool:
+        return self.kind in ("uniform", "normal", "choice")
+
+    def draw(self, rng: np.random.Generator) -> Any:
+        """One draw (uses ``rng`` only for the random kinds)."""
+        if self.kind == "uniform":
+            lo, hi = self.args
+            x = rng.uniform(lo, hi, size=np.shape(lo))
+        elif self.kind == "normal":
+            mean, sigma = self.args
+            x = rng.normal(mean, sigma, size=np.broadcast(mean, sigma).shape)
+        elif self.kind == "choice":
+            return self.values[int(rng.integers(len(self.values)))]
+        else:
+            raise ValueError(f"{self.kind} values are not drawn")
+        return float(x) if np.ndim(x) == 0 else [float(v) for v in x]
+
+    def to_json(self) -> dict:
+        return {"text": self.text, "path": self.path, "kind": self.kind, "unit": self.unit,
+                "args": [a.tolist() if isinstance(a, np.ndarray) else a for a in self.args]}
+
+
+def parse_vary(text: str) -> Vary:
+    """Parse ``PATH=DIST [UNIT]`` (module docstring); SweepError with the reason otherwise."""
+    what = f"--vary {text!r}"
+    if not isinstance(text, str) or "=" not in text:
+        raise SweepError(f"{what}: expected PATH=DISTRIBUTION, e.g. 'bodies.sat1.orbit.e=uniform(0.1, 0.9)'")
+    if len(text) > MAX_SPEC:
+        raise SweepError(f"{what[:60]}...: expected at most {MAX_SPEC} characters")
+    path_text, expr = text.split("=", 1)
+    segments = parse_path(path_text, what)
+    tk = _Tokens(expr, what)
+    head = tk.peek()
+    if head and head[0] == "word" and head[1] in _DISTRIBUTIONS:
+        kind = tk.take()[1]
+        tk.expect("(")
+        args: list[Any] = []
+        if tk.peek() != ("punct", ")"):
+            while True:
+                args.append(_value(tk))
+                tok = tk.peek()
+                if tok == ("punct", ","):
+                    tk.take()
+                    continue
+                if tok == ("punct", ")"):
+                    break
+                raise tk.error("',' or ')'")
+        tk.expect(")")
+    else:
+        kind, args = "const", [_value(tk)]
+        if tk.peek() == ("punct", "("):
+            raise SweepError(f"{what}: unknown distribution {args[0]!r}; expected one of {', '.join(_DISTRIBUTIONS)} "
+                             "or a plain value")
+    unit = tk.text[tk.pos:].strip() or None
+    if unit is not None:
+        _check_unit(unit, what)
+    return _build_vary(text, path_text.strip(), segments, kind, args, unit, what)
+
+
+def _check_unit(unit: str, what: str) -> None:
+    from astropy import units as u
+
+    try:
+        u.Unit(unit, parse_strict="raise")
+    except Exception:
+        raise SweepError(f"{what}: expected a unit after the distribution (e.g. km, deg, rad/s), got {unit!r}") from None
+
+
+def _build_vary(text: str, path: str, segments: tuple, kind: str, args: list, unit: str | None, what: str) -> Vary:
+    n = len(args)
+    values: tuple = ()
+    if kind == "uniform":
+        if n != 2:
+            raise SweepError(f"{what}: uniform: expected 2 arguments (low, high), got {n}")
+        lo, hi = _numeric(args[0], f"{what}: uniform low"), _numeric(args[1], f"{what}: uniform high")
+        if np.shape(lo) != np.shape(hi):
+            raise SweepError(f"{what}: uniform: expected low and high of the same shape, got {np.shape(lo)} and {np.shape(hi)}")
+        if np.any(lo > hi):
+            raise SweepError(f"{what}: uniform: expected low <= high, got {args[0]!r} > {args[1]!r}")
+        args = [lo, hi]
+    elif kind == "normal":
+        if n != 2:
+            raise SweepError(f"{what}: normal: expected 2 arguments (mean, sigma), got {n}")
+        mean, sigma = _numeric(args[0], f"{what}: normal mean"), _numeric(args[1], f"{what}: normal sigma")
+        if np.ndim(sigma) and np.shape(sigma) != np.shape(mean):
+            raise SweepError(f"{what}: normal: expected sigma a scalar or of the shape of mean {np.shape(mean)}, got {np.shape(sigma)}")
+        if np.any(sigma < 0):
+            raise SweepError(f"{what}: normal: expected sigma >= 0, got {args[1]!r}")
+        args = [mean, sigma]
+    elif kind == "choice":
+        if n < 1:
+            raise SweepError(f"{what}: choice: expected at least one value")
+        values = tuple(args)
+    elif kind == "grid":
+        if n == 1 and isinstance(args[0], list) and args[0]:
+            values = tuple(args[0])
+        elif n == 3:
+            lo = _numeric(args[0], f"{what}: grid low")
+            hi = _numeric(args[1], f"{what}: grid high")
+            count = args[2]
+            if not (isinstance(count, int) and not isinstance(count, bool) and 1 <= count <= MAX_GRID):
+                raise SweepError(f"{what}: grid: expected a point count 1 <= n <= {MAX_GRID} as the third argument, got {count!r}")
+            if np.shape(lo) != np.shape(hi):
+                raise SweepError(f"{what}: grid: expected low and high of the same shape")
+            pts = np.linspace(lo, hi, count)
+            values = tuple(float(p) if np.ndim(p) == 0 else [float(x) for x in p] for p in pts)
+        else:
+            raise SweepError(f"{what}: grid: expected grid(low, high, n) or grid([v1, v2, ...]), got {n} arguments")
+    else:  # const
+        values = (args[0],)
+    if unit is not None:
+        for v in (values or [a.tolist() for a in args]):
+            if not (_is_number(v) or (isinstance(v, list) and all(_is_number(x) for x in v))):
+                raise SweepError(f"{what}: a unit applies to numbers only, got the value {v!r}")
+    return Vary(text=text, path=path, segments=segments, kind=kind, args=tuple(args), unit=unit, values=values)
+
+
+def read_cases_csv(path: str | os.PathLike) -> tuple[list[str], list[dict[str, Any]]]:
+    """Header (key paths) and rows (path -> parsed value; empty cells omitted) of a cases CSV."""
+    try:
+        with open(path, newline="", encoding="utf-8") as fh:
+            reader = csv.reader(fh)
+            header = next(reader, None)
+            if not header:
+                raise SweepError(f"--cases {path}: expected a header row of key paths, got an empty file")
+            header = [h.strip() for h in header]
+            rows = []
+            for lineno, cells in enumerate(reader, start=2):
+                if not any(c.strip() for c in cells):
+                    continue
+                if len(cells) != len(header):
+                    raise SweepError(f"--cases {path}: line {lineno}: expected {len(header)} cells, got {len(cells)}")
+                rows.append({h: parse_value(c, f"--cases {path}: line {lineno}, column {h!r}")
+                             for h, c in zip(header, cells) if c.strip()})
+    except OSError as exc:
+        raise SweepError(f"--cases {path}: expected a readable CSV file ({exc.strerror or exc})") from None
+    for h in header:
+        parse_path(h, f"--cases {path}: column {h!r}")
+    if not rows:
+        raise SweepError(f"--cases {path}: expected at least one case row")
+    return header, rows
+
+
+# --------------------------------------------------------------------------- spec
+
+
+@dataclass
+class SweepSpec:
+    """Everything a worker needs to build and run case ``k`` (picklable, JSON-able)."""
+
+    config: dict
+    source: str
+    base_dir: str
+    varies: tuple[Vary, ...]
+    n: int
+    seed: int
+    cases_header: tuple[str, ...] = ()
+    cases_rows: tuple[dict, ...] = ()
+    resolved: dict = field(default_factory=dict)  #: path text -> concrete segments
+    grid_sizes: tuple[int, ...] = ()
+    mcap_dir: str | None = None
+
+    # ---- draws
+    def draws(self, k: int) -> dict[str, Any]:
+        """``{path: value}`` applied in case ``k`` (CSV row first, then --vary in order)."""
+        if not 0 <= k < self.n:
+            raise SweepError(f"--case: expected 0 <= case < {self.n}, got {k}")
+        out: dict[str, Any] = {}
+        if self.cases_rows:
+            out.update(self.cases_rows[k % len(self.cases_rows)])
+        rng = np.random.default_rng([self.seed, k])
+        grid_index = _unravel(k % max(1, math.prod(self.grid_sizes)), self.grid_sizes)
+        g = 0
+        for vary in self.varies:
+            if vary.random:
+                value = vary.draw(rng)
+            elif vary.kind == "grid":
+                value = vary.values[grid_index[g]]
+                g += 1
+            else:
+                value = vary.values[0]
+            out[vary.path] = _with_unit(value, vary.unit)
+        return out
+
+    def case_config(self, k: int) -> tuple[dict, dict[str, Any]]:
+        """The config dict of case ``k`` and its draws."""
+        draws = self.draws(k)
+        config = copy.deepcopy(self.config)
+        for path, value in draws.items():
+            _assign(config, self.resolved[path], value, path)
+        return config, draws
+
+    def to_json(self) -> dict:
+        return {
+            "format": "astrodyn.sweep/1", "source": self.source, "n": self.n, "seed": self.seed,
+            "rng": "numpy.random.default_rng([seed, case])", "varies": [v.to_json() for v in self.varies],
+            "cases_csv_columns": list(self.cases_header), "cases_csv_rows": len(self.cases_rows),
+            "grid_sizes": list(self.grid_sizes), "config": self.config,
+        }
+
+
+def _unravel(i: int, sizes: tuple[int, ...]) -> list[int]:
+    """Mixed-radix digits of ``i`` (first size slowest), like ``itertools.product`` order."""
+    out = []
+    for s in reversed(sizes):
+        i, r = divmod(i, s)
+        out.append(r)
+    return out[::-1]
+
+
+def _with_unit(value: Any, unit: str | None) -> Any:
+    if unit is None:
+        return value
+    if isinstance(value, list):
+        return [f"{float(x)!r} {unit}" for x in value]
+    return f"{float(value)!r} {unit}"
+
+
+def _resolve(config: dict, segments: tuple, what: str) -> tuple:
+    """Concrete segments (body names -> indices) checked against ``config``; the last key
+    may be new (e.g. an element not given in the file), every container must exist."""
+    node: Any = config
+    out: list[str | int] = []
+    for j, seg in enumerate(segments):
+        last = j == len(segments) - 1
+        if isinstance(node, list):
+            if isinstance(seg, str) and all(isinstance(b, dict) for b in node):
+                names = [b.get("name") for b in node]
+                if seg not in names:
+                    raise SweepError(f"{what}: no entry named {seg!r} in {_join(out)} "
+                                     f"(names: {', '.join(map(str, names)) or 'none'})")
+                seg = names.index(seg)
+            if not isinstance(seg, int) or not 0 <= seg < len(node):
+                raise SweepError(f"{what}: {_join(out)} has {len(node)} entries; expected an index 0..{len(node) - 1} "
+                                 f"or a name, got {seg!r}")
+        elif isinstance(node, dict):
+            if not isinstance(seg, str):
+                raise SweepError(f"{what}: {_join(out) or 'the config'} is a table; expected a key, got [{seg}]")
+            if seg not in node and not last:
+                raise SweepError(f"{what}: {_join(out + [seg])} is not in the config "
+                                 f"(keys of {_join(out) or 'the config'}: {', '.join(node) or 'none'})")
+        else:
+            raise SweepError(f"{what}: {_join(out)} is a value ({node!r}), not a table or a list")
+        out.append(seg)
+        if not last:
+            node = node[seg]
+    return tuple(out)
+
+
+def _join(segs: Iterable) -> str:
+    s = ""
+    for seg in segs:
+        s += f"[{seg}]" if isinstance(seg, int) else (f".{seg}" if s else seg)
+    return s
+
+
+def _assign(config: dict, segments: tuple, value: Any, path: str) -> None:
+    node: Any = config
+    for seg in segments[:-1]:
+        node = node[seg]
+    last = segments[-1]
+    if isinstance(node, list) and not (isinstance(last, int) and last < len(node)):
+        raise SweepError(f"{path}: index {last} out of range")
+    node[last] = value
+
+
+def make_spec(config_path: str | os.PathLike, varies: Iterable[str], n: int | None = None, seed: int = 0,
+              cases_csv: str | os.PathLike | None = None) -> SweepSpec:
+    """Parse and check a sweep against the config file (SweepError / ScenarioError if bad)."""
+    from astrodyn.scenario import ScenarioError, load
+
+    try:
+        base = load(config_path)  # the nominal scenario must be valid
+    except ScenarioError:
+        raise
+    parsed = tuple(parse_vary(v) for v in varies)
+    header: tuple[str, ...] = ()
+    rows: tuple[dict, ...] = ()
+    if cases_csv is not None:
+        h, r = read_cases_csv(cases_csv)
+        header, rows = tuple(h), tuple(r)
+    if not parsed and not rows:
+        raise SweepError("--vary / --cases: expected at least one dispersion (--vary PATH=DIST) or a cases CSV")
+    paths = [v.path for v in parsed] + list(header)
+    dup = sorted({p for p in paths if paths.count(p) > 1})
+    if dup:
+        raise SweepError(f"--vary / --cases: each key path at most once, got {', '.join(dup)} more than once")
+    grids = tuple(len(v.values) for v in parsed if v.kind == "grid")
+    if grids and rows:
+        raise SweepError("--cases with grid(...): expected one of them (a cases CSV already enumerates cases)")
+    if math.prod(grids) > MAX_CASES:
+        raise SweepError(f"grid(...): the grids have {math.prod(grids)} points; expected at most {MAX_CASES}")
+    if n is None:
+        if grids:
+            n = math.prod(grids)
+        elif rows:
+            n = len(rows)
+        else:
+            raise SweepError("-n: expected the number of cases (required unless grid(...) or --cases give it)")
+    if isinstance(n, bool) or not isinstance(n, int) or not 1 <= n <= MAX_CASES:
+        raise SweepError(f"-n: expected an integer 1 <= n <= {MAX_CASES}, got {n!r}")
+    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
+        raise SweepError(f"--seed: expected an integer >= 0, got {seed!r}")
+    config = base.config
+    resolved = {}
+    for v in parsed:
+        resolved[v.path] = _resolve(config, v.segments, f"--vary {v.text!r}")
+    for h in header:
+        resolved[h] = _resolve(config, parse_path(h), f"--cases column {h!r}")
+    return SweepSpec(config=config, source=str(config_path), base_dir=str(Path(config_path).resolve().parent),
+                     varies=parsed, n=n, seed=seed, cases_header=header, cases_rows=rows, resolved=resolved,
+                     grid_sizes=grids)
+
+
+# --------------------------------------------------------------------------- one case
+
+
+def _draw_columns(draws: dict[str, Any], spec: SweepSpec) -> dict[str, Any]:
+    """Table columns of the draws: vectors expand to ``path[i]``, a unit goes in the name."""
+    units = {v.path: v.unit for v in spec.varies}
+    out: dict[str, Any] = {}
+    for path, value in draws.items():
+        unit = units.get(path)
+        name = f"{path} [{unit}]" if unit else path
+        if isinstance(value, list):
+            for i, x in enumerate(value):
+                out[f"{name}[{i}]" if not unit else f"{path}[{i}] [{unit}]"] = _strip_unit(x, unit)
+        else:
+            out[name] = _strip_unit(value, unit)
+    return out
+
+
+def _strip_unit(x: Any, unit: str | None) -> Any:
+    if unit and isinstance(x, str) and x.endswith(" " + unit):
+        return float(x[: -len(unit) - 1])
+    return x
+
+
+def case_metrics(scenario, result) -> dict[str, Any]:
+    """Summary metrics of one simulated case (module docstring; units in :data:`METRIC_UNITS`)."""
+    from astrodyn.orbit import elements_from_state
+    from astrodyn.rotation import dcm_from_quat
+
+    row: dict[str, Any] = {"n_steps": int(result.t.shape[0])}
+    cb = scenario.central_body
+    mu = cb.mu
+    for j, name in enumerate(result.orbit_names):
+        r, v = result.r[:, j], result.v[:, j]
+        rn = np.linalg.norm(r, axis=1)
+        el = elements_from_state(r[-1], v[-1], mu)
+        for key in ("a", "e", "i", "raan", "argp", "nu"):
+            row[f"{name}.{key}_final"] = float(getattr(el, key))
+        energy = 0.5 * np.einsum("ij,ij->i", v, v) - mu / rn
+        h = np.linalg.norm(np.cross(r, v), axis=1)
+        row[f"{name}.r_min"] = float(rn.min())
+        row[f"{name}.r_max"] = float(rn.max())
+        row[f"{name}.alt_min"] = float(rn.min() - cb.radius)
+        # relative to mu/|r0| (the size of the terms of E), not to E, which is ~0 near parabolic orbits
+        row[f"{name}.energy_drift"] = float(np.max(np.abs(energy - energy[0])) * rn[0] / mu)
+        row[f"{name}.h_drift"] = float(np.max(np.abs(h - h[0])) / h[0]) if h[0] else 0.0
+    n_orb = len(result.orbit_names)
+    if 2 <= n_orb <= 100:
+        best = (math.inf, 0, 0, 0)
+        for a, b in itertools.combinations(range(n_orb), 2):
+            d = np.linalg.norm(result.r[:, a] - result.r[:, b], axis=1)
+            i = int(np.argmin(d))
+            if d[i] < best[0]:
+                best = (float(d[i]), i, a, b)
+        row["min_separation"] = best[0]
+        row["min_separation_t"] = float(result.t[best[1]])
+        row["min_separation_pair"] = f"{result.orbit_names[best[2]]}|{result.orbit_names[best[3]]}"
+    models = {bp.name: bp.attitude_model for bp in result.plan.bodies}
+    for j, name in enumerate(result.attitude_names):
+        q, w = result.q[:, j], result.w[:, j]
+        wn = np.linalg.norm(w, axis=1)
+        row[f"{name}.w_max"] = float(wn.max())
+        row[f"{name}.w_final"] = float(wn[-1])
+        row[f"{name}.q_norm_err"] = float(np.max(np.abs(np.linalg.norm(q, axis=1) - 1.0)))
+        if models.get(name) == "torque_free":
+            J = np.asarray(scenario.body(name).attitude.inertia, dtype=np.float64)
+            Hb = w @ J.T
+            T = 0.5 * np.einsum("ij,ij->i", w, Hb)
+            Hi = np.einsum("nji,nj->ni", dcm_from_quat(q), Hb)  # inertial components C^T H_body
+            hn = float(np.linalg.norm(Hi[0]))
+            row[f"{name}.rot_energy_drift"] = float(np.max(np.abs(T - T[0])) / T[0]) if T[0] else 0.0
+            row[f"{name}.H_drift"] = float(np.max(np.linalg.norm(Hi - Hi[0], axis=1)) / hn) if hn else 0.0
+    return row
+
+
+def _one_line(exc: BaseException) -> str:
+    text = " ".join(str(exc).split())
+    return text if text else type(exc).__name__
+
+
+def run_case(k: int, spec: SweepSpec) -> dict[str, Any]:
+    """Build, validate, simulate and summarize case ``k``; never raises for a case's own
+    failure: returns a row with ``status = "failed"`` and ``error`` (plus ``traceback`` for
+    an unexpected exception)."""
+    from astrodyn.scenario import ScenarioError, load_dict
+    from astrodyn.simulate import simulate
+
+    started = time.perf_counter()
+    row: dict[str, Any] = {"case": k, "status": "ok"}
+    try:
+        config, draws = spec.case_config(k)
+        row.update(_draw_columns(draws, spec))
+        scenario = load_dict(config, source=f"{spec.source} case {k}", base_dir=spec.base_dir)
+        result = simulate(scenario)
+        row.update(case_metrics(scenario, result))
+        if spec.mcap_dir:
+            write_case_mcap(Path(spec.mcap_dir) / f"case-{k:06d}.mcap", scenario, result, draws, k)
+    except ScenarioError as exc:
+        row.update(status="failed", error=_one_line(exc))
+    except Exception as exc:  # a case's failure must not stop the sweep: report it
+        row.update(status="failed", error=f"{type(exc).__name__}: {_one_line(exc)}", traceback=traceback.format_exc())
+    row["wall_s"] = time.perf_counter() - started
+    return row
+
+
+def write_case_mcap(path: Path, scenario, result, draws: dict, k: int) -> None:
+    """One case as an MCAP in the service's layout (design.md section 3): seq = output step."""
+    from astrodyn import messages
+    from astrodyn.recording.writer import McapRecorder
+
+    path.parent.mkdir(parents=True, exist_ok=True)
+    meta = scenario.to_metadata() | {"sweep_case": str(k), "sweep_draws": json.dumps(draws)}
+    orbit_models = {bp.name: bp.orbit_model for bp in result.plan.bodies}
+    att_models = {bp.name: bp.attitude_model for bp in result.plan.bodies}
+    okeys = [messages.orbit_key(scenario.name, n) for n in result.orbit_names]
+    akeys = [messages.attitude_key(scenario.name, n) for n in result.attitude_names]
+    omodels = [orbit_models[n] for n in result.orbit_names]
+    amodels = [att_models[n] for n in result.attitude_names]
+    mu, frame = scenario.central_body.mu, scenario.frame
+    with McapRecorder(path, meta, epoch_ns=scenario.epoch_unix_ns, flush_interval_s=3600.0) as rec:
+        for s, t in enumerate(result.t):
+            t = float(t)
+            for j, key in enumerate(okeys):
+                payload = messages.encode_orbit_batch(t, s, omodels[j], result.r[s, j:j + 1], result.v[s, j:j + 1], mu, frame)[0]
+                rec.write_encoded(key, payload, t, s)
+            for j, key in enumerate(akeys):
+                payload = messages.encode_attitude_batch(t, s, amodels[j], result.q[s, j:j + 1], result.w[s, j:j + 1])[0]
+                rec.write_encoded(key, payload, t, s)
+
+
+# --------------------------------------------------------------------------- many cases
+
+
+def _failed_row(k: int, spec: SweepSpec, exc: BaseException) -> dict[str, Any]:
+    row: dict[str, Any] = {"case": k, "status": "failed"}
+    try:
+        row.update(_draw_columns(spec.draws(k), spec))
+    except Exception:
+        pass
+    row.update(error=f"{type(exc).__name__}: {_one_line(exc)}", wall_s=math.nan)
+    return row
+
+
+def run_cases(spec: SweepSpec, cases: Iterable[int], workers: int = 2, scheduler: str | None = None) -> Iterator[dict]:
+    """Rows of ``cases`` as they finish: serially here (``workers=0`` and no scheduler), on
+    a Dask ``LocalCluster`` of ``workers`` processes, or on the Dask ``scheduler`` address."""
+    cases = list(cases)
+    if workers == 0 and scheduler is None:
+        for k in cases:
+            yield run_case(k, spec)
+        return
+    try:
+        import dask
+        from distributed import Client, LocalCluster, as_completed
+    except ImportError:
+        raise SweepError("Dask is not installed: `pip install 'astrodyn[sweep]'` (or --workers 0 to run serially)") from None
+    import logging
+
+    cluster = None
+    if scheduler is None:
+        # one numba thread per worker process: the workers are the parallelism
+        with dask.config.set({"distributed.nanny.pre-spawn-environ.NUMBA_NUM_THREADS": 1}):
+            cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                                   dashboard_address=None, silence_logs=logging.ERROR)
+        client = Client(cluster)
+    else:
+        try:
+            client = Client(scheduler, timeout="30s")
+        except (OSError, TimeoutError) as exc:
+            raise SweepError(f"--scheduler {scheduler}: cannot reach a Dask scheduler ({exc})") from None
+    try:
+        spec_future = client.scatter(spec, broadcast=True)
+        token = f"{os.getpid()}-{time.time_ns()}"
+        futures = client.map(run_case, cases, spec=spec_future, key=[f"astrodyn-case-{k}-{token}" for k in cases],
+                             pure=False)
+        case_of = {f.key: k for f, k in zip(futures, cases)}
+        try:
+            for fut in as_completed(futures):
+                try:
+                    yield fut.result()
+                except Exception as exc:  # worker died (KilledWorker), lost data, ...
+                    yield _failed_row(case_of[fut.key], spec, exc)
+                fut.release()
+        except BaseException:
+            client.cancel(futures)
+            raise
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
+
+
+class Progress:
+    """A one-line progress report on stderr (rewritten in place on a terminal, every 5 s otherwise)."""
+
+    def __init__(self, total: int, enabled: bool = True, stream=None):
+        self.total, self.enabled = total, enabled
+        self.stream = stream or sys.stderr
+        self.done = self.failed = 0
+        self.started = time.monotonic()
+        self._last = 0.0
+        self._tty = bool(getattr(self.stream, "isatty", lambda: False)())
+
+    def update(self, row: dict) -> None:
+        self.done += 1
+        self.failed += row.get("status") != "ok"
+        now = time.monotonic()
+        if self.enabled and (self.done == self.total or now - self._last >= (0.2 if self._tty else 5.0)):
+            self._last = now
+            elapsed = now - self.started
+            rate = self.done / max(elapsed, 1e-9)
+            eta = (self.total - self.done) / rate if rate > 0 else math.inf
+            width = 30
+            fill = int(width * self.done / max(self.total, 1))
+            line = (f"  [{'#' * fill}{'.' * (width - fill)}] {self.done}/{self.total} cases, {self.failed} failed, "
+                    f"{rate:.2f} cases/s, {elapsed:.0f} s elapsed, eta {eta:.0f} s")
+            print(("\r" + line) if self._tty else line, end="" if self._tty and self.done < self.total else "\n",
+                  file=self.stream, flush=True)
+
+
+# --------------------------------------------------------------------------- tables
+
+
+def _columns(rows: list[dict]) -> list[str]:
+    """Column order: case, status, the draws and metrics in first-seen order, wall_s last."""
+    cols: dict[str, None] = dict.fromkeys(_FIXED_COLUMNS)
+    for row in rows:
+        for key in row:
+            if key not in ("error", "traceback", "wall_s"):
+                cols.setdefault(key)
+    cols["wall_s"] = None
+    return list(cols)
+
+
+def _cell(x: Any) -> str:
+    if x is None:
+        return ""
+    if isinstance(x, float):
+        return repr(x)
+    if isinstance(x, (list, dict)):
+        return json.dumps(x)
+    return str(x)
+
+
+def read_table(path: str | os.PathLike) -> list[dict[str, str]]:
+    """Rows of a CSV written by :func:`write_tables` (cells as strings)."""
+    with open(path, newline="", encoding="utf-8") as fh:
+        return list(csv.DictReader(fh))
+
+
+def _write_csv(path: Path, columns: list[str], rows: list[dict]) -> None:
+    tmp = path.with_suffix(path.suffix + ".part")
+    with open(tmp, "w", newline="", encoding="utf-8") as fh:
+        w = csv.writer(fh)
+        w.writerow(columns)
+        for row in rows:
+            w.writerow([_cell(row.get(c)) for c in columns])
+    os.replace(tmp, path)
+
+
+def _draw_path(column: str) -> str:
+    """The key path of a draw column: ``bodies.sat1.attitude.w[2] [deg/s]`` -> ``bodies.sat1.attitude.w``."""
+    return re.sub(r"\[\d+\]$", "", re.sub(r" \[[^\[\]]*\]$", "", column))
+
+
+def _typed(value: Any) -> Any:
+    """A cell as a number when it is one (for Parquet), else the string (empty -> None)."""
+    if value is None or value == "":
+        return None
+    if isinstance(value, str):
+        try:
+            return int(value) if re.fullmatch(r"-?\d+", value) else float(value)
+        except ValueError:
+            return value
+    return value
+
+
+def write_tables(out: Path, rows: list[dict], spec: SweepSpec, extra: dict | None = None) -> dict[str, Path]:
+    """Write summary.csv (+ .parquet), failures.csv, failures/, sweep.json into ``out``."""
+    out.mkdir(parents=True, exist_ok=True)
+    rows = sorted(rows, key=lambda r: int(r["case"]))
+    columns = _columns(rows)
+    paths = {"summary": out / "summary.csv", "failures": out / "failures.csv", "spec": out / "sweep.json"}
+    _write_csv(paths["summary"], columns, rows)
+    failed = [r for r in rows if r.get("status") != "ok"]
+    draw_cols = [c for c in columns if _draw_path(c) in spec.resolved]
+    _write_csv(paths["failures"], ["case", "error", *draw_cols], failed)
+    for r in failed:
+        if r.get("traceback"):
+            (out / "failures").mkdir(exist_ok=True)
+            (out / "failures" / f"case-{int(r['case']):06d}.txt").write_text(r["traceback"], encoding="utf-8")
+    try:
+        import pyarrow as pa
+        import pyarrow.parquet as pq
+    except ImportError:
+        pa = None
+    if pa is not None:
+        table = {c: [_typed(r.get(c)) for r in rows] for c in columns}
+        try:
+            pq.write_table(pa.table(table), out / "summary.parquet")
+            paths["parquet"] = out / "summary.parquet"
+        except (pa.ArrowInvalid, pa.ArrowTypeError) as exc:  # mixed types in a column: keep the CSV
+            print(f"astrodyn sweep: summary.parquet not written ({exc})", file=sys.stderr)
+    units = {}
+    for c in columns:
+        m = re.search(r" \[([^\[\]]+)\]$", c)
+        if _draw_path(c) in spec.resolved:
+            units[c] = m.group(1) if m else "SI"
+        else:
+            units[c] = METRIC_UNITS.get(c.rsplit(".", 1)[-1], "")
+    doc = spec.to_json() | {"columns": units, "cases_run": len(rows), "failed": len(failed)} | (extra or {})
+    paths["spec"].write_text(json.dumps(doc, indent=1, default=str), encoding="utf-8")
+    return paths
+
+
+def _merge(out: Path, new_rows: list[dict]) -> list[dict]:
+    """Existing rows of ``out/summary.csv`` with ``new_rows`` replacing the same cases."""
+    path = out / "summary.csv"
+    old = read_table(path) if path.exists() else []
+    errors = {}
+    fpath = out / "failures.csv"
+    if fpath.exists():
+        errors = {r["case"]: r.get("error", "") for r in read_table(fpath)}
+    replaced = {int(r["case"]) for r in new_rows}
+    rows: list[dict] = []
+    for r in old:
+        if int(r["case"]) in replaced:
+            continue
+        r = {k: v for k, v in r.items() if v != ""}
+        if r.get("status") != "ok" and r["case"] in errors:
+            r["error"] = errors[r["case"]]
+        rows.append(r)
+    return rows + list(new_rows)
+
+
+# --------------------------------------------------------------------------- CLI
+
+
+def _parser() -> argparse.ArgumentParser:
+    ap = argparse.ArgumentParser(prog="astrodyn sweep", description="Monte Carlo dispersions / parameter sweeps of a "
+                                 "scenario on Dask (a LocalCluster by default).",
+                                 epilog="Dispersion syntax and output files: docs/sweeps.md.")
+    ap.add_argument("config", help="scenario TOML file (the nominal case)")
+    ap.add_argument("--vary", action="append", default=[], metavar="PATH=DIST",
+                    help="a dispersion, e.g. 'bodies.sat1.orbit.e=uniform(0.1, 0.9)' (repeatable): uniform(lo, hi), "
+                         "normal(mean, sigma), choice(a, b, ...), grid(lo, hi, n) or grid([a, b, ...]), a plain value; "
+                         "optional unit after it")
+    ap.add_argument("--cases", metavar="FILE.csv", help="a CSV of cases: header = key paths, one row per case")
+    ap.add_argument("-n", type=int, default=None, help="number of cases (default: the grid size or the CSV rows)")
+    ap.add_argument("--seed", type=int, default=0, help="random seed (default 0); case k uses default_rng([seed, k])")
+    ap.add_argument("--scheduler", metavar="ADDRESS", help="a running Dask scheduler, e.g. tcp://10.0.0.5:8786")
+    ap.add_argument("--workers", type=int, default=2,
+                    help="LocalCluster worker processes (default 2, 1 thread each); 0 = serial in this process")
+    ap.add_argument("--case", action="append", type=int, default=None, metavar="K",
+                    help="rerun only case K (repeatable), serially, updating the tables in --out")
+    ap.add_argument("--mcap", action="store_true", help="also write one MCAP per case into OUT/mcap/")
+    ap.add_argument("--out", required=True, metavar="DIR", help="output directory")
+    ap.add_argument("--quiet", action="store_true", help="no progress line")
+    return ap
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = _parser().parse_args(argv)
+    from astrodyn.scenario import ScenarioError
+
+    try:
+        if args.workers < 0:
+            raise SweepError(f"--workers: expected an integer >= 0, got {args.workers}")
+        spec = make_spec(args.config, args.vary, n=args.n, seed=args.seed, cases_csv=args.cases)
+        out = Path(args.out)
+        if out.exists() and not out.is_dir():
+            raise SweepError(f"--out {out}: expected a directory, got a file")
+        out.mkdir(parents=True, exist_ok=True)
+        if not os.access(out, os.W_OK):
+            raise SweepError(f"--out {out}: expected a writable directory")
+        if args.mcap:
+            spec.mcap_dir = str((out / "mcap").resolve())
+        cases = list(range(spec.n)) if args.case is None else sorted(set(args.case))
+        for k in cases:
+            if not 0 <= k < spec.n:
+                raise SweepError(f"--case: expected 0 <= K < {spec.n} (the sweep's -n), got {k}")
+    except (SweepError, ScenarioError) as exc:
+        print(f"astrodyn sweep: {exc}", file=sys.stderr)
+        return 2
+    rerun = args.case is not None
+    workers, scheduler = (0, None) if rerun else (args.workers, args.scheduler)
+    where = "serially in this process" if workers == 0 and scheduler is None else (
+        f"on the Dask scheduler {scheduler}" if scheduler else f"on a Dask LocalCluster of {workers} worker processes")
+    if not args.quiet:
+        print(f"astrodyn sweep: {len(cases)} case(s) of {spec.source} {where}, seed {spec.seed}", file=sys.stderr)
+    progress = Progress(len(cases), enabled=not args.quiet)
+    rows: list[dict] = []
+    started = time.monotonic()
+    interrupted = False
+    try:
+        for row in run_cases(spec, cases, workers=workers, scheduler=scheduler):
+            rows.append(row)
+            progress.update(row)
+            if rerun:
+                shown = {k: v for k, v in row.items() if k != "traceback"}
+                print(json.dumps(shown, default=str), flush=True)
+    except SweepError as exc:
+        print(f"astrodyn sweep: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        interrupted = True
+        print(f"\nastrodyn sweep: interrupted; writing the {len(rows)} finished cases", file=sys.stderr)
+    wall = time.monotonic() - started
+    all_rows = _merge(out, rows) if rerun else rows
+    versions = {"astrodyn": _version(), "numpy": np.__version__}
+    try:
+        import distributed
+
+        versions["distributed"] = distributed.__version__
+    except ImportError:
+        pass
+    extra = {"wall_s": wall, "workers": workers, "scheduler": scheduler, "versions": versions,
+             "cases_per_s": len(rows) / wall if wall > 0 else None, "interrupted": interrupted}
+    if rerun and (out / "sweep.json").exists():  # keep the full run's record, note the rerun
+        try:
+            previous = json.loads((out / "sweep.json").read_text(encoding="utf-8"))
+        except ValueError:
+            previous = {}
+        keep = ("wall_s", "workers", "scheduler", "versions", "cases_per_s", "interrupted")
+        extra = {k: previous[k] for k in keep if k in previous} | {"reruns": previous.get("reruns", []) + [cases]}
+    write_tables(out, all_rows, spec, extra=extra)
+    failed = [r for r in rows if r.get("status") != "ok"]
+    if not args.quiet:
+        print(f"astrodyn sweep: {len(rows) - len(failed)} ok, {len(failed)} failed in {wall:.1f} s "
+              f"({len(rows) / max(wall, 1e-9):.2f} cases/s); tables in {out}/", file=sys.stderr)
+        for r in failed[:10]:
+            print(f"  case {r['case']}: {r.get('error')}", file=sys.stderr)
+        if len(failed) > 10:
+            print(f"  ... {len(failed) - 10} more in {out / 'failures.csv'}", file=sys.stderr)
+        if failed:
+            print(f"  rerun one with the same command and --case K", file=sys.stderr)
+    if interrupted:
+        return 130
+    return 1 if failed else 0
+
+
+def _version() -> str:
+    from astrodyn import __version__
+
+    return __version__
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())
