@@ -19,7 +19,7 @@ __all__ = ["time_axis", "orbit_3d", "ground_track", "elements", "orbit_drift", "
            "euler_angles", "quaternion", "body_rates", "polhode", "attitude_drift", "top_angles"]
 
 _DPI = 110
-plt.rcParams.update({"font.size": 9, "axes.grid": True, "grid.alpha": 0.3, "figure.autolayout": False})
+plt.rcParams.update({"font.size": 9, "axes.grid": True, "grid.alpha": 0.3, "axes.formatter.useoffset": False})
 
 
 def time_axis(t: np.ndarray) -> tuple[np.ndarray, str]:
@@ -37,13 +37,18 @@ def _save(fig, path: Path) -> Path:
     return path
 
 
-def _stacked(t, series, labels, title, path, sharey=False):
+def _stacked(t, series, labels, title, path, dots=()):
+    """One panel per series over a shared time axis; series indices in ``dots`` are drawn
+    as points (angles that wrap at +-180 deg would otherwise draw vertical lines)."""
     ts, tl = time_axis(t)
-    fig, axes = plt.subplots(len(series), 1, figsize=(7.5, 1.6 + 1.45 * len(series)), sharex=True, sharey=sharey,
+    fig, axes = plt.subplots(len(series), 1, figsize=(7.5, 1.6 + 1.45 * len(series)), sharex=True,
                              constrained_layout=True)
     axes = np.atleast_1d(axes)
-    for ax, y, label in zip(axes, series, labels):
-        ax.plot(ts, y, lw=1.0)
+    for k, (ax, y, label) in enumerate(zip(axes, series, labels)):
+        if k in dots:
+            ax.plot(ts, y, ".", ms=1.5)
+        else:
+            ax.plot(ts, y, lw=1.0)
         ax.set_ylabel(label)
     axes[-1].set_xlabel(tl)
     fig.suptitle(title)
@@ -96,11 +101,11 @@ def ground_track(name: str, lon: np.ndarray, lat: np.ndarray, path: Path) -> Pat
 
 
 def elements(name: str, t: np.ndarray, el, path: Path) -> Path:
-    """a (km), e, i, RAAN, argument of periapsis, true anomaly (deg) over time."""
+    """a (km), e, i, RAAN, argument of periapsis (unwrapped), true anomaly (deg, points)."""
     deg = np.degrees
-    series = [el.a / 1e3, el.e, deg(el.i), deg(el.raan), deg(el.argp), deg(el.nu)]
+    series = [el.a / 1e3, el.e, deg(el.i), deg(np.unwrap(el.raan)), deg(np.unwrap(el.argp)), deg(np.mod(el.nu, 2 * np.pi))]
     labels = ["a (km)", "e (-)", "i (deg)", "RAAN (deg)", "arg. periapsis (deg)", "true anomaly (deg)"]
-    return _stacked(t, series, labels, f"{name}: osculating elements", path)
+    return _stacked(t, series, labels, f"{name}: osculating elements", path, dots=(5,))
 
 
 def orbit_drift(name: str, t: np.ndarray, energy_drift, h_drift, path: Path) -> Path:
@@ -117,7 +122,8 @@ def crosscheck(name: str, t: np.ndarray, dr_norm, dv_norm, path: Path) -> Path:
 def euler_angles(name: str, t: np.ndarray, angles, seq: str, path: Path) -> Path:
     deg = np.degrees(angles)
     labels = [f"angle {i + 1}, axis {seq[i]} (deg)" for i in range(3)]
-    return _stacked(t, [deg[:, 0], deg[:, 1], deg[:, 2]], labels, f"{name}: Euler angles, body sequence {seq}", path)
+    return _stacked(t, [deg[:, 0], deg[:, 1], deg[:, 2]], labels, f"{name}: Euler angles, body sequence {seq}", path,
+                    dots=(0, 1, 2))
 
 
 def quaternion(name: str, t: np.ndarray, q, path: Path) -> Path:
@@ -141,26 +147,39 @@ def body_rates(name: str, t: np.ndarray, w, path: Path) -> Path:
 def polhode(name: str, h_body: np.ndarray, inertia: np.ndarray, path: Path) -> Path:
     """The polhode: the body-frame angular momentum on the momentum sphere |H| = const.
 
-    It is the intersection of that sphere with the energy ellipsoid H . I^-1 H = 2T; the
-    sphere is drawn as a wire frame, the recorded path over it.
+    It is the intersection of that sphere with the energy ellipsoid H . I^-1 H = 2T.
+    Left: the sphere (wire frame) and the path; right: the path seen along the body
+    axis it stays closest to (equal scales), where a small polhode is readable.
     """
     hn = np.linalg.norm(h_body[0])
-    fig = plt.figure(figsize=(6.0, 5.6), constrained_layout=True)
-    ax = fig.add_subplot(projection="3d")
-    u, v = np.mgrid[0:2 * np.pi:28j, 0:np.pi:14j]
-    ax.plot_wireframe(np.cos(u) * np.sin(v), np.sin(u) * np.sin(v), np.cos(v), color="0.75", lw=0.4)
     hh = h_body / hn
-    ax.plot(hh[:, 0], hh[:, 1], hh[:, 2], lw=1.4, color="C3", label="polhode")
-    ax.scatter(*hh[0], s=14, color="green", label="start")
+    fig = plt.figure(figsize=(10.0, 4.8), constrained_layout=True)
+    ax = fig.add_subplot(1, 2, 1, projection="3d")
+    u, v = np.mgrid[0:2 * np.pi:28j, 0:np.pi:14j]
+    ax.plot_wireframe(np.cos(u) * np.sin(v), np.sin(u) * np.sin(v), np.cos(v), color="0.8", lw=0.3)
+    ax.plot(hh[:, 0], hh[:, 1], hh[:, 2], lw=1.6, color="C3", label="polhode", zorder=5)
+    ax.scatter(*hh[0], s=14, color="green", label="start", zorder=6)
     moments = np.diag(inertia)
     for i in range(3):
-        ax.text(*(1.25 * np.eye(3)[i]), f"b{i + 1} (I={moments[i]:.3g})", fontsize=7)
+        ax.text(*(1.3 * np.eye(3)[i]), f"b{i + 1}", fontsize=8)
     ax.set_box_aspect((1, 1, 1))
+    for set_ticks in (ax.set_xticks, ax.set_yticks, ax.set_zticks):
+        set_ticks([-1, 0, 1])
     ax.set_xlabel("H1 / |H| (-)")
     ax.set_ylabel("H2 / |H| (-)")
     ax.set_zlabel("H3 / |H| (-)")
     ax.legend(loc="upper left", fontsize=8)
-    ax.set_title(f"{name}: polhode on the momentum sphere (|H| = {hn:.4g} kg m²/s)")
+    ax.set_title("on the momentum sphere")
+    k = int(np.argmax(np.abs(hh.mean(axis=0))))
+    i, j = [a for a in range(3) if a != k]
+    ax2 = fig.add_subplot(1, 2, 2)
+    ax2.plot(hh[:, i], hh[:, j], lw=1.2, color="C3")
+    ax2.plot(hh[0, i], hh[0, j], "o", color="green", ms=4)
+    ax2.set_aspect("equal", adjustable="datalim")
+    ax2.set_xlabel(f"H{i + 1} / |H| (-)")
+    ax2.set_ylabel(f"H{j + 1} / |H| (-)")
+    ax2.set_title(f"seen along body axis b{k + 1}")
+    fig.suptitle(f"{name}: polhode, |H| = {hn:.4g} kg m²/s, I = ({', '.join(f'{m:.3g}' for m in moments)}) kg m²")
     return _save(fig, path)
 
 
