@@ -234,6 +234,27 @@ def _f(x: float) -> str:
     return repr(float(x))
 
 
+def _message_head(version_key: str, version: str, run: Run, tr: Track, comments: list[str], name: str,
+                  meta: list[tuple[str, str]], system: str, epochs: list[str]) -> list[str]:
+    """Header and metadata block shared by OEM and AEM (KVN)."""
+    return [
+        _kvn(version_key, version),
+        f"COMMENT astrodyn {__version__} export of {os.path.basename(run.path)}, channel {tr.topic}",
+        *(f"COMMENT {c}" for c in comments),
+        _kvn("CREATION_DATE", _creation_date()),
+        _kvn("ORIGINATOR", "ASTRODYN"),
+        "",
+        "META_START",
+        _kvn("OBJECT_NAME", name),
+        _kvn("OBJECT_ID", name),
+        _kvn("CENTER_NAME", _central_name(run)),
+        *(_kvn(k, v) for k, v in meta),
+        _kvn("TIME_SYSTEM", system),
+        _kvn("START_TIME", epochs[0]),
+        _kvn("STOP_TIME", epochs[-1]),
+    ]
+
+
 def write_oem(run: Run, out: Path) -> list[Path]:
     """``<body>.oem`` per body with an orbit channel (CCSDS 502.0-B-3 KVN)."""
     written = []
@@ -243,21 +264,10 @@ def write_oem(run: Run, out: Path) -> list[Path]:
             continue
         epochs, system = ccsds_epochs(run, tr.t, tr.log_time)
         frames = sorted(set(tr.frame))
-        lines = [
-            _kvn("CCSDS_OEM_VERS", "3.0"),
-            f"COMMENT astrodyn {__version__} export of {os.path.basename(run.path)}, channel {tr.topic}",
-            f"COMMENT scenario {run.scenario.get('name', '?')}, epoch {run.scenario.get('epoch', '?')}; models {', '.join(sorted(set(tr.model)))}",
-            _kvn("CREATION_DATE", _creation_date()),
-            _kvn("ORIGINATOR", "ASTRODYN"),
-            "",
-            "META_START",
-            _kvn("OBJECT_NAME", name),
-            _kvn("OBJECT_ID", name),
-            _kvn("CENTER_NAME", _central_name(run)),
-            _kvn("REF_FRAME", frames[0] if len(frames) == 1 else "GCRF"),
-            _kvn("TIME_SYSTEM", system),
-            _kvn("START_TIME", epochs[0]),
-            _kvn("STOP_TIME", epochs[-1]),
+        comment = (f"scenario {run.scenario.get('name', '?')}, epoch {run.scenario.get('epoch', '?')}; "
+                   f"models {', '.join(sorted(set(tr.model)))}")
+        lines = _message_head("CCSDS_OEM_VERS", "3.0", run, tr, [comment], name,
+                              [("REF_FRAME", frames[0] if len(frames) == 1 else "GCRF")], system, epochs) + [
             "META_STOP",
             "",
             "COMMENT position km, velocity km/s",
@@ -280,23 +290,10 @@ def write_aem(run: Run, out: Path) -> list[Path]:
             continue
         epochs, system = ccsds_epochs(run, tr.t, tr.log_time)
         frame_a = sorted(set(body.orbit.frame))[0] if body.orbit is not None and len(body.orbit) else "GCRF"
-        lines = [
-            _kvn("CCSDS_AEM_VERS", "2.0"),
-            f"COMMENT astrodyn {__version__} export of {os.path.basename(run.path)}, channel {tr.topic}",
-            "COMMENT Quaternion rotates REF_FRAME_A into REF_FRAME_B: v_B = C(q) v_A (Baruh ch. 7),",
-            "COMMENT data columns Q1 Q2 Q3 QC with the scalar QC last (astrodyn q = (QC, Q1, Q2, Q3)).",
-            _kvn("CREATION_DATE", _creation_date()),
-            _kvn("ORIGINATOR", "ASTRODYN"),
-            "",
-            "META_START",
-            _kvn("OBJECT_NAME", name),
-            _kvn("OBJECT_ID", name),
-            _kvn("CENTER_NAME", _central_name(run)),
-            _kvn("REF_FRAME_A", frame_a),
-            _kvn("REF_FRAME_B", "SC_BODY_1"),
-            _kvn("TIME_SYSTEM", system),
-            _kvn("START_TIME", epochs[0]),
-            _kvn("STOP_TIME", epochs[-1]),
+        comments = ["Quaternion rotates REF_FRAME_A into REF_FRAME_B: v_B = C(q) v_A (Baruh ch. 7),",
+                    "data columns Q1 Q2 Q3 QC with the scalar QC last (astrodyn q = (QC, Q1, Q2, Q3))."]
+        lines = _message_head("CCSDS_AEM_VERS", "2.0", run, tr, comments, name,
+                              [("REF_FRAME_A", frame_a), ("REF_FRAME_B", "SC_BODY_1")], system, epochs) + [
             _kvn("ATTITUDE_TYPE", "QUATERNION"),
             "META_STOP",
             "",
