@@ -1,0 +1,118 @@
+"""``astrodyn router``: a Zenoh router, so astrodyn processes on several hosts meet.
+
+    astrodyn router                                 # tcp/127.0.0.1:7447 (this machine only)
+    astrodyn router --listen tcp/0.0.0.0:7447       # open to the network (prints a warning)
+
+A router is a Zenoh session in ``router`` mode (:func:`astrodyn.bus.open_session` with
+``mode="router"``, multicast scouting off): clients and peers that ``--connect`` to it
+exchange publications, queries and liveliness tokens through it, so each process needs to
+know only the router's endpoint.  ``astrodyn run CONFIG --connect tcp/HOST:7447``, the
+services (``services/orbit.py`` ... with ``--mode client --connect tcp/HOST:7447``) and
+``astrodyn serve`` join it.  Two-host walk-through, TLS and access control:
+``docs/multihost.md``.
+
+The default endpoint is loopback; listening on every interface (``0.0.0.0``, ``[::]``)
+happens only when asked and prints a warning, because Zenoh traffic is neither encrypted
+nor authenticated unless TLS and access control are configured (``--config`` takes a
+Zenoh JSON5 config file for that; the endpoints given here are added to it).
+
+It runs until SIGTERM or Ctrl-C (exit 0); with ``--status-interval S`` it prints the
+routers and peers connected every S seconds.  Exit 2 on bad arguments, 1 if the session
+cannot be opened (port taken, unreadable config).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import signal
+import sys
+import threading
+import time
+
+__all__ = ["DEFAULT_LISTEN", "main", "open_router", "is_wildcard"]
+
+DEFAULT_LISTEN = "tcp/127.0.0.1:7447"
+_WILDCARD_HOSTS = ("0.0.0.0", "[::]", "::", "[::0]")
+
+
+def is_wildcard(endpoint: str) -> bool:
+    """True when ``endpoint`` (``proto/host:port``) binds every interface."""
+    try:
+        host = endpoint.split("/", 1)[1].rsplit(":", 1)[0]
+    except IndexError:
+        return False
+    return host in _WILDCARD_HOSTS
+
+
+def open_router(listen: list[str], connect: list[str] | None = None, config_file: str | None = None):
+    """Open a Zenoh session in router mode with astrodyn's defaults (or ``config_file``)."""
+    from astrodyn import bus
+
+    if config_file is None:
+        return bus.open_session(listen=listen, connect=connect or None, mode="router")
+    import zenoh
+
+    try:
+        config = zenoh.Config.from_file(config_file)
+        config.insert_json5("mode", json.dumps("router"))
+        if listen:
+            config.insert_json5("listen/endpoints", json.dumps(listen))
+        if connect:
+            config.insert_json5("connect/endpoints", json.dumps(connect))
+        return zenoh.open(config)
+    except zenoh.ZError as exc:
+        raise bus.BusError(f"cannot open a Zenoh router (config {config_file}, listen={listen}, connect={connect}): {exc}") from None
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog="astrodyn router", description=__doc__.split("\n\n")[0])
+    ap.add_argument("--listen", action="append", default=None, metavar="ENDPOINT",
+                    help=f"endpoint to listen on (repeatable; default {DEFAULT_LISTEN}); tcp/0.0.0.0:7447 opens it to the network")
+    ap.add_argument("--connect", action="append", default=None, metavar="ENDPOINT",
+                    help="another router to join (repeatable), for a mesh of routers")
+    ap.add_argument("--config", metavar="FILE", help="a Zenoh JSON5 config (TLS, access control); --listen/--connect are added")
+    ap.add_argument("--status-interval", type=float, default=0.0, metavar="S",
+                    help="print the connected routers and peers every S seconds (0: never)")
+    args = ap.parse_args(argv)
+    from astrodyn import bus
+
+    listen = args.listen or ([] if args.config else [DEFAULT_LISTEN])
+    try:
+        for e in listen + (args.connect or []):
+            bus.make_config(listen=[e], mode="router")  # validates the endpoint syntax
+    except bus.BusError as exc:
+        print(f"astrodyn router: {exc}", file=sys.stderr)
+        return 2
+    for e in listen:
+        if is_wildcard(e):
+            print(f"astrodyn router: WARNING: {e} listens on every network interface; Zenoh traffic is not encrypted or "
+                  "authenticated unless TLS and access control are configured (docs/multihost.md)", file=sys.stderr)
+    stop = threading.Event()
+
+    def on_signal(signum, frame):
+        stop.set()
+
+    signal.signal(signal.SIGTERM, on_signal)
+    signal.signal(signal.SIGINT, on_signal)
+    try:
+        session = open_router(listen, args.connect, args.config)
+    except bus.BusError as exc:
+        print(f"astrodyn router: {exc}", file=sys.stderr)
+        return 1
+    with session:
+        print(json.dumps({"router": str(session.info.zid()), "listen": listen, "connect": args.connect or []}),
+              flush=True)
+        next_status = time.monotonic() + args.status_interval
+        while not stop.wait(0.2):
+            if args.status_interval > 0 and time.monotonic() >= next_status:
+                next_status += args.status_interval
+                routers = [str(z) for z in session.info.routers_zid()]
+                peers = [str(z) for z in session.info.peers_zid()]
+                print(f"astrodyn router: {len(routers)} routers, {len(peers)} peers connected", file=sys.stderr, flush=True)
+    print("astrodyn router: stopped", file=sys.stderr, flush=True)
+    return 0
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())
