@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 
 from astrodyn import bus
@@ -36,6 +37,9 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument("--roll-size", type=int, default=None, help="start a new file after this many bytes")
     p.add_argument("--roll-interval", type=float, default=None, help="start a new file after this many wall seconds")
     p.add_argument("--max-seconds", type=float, default=None, help="stop after this many wall seconds")
+    p.add_argument("--prefill", default=None, metavar="MCAP",
+                   help="first copy the state messages with seq < --prefill-steps from this recording (run --resume)")
+    p.add_argument("--prefill-steps", type=int, default=0, help="steps (seq 0 .. N-1) to copy from --prefill")
     bus.add_bus_arguments(p)
     return p.parse_args(argv)
 
@@ -55,6 +59,35 @@ def scenario_metadata(args: argparse.Namespace) -> dict:
     return meta
 
 
+def prefill(recorder: McapRecorder, path: str, scenario: str, steps: int) -> int:
+    """Copy the state messages (orbit, attitude, crosscheck) with ``seq < steps`` of
+    ``scenario`` from the recording ``path`` into ``recorder``, payloads unchanged; this
+    also seeds the seq accounting, so the continuation counts no gap.  Returns the number
+    of messages copied.  Events of the old run are not copied (the new processes number
+    their own); the "resumed_from" metadata record says where the copy came from."""
+    from astrodyn import messages
+    from astrodyn.recording.stream import open_stream
+
+    n = 0
+    with open_stream(path) as stream:
+        for m in stream.messages(f"{messages.PREFIX}/{scenario}/*"):
+            try:
+                kind = messages.kind_of_key(m.topic)
+            except messages.MessageError:
+                continue
+            if kind not in ("orbit", "attitude", "crosscheck"):
+                continue
+            try:
+                msg = messages.decode(m.data, kind)
+            except messages.MessageError:
+                continue  # load() reports these; they are not states to continue from
+            if msg["seq"] < steps:
+                recorder.write_encoded(m.topic, m.data, msg["t"], msg["seq"], m.publish_time)
+                n += 1
+    recorder.add_metadata("resumed_from", {"path": os.path.abspath(path), "steps": str(steps), "messages": str(n)})
+    return n
+
+
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
     try:
@@ -67,9 +100,12 @@ def main(argv: list[str] | None = None) -> int:
             recorder = McapRecorder(args.out, meta, epoch_ns=args.epoch_ns,
                                     chunk_size=args.chunk_size, flush_interval_s=args.flush_interval,
                                     roll_size=args.roll_size, roll_interval_s=args.roll_interval)
+            copied = prefill(recorder, args.prefill, args.scenario, args.prefill_steps) if args.prefill else 0
             logger = Logger(session, args.scenario, recorder, expect=args.expect, queue_capacity=args.queue,
                             control=not args.no_control)
             summary = logger.run(max_seconds=args.max_seconds)
+            if args.prefill:
+                summary["prefilled"] = copied
     except (RecordingError, bus.BusError) as exc:
         print(f"logger: {exc}", file=sys.stderr)
         return 1

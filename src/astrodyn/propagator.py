@@ -99,6 +99,8 @@ class PropagatorOptions:
     start_step: int = 0
     max_steps: int | None = None  # stop after this many instants (tests)
     endless: bool = False  # serve: keep going past the scenario's duration until stopped
+    resume_state: tuple[int, float, dict] | None = None  # (step, t, states) the integrated bodies continue from
+    first_event_seq: int = 0  # a restarted process continues its predecessor's event numbering
 
 
 class _Stop(Exception):
@@ -122,6 +124,12 @@ def run_propagator(scenario: Scenario, session, opts: PropagatorOptions, log=pri
         engine = AttitudeEngine(scenario, p)
         key_of = messages.attitude_key
     names, models = engine.names, engine.models
+    if opts.resume_state is not None:
+        step, t_state, states = opts.resume_state
+        if opts.start_step != step + 1:
+            raise ValueError(f"--start-step: expected {step + 1} (the step after the resume state's {step}), "
+                             f"got {opts.start_step}")
+        engine.resume(t_state, states)
     keys = [key_of(scenario.name, n) for n in names]
     groups: dict[str, np.ndarray] = {}
     for i, m in enumerate(models):
@@ -155,6 +163,7 @@ def run_propagator(scenario: Scenario, session, opts: PropagatorOptions, log=pri
             bus.EventPublisher(session, scenario.name, opts.kind) as events, \
             session.declare_subscriber(command_key(scenario.name), _fifo()) as commands:
         bus.wait_for_process(session, scenario.name, "logger", timeout_s=opts.wait_logger_s)
+        events.next_seq = int(opts.first_event_seq)
         events.emit("start", float(t_reached), json.dumps({"bodies": len(names), "first_step": start,
                                                            "steps": stop_at - start}))
         k = start
@@ -295,6 +304,9 @@ def service_main(kind: str, argv: list[str] | None = None) -> int:
                     help="sim seconds per wall second (default inf: as fast as possible)")
     ap.add_argument("--cross-check", action="store_true", help="orbit: run REBOUND IAS15 alongside for every body")
     ap.add_argument("--start-step", type=int, default=0, help="first output step to publish (resume)")
+    ap.add_argument("--resume-state", default=None, metavar="JSON",
+                    help="states at step START_STEP-1 for the integrated bodies (astrodyn.resume.write_state_file)")
+    ap.add_argument("--first-event-seq", type=int, default=0, help="seq of this process's first event (a restart)")
     ap.add_argument("--max-steps", type=int, default=None, help="publish at most this many steps")
     ap.add_argument("--endless", action="store_true", help="keep going past the scenario's duration until stopped (serve)")
     ap.add_argument("--block", type=int, default=0, help="output steps per engine call (default automatic)")
@@ -306,17 +318,33 @@ def service_main(kind: str, argv: list[str] | None = None) -> int:
     except ScenarioError as exc:
         print(f"{kind}: {exc}", file=sys.stderr)
         return 2
+    resume_state = None
+    if args.resume_state is not None:
+        from astrodyn.resume import ResumeError, read_state_file
+
+        try:
+            resume_state = read_state_file(args.resume_state, kind)
+        except ResumeError as exc:
+            print(f"{kind}: {exc}", file=sys.stderr)
+            return 2
+    if args.start_step < 0 or args.first_event_seq < 0:
+        print(f"{kind}: --start-step and --first-event-seq: expected integers >= 0", file=sys.stderr)
+        return 2
     if not (args.real_time_factor > 0):
         print(f"{kind}: --real-time-factor: expected a number > 0, got {args.real_time_factor}", file=sys.stderr)
         return 2
     opts = PropagatorOptions(kind=kind, real_time_factor=args.real_time_factor, block=args.block,
                              cross_check=args.cross_check, wait_logger_s=args.wait_logger,
-                             start_step=args.start_step, max_steps=args.max_steps, endless=args.endless)
+                             start_step=args.start_step, max_steps=args.max_steps, endless=args.endless,
+                             resume_state=resume_state, first_event_seq=args.first_event_seq)
     try:
         with bus.session_from_args(args) as session:
             summary = run_propagator(scenario, session, opts)
     except bus.BusError as exc:
         print(f"{kind}: {exc}", file=sys.stderr)
         return 1
+    except ValueError as exc:  # a resume state that does not fit the scenario
+        print(f"{kind}: {exc}", file=sys.stderr)
+        return 2
     print(json.dumps(summary, separators=(",", ":")), flush=True)
     return 0

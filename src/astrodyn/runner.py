@@ -34,6 +34,7 @@ import signal
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from pathlib import Path
 
@@ -133,8 +134,15 @@ class _Child:
 
 def run_scenario(scenario: Scenario, config_path: Path, out: Path, *, cross_check: bool = False,
                  real_time_factor: float = math.inf, connect: list[str] | None = None,
-                 progress: bool = True, timeout_s: float | None = None, extra_args: dict | None = None) -> dict:
-    """Run ``scenario`` with real processes; return the result dict (see :func:`main`)."""
+                 progress: bool = True, timeout_s: float | None = None, extra_args: dict | None = None,
+                 logger_args: list[str] | None = None) -> dict:
+    """Run ``scenario`` with real processes; return the result dict (see :func:`main`).
+
+    SIGTERM / SIGINT (Ctrl-C) while it runs: the propagators are stopped first (each sends
+    its end-of-run event saying how far it got), then the logger finishes the file
+    (summary, indexes, footer, and an "end" metadata record with the sim time reached);
+    ``result["interrupted"]`` names the signal.
+    """
     services = services_dir()
     p = make_plan(scenario)
     propagators = [k for k in p.processes if k != "logger"]
@@ -144,6 +152,11 @@ def run_scenario(scenario: Scenario, config_path: Path, out: Path, *, cross_chec
     py = sys.executable
     started = time.monotonic()
     result: dict = {"scenario": scenario.name, "out": str(out), "processes": {}, "ok": False}
+    interrupted: dict = {"signal": None}
+    previous = {}
+    if threading.current_thread() is threading.main_thread():
+        for sig in (signal.SIGTERM, signal.SIGINT):
+            previous[sig] = signal.signal(sig, lambda s, f: interrupted.update(signal=signal.Signals(s).name))
     with tempfile.TemporaryDirectory(prefix="astrodyn-run-") as tmp, \
             bus.open_session(listen=[hub]) as session, \
             bus.HeartbeatMonitor(session, scenario.name) as beats, \
@@ -156,25 +169,32 @@ def run_scenario(scenario: Scenario, config_path: Path, out: Path, *, cross_chec
             logger_argv = [py, str(services / "logger.py"), "--scenario", scenario.name, "--out", str(out),
                            "--epoch-ns", str(scenario.epoch_unix_ns), "--metadata", str(meta_path),
                            "--config", str(config_path), *sum((["--expect", k] for k in propagators), []),
-                           *connect_args]
+                           *(logger_args or []), *connect_args]
             children["logger"] = _Child("logger", logger_argv, tmpd)
-            bus.wait_for_process(session, scenario.name, "logger", timeout_s=30.0)
-            for kind in propagators:
-                argv = [py, str(services / f"{kind}.py"), str(config_path), *connect_args]
-                if not math.isinf(real_time_factor):
-                    argv += ["--real-time-factor", str(real_time_factor)]
-                if cross_check and kind == "orbit":
-                    argv.append("--cross-check")
-                for k, v in (extra_args or {}).get(kind, {}).items():
-                    argv += [k, str(v)]
-                children[kind] = _Child(kind, argv, tmpd)
-            if progress:
-                print("  started " + ", ".join(f"{n} (pid {c.pid})" for n, c in children.items()), file=sys.stderr, flush=True)
-            failure = _watch(scenario, p, children, beats, alive, progress, timeout_s)
+            failure = _wait_ready(session, scenario.name, children["logger"], 60.0, interrupted)
+            if failure is None:
+                for kind in propagators:
+                    argv = [py, str(services / f"{kind}.py"), str(config_path), *connect_args]
+                    if not math.isinf(real_time_factor):
+                        argv += ["--real-time-factor", str(real_time_factor)]
+                    if cross_check and kind == "orbit":
+                        argv.append("--cross-check")
+                    for k, v in (extra_args or {}).get(kind, {}).items():
+                        argv += [k, str(v)]
+                    children[kind] = _Child(kind, argv, tmpd)
+                if progress:
+                    print("  started " + ", ".join(f"{n} (pid {c.pid})" for n, c in children.items()), file=sys.stderr, flush=True)
+                failure = _watch(scenario, p, children, beats, alive, progress, timeout_s, interrupted)
             logger = children["logger"]
             if failure:
                 for kind in propagators:
-                    children[kind].stop()
+                    if kind in children:
+                        children[kind].stop()
+                if interrupted["signal"]:  # clean stops: the logger ends once it holds their last states
+                    try:
+                        logger.proc.wait(timeout=10)
+                    except subprocess.TimeoutExpired:
+                        pass
                 logger.stop(signal.SIGTERM, timeout=30)
             else:
                 try:
@@ -189,9 +209,13 @@ def run_scenario(scenario: Scenario, config_path: Path, out: Path, *, cross_chec
                 failure = f"logger exited with status {logger.poll()}: {logger.stderr_tail()}"
             result["failure"] = failure
         finally:
-            for ch in children.values():
-                ch.stop()
-                ch.close()
+            for name in [*(k for k in children if k != "logger"), "logger"]:  # propagators first
+                if name in children:
+                    children[name].stop()
+                    children[name].close()
+            for sig, handler in previous.items():
+                signal.signal(sig, handler)
+    result["interrupted"] = interrupted["signal"]
     result["wall_s"] = time.monotonic() - started
     log = (result["processes"].get("logger") or {}).get("summary") or {}
     result["logger"] = log
@@ -202,7 +226,27 @@ def run_scenario(scenario: Scenario, config_path: Path, out: Path, *, cross_chec
     return result
 
 
-def _watch(scenario: Scenario, p, children: dict, beats, alive, progress: bool, timeout_s: float | None) -> str | None:
+def _wait_ready(session, scenario: str, child: _Child, timeout_s: float, interrupted: dict) -> str | None:
+    """Wait for ``child``'s liveliness token; a failure description if it exits first (e.g.
+    the logger cannot write its file), is interrupted, or is not ready within ``timeout_s``."""
+    deadline = time.monotonic() + timeout_s
+    while True:
+        rc = child.poll()
+        if rc is not None:
+            time.sleep(0.1)  # let its last words reach the stderr file
+            return f"process {child.name} (pid {child.pid}) exited with status {rc} during start-up: {child.stderr_tail(3)}"
+        if interrupted["signal"]:
+            return f"interrupted by {interrupted['signal']} during start-up"
+        try:
+            bus.wait_for_process(session, scenario, child.name, timeout_s=0.5)
+            return None
+        except bus.BusError:
+            if time.monotonic() > deadline:
+                return f"process {child.name} (pid {child.pid}) not ready after {timeout_s} s: {child.stderr_tail(3)}"
+
+
+def _watch(scenario: Scenario, p, children: dict, beats, alive, progress: bool, timeout_s: float | None,
+           interrupted: dict | None = None) -> str | None:
     """Wait for the propagators to finish; return a failure description or None."""
     propagators = [k for k in children if k != "logger"]
     duration = scenario.output_times()[-1] if scenario.n_steps else 0.0
@@ -242,6 +286,9 @@ def _watch(scenario: Scenario, p, children: dict, beats, alive, progress: bool, 
             print(("\r" if tty else "") + f"  sim t {t_min:10.1f} / {duration:.1f} s  ({100 * t_min / max(duration, 1e-300):5.1f} %)"
                   f"  logged {msgs:>9d}  {rate:9.0f} msg/s", end="" if tty else "\n", file=sys.stderr, flush=True)
             last_print = now
+        if interrupted is not None and interrupted["signal"]:
+            ts = [beats.last.get(k, {}).get("t", 0.0) for k in propagators]
+            return f"interrupted by {interrupted['signal']} at sim t {min(ts) if ts else 0.0:.6g} s of {duration:.6g} s"
         if timeout_s is not None and now - t0 > timeout_s:
             return f"timeout: the run took longer than {timeout_s} s"
         time.sleep(0.05)
@@ -298,6 +345,8 @@ def _print_summary(result: dict, rows: list[dict], scenario: Scenario) -> None:
     print(f"  wall {result['wall_s']:.2f} s for {scenario.duration:.6g} s of sim time "
           f"(real-time factor {scenario.duration / max(result['wall_s'], 1e-9):.1f}x); "
           f"states logged {log.get('states', '?')}, missing {log.get('missing', '?')}, malformed {log.get('malformed', '?')}")
+    if log.get("t") is not None and log.get("reason"):
+        print(f"  sim t reached {log['t']:.6g} s of {scenario.duration:.6g} s; logger stopped: {log['reason']}")
     hdr = f"  {'body':<16} {'orbit model':<12} {'att. model':<17} {'states':>8} {'energy drift':>12} {'h drift':>9} {'|q|-1':>9} {'xcheck dr':>10}"
     print(hdr)
     shown = rows if len(rows) <= 25 else rows[:20]
@@ -323,17 +372,24 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--timeout", type=float, default=None, help="fail if the run takes longer than this many wall seconds")
     ap.add_argument("--quiet", action="store_true", help="no progress line")
     ap.add_argument("--json", metavar="FILE", help="write the full result (per-body summary included) as JSON")
+    ap.add_argument("--resume", metavar="MCAP", help="continue the scenario from the last complete step recorded in "
+                    "this file: its states are copied into --out (which must differ) and the run goes on from there")
     args = ap.parse_args(argv)
-    try:
-        scenario = load(args.config)
-        out = Path(args.out) if args.out else (scenario.output_path or Path(f"{scenario.name}.mcap"))
-        _check_output(out)
-    except ScenarioError as exc:
-        print(f"astrodyn run: {exc}", file=sys.stderr)
-        return 2
-    print(make_plan(scenario).text(), file=sys.stderr)
-    result = run_scenario(scenario, Path(args.config), out, cross_check=args.cross_check, connect=args.connect,
-                          progress=not args.quiet, timeout_s=args.timeout)
+    with tempfile.TemporaryDirectory(prefix="astrodyn-resume-") as work:
+        try:
+            scenario = load(args.config)
+            out = Path(args.out) if args.out else (scenario.output_path or Path(f"{scenario.name}.mcap"))
+            _check_output(out)
+            resume = resume_plan(Path(args.resume), scenario, out, Path(work)) if args.resume else {}
+        except ScenarioError as exc:
+            print(f"astrodyn run: {exc}", file=sys.stderr)
+            return 2
+        print(make_plan(scenario).text(), file=sys.stderr)
+        if resume:
+            print(f"  resuming from {args.resume} at step {resume['step']} (t = {resume['t']:.6g} s)", file=sys.stderr)
+        result = run_scenario(scenario, Path(args.config), out, cross_check=args.cross_check, connect=args.connect,
+                              progress=not args.quiet, timeout_s=args.timeout, extra_args=resume.get("extra_args"),
+                              logger_args=resume.get("logger_args"))
     print("", file=sys.stderr)
     rows = []
     if out.exists():
@@ -347,5 +403,39 @@ def main(argv: list[str] | None = None) -> int:
         Path(args.json).write_text(json.dumps(result, indent=1, default=str))
     if result.get("failure"):
         print(f"astrodyn run: FAILED: {result['failure']}", file=sys.stderr)
+        if result.get("interrupted"):  # shell convention: 128 + signal number
+            return 128 + int(signal.Signals[result["interrupted"]])
         return 1
     return 0
+
+
+def resume_plan(path: Path, scenario: Scenario, out: Path, work: Path) -> dict:
+    """How to continue ``scenario`` from the recording ``path``: the step k to start at (every
+    state channel holds steps 0 .. k-1), the logger's prefill arguments and each
+    propagator's ``--start-step`` / ``--resume-state``.  ScenarioError naming the file for
+    anything that cannot be resumed (not MCAP, another scenario or config, nothing or
+    everything recorded, ``--out`` the same file)."""
+    from astrodyn.recording import RecordingError, load as load_run
+    from astrodyn.resume import contiguous_steps, propagator_resume_args, state_topics
+
+    if path.resolve() == out.resolve():
+        raise ScenarioError(f"--out {out}: expected a new file, not the --resume file itself")
+    try:
+        run = load_run(path)
+    except RecordingError as exc:
+        raise ScenarioError(f"--resume {exc}") from None
+    recorded = run.scenario.get("json")
+    if run.scenario.get("name") != scenario.name or (recorded and recorded != scenario.to_metadata()["json"]):
+        raise ScenarioError(f"--resume {path}: expected a recording of this scenario and config ({scenario.name!r}), "
+                            f"got one of {run.scenario.get('name')!r}{' with another config' if run.scenario.get('name') == scenario.name else ''}")
+    p = make_plan(scenario)
+    kinds = [k for k in p.processes if k != "logger"]
+    topics = [t for kind in kinds for t in state_topics(scenario, kind).values()]
+    k = contiguous_steps(run, topics)
+    if k == 0:
+        raise ScenarioError(f"--resume {path}: expected at least one complete step (every body's states), found none")
+    if k >= scenario.n_steps:
+        raise ScenarioError(f"--resume {path}: the recording already holds all {scenario.n_steps} steps; nothing to resume")
+    extra = {kind: propagator_resume_args(run, scenario, kind, k - 1, work) for kind in kinds}
+    return {"step": k, "t": k / scenario.rate, "extra_args": extra,
+            "logger_args": ["--prefill", str(path), "--prefill-steps", str(k)]}

@@ -24,15 +24,27 @@ From Python::
 The supervisor forwards pause / resume / rate / stop to its propagators on the private key
 ``astrodyn/<scenario>/@command``; on ``stop`` the propagators end with their end-of-run
 events and the logger finishes the file once it holds every message (nothing published
-is lost).  SIGTERM / Ctrl-C to the supervisor is a ``stop``.  A propagator that dies is
-reported on stderr and in the ``status`` reply.
+is lost).  SIGTERM / Ctrl-C to the supervisor is a ``stop``.
+
+A propagator that dies (SIGKILL, crash) is noticed from its exit status and its Zenoh
+liveliness token (measured: well under a second, docs/reliability.md), reported on stderr
+and in the ``status`` reply (``restarts``), and restarted from the last state the logger
+flushed to the file (:mod:`astrodyn.resume`: the latest step every one of its channels
+holds; exact models are re-evaluated from the initial state, integrated ones continue from
+that state with ``--resume-state``).  A ``restart`` event (process ``serve``) is recorded
+in the MCAP with the step it restarted from.  Steps the dead process published after the
+last flush are published again; the logger keeps the first copy of each seq, so the file
+has no gap and no duplicate.  After ``max_restarts`` deaths of one process it stays down
+and the failure is final (exit 1).
 """
 
 from __future__ import annotations
 
 import argparse
+import glob
 import json
 import math
+import os
 import signal
 import sys
 import tempfile
@@ -51,9 +63,14 @@ class Supervisor:
     """Starts the processes of one scenario and answers the control verbs (module docstring)."""
 
     def __init__(self, scenario, config_path: Path, out: Path, session, hub: str, *, rate: float,
-                 roll_size: int | None = None, roll_interval: float | None = None, connect=(), tmp: Path):
+                 roll_size: int | None = None, roll_interval: float | None = None, connect=(), tmp: Path,
+                 max_restarts: int = 5):
         self.scenario = scenario
         self.session = session
+        self.out = Path(out)
+        self.tmp = tmp
+        self.max_restarts = int(max_restarts)
+        self.restarts: list[dict] = []
         self.rate = float(rate)
         self.state = "starting"
         self.started = time.monotonic()
@@ -73,12 +90,14 @@ class Supervisor:
             logger_argv += ["--roll-interval", str(roll_interval)]
         self.children: dict[str, _Child] = {"logger": _Child("logger", logger_argv, tmp)}
         bus.wait_for_process(session, scenario.name, "logger", timeout_s=30.0)
+        self._argv = {kind: [sys.executable, str(services / f"{kind}.py"), str(config_path), "--endless", *connect_args]
+                      for kind in self.propagators}
         for kind in self.propagators:
-            argv = [sys.executable, str(services / f"{kind}.py"), str(config_path), "--endless",
-                    "--real-time-factor", str(self.rate), *connect_args]
-            self.children[kind] = _Child(kind, argv, tmp)
+            self.children[kind] = _Child(kind, [*self._argv[kind], "--real-time-factor", str(self.rate)], tmp)
         self.commands = session.declare_publisher(command_key(scenario.name))
         self.beats = bus.HeartbeatMonitor(session, scenario.name)
+        self.alive = bus.AliveWatcher(session, scenario.name)
+        self.events = bus.EventPublisher(session, scenario.name, "serve")
         self.state = "running"
 
     # ------------------------------------------------------------------ commands
@@ -97,7 +116,7 @@ class Supervisor:
         return {"scenario": self.scenario.name, "state": self.state,
                 "real_time_factor": "inf" if math.isinf(self.rate) else self.rate,
                 "t": min(ts) if ts else 0.0, "wall_s": round(time.monotonic() - self.started, 3),
-                "processes": procs, "failures": list(self.failures)}
+                "processes": procs, "failures": list(self.failures), "restarts": list(self.restarts)}
 
     def handle(self, request: bus.ControlRequest) -> bool:
         """Answer one control request; True when it was ``stop``."""
@@ -131,15 +150,66 @@ class Supervisor:
         return False
 
     def check_children(self) -> None:
-        for name, ch in self.children.items():
+        """Notice dead processes (exit status or lost liveliness token); restart propagators."""
+        lost = {p for p, is_alive in self.alive.poll() if not is_alive}
+        for name, ch in list(self.children.items()):
             rc = ch.poll()
-            if rc is not None and rc != 0 and not any(f.startswith(f"process {name} ") for f in self.failures):
-                hb = self.beats.last.get(name, {})
-                msg = (f"process {name} (pid {ch.pid}) "
-                       f"{'killed by signal ' + str(-rc) if rc < 0 else 'exited with status ' + str(rc)}"
-                       f" at sim t {hb.get('t')}: {ch.stderr_tail(3)}")
-                self.failures.append(msg)
-                print(f"astrodyn serve: {msg}", file=sys.stderr, flush=True)
+            if rc is None and name in lost and self.state in ("running", "paused"):
+                try:  # the token went first: the process is on its way out
+                    rc = ch.proc.wait(timeout=1.0)
+                except Exception:
+                    continue  # token lost but still running (e.g. a network blip): the heartbeat will tell
+            if rc is None or rc == 0 or getattr(ch, "reported", False):
+                continue
+            ch.reported = True
+            hb = self.beats.last.get(name, {})
+            how = "killed by signal " + str(-rc) if rc < 0 else "exited with status " + str(rc)
+            msg = f"process {name} (pid {ch.pid}) {how} at sim t {hb.get('t')}: {ch.stderr_tail(3)}"
+            print(f"astrodyn serve: {msg}", file=sys.stderr, flush=True)
+            n = sum(1 for r in self.restarts if r["process"] == name)
+            if name in self.propagators and self.state in ("running", "paused") and n < self.max_restarts:
+                try:
+                    self.restart(name, msg, n)
+                    continue
+                except Exception as exc:  # keep serving the others; the failure is final for this one
+                    msg += f"; restart failed: {exc}"
+            self.failures.append(msg)
+
+    def _parts(self) -> list[str]:
+        """The files the logger has written so far, newest first (rolled parts included)."""
+        root, ext = os.path.splitext(str(self.out))
+        rolled = sorted(glob.glob(glob.escape(root) + "-[0-9][0-9][0-9][0-9]" + (ext or ".mcap")))
+        return [p for p in [*reversed(rolled), str(self.out)] if os.path.exists(p)]
+
+    def restart(self, kind: str, why: str, n: int) -> None:
+        """Start ``kind`` again after the last step every one of its channels has in the file."""
+        from astrodyn.recording import load as load_run
+        from astrodyn.resume import last_common_step, propagator_resume_args, state_topics
+
+        topics = list(state_topics(self.scenario, kind).values())
+        args: dict = {"--start-step": 0}
+        source, step = None, None
+        for part in self._parts():
+            run = load_run(part)  # reads a file still being written, up to its last flushed chunk
+            step = last_common_step(run, topics)
+            if step is not None:
+                args = propagator_resume_args(run, self.scenario, kind, step, self.tmp)
+                source = part
+                break
+        old = self.children[kind]
+        old.close()
+        argv = [*self._argv[kind], "--real-time-factor", str(self.rate), "--first-event-seq", str(n + 1)]
+        for k, v in args.items():
+            argv += [k, str(v)]
+        self.children[kind] = _Child(f"{kind}-r{n + 1}", argv, self.tmp)
+        self.children[kind].name = kind
+        record = {"process": kind, "old_pid": old.pid, "new_pid": self.children[kind].pid, "why": why,
+                  "from_step": args["--start-step"], "state_from": source, "time": time.time()}
+        self.restarts.append(record)
+        t = (args["--start-step"] - 1) / self.scenario.rate if step is not None else 0.0
+        self.events.emit("restart", max(0.0, t), json.dumps({k: record[k] for k in ("process", "old_pid", "new_pid", "from_step", "state_from")}))
+        print(f"astrodyn serve: restarted {kind} (pid {record['new_pid']}) from step {record['from_step']}"
+              f"{' (state from ' + source + ')' if source else ''}", file=sys.stderr, flush=True)
 
     def stop(self, timeout_s: float = 60.0) -> dict:
         """Stop the propagators, let the logger finish the file, return the final summary."""
@@ -167,6 +237,8 @@ class Supervisor:
             ch.stop()
             ch.close()
         self.beats.close()
+        self.alive.close()
+        self.events.close()
         self.commands.undeclare()
 
 

@@ -148,6 +148,27 @@ class OrbitEngine:
             g.t0, g.r0, g.v0 = float(times[-1]), r[-1, g.index].copy(), v[-1, g.index].copy()
         return r, v
 
+    def resume(self, t: float, states: dict[str, dict]) -> list[str]:
+        """Continue the integrated (perturbed) bodies from recorded states at time ``t`` (s).
+
+        ``states`` maps body name -> ``{"r": (3,), "v": (3,)}`` (m, m/s), e.g. the last
+        state a killed run logged.  Kepler bodies need nothing (they are exact from the
+        initial state at any t, so a resumed run reproduces them bit for bit); every
+        perturbed body must be given (ValueError naming the missing ones).  Returns the
+        names of the bodies that took a state.
+        """
+        taken = []
+        for g in self.groups:
+            names = [self.names[i] for i in g.index]
+            missing = [n for n in names if n not in states]
+            if missing:
+                raise ValueError(f"resume state: expected r and v of the integrated bodies {missing} at t = {t} s")
+            g.t0 = float(t)
+            g.r0 = np.array([states[n]["r"] for n in names], dtype=np.float64).reshape(-1, 3)
+            g.v0 = np.array([states[n]["v"] for n in names], dtype=np.float64).reshape(-1, 3)
+            taken += names
+        return taken
+
     def position_function(self, body: str):
         """``r(t)`` (m) of one body at an array of times, from the same code as :meth:`states`.
 
@@ -240,6 +261,27 @@ class AttitudeEngine:
             self.bodies.append(body)
         self.names = [b.name for b in self.bodies]
         self.models = [b.model for b in self.bodies]
+
+    def resume(self, t: float, states: dict[str, dict]) -> list[str]:
+        """Continue the torqued (integrated) bodies from recorded states at time ``t`` (s).
+
+        ``states`` maps body name -> ``{"q": (4,), "w": (3,)}`` in the config's body axes
+        (as published).  Torque-free bodies need nothing (exact from the initial state);
+        every integrated body must be given (ValueError naming the missing ones).
+        Returns the names of the bodies that took a state.
+        """
+        integrated = [b for b in self.bodies if b.model != "torque_free"]
+        missing = [b.name for b in integrated if b.name not in states]
+        if missing:
+            raise ValueError(f"resume state: expected q and w of the integrated bodies {missing} at t = {t} s")
+        for b in integrated:
+            q = np.asarray(states[b.name]["q"], dtype=np.float64)
+            w = np.asarray(states[b.name]["w"], dtype=np.float64)
+            c_pb = b.axes.T  # body -> principal components
+            b.t0 = float(t)
+            b.q0 = q.copy() if np.array_equal(b.axes, np.eye(3)) else quat_from_dcm(c_pb @ dcm_from_quat(q))
+            b.w0 = w.copy() if np.array_equal(b.axes, np.eye(3)) else c_pb @ w
+        return [b.name for b in integrated]
 
     def states(self, times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``(q, w)`` of shapes ``(len(times), n_bodies, 4)`` and ``(..., 3)`` at increasing times."""

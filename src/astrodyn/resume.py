@@ -1,0 +1,144 @@
+"""Continue a run from what a recording holds: the resume point and the last states.
+
+Used by ``astrodyn run --resume FILE.mcap`` (continue a stopped or crashed run into a new
+file) and by ``astrodyn serve`` (restart a killed propagator from the last state the
+logger flushed).  ``seq`` of every state channel is the output step index (design.md
+section 3), so "how far a recording got" is a step number:
+
+* :func:`contiguous_steps` -- how many steps from 0 every channel holds without a hole
+  (``run --resume`` copies exactly those into the new file and continues after them);
+* :func:`last_common_step` -- the latest step present in every channel (``serve``: a
+  rolled part does not start at step 0);
+* :func:`states_at` -- the recorded states of one process kind at one step, as the
+  engines' ``resume`` methods take them (:meth:`astrodyn.simulate.OrbitEngine.resume`,
+  :meth:`astrodyn.simulate.AttitudeEngine.resume`);
+* :func:`write_state_file` / :func:`read_state_file` -- the JSON handed to a propagator
+  with ``--resume-state`` (floats by ``repr``: the states round-trip bit for bit).
+
+Exact models (Kepler orbits, torque-free attitudes) need no state: they are evaluated
+from the initial state at each output time, so a resumed run reproduces them bit for bit.
+Integrated models (J2, zonal, third body, torqued attitudes) continue from the recorded
+state of the step before the resume point.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from pathlib import Path
+
+import numpy as np
+
+from astrodyn import messages
+from astrodyn.scenario import Scenario, plan as make_plan
+
+__all__ = ["state_topics", "contiguous_steps", "last_common_step", "states_at", "write_state_file",
+           "read_state_file", "propagator_resume_args", "ResumeError"]
+
+
+class ResumeError(ValueError):
+    """A recording cannot be resumed from (the text says which file and why)."""
+
+
+def state_topics(scenario: Scenario, kind: str) -> dict[str, str]:
+    """body -> state key of the bodies whose ``kind`` ("orbit" | "attitude") is propagated."""
+    p = make_plan(scenario)
+    if kind == "orbit":
+        return {b.name: messages.orbit_key(scenario.name, b.name) for b in p.bodies if b.orbit_model}
+    if kind == "attitude":
+        return {b.name: messages.attitude_key(scenario.name, b.name) for b in p.bodies if b.attitude_model}
+    raise ValueError(f"kind: expected 'orbit' or 'attitude', got {kind!r}")
+
+
+def _tracks(run, topics) -> list:
+    return [run.channels.get(t) for t in topics]
+
+
+def contiguous_steps(run, topics) -> int:
+    """The number k of steps 0..k-1 that every channel in ``topics`` holds (0 if any is absent)."""
+    k = None
+    for track in _tracks(run, topics):
+        if track is None or len(track) == 0:
+            return 0
+        seq = np.unique(track.seq)
+        n = int(np.searchsorted(seq - np.arange(seq.size), 0, side="right"))  # seq[i] == i prefix
+        k = n if k is None else min(k, n)
+    return k or 0
+
+
+def last_common_step(run, topics) -> int | None:
+    """The latest step present in every channel of ``topics`` (None if there is none)."""
+    tracks = _tracks(run, topics)
+    if not tracks or any(t is None or len(t) == 0 for t in tracks):
+        return None
+    common = np.unique(tracks[0].seq)
+    for t in tracks[1:]:
+        common = np.intersect1d(common, t.seq, assume_unique=False)
+    return int(common[-1]) if common.size else None
+
+
+def states_at(run, scenario: Scenario, kind: str, step: int) -> tuple[float, dict[str, dict]]:
+    """``(t, {body: state})`` of ``kind`` at output step ``step`` from the recording ``run``.
+
+    Orbit states are ``{"r", "v"}`` (m, m/s), attitude states ``{"q", "w"}`` (scalar-first
+    Euler parameters, body rates rad/s), all as plain float lists.
+    """
+    fields = ("r", "v") if kind == "orbit" else ("q", "w")
+    out: dict[str, dict] = {}
+    t = None
+    for body, topic in state_topics(scenario, kind).items():
+        track = run.channels.get(topic)
+        idx = np.flatnonzero(track.seq == step) if track is not None else np.zeros(0, int)
+        if idx.size == 0:
+            raise ResumeError(f"{run.path}: no {kind} state of body {body!r} at step {step}")
+        i = int(idx[0])
+        out[body] = {f: [float(x) for x in getattr(track, f)[i]] for f in fields}
+        t = float(track.t[i])
+    if t is None:
+        t = step / scenario.rate
+    return t, out
+
+
+def write_state_file(path: str | os.PathLike, kind: str, step: int, t: float, states: dict) -> Path:
+    """Write the ``--resume-state`` JSON of a propagator: the states at ``step`` (time ``t``)."""
+    path = Path(path)
+    path.write_text(json.dumps({"kind": kind, "step": int(step), "t": float(t), "states": states}, allow_nan=False))
+    return path
+
+
+def read_state_file(path: str | os.PathLike, kind: str) -> tuple[int, float, dict]:
+    """``(step, t, states)`` from a ``--resume-state`` file; ResumeError naming what is wrong."""
+    try:
+        data = json.loads(Path(path).read_text(encoding="utf-8"))
+    except (OSError, ValueError) as exc:
+        raise ResumeError(f"--resume-state {path}: expected a readable JSON file, got {type(exc).__name__}: {exc}") from None
+    if not isinstance(data, dict) or data.get("kind") != kind:
+        raise ResumeError(f"--resume-state {path}: expected a JSON object with kind {kind!r}")
+    step, t, states = data.get("step"), data.get("t"), data.get("states")
+    if not (isinstance(step, int) and step >= 0 and isinstance(t, (int, float)) and math.isfinite(t)
+            and isinstance(states, dict)):
+        raise ResumeError(f"--resume-state {path}: expected step >= 0, finite t and a states object")
+    fields = ("r", "v") if kind == "orbit" else ("q", "w")
+    for body, st in states.items():
+        ok = isinstance(st, dict) and all(
+            isinstance(st.get(f), list) and len(st[f]) == (4 if f == "q" else 3)
+            and all(isinstance(x, (int, float)) and math.isfinite(x) for x in st[f]) for f in fields)
+        if not ok:
+            raise ResumeError(f"--resume-state {path}: states.{body}: expected finite {' and '.join(fields)} vectors")
+    return step, float(t), states
+
+
+def propagator_resume_args(run, scenario: Scenario, kind: str, step: int, work: str | os.PathLike) -> dict:
+    """The arguments that make a ``kind`` propagator continue after output step ``step``
+    of the recording ``run``: ``--start-step step+1`` and, when the process has integrated
+    bodies, ``--resume-state`` (a JSON file written in ``work`` with their states at ``step``)."""
+    args: dict = {"--start-step": step + 1}
+    p = make_plan(scenario)
+    exact = "kepler" if kind == "orbit" else "torque_free"
+    integrated = {b.name for b in p.bodies if (b.orbit_model if kind == "orbit" else b.attitude_model) not in (None, exact)}
+    if integrated:
+        t, states = states_at(run, scenario, kind, step)
+        states = {b: st for b, st in states.items() if b in integrated}
+        args["--resume-state"] = write_state_file(Path(work) / f"{kind}-state-{step}.json", kind, step, t, states)
+    return args
