@@ -299,7 +299,8 @@ class Logger:
                 self.reason = self._stop_reason
                 return True
             return False
-        if self.expect and all(p in self.ended or p in self.died for p in self.expect):
+        # under a supervisor (control off) a death does not end the run: it restarts the process
+        if self.expect and all(p in self.ended or (p in self.died and self.control) for p in self.expect):
             if self._all_ended_at is None:
                 self._all_ended_at = now
             if self.is_complete():
