@@ -19,7 +19,6 @@ from __future__ import annotations
 import json
 import os
 import shutil
-import signal
 import subprocess
 import sys
 import time
@@ -33,6 +32,7 @@ from astrodyn import bus
 from astrodyn.router import is_wildcard
 from astrodyn.scenario import load
 from astrodyn.simulate import simulate
+from test_service import _stop  # stop a child by PID: SIGTERM, then SIGKILL (one helper)
 
 ROOT = Path(__file__).resolve().parents[1]
 SERVICES = ROOT / "services"
@@ -62,16 +62,6 @@ name = "probe"
 [bodies.orbit]
 a = "8000 km"
 """
-
-
-def _stop(proc: subprocess.Popen) -> None:
-    if proc.poll() is None:
-        os.kill(proc.pid, signal.SIGTERM)
-        try:
-            proc.wait(timeout=20)
-        except subprocess.TimeoutExpired:
-            os.kill(proc.pid, signal.SIGKILL)
-            proc.wait(timeout=10)
 
 
 def _start(argv: list[str], log: Path) -> subprocess.Popen:

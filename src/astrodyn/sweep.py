@@ -55,7 +55,8 @@ row (:data:`METRIC_UNITS` gives the unit of each column suffix):
   smallest and largest sampled radius ``r_min``, ``r_max`` and altitude ``alt_min`` over
   the central body's equatorial radius (sampled at the output rate, not refined between
   samples), and the two-body conservation drifts ``energy_drift`` (max |E - E0| relative
-  to mu / |r0|, the size of the terms) and ``h_drift`` (max ||h| - |h0|| / |h0|);
+  to mu / |r0|, the size of the terms) and ``h_drift`` (max |h - h0| / |h0|, the vector
+  h = r x v; :func:`astrodyn.analysis.metrics.relative_drift`);
 * pairs of bodies (2 to 100 orbits): ``min_separation`` (m, the miss distance over the
   sampled times), ``min_separation_t`` (s) and ``min_separation_pair``;
 * attitude, per body: ``w_max`` and ``w_final`` (|w|, rad/s), ``q_norm_err``
@@ -631,6 +632,7 @@ def _strip_unit(x: Any, unit: str | None) -> Any:
 
 def case_metrics(scenario, result) -> dict[str, Any]:
     """Summary metrics of one simulated case (module docstring; units in :data:`METRIC_UNITS`)."""
+    from astrodyn.analysis.metrics import relative_drift
     from astrodyn.orbit import elements_from_state
     from astrodyn.rotation import dcm_from_quat
 
@@ -644,13 +646,12 @@ def case_metrics(scenario, result) -> dict[str, Any]:
         for key in ("a", "e", "i", "raan", "argp", "nu"):
             row[f"{name}.{key}_final"] = float(getattr(el, key))
         energy = 0.5 * np.einsum("ij,ij->i", v, v) - mu / rn
-        h = np.linalg.norm(np.cross(r, v), axis=1)
         row[f"{name}.r_min"] = float(rn.min())
         row[f"{name}.r_max"] = float(rn.max())
         row[f"{name}.alt_min"] = float(rn.min() - cb.radius)
         # relative to mu/|r0| (the size of the terms of E), not to E, which is ~0 near parabolic orbits
         row[f"{name}.energy_drift"] = float(np.max(np.abs(energy - energy[0])) * rn[0] / mu)
-        row[f"{name}.h_drift"] = float(np.max(np.abs(h - h[0])) / h[0]) if h[0] else 0.0
+        row[f"{name}.h_drift"] = float(np.max(relative_drift(np.cross(r, v))))
     n_orb = len(result.orbit_names)
     if 2 <= n_orb <= 100:
         best = (math.inf, 0, 0, 0)
@@ -674,9 +675,8 @@ def case_metrics(scenario, result) -> dict[str, Any]:
             Hb = w @ J.T
             T = 0.5 * np.einsum("ij,ij->i", w, Hb)
             Hi = np.einsum("nji,nj->ni", dcm_from_quat(q), Hb)  # inertial components C^T H_body
-            hn = float(np.linalg.norm(Hi[0]))
-            row[f"{name}.rot_energy_drift"] = float(np.max(np.abs(T - T[0])) / T[0]) if T[0] else 0.0
-            row[f"{name}.H_drift"] = float(np.max(np.linalg.norm(Hi - Hi[0], axis=1)) / hn) if hn else 0.0
+            row[f"{name}.rot_energy_drift"] = float(np.max(relative_drift(T)))
+            row[f"{name}.H_drift"] = float(np.max(relative_drift(Hi)))
     return row
 
 
@@ -1036,11 +1036,12 @@ def main(argv: list[str] | None = None) -> int:
         print(f"astrodyn sweep: {len(rows) - len(failed)} ok, {len(failed)} failed in {wall:.1f} s "
               f"({len(rows) / max(wall, 1e-9):.2f} cases/s); tables in {out}/", file=sys.stderr)
         for r in failed[:10]:
-            print(f"  case {r['case']}: {r.get('error')}", file=sys.stderr)
+            err = str(r.get("error"))
+            print(f"  case {r['case']}: {err if len(err) <= 300 else err[:300] + ' ...'}", file=sys.stderr)
         if len(failed) > 10:
             print(f"  ... {len(failed) - 10} more in {out / 'failures.csv'}", file=sys.stderr)
         if failed:
-            print(f"  rerun one with the same command and --case K", file=sys.stderr)
+            print("  rerun one with the same command and --case K", file=sys.stderr)
     if interrupted:
         return 130
     return 1 if failed else 0
