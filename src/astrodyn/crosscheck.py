@@ -225,7 +225,7 @@ class ReboundScene:
             sim.dt = dt
         self.sim = sim
         # Elapsed time since t0 that REBOUND's state belongs to, as hi + lo (TwoSum);
-        # hi equals sim.t (REBOUND's own plain running sum).
+        # with IAS15, hi equals sim.t (REBOUND's own plain running sum of the steps).
         self._elapsed_hi = 0.0
         self._elapsed_lo = 0.0
 

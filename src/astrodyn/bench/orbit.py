@@ -308,7 +308,7 @@ def main(argv: list[str] | None = None) -> int:
                 _fmt(float(rel_ad.max())) if is_top else "",
                 _fmt(float(np.median(rel_ad))) if is_top else "",
                 _fmt(float(ratio_ad.max()), ".3g") if is_top else "",
-                "1 (ref.)" if is_top else _fmt(ns_astrodyn[n] / ns_astrodyn[batch_n], ".3g") + " x slower",
+                "1 (ref.)" if is_top else _fmt(ns_astrodyn[n] / ns_astrodyn[batch_n], ".3g") + " x the batch ns",
                 "",
                 "",
             ]
