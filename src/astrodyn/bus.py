@@ -611,3 +611,23 @@ def send_control(
     ``rate`` takes ``{"factor": 2.0}``.  Returns every answering process's JSON reply.
     """
     return query_json(session, messages.control_key(scenario, verb), args, timeout_s)
+
+
+# --------------------------------------------------------------------------- consumers
+
+
+def state_samples(key: str, payload: bytes) -> list[tuple[str, bytes]]:
+    """The per-body ``(key, payload)`` pairs a received sample carries.
+
+    Small scenes publish one sample per body on its own key; large ones (and ``replay
+    --batch``) publish one envelope per instant on ``astrodyn/<scenario>/@batch/<kind>``.
+    A consumer subscribed to both ``astrodyn/<scenario>/**`` and
+    ``astrodyn/<scenario>/@batch/*`` reads either form alike through this function
+    (``MessageError`` for a damaged envelope)::
+
+        for key, payload in bus.state_samples(str(sample.key_expr), sample.payload.to_bytes()):
+            msg = messages.decode(payload, key)
+    """
+    if "/@batch/" in key:
+        return messages.decode_batch(payload)
+    return [(key, payload)]

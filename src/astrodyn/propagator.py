@@ -3,7 +3,9 @@
 One loop, two kinds: it asks an engine of :mod:`astrodyn.simulate` for the states of a
 block of output instants, encodes one JSON payload per body per instant
 (:func:`astrodyn.messages.encode_orbit_batch` / ``encode_attitude_batch``), and publishes
-each instant's payloads as one batch envelope on ``astrodyn/<scenario>/@batch/<kind>``
+them on the per-body keys of design.md section 3.  Large scenes (more than
+:data:`BATCH_THRESHOLD` bodies, or ``--batch always``) instead publish each instant's
+payloads as one batch envelope on ``astrodyn/<scenario>/@batch/<kind>``
 (the logger splits it back into the per-body channels of design.md section 3; ``seq`` of
 every channel is the output step index ``k``, so 0, 1, 2, ... with no gaps).
 
@@ -40,6 +42,11 @@ from astrodyn.simulate import AttitudeEngine, OrbitEngine
 __all__ = ["Pacer", "PropagatorOptions", "run_propagator", "command_key"]
 
 KINDS = ("orbit", "attitude")
+
+#: Scenes with more bodies than this publish one batch envelope per instant instead of
+#: one sample per body (``--batch auto``); consumers use :func:`astrodyn.bus.state_samples`
+#: to read both forms alike.
+BATCH_THRESHOLD = 64
 
 
 def command_key(scenario: str) -> str:
@@ -99,6 +106,7 @@ class PropagatorOptions:
     start_step: int = 0
     max_steps: int | None = None  # stop after this many instants (tests)
     endless: bool = False  # serve: keep going past the scenario's duration until stopped
+    batch: str = "auto"  # "auto" (envelopes above BATCH_THRESHOLD bodies) | "always" | "never"
     resume_state: tuple[int, float, dict] | None = None  # (step, t, states) the integrated bodies continue from
     first_event_seq: int = 0  # a restarted process continues its predecessor's event numbering
 
@@ -162,6 +170,13 @@ def run_propagator(scenario: Scenario, session, opts: PropagatorOptions, log=pri
             bus.BatchPublisher(session, scenario.name, opts.kind) as batch, \
             bus.EventPublisher(session, scenario.name, opts.kind) as events, \
             session.declare_subscriber(command_key(scenario.name), _fifo()) as commands:
+        batched = opts.batch == "always" or (opts.batch == "auto" and len(names) > BATCH_THRESHOLD)
+        per_body = None
+        if not batched:
+            per_body = {key: bus.declare_state_publisher(session, key) for key in keys}
+            if cross is not None:
+                per_body.update({key: bus.declare_state_publisher(session, key)
+                                 for _, xkeys, _ in cross.scenes for key in xkeys})
         bus.wait_for_process(session, scenario.name, "logger", timeout_s=opts.wait_logger_s)
         events.next_seq = int(opts.first_event_seq)
         events.emit("start", float(t_reached), json.dumps({"bodies": len(names), "first_step": start,
@@ -192,7 +207,11 @@ def run_propagator(scenario: Scenario, session, opts: PropagatorOptions, log=pri
                         items.extend(zip((keys[i] for i in ix), payloads))
                     if xc is not None:
                         items.extend(xc(j, k, t))
-                    batch.publish(items)
+                    if per_body is None:
+                        batch.publish(items)
+                    else:
+                        for key, payload in items:
+                            per_body[key].put(payload)
                     published += len(items)
                     t_reached = t
                     k += 1
@@ -308,6 +327,8 @@ def service_main(kind: str, argv: list[str] | None = None) -> int:
                     help="states at step START_STEP-1 for the integrated bodies (astrodyn.resume.write_state_file)")
     ap.add_argument("--first-event-seq", type=int, default=0, help="seq of this process's first event (a restart)")
     ap.add_argument("--max-steps", type=int, default=None, help="publish at most this many steps")
+    ap.add_argument("--batch", choices=("auto", "always", "never"), default="auto",
+                    help=f"publish one envelope per step instead of per-body samples (auto: above {BATCH_THRESHOLD} bodies)")
     ap.add_argument("--endless", action="store_true", help="keep going past the scenario's duration until stopped (serve)")
     ap.add_argument("--block", type=int, default=0, help="output steps per engine call (default automatic)")
     ap.add_argument("--wait-logger", type=float, default=30.0, help="seconds to wait for the logger's liveliness token")
