@@ -3,9 +3,11 @@
 mcap 1.6.0's ``Writer.add_message`` builds a ``Message`` object and makes a dozen small
 writes per message (about 7 us on this machine); the logger has to sustain > 30k msg/s,
 so this writer appends each message record to the open chunk with a single
-``struct.pack`` and keeps the message index as plain lists.  Every other record (header,
-schema, channel, chunk, message index, chunk index, metadata, statistics, summary,
-footer) is serialised by mcap's own record classes, and the layout follows
+``struct.pack`` and keeps the message index as three flat lists (channel, log_time,
+offset), turned into the chunk's MessageIndex records by a few numpy operations when the
+chunk closes (a per-channel ``struct.pack`` cost about 1 us per message with 2000
+channels and 1 MiB chunks).  Every other record (header, schema, channel, chunk, chunk
+index, metadata, statistics, summary, footer) is serialised by mcap's own record classes, and the layout follows
 ``mcap.writer.Writer`` (chunks are self-contained: a schema or channel record goes into
 the chunk that first needs it; summary with repeated schemas/channels, statistics, chunk
 and metadata indexes, summary offsets, footer CRC).  The files are read back by mcap's
@@ -18,6 +20,7 @@ import struct
 import zlib
 from typing import BinaryIO
 
+import numpy as np
 import zstandard
 from mcap.data_stream import RecordBuilder
 from mcap.opcode import Opcode
@@ -39,13 +42,39 @@ MAGIC = b"\x89MCAP0\r\n"
 # opcode u8, record length u64, channel_id u16, sequence u32, log_time u64, publish_time u64
 _MESSAGE = struct.Struct("<BQHIQQ")
 _MESSAGE_OPCODE = int(Opcode.MESSAGE)
+_MESSAGE_INDEX_OPCODE = int(Opcode.MESSAGE_INDEX)
 
 
-def _message_index(channel_id: int, records: list[tuple[int, int]]) -> bytes:
-    """A MessageIndex record (same bytes as mcap.records.MessageIndex.write), packed at once."""
-    n = len(records)
-    flat = [x for pair in records for x in pair]
-    return struct.pack(f"<BQHI{2 * n}Q", Opcode.MESSAGE_INDEX, 6 + 16 * n, channel_id, 16 * n, *flat)
+_INDEX_HEADER = np.dtype([("opcode", "u1"), ("length", "<u8"), ("channel_id", "<u2"), ("records_length", "<u4")])
+_HEADER_SIZE = _INDEX_HEADER.itemsize  # 15: packed, as in the MCAP spec
+_RECORD_SIZE = 16  # (log_time u64, offset u64)
+
+
+def _message_indexes(channels: np.ndarray, times: np.ndarray, offsets: np.ndarray) -> tuple[list, list, list, bytes]:
+    """Every MessageIndex record of one chunk, built at once with numpy.
+
+    One record per channel (ascending channel id), its entries ``(log_time, offset)`` in
+    arrival order; the bytes equal ``mcap.records.MessageIndex.write`` of each record in
+    turn (tested).  Returns ``(channel_ids, record_starts, counts, bytes)``, starts
+    relative to the first record.
+    """
+    order = np.argsort(channels, kind="stable")
+    ids, first, counts = np.unique(channels[order], return_index=True, return_counts=True)
+    n_channels, n = ids.shape[0], channels.shape[0]
+    out = np.empty(_HEADER_SIZE * n_channels + _RECORD_SIZE * n, dtype=np.uint8)
+    header = np.empty(n_channels, dtype=_INDEX_HEADER)
+    header["opcode"] = _MESSAGE_INDEX_OPCODE
+    header["length"] = 6 + _RECORD_SIZE * counts
+    header["channel_id"] = ids
+    header["records_length"] = _RECORD_SIZE * counts
+    starts = _HEADER_SIZE * np.arange(n_channels) + _RECORD_SIZE * first
+    out[starts[:, None] + np.arange(_HEADER_SIZE)] = header.view(np.uint8).reshape(n_channels, _HEADER_SIZE)
+    entries = np.empty((n, 2), dtype="<u8")
+    entries[:, 0] = times[order]
+    entries[:, 1] = offsets[order]
+    at = _HEADER_SIZE * (np.repeat(np.arange(n_channels), counts) + 1) + _RECORD_SIZE * np.arange(n)
+    out[at[:, None] + np.arange(_RECORD_SIZE)] = entries.view(np.uint8).reshape(n, _RECORD_SIZE)
+    return ids.tolist(), starts.tolist(), counts.tolist(), out.tobytes()
 
 
 def _serialise(*records) -> bytes:
@@ -72,10 +101,10 @@ class ChunkedWriter:
         self.metadata_indexes: list[MetadataIndex] = []
         self._compressor = zstandard.ZstdCompressor()
         self._chunk = bytearray()
-        self._chunk_messages = 0
-        self._chunk_start = 0
-        self._chunk_end = 0
-        self._index: dict[int, list[tuple[int, int]]] = {}
+        # message index of the open chunk, one entry per message, grouped at finalize_chunk
+        self._index_channels: list[int] = []
+        self._index_times: list[int] = []
+        self._index_offsets: list[int] = []
         self._write(MAGIC + _serialise(Header(profile="", library=library)))
 
     def _write(self, data: bytes) -> None:
@@ -98,61 +127,55 @@ class ChunkedWriter:
         return cid
 
     def add_message(self, channel_id: int, log_time: int, data: bytes, publish_time: int, sequence: int) -> None:
+        if channel_id not in self.channel_counts:
+            raise ValueError(f"channel_id: expected a registered channel (1 ... {len(self.channels)}), got {channel_id!r}")
         chunk = self._chunk
-        index = self._index.get(channel_id)
-        if index is None:
-            index = self._index[channel_id] = []
-        index.append((log_time, len(chunk)))
+        self._index_channels.append(channel_id)
+        self._index_times.append(log_time)
+        self._index_offsets.append(len(chunk))
         chunk += _MESSAGE.pack(_MESSAGE_OPCODE, 22 + len(data), channel_id, sequence, log_time, publish_time)
         chunk += data
-        if self._chunk_messages == 0:
-            self._chunk_start = self._chunk_end = log_time
-        elif log_time < self._chunk_start:
-            self._chunk_start = log_time
-        elif log_time > self._chunk_end:
-            self._chunk_end = log_time
-        self._chunk_messages += 1
-        self.channel_counts[channel_id] += 1
         if len(chunk) > self.chunk_size:
             self.finalize_chunk()
 
     def finalize_chunk(self) -> None:
         """Write the open chunk (if it holds messages) and its message indexes."""
-        if self._chunk_messages == 0:
+        n_messages = len(self._index_channels)
+        if n_messages == 0:
             return
         data = bytes(self._chunk)
+        times = np.array(self._index_times, dtype=np.uint64)
+        chunk_start, chunk_end = int(times.min()), int(times.max())
         compressed = self._compressor.compress(data)
         chunk = Chunk(
-            compression="zstd", data=compressed, message_start_time=self._chunk_start,
-            message_end_time=self._chunk_end, uncompressed_crc=zlib.crc32(data), uncompressed_size=len(data),
+            compression="zstd", data=compressed, message_start_time=chunk_start,
+            message_end_time=chunk_end, uncompressed_crc=zlib.crc32(data), uncompressed_size=len(data),
         )
         chunk_bytes = _serialise(chunk)
         chunk_offset = self.pos
         self._write(chunk_bytes)
         index_offset = self.pos
-        offsets = {}
-        parts = []
-        at = index_offset
-        for cid, records in self._index.items():
-            part = _message_index(cid, records)
-            offsets[cid] = at
-            at += len(part)
-            parts.append(part)
-        index_bytes = b"".join(parts)
+        channel_ids, starts, counts, index_bytes = _message_indexes(
+            np.array(self._index_channels, dtype=np.uint16), times, np.array(self._index_offsets, dtype=np.uint64))
         self._write(index_bytes)
+        offsets = {}
+        for cid, start, count in zip(channel_ids, starts, counts):
+            offsets[cid] = index_offset + start
+            self.channel_counts[cid] += count
         self.chunk_indexes.append(ChunkIndex(
-            message_start_time=self._chunk_start, message_end_time=self._chunk_end,
+            message_start_time=chunk_start, message_end_time=chunk_end,
             chunk_start_offset=chunk_offset, chunk_length=len(chunk_bytes), message_index_offsets=offsets,
             message_index_length=len(index_bytes), compression="zstd", compressed_size=len(compressed),
             uncompressed_size=len(data),
         ))
-        self.message_count += self._chunk_messages
-        if self.start_time is None or self._chunk_start < self.start_time:
-            self.start_time = self._chunk_start
-        self.end_time = max(self.end_time, self._chunk_end)
+        self.message_count += n_messages
+        if self.start_time is None or chunk_start < self.start_time:
+            self.start_time = chunk_start
+        self.end_time = max(self.end_time, chunk_end)
         self._chunk = bytearray()
-        self._chunk_messages = 0
-        self._index = {}
+        self._index_channels = []
+        self._index_times = []
+        self._index_offsets = []
 
     def add_metadata(self, name: str, data: dict[str, str]) -> None:
         offset = self.pos

@@ -108,6 +108,7 @@ class Logger:
         self.max_t = 0.0
         self._own_event_seq = 0
         self._key_kind: dict[str, str | None] = {}
+        self._fast_of: dict[str, Any] = {}  # key -> canonical-layout checker or False
         self._stop_reason: str | None = None
         self._stop_requested_at: float | None = None
         self._stop_requests: list[bus.ControlRequest] = []
@@ -151,27 +152,77 @@ class Logger:
         if kind is None:
             self._bad(key, "not a message key of this scenario")
             return
-        try:
-            msg = messages.decode(payload, kind)
-        except messages.MessageError as exc:
-            self._bad(key, str(exc))
-            return
+        fast = messages.FAST_CHECKS.get(kind)
+        found = fast(payload) if fast is not None and type(payload) is bytes else None
+        msg = None
+        if found is None:
+            try:
+                msg = messages.decode(payload, kind)
+            except messages.MessageError as exc:
+                self._bad(key, str(exc))
+                return
+            found = msg["t"], msg["seq"]
+        t, seq = found
         track = None
         if kind == "event":
             track = f"{key}#{msg['process']}"
         try:
-            status = self.recorder.write_encoded(key, payload, msg["t"], msg["seq"], now_ns, track)
+            status = self.recorder.write_encoded(key, payload, t, seq, now_ns, track)
         except ValueError as exc:  # t outside MCAP's log_time range
             self._bad(key, str(exc))
             return
         if status == DUPLICATE:
             return
-        if msg["t"] > self.max_t:
-            self.max_t = msg["t"]
+        if t > self.max_t:
+            self.max_t = t
         if kind in _STATE_KINDS:
             self.states += 1
         elif kind == "event":
             self._on_event(msg)
+
+    def _fast_check_of(self, key: str):
+        """The canonical-layout checker for a state key of this scenario, else False (cached)."""
+        kind = self._kind(key)
+        fast = messages.FAST_CHECKS.get(kind, False) if kind is not None else False
+        if len(self._fast_of) < _MAX_KEY_CACHE:
+            self._fast_of[key] = fast
+        return fast
+
+    def _record_many(self, items: list[tuple[str, bytes]], now_ns: int) -> None:
+        """:meth:`_record` for every entry of a batch, with the common case inlined.
+
+        The common case is a state in the batch encoders' canonical layout on a known
+        key (:data:`astrodyn.messages.FAST_CHECKS`); everything else goes through
+        :meth:`_record` and its full decode.
+        """
+        fast_of = self._fast_of
+        write = self.recorder.write_encoded
+        record = self._record
+        max_t = self.max_t
+        states = 0
+        try:
+            for key, payload in items:
+                fast = fast_of.get(key)
+                if fast is None:
+                    fast = self._fast_check_of(key)
+                found = fast(payload) if fast else None
+                if found is None:
+                    record(key, payload, now_ns)
+                    continue
+                t, seq = found
+                try:
+                    status = write(key, payload, t, seq, now_ns, None)
+                except ValueError as exc:  # t outside MCAP's log_time range
+                    self._bad(key, str(exc))
+                    continue
+                if status != DUPLICATE:
+                    states += 1
+                    if t > max_t:
+                        max_t = t
+        finally:
+            self.states += states
+            if max_t > self.max_t:
+                self.max_t = max_t
 
     def _on_event(self, msg: dict) -> None:
         process = msg["process"]
@@ -196,8 +247,7 @@ class Logger:
             except messages.MessageError as exc:
                 self._bad(key, str(exc))
                 return
-            for item_key, item_payload in items:
-                self._record(item_key, item_payload, now_ns)
+            self._record_many(items, now_ns)
         elif rest is not None and rest.startswith("@heartbeat/"):
             self.heartbeats[rest[len("@heartbeat/"):]] = time.monotonic()
         else:
