@@ -204,3 +204,11 @@ def test_hyperbolic_dense_sweep():
     for Mi, ei, Fi in zip(M, e, F):
         ref = ref_hyperbolic(Mi, ei)
         assert abs(Fi - float(ref)) <= tol_hyperbolic(Mi, ei, ref)
+
+
+def test_elliptic_beyond_resolved_phase_is_finite():
+    # |M| >= 2**52: one ulp of M exceeds half a radian; E must still satisfy
+    # E - e sin E = M to the float64 resolution of M (|E - M| <= e).
+    for M in (2.0**53, 1e17, -1e300):
+        E = solve_kepler(M, 0.5)
+        assert np.isfinite(E) and abs(E - M) <= 0.5 + np.spacing(abs(M))

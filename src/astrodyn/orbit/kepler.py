@@ -58,6 +58,12 @@ TWO_PI_2 = 2.4492935982947064e-16
 TWO_PI_3 = -5.989539619436679e-33
 PI = math.pi
 _SPLIT = 134217729.0  # 2**27 + 1, Veltkamp splitter
+# reciprocals of constants: without fast-math, x / 6.0 stays a (slow) division
+_INV6 = 1.0 / 6.0
+_INV24 = 1.0 / 24.0
+_INV_PI2_M6 = 1.0 / (PI * PI - 6.0)
+_INV_TWO_PI = 1.0 / TWO_PI_1
+HUGE_ANGLE = 2.0**52  # [rad] above this the float64 phase is not resolved (see _reduce_2pi)
 
 # Taylor coefficients 1/(2k+1)! for k = 1..10: x - sin x = sum (-1)^(k+1) x^(2k+1)/(2k+1)!
 _INV_ODD_FACT = (
@@ -71,6 +77,19 @@ _INV_ODD_FACT = (
     1.0 / 355687428096000.0,
     1.0 / 121645100408832000.0,
     1.0 / 51090942171709440000.0,
+)
+# 1/(2k+2)! for k = 0..9: 1 - cos x = sum (-1)^k x^(2k+2)/(2k+2)!
+_INV_EVEN_FACT = (
+    1.0 / 2.0,
+    1.0 / 24.0,
+    1.0 / 720.0,
+    1.0 / 40320.0,
+    1.0 / 3628800.0,
+    1.0 / 479001600.0,
+    1.0 / 87178291200.0,
+    1.0 / 20922789888000.0,
+    1.0 / 6402373705728000.0,
+    1.0 / 2432902008176640000.0,
 )
 
 
@@ -110,12 +129,21 @@ def _reduce_2pi(hi, lo):
     Cody-Waite reduction with ``2 pi`` in three parts and exact products.
     Returns ``(k, rh, rl)`` with ``hi + lo = k 2 pi + rh + rl`` (``rh + rl``
     normalized, ``|rh| <= pi`` up to rounding).  Exact to about 1e-32
-    absolute for ``|hi| < 2**52``.
+    absolute for ``|hi| < 2**52``.  Beyond that one ulp of the angle exceeds
+    half a radian, the phase carries no information, and the remainder is
+    ``fmod(hi, float(2 pi))`` (still a point on the orbit, never NaN).
     """
     if -PI <= hi <= PI:
         s, t = _two_sum(hi, lo)
         return 0.0, s, t
-    k = math.floor(hi / TWO_PI_1 + 0.5)
+    if not (abs(hi) < HUGE_ANGLE):
+        s = np.fmod(hi, TWO_PI_1)  # exact remainder; NaN for inf/NaN input
+        if s > PI:
+            s -= TWO_PI_1
+        elif s < -PI:
+            s += TWO_PI_1
+        return (hi - s) * _INV_TWO_PI, s, 0.0
+    k = float(math.floor(hi * _INV_TWO_PI + 0.5))
     p1, e1 = _two_prod(k, TWO_PI_1)
     s = hi - p1  # exact (Sterbenz): p1 is within a factor 2 of hi
     p2, e2 = _two_prod(k, TWO_PI_2)
@@ -139,20 +167,23 @@ def _reduce_2pi(hi, lo):
 # ---------------------------------------------------------------------------
 @jit(inline="always")
 def _odd_series(x, sign):
-    """sum_{k>=1} sign^(k+1) x^(2k+1)/(2k+1)!  (x - sin x for sign=+1... see callers)."""
-    x2 = x * x
+    """``sum_{k>=1} sign^(k+1) x^(2k+1) / (2k+1)!`` through ``x^21``, for ``|x| < 1``.
+
+    ``sign = -1``: ``x - sin x``; ``sign = +1``: ``sinh x - x``.  Estrin's scheme
+    in ``y = sign x^2`` (short dependency chain; the terms fall fast enough that
+    its rounding stays within an ulp or two of the Horner form).
+    """
     c = _INV_ODD_FACT
-    # Horner in x^2, highest term first; sign=-1 alternates (x - sin x), +1 not (sinh x - x)
-    acc = c[9]
-    acc = c[8] + sign * x2 * acc
-    acc = c[7] + sign * x2 * acc
-    acc = c[6] + sign * x2 * acc
-    acc = c[5] + sign * x2 * acc
-    acc = c[4] + sign * x2 * acc
-    acc = c[3] + sign * x2 * acc
-    acc = c[2] + sign * x2 * acc
-    acc = c[1] + sign * x2 * acc
-    acc = c[0] + sign * x2 * acc
+    x2 = x * x
+    y = sign * x2
+    y2 = y * y
+    y4 = y2 * y2
+    p01 = c[0] + c[1] * y
+    p23 = c[2] + c[3] * y
+    p45 = c[4] + c[5] * y
+    p67 = c[6] + c[7] * y
+    p89 = c[8] + c[9] * y
+    acc = (p01 + p23 * y2) + (p45 + p67 * y2) * y4 + p89 * (y4 * y4)
     return x * x2 * acc
 
 
@@ -205,7 +236,7 @@ def _kepler_start(M, e):
         M = -M
         sgn = -1.0
     ome = 1.0 - e
-    alpha = (3.0 * PI * PI + 1.6 * PI * (PI - M) / (1.0 + e)) / (PI * PI - 6.0)
+    alpha = (3.0 * PI * PI + 1.6 * PI * (PI - M) / (1.0 + e)) * _INV_PI2_M6
     d = 3.0 * ome + alpha * e
     q = 2.0 * alpha * d * ome - M * M
     r = 3.0 * alpha * d * (d - 1.0 + e) * M + M * M * M
@@ -215,7 +246,7 @@ def _kepler_start(M, e):
     w = (abs(r) + math.sqrt(disc)) ** (2.0 / 3.0)
     den = w * w + w * q + q * q
     if den > 0.0:
-        E = (2.0 * r * w / den + M) / d
+        E = (2.0 * r * w + M * den) / (d * den)
     else:
         E = M / d
     return sgn * E
@@ -229,8 +260,10 @@ def _rotate(s, c, d):
     a small correction needs no further libm call.
     """
     d2 = d * d
-    sd = d * (1.0 - d2 / 6.0 * (1.0 - d2 / 20.0 * (1.0 - d2 / 42.0 * (1.0 - d2 / 72.0))))
-    omcd = 0.5 * d2 * (1.0 - d2 / 12.0 * (1.0 - d2 / 30.0 * (1.0 - d2 / 56.0)))
+    fo = _INV_ODD_FACT
+    fe = _INV_EVEN_FACT
+    sd = d - d * d2 * (fo[0] - d2 * (fo[1] - d2 * (fo[2] - d2 * fo[3])))
+    omcd = d2 * (fe[0] - d2 * (fe[1] - d2 * (fe[2] - d2 * fe[3])))
     return s + (c * sd - s * omcd), c - (s * sd + c * omcd)
 
 
@@ -276,8 +309,8 @@ def _solve_diff_ell(q, C, S, mh, ml, x, lo, hi):
         # derivatives: F' = Fp, F'' = F2, F''' = F3, F'''' = -F2
         F3 = C * c - S * s
         d3 = -F / (Fp - 0.5 * F * F2 / Fp)
-        d4 = -F / (Fp + 0.5 * d3 * F2 + d3 * d3 * F3 / 6.0)
-        dx = -F / (Fp + 0.5 * d4 * F2 + d4 * d4 * F3 / 6.0 - d4 * d4 * d4 * F2 / 24.0)
+        d4 = -F / (Fp + 0.5 * d3 * F2 + d3 * d3 * F3 * _INV6)
+        dx = -F / (Fp + 0.5 * d4 * F2 + d4 * d4 * F3 * _INV6 - d4 * d4 * d4 * F2 * _INV24)
         xn = x + dx
         if not (lo <= xn <= hi):
             xn = x - F / Fp  # Newton, then bisection if even that leaves the bracket

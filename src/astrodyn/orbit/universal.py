@@ -46,8 +46,10 @@ import numpy as np
 
 from astrodyn._jit import jit, pjit, prange
 from astrodyn.orbit.kepler import (
+    _INV_EVEN_FACT,
     _INV_ODD_FACT,
     EPS,
+    HUGE_ANGLE,
     MAX_ITER,
     PARALLEL_MIN,
     PI,
@@ -66,21 +68,6 @@ __all__ = ["propagate", "lagrange_coefficients", "stumpff"]
 
 Q_UNIVERSAL = 0.05  # |r0 / a| at or below which near-parabolic arcs use chi
 M_UNIVERSAL = 1.0  # ... provided the mean-motion angle |n dt| is at most this
-
-# 1/(2k+2)! for k = 0..9 (series of c2)
-_INV_EVEN_FACT = (
-    1.0 / 2.0,
-    1.0 / 24.0,
-    1.0 / 720.0,
-    1.0 / 40320.0,
-    1.0 / 3628800.0,
-    1.0 / 479001600.0,
-    1.0 / 87178291200.0,
-    1.0 / 20922789888000.0,
-    1.0 / 6402373705728000.0,
-    1.0 / 2432902008176640000.0,
-)
-
 
 # ---------------------------------------------------------------------------
 # Stumpff functions
@@ -144,9 +131,11 @@ def _fg_elliptic(r0, sig, q, alpha, n, dt, mu):
     sqa = math.sqrt(alpha / mu)  # 1 / sqrt(mu a)
     C = 1.0 - q  # e cos E0
     S = sig * sqa  # e sin E0
-    mh, ml = _two_prod(n, dt)
+    mh, ml = n * dt, 0.0
+    if abs(mh) < HUGE_ANGLE:  # exact product (double-double) unless the phase is lost anyway
+        mh, ml = _two_prod(n, dt)
     _, mh, ml = _reduce_2pi(mh, ml)
-    e = min(math.hypot(C, S), 1.0 - EPS)
+    e = min(math.sqrt(C * C + S * S), 1.0 - EPS)
     E0 = math.atan2(S, C)
     M1 = E0 - S + mh
     if M1 > PI:
