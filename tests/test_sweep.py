@@ -295,3 +295,24 @@ def test_parquet_equals_csv(serial_run):
                 assert v == float(text) or (math.isnan(v) and text == "nan")
             else:
                 assert ("" if v is None else str(v)) == text
+
+
+def test_sweep_report(serial_run, tmp_path):
+    pytest.importorskip("matplotlib")
+    from astrodyn.analysis.sweep import is_sweep_dir, sweep_report
+
+    assert is_sweep_dir(serial_run) and not is_sweep_dir(tmp_path)
+    rep = sweep_report(serial_run, tmp_path / "rep")
+    rows = [r for r in _read(serial_run / "summary.csv") if r["status"] == "ok"]
+    e = np.array([float(r["sat1.e_final"]) for r in rows])
+    assert rep["ok"] == len(rows) and rep["failed"] == N - len(rows)
+    assert rep["stats"]["sat1.e_final"]["mean"] == pytest.approx(e.mean(), rel=1e-15)  # same sum, maybe reordered
+    assert "sat1.a_final" in rep["constant"]  # Kepler: a is kept to round-off
+    # e_final follows the drawn e exactly, so its rank correlation with it is 1
+    assert rep["correlations"]["bodies.sat1.orbit.e"]["sat1.e_final"] == 1.0
+    for f in rep["figures"]:
+        assert Path(f).stat().st_size > 10_000
+    text = Path(rep["report"]).read_text()
+    assert "| sat1.r_min | m |" in text and "## Failures" in text
+    with pytest.raises(ValueError, match="summary.csv"):
+        sweep_report(tmp_path)
