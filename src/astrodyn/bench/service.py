@@ -1,0 +1,378 @@
+"""``astrodyn bench service``: the whole service, propagators -> Zenoh -> logger -> MCAP.
+
+What is measured (design.md section 5, issues 4 and 6), each scene run headless through
+the machinery of ``astrodyn run`` (:func:`astrodyn.runner.run_scenario`: real OS
+processes, loopback Zenoh, the end-of-run protocol):
+
+* ``constellation-1000`` (``configs/constellation-1000.toml``: 1000 Walker satellites,
+  Kepler orbit + exact torque-free attitude, 10 Hz, i.e. 20 000 state messages per
+  simulated second) and a smaller scene of the same shape (100 satellites), as fast as the
+  machine allows.  Target: >= 5x real time (100 000 messages/s) with no lost or
+  reordered message.
+* The load case of issue 6: the propagators paced at 10x the nominal rate of
+  ``constellation-1000`` (``--real-time-factor 10``: 200 000 messages/s offered), so the
+  publishers outrun the logger.  Zenoh's reliable delivery with blocking congestion
+  control must slow the publishers down instead of dropping: the row reports the rate
+  actually sustained, any gap (must be none) and the logger's peak memory (bounded).
+
+Per scene: wall time of the run (process start-up included), real-time factor = simulated
+seconds / wall seconds, messages per wall second, and per process (logger, orbit,
+attitude) CPU seconds and peak resident memory (VmHWM), sampled from ``/proc`` every
+50 ms while the process lives (CPU of the last < 50 ms of a process can be missed; the
+exact sum over all children from ``getrusage(RUSAGE_CHILDREN)`` is printed beside).
+
+Loss and order are checked independently of the logger's own accounting: the MCAP is
+read back with the plain ``mcap`` streaming reader (CRCs validated) and every channel
+must hold exactly ``n_steps`` messages whose ``sequence`` is 0, 1, 2, ... in file order,
+with ``log_time`` increasing; one payload in 997 is also JSON-decoded and its ``seq``
+compared with the record's ``sequence``.
+
+Results go to stdout as a table and, with ``--md``, to a Markdown file (machine, date,
+load average before and after: the machine is shared, so the numbers are a snapshot).
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime as _dt
+import json
+import math
+import os
+import platform
+import re
+import resource
+import sys
+import tempfile
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+__all__ = ["Scene", "main", "run_scene", "check_recording", "ProcSampler"]
+
+_CLK_TCK = os.sysconf("SC_CLK_TCK")
+_PROCESSES = ("logger", "orbit", "attitude")
+
+
+@dataclass
+class Scene:
+    """One benchmark row: a Walker constellation of ``bodies`` satellites."""
+
+    name: str
+    bodies: int
+    planes: int
+    duration_s: float
+    real_time_factor: float = math.inf  # inf: as fast as possible; finite: paced (load test)
+    rate_hz: float = 10.0
+
+    @property
+    def n_steps(self) -> int:
+        return int(round(self.duration_s * self.rate_hz)) + 1
+
+    @property
+    def expected_messages(self) -> int:
+        return 2 * self.bodies * self.n_steps
+
+
+def scene_config(scene: Scene, template: str) -> str:
+    """The TOML of ``scene``: ``configs/constellation-1000.toml`` with its name, size and
+    duration replaced (everything else -- orbit, attitude, rate -- as shipped)."""
+    out = template
+    for key, value in (("name", f'"{scene.name}"'), ("duration", f'"{scene.duration_s:g} s"'),
+                       ("rate", f'"{scene.rate_hz:g} Hz"'), ("t", str(scene.bodies)), ("p", str(scene.planes))):
+        out, n = re.subn(rf"(?m)^{key} = .*$", f"{key} = {value}", out, count=1)
+        if n != 1:
+            raise ValueError(f"constellation template: expected one '{key} = ...' line")
+    return out
+
+
+# --------------------------------------------------------------------------- /proc sampling
+
+
+def _proc_cpu_s(pid: int) -> float | None:
+    try:
+        with open(f"/proc/{pid}/stat", "rb") as f:
+            fields = f.read().rsplit(b")", 1)[1].split()
+    except (OSError, IndexError):
+        return None
+    return (int(fields[11]) + int(fields[12])) / _CLK_TCK  # utime, stime (fields 14, 15)
+
+
+def _proc_hwm_mb(pid: int) -> float | None:
+    try:
+        with open(f"/proc/{pid}/status", "rb") as f:
+            for line in f:
+                if line.startswith(b"VmHWM:"):
+                    return int(line.split()[1]) / 1024.0
+    except OSError:
+        return None
+    return None
+
+
+def _children_by_name(parent: int) -> dict[str, int]:
+    """pid of each ``services/<name>.py`` child of ``parent``, by reading /proc."""
+    found = {}
+    for entry in os.listdir("/proc"):
+        if not entry.isdigit():
+            continue
+        try:
+            with open(f"/proc/{entry}/stat", "rb") as f:
+                ppid = int(f.read().rsplit(b")", 1)[1].split()[1])
+            if ppid != parent:
+                continue
+            with open(f"/proc/{entry}/cmdline", "rb") as f:
+                argv = f.read().split(b"\0")
+        except (OSError, ValueError, IndexError):
+            continue
+        for a in argv[1:3]:
+            name = os.path.basename(a.decode(errors="replace"))
+            if name.endswith(".py") and name[:-3] in _PROCESSES:
+                found[name[:-3]] = int(entry)
+    return found
+
+
+@dataclass
+class ProcSampler:
+    """Samples CPU time and VmHWM of this process's service children every ``period_s``."""
+
+    period_s: float = 0.05
+    cpu_s: dict[str, float] = field(default_factory=dict)
+    hwm_mb: dict[str, float] = field(default_factory=dict)
+    pids: dict[str, int] = field(default_factory=dict)
+
+    def __post_init__(self):
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._loop, daemon=True)
+
+    def _loop(self) -> None:
+        me = os.getpid()
+        while not self._stop.is_set():
+            for name, pid in _children_by_name(me).items():
+                self.pids[name] = pid
+            for name, pid in self.pids.items():
+                cpu = _proc_cpu_s(pid)
+                if cpu is not None:
+                    self.cpu_s[name] = max(cpu, self.cpu_s.get(name, 0.0))
+                hwm = _proc_hwm_mb(pid)
+                if hwm is not None:
+                    self.hwm_mb[name] = max(hwm, self.hwm_mb.get(name, 0.0))
+            self._stop.wait(self.period_s)
+
+    def __enter__(self) -> ProcSampler:
+        self._thread.start()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self._stop.set()
+        self._thread.join()
+
+
+# --------------------------------------------------------------------------- read-back check
+
+
+def check_recording(path: str | os.PathLike, n_channels: int, n_steps: int) -> dict:
+    """Read the MCAP back with mcap's streaming reader; count loss and disorder per channel.
+
+    Returns ``{"messages", "channels", "lost", "reordered", "extra", "seq_mismatch"}``:
+    ``lost`` = expected messages (``n_channels * n_steps``) not found, ``reordered`` =
+    messages whose ``sequence`` is not the previous one + 1 in file order or whose
+    ``log_time`` does not increase, ``extra`` = messages beyond ``n_steps`` on a channel,
+    ``channels`` = state channels found (must equal ``n_channels``), ``seq_mismatch`` = sampled payloads whose JSON
+    ``seq`` differs from the record's ``sequence``.
+    """
+    from mcap.reader import make_reader
+
+    counts: dict[int, int] = {}
+    last_seq: dict[int, int] = {}
+    last_time: dict[int, int] = {}
+    topics: dict[int, str] = {}
+    reordered = seq_mismatch = n = 0
+    with open(path, "rb") as f:
+        reader = make_reader(f, validate_crcs=True)
+        for _schema, channel, message in reader.iter_messages(log_time_order=False):
+            cid = channel.id
+            if cid not in topics:
+                topics[cid] = channel.topic
+            if (message.sequence != last_seq.get(cid, -1) + 1 or message.log_time <= last_time.get(cid, -1)) \
+                    and channel.topic.endswith(("/orbit", "/attitude")):  # @event: one seq per process
+                reordered += 1
+            last_seq[cid] = message.sequence
+            last_time[cid] = message.log_time
+            counts[cid] = counts.get(cid, 0) + 1
+            if n % 997 == 0 and json.loads(message.data)["seq"] != message.sequence:
+                seq_mismatch += 1
+            n += 1
+    state = {cid: c for cid, c in counts.items() if topics[cid].endswith(("/orbit", "/attitude"))}
+    found = sum(min(c, n_steps) for c in state.values())
+    extra = sum(max(0, c - n_steps) for c in state.values())
+    return {"messages": sum(state.values()), "channels": len(state), "lost": n_channels * n_steps - found,
+            "reordered": reordered, "extra": extra, "seq_mismatch": seq_mismatch}
+
+
+# --------------------------------------------------------------------------- one scene
+
+
+def run_scene(scene: Scene, workdir: Path, template: str, keep: bool = False) -> dict:
+    """Run ``scene`` through :func:`astrodyn.runner.run_scenario`; measure and check it."""
+    from astrodyn.runner import run_scenario
+    from astrodyn.scenario import load
+
+    config = workdir / f"{scene.name}.toml"
+    config.write_text(scene_config(scene, template))
+    out = workdir / f"{scene.name}.mcap"
+    scenario = load(config)
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    t0 = time.monotonic()
+    with ProcSampler() as sampler:
+        result = run_scenario(scenario, config, out, real_time_factor=scene.real_time_factor, progress=False)
+    wall = time.monotonic() - t0
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    row: dict = {
+        "scene": scene.name, "bodies": scene.bodies, "sim_s": scene.duration_s,
+        "paced_rtf": scene.real_time_factor, "expected": scene.expected_messages,
+        "wall_s": wall, "rtf": scene.duration_s / wall, "ok": bool(result.get("ok")),
+        "failure": result.get("failure"),
+        "cpu_s": {k: round(v, 2) for k, v in sampler.cpu_s.items()},
+        "peak_rss_mb": {k: round(v, 1) for k, v in sampler.hwm_mb.items()},
+        "children_cpu_s": round((after.ru_utime + after.ru_stime) - (before.ru_utime + before.ru_stime), 2),
+    }
+    procs = result.get("processes", {})
+    prop_walls = [((procs.get(k) or {}).get("summary") or {}).get("wall_s") for k in ("orbit", "attitude")]
+    prop_walls = [w for w in prop_walls if w]
+    row["propagate_wall_s"] = max(prop_walls) if prop_walls else None
+    log = result.get("logger") or {}
+    row["logger_missing"] = log.get("missing")
+    row["logger_malformed"] = log.get("malformed")
+    if out.exists():
+        row["check"] = check_recording(out, 2 * scene.bodies, scene.n_steps)
+        row["msg_per_s"] = row["check"]["messages"] / wall
+        row["file_mb"] = round(out.stat().st_size / 2**20, 1)
+        if not keep:
+            out.unlink()
+    else:
+        row["check"] = None
+        row["msg_per_s"] = 0.0
+    c = row["check"] or {}
+    row["lost"] = c.get("lost", scene.expected_messages)
+    row["reordered"] = c.get("reordered", 0)
+    row["zero_loss"] = bool(c) and c["channels"] == 2 * scene.bodies and c["lost"] == 0 and c["reordered"] == 0 and c["extra"] == 0 and c["seq_mismatch"] == 0
+    return row
+
+
+# --------------------------------------------------------------------------- report
+
+
+def machine() -> dict:
+    model = platform.processor() or "?"
+    try:
+        with open("/proc/cpuinfo") as f:
+            for line in f:
+                if line.startswith("model name"):
+                    model = line.split(":", 1)[1].strip()
+                    break
+    except OSError:
+        pass
+    return {"cpu": model, "cores": os.cpu_count(), "python": platform.python_version(),
+            "platform": platform.platform(), "load": os.getloadavg()}
+
+
+def table(rows: list[dict]) -> list[str]:
+    """Markdown table, one line per scene (also printed to stdout)."""
+    head = ("| scene | bodies | sim s | pacing | wall s | real-time factor | msg/s | expected | lost | reordered |"
+            " zero loss | CPU s logger / orbit / attitude | peak RSS MB logger / orbit / attitude |")
+    lines = [head, "|" + "---|" * (head.count("|") - 1)]
+    for r in rows:
+        cpu = " / ".join(f"{r['cpu_s'].get(k, float('nan')):.1f}" for k in _PROCESSES)
+        rss = " / ".join(f"{r['peak_rss_mb'].get(k, float('nan')):.0f}" for k in _PROCESSES)
+        pacing = "max" if math.isinf(r["paced_rtf"]) else f"{r['paced_rtf']:g}x"
+        lines.append(f"| {r['scene']} | {r['bodies']} | {r['sim_s']:g} | {pacing} | {r['wall_s']:.1f} | {r['rtf']:.2f} |"
+                     f" {r['msg_per_s']:,.0f} | {r['expected']:,} | {r['lost']} | {r['reordered']} |"
+                     f" {'yes' if r['zero_loss'] else 'NO'} | {cpu} | {rss} |")
+    return lines
+
+
+def default_scenes(duration: float | None, load_duration: float, small: int) -> list[Scene]:
+    return [
+        Scene(f"constellation-{small}", small, max(1, small // 10), duration or 120.0),
+        Scene("constellation-1000", 1000, 20, duration or 120.0),
+        Scene("load-10x", 1000, 20, load_duration, real_time_factor=10.0),
+    ]
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog="astrodyn bench service", description=__doc__.split("\n\n")[0])
+    ap.add_argument("--duration", type=float, default=None,
+                    help="simulated seconds of the as-fast-as-possible scenes (default 120, as in the config)")
+    ap.add_argument("--load-duration", type=float, default=20.0, help="simulated seconds of the 10x load case (default 20)")
+    ap.add_argument("--small", type=int, default=100, help="satellites of the small scene (default 100)")
+    ap.add_argument("--bodies", type=int, default=None, help="run one scene of this many satellites only (smoke runs)")
+    ap.add_argument("--no-load", action="store_true", help="skip the 10x load case")
+    ap.add_argument("--md", metavar="FILE", help="write the results as Markdown (e.g. docs/bench-service.md)")
+    ap.add_argument("--json", metavar="FILE", help="write the results as JSON")
+    ap.add_argument("--keep", metavar="DIR", help="keep configs and MCAP files in DIR")
+    args = ap.parse_args(argv)
+    from astrodyn.runner import repo_dir
+
+    template = (repo_dir("configs", "constellation-1000.toml") / "constellation-1000.toml").read_text()
+    if args.bodies:
+        planes = max(1, min(20, args.bodies // 10))
+        while args.bodies % planes:
+            planes -= 1
+        scenes = [Scene(f"constellation-{args.bodies}", args.bodies, planes, args.duration or 2.0)]
+    else:
+        scenes = default_scenes(args.duration, args.load_duration, args.small)
+        if args.no_load:
+            scenes = [s for s in scenes if math.isinf(s.real_time_factor)]
+    info = machine()
+    rows = []
+    with tempfile.TemporaryDirectory(prefix="astrodyn-bench-") as tmp:
+        workdir = Path(args.keep) if args.keep else Path(tmp)
+        workdir.mkdir(parents=True, exist_ok=True)
+        for scene in scenes:
+            print(f"[bench service] {scene.name}: {scene.bodies} bodies, {scene.duration_s:g} s sim, "
+                  f"{scene.expected_messages:,} messages ...", file=sys.stderr, flush=True)
+            rows.append(run_scene(scene, workdir, template, keep=bool(args.keep)))
+    info["load_after"] = os.getloadavg()
+    lines = table(rows)
+    print("\n".join(lines))
+    for r in rows:
+        if r["failure"]:
+            print(f"  {r['scene']}: run failure: {r['failure']}")
+        print(f"  {r['scene']}: children CPU total {r['children_cpu_s']} s (getrusage), propagate wall "
+              f"{r['propagate_wall_s'] or float('nan'):.1f} s, file {r.get('file_mb', 0)} MB, check {r['check']}")
+    if args.md:
+        Path(args.md).write_text("\n".join(markdown(rows, info, argv)) + "\n")
+    if args.json:
+        Path(args.json).write_text(json.dumps({"machine": info, "rows": rows}, indent=1, default=str))
+    return 0 if all(r["zero_loss"] and r["ok"] for r in rows) else 1
+
+
+def markdown(rows: list[dict], info: dict, argv: list[str] | None) -> list[str]:
+    cmd = " ".join(["astrodyn bench service", *(argv if argv is not None else sys.argv[1:])]).strip()
+    load0, load1 = info["load"], info["load_after"]
+    out = [
+        "# Service benchmark: propagators -> Zenoh -> logger -> MCAP",
+        "",
+        f"Generated by `{cmd}` on {_dt.datetime.now().strftime('%Y-%m-%d %H:%M')}: {info['cpu']}, {info['cores']} cores,"
+        f" Python {info['python']}. The machine is shared: load average {load0[0]:.1f} before and {load1[0]:.1f} after"
+        " the run, so every number is a snapshot of a loaded machine, not a best case.",
+        "",
+        "Each row is one `astrodyn run` (real processes, loopback Zenoh, end-of-run protocol); wall time includes",
+        "process start-up. Loss and order are checked by reading the MCAP back with the plain `mcap` reader: every",
+        "channel must hold exactly n_steps messages, sequence 0, 1, 2, ... in file order. CPU seconds and peak RSS",
+        "(VmHWM) per process are sampled from /proc. Target (design.md section 5): constellation-1000 at >= 5x",
+        "real time, i.e. 100 000 msg/s, zero loss. The load row paces the propagators at 10x real time",
+        "(200 000 msg/s offered): blocking congestion control must slow them instead of dropping.",
+        "",
+        *table(rows),
+        "",
+    ]
+    for r in rows:
+        out.append(f"- {r['scene']}: children CPU total {r['children_cpu_s']} s (getrusage), propagators' own wall"
+                   f" {r['propagate_wall_s'] or float('nan'):.1f} s, file {r.get('file_mb', 0)} MB"
+                   + (f", FAILURE: {r['failure']}" if r["failure"] else ""))
+    return out
+
+
+if __name__ == "__main__":
+    sys.exit(main())
