@@ -480,6 +480,8 @@ def solve_kepler(M, e):
     ValueError
         If a finite ``e`` is outside ``[0, 1)``.
     """
+    if type(M) is float and type(e) is float and 0.0 <= e < 1.0:  # fast path for one value
+        return _kepler_ell_scalar(M, e)
     shape, Mf, ef = _broadcast_flat(M, e)
     bad = np.isfinite(ef) & ~((ef >= 0.0) & (ef < 1.0))
     if bad.any():
@@ -510,6 +512,8 @@ def solve_kepler_hyperbolic(M, e):
     ValueError
         If a finite ``e`` is not ``> 1``.
     """
+    if type(M) is float and type(e) is float and e > 1.0:  # fast path for one value
+        return _kepler_hyp_scalar(M, e, e - 1.0)
     shape, Mf, ef = _broadcast_flat(M, e)
     bad = np.isfinite(ef) & ~(ef > 1.0)
     if bad.any():

@@ -337,6 +337,18 @@ def _propagate_loop_par(r0, v0, dt, mu, r, v):
 
 
 @jit
+def _propagate_single(r0, v0, dt, mu):
+    """One state, no broadcasting: the cheap path for scalar calls."""
+    r = np.empty(3)
+    v = np.empty(3)
+    f, g, fd, gd = _lagrange_scalar(r0[0], r0[1], r0[2], v0[0], v0[1], v0[2], dt, mu)
+    for j in range(3):
+        r[j] = f * r0[j] + g * v0[j]
+        v[j] = fd * r0[j] + gd * v0[j]
+    return r, v
+
+
+@jit
 def _lagrange_loop(r0, v0, dt, mu, out):
     for i in range(r0.shape[0]):
         out[i, 0], out[i, 1], out[i, 2], out[i, 3] = _lagrange_scalar(
@@ -402,6 +414,11 @@ def propagate(r0, v0, dt, mu):
     ValueError
         Wrong shapes (names the argument) or a finite ``mu <= 0``.
     """
+    if type(dt) is float and type(mu) is float:  # fast path for one state (a few microseconds)
+        r0a = np.asarray(r0, dtype=np.float64)
+        v0a = np.asarray(v0, dtype=np.float64)
+        if r0a.shape == (3,) and v0a.shape == (3,) and mu > 0.0:
+            return _propagate_single(r0a, v0a, dt, mu)
     lead, r0f, v0f, dtf, muf = _prepare(r0, v0, dt, mu, "propagate")
     r = np.empty_like(r0f)
     v = np.empty_like(v0f)
