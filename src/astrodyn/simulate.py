@@ -178,7 +178,7 @@ class OrbitEngine:
         k = self.names.index(body)
         r0, v0, mu = self.r0[k], self.v0[k], self.mu
         if self.kepler[k]:
-            return lambda t: propagate(r0, v0, np.asarray(t, dtype=np.float64)[..., None], mu)[0]
+            return lambda t: propagate(r0, v0, np.asarray(t, dtype=np.float64), mu)[0]
         group = next(g for g in self.groups if k in g.index)
         cache = {"t": 0.0, "r": r0.copy(), "v": v0.copy()}
 
