@@ -260,7 +260,7 @@ def _watch(scenario: Scenario, p, children: dict, beats, alive, progress: bool, 
         for name, ch in children.items():
             rc = ch.poll()
             if rc is not None and (name == "logger" or rc != 0):
-                if name == "logger":
+                if name == "logger" and rc == 0:
                     # the logger ends by itself once it holds everything: give the
                     # propagators a moment to exit after their end-of-run event
                     deadline = time.monotonic() + 10.0
