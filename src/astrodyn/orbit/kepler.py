@@ -406,7 +406,7 @@ def _kepler_hyp_scalar(M, e, em1):
     hi = Fu
     for _ in range(MAX_ITER + 8):
         R, Rp, Rpp, noise = _hyp_residual(F, e, em1, M)
-        if abs(R) <= 2.0 * noise:
+        if abs(R) <= 4.0 * noise:
             return sgn * (F - R / Rp)
         if R > 0.0:
             hi = min(hi, F)

@@ -183,7 +183,7 @@ def _fg_hyperbolic(r0, sig, q, beta, n, dt, mu, h2):
                 break
             x += dx
             sh, chm1, shmx = _sinh_parts(x)
-            if abs(G) <= 2.0 * noise:
+            if abs(G) <= 4.0 * noise:
                 break
         rb = p + Ch * chm1 + Sh * sh  # r / |a|
     else:
@@ -234,7 +234,7 @@ def _fg_universal(r0, sg, q, alpha, dt, sqmu):
         T = (r0 * chi + sg * chi2 * c2 + omq * chi * chi2 * c3) - tau
         rr = chi2 * c2 + sg * chi * (1.0 - z * c3) + r0 * (1.0 - z * c2)
         noise = EPS * (abs(r0 * chi) + abs(sg * chi2 * c2) + abs(omq * chi * chi2 * c3) + abs(tau))
-        if abs(T) <= 2.0 * noise:
+        if abs(T) <= 4.0 * noise:
             chi -= T / rr
             chi2 = chi * chi
             z = alpha * chi2
