@@ -211,7 +211,7 @@ def test_metrics_match_the_drawn_orbit(serial_run):
 
 def test_dask_local_cluster_gives_the_serial_table(config, serial_run, tmp_path):
     pytest.importorskip("distributed")
-    rc = sweep.main(_argv(config, tmp_path, "--workers", "2"))
+    rc = sweep.main(_argv(config, tmp_path, "--workers", "2", "--chunk", "3"))  # 7 tasks of <= 3 cases
     assert rc == 1
     dask_rows = _read(tmp_path / "summary.csv")
     serial_rows = _read(serial_run / "summary.csv")

@@ -9,7 +9,8 @@ Zenoh), reduced to one row of summary metrics, and optionally recorded as its ow
 Cases run on **Dask distributed**: a ``LocalCluster`` of ``--workers`` processes (default
 2, one thread each) on this machine, or any running Dask scheduler given with
 ``--scheduler tcp://HOST:8786`` (reached with dask-jobqueue, dask-kubernetes, ``dask
-scheduler`` + ``dask worker`` by hand: see ``docs/sweeps.md``).  ``--workers 0`` runs
+scheduler`` + ``dask worker`` by hand: see ``docs/sweeps.md``); ``--chunk C`` puts C
+cases in one Dask task when cases take only milliseconds.  ``--workers 0`` runs
 serially in this process without importing Dask.
 
 Dispersion specs (``--vary PATH=DIST [UNIT]``, parsed by a tiny parser: nothing is
@@ -105,6 +106,7 @@ __all__ = [
     "read_cases_csv",
     "make_spec",
     "run_case",
+    "run_chunk",
     "case_metrics",
     "run_cases",
     "write_tables",
@@ -748,10 +750,20 @@ def _failed_row(k: int, spec: SweepSpec, exc: BaseException) -> dict[str, Any]:
     return row
 
 
-def run_cases(spec: SweepSpec, cases: Iterable[int], workers: int = 2, scheduler: str | None = None) -> Iterator[dict]:
+def run_chunk(ks: list[int], spec: SweepSpec) -> list[dict[str, Any]]:
+    """Rows of several cases run one after the other (one Dask task: less per-task overhead)."""
+    return [run_case(k, spec) for k in ks]
+
+
+def run_cases(spec: SweepSpec, cases: Iterable[int], workers: int = 2, scheduler: str | None = None,
+              chunk: int = 1) -> Iterator[dict]:
     """Rows of ``cases`` as they finish: serially here (``workers=0`` and no scheduler), on
-    a Dask ``LocalCluster`` of ``workers`` processes, or on the Dask ``scheduler`` address."""
+    a Dask ``LocalCluster`` of ``workers`` processes, or on the Dask ``scheduler`` address.
+    ``chunk`` cases make one Dask task (for cases of a few ms, where the scheduler's
+    per-task overhead of ~10-20 ms would dominate)."""
     cases = list(cases)
+    if not (isinstance(chunk, int) and chunk >= 1):
+        raise SweepError(f"--chunk: expected an integer >= 1, got {chunk!r}")
     if workers == 0 and scheduler is None:
         for k in cases:
             yield run_case(k, spec)
@@ -778,15 +790,17 @@ def run_cases(spec: SweepSpec, cases: Iterable[int], workers: int = 2, scheduler
     try:
         spec_future = client.scatter(spec, broadcast=True)
         token = f"{os.getpid()}-{time.time_ns()}"
-        futures = client.map(run_case, cases, spec=spec_future, key=[f"astrodyn-case-{k}-{token}" for k in cases],
-                             pure=False)
-        case_of = {f.key: k for f, k in zip(futures, cases)}
+        groups = [cases[i:i + chunk] for i in range(0, len(cases), chunk)]
+        futures = client.map(run_chunk, groups, spec=spec_future,
+                             key=[f"astrodyn-cases-{g[0]}-{len(g)}-{token}" for g in groups], pure=False)
+        group_of = {f.key: g for f, g in zip(futures, groups)}
         try:
             for fut in as_completed(futures):
                 try:
-                    yield fut.result()
+                    yield from fut.result()
                 except Exception as exc:  # worker died (KilledWorker), lost data, ...
-                    yield _failed_row(case_of[fut.key], spec, exc)
+                    for k in group_of[fut.key]:
+                        yield _failed_row(k, spec, exc)
                 fut.release()
         except BaseException:
             client.cancel(futures)
@@ -958,6 +972,8 @@ def _parser() -> argparse.ArgumentParser:
     ap.add_argument("--scheduler", metavar="ADDRESS", help="a running Dask scheduler, e.g. tcp://10.0.0.5:8786")
     ap.add_argument("--workers", type=int, default=2,
                     help="LocalCluster worker processes (default 2, 1 thread each); 0 = serial in this process")
+    ap.add_argument("--chunk", type=int, default=1, metavar="C",
+                    help="cases per Dask task (default 1; raise it for cases of a few ms)")
     ap.add_argument("--case", action="append", type=int, default=None, metavar="K",
                     help="rerun only case K (repeatable), serially, updating the tables in --out")
     ap.add_argument("--mcap", action="store_true", help="also write one MCAP per case into OUT/mcap/")
@@ -1000,7 +1016,7 @@ def main(argv: list[str] | None = None) -> int:
     started = time.monotonic()
     interrupted = False
     try:
-        for row in run_cases(spec, cases, workers=workers, scheduler=scheduler):
+        for row in run_cases(spec, cases, workers=workers, scheduler=scheduler, chunk=args.chunk):
             rows.append(row)
             progress.update(row)
             if rerun:

@@ -46,19 +46,23 @@ e = 0.01
 i = "97 deg"
 """
 
+_DEMO_VARY = ["bodies.iss.orbit.e=uniform(0.0001, 0.01)", "bodies.cubesat.attitude.w=normal([0.001, 0.3, 0.002], 0.01)"]
+_ORBIT_VARY = ["bodies.sat1.orbit.e=uniform(0, 0.1)", "bodies.sat2.orbit.i=normal(97, 1) deg"]
+# name -> (config text or None for configs/demo.toml, dispersions, cases, cases per Dask task)
 SCENES = {
-    "demo": (None, ["bodies.iss.orbit.e=uniform(0.0001, 0.01)", "bodies.cubesat.attitude.w=normal([0.001, 0.3, 0.002], 0.01)"], 24),
-    "orbit-only": (ORBIT_ONLY, ["bodies.sat1.orbit.e=uniform(0, 0.1)", "bodies.sat2.orbit.i=normal(97, 1) deg"], 200),
+    "demo": (None, _DEMO_VARY, 24, 1),
+    "orbit-only": (ORBIT_ONLY, _ORBIT_VARY, 200, 1),
+    "orbit-only, --chunk 10": (ORBIT_ONLY, _ORBIT_VARY, 200, 10),
 }
 
 
-def measure(config: Path, varies: list[str], n: int, workers: int) -> dict:
+def measure(config: Path, varies: list[str], n: int, workers: int, chunk: int = 1) -> dict:
     """One sweep of ``n`` cases; steady-state cases/s and start-up time."""
     spec = make_spec(config, varies, n=n, seed=1)
     t0 = time.perf_counter()
     first = last = None
     count = failed = 0
-    for row in run_cases(spec, range(n), workers=workers):
+    for row in run_cases(spec, range(n), workers=workers, chunk=chunk):
         now = time.perf_counter()
         if first is None:
             first = now
@@ -78,16 +82,16 @@ def main(argv: list[str] | None = None) -> int:
 
     results: dict[tuple[str, int], dict] = {}
     with tempfile.TemporaryDirectory() as tmp:
-        for scene, (text, varies, n) in SCENES.items():
+        for scene, (text, varies, n, chunk) in SCENES.items():
             if text is None:
                 config = repo_dir("configs", "demo.toml") / "demo.toml"
             else:
-                config = Path(tmp) / f"{scene}.toml"
+                config = Path(tmp) / "orbit-only.toml"
                 config.write_text(text)
             for workers in (0, 1, 2):
                 best = None
                 for _ in range(args.repeat):
-                    r = measure(config, varies, n, workers)
+                    r = measure(config, varies, n, workers, chunk)
                     if best is None or r["cases_per_s"] > best["cases_per_s"]:
                         best = r
                 results[(scene, workers)] = best | {"n": n}
