@@ -29,21 +29,10 @@ from astrodyn.recording import load
 from astrodyn.scenario import load as load_scenario
 from astrodyn.simulate import OrbitEngine
 
-ROOT = Path(__file__).resolve().parents[1]
-CONFIGS = ROOT / "configs"
-ASTRODYN = [sys.executable, "-m", "astrodyn"]
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from test_service import ASTRODYN, CONFIGS, _stop  # noqa: E402  (same process handling as the service tests)
 
 pytestmark = pytest.mark.network
-
-
-def _stop(proc: subprocess.Popen) -> None:
-    if proc.poll() is None:
-        os.kill(proc.pid, signal.SIGTERM)
-        try:
-            proc.wait(timeout=30)
-        except subprocess.TimeoutExpired:
-            os.kill(proc.pid, signal.SIGKILL)
-            proc.wait(timeout=10)
 
 
 def _config(tmp_path: Path, duration: str, name: str = "demo.toml") -> Path:

@@ -313,9 +313,9 @@ def load(path: str | os.PathLike) -> Run:
             return
         name, schema = schemas.get(rec.schema_id, ("", None))
         try:
-            kind = messages.kind_of_key(rec.topic)
+            kind = messages.kind_of_key(rec.topic) if rec.message_encoding == "json" else None
         except messages.MessageError:
-            kind = None
+            kind = None  # not JSON (e.g. a pickle someone recorded): opaque bytes, never a body's states
         b = builders.get(rec.topic)
         if b is None:
             b = builders[rec.topic] = _Builder(rec.topic, kind, name, _columns_for(schema) if rec.message_encoding == "json" else None)

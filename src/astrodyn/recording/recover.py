@@ -108,6 +108,9 @@ def recover(path: str | os.PathLike, out: str | os.PathLike | None = None, *, ch
         size = os.fstat(f.fileno()).st_size
     except OSError as exc:
         raise RecordingError(f"{src}: cannot open: {exc.strerror or exc}") from None
+    if os.path.exists(dst) and not os.path.isfile(dst):  # never rename over a device, fifo or directory
+        f.close()
+        raise RecordingError(f"{dst}: expected a regular file to write, got a special file or directory")
     tmp = dst + ".recover-tmp"
     state: dict = {}
     notes: list[str] = []
