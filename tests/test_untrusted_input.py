@@ -172,15 +172,21 @@ def test_config_with_code_is_rejected_and_not_run(tmp_path, payload):
         assert not marker.exists()
 
 
-def test_pickle_config_is_rejected(tmp_path):
-    marker = tmp_path / "pwned"
+def _evil_pickle(marker: Path) -> bytes:
+    """A pickle that would create ``marker`` if anything ever unpickled it."""
 
     class Evil:
         def __reduce__(self):
             return (os.system, (f"touch {marker}",))
 
+    return pickle.dumps(Evil())
+
+
+def test_pickle_config_is_rejected(tmp_path):
+    marker = tmp_path / "pwned"
+
     cfg = tmp_path / "evil.toml"
-    cfg.write_bytes(pickle.dumps(Evil()))
+    cfg.write_bytes(_evil_pickle(marker))
     with pytest.raises(ScenarioError, match=str(cfg)):
         load_scenario(cfg)
     assert not marker.exists()
@@ -206,20 +212,16 @@ def test_relative_output_path_is_resolved_against_the_config(tmp_path):
 def test_recordings_with_pickle_payloads_are_never_unpickled(tmp_path):
     marker = tmp_path / "pwned"
 
-    class Evil:
-        def __reduce__(self):
-            return (os.system, (f"touch {marker}",))
-
     path = tmp_path / "pickle.mcap"
     with open(path, "wb") as f:
         w = Writer(f)
         w.start()
-        sid = w.register_schema("Evil", "pickle", pickle.dumps(Evil()))
+        sid = w.register_schema("Evil", "pickle", _evil_pickle(marker))
         cid = w.register_channel("astrodyn/x/evil/orbit", "pickle", sid)
         cid2 = w.register_channel("other/topic", "pickle", sid)
         for i in range(3):
-            w.add_message(cid, i, pickle.dumps(Evil()), i, i)
-            w.add_message(cid2, i, pickle.dumps(Evil()), i, i)
+            w.add_message(cid, i, _evil_pickle(marker), i, i)
+            w.add_message(cid2, i, _evil_pickle(marker), i, i)
         w.finish()
     run = load(path)
     assert run.messages == 6 and not run.bodies  # not JSON: opaque bytes, never a body's states
