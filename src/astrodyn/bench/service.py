@@ -149,7 +149,7 @@ class ProcSampler:
         while not self._stop.is_set():
             for name, pid in _children_by_name(me).items():
                 self.pids[name] = pid
-            for name, pid in self.pids.items():
+            for name, pid in list(self.pids.items()):
                 cpu = _proc_cpu_s(pid)
                 if cpu is not None:
                     self.cpu_s[name] = max(cpu, self.cpu_s.get(name, 0.0))
@@ -259,6 +259,122 @@ def run_scene(scene: Scene, workdir: Path, template: str, keep: bool = False) ->
     return row
 
 
+# --------------------------------------------------------------------------- flood (issue 6)
+
+
+def flood_publisher(connect: str, scenario: str, steps: int, bodies: int) -> None:
+    """Child process of :func:`run_flood`: pre-encode ``steps`` instants of orbit + attitude
+    envelopes for ``bodies`` bodies (as the propagators frame them), then put them all as
+    fast as Zenoh takes them; prints ``{"first_put_unix": ..., "publish_s": ...}``."""
+    import numpy as np
+
+    from astrodyn import bus, messages
+
+    rng = np.random.default_rng(1)
+    okeys = [messages.orbit_key(scenario, f"s{i}") for i in range(bodies)]
+    akeys = [messages.attitude_key(scenario, f"s{i}") for i in range(bodies)]
+    envelopes = []
+    for k in range(steps):
+        r, v = rng.normal(size=(bodies, 3)) * 7e6, rng.normal(size=(bodies, 3)) * 7.5e3
+        q = rng.normal(size=(bodies, 4))
+        q /= np.linalg.norm(q, axis=1)[:, None]
+        w = rng.normal(size=(bodies, 3)) * 1e-3
+        envelopes.append(messages.encode_batch(zip(okeys, messages.encode_orbit_batch(k / 10, k, "kepler", r, v, 3.986004418e14))))
+        envelopes.append(messages.encode_batch(zip(akeys, messages.encode_attitude_batch(k / 10, k, "torque_free", q, w))))
+    with bus.open_session(connect=[connect]) as session:
+        bus.wait_for_process(session, scenario, "logger", timeout_s=30)
+        with bus.EventPublisher(session, scenario, "flood") as events:
+            publisher = session.declare_publisher(
+                messages.batch_key(scenario, "flood"), congestion_control=zenoh_block(), reliability=zenoh_reliable())
+            first = time.time()
+            t0 = time.monotonic()
+            for env in envelopes:
+                publisher.put(env)
+            publish_s = time.monotonic() - t0
+            events.end(steps / 10, 2 * bodies * steps)
+            # put() returns once a sample is queued on our side; closing the session drops
+            # what is still queued, so stay until the logger has everything (it exits).
+            deadline = time.monotonic() + 300
+            while "logger" in bus.alive_processes(session, scenario) and time.monotonic() < deadline:
+                time.sleep(0.05)
+            publisher.undeclare()
+    print(json.dumps({"first_put_unix": first, "publish_s": publish_s}), flush=True)
+
+
+def zenoh_block():
+    import zenoh
+
+    return zenoh.CongestionControl.BLOCK
+
+
+def zenoh_reliable():
+    import zenoh
+
+    return zenoh.Reliability.RELIABLE
+
+
+def run_flood(steps: int, bodies: int, queue: int, workdir: Path) -> dict:
+    """Issue 6 load case: one publisher putting pre-encoded envelopes as fast as Zenoh takes
+    them (far above 10x the nominal rate) into ``services/logger.py --queue queue``."""
+    import subprocess
+
+    from astrodyn import bus
+    from astrodyn.runner import services_dir
+
+    name = f"flood-q{queue}"
+    out = workdir / f"{name}.mcap"
+    port = bus.free_port()
+    hub = bus.loopback_endpoint(port)
+    py = sys.executable
+    row: dict = {"scene": name, "bodies": bodies, "sim_s": steps / 10, "paced_rtf": math.inf,
+                 "expected": 2 * bodies * steps, "queue": queue}
+    t0 = time.monotonic()
+    with bus.open_session(listen=[hub]), ProcSampler() as sampler:
+        logger = subprocess.Popen([py, str(services_dir() / "logger.py"), "--scenario", name, "--out", str(out),
+                                   "--epoch-ns", "1774008000000000000", "--expect", "flood", "--queue", str(queue),
+                                   "--connect", hub], stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+        pub = subprocess.Popen([py, "-m", "astrodyn.bench.service", "--flood-publisher", hub, name, str(steps), str(bodies)],
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+        sampler.pids.update(logger=logger.pid, flood=pub.pid)
+        pub_out, pub_err = pub.communicate(timeout=600)
+        log_out, log_err = logger.communicate(timeout=600)
+        end_unix = time.time()
+    row["wall_s"] = time.monotonic() - t0
+    row["cpu_s"] = {k: round(v, 2) for k, v in sampler.cpu_s.items()}
+    row["peak_rss_mb"] = {k: round(v, 1) for k, v in sampler.hwm_mb.items()}
+    try:
+        pinfo = json.loads(pub_out.decode().strip().splitlines()[-1])
+        summary = json.loads(log_out.decode().strip().splitlines()[-1])
+    except (ValueError, IndexError):
+        row.update(ok=False, failure=f"flood: publisher rc {pub.returncode}: {pub_err.decode()[-300:]}; "
+                                     f"logger rc {logger.returncode}: {log_err.decode()[-300:]}")
+        return row
+    row["offered_msg_s"] = row["expected"] / max(pinfo["publish_s"], 1e-9)
+    row["sustained_msg_s"] = row["expected"] / max(end_unix - pinfo["first_put_unix"], 1e-9)
+    row["logger_missing"] = summary.get("missing")
+    row["check"] = check_recording(out, 2 * bodies, steps) if out.exists() else None
+    c = row["check"] or {}
+    row["zero_loss"] = bool(c) and c["channels"] == 2 * bodies and c["lost"] == 0 and c["reordered"] == 0 \
+        and c["extra"] == 0 and c["seq_mismatch"] == 0
+    row["ok"] = logger.returncode == 0 and pub.returncode == 0
+    row["failure"] = None if row["ok"] else f"exit codes logger {logger.returncode}, publisher {pub.returncode}"
+    out.unlink(missing_ok=True)
+    return row
+
+
+def flood_table(rows: list[dict]) -> list[str]:
+    head = ("| scene | logger queue (samples) | messages | publish phase msg/s | sustained msg/s into MCAP | lost |"
+            " reordered | zero loss | peak RSS MB logger / publisher | CPU s logger |")
+    lines = [head, "|" + "---|" * (head.count("|") - 1)]
+    for r in rows:
+        c = r.get("check") or {}
+        lines.append(f"| {r['scene']} | {r['queue']} | {r['expected']:,} | {r.get('offered_msg_s', 0):,.0f} |"
+                     f" {r.get('sustained_msg_s', 0):,.0f} | {c.get('lost', '?')} | {c.get('reordered', '?')} |"
+                     f" {'yes' if r.get('zero_loss') else 'NO'} | {r['peak_rss_mb'].get('logger', float('nan')):.0f} /"
+                     f" {r['peak_rss_mb'].get('flood', float('nan')):.0f} | {r['cpu_s'].get('logger', float('nan')):.1f} |")
+    return lines
+
+
 # --------------------------------------------------------------------------- report
 
 
@@ -307,9 +423,17 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--small", type=int, default=100, help="satellites of the small scene (default 100)")
     ap.add_argument("--bodies", type=int, default=None, help="run one scene of this many satellites only (smoke runs)")
     ap.add_argument("--no-load", action="store_true", help="skip the 10x load case")
+    ap.add_argument("--flood-steps", type=int, default=200,
+                    help="instants of the flood case (1000 bodies x 2 kinds each; default 200 = 400k messages; 0 skips it)")
+    ap.add_argument("--flood-queues", default="65536,64",
+                    help="logger --queue values (samples) to run the flood case with (default 65536,64)")
     ap.add_argument("--md", metavar="FILE", help="write the results as Markdown (e.g. docs/bench-service.md)")
     ap.add_argument("--json", metavar="FILE", help="write the results as JSON")
     ap.add_argument("--keep", metavar="DIR", help="keep configs and MCAP files in DIR")
+    if argv and argv[0] == "--flood-publisher" or argv is None and sys.argv[1:2] == ["--flood-publisher"]:
+        rest = (argv if argv is not None else sys.argv[1:])[1:]
+        flood_publisher(rest[0], rest[1], int(rest[2]), int(rest[3]))
+        return 0
     args = ap.parse_args(argv)
     from astrodyn.runner import repo_dir
 
@@ -332,8 +456,16 @@ def main(argv: list[str] | None = None) -> int:
             print(f"[bench service] {scene.name}: {scene.bodies} bodies, {scene.duration_s:g} s sim, "
                   f"{scene.expected_messages:,} messages ...", file=sys.stderr, flush=True)
             rows.append(run_scene(scene, workdir, template, keep=bool(args.keep)))
+        floods = []
+        if args.flood_steps and not args.bodies and not args.no_load:
+            for queue in [int(x) for x in args.flood_queues.split(",") if x.strip()]:
+                print(f"[bench service] flood: {args.flood_steps} instants x 2000 messages, logger queue {queue} ...",
+                      file=sys.stderr, flush=True)
+                floods.append(run_flood(args.flood_steps, 1000, queue, workdir))
     info["load_after"] = os.getloadavg()
     lines = table(rows)
+    if floods:
+        lines += ["", *flood_table(floods)]
     print("\n".join(lines))
     for r in rows:
         if r["failure"]:
@@ -341,13 +473,13 @@ def main(argv: list[str] | None = None) -> int:
         print(f"  {r['scene']}: children CPU total {r['children_cpu_s']} s (getrusage), propagate wall "
               f"{r['propagate_wall_s'] or float('nan'):.1f} s, file {r.get('file_mb', 0)} MB, check {r['check']}")
     if args.md:
-        Path(args.md).write_text("\n".join(markdown(rows, info, argv)) + "\n")
+        Path(args.md).write_text("\n".join(markdown(rows, floods, info, argv)) + "\n")
     if args.json:
-        Path(args.json).write_text(json.dumps({"machine": info, "rows": rows}, indent=1, default=str))
-    return 0 if all(r["zero_loss"] and r["ok"] for r in rows) else 1
+        Path(args.json).write_text(json.dumps({"machine": info, "rows": rows, "flood": floods}, indent=1, default=str))
+    return 0 if all(r.get("zero_loss") and r.get("ok") for r in rows + floods) else 1
 
 
-def markdown(rows: list[dict], info: dict, argv: list[str] | None) -> list[str]:
+def markdown(rows: list[dict], floods: list[dict], info: dict, argv: list[str] | None) -> list[str]:
     cmd = " ".join(["astrodyn bench service", *(argv if argv is not None else sys.argv[1:])]).strip()
     load0, load1 = info["load"], info["load_after"]
     out = [
@@ -371,6 +503,13 @@ def markdown(rows: list[dict], info: dict, argv: list[str] | None) -> list[str]:
         out.append(f"- {r['scene']}: children CPU total {r['children_cpu_s']} s (getrusage), propagators' own wall"
                    f" {r['propagate_wall_s'] or float('nan'):.1f} s, file {r.get('file_mb', 0)} MB"
                    + (f", FAILURE: {r['failure']}" if r["failure"] else ""))
+    if floods:
+        out += ["", "## Flood: publisher far faster than the logger (issue 6)", "",
+                "One process puts pre-encoded envelopes (1000 bodies x orbit + attitude per instant) as fast as Zenoh",
+                "takes them into `services/logger.py --queue N`. 'Publish phase' is the rate of the puts (blocking",
+                "congestion control slows them once the logger's queue is full); 'sustained' counts from the first put",
+                "to the logger's exit with the file finished. The logger's peak RSS shows what its queue holds.", "",
+                *flood_table(floods)]
     return out
 
 
