@@ -387,7 +387,7 @@ def _kepler_hyp_scalar(M, e, em1):
         sgn = -1.0
     if M == 0.0:
         return 0.0
-    lo = math.asinh(M / e)  # e sinh F = M + F > M
+    lo = 0.0  # F > 0 for M > 0 (bracket for the bisection fallback only)
     # upper bounds: the cubic (sinh F - F >= F^3/6), and (e - 1) sinh F <= M
     if M < 1e100:
         p3 = 2.0 * em1 / e  # p/3 with p = 6 (e - 1)/e
