@@ -24,3 +24,43 @@ settings.register_profile(
 )
 settings.register_profile("dev", max_examples=50, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "ci"))
+
+
+# --------------------------------------------------------------------------- processes and the bus
+
+import os as _os
+import signal as _signal
+import subprocess as _subprocess
+
+import pytest
+
+
+@pytest.fixture
+def hub():
+    """(session, endpoint): the test's own loopback Zenoh session, which children connect to."""
+    from astrodyn import bus
+
+    endpoint = bus.loopback_endpoint()
+    with bus.open_session(listen=endpoint) as session:
+        yield session, endpoint
+
+
+@pytest.fixture
+def processes():
+    """``start(argv, **popen_kwargs) -> Popen``: children started with subprocess (never
+    fork); every one still running at teardown is killed by its PID, and its pipes closed."""
+    children: list[_subprocess.Popen] = []
+
+    def start(argv, **kw) -> _subprocess.Popen:
+        proc = _subprocess.Popen([str(a) for a in argv], **kw)
+        children.append(proc)
+        return proc
+
+    yield start
+    for proc in children:
+        if proc.poll() is None:
+            _os.kill(proc.pid, _signal.SIGKILL)
+        proc.wait(timeout=10)
+        for stream in (proc.stdin, proc.stdout, proc.stderr):
+            if stream is not None:
+                stream.close()

@@ -32,31 +32,13 @@ EPOCH_NS = 1_774_008_000_000_000_000
 
 
 @pytest.fixture
-def hub():
-    """(session, endpoint): the test's own session, which the children connect to."""
-    endpoint = bus.loopback_endpoint()
-    with bus.open_session(listen=endpoint) as session:
-        yield session, endpoint
-
-
-@pytest.fixture
-def spawn():
-    """Start children with subprocess (never fork); kill each by PID at teardown."""
-    children: list[subprocess.Popen] = []
+def spawn(processes):
+    """Start ``python ARGS...`` children (conftest ``processes``: killed by PID at teardown)."""
 
     def start(*args: str, **kw) -> subprocess.Popen:
-        proc = subprocess.Popen([sys.executable, *map(str, args)], text=True, **kw)
-        children.append(proc)
-        return proc
+        return processes([sys.executable, *args], text=True, **kw)
 
-    yield start
-    for proc in children:
-        if proc.poll() is None:
-            os.kill(proc.pid, signal.SIGKILL)
-        proc.wait(timeout=10)
-        for stream in (proc.stdout, proc.stderr):
-            if stream is not None:
-                stream.close()
+    return start
 
 
 def _wait(predicate, timeout_s: float, what: str, step_s: float = 0.01):

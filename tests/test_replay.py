@@ -29,29 +29,20 @@ from astrodyn.recording.stream import open_stream
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _recordings import leo_recording  # noqa: E402
-from test_bus import hub  # noqa: E402,F401  (fixture: the test's loopback session and its endpoint)
 
 pytestmark = pytest.mark.network
 EPOCH_NS = 1_774_008_000_000_000_000
 
 
 @pytest.fixture
-def spawn():
-    children: list[subprocess.Popen] = []
+def spawn(processes):
+    """Start ``astrodyn replay ARGS...`` (conftest ``processes``: killed by PID at teardown)."""
 
     def start(*args, **kw) -> subprocess.Popen:
-        proc = subprocess.Popen([sys.executable, "-m", "astrodyn", "replay", *map(str, args)],
-                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, **kw)
-        children.append(proc)
-        return proc
+        return processes([sys.executable, "-m", "astrodyn", "replay", *args],
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, **kw)
 
-    yield start
-    for proc in children:
-        if proc.poll() is None:
-            os.kill(proc.pid, signal.SIGKILL)
-        proc.wait(timeout=10)
-        proc.stdout.close()
-        proc.stderr.close()
+    return start
 
 
 @pytest.fixture(scope="module")
