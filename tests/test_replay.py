@@ -10,9 +10,7 @@ bounded in time, and every child is killed by its PID at teardown.
 from __future__ import annotations
 
 import json
-import os
 import random
-import signal
 import subprocess
 import sys
 import time
