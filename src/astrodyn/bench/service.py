@@ -479,6 +479,29 @@ def main(argv: list[str] | None = None) -> int:
     return 0 if all(r.get("zero_loss") and r.get("ok") for r in rows + floods) else 1
 
 
+def budget(rows: list[dict]) -> list[str]:
+    """CPU per message of each process and the real-time factor that CPU allows on dedicated cores.
+
+    Projection for ``cores`` dedicated cores: the run cannot be shorter than the busiest
+    single process (each is one Python thread) nor than the total CPU / cores.
+    """
+    lines = ["| scene | logger us/msg | orbit us/msg | attitude us/msg | share of the machine used |"
+             " RTF possible on 2 dedicated cores |", "|---|---|---|---|---|---|"]
+    for r in rows:
+        cpu = r.get("cpu_s") or {}
+        n = r["expected"]
+        if n == 0 or not all(k in cpu for k in _PROCESSES):
+            continue
+        per = [cpu["logger"] / n * 1e6, cpu["orbit"] / (n / 2) * 1e6, cpu["attitude"] / (n / 2) * 1e6]
+        floor_s = max(max(cpu[k] for k in _PROCESSES), sum(cpu[k] for k in _PROCESSES) / 2)
+        share = sum(cpu[k] for k in _PROCESSES) / r["wall_s"]
+        lines.append(f"| {r['scene']} | {per[0]:.1f} | {per[1]:.1f} | {per[2]:.1f} | {share:.2f} cores |"
+                     f" {r['sim_s'] / floor_s:.1f}x |")
+    lines += ["", "CPU seconds include each process's start-up (imports, numba cache load, Zenoh session: about"
+              " 1-2 s), which weighs on the short rows. 'Possible' assumes nothing else runs on the two cores."]
+    return lines
+
+
 def markdown(rows: list[dict], floods: list[dict], info: dict, argv: list[str] | None) -> list[str]:
     cmd = " ".join(["astrodyn bench service", *(argv if argv is not None else sys.argv[1:])]).strip()
     load0, load1 = info["load"], info["load_after"]
@@ -503,6 +526,7 @@ def markdown(rows: list[dict], floods: list[dict], info: dict, argv: list[str] |
         out.append(f"- {r['scene']}: children CPU total {r['children_cpu_s']} s (getrusage), propagators' own wall"
                    f" {r['propagate_wall_s'] or float('nan'):.1f} s, file {r.get('file_mb', 0)} MB"
                    + (f", FAILURE: {r['failure']}" if r["failure"] else ""))
+    out += ["", "## Where the CPU goes", "", *budget(rows)]
     if floods:
         out += ["", "## Flood: publisher far faster than the logger (issue 6)", "",
                 "One process puts pre-encoded envelopes (1000 bodies x orbit + attitude per instant) as fast as Zenoh",
