@@ -316,3 +316,24 @@ def test_sweep_report(serial_run, tmp_path):
     assert "| sat1.r_min | m |" in text and "## Failures" in text
     with pytest.raises(ValueError, match="summary.csv"):
         sweep_report(tmp_path)
+
+
+def test_existing_scheduler_gives_the_serial_table(config, serial_run, tmp_path):
+    distributed = pytest.importorskip("distributed")
+    # a scheduler started elsewhere (here: in this process, one in-process worker thread)
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=False, dashboard_address=None) as cluster:
+        address = cluster.scheduler_address
+        rc = sweep.main(_argv(config, tmp_path, "--scheduler", address, "--chunk", "5"))
+    assert rc == 1
+    assert [_no_wall(r) for r in _read(tmp_path / "summary.csv")] == [_no_wall(r) for r in _read(serial_run / "summary.csv")]
+    assert json.loads((tmp_path / "sweep.json").read_text())["scheduler"] == address
+
+
+def test_unreachable_scheduler_is_a_clear_error(config, tmp_path, capsys, monkeypatch):
+    pytest.importorskip("distributed")
+    monkeypatch.setattr(sweep, "SCHEDULER_TIMEOUT_S", 2.0)
+    from astrodyn.bus import free_port
+
+    rc = sweep.main(_argv(config, tmp_path, "--scheduler", f"tcp://127.0.0.1:{free_port()}"))
+    assert rc == 2
+    assert "cannot reach a Dask scheduler" in capsys.readouterr().err

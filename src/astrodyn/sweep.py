@@ -107,6 +107,7 @@ __all__ = [
     "make_spec",
     "run_case",
     "run_chunk",
+    "local_cluster",
     "case_metrics",
     "run_cases",
     "write_tables",
@@ -118,6 +119,7 @@ __all__ = [
 MAX_CASES = 10_000_000  #: upper bound on -n (a sanity limit, not a resource estimate)
 MAX_GRID = 1_000_000  #: most points a grid(...) may have
 MAX_SPEC = 4096  #: longest --vary text
+SCHEDULER_TIMEOUT_S = 30.0  #: how long to try reaching a --scheduler
 
 #: Unit of each metric column, by the suffix after the last "." of the column name.
 METRIC_UNITS: dict[str, str] = {
@@ -750,6 +752,19 @@ def _failed_row(k: int, spec: SweepSpec, exc: BaseException) -> dict[str, Any]:
     return row
 
 
+def local_cluster(workers: int):
+    """A Dask ``LocalCluster`` of ``workers`` processes, one thread and one numba thread each
+    (the workers are the parallelism), no dashboard, quiet logs."""
+    import logging
+
+    import dask
+    from distributed import LocalCluster
+
+    with dask.config.set({"distributed.nanny.pre-spawn-environ.NUMBA_NUM_THREADS": 1}):
+        return LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                            dashboard_address=None, silence_logs=logging.ERROR)
+
+
 def run_chunk(ks: list[int], spec: SweepSpec) -> list[dict[str, Any]]:
     """Rows of several cases run one after the other (one Dask task: less per-task overhead)."""
     return [run_case(k, spec) for k in ks]
@@ -769,22 +784,17 @@ def run_cases(spec: SweepSpec, cases: Iterable[int], workers: int = 2, scheduler
             yield run_case(k, spec)
         return
     try:
-        import dask
-        from distributed import Client, LocalCluster, as_completed
+        from distributed import Client, as_completed
     except ImportError:
         raise SweepError("Dask is not installed: `pip install 'astrodyn[sweep]'` (or --workers 0 to run serially)") from None
-    import logging
 
     cluster = None
     if scheduler is None:
-        # one numba thread per worker process: the workers are the parallelism
-        with dask.config.set({"distributed.nanny.pre-spawn-environ.NUMBA_NUM_THREADS": 1}):
-            cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                                   dashboard_address=None, silence_logs=logging.ERROR)
+        cluster = local_cluster(workers)
         client = Client(cluster)
     else:
         try:
-            client = Client(scheduler, timeout="30s")
+            client = Client(scheduler, timeout=f"{SCHEDULER_TIMEOUT_S}s")
         except (OSError, TimeoutError) as exc:
             raise SweepError(f"--scheduler {scheduler}: cannot reach a Dask scheduler ({exc})") from None
     try:
