@@ -3,7 +3,8 @@
 What it does with each sample (keys in :mod:`astrodyn.bus`):
 
 * ``<body>/orbit|attitude|crosscheck``, ``@event``, ``@status``: decoded and validated with
-  :func:`astrodyn.messages.decode`; valid messages are written as received (no re-encoding)
+  :func:`astrodyn.messages.decode` (orbit and attitude payloads in the batch encoders'
+  canonical layout by the equivalent, faster :data:`astrodyn.messages.FAST_CHECKS`); valid messages are written as received (no re-encoding)
   by :class:`~astrodyn.recording.writer.McapRecorder`, which accounts ``seq`` per channel
   (gaps, late arrivals, duplicates -- duplicates are not written).  Event seqs are
   accounted per (channel, process), since every process numbers its own events.
