@@ -102,6 +102,9 @@ def hard_cases():
         t /= np.linalg.norm(t)
         for dt in [2000.0, 100.0, 20000.0]:
             add(f"nearly_radial_vr{vr}_vt{vt}_dt{dt}", r0, vr * rh + vt * t, dt, MU_E, slow=not (dt == 2000.0 and vr in (3000.0, -12000.0)))
+    # long nearly radial hyperbola (e - 1 ~ 5e-13): outbound to 1e9 s, back through its r_p ~ 6e-6 m periapsis
+    for dt in [1e7, 1e9, -1e7, -1e9]:
+        add(f"nearly_radial_hyperbola_dt{dt:g}", np.array([7e6, 0, 0.0]), np.array([12000.0, 0.01, 0.0]), dt, MU_E, slow=dt not in (1e7, -1e9))
     add("helio_earth_100yr", *perifocal_state(AU * (1 - 0.0167**2), 0.0167, 0.5, MU_SUN, 0.1, 0.2, 0.3), 100 * 365.25 * 86400, MU_SUN)
     add("helio_comet_e0.995", *perifocal_state(0.5 * AU * 1.995, 0.995, -1.0, MU_SUN, 2.0, 0.2, 0.3), 200 * 86400.0, MU_SUN)
     add("helio_interstellar_e1.2", *perifocal_state(1.2 * AU * 2.2, 1.2, -1.8, MU_SUN, 0.4, 0.2, 0.3), 3 * 365.25 * 86400, MU_SUN)
