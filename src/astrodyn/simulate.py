@@ -292,11 +292,20 @@ class AttitudeEngine:
         T, N = times.shape[0], len(self.bodies)
         q = np.empty((T, N, 4))
         w = np.empty((T, N, 3))
+        free = [k for k, b in enumerate(self.bodies) if b.model == "torque_free"]
+        if free and T:
+            # one batched call for every torque-free body (exact from its initial state)
+            wf, qf = torque_free(np.array([self.bodies[k].inertia for k in free]),
+                                 np.array([self.bodies[k].w0 for k in free]),
+                                 np.array([self.bodies[k].q0 for k in free]), times)
+            q[:, free], w[:, free] = np.swapaxes(qf, 0, 1), np.swapaxes(wf, 0, 1)
         for k, b in enumerate(self.bodies):
             if T == 0:
                 break
             if b.model == "torque_free":
-                wp, qp = torque_free(b.inertia, b.w0, b.q0, times)
+                if np.array_equal(b.axes, np.eye(3)):
+                    continue
+                qp, wp = q[:, k].copy(), w[:, k].copy()
             else:
                 if times[0] < b.t0:
                     raise ValueError(f"times: torqued attitudes continue forward only; got {times[0]} s before {b.t0} s")
