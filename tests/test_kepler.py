@@ -27,7 +27,7 @@ mp.mp.dps = 50
 
 
 def ulp(x):
-    return float(np.spacing(abs(float(x))))
+    return math.ulp(abs(float(x)))  # np.spacing overflows to inf at the largest float
 
 
 def ref_elliptic(M, e):
@@ -157,6 +157,16 @@ def test_hyperbolic_residual_property(M, e):
     F = solve_kepler_hyperbolic(M, e)
     ref = ref_hyperbolic(M, e)
     assert abs(F - float(ref)) <= tol_hyperbolic(M, e, ref)
+
+
+@pytest.mark.parametrize("e", [1 + 1e-15, 1 + 2.220446049250313e-16, 1.5, 1e10])
+@pytest.mark.parametrize("M", [1e308, -1.7e308, 1.7976931348623157e308, 1e300, 1e101])
+def test_hyperbolic_near_overflow(M, e):
+    # F ~ 710, where e sinh F ~ M is still finite but exp(F) is not (> 709.78) and
+    # M / (e - 1) overflows: the starter and the residual must stay finite
+    F = solve_kepler_hyperbolic(M, e)
+    ref = ref_hyperbolic(M, e)
+    assert abs(F - float(ref)) <= tol_hyperbolic(M, e, ref), (M, e, F, float(ref))
 
 
 def test_shapes_and_scalars():

@@ -63,6 +63,7 @@ _INV6 = 1.0 / 6.0
 _INV24 = 1.0 / 24.0
 _INV_PI2_M6 = 1.0 / (PI * PI - 6.0)
 _INV_TWO_PI = 1.0 / TWO_PI_1
+_LN2 = math.log(2.0)
 HUGE_ANGLE = 2.0**52  # [rad] above this the float64 phase is not resolved (see _reduce_2pi)
 
 # Taylor coefficients 1/(2k+1)! for k = 1..10: x - sin x = sum (-1)^(k+1) x^(2k+1)/(2k+1)!
@@ -214,6 +215,13 @@ def _sinh_parts(x):
         sh = x + shmx
         chm1 = sh * sh / (1.0 + math.sqrt(1.0 + sh * sh))
         return sh, chm1, shmx
+    if abs(x) > 700.0:
+        # exp(x) overflows above 709.78 while sinh x stays finite up to 710.47:
+        # sinh x = (exp(x/2) / 2) exp(x/2) (x/2 exact; exp(-x) is below 1e-304 relative)
+        h = math.exp(0.5 * abs(x))
+        ch = (0.5 * h) * h
+        sh = math.copysign(ch, x)
+        return sh, ch, sh - x
     ex = math.exp(x)
     iex = 1.0 / ex
     sh = 0.5 * (ex - iex)
@@ -399,8 +407,8 @@ def _kepler_hyp_scalar(M, e, em1):
         Fu = math.inf
     if em1 > 0.0:
         Fu = min(Fu, math.asinh(M / em1))
-    if not math.isfinite(Fu):  # e == 1 and huge M: log bound
-        Fu = math.log(2.0 * (M + 1.0)) + math.log1p(M) + 1.0
+    if not math.isfinite(Fu):  # e -> 1 and huge M (M / (e - 1) overflows): log bound, in logs so
+        Fu = _LN2 + math.log1p(M) + math.log1p(M) + 1.0  # that M ~ 1e308 does not overflow
     Fu = math.asinh((M + Fu) / e)  # still an upper bound, much tighter
     F = Fu
     hi = Fu
