@@ -31,7 +31,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                    help="process whose end-of-run event ends the recording (repeatable)")
     p.add_argument("--chunk-size", type=int, default=1 << 20, help="uncompressed bytes per zstd chunk")
     p.add_argument("--flush-interval", type=float, default=1.0, help="max seconds between flushes (crash-loss bound)")
-    p.add_argument("--queue", type=int, default=65536, help="bounded receive queue (samples)")
+    p.add_argument("--queue", type=int, default=256, help="bounded receive queue per subscription (samples; a full queue blocks the publishers, so memory stays bounded and nothing is lost)")
     p.add_argument("--no-control", action="store_true",
                    help="do not answer the stop verb (a supervisor such as `astrodyn serve` ends the run)")
     p.add_argument("--roll-size", type=int, default=None, help="start a new file after this many bytes")

@@ -77,7 +77,7 @@ class Logger:
         recorder: McapRecorder,
         *,
         expect: Iterable[str] = (),
-        queue_capacity: int = 65536,
+        queue_capacity: int = 256,
         drain_idle_s: float = 0.3,
         drain_timeout_s: float = 10.0,
         stall_timeout_s: float = 5.0,
