@@ -129,15 +129,19 @@ def test_liveliness_notices_a_killed_child(hub, spawn):
 def test_heartbeat_monitor_flags_silence(hub):
     session, endpoint = hub
     with bus.open_session(connect=endpoint) as other, \
-            bus.HeartbeatMonitor(session, "hb", timeout_s=0.3) as monitor, \
+            bus.HeartbeatMonitor(session, "hb", timeout_s=1.0) as monitor, \
             bus.Heartbeat(other, "hb", "orbit", period_s=0.05) as beat:
         time.sleep(0.3)  # let the subscription reach the other session
         for _ in range(10):
             beat.beat(t=1.5)
             time.sleep(0.02)
         _wait(lambda: monitor.poll() or "orbit" in monitor.last, 5, "a heartbeat")
-        assert monitor.last["orbit"]["t"] == 1.5 and monitor.stale() == []
-        time.sleep(0.5)  # no beats: a hung loop
+        assert monitor.last["orbit"]["t"] == 1.5
+        n = monitor.last["orbit"]["n"]
+        beat.beat(force=True, t=2.0)  # a fresh beat: not stale, however slow the machine
+        _wait(lambda: monitor.poll() or monitor.last["orbit"]["n"] > n, 5, "the fresh heartbeat")
+        assert monitor.stale(now=monitor.seen["orbit"] + 0.5) == []
+        time.sleep(1.5)  # no beats: a hung loop
         assert monitor.stale() == ["orbit"]
 
 
