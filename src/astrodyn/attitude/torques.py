@@ -13,7 +13,9 @@ works too (through a slower Python path).
   spacecraft) in body axes.  Baruh, *Analytical Dynamics*, sec. 8.x
   (gravity-gradient moment); Hughes, *Spacecraft Attitude Dynamics*, ch. 8,
   eq. (8.1.x).  The position comes from a callable ``r(t)``, e.g. the orbit core
-  ``lambda t: astrodyn.orbit.propagate(r0, v0, t, mu)[0]``.
+  ``lambda t: astrodyn.orbit.propagate(r0, v0, t, mu)[0]``, or for a two-body
+  orbit :meth:`GravityGradientTorque.kepler` (evaluated inside the compiled
+  integrator kernel).
 * :class:`UniformGravityTorque`: a uniform field acting at a body-fixed centre of
   mass, ``tau = r_c x (C m g)`` about a fixed point (the heavy top, Baruh 10.5).
 * :class:`ConstantTorque`: fixed in body or in inertial axes.
@@ -67,6 +69,11 @@ class GravityGradientTorque:
     inertia : array_like
         ``(3,)`` principal moments or ``(3, 3)`` tensor in body axes, kg m^2
         (the full mass distribution, rotors included).
+
+    For a two-body (Kepler) orbit use :meth:`kepler` instead: the integrator then
+    evaluates the position inside its compiled kernel (universal-variable
+    Lagrange coefficients of :mod:`astrodyn.orbit.universal`), about 5x cheaper
+    per step than calling ``position`` from Python.
     """
 
     def __init__(self, mu, position, inertia):
@@ -77,6 +84,40 @@ class GravityGradientTorque:
             raise ValueError(f"mu: expected a positive gravitational parameter in m^3/s^2, got {mu}")
         self.position = position
         self.inertia = inertia_tensor(inertia)
+        self.orbit = None  # (r0, v0, t0) of a Kepler orbit, see kepler()
+
+    @classmethod
+    def kepler(cls, mu, r0, v0, inertia, t0=0.0):
+        """Gravity gradient along the two-body orbit through ``(r0, v0)`` at time ``t0``.
+
+        ``r0`` (m), ``v0`` (m/s): inertial state ``(3,)`` relative to the
+        attracting centre at ``t = t0`` (s, on the integrator's clock); ``mu``
+        m^3/s^2 is used for both the orbit and the torque.  ``r(t)`` is
+        :func:`astrodyn.orbit.propagate` ``(r0, v0, t - t0, mu)`` (every conic).
+        """
+        from astrodyn.orbit.universal import propagate
+
+        r0 = np.array(r0, dtype=np.float64).reshape(-1)
+        v0 = np.array(v0, dtype=np.float64).reshape(-1)
+        if r0.shape != (3,) or v0.shape != (3,):
+            raise ValueError(f"r0, v0: expected inertial position (3,) m and velocity (3,) m/s, got {r0.shape} and {v0.shape}")
+        t0 = float(t0)
+        mu = float(mu)
+
+        def position(t):
+            return propagate(r0, v0, np.asarray(t, dtype=np.float64) - t0, mu)[0]
+
+        model = cls(mu, position, inertia)
+        model.orbit = (r0, v0, t0)
+        return model
+
+    def shifted(self, dt):
+        """The same torque on a clock that starts ``dt`` seconds later: ``model_new(t) = model(t + dt)``."""
+        if self.orbit is not None:
+            r0, v0, t0 = self.orbit
+            return GravityGradientTorque.kepler(self.mu, r0, v0, self.inertia, t0 - dt)
+        position = self.position
+        return GravityGradientTorque(self.mu, lambda t: position(np.asarray(t, dtype=np.float64) + dt), self.inertia)
 
     def __call__(self, t, q, w=None):
         r = np.asarray(self.position(np.asarray(t, dtype=np.float64)), dtype=np.float64)
