@@ -74,6 +74,7 @@ __all__ = [
     "quat_conjugate",
     "quat_inverse",
     "quat_multiply",
+    "quat_hamilton_scalar",
     "quat_rotate",
     "dcm_from_quat",
     "quat_from_dcm",
@@ -266,6 +267,33 @@ def quat_inverse(q):
     return quat_conjugate(q) / n2
 
 
+@jit
+def quat_hamilton_scalar(p0, p1, p2, p3, q0, q1, q2, q3):
+    """Hamilton product ``p (x) q`` of two quaternions given by their scalar components.
+
+    Returns the tuple ``(r0, r1, r2, r3)``: scalar ``p0 q0 - p.q``, vector
+    ``p0 q + q0 p + p x q``.  In this module's frame convention
+    ``C(p (x) q) = C(q) @ C(p)`` (so ``quat_multiply(q2, q1) = q1 (x) q2``).
+    Compiled (numba) and callable from other kernels; the one scalar quaternion
+    product of the package.
+    """
+    return (
+        p0 * q0 - p1 * q1 - p2 * q2 - p3 * q3,
+        p0 * q1 + p1 * q0 + p2 * q3 - p3 * q2,
+        p0 * q2 - p1 * q3 + p2 * q0 + p3 * q1,
+        p0 * q3 + p1 * q2 - p2 * q1 + p3 * q0,
+    )
+
+
+@jit
+def _quat_multiply_loop(a, b, out):
+    """``out[n] = a[n] (x) b[n]`` (Hamilton) over rows of ``(N, 4)`` arrays."""
+    for n in range(a.shape[0]):
+        out[n, 0], out[n, 1], out[n, 2], out[n, 3] = quat_hamilton_scalar(
+            a[n, 0], a[n, 1], a[n, 2], a[n, 3], b[n, 0], b[n, 1], b[n, 2], b[n, 3]
+        )
+
+
 def quat_multiply(q2, q1):
     """Compose two rotations in matrix order: ``C(quat_multiply(q2, q1)) = C(q2) @ C(q1)``.
 
@@ -275,18 +303,16 @@ def quat_multiply(q2, q1):
     *J. Astronaut. Sci.* 41(4), 1993, 439-517):
     scalar ``a0 b0 - a.b`` and vector ``a0 b + b0 a - a x b`` for
     ``q2 = (a0, a)``, ``q1 = (b0, b)``; equivalently the Hamilton product
-    ``q1 (x)_H q2``.  Broadcasts over leading axes.
+    ``q1 (x)_H q2`` (:func:`quat_hamilton_scalar`).  Broadcasts over leading axes.
     """
     q2 = _as_quat(q2, "q2")
     q1 = _as_quat(q1, "q1")
-    a0, a1, a2, a3 = q2[..., 0], q2[..., 1], q2[..., 2], q2[..., 3]
-    b0, b1, b2, b3 = q1[..., 0], q1[..., 1], q1[..., 2], q1[..., 3]
-    out = np.empty(np.broadcast_shapes(q2.shape, q1.shape))
-    out[..., 0] = a0 * b0 - a1 * b1 - a2 * b2 - a3 * b3
-    out[..., 1] = a0 * b1 + b0 * a1 - (a2 * b3 - a3 * b2)
-    out[..., 2] = a0 * b2 + b0 * a2 - (a3 * b1 - a1 * b3)
-    out[..., 3] = a0 * b3 + b0 * a3 - (a1 * b2 - a2 * b1)
-    return out
+    shape = np.broadcast_shapes(q2.shape, q1.shape)
+    a = np.ascontiguousarray(np.broadcast_to(q1, shape).reshape(-1, 4))
+    b = np.ascontiguousarray(np.broadcast_to(q2, shape).reshape(-1, 4))
+    out = np.empty_like(a)
+    _quat_multiply_loop(a, b, out)
+    return out.reshape(shape)
 
 
 def quat_rotate(q, v):

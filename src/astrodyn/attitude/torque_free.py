@@ -87,6 +87,7 @@ import numpy as np
 
 from astrodyn._jit import jit, pjit, prange
 from astrodyn.attitude.elliptic import _ellipk, _reduce_half_period, _rf, _rj, _sncndn_half
+from astrodyn.rotation import quat_hamilton_scalar
 
 __all__ = ["torque_free", "polhode", "herpolhode", "rate_period", "flip_period"]
 
@@ -113,22 +114,6 @@ _QB0 = 25  # 4 entries: q of C_B0 (uniform mode: q0)
 _W = 29  # 3 entries: constant rates (uniform mode)
 _INER = 32  # 3 entries: body principal moments
 _NPAR = 36
-
-
-# ---------------------------------------------------------------------------
-# private quaternion helpers (Hamilton product p (x) q; C(p (x) q) = C(q) @ C(p)).
-# astrodyn.rotation has the numpy versions (quat_multiply(q2, q1) = q1 (x) q2);
-# these scalar numba forms live here because the kernel needs them inline.
-
-
-@jit
-def _hmul(p0, p1, p2, p3, q0, q1, q2, q3):
-    return (
-        p0 * q0 - p1 * q1 - p2 * q2 - p3 * q3,
-        p0 * q1 + p1 * q0 + p2 * q3 - p3 * q2,
-        p0 * q2 - p1 * q3 + p2 * q0 + p3 * q1,
-        p0 * q3 + p1 * q2 - p2 * q1 + p3 * q0,
-    )
 
 
 # ---------------------------------------------------------------------------
@@ -197,7 +182,7 @@ def _evaluate(par, t, w, q):
             return
         half = 0.5 * wn * t
         sh = math.sin(half) / wn
-        r0, r1, r2, r3 = _hmul(
+        r0, r1, r2, r3 = quat_hamilton_scalar(
             par[_QB0], par[_QB0 + 1], par[_QB0 + 2], par[_QB0 + 3], math.cos(half), w0 * sh, w1 * sh, w2 * sh
         )
         nrm = math.sqrt(r0 * r0 + r1 * r1 + r2 * r2 + r3 * r3)
@@ -234,8 +219,8 @@ def _evaluate(par, t, w, q):
         qc = (cps, 0.0, 0.0, sps)
     # C_a(psi) above: frame rotation by psi about a = s e_c
     # q = qB0 (x) qc (x) qm   <=>   C = Q C_a(psi) C_B0
-    x0, x1, x2, x3 = _hmul(qc[0], qc[1], qc[2], qc[3], qm[0], qm[1], qm[2], qm[3])
-    r0, r1, r2, r3 = _hmul(par[_QB0], par[_QB0 + 1], par[_QB0 + 2], par[_QB0 + 3], x0, x1, x2, x3)
+    x0, x1, x2, x3 = quat_hamilton_scalar(qc[0], qc[1], qc[2], qc[3], qm[0], qm[1], qm[2], qm[3])
+    r0, r1, r2, r3 = quat_hamilton_scalar(par[_QB0], par[_QB0 + 1], par[_QB0 + 2], par[_QB0 + 3], x0, x1, x2, x3)
     nrm = math.sqrt(r0 * r0 + r1 * r1 + r2 * r2 + r3 * r3)
     q[0], q[1], q[2], q[3] = r0 / nrm, r1 / nrm, r2 / nrm, r3 / nrm
 
@@ -355,7 +340,7 @@ def _setup(inertia, w0, q0, par):
     wtmp = np.empty(3)
     qm0 = np.empty(4)
     _evaluate(par, 0.0, wtmp, qm0)
-    r0, r1, r2, r3 = _hmul(q0[0] / qn, q0[1] / qn, q0[2] / qn, q0[3] / qn, qm0[0], -qm0[1], -qm0[2], -qm0[3])
+    r0, r1, r2, r3 = quat_hamilton_scalar(q0[0] / qn, q0[1] / qn, q0[2] / qn, q0[3] / qn, qm0[0], -qm0[1], -qm0[2], -qm0[3])
     par[_QB0], par[_QB0 + 1], par[_QB0 + 2], par[_QB0 + 3] = r0, r1, r2, r3
 
 
