@@ -133,12 +133,16 @@ def make_config(
     listen: str | Sequence[str] | None = None,
     connect: str | Sequence[str] | None = None,
     mode: str = "peer",
+    config_file: str | None = None,
 ) -> zenoh.Config:
     """The Zenoh configuration astrodyn uses (see the module docstring for the defaults).
 
     ``listen=None`` means one loopback endpoint on a free port (ignored in client mode,
     where a session never listens); ``connect`` lists endpoints to join (a router, the
     runner's hub).  Endpoints are Zenoh locators, e.g. ``tcp/127.0.0.1:7447``.
+    ``config_file``: a Zenoh JSON5 configuration to start from (TLS certificates under
+    ``transport/link/tls``, ``access_control``, ...); mode, endpoints and scouting are
+    still set from the arguments above, so multicast scouting stays off.
     """
     if mode not in _MODES:
         raise BusError(f"mode: expected one of {', '.join(_MODES)}, got {mode!r}")
@@ -146,7 +150,13 @@ def make_config(
     connect_list = _endpoint_list("connect", connect)
     if listen is None and mode != "client":
         listen_list = [loopback_endpoint()]
-    config = zenoh.Config()
+    if config_file is not None:
+        try:
+            config = zenoh.Config.from_file(str(config_file))
+        except (zenoh.ZError, OSError, ValueError) as exc:
+            raise BusError(f"--zenoh-config {config_file}: expected a readable Zenoh JSON5 configuration: {exc}") from None
+    else:
+        config = zenoh.Config()
     config.insert_json5("mode", json.dumps(mode))
     if mode != "client":
         config.insert_json5("listen/endpoints", json.dumps(listen_list))
@@ -160,6 +170,7 @@ def open_session(
     listen: str | Sequence[str] | None = None,
     connect: str | Sequence[str] | None = None,
     mode: str = "peer",
+    config_file: str | None = None,
 ) -> zenoh.Session:
     """Open a Zenoh session with astrodyn's defaults; use it as a context manager.
 
@@ -173,7 +184,7 @@ def open_session(
     attempts = 3 if listen is None else 1  # only retry ports we picked ourselves
     last: Exception | None = None
     for _ in range(attempts):
-        config = make_config(listen, connect, mode)
+        config = make_config(listen, connect, mode, config_file)
         try:
             return zenoh.open(config)
         except zenoh.ZError as exc:
@@ -194,11 +205,16 @@ def add_bus_arguments(parser: Any) -> None:
         help="Zenoh endpoint to connect to (repeatable), e.g. the runner's hub or a router",
     )
     parser.add_argument("--mode", choices=_MODES, default="peer", help="Zenoh mode (default peer)")
+    parser.add_argument(
+        "--zenoh-config", default=None, metavar="FILE",
+        help="Zenoh JSON5 config to start from (TLS, access control); see docs/security.md",
+    )
 
 
 def session_from_args(args: Any) -> zenoh.Session:
     """:func:`open_session` from the options added by :func:`add_bus_arguments`."""
-    return open_session(listen=args.listen, connect=args.connect, mode=args.mode)
+    return open_session(listen=args.listen, connect=args.connect, mode=args.mode,
+                        config_file=getattr(args, "zenoh_config", None))
 
 
 # --------------------------------------------------------------------------- publishing

@@ -176,10 +176,21 @@ def _write_html(report: dict, path: Path) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="astrodyn analyze", description="Report (Markdown, HTML, PNG) from an MCAP recording.")
-    ap.add_argument("file", help="MCAP file recorded by astrodyn")
+    ap.add_argument("file", help="MCAP file recorded by astrodyn, or a sweep directory (with summary.csv)")
     ap.add_argument("--out", default=None, help="report directory (default <file>-report)")
     ap.add_argument("--seq", default="321", help="Euler angle sequence for the attitude plots (default 321)")
     args = ap.parse_args(argv)
+    if Path(args.file).is_dir():
+        if not (Path(args.file) / "summary.csv").is_file():
+            print(f"astrodyn analyze: error: {args.file}: expected an MCAP file or a sweep directory with summary.csv",
+                  file=sys.stderr)
+            return 1
+        from astrodyn.analysis.sweep import sweep_report
+
+        out = Path(args.out) if args.out else Path(args.file) / "report"
+        sweep_report(args.file, out)
+        print(out / "report.md")
+        return 0
     try:
         report = analyze(args.file, args.out, args.seq)
     except (RecordingError, ValueError) as exc:

@@ -14,6 +14,7 @@ SUITES = {
     "orbit": "astrodyn.bench.orbit",
     "attitude": "astrodyn.bench.attitude",
     "service": "astrodyn.bench.service",
+    "sweep": "astrodyn.bench.sweep",
 }
 
 
