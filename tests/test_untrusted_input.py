@@ -131,7 +131,7 @@ def _cli(*argv: str, timeout: float = 90) -> subprocess.CompletedProcess:
 def test_replay_analyze_recover_cli_on_bad_files(good, tmp_path):
     files = _bad_files(good, tmp_path)
     # one process per command over all files would hide which file hung; a few representative ones
-    for name in ("text", "empty", "cut-half", "corrupt-chunk", "absurd-length"):
+    for name in ("text", "cut-half", "corrupt-chunk"):  # load() itself sees all of them above
         path = files[name]
         for argv in (["replay", str(path), "--rate", "inf", "--wait", "0", "--quiet"],
                      ["analyze", str(path), "--out", str(tmp_path / f"{name}-report")],
@@ -139,7 +139,7 @@ def test_replay_analyze_recover_cli_on_bad_files(good, tmp_path):
             proc = _cli(*argv)
             where = f"{argv[0]} {name}: rc={proc.returncode} stderr={proc.stderr[-600:]}"
             assert "Traceback" not in proc.stderr, where
-            if name in ("text", "empty"):
+            if name == "text":
                 assert proc.returncode == 1 and "not an MCAP file" in proc.stderr, where
             else:  # readable up to the damage: done, with a warning where the command has one
                 assert proc.returncode in (0, 1), where
