@@ -20,6 +20,7 @@ __all__ = ["torque_free", "polhode", "herpolhode", "rate_period", "flip_period"]
 
 # --- other attitude modules: append their imports (and extend __all__) below this line ---
 from astrodyn.attitude.euler import attitude_state_rates, body_momentum_rates, euler_rates, inertia_tensor, principal_axes
+from astrodyn.attitude.gyrocompass import Gyrocompass
 from astrodyn.attitude.gyrostat import Gyrostat, spin_stability_product, spin_transverse_rate
 from astrodyn.attitude.integrators import propagate_attitude
 from astrodyn.attitude.top import HeavyTop
@@ -27,6 +28,6 @@ from astrodyn.attitude.torques import ConstantTorque, GravityGradientTorque, Tor
 
 __all__ += [
     "attitude_state_rates", "body_momentum_rates", "euler_rates", "inertia_tensor", "principal_axes",
-    "Gyrostat", "spin_stability_product", "spin_transverse_rate", "propagate_attitude", "HeavyTop",
+    "Gyrocompass", "Gyrostat", "spin_stability_product", "spin_transverse_rate", "propagate_attitude", "HeavyTop",
     "ConstantTorque", "GravityGradientTorque", "TorqueSum", "UniformGravityTorque", "gravity_gradient_torque",
 ]  # fmt: skip
