@@ -54,10 +54,15 @@ from astrodyn.orbit.kepler import (
     PARALLEL_MIN,
     PI,
     TWO_PI_1,
+    _INV_TWO_PI,
+    _cbrt_start,
     _kepler_hyp_scalar,
+    _INV6,
+    _INV24,
     _kepler_start,
     _one_minus_cos,
     _reduce_2pi,
+    _rotate,
     _sinh_parts,
     _solve_diff_ell,
     _two_prod,
@@ -125,9 +130,14 @@ def stumpff(z):
 # ---------------------------------------------------------------------------
 # the three formulations
 # ---------------------------------------------------------------------------
-@jit
-def _fg_elliptic(r0, sig, q, alpha, n, dt, mu):
-    """Lagrange coefficients on an ellipse via the exactly reduced difference form."""
+@jit(inline="always")
+def _ell_setup(sig, q, alpha, n, dt, mu):
+    """Ellipse, part 1: invariants, exact ``n dt mod 2 pi`` and the Markley starter ``x0``.
+
+    Returns ``(sqa, C, S, mh, ml, e, x0, c0)``: ``sqa = 1 / sqrt(mu a)``,
+    ``C = e cos E0``, ``S = e sin E0``, ``mh + ml = n dt mod 2 pi`` (double-double),
+    ``c0 = mh - S`` (the root obeys ``|x - c0| <= e``).
+    """
     sqa = math.sqrt(alpha / mu)  # 1 / sqrt(mu a)
     C = 1.0 - q  # e cos E0
     S = sig * sqa  # e sin E0
@@ -143,16 +153,87 @@ def _fg_elliptic(r0, sig, q, alpha, n, dt, mu):
     elif M1 < -PI:
         M1 += TWO_PI_1
     x0 = _kepler_start(M1, e) - E0
-    c0 = mh - S  # the root obeys |x - (m - S)| <= e
-    x0 += TWO_PI_1 * math.floor((c0 - x0) / TWO_PI_1 + 0.5)
-    pad = 4.0 * EPS * (abs(c0) + 1.0)
-    x, s, c, omc, rda = _solve_diff_ell(q, C, S, mh, ml, x0, c0 - e - pad, c0 + e + pad)
+    c0 = mh - S
+    x0 += TWO_PI_1 * math.floor((c0 - x0) * _INV_TWO_PI + 0.5)
+    return sqa, C, S, mh, ml, e, x0, c0
+
+
+@jit(inline="always")
+def _ell_residual(q, C, S, mh, ml, x, s, c):
+    """Difference-form residual (see :func:`astrodyn.orbit.kepler._solve_diff_ell`), its slope ``r/a`` and noise."""
+    omc = _one_minus_cos(s, c)
+    xms = _x_minus_sin(x, s)
+    rda = q + C * omc + S * s
+    F = (q * x + C * xms + S * omc - mh) - ml
+    noise = EPS * (abs(q * x) + abs(C * xms) + abs(S * omc) + abs(mh))
+    return omc, rda, F, noise
+
+
+@jit(inline="always")
+def _ell_one_step(q, C, S, mh, ml, x, s, c):
+    """Ellipse, part 2 (straight-line fast path): one fifth-order step from the starter, then
+    the residual check and Newton polish of :func:`astrodyn.orbit.kepler._solve_diff_ell`.
+
+    The same arithmetic as that solver's first iteration when it converges there
+    (the usual case after Markley's starter); ``ok`` is False when it would not
+    (series outside its range, step > 0.05 rad, residual above the noise), and the
+    caller then runs the general safeguarded solver from the starter instead.
+    No loop and no libm call, so two states can be interleaved (:func:`_ell_pair`).
+    Returns ``(ok, x, s, c, 1 - cos x, r / a)``.
+    """
+    omc, rda, F, noise = _ell_residual(q, C, S, mh, ml, x, s, c)
+    F2 = C * s + S * c
+    F3 = C * c - S * s
+    inv = 1.0 / rda
+    u = F * inv
+    a2u = 0.5 * F2 * inv * u
+    a3u2 = F3 * _INV6 * inv * u * u
+    a4u3 = -F2 * _INV24 * inv * u * u * u
+    # inverted Taylor series of the residual (fifth order; see _solve_diff_ell)
+    dx = -u * (1.0 + a2u + (2.0 * a2u * a2u - a3u2) + (5.0 * a2u * (a2u * a2u - a3u2) + a4u3))
+    ok = abs(a2u) < 0.1 and abs(dx) <= 0.05
+    x = x + dx
+    s, c = _rotate(s, c, dx)
+    omc, rda, F, noise = _ell_residual(q, C, S, mh, ml, x, s, c)
+    ok = ok and abs(F) <= 2.0 * noise
+    F2 = C * s + S * c
+    dx = -F / rda
+    x += dx
+    s, c = s + c * dx, c - s * dx
+    omc += s * dx
+    rda += F2 * dx
+    return ok, x, s, c, omc, rda
+
+
+@jit(inline="always")
+def _ell_fg(r0, q, alpha, n, sqa, S, s, omc, rda):
+    """Ellipse, part 3: Lagrange coefficients from the solved eccentric-anomaly change."""
     f = 1.0 - omc / q
     g = (q * s + S * omc) / n  # from the time equation: no m, no cancellation with dt
     r = rda / alpha
     fdot = -s / (sqa * r * r0)
     gdot = 1.0 - omc / rda
     return f, g, fdot, gdot
+
+
+@jit(inline="always")
+def _ell_fallback(q, C, S, mh, ml, e, x0, c0):
+    """The general safeguarded solver from the starter (bracket ``c0 +- e``)."""
+    pad = 4.0 * EPS * (abs(c0) + 1.0)
+    x, s, c, omc, rda = _solve_diff_ell(q, C, S, mh, ml, x0, c0 - e - pad, c0 + e + pad)
+    return x, s, c, omc, rda
+
+
+@jit
+def _fg_elliptic(r0, sig, q, alpha, n, dt, mu):
+    """Lagrange coefficients on an ellipse via the exactly reduced difference form."""
+    sqa, C, S, mh, ml, e, x0, c0 = _ell_setup(sig, q, alpha, n, dt, mu)
+    s0 = math.sin(x0)
+    c0s = math.cos(x0)
+    ok, x, s, c, omc, rda = _ell_one_step(q, C, S, mh, ml, x0, s0, c0s)
+    if not ok:
+        x, s, c, omc, rda = _ell_fallback(q, C, S, mh, ml, e, x0, c0)
+    return _ell_fg(r0, q, alpha, n, sqa, S, s, omc, rda)
 
 
 @jit
@@ -216,7 +297,7 @@ def _fg_universal(r0, sg, q, alpha, dt, sqmu):
     tau = sqmu * dt
     omq = 1.0 - q
     chi = tau / r0
-    cub = (6.0 * abs(tau) / omq) ** (1.0 / 3.0)
+    cub = _cbrt_start(6.0 * abs(tau) / omq)
     if abs(chi) > cub:
         chi = math.copysign(cub, tau)
     if tau > 0.0:
@@ -273,10 +354,15 @@ def _fg_universal(r0, sg, q, alpha, dt, sqmu):
     return f, g, fdot, gdot
 
 
-@jit
-def _lagrange_scalar(rx, ry, rz, vx, vy, vz, dt, mu):
-    """``(f, g, fdot, gdot)`` for one state; picks the formulation (see module doc)."""
-    nan = math.nan
+@jit(inline="always")
+def _classify(rx, ry, rz, vx, vy, vz, dt, mu):
+    """Which formulation a state takes (module doc), with its scalar invariants.
+
+    Returns ``(kind, r0, sig, q, alpha, n)``: kind 0 = NaN result (non-finite
+    input, ``r0 = 0``, ``mu <= 0``), 1 = identity (``dt = 0``), 2 = ellipse,
+    3 = hyperbola, 4 = universal variable (near-parabolic window).
+    ``sig = r0.v0``, ``q = r0 / a``, ``alpha = 1 / a``, ``n`` the mean motion.
+    """
     if not (
         math.isfinite(rx)
         and math.isfinite(ry)
@@ -288,12 +374,12 @@ def _lagrange_scalar(rx, ry, rz, vx, vy, vz, dt, mu):
         and math.isfinite(mu)
         and mu > 0.0
     ):
-        return nan, nan, nan, nan
+        return 0, 0.0, 0.0, 0.0, 0.0, 0.0
     r0 = math.sqrt(rx * rx + ry * ry + rz * rz)
     if r0 == 0.0:
-        return nan, nan, nan, nan
+        return 0, 0.0, 0.0, 0.0, 0.0, 0.0
     if dt == 0.0:
-        return 1.0, 0.0, 0.0, 1.0
+        return 1, r0, 0.0, 0.0, 0.0, 0.0
     v2 = vx * vx + vy * vy + vz * vz
     sig = rx * vx + ry * vy + rz * vz
     q = 2.0 - r0 * v2 / mu  # r0 / a
@@ -303,37 +389,123 @@ def _lagrange_scalar(rx, ry, rz, vx, vy, vz, dt, mu):
     else:
         n = -alpha * math.sqrt(-mu * alpha)
     if abs(q) <= Q_UNIVERSAL and abs(n * dt) <= M_UNIVERSAL:
+        return 4, r0, sig, q, alpha, n
+    if q > 0.0:
+        return 2, r0, sig, q, alpha, n
+    return 3, r0, sig, q, alpha, n
+
+
+@jit(inline="always")
+def _dispatch(kind, r0, sig, q, alpha, n, rx, ry, rz, vx, vy, vz, dt, mu):
+    """``(f, g, fdot, gdot)`` of a classified state (:func:`_classify`)."""
+    if kind == 2:
+        return _fg_elliptic(r0, sig, q, alpha, n, dt, mu)
+    if kind == 3:
+        hx = ry * vz - rz * vy
+        hy = rz * vx - rx * vz
+        hz = rx * vy - ry * vx
+        return _fg_hyperbolic(r0, sig, q, -alpha, n, dt, mu, hx * hx + hy * hy + hz * hz)
+    if kind == 4:
         sqmu = math.sqrt(mu)
         return _fg_universal(r0, sig / sqmu, q, alpha, dt, sqmu)
-    if q > 0.0:
-        return _fg_elliptic(r0, sig, q, alpha, n, dt, mu)
-    hx = ry * vz - rz * vy
-    hy = rz * vx - rx * vz
-    hz = rx * vy - ry * vx
-    return _fg_hyperbolic(r0, sig, q, -alpha, n, dt, mu, hx * hx + hy * hy + hz * hz)
+    if kind == 1:
+        return 1.0, 0.0, 0.0, 1.0
+    nan = math.nan
+    return nan, nan, nan, nan
+
+
+@jit
+def _lagrange_scalar(rx, ry, rz, vx, vy, vz, dt, mu):
+    """``(f, g, fdot, gdot)`` for one state; picks the formulation (see module doc)."""
+    kind, r0, sig, q, alpha, n = _classify(rx, ry, rz, vx, vy, vz, dt, mu)
+    return _dispatch(kind, r0, sig, q, alpha, n, rx, ry, rz, vx, vy, vz, dt, mu)
 
 
 # ---------------------------------------------------------------------------
 # loops (serial for small batches, parallel for large ones)
 # ---------------------------------------------------------------------------
+_BLOCK = 512  # states per block: ellipses are gathered per block and solved in pairs
+
+
 @jit(inline="always")
-def _propagate_one(r0, v0, dt, mu, r, v, i):
-    f, g, fd, gd = _lagrange_scalar(r0[i, 0], r0[i, 1], r0[i, 2], v0[i, 0], v0[i, 1], v0[i, 2], dt[i], mu[i])
+def _store(r0, v0, r, v, i, f, g, fd, gd):
     for j in range(3):
         r[i, j] = f * r0[i, j] + g * v0[i, j]
         v[i, j] = fd * r0[i, j] + gd * v0[i, j]
 
 
+@jit(inline="always")
+def _ell_pair(r0, v0, dt, mu, r, v, i, j, inv_i, inv_j):
+    """Two ellipses at once, their instruction streams interleaved stage by stage.
+
+    One state's solve is a ~600-cycle dependency chain (atan2 -> starter ->
+    sin/cos -> step -> polish) at about 1.2 instructions per cycle; two
+    independent chains side by side let the out-of-order core overlap them.
+    Bit-identical to :func:`_fg_elliptic` on each state (same operations).
+    """
+    rn_a, sig_a, q_a, al_a, n_a = inv_i[0], inv_i[1], inv_i[2], inv_i[3], inv_i[4]
+    rn_b, sig_b, q_b, al_b, n_b = inv_j[0], inv_j[1], inv_j[2], inv_j[3], inv_j[4]
+    sqa_a, C_a, S_a, mh_a, ml_a, e_a, x0_a, c0_a = _ell_setup(sig_a, q_a, al_a, n_a, dt[i], mu[i])
+    sqa_b, C_b, S_b, mh_b, ml_b, e_b, x0_b, c0_b = _ell_setup(sig_b, q_b, al_b, n_b, dt[j], mu[j])
+    s_a = math.sin(x0_a)
+    s_b = math.sin(x0_b)
+    c_a = math.cos(x0_a)
+    c_b = math.cos(x0_b)
+    ok_a, x_a, s_a, c_a, omc_a, rda_a = _ell_one_step(q_a, C_a, S_a, mh_a, ml_a, x0_a, s_a, c_a)
+    ok_b, x_b, s_b, c_b, omc_b, rda_b = _ell_one_step(q_b, C_b, S_b, mh_b, ml_b, x0_b, s_b, c_b)
+    if not ok_a:
+        x_a, s_a, c_a, omc_a, rda_a = _ell_fallback(q_a, C_a, S_a, mh_a, ml_a, e_a, x0_a, c0_a)
+    if not ok_b:
+        x_b, s_b, c_b, omc_b, rda_b = _ell_fallback(q_b, C_b, S_b, mh_b, ml_b, e_b, x0_b, c0_b)
+    f_a, g_a, fd_a, gd_a = _ell_fg(rn_a, q_a, al_a, n_a, sqa_a, S_a, s_a, omc_a, rda_a)
+    f_b, g_b, fd_b, gd_b = _ell_fg(rn_b, q_b, al_b, n_b, sqa_b, S_b, s_b, omc_b, rda_b)
+    _store(r0, v0, r, v, i, f_a, g_a, fd_a, gd_a)
+    _store(r0, v0, r, v, j, f_b, g_b, fd_b, gd_b)
+
+
+@jit(inline="always")
+def _propagate_block(r0, v0, dt, mu, r, v, lo, hi, idx, inv):
+    """States ``lo:hi``: non-elliptic ones directly, ellipses gathered and solved in pairs."""
+    m = 0
+    for i in range(lo, hi):
+        rx, ry, rz = r0[i, 0], r0[i, 1], r0[i, 2]
+        vx, vy, vz = v0[i, 0], v0[i, 1], v0[i, 2]
+        kind, rn, sig, q, alpha, n = _classify(rx, ry, rz, vx, vy, vz, dt[i], mu[i])
+        if kind == 2:
+            idx[m] = i
+            inv[m, 0], inv[m, 1], inv[m, 2], inv[m, 3], inv[m, 4] = rn, sig, q, alpha, n
+            m += 1
+        else:
+            f, g, fd, gd = _dispatch(kind, rn, sig, q, alpha, n, rx, ry, rz, vx, vy, vz, dt[i], mu[i])
+            _store(r0, v0, r, v, i, f, g, fd, gd)
+    k = 0
+    while k + 1 < m:
+        _ell_pair(r0, v0, dt, mu, r, v, idx[k], idx[k + 1], inv[k], inv[k + 1])
+        k += 2
+    if k < m:
+        i = idx[k]
+        f, g, fd, gd = _fg_elliptic(inv[k, 0], inv[k, 1], inv[k, 2], inv[k, 3], inv[k, 4], dt[i], mu[i])
+        _store(r0, v0, r, v, i, f, g, fd, gd)
+
+
 @jit
 def _propagate_loop(r0, v0, dt, mu, r, v):
-    for i in range(r0.shape[0]):
-        _propagate_one(r0, v0, dt, mu, r, v, i)
+    n = r0.shape[0]
+    idx = np.empty(_BLOCK, dtype=np.int64)
+    inv = np.empty((_BLOCK, 5))
+    for lo in range(0, n, _BLOCK):
+        _propagate_block(r0, v0, dt, mu, r, v, lo, min(lo + _BLOCK, n), idx, inv)
 
 
 @pjit
 def _propagate_loop_par(r0, v0, dt, mu, r, v):
-    for i in prange(r0.shape[0]):
-        _propagate_one(r0, v0, dt, mu, r, v, i)
+    n = r0.shape[0]
+    nblocks = (n + _BLOCK - 1) // _BLOCK
+    for b in prange(nblocks):
+        idx = np.empty(_BLOCK, dtype=np.int64)
+        inv = np.empty((_BLOCK, 5))
+        lo = b * _BLOCK
+        _propagate_block(r0, v0, dt, mu, r, v, lo, min(lo + _BLOCK, n), idx, inv)
 
 
 @jit
