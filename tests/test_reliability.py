@@ -129,6 +129,7 @@ def test_sigterm_to_run_finishes_the_file_and_says_how_far(tmp_path):
 # ----------------------------------------------------------------------------- logger SIGKILL, recover
 
 
+@pytest.mark.slow  # ~16 s; the writer-level kill (test_recording) and recover (test_untrusted_input) run by default
 def test_sigkilled_logger_keeps_every_flushed_chunk_and_recover_finishes_it(tmp_path):
     out = tmp_path / "killed.mcap"
     proc, pids = _start_run(_config(tmp_path, "30 d"), out)
@@ -275,6 +276,7 @@ def test_serve_restarts_a_killed_propagator_from_the_last_state(tmp_path):
             while status()["t"] < 60:
                 assert time.monotonic() < deadline, "serve never reached t = 60 s"
                 time.sleep(0.2)
+            _wait_states(out, 100)  # flushed to the file: the restart has a state to start from
             alive.poll()
             assert "orbit" in alive.alive
             old = status()["processes"]["orbit"]["pid"]
