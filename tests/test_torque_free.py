@@ -68,6 +68,11 @@ CASES = [
     ("m1_1e-12", (1.0, 2.0, 3.0), (1e-6, 1.0, 0.0), 4.0),
     ("exact_intermediate_spin", (1.0, 2.0, 3.0), (0.0, 1.0, 0.0), 4.0),
     ("fast_spin_300", (1.0, 2.0, 3.0), (3.0, 2.0, 300.0), 0.03),
+    # moment gap 1e-9 between the two minor moments, circulating about the minor axis
+    # (w3^2 < (B - A) w1^2 / 6): wp = 2.6e-5 rad/s, n = -6.7e8, k = 2.6e4; one ulp of
+    # the inputs moves C by < 7e-16 (mpmath), the J - J0 form lost |k| eps ~ 1e-11
+    ("near_symmetric_slow_circulation", (1.0, 1.0 + 1e-9, 3.0), (1.0, 0.2, 1e-6), 4.0),
+    ("near_prolate_circulation", (1.0, 3.0, 3.0 + 3e-9), (1.0, 0.2, 0.3), 4.0),
 ]
 
 
@@ -209,7 +214,7 @@ def test_initial_state_reproduced():
 @pytest.mark.parametrize(
     "inertia, w0",
     [((1.0, 2.0, 3.0), (0.3, 0.2, 1.0)), ((1.0, 2.0, 3.0), (1e-9, 1.0, 1e-9)), ((1.0, 1.0 + 1e-9, 3.0), (0.3, 0.2, 1.0)),
-     ((3.0, 1.0, 2.0), (0.2, 1.0, 0.4)), ((1.0, 2.0, 3.0), (3.0, 2.0, 300.0))],
+     ((3.0, 1.0, 2.0), (0.2, 1.0, 0.4)), ((1.0, 2.0, 3.0), (3.0, 2.0, 300.0)), ((1.0, 1.0 + 1e-9, 3.0), (1.0, 0.2, 1e-6))],
 )
 def test_long_span_conservation(inertia, w0):
     """Over 1e6 s: |q| - 1 <= 1e-12, energy and inertial momentum C^T I w to 1e-10 relative."""
@@ -221,6 +226,69 @@ def test_long_span_conservation(inertia, w0):
     assert np.abs(T / T[0] - 1).max() <= 1e-10
     H = np.einsum("nji,nj->ni", dcm_from_quat(q), I * w)
     assert np.abs(H - H[0]).max() <= 1e-10 * np.linalg.norm(H[0])
+
+
+@pytest.mark.parametrize(
+    "inertia, w0", [((1.0, 2.0, 3.0), (0.3, 0.2, 1.0)), ((1.0, 1.0 + 1e-9, 3.0), (1.0, 0.2, 1e-6))], ids=["triaxial", "slow"]
+)
+def test_restart_across_half_periods(inertia, w0):
+    """Flow property x(t1 + t2) = flow(t2, x(t1)) across several half periods of the rates.
+
+    The restart recomputes the initial phase, J0/G0 and C_B0 from the state at t1
+    (a different phase and reduction path; the half-period constants themselves are
+    checked against mpmath in test_pi_form_against_mpmath).  The restart state
+    carries ~eps |w| rounding, which moves the attitude by ~eps |w| t2; the direct
+    path carries eps (|w| t + K) as in the mpmath test: 100x their sum.
+    """
+    P = rate_period(inertia, w0)  # two half periods
+    t1 = np.array([0.0, 1.3 * P, 2.6 * P])
+    t2 = 0.37 * P
+    w1, q1 = torque_free(inertia, w0, Q0, t1)
+    wd, qd = torque_free(inertia, w0, Q0, t1 + t2)
+    wmag = np.linalg.norm(w0)
+    K = float(_landau_K_wp(inertia, w0)[0])
+    for i in range(len(t1)):
+        wr, qr = torque_free(inertia, w1[i], q1[i], t2)
+        tol = 100 * EPS * (1 + wmag * (t1[i] + t2) + K)
+        assert np.abs(wr - wd[i]).max() <= tol * wmag
+        assert np.abs(dcm_from_quat(qr) - dcm_from_quat(qd[i])).max() <= tol
+
+
+@pytest.mark.parametrize("n, m", [(-3.0, 0.3), (-6.7e8, 0.044), (-1.5, 0.999), (-40.0, 1e-6)])
+def test_pi_form_against_mpmath(n, m):
+    """The n < -1 form of the third-kind integral (reciprocal characteristic, DLMF 19.7.9)
+    and its half-period increment 2 Pi(n|m), against mpmath.ellippi at 30 digits.
+
+    Relative accuracy: a few ulp of Pi (no cancellation: both terms positive for
+    sn > 0), so 100 eps relative, plus 100 eps absolute on the scale 1/sqrt(-n).
+    """
+    import importlib
+
+    tf = importlib.import_module("astrodyn.attitude.torque_free")
+    from astrodyn.attitude.elliptic import ellipj, ellipk
+
+    m1 = 1.0 - m
+    g = math.sqrt(1.0 + m - n - m / n)
+    K = float(ellipk(m, m1))
+    for r in np.linspace(-K, K, 9):
+        sn, cn, dn = (float(x) for x in ellipj(r, m))
+        jv, _ = tf._j_g(sn, cn, dn, r, n, math.sqrt(1 - n), m1, m, 1.0, g)
+        with mp.workdps(30):
+            phi = mp.asin(mp.mpf(sn))  # |r| <= K: amplitude in [-pi/2, pi/2]
+            ref = float(mp.ellippi(mp.mpf(n), phi, mp.mpf(m)))
+        assert abs(jv - ref) <= 100 * EPS * (abs(ref) + 1 / math.sqrt(-n)), (r, jv, ref)
+    # the half-period constant of a body with about this (n, m): A = 1, C = 2, B from
+    # n = -C (B - A) / (A (C - B)), w2 = 0 and w3 from m; compared with mpmath at the
+    # body's own (n, m) (whatever rounding made of them)
+    par = np.empty(tf._NPAR)
+    A, C = 1.0, 2.0
+    B = C * A * (1.0 - n) / (C - n * A)
+    w3 = math.sqrt((B - A) * A / ((C - B) * C * m))
+    tf._setup(np.array([A, B, C]), np.array([1.0, 0.0, w3]), np.array([1.0, 0, 0, 0]), par)
+    assert par[tf._PF] == 1.0 and 0.0 < par[tf._M] < 1.0
+    with mp.workdps(30):
+        ref2 = 2 * mp.ellippi(mp.mpf(par[tf._N]), mp.mpf(par[tf._M]))
+    assert abs(par[tf._DJ] - float(ref2)) <= 100 * EPS * abs(ref2)
 
 
 def test_periodicity_cost_independent_of_t():

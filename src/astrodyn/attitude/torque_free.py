@@ -50,10 +50,19 @@ Fasso, Safstrom & Zanna, SIAM J. Sci. Comput. 30 (2008) 2084):
    ``J(tau) = Pi(n; am tau|m) - tau = (n/3) sn^3 R_J(cn^2, dn^2, 1, 1 - n sn^2)``
    (DLMF 19.25.14; the ``R_F`` part of ``Pi`` is ``tau`` itself) and
    ``G = int dphi/(1 - n sin^2 phi) = atan2(sqrt(1-n) sn, cn)/sqrt(1-n)``.
+   For ``n < -1`` (in particular nearly equal ``B, C``: slow circulation,
+   ``wp ~ sqrt(C - B)``, ``k ~ 1/wp`` huge) the same angle is written
+   ``psi = H t / C + k [ (H/C) (P(tau) - P(tau0)) - a3 (G(tau) - G(tau0)) ]`` with
+   ``P = Pi(n; am tau|m)`` itself, evaluated through the reciprocal
+   characteristic ``n2 = m/n`` (DLMF 19.7.9):
+   ``P = atan2(g sn, cn dn)/g - (n2/3) sn^3 R_J(cn^2, dn^2, 1, 1 - n2 sn^2)``,
+   ``g = sqrt(1 + m - n - n2)``.  ``P ~ 1/sqrt(-n)`` is small, so ``k P`` carries
+   no cancellation; ``k (J - J0)`` with ``J ~ -tau`` lost ``|k| eps`` (1e-11 rad
+   at a moment gap of 1e-9).
 
 3. **Any t at fixed cost.**  ``tau`` is reduced by the half period ``2K``
    (``sn, cn`` change sign); each half period adds the constants
-   ``2(Pi(n|m) - K) = (2n/3) R_J(0, m1, 1, 1 - n)`` to ``J`` and
+   ``2(Pi(n|m) - K) = (2n/3) R_J(0, m1, 1, 1 - n)`` to ``J`` (``2 Pi(n|m)`` to ``P``) and
    ``pi/sqrt(1 - n)`` to ``G``, computed once per body.
 
 Special cases: zero rates and every uniform rotation (``w x I w = 0`` exactly:
@@ -113,7 +122,9 @@ _DJ, _DG = 23, 24  # increments of J and G per half period 2K
 _QB0 = 25  # 4 entries: q of C_B0 (uniform mode: q0)
 _W = 29  # 3 entries: constant rates (uniform mode)
 _INER = 32  # 3 entries: body principal moments
-_NPAR = 36
+_PF = 36  # 1: "Pi form" for n < -1 (jv holds Pi(n; am tau|m) itself, see _j_g), else 0
+_GPF = 37  # sqrt(1 + m - n - m/n) (Pi form)
+_NPAR = 38
 
 
 # ---------------------------------------------------------------------------
@@ -121,14 +132,29 @@ _NPAR = 36
 
 
 @jit
-def _j_g(s, c, d, r, n, sq1n, m1):
-    """J = Pi(n; am r|m) - r and G = int_0^{am r} dphi/(1 - n sin^2 phi) for |r| <= K."""
+def _j_g(s, c, d, r, n, sq1n, m1, m, pf, gpf):
+    """J = Pi(n; am r|m) - r (or, Pi form, Pi(n; am r|m) itself) and G = int_0^{am r} dphi/(1 - n sin^2 phi), |r| <= K.
+
+    Pi form (``pf == 1``, used for ``n < -1``, the slowly circulating
+    near-symmetric bodies where ``k = (C - A)/(A wp)`` is huge): Pi through the
+    reciprocal-characteristic relation (DLMF 19.7.9 with ``n2 = m/n``; the two
+    ``F`` cancel analytically, and ``R_C`` reduces to an ``atan2`` because
+    ``y - x = sn^2 (1 + m - n - n2)`` exactly):
+    ``Pi(n) = atan2(g sn, cn dn)/g - (n2/3) sn^3 R_J(cn^2, dn^2, 1, 1 - n2 sn^2)``,
+    ``g = sqrt(1 + m - n - n2)``.  ``Pi ~ 1/sqrt(-n)`` is small there, so ``k Pi``
+    carries no cancellation (``k (Pi - r)`` would lose ``|k| eps`` absolute).
+    """
     if m1 == 0.0:  # separatrix: Pi(n; r|1) = r/(1-n) - n/(1-n) atan(sqrt(-n) tanh r)/sqrt(-n)
         if n == 0.0:
             jv = 0.0
         else:
             sn_ = math.sqrt(-n)
             jv = n / (1.0 - n) * (r - math.atan(sn_ * s) / sn_)
+    elif pf == 1.0:
+        n2 = m / n
+        jv = math.atan2(gpf * s, c * d) / gpf
+        if n2 != 0.0 and s != 0.0:
+            jv -= n2 / 3.0 * s * s * s * _rj(c * c, d * d, 1.0, 1.0 - n2 * s * s)
     elif n == 0.0 or s == 0.0:
         jv = 0.0
     else:
@@ -149,11 +175,11 @@ def _phase(par, t):
     if m1 == 0.0:
         th = math.tanh(tau)
         sech = 1.0 / math.cosh(tau) if abs(tau) < 710.0 else 0.0
-        jv, gv = _j_g(th, sech, sech, tau, n, sq1n, m1)
+        jv, gv = _j_g(th, sech, sech, tau, n, sq1n, m1, m, 0.0, 0.0)
         return th, sech, sech, jv, gv
     j, r = _reduce_half_period(tau, K)
     s, c, d = _sncndn_half(r, m, m1)
-    jv, gv = _j_g(s, c, d, r, n, sq1n, m1)
+    jv, gv = _j_g(s, c, d, r, n, sq1n, m1, m, par[_PF], par[_GPF])
     jv += j * par[_DJ]
     gv += j * par[_DG]
     if j % 2.0 != 0.0:
@@ -328,7 +354,20 @@ def _setup(inertia, w0, q0, par):
     par[_KG] = kco * a3
     par[_N] = n
     par[_SQ1N] = sq1n
-    if m1 > 0.0:
+    if m1 > 0.0 and n < -1.0:
+        # Pi form (see _j_g): psi = (H/C) t + k [(H/C)(Pi - Pi0) - a3 (G - G0)]
+        # (H/A - k (H/C) wp = H/C); per half period Pi gains 2 Pi(n|m)
+        n2 = m / n
+        gpf = math.sqrt(1.0 + m - n - n2)
+        par[_PF] = 1.0
+        par[_GPF] = gpf
+        par[_LIN] = hmag / Ic
+        pk = 0.5 * math.pi / gpf
+        if n2 != 0.0:
+            pk -= n2 / 3.0 * _rj(0.0, m1, 1.0, 1.0 - n2)
+        par[_DJ] = 2.0 * pk
+        par[_DG] = math.pi / sq1n
+    elif m1 > 0.0:
         par[_DJ] = 2.0 * n / 3.0 * _rj(0.0, m1, 1.0, 1.0 - n) if n != 0.0 else 0.0
         par[_DG] = math.pi / sq1n
     # J, G at tau0 through the same reduction as every later time (psi(0) == 0 exactly)
