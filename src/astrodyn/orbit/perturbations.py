@@ -712,8 +712,8 @@ def propagate_perturbed(
     if r0.shape != v0.shape:
         raise ValueError(f"v0 must have the shape of r0 {r0.shape}, got {v0.shape}")
     mu = float(mu)
-    if not mu > 0:
-        raise ValueError(f"mu (central gravitational parameter, m^3/s^2) must be > 0, got {mu!r}")
+    if not (math.isfinite(mu) and mu > 0):
+        raise ValueError(f"mu (central gravitational parameter, m^3/s^2) must be finite and > 0, got {mu!r}")
     if not (rtol > 0 and atol > 0):
         raise ValueError(f"rtol and atol must be > 0, got rtol={rtol!r}, atol={atol!r}")
     t_arr = np.asarray(t, dtype=np.float64)
