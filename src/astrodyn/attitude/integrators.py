@@ -165,9 +165,16 @@ def _renormalize(q):
         q[i] *= f
 
 
+KICK_CONSTANT, KICK_FORCE, KICK_GRAVITY_GRADIENT = 1, 2, 4
+
+
 @jit
-def _kick(M, q, dt, tau_body, tau_inertial, com, force, gg_mu, gg_inertia, r):
-    """``M <- M + dt * tau(q)``: constant body + inertial torques, uniform gravity, gravity gradient."""
+def _kick(M, q, dt, parts, tau_body, tau_inertial, com, force, gg_mu, gg_inertia, r):
+    """``M <- M + dt * tau(q)``: constant body + inertial torques, uniform gravity, gravity gradient.
+
+    ``parts`` bitmask of the terms present (``KICK_CONSTANT | KICK_FORCE |
+    KICK_GRAVITY_GRADIENT``): absent terms cost nothing.
+    """
     e0 = q[0]
     e1 = q[1]
     e2 = q[2]
@@ -182,20 +189,24 @@ def _kick(M, q, dt, tau_body, tau_inertial, com, force, gg_mu, gg_inertia, r):
     c20 = 2.0 * (e1 * e3 + e0 * e2)
     c12 = 2.0 * (e2 * e3 + e0 * e1)
     c21 = 2.0 * (e2 * e3 - e0 * e1)
-    # inertial torque and gravity force in body axes
-    v0 = tau_inertial[0]
-    v1 = tau_inertial[1]
-    v2 = tau_inertial[2]
-    t0 = tau_body[0] + c00 * v0 + c01 * v1 + c02 * v2
-    t1 = tau_body[1] + c10 * v0 + c11 * v1 + c12 * v2
-    t2 = tau_body[2] + c20 * v0 + c21 * v1 + c22 * v2
-    f0 = c00 * force[0] + c01 * force[1] + c02 * force[2]
-    f1 = c10 * force[0] + c11 * force[1] + c12 * force[2]
-    f2 = c20 * force[0] + c21 * force[1] + c22 * force[2]
-    t0 += com[1] * f2 - com[2] * f1
-    t1 += com[2] * f0 - com[0] * f2
-    t2 += com[0] * f1 - com[1] * f0
-    if gg_mu != 0.0:
+    t0 = 0.0
+    t1 = 0.0
+    t2 = 0.0
+    if parts & 1:  # constant torques: body + inertial (in body axes)
+        v0 = tau_inertial[0]
+        v1 = tau_inertial[1]
+        v2 = tau_inertial[2]
+        t0 = tau_body[0] + c00 * v0 + c01 * v1 + c02 * v2
+        t1 = tau_body[1] + c10 * v0 + c11 * v1 + c12 * v2
+        t2 = tau_body[2] + c20 * v0 + c21 * v1 + c22 * v2
+    if parts & 2:  # uniform gravity at a body-fixed centre of mass: r_c x (C F)
+        f0 = c00 * force[0] + c01 * force[1] + c02 * force[2]
+        f1 = c10 * force[0] + c11 * force[1] + c12 * force[2]
+        f2 = c20 * force[0] + c21 * force[1] + c22 * force[2]
+        t0 += com[1] * f2 - com[2] * f1
+        t1 += com[2] * f0 - com[0] * f2
+        t2 += com[0] * f1 - com[1] * f0
+    if parts & 4:  # gravity gradient 3 mu / |r|^5 r_b x (I r_b)
         b0 = c00 * r[0] + c01 * r[1] + c02 * r[2]
         b1 = c10 * r[0] + c11 * r[1] + c12 * r[2]
         b2 = c20 * r[0] + c21 * r[1] + c22 * r[2]
@@ -237,7 +248,7 @@ def _orbit_position(orbit_rv, mu, t, nodes, r):
     ``nodes[2, 0] == 0``: exact Kepler evaluation at ``t``.  Otherwise quintic
     Hermite interpolation in ``(r, v, a)`` between grid nodes ``k D`` and
     ``(k + 1) D`` (``D = nodes[2, 0]`` s, ``k = nodes[2, 1]`` the cached node
-    pair), each node exact.  The error bound ``|r^(6)| D^6 / 46080`` with
+    pair, ``nodes[2, 2] = 1/D``), each node exact.  The error bound ``|r^(6)| D^6 / 46080`` with
     ``D = 0.005 / w_max`` (``w_max`` the fastest angular rate on the orbit,
     ``|r^(6)| ~ w_max^6 |r|``) is ``3e-19 |r|``: below round-off.
     """
@@ -246,7 +257,8 @@ def _orbit_position(orbit_rv, mu, t, nodes, r):
         _orbit_node(orbit_rv, mu, t, nodes[0])
         r[:] = nodes[0, :3]
         return
-    k = math.floor(t / D)
+    u = t * nodes[2, 2]  # t / D
+    k = math.floor(u)
     if not k == nodes[2, 1]:
         if k == nodes[2, 1] + 1.0:
             nodes[0, :] = nodes[1, :]
@@ -258,7 +270,7 @@ def _orbit_position(orbit_rv, mu, t, nodes, r):
         if not k == nodes[2, 1] - 1.0:
             _orbit_node(orbit_rv, mu, (k + 1.0) * D, nodes[1])
         nodes[2, 1] = k
-    x = t / D - k
+    x = u - k
     x2 = x * x
     x3 = x2 * x
     b0 = 1.0 - x3 * (10.0 - x * (15.0 - 6.0 * x))
@@ -288,7 +300,7 @@ def _stage_midpoints(weights):
 @jit
 def _split_kernel(
     M, q, inertia, weights, step_t, step_dt, record, out_M, out_q,
-    has_torque, tau_body, tau_inertial, com, force, gg_mu, gg_inertia,
+    parts, tau_body, tau_inertial, com, force, gg_mu, gg_inertia,
     orbit_mode, r_kick, orbit_rv, orbit_nodes, rotor_mode, h_table,
 ):  # fmt: skip
     """Advance ``(M, q)`` in place over ``len(step_dt)`` composed splitting steps.
@@ -325,17 +337,17 @@ def _split_kernel(
             if rotor_mode == 2:
                 h_rot[:] = h_table[k, s]
             _rotate_about_axis(M, q, 0, pend + (M[0] - h_rot[0]) * i0 * ha)
-            if has_torque:
+            if parts != 0:
                 if orbit_mode == 1:
                     _orbit_position(orbit_rv, gg_mu, step_t[k] + mids[s] * dt, orbit_nodes, r)
                 elif orbit_mode == 2:
                     r[:] = r_kick[k, s]
-                _kick(M, q, ha, tau_body, tau_inertial, com, force, gg_mu, gg_inertia, r)
+                _kick(M, q, ha, parts, tau_body, tau_inertial, com, force, gg_mu, gg_inertia, r)
             _rotate_about_axis(M, q, 1, (M[1] - h_rot[1]) * i1 * ha)
             _rotate_about_axis(M, q, 2, (M[2] - h_rot[2]) * i2 * a)
             _rotate_about_axis(M, q, 1, (M[1] - h_rot[1]) * i1 * ha)
-            if has_torque:
-                _kick(M, q, ha, tau_body, tau_inertial, com, force, gg_mu, gg_inertia, r)
+            if parts != 0:
+                _kick(M, q, ha, parts, tau_body, tau_inertial, com, force, gg_mu, gg_inertia, r)
             pend = (M[0] - h_rot[0]) * i0 * ha
         _renormalize(q)
         j = record[k]
@@ -406,7 +418,7 @@ def _kernel_torque(torque, frame):
     force = np.zeros(3)
     gg = None
     if torque is None:
-        return dict(has=False, tau_b=tau_b, tau_i=tau_i, com=com, force=force, gg=None)
+        return dict(has=False, parts=0, tau_b=tau_b, tau_i=tau_i, com=com, force=force, gg=None)
     for m in _flatten_torque(torque):
         if type(m) is ConstantTorque:
             if m.frame == "body":
@@ -424,7 +436,9 @@ def _kernel_torque(torque, frame):
             gg = m
         else:
             return None
-    return dict(has=True, tau_b=tau_b, tau_i=tau_i, com=com, force=force, gg=gg)
+    parts = (KICK_CONSTANT if np.any(tau_b != 0) or np.any(tau_i != 0) else 0) | (KICK_FORCE if np.any(force != 0) else 0)
+    parts |= KICK_GRAVITY_GRADIENT if gg is not None else 0
+    return dict(has=True, parts=parts, tau_b=tau_b, tau_i=tau_i, com=com, force=force, gg=gg)
 
 
 def _rotor_function(rotor_momentum, frame):
@@ -526,7 +540,8 @@ def _run_split(frame, M0, q0, t_out, step, weights, ktorque, rotor, torque, even
             if gg.orbit is not None:  # two-body orbit: positions computed inside the kernel
                 orbit_mode = 1
                 orbit_rv[0], orbit_rv[1], orbit_rv[2, 0] = gg.orbit[0], gg.orbit[1], -gg.orbit[2]
-                orbit_nodes[2, :2] = _hermite_spacing(gg.orbit[0], gg.orbit[1], gg.mu, np.max(np.abs(dt))), math.nan
+                D = _hermite_spacing(gg.orbit[0], gg.orbit[1], gg.mu, np.max(np.abs(dt)))
+                orbit_nodes[2, :3] = D, math.nan, (1.0 / D if D > 0 else 0.0)
         for st, sd, rec in _step_chunks(starts, n, dt):
             if orbit_mode == 2:
                 tk = st[:, None] + sd[:, None] * mids[None, :]
@@ -540,7 +555,7 @@ def _run_split(frame, M0, q0, t_out, step, weights, ktorque, rotor, torque, even
                 h_table = h_table1
             _split_kernel(
                 M, q, frame.moments, weights, st, sd, rec, out_M, out_q,
-                ktorque["has"], ktorque["tau_b"], ktorque["tau_i"], ktorque["com"], ktorque["force"],
+                ktorque["parts"], ktorque["tau_b"], ktorque["tau_i"], ktorque["com"], ktorque["force"],
                 gg_mu, gg_I, orbit_mode, r_kick, orbit_rv, orbit_nodes, mode, h_table,
             )  # fmt: skip
     else:

@@ -59,6 +59,7 @@ from astrodyn._jit import jit
 from astrodyn.attitude.integrators import (
     SPLIT2_WEIGHTS,
     SPLIT4_WEIGHTS,
+    KICK_FORCE,
     _attitude_difference,
     _kick,
     _renormalize,
@@ -286,16 +287,16 @@ def _top_kernel(M, q, inv, com, force, weights, step_dt, record, out_M, out_q):
         dt = step_dt[k]
         for s in range(weights.shape[0]):
             a = weights[s] * dt
-            _kick(M, q, pend + 0.5 * a, zero, zero, com, force, 0.0, eye, zero)
+            _kick(M, q, pend + 0.5 * a, KICK_FORCE, zero, zero, com, force, 0.0, eye, zero)
             _rotate_about_momentum(M, q, inv[0], a)
             _rotate_about_axis(M, q, 2, inv[1] * M[2] * a)
             pend = 0.5 * a
         _renormalize(q)
         j = record[k]
         if j >= 0:
-            _kick(M, q, pend, zero, zero, com, force, 0.0, eye, zero)
+            _kick(M, q, pend, KICK_FORCE, zero, zero, com, force, 0.0, eye, zero)
             pend = 0.0
             out_M[j] = M
             out_q[j] = q
     if pend != 0.0:
-        _kick(M, q, pend, zero, zero, com, force, 0.0, eye, zero)
+        _kick(M, q, pend, KICK_FORCE, zero, zero, com, force, 0.0, eye, zero)

@@ -6,14 +6,16 @@ exact answer exists):
 * ``exact``: :func:`astrodyn.attitude.torque_free` (no integration), cost per
   (body, time) and its own error against the 34-digit mpmath Taylor reference
   (:mod:`astrodyn.reference.attitude_mp`) where that reference is affordable;
-* ``split2`` / ``split4``: the splitting integrators at several steps;
+* ``split2`` / ``split4`` / ``split4-yoshida``: the splitting integrators at several steps;
 * ``dop853``: scipy's DOP853 at several ``rtol``.
 
 Errors of the integrators are measured against the exact solution: max over the
 output times of the attitude error angle (rad) and of ``|w - w_ref| / |w0|``.
-Times are the best of a few repeats (the machine is shared).  A kernel
-micro-benchmark gives ns per splitting step (torque-free and with gravity
-gradient).  Writes ``bench-attitude.md`` and ``bench-attitude.png`` into
+Times are the best of a few repeats (the machine is shared); every wall time
+is also given as a ratio to DOP853 at rtol 1e-12 on the same case in the same
+run.  A kernel micro-benchmark gives ns per splitting step (torque-free, gravity
+gradient with the Kepler orbit inside the kernel or from a Python ``r(t)``, and
+the heavy top's own splitting).  Writes ``bench-attitude.md`` and ``bench-attitude.png`` into
 ``--out`` (default ``docs``).
 """
 
@@ -51,25 +53,41 @@ def _angle(qa, qb):
     return 2.0 * np.arctan2(np.linalg.norm(d[..., 1:], axis=-1), np.abs(d[..., 0]))
 
 
-def kernel_ns_per_step(method, with_gg, repeats, n_steps):
-    """Best ns per step of the compiled splitting kernel (output only at the end)."""
-    from astrodyn.attitude import GravityGradientTorque, propagate_attitude
+def kernel_ns_per_step(method, torque_kind, repeats, n_steps):
+    """Best ns per step of the compiled splitting kernel (output only at the end).
+
+    ``torque_kind``: ``"none"``; ``"gg-kepler"`` gravity gradient on a circular
+    LEO orbit evaluated inside the kernel (:meth:`GravityGradientTorque.kepler`);
+    ``"gg-callable"`` the same orbit through a Python ``r(t)`` (numpy positions per
+    chunk).  ``method="top4"`` times the heavy top's own splitting instead.
+    """
+    from astrodyn.attitude import GravityGradientTorque, HeavyTop, propagate_attitude
 
     I = np.array([1.0, 2.0, 3.0])
     w0 = np.array([0.3, 0.1, 0.6])
-    torque, rotor = None, np.zeros(3)
-    if with_gg:
+    h = 0.01
+    if method == "top4":
+        top = HeavyTop(mass=0.5, cm_distance=0.04, transverse_inertia=2e-3, axial_inertia=1e-3)
+        wt, qt = top.state_from_euler(0.0, 0.5, 0.0, 0.0, 0.0, 60.0)
+
+        def run():
+            return top.simulate(wt, qt, [n_steps * 1e-4], step=1e-4, error_estimate=False)
+
+    else:
+        torque, rotor = None, np.zeros(3)
         a, mu = 7e6, 3.986004418e14
         n = np.sqrt(mu / a**3)
+        if torque_kind == "gg-kepler":
+            torque, rotor = GravityGradientTorque.kepler(mu, [a, 0.0, 0.0], [0.0, a * n, 0.0], I), None
+        elif torque_kind == "gg-callable":
 
-        def orbit(t):
-            return a * np.stack([np.cos(n * t), np.sin(n * t), np.zeros_like(t)], -1)
+            def orbit(t):
+                return a * np.stack([np.cos(n * t), np.sin(n * t), np.zeros_like(t)], -1)
 
-        torque, rotor = GravityGradientTorque(mu, orbit, I), None
-    h = 0.01
+            torque, rotor = GravityGradientTorque(mu, orbit, I), None
 
-    def run():
-        return propagate_attitude(I, w0, Q0, [n_steps * h], torque=torque, rotor_momentum=rotor, method=method, step=h, error_estimate=False)
+        def run():
+            return propagate_attitude(I, w0, Q0, [n_steps * h], torque=torque, rotor_momentum=rotor, method=method, step=h, error_estimate=False)
 
     run()  # compile / load cache
     sec, _ = _best(run, repeats)
@@ -98,7 +116,8 @@ def run_case(name, inertia, w0, span, mp_ok, quick, repeats):
     rows.append(dict(method="exact", param="-", seconds=sec * len(t) / len(tt), per=1e9 * sec / len(tt), per_unit="ns/(body,time)", err_a=err_a, err_w=err_w, ref="mpmath 34 digits" if np.isfinite(err_a) else "-"))
 
     omega = np.linalg.norm(inertia * w0) / np.min(inertia)  # bound on |w|
-    fracs = {"split2": [0.1, 0.03, 0.01] + ([] if quick else [0.003]), "split4": [0.3, 0.1, 0.03] + ([] if quick else [0.01])}
+    fracs = {"split2": [0.1, 0.03, 0.01] + ([] if quick else [0.003]), "split4": [0.3, 0.1, 0.03] + ([] if quick else [0.01]),
+             "split4-yoshida": [0.2, 0.06, 0.02] + ([] if quick else [0.006])}  # fmt: skip
     for method, cs in fracs.items():
         for c in cs:
             h = c / omega
@@ -118,6 +137,9 @@ def run_case(name, inertia, w0, span, mp_ok, quick, repeats):
         sec, (w, q, info) = _best(run, 1 if quick else max(1, repeats - 1))
         rows.append(dict(method="dop853", param=f"rtol={rtol:g}", seconds=sec, per=1e9 * sec / info["nfev"], per_unit="ns/fev",
                          err_a=float(np.max(_angle(q, q_ex))), err_w=float(np.max(np.linalg.norm(w - w_ex, axis=-1)) / wscale), ref="exact"))  # fmt: skip
+    ref = next(r for r in rows[::-1] if r["method"] == "dop853")  # the tightest rtol
+    for r in rows:
+        r["ratio"] = r["seconds"] / ref["seconds"]
     return rows
 
 
@@ -128,7 +150,7 @@ def _plot(results, path):
     import matplotlib.pyplot as plt
 
     fig, axes = plt.subplots(1, len(results), figsize=(5 * len(results), 4.2), squeeze=False)
-    style = {"exact": ("k", "*"), "split2": ("tab:blue", "o"), "split4": ("tab:green", "s"), "dop853": ("tab:red", "^")}
+    style = {"exact": ("k", "*"), "split2": ("tab:blue", "o"), "split4": ("tab:green", "s"), "split4-yoshida": ("tab:olive", "D"), "dop853": ("tab:red", "^")}
     for ax, (case, rows) in zip(axes[0], results.items()):
         for m, (color, marker) in style.items():
             pts = [(max(r["err_a"], 1e-17), r["seconds"]) for r in rows if r["method"] == m and np.isfinite(r["err_a"])]
@@ -156,39 +178,54 @@ def main(argv=None) -> int:
     repeats = args.repeats or (2 if args.quick else 5)
     os.makedirs(args.out, exist_ok=True)
 
+    load0 = os.getloadavg()
     kernel = {}
     nsteps = 20000 if args.quick else 200000
-    for method in ("split2", "split4"):
-        for gg in (False, True):
-            kernel[(method, gg)] = kernel_ns_per_step(method, gg, repeats, nsteps)
+    for method in ("split2", "split4", "split4-yoshida"):
+        for kind in ("none", "gg-kepler", "gg-callable"):
+            kernel[(method, kind)] = kernel_ns_per_step(method, kind, repeats, nsteps)
+    kernel[("top4", "uniform gravity (heavy top)")] = kernel_ns_per_step("top4", None, repeats, nsteps)
     results = {}
     for name, (inertia, w0, span, mp_ok) in CASES.items():
         print(f"[bench attitude] {name} ...", file=sys.stderr, flush=True)
         results[name] = run_case(name, inertia, w0, span, mp_ok, args.quick, repeats)
+    load1 = os.getloadavg()
 
+    kind_label = {
+        "none": "none (torque free through the kernel)",
+        "gg-kepler": "gravity gradient, Kepler orbit inside the kernel",
+        "gg-callable": "gravity gradient, orbit r(t) from Python (numpy per chunk)",
+    }
     lines = [
         "# Attitude benchmark: time against error",
         "",
         "Generated by `astrodyn bench attitude" + (" --quick" if args.quick else "") + "` on this machine"
-        f" ({time.strftime('%Y-%m-%d %H:%M')}, {os.cpu_count()} cores, shared: times are the best of {repeats} repeats).",
+        f" ({time.strftime('%Y-%m-%d %H:%M')}, {os.cpu_count()} cores, shared: load average"
+        f" {load0[0]:.1f} at the start, {load1[0]:.1f} at the end; times are the best of {repeats} repeats).",
         "Errors: max over 10 output times of the attitude error angle (rad) and of |w - w_ref| / |w0|, against the",
         "exact torque-free solution (the exact solution itself against the 34-digit mpmath Taylor reference where affordable).",
         "Initial attitude q0 = (0.9, 0.1, -0.3, 0.3)/|.|; every case is torque free so the exact answer is known.",
+        "The last column is the wall time over that of the tightest scipy DOP853 run (rtol 1e-12; 1e-9 with --quick)"
+        " on the same case, in the same run.",
         "",
         "## Splitting kernel cost",
+        "",
+        "I = (1, 2, 3) kg m^2, w0 = (0.3, 0.1, 0.6) rad/s, step 10 ms, one output at the end; LEO circular orbit (a = 7000 km).",
+        "split2: 4 exact axis rotations per step (T1 halves merged across steps), 2 kicks with a torque;",
+        "split4 (Suzuki, 5 stages) and split4-yoshida (3 stages): that per stage.",
         "",
         "| method | torque | ns/step |",
         "| --- | --- | --- |",
     ]
-    for (m, gg), ns in kernel.items():
-        lines.append(f"| {m} | {'gravity gradient (orbit r(t) evaluated by numpy per chunk)' if gg else 'none'} | {ns:.0f} |")
+    for (m, kind), ns in kernel.items():
+        lines.append(f"| {m} | {kind_label.get(kind, kind)} | {ns:.0f} |")
     for name, rows in results.items():
         inertia, w0, span, _ = CASES[name]
         lines += ["", f"## {name}: I = {inertia} kg m^2, w0 = {w0} rad/s, span {span:g} s", "",
-                  "| method | setting | wall time (s) | cost | attitude error (rad) | rate error (rel.) | reference |",
-                  "| --- | --- | --- | --- | --- | --- | --- |"]  # fmt: skip
+                  "| method | setting | wall time (s) | cost | attitude error (rad) | rate error (rel.) | reference | time / DOP853 |",
+                  "| --- | --- | --- | --- | --- | --- | --- | --- |"]  # fmt: skip
         for r in rows:
-            lines.append(f"| {r['method']} | {r['param']} | {r['seconds']:.3g} | {r['per']:.0f} {r['per_unit']} | {r['err_a']:.2e} | {r['err_w']:.2e} | {r['ref']} |")
+            lines.append(f"| {r['method']} | {r['param']} | {r['seconds']:.3g} | {r['per']:.0f} {r['per_unit']} | {r['err_a']:.2e} | {r['err_w']:.2e} | {r['ref']} | {r['ratio']:.3g} |")
     lines += ["", "![work-precision](bench-attitude.png)", ""]
     md = os.path.join(args.out, "bench-attitude.md")
     with open(md, "w") as f:
