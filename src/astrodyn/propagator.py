@@ -155,6 +155,7 @@ def run_propagator(scenario: Scenario, session, opts: PropagatorOptions, log=pri
 
     pacer = Pacer(opts.real_time_factor)
     stopping = {"why": None}
+    conservation = _Conservation(opts.kind, scenario, engine)
 
     def on_signal(signum, frame):
         stopping["why"] = signal.Signals(signum).name
@@ -187,6 +188,7 @@ def run_propagator(scenario: Scenario, session, opts: PropagatorOptions, log=pri
                 tb = np.arange(k, min(stop_at, k + block), dtype=np.float64) / rate
                 a, b = engine.states(tb)
                 xc = cross.block(tb, a, b) if cross is not None else None
+                rows_done = 0
                 for j in range(tb.shape[0]):
                     t = float(tb[j])
                     _obey(commands, pacer, t, stopping, heartbeat)
@@ -213,11 +215,13 @@ def run_propagator(scenario: Scenario, session, opts: PropagatorOptions, log=pri
                         for key, payload in items:
                             per_body[key].put(payload)
                     published += len(items)
+                    rows_done = j + 1
                     t_reached = t
                     k += 1
                     heartbeat.beat(t=t_reached, step=k)
+                conservation.update(a, b)
         except _Stop:
-            pass
+            conservation.update(a[:rows_done], b[:rows_done])
         wall = time.monotonic() - wall0
         extra = {"last_step": k - 1, "t_reached": float(t_reached), "reason": stopping["why"] or "end of scenario"}
         if cross is not None:
@@ -227,9 +231,78 @@ def run_propagator(scenario: Scenario, session, opts: PropagatorOptions, log=pri
         _wait_until_logged(session, scenario.name, opts.kind)
     summary = {"process": opts.kind, "bodies": len(names), "steps": k - start, "messages": published,
                "t": float(t_reached), "wall_s": wall, "reason": extra["reason"]}
+    per_body = conservation.report()
     if cross is not None:
         summary["crosscheck_max_dr"] = cross.max_dr
+        for name, dr in cross.max_dr_by_body.items():
+            per_body[name]["crosscheck_max_dr"] = dr
+    summary["per_body"] = per_body
     return summary
+
+
+class _Conservation:
+    """Drift of the conserved quantities over the states a propagator published.
+
+    Orbit: specific energy (relative to mu/|r0|, the size of its terms, not to the energy
+    itself, which is ~0 near parabolic orbits) and |r x v| (relative).  Attitude: max
+    ||q| - 1|; for torque-free bodies also rotational energy and inertial angular
+    momentum C^T (J w) (relative).  Reported per body, from the first state published.
+    """
+
+    def __init__(self, kind: str, scenario: Scenario, engine):
+        self.kind = kind
+        self.names = list(engine.names)
+        self.first = None
+        self.dev = np.zeros((len(self.names), 2))
+        self.qnorm = np.zeros(len(self.names))
+        if kind == "orbit":
+            self.mu = engine.mu
+        else:
+            self.J = np.array([scenario.body(n).attitude.inertia for n in self.names]).reshape(-1, 3, 3)
+            self.free = np.array([m == "torque_free" for m in engine.models], dtype=bool)
+
+    def _values(self, a, b):
+        if self.kind == "orbit":
+            rn = np.linalg.norm(a, axis=-1)
+            energy = 0.5 * np.einsum("...i,...i->...", b, b) - self.mu / rn
+            h = np.linalg.norm(np.cross(a, b), axis=-1)
+            return energy, h, rn
+        from astrodyn.rotation import quat_conjugate, quat_rotate
+
+        Hb = np.einsum("nij,tnj->tni", self.J, b)
+        T = 0.5 * np.einsum("tni,tni->tn", b, Hb)
+        Hi = quat_rotate(quat_conjugate(a), Hb)  # C^T H_body: inertial components
+        return T, Hi, np.abs(np.linalg.norm(a, axis=-1) - 1.0)
+
+    def update(self, a, b) -> None:
+        if a.shape[0] == 0 or not self.names:
+            return
+        x, y, z = self._values(a, b)
+        if self.first is None:
+            self.first = (x[0].copy(), y[0].copy(), z[0].copy())
+        x0, y0, z0 = self.first
+        if self.kind == "orbit":
+            self.dev[:, 0] = np.maximum(self.dev[:, 0], np.max(np.abs(x - x0), axis=0) * z0 / self.mu)
+            self.dev[:, 1] = np.maximum(self.dev[:, 1], np.max(np.abs(y - y0), axis=0) / np.where(y0 > 0, y0, 1.0))
+        else:
+            self.qnorm = np.maximum(self.qnorm, np.max(z, axis=0))
+            scale_t = np.where(x0 > 0, x0, 1.0)
+            h0 = np.linalg.norm(y0, axis=-1)
+            self.dev[:, 0] = np.maximum(self.dev[:, 0], np.max(np.abs(x - x0), axis=0) / scale_t)
+            self.dev[:, 1] = np.maximum(self.dev[:, 1],
+                                        np.max(np.linalg.norm(y - y0, axis=-1), axis=0) / np.where(h0 > 0, h0, 1.0))
+
+    def report(self) -> dict[str, dict]:
+        out = {}
+        for i, name in enumerate(self.names):
+            if self.kind == "orbit":
+                out[name] = {"energy_drift": float(self.dev[i, 0]), "momentum_drift": float(self.dev[i, 1])}
+            else:
+                row = {"quat_norm_error": float(self.qnorm[i])}
+                if self.free[i]:
+                    row.update(rot_energy_drift=float(self.dev[i, 0]), inertial_momentum_drift=float(self.dev[i, 1]))
+                out[name] = row
+        return out
 
 
 def _wait_until_logged(session, scenario: str, kind: str, timeout_s: float = 60.0) -> None:
@@ -290,6 +363,7 @@ class _CrossCheck:
         self.scenes = []  # (indices into engine bodies, keys, ReboundScene)
         self.skipped = []
         self.max_dr = 0.0
+        self.max_dr_by_body: dict[str, float] = {}
         chosen = [i for i, b in enumerate(engine.names) if all_bodies or scenario.body(b).cross_check]
         for model in ("kepler", "j2"):
             idx = [i for i in chosen if engine.models[i] == model]
@@ -309,7 +383,11 @@ class _CrossCheck:
             refs = [scene.advance_to(float(t)) for t in tb]
             dr = np.stack([r[j, idx] - refs[j][0] for j in range(len(tb))])
             dv = np.stack([v[j, idx] - refs[j][1] for j in range(len(tb))])
-            self.max_dr = max(self.max_dr, float(np.max(np.linalg.norm(dr, axis=-1))))
+            norms = np.max(np.linalg.norm(dr, axis=-1), axis=0)
+            self.max_dr = max(self.max_dr, float(np.max(norms)))
+            for key, value in zip(keys, norms):
+                body = key.rsplit("/", 2)[-2]
+                self.max_dr_by_body[body] = max(self.max_dr_by_body.get(body, 0.0), float(value))
             parts.append((keys, dr, dv))
 
         def items(j, k, t):

@@ -43,7 +43,7 @@ import numpy as np
 from astrodyn import bus
 from astrodyn.scenario import Scenario, ScenarioError, load, plan as make_plan
 
-__all__ = ["main", "run_scenario", "services_dir", "drift_summary"]
+__all__ = ["main", "run_scenario", "services_dir", "summary_rows", "drift_summary"]
 
 
 def repo_dir(name: str, marker: str) -> Path:
@@ -297,6 +297,31 @@ def _watch(scenario: Scenario, p, children: dict, beats, alive, progress: bool, 
 # --------------------------------------------------------------------------- summary
 
 
+def summary_rows(result: dict, scenario: Scenario) -> list[dict] | None:
+    """Per body: models, states logged (the logger's per-channel counts) and the drift of
+    the conserved quantities the propagators measured on what they published; None when
+    a propagator left no summary (killed), so the caller reads the file instead."""
+    procs = result.get("processes", {})
+    per_kind = {}
+    for kind in ("orbit", "attitude"):
+        if kind in procs:
+            summary = procs[kind].get("summary") or {}
+            if "per_body" not in summary:
+                return None
+            per_kind[kind] = summary["per_body"]
+    channels = (result.get("logger") or {}).get("channels") or {}
+    rows = []
+    for bp in make_plan(scenario).bodies:
+        row = {"body": bp.name, "orbit_model": bp.orbit_model, "attitude_model": bp.attitude_model}
+        for kind in ("orbit", "attitude"):
+            stats = per_kind.get(kind, {}).get(bp.name)
+            if stats is not None:
+                row[f"{kind}_states"] = int(channels.get(f"astrodyn/{scenario.name}/{bp.name}/{kind}", 0))
+                row.update(stats)
+        rows.append(row)
+    return rows
+
+
 def drift_summary(path: Path, scenario: Scenario) -> list[dict]:
     """Per body: model, steps and states logged, conserved-quantity drift, read from the file."""
     from astrodyn.recording import load as load_run
@@ -391,12 +416,13 @@ def main(argv: list[str] | None = None) -> int:
                               progress=not args.quiet, timeout_s=args.timeout, extra_args=resume.get("extra_args"),
                               logger_args=resume.get("logger_args"))
     print("", file=sys.stderr)
-    rows = []
-    if out.exists():
+    rows = summary_rows(result, scenario)
+    if rows is None and out.exists():  # a propagator died: measure what the file holds
         try:
             rows = drift_summary(out, scenario)
         except Exception as exc:  # the file is still there; say why the summary is missing
             print(f"astrodyn run: could not read back {out} for the summary: {exc}", file=sys.stderr)
+    rows = rows or []
     result["bodies"] = rows
     _print_summary(result, rows, scenario)
     if args.json:
