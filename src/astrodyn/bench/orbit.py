@@ -237,6 +237,57 @@ def _table(rows, headers) -> tuple[str, str]:
     return text, md
 
 
+BRANCH_NAMES = {2: "ellipse", 3: "hyperbola", 4: "near-parabolic (universal)"}
+
+
+def branch_timings(r0, v0, dt, mu: float, repeats: int) -> list[tuple[str, int, float, float]]:
+    """Serial CPU ns/state of propagate's kernel on each branch of the given states.
+
+    The states are split by the formulation :mod:`astrodyn.orbit.universal` picks
+    for them (ellipse, hyperbola, near-parabolic universal variable), and the
+    serial kernel ``_propagate_loop`` (one thread, the same code each parallel
+    worker runs) is timed on each subset and on all of them ("mixed").  CPU time
+    of the process (``time.process_time``), best of ``repeats``: on a shared
+    machine it is steadier than wall time.  Returns ``(name, count, cpu_ns,
+    wall_ns)`` rows.
+    """
+    from astrodyn.orbit.universal import _kind_loop, _propagate_loop
+
+    n = len(dt)
+    muf = np.full(n, mu)
+    kinds = np.empty(n, dtype=np.int64)
+    _kind_loop(r0, v0, dt, muf, kinds)
+    subsets = [(name, kinds == k) for k, name in BRANCH_NAMES.items()] + [("mixed", np.ones(n, bool))]
+    rows = []
+    for name, sel in subsets:
+        m = int(sel.sum())
+        if m == 0:
+            continue
+        rr, vv, dd, mm = (np.ascontiguousarray(a[sel]) for a in (r0, v0, dt, muf))
+        r = np.empty_like(rr)
+        v = np.empty_like(vv)
+        _propagate_loop(rr[:2], vv[:2], dd[:2], mm[:2], r[:2], v[:2])  # compile / cache load
+        cpu = {}
+        wall = _best_seconds(lambda: _propagate_loop(rr, vv, dd, mm, r, v), repeats, cpu=cpu)
+        rows.append((name, m, cpu["seconds"] / m * 1e9, wall / m * 1e9))
+    return rows
+
+
+def _print_branches(args) -> int:
+    n = max(args.sizes)
+    r0, v0, dt, _ = mixed_conic_states(n, args.seed, MU_EARTH)
+    load = os.getloadavg()
+    rows = branch_timings(r0, v0, dt, MU_EARTH, args.repeats)
+    print(f"astrodyn bench orbit --branches: {n:,} states, seed {args.seed}, serial kernel, best of {args.repeats}")
+    print(f"load average (1, 5, 15 min) {load[0]:.2f} {load[1]:.2f} {load[2]:.2f} before the timing")
+    text, _ = _table(
+        [[name, f"{m:,}", f"{100.0 * m / n:.1f}", f"{cpu:.1f}", f"{wall:.1f}"] for name, m, cpu, wall in rows],
+        ["branch", "states", "% of mix", "CPU ns/state", "wall ns/state"],
+    )
+    print(text)
+    return 0
+
+
 def _parse(argv):
     ap = argparse.ArgumentParser(prog="astrodyn bench orbit", description=__doc__.split("\n\n")[0])
     ap.add_argument("--sizes", default="1,1000,1000000", help="comma-separated batch sizes (default 1,1000,1000000)")
@@ -245,6 +296,7 @@ def _parse(argv):
     ap.add_argument("--seed", type=int, default=20240601, help="random seed of the states")
     ap.add_argument("--repeats", type=int, default=7, help="timing repeats, best is reported (default 7)")
     ap.add_argument("--quick", action="store_true", help="smoke test: sizes 1,1000, sample 8, compare 4, repeats 2")
+    ap.add_argument("--branches", action="store_true", help="only the serial CPU ns/state of each branch (ellipse, hyperbola, near-parabolic, mixed) on the largest size")
     ap.add_argument("--markdown", metavar="FILE", help="also write the table (markdown) with the machine description")
     args = ap.parse_args(argv)
     if args.quick:
@@ -263,6 +315,8 @@ def _parse(argv):
 
 def main(argv: list[str] | None = None) -> int:
     args = _parse(list(sys.argv[1:] if argv is None else argv))
+    if args.branches:
+        return _print_branches(args)
     from astrodyn.orbit import propagate, solve_kepler
     from astrodyn.reference.conditioning import path_sensitivity, ulp_sensitivity
 

@@ -509,6 +509,13 @@ def _propagate_loop_par(r0, v0, dt, mu, r, v):
 
 
 @jit
+def _kind_loop(r0, v0, dt, mu, out):
+    """Formulation of each state (:func:`_classify`'s kind), for benchmarks and tests."""
+    for i in range(r0.shape[0]):
+        out[i] = _classify(r0[i, 0], r0[i, 1], r0[i, 2], v0[i, 0], v0[i, 1], v0[i, 2], dt[i], mu[i])[0]
+
+
+@jit
 def _propagate_single(r0, v0, dt, mu):
     """One state, no broadcasting: the cheap path for scalar calls."""
     r = np.empty(3)
