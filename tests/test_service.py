@@ -281,3 +281,19 @@ def test_serve_control_over_zenoh(tmp_path):
         if topic.endswith(("/orbit", "/attitude")):
             seq = [m[2]["seq"] for m in msgs]
             assert seq == list(range(len(seq)))
+
+
+def test_zenoh_config_file_reaches_every_process(tmp_path):
+    """--zenoh-config (TLS / access control in real use) is loaded by the runner and every
+    child; a file Zenoh cannot read is refused up front (exit 2, nothing written)."""
+    cfg = tmp_path / "zenoh.json5"
+    cfg.write_text("{\n  // extra settings only; astrodyn sets mode, endpoints, scouting\n"
+                   "  transport: { unicast: { max_sessions: 64 } },\n}\n")
+    out = tmp_path / "dz.mcap"
+    ok = subprocess.run([*ASTRODYN, "run", str(CONFIGS / "dzhanibekov.toml"), "--out", str(out), "--quiet",
+                         "--zenoh-config", str(cfg)], capture_output=True, text=True, timeout=300)
+    assert ok.returncode == 0, ok.stderr[-2000:]
+    bad_out = tmp_path / "bad.mcap"
+    bad = subprocess.run([*ASTRODYN, "run", str(CONFIGS / "dzhanibekov.toml"), "--out", str(bad_out), "--quiet",
+                          "--zenoh-config", str(tmp_path / "missing.json5")], capture_output=True, text=True, timeout=120)
+    assert bad.returncode == 2 and "--zenoh-config" in bad.stderr and not bad_out.exists()

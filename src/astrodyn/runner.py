@@ -135,8 +135,10 @@ class _Child:
 def run_scenario(scenario: Scenario, config_path: Path, out: Path, *, cross_check: bool = False,
                  real_time_factor: float = math.inf, connect: list[str] | None = None,
                  progress: bool = True, timeout_s: float | None = None, extra_args: dict | None = None,
-                 logger_args: list[str] | None = None) -> dict:
+                 logger_args: list[str] | None = None, zenoh_config: str | None = None) -> dict:
     """Run ``scenario`` with real processes; return the result dict (see :func:`main`).
+
+    ``zenoh_config``: a Zenoh JSON5 file (TLS, access control) every process starts from.
 
     SIGTERM / SIGINT (Ctrl-C) while it runs: the propagators are stopped first (each sends
     its end-of-run event saying how far it got), then the logger finishes the file
@@ -149,6 +151,8 @@ def run_scenario(scenario: Scenario, config_path: Path, out: Path, *, cross_chec
     port = bus.free_port()
     hub = bus.loopback_endpoint(port)
     connect_args = sum((["--connect", e] for e in [hub, *(connect or [])]), [])
+    if zenoh_config:
+        connect_args += ["--zenoh-config", str(zenoh_config)]
     py = sys.executable
     started = time.monotonic()
     result: dict = {"scenario": scenario.name, "out": str(out), "processes": {}, "ok": False}
@@ -158,7 +162,7 @@ def run_scenario(scenario: Scenario, config_path: Path, out: Path, *, cross_chec
         for sig in (signal.SIGTERM, signal.SIGINT):
             previous[sig] = signal.signal(sig, lambda s, f: interrupted.update(signal=signal.Signals(s).name))
     with tempfile.TemporaryDirectory(prefix="astrodyn-run-") as tmp, \
-            bus.open_session(listen=[hub]) as session, \
+            bus.open_session(listen=[hub], config_file=zenoh_config) as session, \
             bus.HeartbeatMonitor(session, scenario.name) as beats, \
             bus.AliveWatcher(session, scenario.name) as alive:
         tmpd = Path(tmp)
@@ -394,6 +398,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--out", help="MCAP file to write (default: the config's [output] path, else <scenario>.mcap)")
     ap.add_argument("--cross-check", action="store_true", help="run REBOUND IAS15 alongside every orbit; report the difference")
     ap.add_argument("--connect", action="append", metavar="ENDPOINT", help="also connect to this Zenoh endpoint (router)")
+    ap.add_argument("--zenoh-config", metavar="FILE", help="Zenoh JSON5 config every process starts from (TLS, "
+                    "access control; docs/security.md)")
     ap.add_argument("--timeout", type=float, default=None, help="fail if the run takes longer than this many wall seconds")
     ap.add_argument("--quiet", action="store_true", help="no progress line")
     ap.add_argument("--json", metavar="FILE", help="write the full result (per-body summary included) as JSON")
@@ -405,6 +411,11 @@ def main(argv: list[str] | None = None) -> int:
             scenario = load(args.config)
             out = Path(args.out) if args.out else (scenario.output_path or Path(f"{scenario.name}.mcap"))
             _check_output(out)
+            if args.zenoh_config:
+                try:
+                    bus.make_config(mode="peer", config_file=args.zenoh_config)
+                except bus.BusError as exc:
+                    raise ScenarioError(str(exc)) from None
             resume = resume_plan(Path(args.resume), scenario, out, Path(work)) if args.resume else {}
         except ScenarioError as exc:
             print(f"astrodyn run: {exc}", file=sys.stderr)
@@ -414,7 +425,7 @@ def main(argv: list[str] | None = None) -> int:
             print(f"  resuming from {args.resume} at step {resume['step']} (t = {resume['t']:.6g} s)", file=sys.stderr)
         result = run_scenario(scenario, Path(args.config), out, cross_check=args.cross_check, connect=args.connect,
                               progress=not args.quiet, timeout_s=args.timeout, extra_args=resume.get("extra_args"),
-                              logger_args=resume.get("logger_args"))
+                              logger_args=resume.get("logger_args"), zenoh_config=args.zenoh_config)
     print("", file=sys.stderr)
     rows = summary_rows(result, scenario)
     if rows is None and out.exists():  # a propagator died: measure what the file holds

@@ -64,7 +64,7 @@ class Supervisor:
 
     def __init__(self, scenario, config_path: Path, out: Path, session, hub: str, *, rate: float,
                  roll_size: int | None = None, roll_interval: float | None = None, connect=(), tmp: Path,
-                 max_restarts: int = 5):
+                 max_restarts: int = 5, zenoh_config: str | None = None):
         self.scenario = scenario
         self.session = session
         self.out = Path(out)
@@ -79,6 +79,8 @@ class Supervisor:
         self.propagators = [k for k in p.processes if k != "logger"]
         services = services_dir()
         connect_args = sum((["--connect", e] for e in [hub, *connect]), [])
+        if zenoh_config:
+            connect_args += ["--zenoh-config", str(zenoh_config)]
         meta = tmp / "scenario.json"
         meta.write_text(json.dumps(scenario.to_metadata()))
         logger_argv = [sys.executable, str(services / "logger.py"), "--scenario", scenario.name, "--out", str(out),
@@ -252,6 +254,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--max-wall", type=float, default=None, help="stop by itself after this many wall seconds")
     ap.add_argument("--port", type=int, default=None, help="loopback port of the control hub (default: a free one)")
     ap.add_argument("--connect", action="append", default=[], metavar="ENDPOINT", help="also connect to this endpoint (router)")
+    ap.add_argument("--zenoh-config", metavar="FILE", help="Zenoh JSON5 config every process starts from (TLS, access control)")
     args = ap.parse_args(argv)
     try:
         scenario = load(args.config)
@@ -268,9 +271,10 @@ def main(argv: list[str] | None = None) -> int:
     stop_signal = {"why": None}
     for sig in (signal.SIGTERM, signal.SIGINT):
         signal.signal(sig, lambda s, f: stop_signal.update(why=signal.Signals(s).name))
-    with tempfile.TemporaryDirectory(prefix="astrodyn-serve-") as tmp, bus.open_session(listen=[hub]) as session:
+    with tempfile.TemporaryDirectory(prefix="astrodyn-serve-") as tmp, bus.open_session(listen=[hub], config_file=args.zenoh_config) as session:
         sup = Supervisor(scenario, Path(args.config), out, session, hub, rate=rate, roll_size=args.roll_size,
-                         roll_interval=args.roll_interval, connect=args.connect, tmp=Path(tmp))
+                         roll_interval=args.roll_interval, connect=args.connect, tmp=Path(tmp),
+                         zenoh_config=args.zenoh_config)
         print(json.dumps({"serving": scenario.name, "hub": hub, "control": f"astrodyn/{scenario.name}/@control/*",
                           "out": str(out), "real_time_factor": rate}), flush=True)
         stop_requests: list[bus.ControlRequest] = []
