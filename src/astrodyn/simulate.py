@@ -210,6 +210,7 @@ class _AttitudeBody:
     q0: np.ndarray  # principal-frame Euler parameters at t0
     t0: float = 0.0
     torque: object = None
+    top: object = None  # HeavyTop for a symmetric heavy top (its own exact-free-flow splitting)
     rotor_momentum: np.ndarray | None = None
     error: float = 0.0
     steps: int = 0
@@ -246,11 +247,24 @@ class AttitudeEngine:
                 if b.orbit is None:
                     raise ValueError(f"bodies.{b.name}.attitude.model: gravity_gradient needs an orbit for the body")
                 orbits = orbits or OrbitEngine(scenario, plan)
-                body.torque = GravityGradientTorque(scenario.central_body.mu, orbits.position_function(b.name), body.inertia)
+                k = orbits.names.index(b.name)
+                mu = scenario.central_body.mu
+                if orbits.kepler[k]:
+                    # the same two-body orbit the orbit process publishes, evaluated inside the
+                    # integrator's compiled kernel (exact nodes + quintic Hermite between them)
+                    body.torque = GravityGradientTorque.kepler(mu, orbits.r0[k], orbits.v0[k], body.inertia)
+                else:
+                    body.torque = GravityGradientTorque(mu, orbits.position_function(b.name), body.inertia)
             elif model == "heavy_top":
+                from astrodyn.attitude.top import HeavyTop
                 from astrodyn.attitude.torques import UniformGravityTorque
 
                 body.torque = UniformGravityTorque(a.mass, c_pb @ np.array([0.0, 0.0, a.cm]), (0.0, 0.0, -a.g))
+                I = body.inertia
+                if np.array_equal(body.axes, np.eye(3)) and I[0] == I[1]:
+                    # symmetric top: the exact free symmetric-top flow keeps J w3 to round-off
+                    body.top = HeavyTop(mass=a.mass, cm_distance=a.cm, transverse_inertia=I[0],
+                                        axial_inertia=I[2], gravity=a.g)
             elif model == "user":
                 from astrodyn.attitude.torques import ConstantTorque
 
@@ -309,10 +323,14 @@ class AttitudeEngine:
             else:
                 if times[0] < b.t0:
                     raise ValueError(f"times: torqued attitudes continue forward only; got {times[0]} s before {b.t0} s")
-                torque = _shifted(b.torque, b.t0)
-                wp, qp, info = propagate_attitude(b.inertia, b.w0, b.q0, times - b.t0, torque=torque,
-                                                  rotor_momentum=b.rotor_momentum, method="split4", step=self.step,
+                if b.top is not None:
+                    wp, qp, info = b.top.simulate(b.w0, b.q0, times - b.t0, method="top4", step=self.step,
                                                   error_estimate=False)
+                else:
+                    torque = _shifted(b.torque, b.t0)
+                    wp, qp, info = propagate_attitude(b.inertia, b.w0, b.q0, times - b.t0, torque=torque,
+                                                      rotor_momentum=b.rotor_momentum, method="split4",
+                                                      step=self.step, error_estimate=False)
                 b.t0, b.w0, b.q0 = float(times[-1]), wp[-1].copy(), qp[-1].copy()
                 b.steps += int(info.get("n_steps", 0))
             # principal -> body axes: C_BI = C_BP C_PI with C_BP = axes
@@ -327,17 +345,16 @@ class AttitudeEngine:
 def _shifted(model, t0: float):
     """The torque model as seen from a block starting at ``t0`` (block-relative times).
 
-    The built-in models stay built-in types so the integrator keeps its compiled path:
-    uniform gravity and body-fixed constant torques do not depend on t; gravity gradient
-    gets its orbit position shifted by ``t0``.
+    Built-in models stay built-in types so the integrator keeps its compiled path: uniform
+    gravity and body-fixed constant torques do not depend on t; gravity gradient moves its
+    orbit's clock (:meth:`GravityGradientTorque.shifted`).
     """
     from astrodyn.attitude.torques import GravityGradientTorque
 
     if model is None or t0 == 0.0:
         return model
     if isinstance(model, GravityGradientTorque):
-        position = model.position
-        return GravityGradientTorque(model.mu, lambda t: position(np.asarray(t, dtype=np.float64) + t0), model.inertia)
+        return model.shifted(t0)
     return model
 
 
