@@ -403,66 +403,139 @@ def _kepler_ell_loop_par(M, e, out):
 # ---------------------------------------------------------------------------
 # hyperbolic
 # ---------------------------------------------------------------------------
-@jit
+@jit(inline="always")
+def _asinh_upper(y):
+    """An upper bound of ``asinh y`` for ``y >= 0``, within a few ulp (plus 1e-15 absolute).
+
+    ``log(y + sqrt(1 + y^2))`` (one log and one sqrt, about half the latency of
+    libm's ``asinh``, which goes through ``log1p``): its absolute error is at most
+    about 2 eps from the argument's rounding plus one ulp of the result, so adding
+    ``4 eps (1 + L)`` makes it a bound; ``asinh y <= y`` keeps small ``y`` tight.
+    Above 1e150 (rare: ``y^2`` would overflow, and ``F`` may sit at the overflow edge
+    ``e sinh F ~ 1.8e308`` where a widened bound would overflow the residual) libm's
+    ``asinh`` itself, a bound up to its sub-ulp rounding, as before.
+    """
+    if y >= 1e150:
+        return math.asinh(y)
+    L = math.log(y + math.sqrt(1.0 + y * y))
+    return min(y, L + 4.0 * EPS * (1.0 + L))
+
+
+@jit(inline="always")
+def _hyp_upper_start(M, e, em1):
+    """An upper bound of the root ``F > 0`` of ``e sinh F - F = M`` (``M > 0``), typically 1e-2 relative.
+
+    The cubic ``(e - 1) F + e F^3 / 6 = M`` (``sinh F - F >= F^3 / 6``; Cardano
+    in the cancellation-free form ``2 (q/2) / (u^2 + u v + v^2)``) and, when
+    ``e - 1`` is large, ``(e - 1) sinh F <= M``; then one fixed-point step
+    ``F = asinh((M + F) / e)``, which maps upper bounds to upper bounds and
+    contracts by ``1 / (e cosh F)``.  Cube root and asinh come from
+    :func:`_cbrt_start` (relative error below 1e-14; the bound is widened by 1e-10,
+    since the Cardano form decreases with u at most twice as fast) and
+    :func:`_asinh_upper`.
+    """
+    if M < 1e100:
+        p3 = 2.0 * em1 / e  # p/3 with p = 6 (e - 1)/e
+        qh = 3.0 * M / e  # qq/2 with qq = 6 M / e
+        u = _cbrt_start(qh + math.sqrt(qh * qh + p3 * p3 * p3))
+        v = p3 / u
+        Fu = 2.0 * qh / (u * u + u * v + v * v) * (1.0 + 1e-10)
+    else:
+        Fu = math.inf
+    if em1 > 0.0:
+        Fu = min(Fu, _asinh_upper(M / em1))
+    if not math.isfinite(Fu):  # e -> 1 and huge M (M / (e - 1) overflows): log bound, in logs so
+        Fu = _LN2 + math.log1p(M) + math.log1p(M) + 1.0  # that M ~ 1e308 does not overflow
+    return _asinh_upper((M + Fu) / e)  # still an upper bound, much tighter
+
+
+@jit(inline="always")
 def _hyp_residual(F, e, em1, M):
-    """``(e - 1) F + e (sinh F - F) - M``, its derivative ``e cosh F - 1``, ``e sinh F``, noise."""
+    """``(e - 1) F + e (sinh F - F) - M``, its slope ``e cosh F - 1``, ``sinh F``, ``cosh F - 1``, noise."""
     sh, chm1, shmx = _sinh_parts(F)
     R = (em1 * F + e * shmx) - M
     noise = EPS * (abs(em1 * F) + abs(e * shmx) + abs(M))
-    return R, em1 + e * chm1, e * sh, noise
+    return R, em1 + e * chm1, sh, chm1, noise
+
+
+@jit(inline="always")
+def _hyp_halley(R, Rp, e, sh):
+    """Halley's step for the hyperbolic residual (second derivative ``e sinh F``); Newton's if
+    Halley's denominator drops below half the slope."""
+    dF = -R / Rp
+    den = Rp + 0.5 * dF * (e * sh)
+    if den > 0.5 * Rp:
+        dF = -R / den
+    return dF
+
+
+@jit(inline="always")
+def _kepler_hyp_fast(M, e, em1, F):
+    """Straight-line solve for ``M > 0`` from the upper bound ``F``: two Halley steps, then the
+    residual check and a Newton correction (no loop, no bracket: pairs can be interleaved).
+
+    From the starter's ~2e-2 relative error Halley's cubic convergence reaches the
+    noise level in two steps for almost every input; ``ok`` is False otherwise and
+    the caller runs the safeguarded :func:`_kepler_hyp_solve`.  Returns
+    ``(ok, F, sinh F, cosh F - 1)`` (sinh, cosh carried to first order through the
+    final correction, as in :func:`_kepler_hyp_solve`).
+    """
+    R, Rp, sh, chm1, noise = _hyp_residual(F, e, em1, M)
+    F = F + _hyp_halley(R, Rp, e, sh)
+    R, Rp, sh, chm1, noise = _hyp_residual(F, e, em1, M)
+    F = F + _hyp_halley(R, Rp, e, sh)
+    R, Rp, sh, chm1, noise = _hyp_residual(F, e, em1, M)
+    ok = abs(R) <= 4.0 * noise and Rp > 0.0
+    d = -R / Rp
+    return ok, F + d, sh + (1.0 + chm1) * d, chm1 + sh * d
 
 
 @jit
-def _kepler_hyp_scalar(M, e, em1):
-    """Hyperbolic anomaly ``F`` [rad] with ``e sinh F - F = M``; ``em1 = e - 1`` given accurately.
+def _kepler_hyp_solve(M, e, em1):
+    """Hyperbolic anomaly with its sinh: ``(F, sinh F, cosh F - 1)``, ``e sinh F - F = M``.
 
-    Converges monotonically from an upper bound (the residual is convex for
-    ``F > 0``); odd symmetry handles ``M < 0``.
+    ``em1 = e - 1`` given accurately.  Converges monotonically from an upper
+    bound (:func:`_hyp_upper_start`; the residual is convex for ``F > 0``) by
+    Halley steps on the cancellation-free residual, stopped at its rounding
+    noise and safeguarded by a bracket; odd symmetry handles ``M < 0``.  The
+    returned sinh and cosh - 1 are the last residual's, carried through the
+    final Newton correction ``d`` to first order (``|d|`` is at the noise
+    level, so ``d^2`` is far below an ulp).
     """
     if not (math.isfinite(M) and e >= 1.0 and em1 >= 0.0):
-        return math.nan
+        return math.nan, math.nan, math.nan
     sgn = 1.0
     if M < 0.0:
         M = -M
         sgn = -1.0
     if M == 0.0:
-        return 0.0
+        return 0.0, 0.0, 0.0
     lo = 0.0  # F > 0 for M > 0 (bracket for the bisection fallback only)
-    # upper bounds: the cubic (sinh F - F >= F^3/6), and (e - 1) sinh F <= M
-    if M < 1e100:
-        p3 = 2.0 * em1 / e  # p/3 with p = 6 (e - 1)/e
-        qh = 3.0 * M / e  # qq/2 with qq = 6 M / e
-        u = (qh + math.sqrt(qh * qh + p3 * p3 * p3)) ** (1.0 / 3.0)
-        v = p3 / u
-        Fu = 2.0 * qh / (u * u + u * v + v * v)
-    else:
-        Fu = math.inf
-    if em1 > 0.0:
-        Fu = min(Fu, math.asinh(M / em1))
-    if not math.isfinite(Fu):  # e -> 1 and huge M (M / (e - 1) overflows): log bound, in logs so
-        Fu = _LN2 + math.log1p(M) + math.log1p(M) + 1.0  # that M ~ 1e308 does not overflow
-    Fu = math.asinh((M + Fu) / e)  # still an upper bound, much tighter
-    F = Fu
-    hi = Fu
+    F = _hyp_upper_start(M, e, em1)
+    hi = F
     for _ in range(MAX_ITER + 8):
-        R, Rp, Rpp, noise = _hyp_residual(F, e, em1, M)
+        R, Rp, sh, chm1, noise = _hyp_residual(F, e, em1, M)
         if abs(R) <= 4.0 * noise:
-            return sgn * (F - R / Rp)
+            d = -R / Rp
+            return sgn * (F + d), sgn * (sh + (1.0 + chm1) * d), chm1 + sh * d
         if R > 0.0:
             hi = min(hi, F)
         else:
             lo = max(lo, F)
-        dF = -R / Rp
-        den = Rp + 0.5 * dF * Rpp
-        if den > 0.5 * Rp:
-            dF = -R / den
-        Fn = F + dF
+        Fn = F + _hyp_halley(R, Rp, e, sh)
         if not (lo <= Fn <= hi):
             Fn = 0.5 * (lo + hi)
         if Fn == F:
             break
         F = Fn
-    return sgn * F
+    sh, chm1, _ = _sinh_parts(F)
+    return sgn * F, sgn * sh, chm1
+
+
+@jit
+def _kepler_hyp_scalar(M, e, em1):
+    """Hyperbolic anomaly ``F`` [rad] with ``e sinh F - F = M``; ``em1 = e - 1`` given accurately."""
+    return _kepler_hyp_solve(M, e, em1)[0]
 
 
 @jit

@@ -56,7 +56,9 @@ from astrodyn.orbit.kepler import (
     TWO_PI_1,
     _INV_TWO_PI,
     _cbrt_start,
-    _kepler_hyp_scalar,
+    _hyp_upper_start,
+    _kepler_hyp_fast,
+    _kepler_hyp_solve,
     _INV6,
     _INV24,
     _kepler_start,
@@ -236,9 +238,14 @@ def _fg_elliptic(r0, sig, q, alpha, n, dt, mu):
     return _ell_fg(r0, q, alpha, n, sqa, S, s, omc, rda)
 
 
-@jit
-def _fg_hyperbolic(r0, sig, q, beta, n, dt, mu, h2):
-    """Lagrange coefficients on a hyperbola (absolute anomaly, difference-form polish)."""
+@jit(inline="always")
+def _hyp_setup(sig, q, beta, n, dt, mu, h2):
+    """Hyperbola, part 1: invariants, the absolute mean anomaly ``M1`` at the end and the
+    upper-bound starter ``Fs`` of ``|F1|`` (:func:`astrodyn.orbit.kepler._hyp_upper_start`).
+
+    Returns ``(sqb, p, Ch, Sh, e, em1, m, F0, M1, Fs)``: ``sqb = 1 / sqrt(mu |a|)``,
+    ``p = r0 / |a|``, ``Ch = e cosh F0``, ``Sh = e sinh F0``, ``m = n dt``.
+    """
     sqb = math.sqrt(beta / mu)  # 1 / sqrt(mu |a|)
     p = -q  # r0 / |a| = e cosh F0 - 1
     Ch = 1.0 + p  # e cosh F0
@@ -248,9 +255,26 @@ def _fg_hyperbolic(r0, sig, q, beta, n, dt, mu, h2):
     em1 = e2m1 / (1.0 + e)
     m = n * dt
     F0 = math.asinh(Sh / e)
-    F1 = _kepler_hyp_scalar((Sh - F0) + m, e, em1)
+    M1 = (Sh - F0) + m
+    Fs = _hyp_upper_start(abs(M1), e, em1)
+    return sqb, p, Ch, Sh, e, em1, m, F0, M1, Fs
+
+
+@jit(inline="always")
+def _hyp_solve(M1, e, em1, Fs):
+    """Hyperbola, part 2: ``(F1, sinh F1, cosh F1 - 1)``, the straight-line solve with the
+    safeguarded one as fallback (:mod:`astrodyn.orbit.kepler`)."""
+    ok, F1, sh1, chm1_1 = _kepler_hyp_fast(abs(M1), e, em1, Fs)
+    if ok:
+        return math.copysign(F1, M1), math.copysign(sh1, M1), chm1_1
+    return _kepler_hyp_solve(M1, e, em1)
+
+
+@jit(inline="always")
+def _hyp_fg(r0, sqb, p, Ch, Sh, e, em1, m, F0, beta, n, F1, sh1, chm1_1):
+    """Hyperbola, part 3: Lagrange coefficients from the solved absolute anomaly ``F1``
+    (difference-form polish of short arcs, ``g`` from its least-cancelling form)."""
     x = F1 - F0
-    sh1, chm1_1, _ = _sinh_parts(F1)
     sh, chm1, shmx = _sinh_parts(x)
     if abs(x) < 1.0:
         # short arc: the difference form G(x) = p x + Ch (sinh x - x) + Sh (cosh x - 1) = m
@@ -285,6 +309,14 @@ def _fg_hyperbolic(r0, sig, q, beta, n, dt, mu, h2):
     fdot = -sh / (sqb * r * r0)
     gdot = 1.0 - chm1 / rb
     return f, g, fdot, gdot
+
+
+@jit
+def _fg_hyperbolic(r0, sig, q, beta, n, dt, mu, h2):
+    """Lagrange coefficients on a hyperbola (absolute anomaly, difference-form polish)."""
+    sqb, p, Ch, Sh, e, em1, m, F0, M1, Fs = _hyp_setup(sig, q, beta, n, dt, mu, h2)
+    F1, sh1, chm1_1 = _hyp_solve(M1, e, em1, Fs)
+    return _hyp_fg(r0, sqb, p, Ch, Sh, e, em1, m, F0, beta, n, F1, sh1, chm1_1)
 
 
 @jit
@@ -424,7 +456,7 @@ def _lagrange_scalar(rx, ry, rz, vx, vy, vz, dt, mu):
 # ---------------------------------------------------------------------------
 # loops (serial for small batches, parallel for large ones)
 # ---------------------------------------------------------------------------
-_BLOCK = 512  # states per block: ellipses are gathered per block and solved in pairs
+_BLOCK = 512  # states per block: ellipses and hyperbolas are gathered per block and solved in pairs
 
 
 @jit(inline="always")
@@ -464,9 +496,27 @@ def _ell_pair(r0, v0, dt, mu, r, v, i, j, inv_i, inv_j):
 
 
 @jit(inline="always")
+def _hyp_pair(r0, v0, dt, mu, r, v, i, j, inv_i, inv_j):
+    """Two hyperbolas at once, stage by stage (as :func:`_ell_pair`); bit-identical to
+    :func:`_fg_hyperbolic` on each state."""
+    rn_a, sig_a, q_a, al_a, n_a, h2_a = inv_i[0], inv_i[1], inv_i[2], inv_i[3], inv_i[4], inv_i[5]
+    rn_b, sig_b, q_b, al_b, n_b, h2_b = inv_j[0], inv_j[1], inv_j[2], inv_j[3], inv_j[4], inv_j[5]
+    sqb_a, p_a, Ch_a, Sh_a, e_a, em1_a, m_a, F0_a, M1_a, Fs_a = _hyp_setup(sig_a, q_a, -al_a, n_a, dt[i], mu[i], h2_a)
+    sqb_b, p_b, Ch_b, Sh_b, e_b, em1_b, m_b, F0_b, M1_b, Fs_b = _hyp_setup(sig_b, q_b, -al_b, n_b, dt[j], mu[j], h2_b)
+    F1_a, sh1_a, chm1_a = _hyp_solve(M1_a, e_a, em1_a, Fs_a)
+    F1_b, sh1_b, chm1_b = _hyp_solve(M1_b, e_b, em1_b, Fs_b)
+    f_a, g_a, fd_a, gd_a = _hyp_fg(rn_a, sqb_a, p_a, Ch_a, Sh_a, e_a, em1_a, m_a, F0_a, -al_a, n_a, F1_a, sh1_a, chm1_a)
+    f_b, g_b, fd_b, gd_b = _hyp_fg(rn_b, sqb_b, p_b, Ch_b, Sh_b, e_b, em1_b, m_b, F0_b, -al_b, n_b, F1_b, sh1_b, chm1_b)
+    _store(r0, v0, r, v, i, f_a, g_a, fd_a, gd_a)
+    _store(r0, v0, r, v, j, f_b, g_b, fd_b, gd_b)
+
+
+@jit(inline="always")
 def _propagate_block(r0, v0, dt, mu, r, v, lo, hi, idx, inv):
-    """States ``lo:hi``: non-elliptic ones directly, ellipses gathered and solved in pairs."""
+    """States ``lo:hi``: ellipses and hyperbolas gathered (ellipses from the front of
+    ``idx, inv``, hyperbolas from the back) and solved in pairs, the rest directly."""
     m = 0
+    mh = idx.shape[0]
     for i in range(lo, hi):
         rx, ry, rz = r0[i, 0], r0[i, 1], r0[i, 2]
         vx, vy, vz = v0[i, 0], v0[i, 1], v0[i, 2]
@@ -475,6 +525,14 @@ def _propagate_block(r0, v0, dt, mu, r, v, lo, hi, idx, inv):
             idx[m] = i
             inv[m, 0], inv[m, 1], inv[m, 2], inv[m, 3], inv[m, 4] = rn, sig, q, alpha, n
             m += 1
+        elif kind == 3:
+            mh -= 1
+            hx = ry * vz - rz * vy
+            hy = rz * vx - rx * vz
+            hz = rx * vy - ry * vx
+            idx[mh] = i
+            inv[mh, 0], inv[mh, 1], inv[mh, 2], inv[mh, 3], inv[mh, 4] = rn, sig, q, alpha, n
+            inv[mh, 5] = hx * hx + hy * hy + hz * hz
         else:
             f, g, fd, gd = _dispatch(kind, rn, sig, q, alpha, n, rx, ry, rz, vx, vy, vz, dt[i], mu[i])
             _store(r0, v0, r, v, i, f, g, fd, gd)
@@ -486,13 +544,21 @@ def _propagate_block(r0, v0, dt, mu, r, v, lo, hi, idx, inv):
         i = idx[k]
         f, g, fd, gd = _fg_elliptic(inv[k, 0], inv[k, 1], inv[k, 2], inv[k, 3], inv[k, 4], dt[i], mu[i])
         _store(r0, v0, r, v, i, f, g, fd, gd)
+    k = mh
+    while k + 1 < idx.shape[0]:
+        _hyp_pair(r0, v0, dt, mu, r, v, idx[k], idx[k + 1], inv[k], inv[k + 1])
+        k += 2
+    if k < idx.shape[0]:
+        i = idx[k]
+        f, g, fd, gd = _fg_hyperbolic(inv[k, 0], inv[k, 1], inv[k, 2], -inv[k, 3], inv[k, 4], dt[i], mu[i], inv[k, 5])
+        _store(r0, v0, r, v, i, f, g, fd, gd)
 
 
 @jit
 def _propagate_loop(r0, v0, dt, mu, r, v):
     n = r0.shape[0]
     idx = np.empty(_BLOCK, dtype=np.int64)
-    inv = np.empty((_BLOCK, 5))
+    inv = np.empty((_BLOCK, 6))
     for lo in range(0, n, _BLOCK):
         _propagate_block(r0, v0, dt, mu, r, v, lo, min(lo + _BLOCK, n), idx, inv)
 
@@ -503,7 +569,7 @@ def _propagate_loop_par(r0, v0, dt, mu, r, v):
     nblocks = (n + _BLOCK - 1) // _BLOCK
     for b in prange(nblocks):
         idx = np.empty(_BLOCK, dtype=np.int64)
-        inv = np.empty((_BLOCK, 5))
+        inv = np.empty((_BLOCK, 6))
         lo = b * _BLOCK
         _propagate_block(r0, v0, dt, mu, r, v, lo, min(lo + _BLOCK, n), idx, inv)
 
