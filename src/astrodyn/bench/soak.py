@@ -1,0 +1,154 @@
+"""``astrodyn bench soak``: a long ``astrodyn serve`` run at real time, sampled every minute.
+
+    astrodyn bench soak --minutes 60 --out soak/          # the issue-6 soak (one hour)
+    astrodyn bench soak --minutes 2 --sample 10 --out /tmp/s   # a quick look
+
+What it does: writes a 100-satellite Walker scene (orbit + torque-free attitude at 10 Hz:
+2000 messages/s), starts ``astrodyn serve`` on it at real-time factor 1 with rolling MCAP
+files, and every ``--sample`` seconds records, per process (supervisor, logger, orbit,
+attitude): resident memory (VmRSS) and CPU time (utime + stime) from ``/proc``; plus the
+round-trip time of a ``status`` query over Zenoh and the lag of sim time behind wall time
+(a service falling behind shows a growing lag).  At the end it stops the service with the
+``stop`` verb, checks the recording (every channel contiguous across the rolled files) and
+writes ``soak.json`` and ``soak.md`` (table + verdict: memory flat = the last quarter's
+mean RSS within 10 % of the second quarter's; no growing lag).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+from astrodyn import bus
+from astrodyn.runner import repo_dir
+
+_TICK = os.sysconf("SC_CLK_TCK")
+
+
+def _proc(pid: int) -> tuple[float, float]:
+    """(RSS MiB, CPU seconds) of a live process, from /proc; (nan, nan) if gone."""
+    try:
+        with open(f"/proc/{pid}/status") as f:
+            rss = next(int(line.split()[1]) for line in f if line.startswith("VmRSS:")) / 1024
+        with open(f"/proc/{pid}/stat") as f:
+            fields = f.read().rsplit(")", 1)[1].split()
+        cpu = (int(fields[11]) + int(fields[12])) / _TICK
+        return rss, cpu
+    except (OSError, StopIteration, IndexError, ValueError):
+        return float("nan"), float("nan")
+
+
+def _scene(out: Path, satellites: int) -> Path:
+    text = (repo_dir("configs", "demo.toml") / "constellation-1000.toml").read_text()
+    text = text.replace('name = "constellation-1000"', 'name = "soak"').replace("t = 1000", f"t = {satellites}")
+    text = text.replace("p = 20", "p = 10")
+    path = out / "soak.toml"
+    path.write_text(text)
+    return path
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog="astrodyn bench soak", description=__doc__.split("\n\n")[0])
+    ap.add_argument("--minutes", type=float, default=60.0, help="length of the soak (default 60)")
+    ap.add_argument("--sample", type=float, default=60.0, help="seconds between samples (default 60)")
+    ap.add_argument("--satellites", type=int, default=100, help="Walker satellites (10 Hz, orbit + attitude)")
+    ap.add_argument("--out", default="soak", help="directory for the config, MCAP files and the report")
+    args = ap.parse_args(argv)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    config = _scene(out, args.satellites)
+    port = bus.free_port()
+    serve = subprocess.Popen([sys.executable, "-m", "astrodyn", "serve", str(config), "--out", str(out / "soak.mcap"),
+                              "--rate", "1", "--port", str(port), "--roll-size", str(256 << 20),
+                              "--max-wall", str(args.minutes * 60 + 600)],
+                             stdout=subprocess.PIPE, stderr=open(out / "serve.err", "wb"), text=True)
+    samples: list[dict] = []
+    final: dict = {}
+    try:
+        hello = json.loads(serve.stdout.readline())
+        print(f"[soak] serving {hello['serving']} on {hello['hub']} for {args.minutes} min", file=sys.stderr)
+        with bus.open_session(connect=[bus.loopback_endpoint(port)]) as s:
+            t_start = time.monotonic()
+            end = t_start + args.minutes * 60
+            next_sample = t_start
+            while time.monotonic() < end and serve.poll() is None:
+                if time.monotonic() >= next_sample:
+                    q0 = time.perf_counter()
+                    replies = bus.send_control(s, "soak", "status", timeout_s=10)
+                    rtt = time.perf_counter() - q0
+                    st = replies[0] if replies else {}
+                    row = {"wall_s": round(time.monotonic() - t_start, 1), "status_rtt_ms": round(rtt * 1e3, 2),
+                           "sim_t": st.get("t"), "lag_s": None}
+                    if st.get("t") is not None:
+                        row["lag_s"] = round(st.get("wall_s", 0.0) - st["t"], 2)
+                    pids = {"serve": serve.pid, **{k: v["pid"] for k, v in st.get("processes", {}).items()}}
+                    for name, pid in pids.items():
+                        rss, cpu = _proc(pid)
+                        row[f"{name}_rss_mb"], row[f"{name}_cpu_s"] = round(rss, 1), round(cpu, 2)
+                    samples.append(row)
+                    print(f"[soak] {json.dumps(row)}", file=sys.stderr, flush=True)
+                    next_sample += args.sample
+                time.sleep(0.5)
+            replies = bus.send_control(s, "soak", "stop", timeout_s=120)
+            final = replies[0] if replies else {}
+        serve.wait(timeout=120)
+    finally:
+        if serve.poll() is None:
+            os.kill(serve.pid, signal.SIGTERM)
+            try:
+                serve.wait(timeout=60)
+            except subprocess.TimeoutExpired:
+                os.kill(serve.pid, signal.SIGKILL)
+    report = _report(samples, final, out, args)
+    (out / "soak.json").write_text(json.dumps({"samples": samples, "final": final, "report": report}, indent=1, default=str))
+    print(report["markdown"])
+    return 0 if report["ok"] else 1
+
+
+def _report(samples: list[dict], final: dict, out: Path, args) -> dict:
+    from astrodyn.recording import load
+
+    files = sorted(out.glob("soak*.mcap"))
+    seqs: dict[str, list] = {}
+    messages = 0
+    for f in files:
+        run = load(f)
+        messages += run.messages
+        for topic, track in run.channels.items():
+            if topic.endswith(("/orbit", "/attitude")):
+                seqs.setdefault(topic, []).extend(track.seq.tolist())
+    gaps = sum(1 for s in seqs.values() if sorted(s) != list(range(len(s))))
+    procs = ["serve", "logger", "orbit", "attitude"]
+    n = len(samples)
+    q2 = samples[n // 4: n // 2] or samples
+    q4 = samples[3 * n // 4:] or samples
+
+    def mean(rows, key):
+        vals = [r[key] for r in rows if r.get(key) == r.get(key) and r.get(key) is not None]
+        return sum(vals) / len(vals) if vals else float("nan")
+
+    flat = {p: abs(mean(q4, f"{p}_rss_mb") - mean(q2, f"{p}_rss_mb")) <= 0.10 * mean(q2, f"{p}_rss_mb") for p in procs}
+    lag_growth = (mean(q4, "lag_s") - mean(q2, "lag_s")) if n >= 4 else float("nan")
+    ok = all(flat.values()) and gaps == 0 and not (lag_growth > 5.0)
+    lines = [f"# Soak: `astrodyn serve` at real time for {args.minutes:g} min",
+             "", f"Scene: {args.satellites}-satellite Walker, orbit + torque-free attitude at 10 Hz "
+             f"({2 * 10 * args.satellites} messages/s); samples every {args.sample:g} s; "
+             f"{len(files)} MCAP file(s), {messages} messages, channels with a gap: {gaps}.", "",
+             "| wall s | sim t s | lag s | status RTT ms | " + " | ".join(f"{p} RSS MB | {p} CPU s" for p in procs) + " |",
+             "|" + "---|" * (4 + 2 * len(procs))]
+    for r in samples:
+        lines.append(f"| {r['wall_s']} | {r.get('sim_t')} | {r.get('lag_s')} | {r['status_rtt_ms']} | "
+                     + " | ".join(f"{r.get(p + '_rss_mb')} | {r.get(p + '_cpu_s')}" for p in procs) + " |")
+    lines += ["", f"Memory flat (last-quarter mean RSS within 10 % of the second quarter's): "
+              + ", ".join(f"{p} {'yes' if v else 'NO'}" for p, v in flat.items()),
+              f"Lag growth (last quarter minus second quarter): {lag_growth:.2f} s; verdict: {'OK' if ok else 'FAILED'}."]
+    md = "\n".join(lines)
+    (out / "soak.md").write_text(md + "\n")
+    return {"ok": ok, "gaps": gaps, "messages": messages, "files": [str(f) for f in files], "flat": flat,
+            "lag_growth_s": lag_growth, "markdown": md}
