@@ -64,10 +64,13 @@ from astrodyn.orbit.kepler import (
     _kepler_start,
     _one_minus_cos,
     _reduce_2pi,
+    _reduce_2pi_core,
     _rotate,
     _sinh_parts,
     _solve_diff_ell,
     _two_prod,
+    _atan2,
+    _sincos,
     _x_minus_sin,
 )
 
@@ -143,20 +146,19 @@ def _ell_setup(sig, q, alpha, n, dt, mu):
     sqa = math.sqrt(alpha / mu)  # 1 / sqrt(mu a)
     C = 1.0 - q  # e cos E0
     S = sig * sqa  # e sin E0
-    mh, ml = n * dt, 0.0
-    if abs(mh) < HUGE_ANGLE:  # exact product (double-double) unless the phase is lost anyway
+    if abs(n * dt) < HUGE_ANGLE:  # exact product (double-double) and exact reduction
         mh, ml = _two_prod(n, dt)
-    _, mh, ml = _reduce_2pi(mh, ml)
-    e = min(math.sqrt(C * C + S * S), 1.0 - EPS)
-    E0 = math.atan2(S, C)
+        _, mh, ml = _reduce_2pi_core(mh, ml)
+    else:  # the phase is lost anyway (see _reduce_2pi); never taken by the block passes
+        _, mh, ml = _reduce_2pi(n * dt, 0.0)
+    e = math.sqrt(C * C + S * S)
+    e = e if e < 1.0 - EPS else 1.0 - EPS
+    E0 = _atan2(S, C)
     M1 = E0 - S + mh
-    if M1 > PI:
-        M1 -= TWO_PI_1
-    elif M1 < -PI:
-        M1 += TWO_PI_1
+    M1 = M1 - TWO_PI_1 if M1 > PI else (M1 + TWO_PI_1 if M1 < -PI else M1)
     x0 = _kepler_start(M1, e) - E0
     c0 = mh - S
-    x0 += TWO_PI_1 * math.floor((c0 - x0) * _INV_TWO_PI + 0.5)
+    x0 += TWO_PI_1 * np.floor((c0 - x0) * _INV_TWO_PI + 0.5)
     return sqa, C, S, mh, ml, e, x0, c0
 
 
@@ -230,8 +232,7 @@ def _ell_fallback(q, C, S, mh, ml, e, x0, c0):
 def _fg_elliptic(r0, sig, q, alpha, n, dt, mu):
     """Lagrange coefficients on an ellipse via the exactly reduced difference form."""
     sqa, C, S, mh, ml, e, x0, c0 = _ell_setup(sig, q, alpha, n, dt, mu)
-    s0 = math.sin(x0)
-    c0s = math.cos(x0)
+    s0, c0s = _sincos(x0)
     ok, x, s, c, omc, rda = _ell_one_step(q, C, S, mh, ml, x0, s0, c0s)
     if not ok:
         x, s, c, omc, rda = _ell_fallback(q, C, S, mh, ml, e, x0, c0)
@@ -467,35 +468,6 @@ def _store(r0, v0, r, v, i, f, g, fd, gd):
 
 
 @jit(inline="always")
-def _ell_pair(r0, v0, dt, mu, r, v, i, j, inv_i, inv_j):
-    """Two ellipses at once, their instruction streams interleaved stage by stage.
-
-    One state's solve is a ~600-cycle dependency chain (atan2 -> starter ->
-    sin/cos -> step -> polish) at about 1.2 instructions per cycle; two
-    independent chains side by side let the out-of-order core overlap them.
-    Bit-identical to :func:`_fg_elliptic` on each state (same operations).
-    """
-    rn_a, sig_a, q_a, al_a, n_a = inv_i[0], inv_i[1], inv_i[2], inv_i[3], inv_i[4]
-    rn_b, sig_b, q_b, al_b, n_b = inv_j[0], inv_j[1], inv_j[2], inv_j[3], inv_j[4]
-    sqa_a, C_a, S_a, mh_a, ml_a, e_a, x0_a, c0_a = _ell_setup(sig_a, q_a, al_a, n_a, dt[i], mu[i])
-    sqa_b, C_b, S_b, mh_b, ml_b, e_b, x0_b, c0_b = _ell_setup(sig_b, q_b, al_b, n_b, dt[j], mu[j])
-    s_a = math.sin(x0_a)
-    s_b = math.sin(x0_b)
-    c_a = math.cos(x0_a)
-    c_b = math.cos(x0_b)
-    ok_a, x_a, s_a, c_a, omc_a, rda_a = _ell_one_step(q_a, C_a, S_a, mh_a, ml_a, x0_a, s_a, c_a)
-    ok_b, x_b, s_b, c_b, omc_b, rda_b = _ell_one_step(q_b, C_b, S_b, mh_b, ml_b, x0_b, s_b, c_b)
-    if not ok_a:
-        x_a, s_a, c_a, omc_a, rda_a = _ell_fallback(q_a, C_a, S_a, mh_a, ml_a, e_a, x0_a, c0_a)
-    if not ok_b:
-        x_b, s_b, c_b, omc_b, rda_b = _ell_fallback(q_b, C_b, S_b, mh_b, ml_b, e_b, x0_b, c0_b)
-    f_a, g_a, fd_a, gd_a = _ell_fg(rn_a, q_a, al_a, n_a, sqa_a, S_a, s_a, omc_a, rda_a)
-    f_b, g_b, fd_b, gd_b = _ell_fg(rn_b, q_b, al_b, n_b, sqa_b, S_b, s_b, omc_b, rda_b)
-    _store(r0, v0, r, v, i, f_a, g_a, fd_a, gd_a)
-    _store(r0, v0, r, v, j, f_b, g_b, fd_b, gd_b)
-
-
-@jit(inline="always")
 def _hyp_pair(r0, v0, dt, mu, r, v, i, j, inv_i, inv_j):
     """Two hyperbolas at once, stage by stage (as :func:`_ell_pair`); bit-identical to
     :func:`_fg_hyperbolic` on each state."""
@@ -511,19 +483,71 @@ def _hyp_pair(r0, v0, dt, mu, r, v, i, j, inv_i, inv_j):
     _store(r0, v0, r, v, j, f_b, g_b, fd_b, gd_b)
 
 
+# rows of the per-block work array W (columns: gathered states); ellipses fill the
+# columns from the front, hyperbolas from the back
+_RN, _SIG, _Q, _ALPHA, _N, _H2, _DT, _MU = 0, 1, 2, 3, 4, 5, 5, 6  # inputs (_H2: hyperbolas, _DT: ellipses)
+_SQA, _C, _S, _MH, _ML, _E, _X0, _C0 = 7, 8, 9, 10, 11, 12, 13, 14  # ellipse setup
+_OK, _SX, _OMC, _RDA = 15, 16, 17, 18  # ellipse solve
+_NW = 19
+
+
 @jit(inline="always")
-def _propagate_block(r0, v0, dt, mu, r, v, lo, hi, idx, inv):
-    """States ``lo:hi``: ellipses and hyperbolas gathered (ellipses from the front of
-    ``idx, inv``, hyperbolas from the back) and solved in pairs, the rest directly."""
+def _ell_passes(W, m, idx, r0, v0, r, v):
+    """The ellipses of a block (columns ``0:m`` of ``W``) in passes over all of them.
+
+    Pass 1 (setup, own atan2, starter) and pass 2 (own sin/cos, fifth-order step,
+    residual check, polish) are straight-line code over independent columns, so
+    LLVM vectorizes them (AVX2: four states per instruction); the few states whose
+    check fails take the general safeguarded solver in a scalar pass 3; pass 4
+    forms f, g and stores.  Each column goes through exactly the operations of
+    :func:`_fg_elliptic`, so the results are bit-identical to a single call.
+    """
+    for k in range(m):
+        sqa, C, S, mh, ml, e, x0, c0 = _ell_setup(W[_SIG, k], W[_Q, k], W[_ALPHA, k], W[_N, k], W[_DT, k], W[_MU, k])
+        W[_SQA, k] = sqa
+        W[_C, k] = C
+        W[_S, k] = S
+        W[_MH, k] = mh
+        W[_ML, k] = ml
+        W[_E, k] = e
+        W[_X0, k] = x0
+        W[_C0, k] = c0
+    for k in range(m):
+        x0 = W[_X0, k]
+        s, c = _sincos(x0)
+        ok, x, s, c, omc, rda = _ell_one_step(W[_Q, k], W[_C, k], W[_S, k], W[_MH, k], W[_ML, k], x0, s, c)
+        W[_OK, k] = 1.0 if ok else 0.0
+        W[_SX, k] = s
+        W[_OMC, k] = omc
+        W[_RDA, k] = rda
+    for k in range(m):
+        if W[_OK, k] == 0.0:
+            x, s, c, omc, rda = _ell_fallback(
+                W[_Q, k], W[_C, k], W[_S, k], W[_MH, k], W[_ML, k], W[_E, k], W[_X0, k], W[_C0, k]
+            )
+            W[_SX, k] = s
+            W[_OMC, k] = omc
+            W[_RDA, k] = rda
+    for k in range(m):
+        f, g, fd, gd = _ell_fg(W[_RN, k], W[_Q, k], W[_ALPHA, k], W[_N, k], W[_SQA, k], W[_S, k], W[_SX, k], W[_OMC, k], W[_RDA, k])
+        _store(r0, v0, r, v, idx[k], f, g, fd, gd)
+
+
+@jit(inline="always")
+def _propagate_block(r0, v0, dt, mu, r, v, lo, hi, idx, W):
+    """States ``lo:hi``: ellipses gathered and solved in vectorized passes
+    (:func:`_ell_passes`), hyperbolas gathered and solved in interleaved pairs,
+    the rest (near-parabolic, identity, NaN; ellipses with a phase beyond 2**52 rad) directly."""
     m = 0
     mh = idx.shape[0]
     for i in range(lo, hi):
         rx, ry, rz = r0[i, 0], r0[i, 1], r0[i, 2]
         vx, vy, vz = v0[i, 0], v0[i, 1], v0[i, 2]
         kind, rn, sig, q, alpha, n = _classify(rx, ry, rz, vx, vy, vz, dt[i], mu[i])
-        if kind == 2:
+        if kind == 2 and abs(n * dt[i]) < HUGE_ANGLE:
             idx[m] = i
-            inv[m, 0], inv[m, 1], inv[m, 2], inv[m, 3], inv[m, 4] = rn, sig, q, alpha, n
+            W[_RN, m], W[_SIG, m], W[_Q, m], W[_ALPHA, m], W[_N, m] = rn, sig, q, alpha, n
+            W[_DT, m], W[_MU, m] = dt[i], mu[i]
             m += 1
         elif kind == 3:
             mh -= 1
@@ -531,26 +555,20 @@ def _propagate_block(r0, v0, dt, mu, r, v, lo, hi, idx, inv):
             hy = rz * vx - rx * vz
             hz = rx * vy - ry * vx
             idx[mh] = i
-            inv[mh, 0], inv[mh, 1], inv[mh, 2], inv[mh, 3], inv[mh, 4] = rn, sig, q, alpha, n
-            inv[mh, 5] = hx * hx + hy * hy + hz * hz
+            W[_RN, mh], W[_SIG, mh], W[_Q, mh], W[_ALPHA, mh], W[_N, mh] = rn, sig, q, alpha, n
+            W[_H2, mh] = hx * hx + hy * hy + hz * hz
         else:
             f, g, fd, gd = _dispatch(kind, rn, sig, q, alpha, n, rx, ry, rz, vx, vy, vz, dt[i], mu[i])
             _store(r0, v0, r, v, i, f, g, fd, gd)
-    k = 0
-    while k + 1 < m:
-        _ell_pair(r0, v0, dt, mu, r, v, idx[k], idx[k + 1], inv[k], inv[k + 1])
-        k += 2
-    if k < m:
-        i = idx[k]
-        f, g, fd, gd = _fg_elliptic(inv[k, 0], inv[k, 1], inv[k, 2], inv[k, 3], inv[k, 4], dt[i], mu[i])
-        _store(r0, v0, r, v, i, f, g, fd, gd)
+    _ell_passes(W, m, idx, r0, v0, r, v)
     k = mh
-    while k + 1 < idx.shape[0]:
-        _hyp_pair(r0, v0, dt, mu, r, v, idx[k], idx[k + 1], inv[k], inv[k + 1])
+    nb = idx.shape[0]
+    while k + 1 < nb:
+        _hyp_pair(r0, v0, dt, mu, r, v, idx[k], idx[k + 1], W[:, k], W[:, k + 1])
         k += 2
-    if k < idx.shape[0]:
+    if k < nb:
         i = idx[k]
-        f, g, fd, gd = _fg_hyperbolic(inv[k, 0], inv[k, 1], inv[k, 2], -inv[k, 3], inv[k, 4], dt[i], mu[i], inv[k, 5])
+        f, g, fd, gd = _fg_hyperbolic(W[_RN, k], W[_SIG, k], W[_Q, k], -W[_ALPHA, k], W[_N, k], dt[i], mu[i], W[_H2, k])
         _store(r0, v0, r, v, i, f, g, fd, gd)
 
 
@@ -558,9 +576,9 @@ def _propagate_block(r0, v0, dt, mu, r, v, lo, hi, idx, inv):
 def _propagate_loop(r0, v0, dt, mu, r, v):
     n = r0.shape[0]
     idx = np.empty(_BLOCK, dtype=np.int64)
-    inv = np.empty((_BLOCK, 6))
+    W = np.empty((_NW, _BLOCK))
     for lo in range(0, n, _BLOCK):
-        _propagate_block(r0, v0, dt, mu, r, v, lo, min(lo + _BLOCK, n), idx, inv)
+        _propagate_block(r0, v0, dt, mu, r, v, lo, min(lo + _BLOCK, n), idx, W)
 
 
 @pjit
@@ -569,9 +587,9 @@ def _propagate_loop_par(r0, v0, dt, mu, r, v):
     nblocks = (n + _BLOCK - 1) // _BLOCK
     for b in prange(nblocks):
         idx = np.empty(_BLOCK, dtype=np.int64)
-        inv = np.empty((_BLOCK, 6))
+        W = np.empty((_NW, _BLOCK))
         lo = b * _BLOCK
-        _propagate_block(r0, v0, dt, mu, r, v, lo, min(lo + _BLOCK, n), idx, inv)
+        _propagate_block(r0, v0, dt, mu, r, v, lo, min(lo + _BLOCK, n), idx, W)
 
 
 @jit
