@@ -65,7 +65,7 @@ _INV24 = 1.0 / 24.0
 _INV_PI2_M6 = 1.0 / (PI * PI - 6.0)
 _INV_TWO_PI = 1.0 / TWO_PI_1
 _LN2 = math.log(2.0)
-_CBRT_MAGIC = 0x2A9F7893782DA1CE  # bits(1)*(2/3) tuned: bits(x)/3 + magic ~ bits(cbrt x)
+_CBRT_B1 = 715094163  # fdlibm s_cbrt.c: high word of x / 3 + B1 ~ high word of cbrt x
 HUGE_ANGLE = 2.0**52  # [rad] above this the float64 phase is not resolved (see _reduce_2pi)
 
 # Taylor coefficients 1/(2k+1)! for k = 1..10: x - sin x = sum (-1)^(k+1) x^(2k+1)/(2k+1)!
@@ -346,7 +346,8 @@ def _atan2(y, x):
 def _cbrt_start(x):
     """Cube root of ``x >= 0`` to about 1e-9 relative, for starters only (no bound property).
 
-    Exponent/3 from the bit pattern (Kahan's trick, ~5 % error), then two
+    Exponent/3 from the high word of the bit pattern (Kahan's trick as in fdlibm's
+    s_cbrt.c, ~5 % error), then two
     Halley steps ``y (y^3 + 2x) / (2 y^3 + x)`` (cubic convergence; measured
     relative error below 1e-14 over 1e-99..1e99).  Straight-line code.  Shorter
     latency than ``x ** (1/3)`` (libm pow), which sits on the critical path of
@@ -357,7 +358,9 @@ def _cbrt_start(x):
     small = x < 1e-100
     large = x > 1e100
     xs = x * 2.0**300 if small else (x * 2.0**-300 if large else x)
-    y = np.int64(np.float64(xs).view(np.int64) // 3 + _CBRT_MAGIC).view(np.float64)
+    hi = (np.float64(xs).view(np.int64) >> 32) & 0xFFFFFFFF  # high word (sign, exponent, 20 bits)
+    # hi // 3 as a multiply-shift (exact for 32-bit hi; vectorizes, an int64 division does not)
+    y = np.int64((((hi * 0xAAAAAAAB) >> 33) + _CBRT_B1) << 32).view(np.float64)
     y3 = y * y * y
     y = y * (y3 + 2.0 * xs) / (2.0 * y3 + xs)
     y3 = y * y * y

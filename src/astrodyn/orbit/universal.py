@@ -143,14 +143,20 @@ def _ell_setup(sig, q, alpha, n, dt, mu):
     ``C = e cos E0``, ``S = e sin E0``, ``mh + ml = n dt mod 2 pi`` (double-double),
     ``c0 = mh - S`` (the root obeys ``|x - c0| <= e``).
     """
-    sqa = math.sqrt(alpha / mu)  # 1 / sqrt(mu a)
-    C = 1.0 - q  # e cos E0
-    S = sig * sqa  # e sin E0
     if abs(n * dt) < HUGE_ANGLE:  # exact product (double-double) and exact reduction
         mh, ml = _two_prod(n, dt)
         _, mh, ml = _reduce_2pi_core(mh, ml)
     else:  # the phase is lost anyway (see _reduce_2pi); never taken by the block passes
         _, mh, ml = _reduce_2pi(n * dt, 0.0)
+    return _ell_setup_core(sig, q, alpha, mu, mh, ml)
+
+
+@jit(inline="always")
+def _ell_setup_core(sig, q, alpha, mu, mh, ml):
+    """:func:`_ell_setup` after the reduction (straight-line code: the block passes vectorize it)."""
+    sqa = math.sqrt(alpha / mu)  # 1 / sqrt(mu a)
+    C = 1.0 - q  # e cos E0
+    S = sig * sqa  # e sin E0
     e = math.sqrt(C * C + S * S)
     e = e if e < 1.0 - EPS else 1.0 - EPS
     E0 = _atan2(S, C)
@@ -503,7 +509,9 @@ def _ell_passes(W, m, idx, r0, v0, r, v):
     :func:`_fg_elliptic`, so the results are bit-identical to a single call.
     """
     for k in range(m):
-        sqa, C, S, mh, ml, e, x0, c0 = _ell_setup(W[_SIG, k], W[_Q, k], W[_ALPHA, k], W[_N, k], W[_DT, k], W[_MU, k])
+        mh, ml = _two_prod(W[_N, k], W[_DT, k])  # |n dt| < HUGE_ANGLE (see the gather)
+        _, mh, ml = _reduce_2pi_core(mh, ml)
+        sqa, C, S, mh, ml, e, x0, c0 = _ell_setup_core(W[_SIG, k], W[_Q, k], W[_ALPHA, k], W[_MU, k], mh, ml)
         W[_SQA, k] = sqa
         W[_C, k] = C
         W[_S, k] = S
