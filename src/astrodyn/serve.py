@@ -250,7 +250,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--out", help="MCAP file (default out/<scenario>.mcap; rolled files get -0001, -0002, ...)")
     ap.add_argument("--rate", type=float, default=None, help="real-time factor (default: the scenario's real_time_factor)")
     ap.add_argument("--roll-size", type=int, default=None, help="start a new MCAP file after this many bytes")
-    ap.add_argument("--roll-interval", type=float, default=None, help="start a new MCAP file after this many wall seconds")
+    ap.add_argument("--roll-interval", type=float, default=3600.0,
+                    help="start a new MCAP file after this many wall seconds (default 3600: hourly files keep each file's chunk index, held in memory for its summary, small)")
     ap.add_argument("--max-wall", type=float, default=None, help="stop by itself after this many wall seconds")
     ap.add_argument("--port", type=int, default=None, help="loopback port of the control hub (default: a free one)")
     ap.add_argument("--connect", action="append", default=[], metavar="ENDPOINT", help="also connect to this endpoint (router)")

@@ -162,12 +162,14 @@ class ChunkedWriter:
         for cid, start, count in zip(channel_ids, starts, counts):
             offsets[cid] = index_offset + start
             self.channel_counts[cid] += count
-        self.chunk_indexes.append(ChunkIndex(
+        # kept serialised for the summary: ~16 bytes per channel instead of a Python dict
+        # entry (~100 bytes), so a long run with many channels holds 5x less in memory
+        self.chunk_indexes.append(_serialise(ChunkIndex(
             message_start_time=chunk_start, message_end_time=chunk_end,
             chunk_start_offset=chunk_offset, chunk_length=len(chunk_bytes), message_index_offsets=offsets,
             message_index_length=len(index_bytes), compression="zstd", compressed_size=len(compressed),
             uncompressed_size=len(data),
-        ))
+        )))
         self.message_count += n_messages
         if self.start_time is None or chunk_start < self.start_time:
             self.start_time = chunk_start
@@ -210,7 +212,7 @@ class ChunkedWriter:
             if not records:
                 continue
             start = len(summary)
-            summary += _serialise(*records)
+            summary += b"".join(records) if isinstance(records[0], bytes) else _serialise(*records)
             offsets.append(SummaryOffset(group_opcode=opcode, group_start=summary_start + start, group_length=len(summary) - start))
         summary_offset_start = summary_start + len(summary)
         summary += _serialise(*offsets)
