@@ -277,7 +277,7 @@ def _hyp_solve(M1, e, em1, Fs):
     return _kepler_hyp_solve(M1, e, em1)
 
 
-@jit(inline="always")
+@jit
 def _hyp_fg(r0, sqb, p, Ch, Sh, e, em1, m, F0, beta, n, F1, sh1, chm1_1):
     """Hyperbola, part 3: Lagrange coefficients from the solved absolute anomaly ``F1``
     (difference-form polish of short arcs, ``g`` from its least-cancelling form)."""
@@ -497,7 +497,7 @@ _OK, _SX, _OMC, _RDA = 15, 16, 17, 18  # ellipse solve
 _NW = 19
 
 
-@jit(inline="always")
+@jit
 def _ell_passes(W, m, idx, r0, v0, r, v):
     """The ellipses of a block (columns ``0:m`` of ``W``) in passes over all of them.
 
@@ -569,6 +569,12 @@ def _propagate_block(r0, v0, dt, mu, r, v, lo, hi, idx, W):
             f, g, fd, gd = _dispatch(kind, rn, sig, q, alpha, n, rx, ry, rz, vx, vy, vz, dt[i], mu[i])
             _store(r0, v0, r, v, i, f, g, fd, gd)
     _ell_passes(W, m, idx, r0, v0, r, v)
+    _hyp_pairs(W, mh, idx, r0, v0, dt, mu, r, v)
+
+
+@jit
+def _hyp_pairs(W, mh, idx, r0, v0, dt, mu, r, v):
+    """The hyperbolas of a block (columns ``mh:`` of ``W``), two at a time (:func:`_hyp_pair`)."""
     k = mh
     nb = idx.shape[0]
     while k + 1 < nb:
@@ -581,23 +587,31 @@ def _propagate_block(r0, v0, dt, mu, r, v, lo, hi, idx, W):
 
 
 @jit
+def _propagate_range(r0, v0, dt, mu, r, v, lo, hi, idx, W):
+    """States ``lo:hi`` block by block (one compiled body shared by the serial and parallel loops)."""
+    for blo in range(lo, hi, _BLOCK):
+        _propagate_block(r0, v0, dt, mu, r, v, blo, min(blo + _BLOCK, hi), idx, W)
+
+
+@jit
 def _propagate_loop(r0, v0, dt, mu, r, v):
-    n = r0.shape[0]
     idx = np.empty(_BLOCK, dtype=np.int64)
     W = np.empty((_NW, _BLOCK))
-    for lo in range(0, n, _BLOCK):
-        _propagate_block(r0, v0, dt, mu, r, v, lo, min(lo + _BLOCK, n), idx, W)
+    _propagate_range(r0, v0, dt, mu, r, v, 0, r0.shape[0], idx, W)
+
+
+_CHUNK = 8 * _BLOCK  # states per parallel task
 
 
 @pjit
 def _propagate_loop_par(r0, v0, dt, mu, r, v):
     n = r0.shape[0]
-    nblocks = (n + _BLOCK - 1) // _BLOCK
-    for b in prange(nblocks):
+    nchunks = (n + _CHUNK - 1) // _CHUNK
+    for c in prange(nchunks):
         idx = np.empty(_BLOCK, dtype=np.int64)
         W = np.empty((_NW, _BLOCK))
-        lo = b * _BLOCK
-        _propagate_block(r0, v0, dt, mu, r, v, lo, min(lo + _BLOCK, n), idx, W)
+        lo = np.int64(c) * _CHUNK  # prange's index is unsigned: keep one int64 specialization
+        _propagate_range(r0, v0, dt, mu, r, v, lo, min(lo + _CHUNK, n), idx, W)
 
 
 @jit
