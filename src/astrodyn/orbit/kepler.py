@@ -19,10 +19,13 @@ How the accuracy is obtained (every piece is exercised by ``tests/test_kepler.py
   (about 1e-15 relative already; the inverted Taylor series, of the same
   order as his eqs. 29-31 with one division instead of three), here applied to the cancellation-free
   residual; sine and cosine at the corrected point come from a Taylor
-  rotation, so a typical solve makes one libm sin/cos call.  For the hyperbola, an upper bound from the
+  rotation, so a typical solve makes one sin/cos evaluation (libm in
+  ``solve_kepler``; the propagator's vectorized path uses the own straight-line
+  kernels ``_sincos`` and ``_atan2`` of this module, tested against mpmath).  For the hyperbola, an upper bound from the
   cubic ``(e - 1) F + e F^3 / 6 = M`` or ``asinh(M / (e - 1))``, tightened by
-  one fixed-point step ``F = asinh((M + F) / e)``, so Newton/Halley converge
-  monotonically from above.
+  one fixed-point step ``F = asinh((M + F) / e)`` (asinh as a widened log + sqrt
+  bound, :func:`_asinh_upper`), so Newton/Halley converge monotonically from above;
+  two Halley steps and a residual check usually suffice (:func:`_kepler_hyp_fast`).
 * **Residual without cancellation.** ``(1 - e) E + e (E - sin E) - M`` with a
   series for ``E - sin E`` when ``|E| < 1`` (and ``(e - 1) F + e (sinh F - F) -
   M`` for the hyperbola); ``1 - e cos E = (1 - e) + e (1 - cos E)``.  The naive
