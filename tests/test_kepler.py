@@ -229,7 +229,7 @@ def test_elliptic_beyond_resolved_phase_is_finite():
 # ---------------------------------------------------------------------------
 def _kernel_loops():
     from astrodyn._jit import jit
-    from astrodyn.orbit.kepler import _atan2, _cbrt_start, _sincos
+    from astrodyn.orbit.kepler import _atan2, _cbrt_start, _exp, _sincos
 
     @jit(cache=False)
     def sincos_loop(x, s, c):
@@ -246,7 +246,12 @@ def _kernel_loops():
         for i in range(x.shape[0]):
             out[i] = _cbrt_start(x[i])
 
-    return sincos_loop, atan2_loop, cbrt_loop
+    @jit(cache=False)
+    def exp_loop(x, out):
+        for i in range(x.shape[0]):
+            out[i] = _exp(x[i])
+
+    return sincos_loop, atan2_loop, cbrt_loop, exp_loop
 
 
 def test_own_sincos_against_mpmath():
@@ -255,7 +260,7 @@ def test_own_sincos_against_mpmath():
     # reduction's hard cases: the reduced argument is tiny), signed zeros.
     # Bound: one ulp of the result (the fdlibm kernels are below one ulp; the
     # three-part Cody-Waite reduction adds ~1e-32 absolute).
-    sincos_loop, _, _ = _kernel_loops()
+    sincos_loop, _, _, _ = _kernel_loops()
     rng = np.random.default_rng(5)
     x = np.concatenate(
         [
@@ -278,7 +283,7 @@ def test_own_atan2_against_mpmath():
     # all four quadrants, both octant sides, the tan(pi/8) switch, the axes and the
     # origin (0 like libm); bound: three ulp of the result (it only feeds the Kepler
     # starter, whose own error is 1e-3; measured max 1.9 ulp)
-    _, atan2_loop, _ = _kernel_loops()
+    _, atan2_loop, _, _ = _kernel_loops()
     rng = np.random.default_rng(6)
     t8 = math.tan(math.pi / 8)
     y = np.concatenate([rng.uniform(-1, 1, 2000), [t8, -t8, 1.0, 0.0, -1.0, 0.0, 1e-300, 0.3]])
@@ -296,7 +301,7 @@ def test_own_atan2_against_mpmath():
 def test_cbrt_start_accuracy_over_the_full_range():
     # a starter only, but the hyperbolic upper bound widens it by 1e-10 relative:
     # require 1e-12 (measured 6e-15) over the float range, incl. the scaled tails
-    _, _, cbrt_loop = _kernel_loops()
+    _, _, cbrt_loop, _ = _kernel_loops()
     x = np.concatenate([10.0 ** np.random.default_rng(7).uniform(-300, 300, 3000), [1e-100, 1e100, 1.0, 8.0]])
     out = np.empty_like(x)
     cbrt_loop(x, out)
@@ -306,3 +311,20 @@ def test_cbrt_start_accuracy_over_the_full_range():
     special = np.array([0.0, math.inf])
     cbrt_loop(special, out[:2])
     assert out[0] == 0.0 and out[1] == math.inf
+
+
+def test_own_exp_against_mpmath():
+    # the documented range |x| <= 708 (the hyperbolic solver uses |x| <= 700), the
+    # reduction's edges |r| = ln2/2, small arguments; bound: one ulp of the result
+    # (fdlibm's method is below one ulp; measured 0.79)
+    _, _, _, exp_loop = _kernel_loops()
+    rng = np.random.default_rng(8)
+    half_ln2 = math.log(2.0) / 2
+    x = np.concatenate(
+        [rng.uniform(-708.0, 708.0, 2000), rng.uniform(-1.0, 1.0, 1000), [0.0, -0.0, 1e-300, half_ln2, -half_ln2, 700.0, -700.0, 708.0]]
+    )
+    out = np.empty_like(x)
+    exp_loop(x, out)
+    for xi, oi in zip(x, out):
+        ref = mp.exp(mp.mpf(xi))
+        assert abs(oi - ref) <= ulp(ref), (xi, oi, ref)

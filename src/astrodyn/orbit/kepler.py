@@ -239,6 +239,27 @@ def _sinh_parts(x):
     return sh, 0.5 * (ex + iex) - 1.0, sh - x
 
 
+@jit(inline="always")
+def _sinh_parts_fast(x):
+    """:func:`_sinh_parts` for ``|x| <= 700`` as straight-line code with the own :func:`_exp`.
+
+    Both forms are evaluated and one is selected (the series below 1, the
+    exponentials above), so loops of it vectorize.  Beyond 700 the caller must
+    not use it (it returns finite garbage there).
+    """
+    shmx_s = _odd_series(x, 1.0)
+    sh_s = x + shmx_s
+    chm1_s = sh_s * sh_s / (1.0 + math.sqrt(1.0 + sh_s * sh_s))
+    ex = _exp(x if abs(x) <= 700.0 else 0.0)
+    iex = 1.0 / ex
+    sh_e = 0.5 * (ex - iex)
+    small = abs(x) < 1.0
+    sh = sh_s if small else sh_e
+    chm1 = chm1_s if small else 0.5 * (ex + iex) - 1.0
+    shmx = shmx_s if small else sh_e - x
+    return sh, chm1, shmx
+
+
 # ---------------------------------------------------------------------------
 # own sin/cos and atan2 kernels: straight-line code (selects, no libm call) so
 # that LLVM can vectorize loops over many states; the same functions serve the
@@ -343,6 +364,41 @@ def _atan2(y, x):
     a = _PIO2 - a if ay > ax else a
     a = PI - a if x < 0.0 else a
     return -a if y < 0.0 else a
+
+
+# exp: fdlibm e_exp.c (Sun Microsystems 1993): ln 2 split so that k * _LN2_HI is exact
+# for |k| < 2**20, the Remez polynomial P1..P5 of r (e^r + 1)/(e^r - 1) on |r| <= ln2/2
+_LN2_HI = 6.93147180369123816490e-01
+_LN2_LO = 1.90821492927058770002e-10
+_INV_LN2 = 1.44269504088896338700e00
+_EXP_P1 = 1.66666666666666019037e-01
+_EXP_P2 = -2.77777777770155933842e-03
+_EXP_P3 = 6.61375632143793436117e-05
+_EXP_P4 = -1.65339022054652515390e-06
+_EXP_P5 = 4.13813679705723846039e-08
+_ROUND_MAGIC = 6755399441055744.0  # 1.5 * 2**52: k + magic holds the integer k in its low bits
+
+
+@jit(inline="always")
+def _exp(x):
+    """``exp x`` for ``|x| <= 708`` within one ulp (tests/test_kepler.py vs mpmath).
+
+    fdlibm's method: ``x = k ln 2 + r`` (Cody-Waite, ``|r| <= ln2 / 2``),
+    ``exp r = 1 + 2 r / (R(r) - r)`` with its degree-10 rational form, then
+    ``2^k`` built in the exponent bits (``k`` read from ``k + 1.5 * 2^52``: no
+    float-to-int conversion, which AVX2 lacks).  No branch and no libm call:
+    loops of it vectorize.  Outside the range the result is garbage (callers select).
+    """
+    k = np.floor(x * _INV_LN2 + 0.5)
+    hi = x - k * _LN2_HI  # exact
+    lo = k * _LN2_LO
+    r = hi - lo
+    t = r * r
+    c = r - t * (_EXP_P1 + t * (_EXP_P2 + t * (_EXP_P3 + t * (_EXP_P4 + t * _EXP_P5))))
+    y = 1.0 - ((lo - (r * c) / (2.0 - c)) - hi)
+    kb = np.float64(k + _ROUND_MAGIC).view(np.int64)  # low 52 bits: 2**51 + k
+    two_k = np.int64((kb + 1023) << 52).view(np.float64)  # the shift drops the 2**51
+    return y * two_k
 
 
 @jit(inline="always")
@@ -568,9 +624,9 @@ def _hyp_upper_start(M, e, em1):
 
 
 @jit(inline="always")
-def _hyp_residual(F, e, em1, M):
-    """``(e - 1) F + e (sinh F - F) - M``, its slope ``e cosh F - 1``, ``sinh F``, ``cosh F - 1``, noise."""
-    sh, chm1, shmx = _sinh_parts(F)
+def _hyp_residual(F, e, em1, M, sh, chm1, shmx):
+    """``(e - 1) F + e (sinh F - F) - M``, its slope ``e cosh F - 1``, ``sinh F``, ``cosh F - 1``, noise
+    (``sh, chm1, shmx``: :func:`_sinh_parts` of ``F``)."""
     R = (em1 * F + e * shmx) - M
     noise = EPS * (abs(em1 * F) + abs(e * shmx) + abs(M))
     return R, em1 + e * chm1, sh, chm1, noise
@@ -590,7 +646,8 @@ def _hyp_halley(R, Rp, e, sh):
 @jit(inline="always")
 def _kepler_hyp_fast(M, e, em1, F):
     """Straight-line solve for ``M > 0`` from the upper bound ``F``: two Halley steps, then the
-    residual check and a Newton correction (no loop, no bracket: pairs can be interleaved).
+    residual check and a Newton correction (no loop, no bracket, no libm call: a loop over
+    many states vectorizes).
 
     From the starter's ~2e-2 relative error Halley's cubic convergence reaches the
     noise level in two steps for almost every input; ``ok`` is False otherwise and
@@ -598,12 +655,16 @@ def _kepler_hyp_fast(M, e, em1, F):
     ``(ok, F, sinh F, cosh F - 1)`` (sinh, cosh carried to first order through the
     final correction, as in :func:`_kepler_hyp_solve`).
     """
-    R, Rp, sh, chm1, noise = _hyp_residual(F, e, em1, M)
+    sh, chm1, shmx = _sinh_parts_fast(F)
+    R, Rp, sh, chm1, noise = _hyp_residual(F, e, em1, M, sh, chm1, shmx)
     F = F + _hyp_halley(R, Rp, e, sh)
-    R, Rp, sh, chm1, noise = _hyp_residual(F, e, em1, M)
+    sh, chm1, shmx = _sinh_parts_fast(F)
+    R, Rp, sh, chm1, noise = _hyp_residual(F, e, em1, M, sh, chm1, shmx)
     F = F + _hyp_halley(R, Rp, e, sh)
-    R, Rp, sh, chm1, noise = _hyp_residual(F, e, em1, M)
-    ok = abs(R) <= 4.0 * noise and Rp > 0.0
+    sh, chm1, shmx = _sinh_parts_fast(F)
+    R, Rp, sh, chm1, noise = _hyp_residual(F, e, em1, M, sh, chm1, shmx)
+    # |F| <= 700: _sinh_parts_fast's range (F is near there only when M is near 1e300)
+    ok = (abs(R) <= 4.0 * noise) & (Rp > 0.0) & (abs(F) <= 700.0)
     d = -R / Rp
     return ok, F + d, sh + (1.0 + chm1) * d, chm1 + sh * d
 
@@ -632,7 +693,8 @@ def _kepler_hyp_solve(M, e, em1):
     F = _hyp_upper_start(M, e, em1)
     hi = F
     for _ in range(MAX_ITER + 8):
-        R, Rp, sh, chm1, noise = _hyp_residual(F, e, em1, M)
+        sh, chm1, shmx = _sinh_parts(F)
+        R, Rp, sh, chm1, noise = _hyp_residual(F, e, em1, M, sh, chm1, shmx)
         if abs(R) <= 4.0 * noise:
             d = -R / Rp
             return sgn * (F + d), sgn * (sh + (1.0 + chm1) * d), chm1 + sh * d

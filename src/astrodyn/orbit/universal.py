@@ -37,8 +37,8 @@ into blocks of 512 states; in each block the ellipses are gathered and solved
 in passes over all of them (setup, own ``atan2`` and starter; own ``sin/cos``,
 one fifth-order step, residual check and polish; the safeguarded solver for the
 few that fail the check; f, g), straight-line code that LLVM vectorizes four
-states wide; the hyperbolas are gathered and solved two at a time with their
-instruction streams interleaved.  Each state goes through exactly the
+states wide; the hyperbolas likewise (the straight-line solve with an own
+``exp`` vectorized, setup and f, g scalar).  Each state goes through exactly the
 operations of a single call, so a batch gives the same bits as one call per
 state, serial or parallel (``prange`` over chunks of eight blocks).
 
@@ -287,10 +287,13 @@ def _hyp_solve(M1, e, em1, Fs):
     return _kepler_hyp_solve(M1, e, em1)
 
 
-@jit
+@jit(inline="always")
 def _hyp_fg(r0, sqb, p, Ch, Sh, e, em1, m, F0, beta, n, F1, sh1, chm1_1):
     """Hyperbola, part 3: Lagrange coefficients from the solved absolute anomaly ``F1``
-    (difference-form polish of short arcs, ``g`` from its least-cancelling form)."""
+    (difference-form polish of short arcs, ``g`` from its least-cancelling form).
+
+    Compiled on its own (not inlined): it holds a loop and libm calls, and
+    inlining it into the block kernel costs compile time for no speed."""
     x = F1 - F0
     sh, chm1, shmx = _sinh_parts(x)
     if abs(x) < 1.0:
@@ -483,31 +486,17 @@ def _store(r0, v0, r, v, i, f, g, fd, gd):
         v[i, j] = fd * r0[i, j] + gd * v0[i, j]
 
 
-@jit(inline="always")
-def _hyp_pair(r0, v0, dt, mu, r, v, i, j, inv_i, inv_j):
-    """Two hyperbolas at once, their instruction streams interleaved stage by stage.
-
-    One state's solve is a long dependency chain through libm (asinh, log, exp);
-    two independent chains side by side let the out-of-order core overlap them.
-    Bit-identical to :func:`_fg_hyperbolic` on each state (same operations)."""
-    rn_a, sig_a, q_a, al_a, n_a, h2_a = inv_i[0], inv_i[1], inv_i[2], inv_i[3], inv_i[4], inv_i[5]
-    rn_b, sig_b, q_b, al_b, n_b, h2_b = inv_j[0], inv_j[1], inv_j[2], inv_j[3], inv_j[4], inv_j[5]
-    sqb_a, p_a, Ch_a, Sh_a, e_a, em1_a, m_a, F0_a, M1_a, Fs_a = _hyp_setup(sig_a, q_a, -al_a, n_a, dt[i], mu[i], h2_a)
-    sqb_b, p_b, Ch_b, Sh_b, e_b, em1_b, m_b, F0_b, M1_b, Fs_b = _hyp_setup(sig_b, q_b, -al_b, n_b, dt[j], mu[j], h2_b)
-    F1_a, sh1_a, chm1_a = _hyp_solve(M1_a, e_a, em1_a, Fs_a)
-    F1_b, sh1_b, chm1_b = _hyp_solve(M1_b, e_b, em1_b, Fs_b)
-    f_a, g_a, fd_a, gd_a = _hyp_fg(rn_a, sqb_a, p_a, Ch_a, Sh_a, e_a, em1_a, m_a, F0_a, -al_a, n_a, F1_a, sh1_a, chm1_a)
-    f_b, g_b, fd_b, gd_b = _hyp_fg(rn_b, sqb_b, p_b, Ch_b, Sh_b, e_b, em1_b, m_b, F0_b, -al_b, n_b, F1_b, sh1_b, chm1_b)
-    _store(r0, v0, r, v, i, f_a, g_a, fd_a, gd_a)
-    _store(r0, v0, r, v, j, f_b, g_b, fd_b, gd_b)
-
-
 # rows of the per-block work array W (columns: gathered states); ellipses fill the
 # columns from the front, hyperbolas from the back
 _RN, _SIG, _Q, _ALPHA, _N, _H2, _DT, _MU = 0, 1, 2, 3, 4, 5, 5, 6  # inputs (_H2: hyperbolas, _DT: ellipses)
 _SQA, _C, _S, _MH, _ML, _E, _X0, _C0 = 7, 8, 9, 10, 11, 12, 13, 14  # ellipse setup
 _OK, _SX, _OMC, _RDA = 15, 16, 17, 18  # ellipse solve
+# hyperbolas have their own work array WH (columns from 0, so LLVM sees
+# non-negative indices and vectorizes): rows _RN.._N, _H2, _MU as in W, then
+_HDT, _SQB, _P, _CH, _SH, _HE, _EM1, _M, _F0, _M1, _FS = 7, 8, 9, 10, 11, 12, 13, 14, 15, 16, 17  # setup
+_HOK, _F1, _SH1, _CHM1 = 18, 19, 20, 21  # solve
 _NW = 19
+_NWH = 22
 
 
 @jit
@@ -555,12 +544,12 @@ def _ell_passes(W, m, idx, r0, v0, r, v):
 
 
 @jit(inline="always")
-def _propagate_block(r0, v0, dt, mu, r, v, lo, hi, idx, W):
-    """States ``lo:hi``: ellipses gathered and solved in vectorized passes
-    (:func:`_ell_passes`), hyperbolas gathered and solved in interleaved pairs,
+def _propagate_block(r0, v0, dt, mu, r, v, lo, hi, idx, W, idxh, WH):
+    """States ``lo:hi``: ellipses (``idx, W``) gathered and solved in vectorized passes
+    (:func:`_ell_passes`), hyperbolas likewise (:func:`_hyp_passes`),
     the rest (near-parabolic, identity, NaN; ellipses with a phase beyond 2**52 rad) directly."""
     m = 0
-    mh = idx.shape[0]
+    mh = 0
     for i in range(lo, hi):
         rx, ry, rz = r0[i, 0], r0[i, 1], r0[i, 2]
         vx, vy, vz = v0[i, 0], v0[i, 1], v0[i, 2]
@@ -571,46 +560,66 @@ def _propagate_block(r0, v0, dt, mu, r, v, lo, hi, idx, W):
             W[_DT, m], W[_MU, m] = dt[i], mu[i]
             m += 1
         elif kind == 3:
-            mh -= 1
             hx = ry * vz - rz * vy
             hy = rz * vx - rx * vz
             hz = rx * vy - ry * vx
-            idx[mh] = i
-            W[_RN, mh], W[_SIG, mh], W[_Q, mh], W[_ALPHA, mh], W[_N, mh] = rn, sig, q, alpha, n
-            W[_H2, mh] = hx * hx + hy * hy + hz * hz
+            idxh[mh] = i
+            WH[_RN, mh], WH[_SIG, mh], WH[_Q, mh], WH[_ALPHA, mh], WH[_N, mh] = rn, sig, q, alpha, n
+            WH[_H2, mh], WH[_MU, mh], WH[_HDT, mh] = hx * hx + hy * hy + hz * hz, mu[i], dt[i]
+            mh += 1
         else:
             f, g, fd, gd = _dispatch(kind, rn, sig, q, alpha, n, rx, ry, rz, vx, vy, vz, dt[i], mu[i])
             _store(r0, v0, r, v, i, f, g, fd, gd)
     _ell_passes(W, m, idx, r0, v0, r, v)
-    _hyp_pairs(W, mh, idx, r0, v0, dt, mu, r, v)
+    _hyp_passes(WH, mh, idxh, r0, v0, r, v)
 
 
 @jit
-def _hyp_pairs(W, mh, idx, r0, v0, dt, mu, r, v):
-    """The hyperbolas of a block (columns ``mh:`` of ``W``), two at a time (:func:`_hyp_pair`)."""
-    k = mh
-    nb = idx.shape[0]
-    while k + 1 < nb:
-        _hyp_pair(r0, v0, dt, mu, r, v, idx[k], idx[k + 1], W[:, k], W[:, k + 1])
-        k += 2
-    if k < nb:
-        i = idx[k]
-        f, g, fd, gd = _fg_hyperbolic(W[_RN, k], W[_SIG, k], W[_Q, k], -W[_ALPHA, k], W[_N, k], dt[i], mu[i], W[_H2, k])
-        _store(r0, v0, r, v, i, f, g, fd, gd)
+def _hyp_passes(W, nh, idx, r0, v0, r, v):
+    """The hyperbolas of a block (columns ``0:nh`` of their work array ``W``) in passes over all of them.
+
+    Pass 1: invariants, ``F0 = asinh``, starter (libm log/asinh: scalar, but
+    independent iterations the core overlaps); pass 2: the straight-line solve
+    (:func:`astrodyn.orbit.kepler._kepler_hyp_fast`, own exp), which LLVM
+    vectorizes; pass 3: the safeguarded solver where its check failed; pass 4:
+    f, g and store.  Bit-identical to :func:`_fg_hyperbolic` on each state.
+    """
+    for k in range(nh):
+        sqb, p, Ch, Sh, e, em1, m, F0, M1, Fs = _hyp_setup(W[_SIG, k], W[_Q, k], -W[_ALPHA, k], W[_N, k], W[_HDT, k], W[_MU, k], W[_H2, k])
+        W[_SQB, k], W[_P, k], W[_CH, k], W[_SH, k], W[_HE, k] = sqb, p, Ch, Sh, e
+        W[_EM1, k], W[_M, k], W[_F0, k], W[_M1, k], W[_FS, k] = em1, m, F0, M1, Fs
+    for k in range(nh):
+        M1 = W[_M1, k]
+        ok, F1, sh1, chm1_1 = _kepler_hyp_fast(abs(M1), W[_HE, k], W[_EM1, k], W[_FS, k])
+        W[_HOK, k] = 1.0 if ok else 0.0
+        W[_F1, k] = math.copysign(F1, M1)
+        W[_SH1, k] = math.copysign(sh1, M1)
+        W[_CHM1, k] = chm1_1
+    for k in range(nh):
+        if W[_HOK, k] == 0.0:
+            W[_F1, k], W[_SH1, k], W[_CHM1, k] = _kepler_hyp_solve(W[_M1, k], W[_HE, k], W[_EM1, k])
+    for k in range(nh):
+        f, g, fd, gd = _hyp_fg(
+            W[_RN, k], W[_SQB, k], W[_P, k], W[_CH, k], W[_SH, k], W[_HE, k], W[_EM1, k], W[_M, k], W[_F0, k],
+            -W[_ALPHA, k], W[_N, k], W[_F1, k], W[_SH1, k], W[_CHM1, k],
+        )
+        _store(r0, v0, r, v, idx[k], f, g, fd, gd)
 
 
 @jit
-def _propagate_range(r0, v0, dt, mu, r, v, lo, hi, idx, W):
+def _propagate_range(r0, v0, dt, mu, r, v, lo, hi, idx, W, idxh, WH):
     """States ``lo:hi`` block by block (one compiled body shared by the serial and parallel loops)."""
     for blo in range(lo, hi, _BLOCK):
-        _propagate_block(r0, v0, dt, mu, r, v, blo, min(blo + _BLOCK, hi), idx, W)
+        _propagate_block(r0, v0, dt, mu, r, v, blo, min(blo + _BLOCK, hi), idx, W, idxh, WH)
 
 
 @jit
 def _propagate_loop(r0, v0, dt, mu, r, v):
     idx = np.empty(_BLOCK, dtype=np.int64)
     W = np.empty((_NW, _BLOCK))
-    _propagate_range(r0, v0, dt, mu, r, v, 0, r0.shape[0], idx, W)
+    idxh = np.empty(_BLOCK, dtype=np.int64)
+    WH = np.empty((_NWH, _BLOCK))
+    _propagate_range(r0, v0, dt, mu, r, v, 0, r0.shape[0], idx, W, idxh, WH)
 
 
 _CHUNK = 8 * _BLOCK  # states per parallel task (one block per task below 16 chunks)
@@ -625,8 +634,10 @@ def _propagate_loop_par(r0, v0, dt, mu, r, v):
     for c in prange(nchunks):
         idx = np.empty(_BLOCK, dtype=np.int64)
         W = np.empty((_NW, _BLOCK))
+        idxh = np.empty(_BLOCK, dtype=np.int64)
+        WH = np.empty((_NWH, _BLOCK))
         lo = np.int64(c) * chunk  # prange's index is unsigned: keep one int64 specialization
-        _propagate_range(r0, v0, dt, mu, r, v, lo, min(lo + chunk, n), idx, W)
+        _propagate_range(r0, v0, dt, mu, r, v, lo, min(lo + chunk, n), idx, W, idxh, WH)
 
 
 @jit
