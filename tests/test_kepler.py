@@ -24,6 +24,7 @@ from hypothesis import strategies as st
 from astrodyn.orbit import solve_kepler, solve_kepler_hyperbolic
 
 mp.mp.dps = 50
+EPS = np.finfo(float).eps
 
 
 def ulp(x):
@@ -229,7 +230,7 @@ def test_elliptic_beyond_resolved_phase_is_finite():
 # ---------------------------------------------------------------------------
 def _kernel_loops():
     from astrodyn._jit import jit
-    from astrodyn.orbit.kepler import _atan2, _cbrt_start, _exp, _sincos
+    from astrodyn.orbit.kepler import _asinh_upper_own, _atan2, _cbrt_start, _exp, _log, _sincos
 
     @jit(cache=False)
     def sincos_loop(x, s, c):
@@ -251,7 +252,13 @@ def _kernel_loops():
         for i in range(x.shape[0]):
             out[i] = _exp(x[i])
 
-    return sincos_loop, atan2_loop, cbrt_loop, exp_loop
+    @jit(cache=False)
+    def log_loop(x, out, bound):
+        for i in range(x.shape[0]):
+            out[i] = _log(x[i])
+            bound[i] = _asinh_upper_own(x[i])
+
+    return sincos_loop, atan2_loop, cbrt_loop, exp_loop, log_loop
 
 
 def test_own_sincos_against_mpmath():
@@ -260,7 +267,7 @@ def test_own_sincos_against_mpmath():
     # reduction's hard cases: the reduced argument is tiny), signed zeros.
     # Bound: one ulp of the result (the fdlibm kernels are below one ulp; the
     # three-part Cody-Waite reduction adds ~1e-32 absolute).
-    sincos_loop, _, _, _ = _kernel_loops()
+    sincos_loop, _, _, _ = _kernel_loops()[:4]
     rng = np.random.default_rng(5)
     x = np.concatenate(
         [
@@ -283,7 +290,7 @@ def test_own_atan2_against_mpmath():
     # all four quadrants, both octant sides, the tan(pi/8) switch, the axes and the
     # origin (0 like libm); bound: three ulp of the result (it only feeds the Kepler
     # starter, whose own error is 1e-3; measured max 1.9 ulp)
-    _, atan2_loop, _, _ = _kernel_loops()
+    _, atan2_loop, _, _ = _kernel_loops()[:4]
     rng = np.random.default_rng(6)
     t8 = math.tan(math.pi / 8)
     y = np.concatenate([rng.uniform(-1, 1, 2000), [t8, -t8, 1.0, 0.0, -1.0, 0.0, 1e-300, 0.3]])
@@ -301,7 +308,7 @@ def test_own_atan2_against_mpmath():
 def test_cbrt_start_accuracy_over_the_full_range():
     # a starter only, but the hyperbolic upper bound widens it by 1e-10 relative:
     # require 1e-12 (measured 6e-15) over the float range, incl. the scaled tails
-    _, _, cbrt_loop, _ = _kernel_loops()
+    _, _, cbrt_loop, _ = _kernel_loops()[:4]
     x = np.concatenate([10.0 ** np.random.default_rng(7).uniform(-300, 300, 3000), [1e-100, 1e100, 1.0, 8.0]])
     out = np.empty_like(x)
     cbrt_loop(x, out)
@@ -317,7 +324,7 @@ def test_own_exp_against_mpmath():
     # the documented range |x| <= 708 (the hyperbolic solver uses |x| <= 700), the
     # reduction's edges |r| = ln2/2, small arguments; bound: one ulp of the result
     # (fdlibm's method is below one ulp; measured 0.79)
-    _, _, _, exp_loop = _kernel_loops()
+    _, _, _, exp_loop = _kernel_loops()[:4]
     rng = np.random.default_rng(8)
     half_ln2 = math.log(2.0) / 2
     x = np.concatenate(
@@ -328,3 +335,25 @@ def test_own_exp_against_mpmath():
     for xi, oi in zip(x, out):
         ref = mp.exp(mp.mpf(xi))
         assert abs(oi - ref) <= ulp(ref), (xi, oi, ref)
+
+
+def test_own_log_and_asinh_bound_against_mpmath():
+    # log over the whole normal range, both sides of the sqrt(2) mantissa switch:
+    # within 2 eps (1 + |log x|) as its docstring states (measured 0.9); the
+    # widened asinh built on it must be an upper bound of asinh everywhere
+    # (the hyperbolic starter's monotone convergence relies on it) and tight to 1e-14
+    *_, log_loop = _kernel_loops()
+    rng = np.random.default_rng(9)
+    s2 = math.sqrt(2.0)
+    x = np.concatenate(
+        [10.0 ** rng.uniform(-307, 308, 2000), rng.uniform(0.5, 2.0, 1000), [1.0, s2, np.nextafter(s2, 3.0), np.nextafter(s2, 0.0), 2.2250738585072014e-308, 1.7976931348623157e308]]
+    )
+    out = np.empty_like(x)
+    bound = np.empty_like(x)
+    log_loop(x, out, bound)
+    for xi, oi, bi in zip(x, out, bound):
+        ref = mp.log(mp.mpf(xi))
+        assert abs(oi - ref) <= 2 * EPS * (1 + abs(oi)), (xi, oi, ref)
+        ref_asinh = mp.asinh(mp.mpf(xi))
+        assert ref_asinh <= bi <= ref_asinh + 1e-14 * (1 + ref_asinh), (xi, bi, ref_asinh)
+

@@ -401,6 +401,36 @@ def _exp(x):
     return y * two_k
 
 
+_SQRT2 = math.sqrt(2.0)
+_TWO52 = 4503599627370496.0  # 2**52
+# log m = 2 atanh s = 2 (s + s^3/3 + s^5/5 + ...), s = (m - 1)/(m + 1), |s| <= 0.1716:
+# 1/(2j+1) through j = 11 (truncation below 1e-18 relative)
+_LOG_C = tuple(1.0 / (2 * j + 1) for j in range(1, 12))
+
+
+@jit(inline="always")
+def _log(y):
+    """``log y`` for finite normal ``y > 0`` within 2 eps (1 + |log y|) (tests vs mpmath).
+
+    ``y = 2^k m`` with ``m`` in ``[sqrt(1/2), sqrt 2)`` from the bit pattern (the
+    exponent read as a float without an int-to-float conversion),
+    ``log m = 2 atanh((m - 1)/(m + 1))`` by its series, ``k ln 2`` with ``ln 2``
+    in two parts.  No branch and no libm call: loops of it vectorize.  Only the
+    Kepler starters use it (through :func:`_asinh_upper_own`, which widens it).
+    """
+    bits = np.float64(y).view(np.int64)
+    ef = np.int64(((bits >> 52) & 0x7FF) | 0x4330000000000000).view(np.float64) - _TWO52  # biased exponent
+    m = np.int64((bits & 0x000FFFFFFFFFFFFF) | 0x3FF0000000000000).view(np.float64)  # [1, 2)
+    big = m > _SQRT2
+    m = 0.5 * m if big else m
+    k = ef - (1022.0 if big else 1023.0)
+    s = (m - 1.0) / (m + 1.0)
+    z = s * s
+    c = _LOG_C
+    p = c[0] + z * (c[1] + z * (c[2] + z * (c[3] + z * (c[4] + z * (c[5] + z * (c[6] + z * (c[7] + z * (c[8] + z * (c[9] + z * c[10])))))))))
+    return (k * _LN2_HI + (2.0 * s + 2.0 * s * (z * p))) + k * _LN2_LO
+
+
 @jit(inline="always")
 def _cbrt_start(x):
     """Cube root of ``x >= 0`` to about 1e-9 relative, for starters only (no bound property).
@@ -596,6 +626,30 @@ def _asinh_upper(y):
 
 
 @jit(inline="always")
+def _asinh_upper_own(y):
+    """:func:`_asinh_upper` with the own :func:`_log` (straight-line; finite ``y >= 0``).
+
+    The own log is within 2 eps (1 + |L|) (tests/test_kepler.py), so the bound
+    adds ``8 eps (1 + L)``; above 1e150 ``log y + log 2 + 8 eps (1 + L)`` (a
+    valid, slightly loose bound: its callers exclude the overflow edge).
+    """
+    big = y >= 1e150
+    L = _log(y * 0.5 if big else y + math.sqrt(1.0 + y * y)) + (2.0 * _LN2 if big else 0.0)
+    b = L + 8.0 * EPS * (1.0 + L)
+    return y if y < b else b
+
+
+@jit(inline="always")
+def _hyp_cubic_bound(M, e, em1):
+    """The cubic bound ``(e - 1) F + e F^3 / 6 = M`` of :func:`_hyp_upper_start` (``M < 1e100``)."""
+    p3 = 2.0 * em1 / e  # p/3 with p = 6 (e - 1)/e
+    qh = 3.0 * M / e  # qq/2 with qq = 6 M / e
+    u = _cbrt_start(qh + math.sqrt(qh * qh + p3 * p3 * p3))
+    v = p3 / u
+    return 2.0 * qh / (u * u + u * v + v * v) * (1.0 + 1e-10)
+
+
+@jit(inline="always")
 def _hyp_upper_start(M, e, em1):
     """An upper bound of the root ``F > 0`` of ``e sinh F - F = M`` (``M > 0``), typically 1e-2 relative.
 
@@ -609,11 +663,7 @@ def _hyp_upper_start(M, e, em1):
     :func:`_asinh_upper`.
     """
     if M < 1e100:
-        p3 = 2.0 * em1 / e  # p/3 with p = 6 (e - 1)/e
-        qh = 3.0 * M / e  # qq/2 with qq = 6 M / e
-        u = _cbrt_start(qh + math.sqrt(qh * qh + p3 * p3 * p3))
-        v = p3 / u
-        Fu = 2.0 * qh / (u * u + u * v + v * v) * (1.0 + 1e-10)
+        Fu = _hyp_cubic_bound(M, e, em1)
     else:
         Fu = math.inf
     if em1 > 0.0:
@@ -621,6 +671,19 @@ def _hyp_upper_start(M, e, em1):
     if not math.isfinite(Fu):  # e -> 1 and huge M (M / (e - 1) overflows): log bound, in logs so
         Fu = _LN2 + math.log1p(M) + math.log1p(M) + 1.0  # that M ~ 1e308 does not overflow
     return _asinh_upper((M + Fu) / e)  # still an upper bound, much tighter
+
+
+@jit(inline="always")
+def _hyp_upper_start_own(M, e, em1):
+    """:func:`_hyp_upper_start` for ``0 <= M < 1e100`` as straight-line code (own log): vectorizable.
+
+    Outside that range it returns garbage; :func:`_kepler_hyp_fast` then fails
+    its check and the caller takes :func:`_kepler_hyp_solve`.
+    """
+    Fc = _hyp_cubic_bound(M, e, em1)
+    y = M / em1 if em1 > 0.0 else 0.0
+    Fa = _asinh_upper_own(y) if (em1 > 0.0) & (y < 1e300) else Fc
+    return _asinh_upper_own((M + (Fa if Fa < Fc else Fc)) / e)
 
 
 @jit(inline="always")

@@ -65,7 +65,7 @@ from astrodyn.orbit.kepler import (
     TWO_PI_1,
     _INV_TWO_PI,
     _cbrt_start,
-    _hyp_upper_start,
+    _hyp_upper_start_own,
     _kepler_hyp_fast,
     _kepler_hyp_solve,
     _INV6,
@@ -257,10 +257,9 @@ def _fg_elliptic(r0, sig, q, alpha, n, dt, mu):
 
 @jit(inline="always")
 def _hyp_setup(sig, q, beta, n, dt, mu, h2):
-    """Hyperbola, part 1: invariants, the absolute mean anomaly ``M1`` at the end and the
-    upper-bound starter ``Fs`` of ``|F1|`` (:func:`astrodyn.orbit.kepler._hyp_upper_start`).
+    """Hyperbola, part 1: invariants and the absolute mean anomaly ``M1`` at the end.
 
-    Returns ``(sqb, p, Ch, Sh, e, em1, m, F0, M1, Fs)``: ``sqb = 1 / sqrt(mu |a|)``,
+    Returns ``(sqb, p, Ch, Sh, e, em1, m, F0, M1)``: ``sqb = 1 / sqrt(mu |a|)``,
     ``p = r0 / |a|``, ``Ch = e cosh F0``, ``Sh = e sinh F0``, ``m = n dt``.
     """
     sqb = math.sqrt(beta / mu)  # 1 / sqrt(mu |a|)
@@ -273,17 +272,25 @@ def _hyp_setup(sig, q, beta, n, dt, mu, h2):
     m = n * dt
     F0 = math.asinh(Sh / e)
     M1 = (Sh - F0) + m
-    Fs = _hyp_upper_start(abs(M1), e, em1)
-    return sqb, p, Ch, Sh, e, em1, m, F0, M1, Fs
+    return sqb, p, Ch, Sh, e, em1, m, F0, M1
 
 
 @jit(inline="always")
-def _hyp_solve(M1, e, em1, Fs):
-    """Hyperbola, part 2: ``(F1, sinh F1, cosh F1 - 1)``, the straight-line solve with the
-    safeguarded one as fallback (:mod:`astrodyn.orbit.kepler`)."""
-    ok, F1, sh1, chm1_1 = _kepler_hyp_fast(abs(M1), e, em1, Fs)
+def _hyp_solve_fast(M1, e, em1):
+    """Hyperbola, part 2: ``(ok, F1, sinh F1, cosh F1 - 1)`` by the straight-line path (own
+    starter and exp, :func:`astrodyn.orbit.kepler._kepler_hyp_fast`; vectorizable); ``ok`` is
+    False where the safeguarded solver must take over (its check failed, ``|M1| >= 1e100``)."""
+    M = abs(M1)
+    ok, F1, sh1, chm1_1 = _kepler_hyp_fast(M, e, em1, _hyp_upper_start_own(M, e, em1))
+    return ok & (M < 1e100), math.copysign(F1, M1), math.copysign(sh1, M1), chm1_1
+
+
+@jit(inline="always")
+def _hyp_solve(M1, e, em1):
+    """``(F1, sinh F1, cosh F1 - 1)``: :func:`_hyp_solve_fast`, the safeguarded solver as fallback."""
+    ok, F1, sh1, chm1_1 = _hyp_solve_fast(M1, e, em1)
     if ok:
-        return math.copysign(F1, M1), math.copysign(sh1, M1), chm1_1
+        return F1, sh1, chm1_1
     return _kepler_hyp_solve(M1, e, em1)
 
 
@@ -334,8 +341,8 @@ def _hyp_fg(r0, sqb, p, Ch, Sh, e, em1, m, F0, beta, n, F1, sh1, chm1_1):
 @jit
 def _fg_hyperbolic(r0, sig, q, beta, n, dt, mu, h2):
     """Lagrange coefficients on a hyperbola (absolute anomaly, difference-form polish)."""
-    sqb, p, Ch, Sh, e, em1, m, F0, M1, Fs = _hyp_setup(sig, q, beta, n, dt, mu, h2)
-    F1, sh1, chm1_1 = _hyp_solve(M1, e, em1, Fs)
+    sqb, p, Ch, Sh, e, em1, m, F0, M1 = _hyp_setup(sig, q, beta, n, dt, mu, h2)
+    F1, sh1, chm1_1 = _hyp_solve(M1, e, em1)
     return _hyp_fg(r0, sqb, p, Ch, Sh, e, em1, m, F0, beta, n, F1, sh1, chm1_1)
 
 
@@ -493,10 +500,10 @@ _SQA, _C, _S, _MH, _ML, _E, _X0, _C0 = 7, 8, 9, 10, 11, 12, 13, 14  # ellipse se
 _OK, _SX, _OMC, _RDA = 15, 16, 17, 18  # ellipse solve
 # hyperbolas have their own work array WH (columns from 0, so LLVM sees
 # non-negative indices and vectorizes): rows _RN.._N, _H2, _MU as in W, then
-_HDT, _SQB, _P, _CH, _SH, _HE, _EM1, _M, _F0, _M1, _FS = 7, 8, 9, 10, 11, 12, 13, 14, 15, 16, 17  # setup
-_HOK, _F1, _SH1, _CHM1 = 18, 19, 20, 21  # solve
+_HDT, _SQB, _P, _CH, _SH, _HE, _EM1, _M, _F0, _M1 = 7, 8, 9, 10, 11, 12, 13, 14, 15, 16  # setup
+_HOK, _F1, _SH1, _CHM1 = 17, 18, 19, 20  # solve
 _NW = 19
-_NWH = 22
+_NWH = 21
 
 
 @jit
@@ -575,26 +582,32 @@ def _propagate_block(r0, v0, dt, mu, r, v, lo, hi, idx, W, idxh, WH):
 
 
 @jit
+def _hyp_fast_pass(W, nh):
+    """Pass 2 of :func:`_hyp_passes`: straight-line, LLVM vectorizes it (packed ymm
+    arithmetic in ``_hyp_fast_pass.inspect_asm``)."""
+    for k in range(nh):
+        ok, F1, sh1, chm1_1 = _hyp_solve_fast(W[_M1, k], W[_HE, k], W[_EM1, k])
+        W[_HOK, k] = 1.0 if ok else 0.0
+        W[_F1, k] = F1
+        W[_SH1, k] = sh1
+        W[_CHM1, k] = chm1_1
+
+
+@jit
 def _hyp_passes(W, nh, idx, r0, v0, r, v):
     """The hyperbolas of a block (columns ``0:nh`` of their work array ``W``) in passes over all of them.
 
-    Pass 1: invariants, ``F0 = asinh``, starter (libm log/asinh: scalar, but
-    independent iterations the core overlaps); pass 2: the straight-line solve
-    (:func:`astrodyn.orbit.kepler._kepler_hyp_fast`, own exp), which LLVM
+    Pass 1: invariants and ``F0 = asinh`` (libm: scalar, but independent
+    iterations the core overlaps); pass 2: starter and straight-line solve
+    (:func:`_hyp_solve_fast`: own log, cube root and exp), which LLVM
     vectorizes; pass 3: the safeguarded solver where its check failed; pass 4:
     f, g and store.  Bit-identical to :func:`_fg_hyperbolic` on each state.
     """
     for k in range(nh):
-        sqb, p, Ch, Sh, e, em1, m, F0, M1, Fs = _hyp_setup(W[_SIG, k], W[_Q, k], -W[_ALPHA, k], W[_N, k], W[_HDT, k], W[_MU, k], W[_H2, k])
+        sqb, p, Ch, Sh, e, em1, m, F0, M1 = _hyp_setup(W[_SIG, k], W[_Q, k], -W[_ALPHA, k], W[_N, k], W[_HDT, k], W[_MU, k], W[_H2, k])
         W[_SQB, k], W[_P, k], W[_CH, k], W[_SH, k], W[_HE, k] = sqb, p, Ch, Sh, e
-        W[_EM1, k], W[_M, k], W[_F0, k], W[_M1, k], W[_FS, k] = em1, m, F0, M1, Fs
-    for k in range(nh):
-        M1 = W[_M1, k]
-        ok, F1, sh1, chm1_1 = _kepler_hyp_fast(abs(M1), W[_HE, k], W[_EM1, k], W[_FS, k])
-        W[_HOK, k] = 1.0 if ok else 0.0
-        W[_F1, k] = math.copysign(F1, M1)
-        W[_SH1, k] = math.copysign(sh1, M1)
-        W[_CHM1, k] = chm1_1
+        W[_EM1, k], W[_M, k], W[_F0, k], W[_M1, k] = em1, m, F0, M1
+    _hyp_fast_pass(W, nh)
     for k in range(nh):
         if W[_HOK, k] == 0.0:
             W[_F1, k], W[_SH1, k], W[_CHM1, k] = _kepler_hyp_solve(W[_M1, k], W[_HE, k], W[_EM1, k])
