@@ -757,16 +757,30 @@ def local_cluster(workers: int):
     (the workers are the parallelism), no dashboard, quiet logs."""
     import logging
 
-    import dask
     from distributed import LocalCluster
 
-    with dask.config.set({"distributed.nanny.pre-spawn-environ.NUMBA_NUM_THREADS": 1}):
+    # Not distributed's "pre-spawn-environ" for NUMBA_NUM_THREADS: the nannies run in this
+    # process and write it into *our* os.environ for good, and numba then refuses to run
+    # here ("Cannot set NUMBA_NUM_THREADS to a different value ...").  run_chunk sets the
+    # worker thread's numba thread count instead.
+    environ = dict(os.environ)
+    try:
         return LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
                             dashboard_address=None, silence_logs=logging.ERROR)
+    finally:  # the nannies also write PYTHONHASHSEED into this process's environment
+        os.environ.clear()
+        os.environ.update(environ)
 
 
-def run_chunk(ks: list[int], spec: SweepSpec) -> list[dict[str, Any]]:
-    """Rows of several cases run one after the other (one Dask task: less per-task overhead)."""
+def run_chunk(ks: list[int], spec: SweepSpec, numba_threads: int | None = None) -> list[dict[str, Any]]:
+    """Rows of several cases run one after the other (one Dask task: less per-task overhead).
+
+    ``numba_threads``: numba threads for this (worker) thread's kernels, 1 on Dask workers
+    (the workers are the parallelism)."""
+    if numba_threads is not None:
+        import numba
+
+        numba.set_num_threads(min(int(numba_threads), numba.config.NUMBA_NUM_THREADS))
     return [run_case(k, spec) for k in ks]
 
 
@@ -801,7 +815,7 @@ def run_cases(spec: SweepSpec, cases: Iterable[int], workers: int = 2, scheduler
         spec_future = client.scatter(spec, broadcast=True)
         token = f"{os.getpid()}-{time.time_ns()}"
         groups = [cases[i:i + chunk] for i in range(0, len(cases), chunk)]
-        futures = client.map(run_chunk, groups, spec=spec_future,
+        futures = client.map(run_chunk, groups, spec=spec_future, numba_threads=1,
                              key=[f"astrodyn-cases-{g[0]}-{len(g)}-{token}" for g in groups], pure=False)
         group_of = {f.key: g for f, g in zip(futures, groups)}
         try:
