@@ -8,6 +8,7 @@ measured in the same process.
 from __future__ import annotations
 
 import importlib
+import platform
 import sys
 
 SUITES = {
@@ -17,6 +18,18 @@ SUITES = {
     "sweep": "astrodyn.bench.sweep",
     "soak": "astrodyn.bench.soak",
 }
+
+
+def cpu_model() -> str:
+    """The CPU model name from /proc/cpuinfo (``platform.processor()`` elsewhere)."""
+    try:
+        with open("/proc/cpuinfo") as f:
+            for line in f:
+                if line.startswith("model name"):
+                    return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or "unknown CPU"
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -196,15 +196,9 @@ def _errors(r, r_ref, floor):
 
 
 def machine_description() -> str:
-    model = platform.processor() or "unknown CPU"
-    try:
-        with open("/proc/cpuinfo") as f:
-            for line in f:
-                if line.startswith("model name"):
-                    model = line.split(":", 1)[1].strip()
-                    break
-    except OSError:
-        pass
+    from astrodyn.bench import cpu_model
+
+    model = cpu_model()
     import numba
     import rebound
     import scipy

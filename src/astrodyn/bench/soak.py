@@ -145,7 +145,7 @@ def _report(samples: list[dict], final: dict, out: Path, args) -> dict:
     for r in samples:
         lines.append(f"| {r['wall_s']} | {r.get('sim_t')} | {r.get('lag_s')} | {r['status_rtt_ms']} | "
                      + " | ".join(f"{r.get(p + '_rss_mb')} | {r.get(p + '_cpu_s')}" for p in procs) + " |")
-    lines += ["", f"Memory flat (last-quarter mean RSS within 10 % of the second quarter's): "
+    lines += ["", "Memory flat (last-quarter mean RSS within 10 % of the second quarter's): "
               + ", ".join(f"{p} {'yes' if v else 'NO'}" for p, v in flat.items()),
               f"Lag growth (last quarter minus second quarter): {lag_growth:.2f} s; verdict: {'OK' if ok else 'FAILED'}."]
     md = "\n".join(lines)
