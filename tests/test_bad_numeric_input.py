@@ -21,7 +21,6 @@ from dataclasses import fields, is_dataclass
 from pathlib import Path
 
 import numpy as np
-import pytest
 
 MU = 3.986004418e14
 R0 = np.array([7.0e6, 1.0e5, -2.0e5])

@@ -9,7 +9,6 @@ status and stderr are checked: a clear one-line error, never a traceback.
 from __future__ import annotations
 
 import ast
-import json
 import os
 import pickle
 import random

@@ -49,7 +49,6 @@ import argparse
 import csv
 import heapq
 import json
-import math
 import os
 import re
 import sys
