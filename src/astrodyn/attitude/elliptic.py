@@ -335,6 +335,20 @@ def _rc1(e):
 
 
 @jit
+def _rj_series(e2, e3, e4, e5):
+    """The fifth-order series that closes Carlson's R_J and R_D duplication algorithms (Carlson 1995, Numer. Algorithms 10)."""
+    return (
+        1.0
+        - 3.0 * e2 / 14.0
+        + e3 / 6.0
+        + 9.0 * e2 * e2 / 88.0
+        - 3.0 * e4 / 22.0
+        - 9.0 * e2 * e3 / 52.0
+        + 3.0 * e5 / 26.0
+    )
+
+
+@jit
 def _rj(x, y, z, p):
     """Carlson R_J(x, y, z, p), x, y, z >= 0 (at most one zero), p > 0 (Carlson 1995, sec. 2)."""
     a0 = (x + y + z + 2.0 * p) / 5.0
@@ -369,15 +383,7 @@ def _rj(x, y, z, p):
     e3 = X * Y * Z + 2.0 * e2 * P + 4.0 * P * P * P
     e4 = (2.0 * X * Y * Z + e2 * P + 3.0 * P * P * P) * P
     e5 = X * Y * Z * P * P
-    series = (
-        1.0
-        - 3.0 * e2 / 14.0
-        + e3 / 6.0
-        + 9.0 * e2 * e2 / 88.0
-        - 3.0 * e4 / 22.0
-        - 9.0 * e2 * e3 / 52.0
-        + 3.0 * e5 / 26.0
-    )
+    series = _rj_series(e2, e3, e4, e5)
     return fac * series / (a * math.sqrt(a)) + 6.0 * s
 
 
@@ -410,15 +416,7 @@ def _rd(x, y, z):
     e3 = (3.0 * X * Y - 8.0 * Z * Z) * Z
     e4 = 3.0 * (X * Y - Z * Z) * Z * Z
     e5 = X * Y * Z * Z * Z
-    series = (
-        1.0
-        - 3.0 * e2 / 14.0
-        + e3 / 6.0
-        + 9.0 * e2 * e2 / 88.0
-        - 3.0 * e4 / 22.0
-        - 9.0 * e2 * e3 / 52.0
-        + 3.0 * e5 / 26.0
-    )
+    series = _rj_series(e2, e3, e4, e5)
     return fac * series / (a * math.sqrt(a)) + 3.0 * s
 
 
