@@ -21,7 +21,8 @@ import numpy as np
 import pytest
 from mcap.reader import make_reader
 
-from astrodyn.recording.export import ExportError, export, parse_ccsds_epoch
+from astrodyn.recording import load
+from astrodyn.recording.export import ExportError, export, parse_ccsds_epoch, write_aem
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _recordings import LEO_TWO_BODIES, leo_recording, record  # noqa: E402
@@ -102,9 +103,9 @@ def test_aem_parses_back_with_documented_order_and_direction(recording, tmp_path
     text = files[0].read_text()
     header, meta, rows = parse_kvn(text)
     assert header["CCSDS_AEM_VERS"] == "2.0"
-    assert meta["ATTITUDE_TYPE"] == "QUATERNION" and meta["REF_FRAME_A"] == "GCRF" and meta["REF_FRAME_B"] == "SC_BODY_1"
+    assert meta["ATTITUDE_TYPE"] == "QUATERNION/ANGVEL" and meta["REF_FRAME_A"] == "GCRF" and meta["REF_FRAME_B"] == "SC_BODY_1"
     assert "scalar QC last" in text and len(rows) == res.t.size
-    quat = np.array([[float(x) for x in row[1:]] for row in rows])
+    quat = np.array([[float(x) for x in row[1:5]] for row in rows])
     # Q1 Q2 Q3 QC = e1 e2 e3 e0, values unchanged (repr round trip: exact)
     np.testing.assert_array_equal(quat, np.concatenate([res.q[:, 0, 1:], res.q[:, 0, :1]], axis=1))
     # direction: torque-free => H_A = M^T (I w) constant.  |I w| ~ 1e-2; M is built from
@@ -117,6 +118,102 @@ def test_aem_parses_back_with_documented_order_and_direction(recording, tmp_path
     # ... and the other direction would not be constant (the check can fail)
     h_wrong = np.array([_ccsds_dcm_a_to_b(*qk) @ (inertia @ wk) for qk, wk in zip(quat, res.w[:, 0])])
     assert np.max(np.abs(h_wrong - h_wrong[0])) > 1e-3 * scale
+
+
+def test_aem_rates_parse_back_in_deg_per_s_in_body_axes(recording, tmp_path):
+    path, _, res = recording
+    (aem,) = export(path, "aem", tmp_path)
+    text = aem.read_text()
+    _, meta, rows = parse_kvn(text)
+    # CCSDS 504.0-B-2 table 4-4: QUATERNION/ANGVEL = epoch Q1 Q2 Q3 QC ANGVEL_X ANGVEL_Y ANGVEL_Z,
+    # ANGVEL_FRAME (sec. 4.2.3) names the frame of the rate components
+    assert meta["ATTITUDE_TYPE"] == "QUATERNION/ANGVEL" and meta["ANGVEL_FRAME"] == meta["REF_FRAME_B"] == "SC_BODY_1"
+    assert {len(row) for row in rows} == {8} and "deg/s" in text
+    rates = np.array([[float(x) for x in row[5:8]] for row in rows])
+    # deg/s -> rad/s here with pi/180: two roundings (w * 180/pi written with repr, read
+    # back * pi/180) of <= 1 ulp each, relative whatever the magnitude: 1e-15 ~ 4.5 ulp
+    np.testing.assert_allclose(rates * (np.pi / 180.0), res.w[:, 0], rtol=1e-15, atol=0)
+    # units: 0.3 rad/s about y is 17.19 deg/s (not 0.3 rad/s, not 0.3/2pi rev/s)
+    assert abs(rates[0, 1] - 17.188733853924696) < 1e-12
+
+
+def _skew(w):
+    return np.array([[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]])
+
+
+def _euler_step_errors(quat, rates_deg, dt, stride):
+    """max over k of |M(t + stride dt) - (I - [w x] stride dt) M(t)| for the CCSDS matrices
+    M (v_B = M v_A) and w of B relative to A in B axes (dM/dt = -[w x] M), and the same
+    with the sign of w flipped."""
+    right, wrong = 0.0, 0.0
+    for k in range(len(quat) - stride):
+        m0, m1 = _ccsds_dcm_a_to_b(*quat[k]), _ccsds_dcm_a_to_b(*quat[k + stride])
+        w = rates_deg[k] * (np.pi / 180.0)
+        h = stride * dt
+        right = max(right, np.max(np.abs(m1 - (np.eye(3) - _skew(w) * h) @ m0)))
+        wrong = max(wrong, np.max(np.abs(m1 - (np.eye(3) + _skew(w) * h) @ m0)))
+    return right, wrong
+
+
+SPIN_Z = LEO_TWO_BODIES.split("[[bodies]]")[0] + """
+[[bodies]]
+name = "spin-z"
+[bodies.attitude]
+q = [1, 0, 0, 0]
+w = ["0 rad/s", "0 rad/s", "0.2 rad/s"]
+inertia = ["0.03 kg m2", "0.035 kg m2", "0.01 kg m2"]
+"""
+
+
+@pytest.mark.parametrize("body", ["spin-z", "tumbler"])
+def test_aem_rates_propagate_the_written_quaternion(tmp_path, body):
+    """Integrating the written quaternion with the written rates over one sample gives the
+    next written quaternion to O(dt^2): the rates are in the right frame, sign and unit."""
+    path = tmp_path / "spin.mcap"
+    toml = SPIN_Z.format(name="spin", duration="20 s", rate="1 Hz")
+    if body == "tumbler":
+        toml = toml.replace('"0 rad/s", "0 rad/s", "0.2 rad/s"', '"0.05 rad/s", "0.02 rad/s", "0.2 rad/s"')
+    record(path, toml)
+    (aem,) = export(path, "aem", tmp_path)
+    _, meta, rows = parse_kvn(aem.read_text())
+    assert meta["ATTITUDE_TYPE"] == "QUATERNION/ANGVEL"
+    quat = np.array([[float(x) for x in row[1:5]] for row in rows])
+    rates = np.array([[float(x) for x in row[5:8]] for row in rows])
+    dt = 1.0
+    spin = np.max(np.linalg.norm(rates, axis=1)) * np.pi / 180.0  # rad/s
+    if body == "spin-z":
+        # pure spin about z: Q3 = sin(w t / 2), QC = cos(w t / 2) with w = +0.2 rad/s (A -> B rotation)
+        t = np.arange(len(rows)) * dt
+        np.testing.assert_allclose(quat, np.stack([0 * t, 0 * t, np.sin(0.1 * t), np.cos(0.1 * t)], axis=1), atol=1e-14)
+        np.testing.assert_allclose(rates, np.tile([0.0, 0.0, 0.2 * 180 / np.pi], (len(rows), 1)), rtol=1e-15, atol=0)
+    err1, wrong1 = _euler_step_errors(quat, rates, dt, 1)
+    err2, _ = _euler_step_errors(quat, rates, dt, 2)
+    # an Euler step of dM/dt = -[w x] M errs by about (w dt)^2 / 2 (plus dw/dt dt^2 / 2, small
+    # here); the wrong sign errs by about 2 w dt
+    assert err1 < (spin * dt) ** 2
+    assert wrong1 > spin * dt
+    # ... and the error is second order: doubling the step multiplies it by ~4
+    assert 3.0 < err2 / err1 < 5.0
+
+
+def test_aem_without_rates_writes_plain_quaternions(recording, tmp_path):
+    path, _, res = recording
+    for case in ("missing", "nan"):
+        run = load(path)
+        fields = run.bodies["leo"].attitude.fields
+        if case == "missing":
+            del fields["w"]
+        else:
+            fields["w"][3, 1] = np.nan  # one message without a usable rate
+        out = tmp_path / case
+        out.mkdir()
+        (aem,) = write_aem(run, out)
+        text = aem.read_text()
+        _, meta, rows = parse_kvn(text)
+        assert meta["ATTITUDE_TYPE"] == "QUATERNION" and "ANGVEL_FRAME" not in meta and "ANGVEL" not in text
+        assert {len(row) for row in rows} == {5}
+        np.testing.assert_array_equal([[float(x) for x in row[1:]] for row in rows],
+                                      np.concatenate([res.q[:, 0, 1:], res.q[:, 0, :1]], axis=1))
 
 
 def test_csv_round_trip_is_exact(recording, tmp_path):

@@ -15,8 +15,11 @@ What each format writes (one file per channel or body, named after the body):
              ``epoch X Y Z X_DOT Y_DOT Z_DOT`` in km and km/s.  ``REF_FRAME`` is the
              message's ``frame`` (e.g. GCRF), ``CENTER_NAME`` the scenario's central body.
 ``aem``      ``<body>.aem``: a CCSDS Attitude Ephemeris Message, KVN, version 2.0
-             (CCSDS 504.0-B-2), ``ATTITUDE_TYPE = QUATERNION``.  Conventions, also
-             written as COMMENT lines in the file:
+             (CCSDS 504.0-B-2).  ``ATTITUDE_TYPE = QUATERNION/ANGVEL`` with
+             ``ANGVEL_FRAME = SC_BODY_1`` when every attitude message carries finite body
+             rates ``w`` (the astrodyn schema requires them), plain ``QUATERNION``
+             otherwise (files from other writers, a NaN rate).  Conventions, also written
+             as COMMENT lines in the file:
 
              * ``REF_FRAME_A`` = the inertial frame of the orbit messages (GCRF when the
                body has no orbit), ``REF_FRAME_B = SC_BODY_1``;
@@ -25,6 +28,10 @@ What each format writes (one file per channel or body, named after the body):
                ``Q1 Q2 Q3 QC = e1 e2 e3 e0`` -- the scalar QC is the **last** column, as
                504.0-B-2 orders the QUATERNION data line.  No sign change: Baruh's C(q)
                and the A-to-B quaternion of 504.0-B-2 are the same rotation.
+             * ``ANGVEL_X ANGVEL_Y ANGVEL_Z`` (504.0-B-2 table 4-4: after ``QC`` on the
+               same line) are the angular velocity of frame B relative to frame A, in
+               frame-B (body) components, in **deg/s**: ``w * 180/pi`` of the recorded
+               ``w`` (rad/s), so ``dC/dt = -[w x] C``.
 ``foxglove`` ``<file>.foxglove.mcap``: every recorded channel copied unchanged, plus a
              ``foxglove.FrameTransform`` JSON channel per body on ``foxglove/<body>/tf``
              (parent frame = the orbit frame, e.g. ``GCRF``, child = the body name).
@@ -33,6 +40,15 @@ What each format writes (one file per channel or body, named after the body):
              read 1 grid unit as 1 km); rotation ``(x, y, z, w) = (e1, e2, e3, e0)``,
              which as Foxglove's active child-to-parent rotation is ``C(q).T``
              (:func:`astrodyn.rotation.quat_to_scalar_last`).
+             And one ``foxglove.SceneUpdate`` JSON channel, ``foxglove/scene``, written
+             once at the first log time, entities that never expire (km as well):
+             the central body as a sphere of the metadata's equatorial radius at the
+             origin of the orbit frame (only when some body has an orbit); per body with
+             an orbit its recorded positions as a LINE_STRIP in its colour, at most
+             2000 points per body and 200,000 in all, evenly spread over the samples,
+             first and last kept (:func:`line_indices`); per body with an attitude
+             three arrows along its x, y, z axes (red, green, blue) in its own frame.
+             See :func:`scene_updates`.
 
 Epochs of OEM/AEM: ``TIME_SYSTEM`` is the scale of the scenario epoch (UTC, TAI, TT,
 TDB, ...), and each data line's epoch is ``epoch + t`` computed in that scale with
@@ -64,7 +80,8 @@ from astrodyn.rotation import quat_to_scalar_last
 
 __all__ = [
     "FORMATS", "ExportError", "export", "write_csv", "write_parquet", "write_oem", "write_aem",
-    "write_foxglove", "ccsds_epochs", "parse_ccsds_epoch", "FRAME_TRANSFORM_SCHEMA", "main",
+    "write_foxglove", "ccsds_epochs", "parse_ccsds_epoch", "FRAME_TRANSFORM_SCHEMA", "SCENE_UPDATE_SCHEMA",
+    "SCENE_TOPIC", "MAX_LINE_POINTS", "MAX_SCENE_POINTS", "scene_updates", "line_indices", "main",
 ]
 
 FORMATS = ("csv", "parquet", "oem", "aem", "foxglove")
@@ -91,6 +108,62 @@ FRAME_TRANSFORM_SCHEMA = {
     },
     "required": ["timestamp", "parent_frame_id", "child_frame_id", "translation", "rotation"],
 }
+
+
+def _obj(title: str, props: dict, required: list[str] | None = None) -> dict:
+    """A JSON Schema object with ``title``, ``properties`` and (default: all) ``required``."""
+    return {"title": title, "type": "object", "properties": props,
+            "required": list(props) if required is None else required}
+
+
+_NUM = {"type": "number"}
+_VECTOR3 = _obj("foxglove.Vector3", {c: _NUM for c in _XYZ})
+_POINT3 = _obj("foxglove.Point3", {c: _NUM for c in _XYZ})
+_QUATERNION = _obj("foxglove.Quaternion", {c: _NUM for c in ("x", "y", "z", "w")})
+_POSE = _obj("foxglove.Pose", {"position": _VECTOR3, "orientation": _QUATERNION})
+_COLOR = _obj("foxglove.Color", {c: _NUM for c in "rgba"})
+_TIME = FRAME_TRANSFORM_SCHEMA["properties"]["timestamp"]
+_DURATION = {"type": "object", "title": "duration", "properties": {
+    "sec": {"type": "integer"}, "nsec": {"type": "integer", "minimum": 0, "maximum": 999999999}}}
+
+
+def _array(items: dict | None = None) -> dict:
+    return {"type": "array", "items": items} if items is not None else {"type": "array"}
+
+
+#: foxglove.SceneUpdate, JSON Schema: the part of the published schema (foxglove-sdk
+#: schemas/jsonschema/SceneUpdate.json) that astrodyn writes, with the same field names,
+#: types and ``required`` lists.  The primitives astrodyn never fills (cylinders,
+#: triangles, texts, models) are declared as (always empty) arrays; Foxglove picks the
+#: decoder by the schema *name*, so this subset is read like the full schema.
+SCENE_UPDATE_SCHEMA = _obj("foxglove.SceneUpdate", {
+    "deletions": _array(_obj("foxglove.SceneEntityDeletion", {
+        "timestamp": _TIME, "type": {"title": "foxglove.SceneEntityDeletionType", "enum": [0, 1]},
+        "id": {"type": "string"}})),
+    "entities": _array(_obj("foxglove.SceneEntity", {
+        "timestamp": _TIME,
+        "frame_id": {"type": "string"},
+        "id": {"type": "string"},
+        "lifetime": _DURATION,
+        "frame_locked": {"type": "boolean"},
+        "metadata": _array(_obj("foxglove.KeyValuePair", {"key": {"type": "string"}, "value": {"type": "string"}})),
+        "arrows": _array(_obj("foxglove.ArrowPrimitive", {
+            "pose": _POSE, "shaft_length": _NUM, "shaft_diameter": _NUM, "head_length": _NUM,
+            "head_diameter": _NUM, "color": _COLOR})),
+        "cubes": _array(_obj("foxglove.CubePrimitive", {"pose": _POSE, "size": _VECTOR3, "color": _COLOR})),
+        "spheres": _array(_obj("foxglove.SpherePrimitive", {"pose": _POSE, "size": _VECTOR3, "color": _COLOR})),
+        "cylinders": _array(),
+        "lines": _array(_obj("foxglove.LinePrimitive", {
+            "type": {"title": "foxglove.LineType", "enum": [0, 1, 2],
+                     "description": "0 LINE_STRIP, 1 LINE_LOOP, 2 LINE_LIST"},
+            "pose": _POSE, "thickness": _NUM, "scale_invariant": {"type": "boolean"},
+            "points": _array(_POINT3), "color": _COLOR, "colors": _array(_COLOR),
+            "indices": _array({"type": "integer", "minimum": 0})})),
+        "triangles": _array(),
+        "texts": _array(),
+        "models": _array(),
+    })),
+})
 
 
 class ExportError(RuntimeError):
@@ -222,11 +295,23 @@ def _kvn(key: str, value) -> str:
     return f"{key:<20} = {value}"
 
 
-def _central_name(run: Run) -> str:
+def _central_body(run: Run) -> dict:
+    """The scenario metadata's ``central_body`` table (name, mu, radius m, frame), or {}."""
     try:
-        return str(json.loads(run.scenario["json"])["central_body"]["name"]).upper()
+        cb = json.loads(run.scenario["json"])["central_body"]
+        return cb if isinstance(cb, dict) else {}
     except (KeyError, ValueError, TypeError):
-        return "EARTH"
+        return {}
+
+
+def _central_name(run: Run) -> str:
+    return str(_central_body(run).get("name", "earth")).upper()
+
+
+def _orbit_frame(body) -> str:
+    """The inertial frame of a body's orbit messages (GCRF when it has no orbit)."""
+    orbit = body.orbit
+    return sorted(set(orbit.frame))[0] if orbit is not None and len(orbit) else "GCRF"
 
 
 def _f(x: float) -> str:
@@ -280,27 +365,48 @@ def write_oem(run: Run, out: Path) -> list[Path]:
     return written
 
 
+def _body_rates(tr: Track) -> np.ndarray | None:
+    """The attitude track's body rates ``w`` (rad/s, ``(n, 3)``) if every message carries them."""
+    w = tr.fields.get("w")
+    if w is None or w.ndim != 2 or w.shape != (len(tr), 3) or not np.all(np.isfinite(w)):
+        return None
+    return w
+
+
 def write_aem(run: Run, out: Path) -> list[Path]:
-    """``<body>.aem`` per body with an attitude channel (CCSDS 504.0-B-2 KVN, QUATERNION)."""
+    """``<body>.aem`` per body with an attitude channel (CCSDS 504.0-B-2 KVN):
+    QUATERNION/ANGVEL when every attitude message carries finite body rates ``w``,
+    plain QUATERNION otherwise (see the module docstring)."""
     written = []
     for name, body in run.bodies.items():
         tr = body.attitude
         if tr is None or len(tr) == 0:
             continue
         epochs, system = ccsds_epochs(run, tr.t, tr.log_time)
-        frame_a = sorted(set(body.orbit.frame))[0] if body.orbit is not None and len(body.orbit) else "GCRF"
+        frame_a = _orbit_frame(body)
+        w = _body_rates(tr)
         comments = ["Quaternion rotates REF_FRAME_A into REF_FRAME_B: v_B = C(q) v_A (Baruh ch. 7),",
                     "data columns Q1 Q2 Q3 QC with the scalar QC last (astrodyn q = (QC, Q1, Q2, Q3))."]
+        meta_tail = [_kvn("ATTITUDE_TYPE", "QUATERNION")]
+        if w is not None:
+            comments += ["ANGVEL_X ANGVEL_Y ANGVEL_Z: angular velocity of REF_FRAME_B relative to REF_FRAME_A,",
+                         "components in ANGVEL_FRAME = SC_BODY_1 (body axes), deg/s: the recorded w (rad/s) * 180/pi;",
+                         "dC/dt = -[w x] C."]
+            meta_tail = [_kvn("ATTITUDE_TYPE", "QUATERNION/ANGVEL"), _kvn("ANGVEL_FRAME", "SC_BODY_1")]
         lines = _message_head("CCSDS_AEM_VERS", "2.0", run, tr, comments, name,
                               [("REF_FRAME_A", frame_a), ("REF_FRAME_B", "SC_BODY_1")], system, epochs) + [
-            _kvn("ATTITUDE_TYPE", "QUATERNION"),
+            *meta_tail,
             "META_STOP",
             "",
             "DATA_START",
         ]
         q = tr.q
+        w_deg = np.degrees(w) if w is not None else None
         for k, ep in enumerate(epochs):
-            lines.append(" ".join([ep, _f(q[k, 1]), _f(q[k, 2]), _f(q[k, 3]), _f(q[k, 0])]))
+            row = [ep, _f(q[k, 1]), _f(q[k, 2]), _f(q[k, 3]), _f(q[k, 0])]
+            if w_deg is not None:
+                row += [_f(w_deg[k, 0]), _f(w_deg[k, 1]), _f(w_deg[k, 2])]
+            lines.append(" ".join(row))
         lines.append("DATA_STOP")
         path = out / f"{name}.aem"
         path.write_text("\n".join(lines) + "\n")
@@ -322,7 +428,7 @@ def frame_transforms(run: Run) -> list[tuple[int, str, bytes]]:
         orbit, att = body.orbit, body.attitude
         if orbit is None and att is None:
             continue
-        parent = sorted(set(orbit.frame))[0] if orbit is not None and len(orbit) else "GCRF"
+        parent = _orbit_frame(body)
         times = np.union1d(orbit.log_time if orbit is not None else [], att.log_time if att is not None else []).astype(np.int64)
         pos = np.zeros((times.size, 3))
         rot = np.tile([0.0, 0.0, 0.0, 1.0], (times.size, 1))
@@ -350,15 +456,134 @@ def frame_transforms(run: Run) -> list[tuple[int, str, bytes]]:
     return out
 
 
-def write_foxglove(run: Run, out: Path) -> list[Path]:
-    """A Foxglove-ready copy of the file: every channel unchanged plus FrameTransform channels."""
+SCENE_TOPIC = "foxglove/scene"
+#: Most points of one orbit line, and of all orbit lines together (see :func:`scene_updates`).
+MAX_LINE_POINTS = 2000
+MAX_SCENE_POINTS = 200_000
+#: Body colours (r, g, b), cycled in the order of the bodies: matplotlib's "tab10".
+BODY_COLORS = ((0.122, 0.467, 0.706), (1.0, 0.498, 0.055), (0.173, 0.627, 0.173), (0.839, 0.153, 0.157),
+               (0.580, 0.404, 0.741), (0.549, 0.337, 0.294), (0.890, 0.467, 0.761), (0.498, 0.498, 0.498),
+               (0.737, 0.741, 0.133), (0.090, 0.745, 0.812))
+_CENTRAL_COLOR = {"r": 0.20, "g": 0.42, "b": 0.80, "a": 0.55}
+_IDENTITY_POSE = {"position": {"x": 0.0, "y": 0.0, "z": 0.0}, "orientation": {"x": 0.0, "y": 0.0, "z": 0.0, "w": 1.0}}
+# Arrow orientations (x, y, z, w) turning the arrow's +x onto the body's x, y, z axis:
+# identity, +90 deg about z, -90 deg about y.
+_AXIS_ORIENTATIONS = ((0.0, 0.0, 0.0, 1.0), (0.0, 0.0, 0.5 ** 0.5, 0.5 ** 0.5), (0.0, -(0.5 ** 0.5), 0.0, 0.5 ** 0.5))
+_AXIS_COLORS = ((0.9, 0.1, 0.1), (0.1, 0.75, 0.1), (0.15, 0.3, 0.95))
+
+
+def line_indices(n: int, max_points: int = MAX_LINE_POINTS) -> np.ndarray:
+    """Sample indices kept for an orbit line of ``n`` recorded positions.
+
+    All of them when ``n <= max_points``; otherwise exactly ``max_points`` indices spread
+    evenly over ``0 .. n-1`` (``round(linspace(0, n-1, max_points))``), the first and the
+    last sample always kept.
+    """
+    if not (isinstance(max_points, (int, np.integer)) and max_points >= 2):
+        raise ValueError(f"max_points: expected an integer >= 2, got {max_points!r}")
+    if n <= max_points:
+        return np.arange(n)
+    return np.rint(np.linspace(0.0, n - 1.0, int(max_points))).astype(np.int64)
+
+
+def _color(rgb, a: float = 1.0) -> dict:
+    return {"r": float(rgb[0]), "g": float(rgb[1]), "b": float(rgb[2]), "a": float(a)}
+
+
+def _entity(stamp: dict, frame_id: str, entity_id: str, frame_locked: bool = False, metadata: dict | None = None,
+            **primitives) -> dict:
+    """A ``foxglove.SceneEntity`` with every required field; lifetime 0 = never expires."""
+    ent = {"timestamp": stamp, "frame_id": frame_id, "id": entity_id, "lifetime": {"sec": 0, "nsec": 0},
+           "frame_locked": frame_locked,
+           "metadata": [{"key": k, "value": str(v)} for k, v in (metadata or {}).items()]}
+    for kind in ("arrows", "cubes", "spheres", "cylinders", "lines", "triangles", "texts", "models"):
+        ent[kind] = primitives.pop(kind, [])
+    if primitives:  # pragma: no cover - programming error
+        raise TypeError(f"unknown primitives {sorted(primitives)}")
+    return ent
+
+
+def scene_updates(run: Run, max_line_points: int = MAX_LINE_POINTS,
+                  max_scene_points: int = MAX_SCENE_POINTS) -> list[tuple[int, str, bytes]]:
+    """``(log_time, topic, payload)`` of the ``foxglove.SceneUpdate`` messages on :data:`SCENE_TOPIC`.
+
+    All are stamped with the first log time of the recording and never expire
+    (``lifetime`` 0); distances in km like the FrameTransforms.  One message per entity
+    group, so none grows with the number of bodies:
+
+    * ``central_body/<name>``: the central body as a sphere of the metadata's equatorial
+      radius (diameter ``2 R / 1000`` on each axis), centred on the origin of the orbit
+      frame.  Written only when some body has an orbit (in an attitude-only scene the
+      bodies sit at the origin, inside the sphere) and the metadata give a radius.
+    * ``orbit/<body>``: per body with an orbit, its recorded positions ``r / 1000`` as a
+      LINE_STRIP in the orbit frame, 2 px wide, in the body's colour
+      (:data:`BODY_COLORS`).  At most ``max_line_points`` points per body and
+      ``max_scene_points`` for all bodies together (a 1000-body constellation gets 200
+      per body), chosen by :func:`line_indices`.
+    * ``axes/<body>``: per body with an attitude, three arrows along its x (red), y
+      (green) and z (blue) axes in the body's own frame (``frame_id`` = body name,
+      ``frame_locked``), so they turn with the FrameTransform; length a tenth of the
+      central body's radius in an orbit scene, 1 km otherwise.
+    """
+    if not (isinstance(max_scene_points, (int, np.integer)) and max_scene_points >= 2):
+        raise ValueError(f"max_scene_points: expected an integer >= 2, got {max_scene_points!r}")
+    bodies = [(name, b) for name, b in run.bodies.items()
+              if (b.orbit is not None and len(b.orbit)) or (b.attitude is not None and len(b.attitude))]
+    if not bodies:
+        return []
+    t0 = int(min(int(tr.log_time.min()) for tr in run.channels.values() if len(tr)))
+    stamp = {"sec": t0 // 10**9, "nsec": t0 % 10**9}
+    orbiting = [b for _, b in bodies if b.orbit is not None and len(b.orbit)]
+    central = _central_body(run)
+    try:
+        radius_km = float(central.get("radius", 0.0)) / 1e3
+    except (TypeError, ValueError):
+        radius_km = 0.0
+    radius_km = radius_km if np.isfinite(radius_km) and radius_km > 0 else 0.0
+    updates = []
+    if orbiting and radius_km > 0:
+        frame = _orbit_frame(orbiting[0])
+        name = str(central.get("name", "central"))
+        size = {"x": 2 * radius_km, "y": 2 * radius_km, "z": 2 * radius_km}
+        sphere = {"pose": _IDENTITY_POSE, "size": size, "color": _CENTRAL_COLOR}
+        updates.append([_entity(stamp, frame, f"central_body/{name}", metadata={"name": name, "radius_km": repr(radius_km)},
+                                spheres=[sphere])])
+    per_body = max(2, min(int(max_line_points), int(max_scene_points) // max(1, len(orbiting))))
+    axis_km = 0.1 * radius_km if orbiting and radius_km > 0 else 1.0
+    for k, (name, body) in enumerate(bodies):
+        rgb = BODY_COLORS[k % len(BODY_COLORS)]
+        entities = []
+        if body.orbit is not None and len(body.orbit):
+            idx = line_indices(len(body.orbit), per_body)
+            points = [dict(zip(_XYZ, map(float, p))) for p in body.orbit.r[idx] / 1e3]
+            line = {"type": 0, "pose": _IDENTITY_POSE, "thickness": 2.0, "scale_invariant": True, "points": points,
+                    "color": _color(rgb), "colors": [], "indices": []}
+            entities.append(_entity(stamp, _orbit_frame(body), f"orbit/{name}",
+                                    metadata={"body": name, "samples": len(body.orbit), "points": len(idx)}, lines=[line]))
+        if body.attitude is not None and len(body.attitude):
+            arrows = [{"pose": {"position": {"x": 0.0, "y": 0.0, "z": 0.0},
+                                "orientation": dict(zip(("x", "y", "z", "w"), orient))},
+                       "shaft_length": 0.8 * axis_km, "shaft_diameter": 0.04 * axis_km,
+                       "head_length": 0.2 * axis_km, "head_diameter": 0.1 * axis_km, "color": _color(c)}
+                      for orient, c in zip(_AXIS_ORIENTATIONS, _AXIS_COLORS)]
+            entities.append(_entity(stamp, name, f"axes/{name}", frame_locked=True,
+                                    metadata={"body": name, "axes": "x red, y green, z blue"}, arrows=arrows))
+        updates.append(entities)
+    return [(t0, SCENE_TOPIC, json.dumps({"deletions": [], "entities": ents}, separators=(",", ":")).encode())
+            for ents in updates]
+
+
+def write_foxglove(run: Run, out: Path, max_line_points: int = MAX_LINE_POINTS) -> list[Path]:
+    """A Foxglove-ready copy of the file: every channel unchanged plus FrameTransform
+    channels and the SceneUpdate channel (see the module docstring)."""
     from astrodyn.recording.stream import open_stream
 
     path = out / (Path(run.path).name.removesuffix(".mcap") + ".foxglove.mcap")
     if path.resolve() == Path(run.path).resolve():
         raise ExportError(f"--out: would overwrite the input {run.path}")
     epoch_ns = int(run.metadata.get("recording", {}).get("epoch_unix_ns", run.scenario.get("epoch_unix_ns", 0)))
-    tfs = frame_transforms(run)
+    # the scene first: at the first instant it is there before the first transform
+    tfs = sorted(scene_updates(run, max_line_points) + frame_transforms(run), key=lambda m: m[0])
     with open_stream(run.path) as stream, McapRecorder(path, run.scenario, epoch_ns=epoch_ns) as rec:
         registered: set[str] = set()
         seqs: dict[str, int] = {}
@@ -366,7 +591,9 @@ def write_foxglove(run: Run, out: Path) -> list[Path]:
         extras = ((lt, topic, data, None) for lt, topic, data in tfs)
         for lt, topic, data, raw in heapq.merge(originals, extras, key=lambda x: x[0]):
             if topic not in registered:
-                if raw is None:
+                if raw is None and topic == SCENE_TOPIC:
+                    rec.add_channel(topic, "foxglove.SceneUpdate", SCENE_UPDATE_SCHEMA)
+                elif raw is None:
                     rec.add_channel(topic, "foxglove.FrameTransform", FRAME_TRANSFORM_SCHEMA)
                 else:
                     ch = next(c for c in stream.channels.values() if c.topic == topic)
