@@ -30,6 +30,7 @@ from test_export import _rotate_active  # noqa: E402  (written independently of 
 # astrodyn writes (SceneUpdate, SceneEntity, and the primitives it fills).
 PUBLISHED_REQUIRED = {
     "foxglove.SceneUpdate": ["deletions", "entities"],
+    "foxglove.SceneEntityDeletion": ["timestamp", "type", "id"],
     "foxglove.SceneEntity": ["timestamp", "frame_id", "id", "lifetime", "frame_locked", "metadata", "arrows", "cubes",
                              "spheres", "cylinders", "lines", "triangles", "texts", "models"],
     "foxglove.SpherePrimitive": ["pose", "size", "color"],
