@@ -101,6 +101,92 @@ _CHUNK = 1 << 15  # steps per kernel call (bounds the size of per-step tables)
 # ---------------------------------------------------------------------------
 
 
+# Short odd/even Taylor polynomials for the small angles of a splitting step
+# (Abramowitz & Stegun 4.3.65-67), with libm above the range:
+#   tan y = y + y^3/3 + 2 y^5/15 + 17 y^7/315 + 62 y^9/2835 + ...   |y| <= 1/32:
+#       first omitted term 1382/155925 y^11 <= 8.1e-18 |y| (0.08 ulp);
+#   sin x = x - x^3/3! + ... - x^11/11!,  cos x = 1 - x^2/2! + ... - x^10/10!   |x| <= 1/8:
+#       first omitted terms x^13/13! <= 1.2e-23 |x| and x^12/12! <= 3e-20.
+_SMALL_ANGLE = 0.125  # rad: |angle| up to which the polynomials are used (y = angle/4 <= 1/32)
+_TAN3, _TAN5, _TAN7, _TAN9 = 1.0 / 3.0, 2.0 / 15.0, 17.0 / 315.0, 62.0 / 2835.0
+_SIN1, _SIN2, _SIN3, _SIN4, _SIN5 = -1.0 / 6.0, 1.0 / 120.0, -1.0 / 5040.0, 1.0 / 362880.0, -1.0 / 39916800.0
+_COS1, _COS2, _COS3, _COS4, _COS5 = -0.5, 1.0 / 24.0, -1.0 / 720.0, 1.0 / 40320.0, -1.0 / 3628800.0
+
+
+@jit(inline="always")
+def _axis_rotation_trig(angle):
+    """``(c, s, ca, sa)``: cos and sin of ``angle/2`` (for ``q``) and of ``angle`` (for ``M``), rad.
+
+    ``c, s`` come from ``u = tan(angle/4)`` through the rational half-angle forms
+    ``c = (1 - u^2)/(1 + u^2)``, ``s = 2u/(1 + u^2)``, so ``c^2 + s^2 = 1`` for any
+    ``u``: the Euler parameters keep unit norm up to rounding whatever the accuracy
+    of ``u``.  For ``|angle| <= 1/8`` rad, ``u`` is an odd Taylor polynomial and
+    ``(ca, sa)`` the Taylor polynomials of ``cos, sin angle`` (Estrin's scheme:
+    a short dependency chain, which is what the serial splitting step waits on);
+    above, ``u = tan`` (libm) and ``ca = c^2 - s^2``, ``sa = 2 s c``.  Every branch
+    is within about 1 ulp of the true values (tested against mpmath); NaN gives
+    NaN (it fails the range test).
+    """
+    if abs(angle) <= _SMALL_ANGLE:
+        z = angle * angle
+        z2 = z * z
+        z4 = z2 * z2
+        sa = angle + angle * (z * ((_SIN1 + z * _SIN2) + z2 * (_SIN3 + z * _SIN4) + z4 * _SIN5))
+        ca = 1.0 + z * ((_COS1 + z * _COS2) + z2 * (_COS3 + z * _COS4) + z4 * _COS5)
+        y = 0.25 * angle
+        y2 = 0.0625 * z
+        u = y + y * (y2 * ((_TAN3 + y2 * _TAN5) + (y2 * y2) * (_TAN7 + y2 * _TAN9)))
+        u2 = u * u
+        d = 1.0 / (1.0 + u2)
+        return (1.0 - u2) * d, 2.0 * u * d, ca, sa
+    u = math.tan(0.25 * angle)
+    u2 = u * u
+    d = 1.0 / (1.0 + u2)
+    c = (1.0 - u2) * d
+    s = 2.0 * u * d
+    return c, s, (c - s) * (c + s), 2.0 * s * c
+
+
+@jit(inline="always")
+def _rot2(ca, sa, x, y):
+    """``(x, y)`` components of a body vector after the body turns by ``angle`` about the third axis."""
+    return ca * x + sa * y, ca * y - sa * x
+
+
+@jit(inline="always")
+def _turn_body(axis, c, s, ca, sa, m0, m1, m2, e0, e1, e2, e3):
+    """Exact rotation of the body by ``angle`` about principal axis ``axis`` (0, 1, 2), in scalars.
+
+    ``M <- C_i(angle) M`` and ``q <- q (x) (c, s e_i)`` with ``(c, s, ca, sa)``
+    from :func:`_axis_rotation_trig`; same arithmetic as :func:`_rotate_about_axis`.
+    """
+    if axis == 0:
+        m1, m2 = _rot2(ca, sa, m1, m2)
+        e0, e1 = _rot2(c, -s, e0, e1)
+        e2, e3 = _rot2(c, s, e2, e3)
+    elif axis == 1:
+        m2, m0 = _rot2(ca, sa, m2, m0)
+        e0, e2 = _rot2(c, -s, e0, e2)
+        e3, e1 = _rot2(c, s, e3, e1)
+    else:
+        m0, m1 = _rot2(ca, sa, m0, m1)
+        e0, e3 = _rot2(c, -s, e0, e3)
+        e1, e2 = _rot2(c, s, e1, e2)
+    return m0, m1, m2, e0, e1, e2, e3
+
+
+@jit(inline="always")
+def _turn_vector(axis, ca, sa, v0, v1, v2):
+    """Body components of an inertially fixed vector after the same rotation (like ``M``)."""
+    if axis == 0:
+        v1, v2 = _rot2(ca, sa, v1, v2)
+    elif axis == 1:
+        v2, v0 = _rot2(ca, sa, v2, v0)
+    else:
+        v0, v1 = _rot2(ca, sa, v0, v1)
+    return v0, v1, v2
+
+
 @jit
 def _rotate_about_axis(M, q, axis, angle):
     """In place: ``M <- C_i(angle) M`` and ``q <- q (x) (cos(angle/2), sin(angle/2) e_i)``.
@@ -108,33 +194,8 @@ def _rotate_about_axis(M, q, axis, angle):
     This is the exact flow of ``H_i = (M_i - h_i)^2 / (2 I_i)`` with
     ``angle = (M_i - h_i) dt / I_i`` (rotation of the body about principal axis i).
     """
-    # one transcendental: u = tan(angle/4) gives the half-angle pair exactly
-    # (c, s) = ((1 - u^2), 2u) / (1 + u^2) to a few ulp; |angle| < pi per sub-step
-    u = math.tan(0.25 * angle)
-    u2 = u * u
-    d = 1.0 / (1.0 + u2)
-    c = (1.0 - u2) * d
-    s = 2.0 * u * d
-    ca = (c - s) * (c + s)
-    sa = 2.0 * s * c
-    j = axis + 1
-    if j == 3:
-        j = 0
-    k = j + 1
-    if k == 3:
-        k = 0
-    mj = M[j]
-    mk = M[k]
-    M[j] = ca * mj + sa * mk
-    M[k] = ca * mk - sa * mj
-    q0 = q[0]
-    qi = q[axis + 1]
-    qj = q[j + 1]
-    qk = q[k + 1]
-    q[0] = c * q0 - s * qi
-    q[axis + 1] = c * qi + s * q0
-    q[j + 1] = c * qj + s * qk
-    q[k + 1] = c * qk - s * qj
+    c, s, ca, sa = _axis_rotation_trig(angle)
+    M[0], M[1], M[2], q[0], q[1], q[2], q[3] = _turn_body(axis, c, s, ca, sa, M[0], M[1], M[2], q[0], q[1], q[2], q[3])
 
 
 @jit
@@ -168,18 +229,9 @@ def _renormalize(q):
 KICK_CONSTANT, KICK_FORCE, KICK_GRAVITY_GRADIENT = 1, 2, 4
 
 
-@jit
-def _kick(M, q, dt, parts, tau_body, tau_inertial, com, force, gg_mu, gg_inertia, r):
-    """``M <- M + dt * tau(q)``: constant body + inertial torques, uniform gravity, gravity gradient.
-
-    ``parts`` bitmask of the terms present (``KICK_CONSTANT | KICK_FORCE |
-    KICK_GRAVITY_GRADIENT``): absent terms cost nothing.
-    """
-    e0 = q[0]
-    e1 = q[1]
-    e2 = q[2]
-    e3 = q[3]
-    # C(q), v_body = C v_inertial (Baruh eq. 7.x, scalar first)
+@jit(inline="always")
+def _dcm_apply(e0, e1, e2, e3, v):
+    """``C(q) v`` for an inertial ``v`` (3,): its body components (``C`` of Baruh eq. 7.x, scalar first)."""
     c00 = e0 * e0 + e1 * e1 - e2 * e2 - e3 * e3
     c11 = e0 * e0 - e1 * e1 + e2 * e2 - e3 * e3
     c22 = e0 * e0 - e1 * e1 - e2 * e2 + e3 * e3
@@ -189,38 +241,85 @@ def _kick(M, q, dt, parts, tau_body, tau_inertial, com, force, gg_mu, gg_inertia
     c20 = 2.0 * (e1 * e3 + e0 * e2)
     c12 = 2.0 * (e2 * e3 + e0 * e1)
     c21 = 2.0 * (e2 * e3 - e0 * e1)
-    t0 = 0.0
-    t1 = 0.0
-    t2 = 0.0
-    if parts & 1:  # constant torques: body + inertial (in body axes)
-        v0 = tau_inertial[0]
-        v1 = tau_inertial[1]
-        v2 = tau_inertial[2]
-        t0 = tau_body[0] + c00 * v0 + c01 * v1 + c02 * v2
-        t1 = tau_body[1] + c10 * v0 + c11 * v1 + c12 * v2
-        t2 = tau_body[2] + c20 * v0 + c21 * v1 + c22 * v2
-    if parts & 2:  # uniform gravity at a body-fixed centre of mass: r_c x (C F)
-        f0 = c00 * force[0] + c01 * force[1] + c02 * force[2]
-        f1 = c10 * force[0] + c11 * force[1] + c12 * force[2]
-        f2 = c20 * force[0] + c21 * force[1] + c22 * force[2]
-        t0 += com[1] * f2 - com[2] * f1
-        t1 += com[2] * f0 - com[0] * f2
-        t2 += com[0] * f1 - com[1] * f0
-    if parts & 4:  # gravity gradient 3 mu / |r|^5 r_b x (I r_b)
-        b0 = c00 * r[0] + c01 * r[1] + c02 * r[2]
-        b1 = c10 * r[0] + c11 * r[1] + c12 * r[2]
-        b2 = c20 * r[0] + c21 * r[1] + c22 * r[2]
-        i0 = gg_inertia[0, 0] * b0 + gg_inertia[0, 1] * b1 + gg_inertia[0, 2] * b2
-        i1 = gg_inertia[1, 0] * b0 + gg_inertia[1, 1] * b1 + gg_inertia[1, 2] * b2
-        i2 = gg_inertia[2, 0] * b0 + gg_inertia[2, 1] * b1 + gg_inertia[2, 2] * b2
-        rr = b0 * b0 + b1 * b1 + b2 * b2
-        k = 3.0 * gg_mu / (rr * rr * math.sqrt(rr))
-        t0 += k * (b1 * i2 - b2 * i1)
-        t1 += k * (b2 * i0 - b0 * i2)
-        t2 += k * (b0 * i1 - b1 * i0)
-    M[0] += dt * t0
-    M[1] += dt * t1
-    M[2] += dt * t2
+    return (
+        c00 * v[0] + c01 * v[1] + c02 * v[2],
+        c10 * v[0] + c11 * v[1] + c12 * v[2],
+        c20 * v[0] + c21 * v[1] + c22 * v[2],
+    )
+
+
+@jit(inline="always")
+def _gg_factor(mu3, r):
+    """``3 mu / |r|^5`` (1/s^2 m^-2) of the gravity-gradient torque, from the inertial position ``r`` (m)."""
+    rr = r[0] * r[0] + r[1] * r[1] + r[2] * r[2]
+    return mu3 / (rr * rr * math.sqrt(rr))
+
+
+@jit(inline="always")
+def _kick_constants(tau_body, com, gg_inertia):
+    """The kick's fixed parameters as one tuple of scalars: ``tau_body`` (3,) N m, ``com`` (3,) m,
+    ``gg_inertia`` (3, 3) kg m^2 row by row (held in registers by the kernel's loop)."""
+    return (
+        tau_body[0], tau_body[1], tau_body[2], com[0], com[1], com[2],
+        gg_inertia[0, 0], gg_inertia[0, 1], gg_inertia[0, 2],
+        gg_inertia[1, 0], gg_inertia[1, 1], gg_inertia[1, 2],
+        gg_inertia[2, 0], gg_inertia[2, 1], gg_inertia[2, 2],
+    )  # fmt: skip
+
+
+@jit(inline="always")
+def _kicked(dt, m0, m1, m2, parts, kc, kg, b0, b1, b2, u0, u1, u2, f0, f1, f2):
+    """``M + dt tau`` with the body torque of the kernel's models, from body copies of inertial vectors.
+
+    ``tau = tau_body + u`` (constant torques, ``u`` the inertial one in body axes),
+    ``+ r_c x f`` (uniform gravity ``f`` at the centre of mass ``r_c``), ``+ kg
+    r_b x (J r_b)`` (gravity gradient, ``kg = 3 mu / |r|^5``; Hughes ch. 8);
+    ``kc`` = :func:`_kick_constants` ``(tau_body, r_c, J)``.  ``parts`` selects the terms present.
+    """
+    t0 = t1 = t2 = 0.0
+    if parts & KICK_CONSTANT:
+        t0 = kc[0] + u0
+        t1 = kc[1] + u1
+        t2 = kc[2] + u2
+    if parts & KICK_FORCE:
+        t0 += kc[4] * f2 - kc[5] * f1
+        t1 += kc[5] * f0 - kc[3] * f2
+        t2 += kc[3] * f1 - kc[4] * f0
+    if parts & KICK_GRAVITY_GRADIENT:
+        g0 = kc[6] * b0 + kc[7] * b1 + kc[8] * b2
+        g1 = kc[9] * b0 + kc[10] * b1 + kc[11] * b2
+        g2 = kc[12] * b0 + kc[13] * b1 + kc[14] * b2
+        t0 += kg * (b1 * g2 - b2 * g1)
+        t1 += kg * (b2 * g0 - b0 * g2)
+        t2 += kg * (b0 * g1 - b1 * g0)
+    return m0 + dt * t0, m1 + dt * t1, m2 + dt * t2
+
+
+@jit(inline="always")
+def _body_copies(e0, e1, e2, e3, parts, r, tau_inertial, force):
+    """Body components ``C(q) v`` of the inertial vectors the kick needs: orbit position
+    ``r_b``, inertial torque ``u``, gravity force ``f`` (zeros for absent terms)."""
+    b0 = b1 = b2 = u0 = u1 = u2 = f0 = f1 = f2 = 0.0
+    if parts & KICK_GRAVITY_GRADIENT:
+        b0, b1, b2 = _dcm_apply(e0, e1, e2, e3, r)
+    if parts & KICK_CONSTANT:
+        u0, u1, u2 = _dcm_apply(e0, e1, e2, e3, tau_inertial)
+    if parts & KICK_FORCE:
+        f0, f1, f2 = _dcm_apply(e0, e1, e2, e3, force)
+    return b0, b1, b2, u0, u1, u2, f0, f1, f2
+
+
+@jit
+def _kick(M, q, dt, parts, tau_body, tau_inertial, com, force, gg_mu, gg_inertia, r):
+    """``M <- M + dt * tau(q)``: constant body + inertial torques, uniform gravity, gravity gradient.
+
+    ``parts`` bitmask of the terms present (``KICK_CONSTANT | KICK_FORCE |
+    KICK_GRAVITY_GRADIENT``): absent terms cost nothing.  ``r`` inertial orbit
+    position (m), ``gg_mu`` m^3/s^2, ``gg_inertia`` (3, 3) kg m^2.
+    """
+    kg = _gg_factor(3.0 * gg_mu, r) if parts & KICK_GRAVITY_GRADIENT else 0.0
+    b0, b1, b2, u0, u1, u2, f0, f1, f2 = _body_copies(q[0], q[1], q[2], q[3], parts, r, tau_inertial, force)
+    M[0], M[1], M[2] = _kicked(dt, M[0], M[1], M[2], parts, _kick_constants(tau_body, com, gg_inertia), kg, b0, b1, b2, u0, u1, u2, f0, f1, f2)
 
 
 @jit
@@ -297,6 +396,21 @@ def _stage_midpoints(weights):
     return mids
 
 
+@jit(inline="always")
+def _turn_carry(axis, angle, parts, m0, m1, m2, e0, e1, e2, e3, b0, b1, b2, u0, u1, u2, f0, f1, f2):
+    """:func:`_turn_body` by ``angle`` about ``axis``, also turning the kick's body copies
+    (a body copy of a fixed inertial vector obeys ``v <- C_i(angle) v`` like ``M``)."""
+    c, s, ca, sa = _axis_rotation_trig(angle)
+    m0, m1, m2, e0, e1, e2, e3 = _turn_body(axis, c, s, ca, sa, m0, m1, m2, e0, e1, e2, e3)
+    if parts & KICK_GRAVITY_GRADIENT:
+        b0, b1, b2 = _turn_vector(axis, ca, sa, b0, b1, b2)
+    if parts & KICK_CONSTANT:
+        u0, u1, u2 = _turn_vector(axis, ca, sa, u0, u1, u2)
+    if parts & KICK_FORCE:
+        f0, f1, f2 = _turn_vector(axis, ca, sa, f0, f1, f2)
+    return m0, m1, m2, e0, e1, e2, e3, b0, b1, b2, u0, u1, u2, f0, f1, f2
+
+
 @jit
 def _split_kernel(
     M, q, inertia, weights, step_t, step_dt, record, out_M, out_q,
@@ -312,6 +426,14 @@ def _split_kernel(
     one rotation by the summed angle (FSAL): ``4 ns`` rotations per step
     instead of ``5 ns``; the pending ``T1`` is applied before an output is stored
     and at the end of the call.  Torques depend on ``(t, q)`` only.
+
+    The state lives in scalars between outputs.  The first kick of a stage forms
+    the body components of the inertial vectors it needs (orbit position
+    ``r_b = C(q) r``, inertial torque, gravity force) once; ``T2 T3 T2`` turns
+    those copies exactly as it turns ``M``, so the second kick needs no ``C(q)``
+    and is the same kick as with ``C(q') r`` in exact arithmetic.  ``3 mu / |r|^5``
+    comes from the inertial ``r``, once per stage.
+
     ``orbit_mode`` 0: no orbit; 1: two-body orbit through ``orbit_rv = (r0, v0)``
     at ``t = -orbit_rv[2, 0]`` evaluated here (:func:`_orbit_position`, node
     cache ``orbit_nodes``); 2: positions given per stage midpoint ``r_kick[k, s]``.
@@ -321,44 +443,68 @@ def _split_kernel(
     """
     ns = weights.shape[0]
     mids = _stage_midpoints(weights)
-    h_rot = np.zeros(3)
+    h0 = h1 = h2 = 0.0
     if rotor_mode == 1:
-        h_rot[:] = h_table[0, 0]
-    r = np.zeros(3)
-    pend = 0.0  # angle of the pending T1 rotation (rad)
+        h0, h1, h2 = h_table[0, 0, 0], h_table[0, 0, 1], h_table[0, 0, 2]
+    m0, m1, m2 = M[0], M[1], M[2]
+    e0, e1, e2, e3 = q[0], q[1], q[2], q[3]
     i0 = 1.0 / inertia[0]
     i1 = 1.0 / inertia[1]
     i2 = 1.0 / inertia[2]
+    mu3 = 3.0 * gg_mu
+    kc = _kick_constants(tau_body, com, gg_inertia)
+    r = np.zeros(3)
+    kg = 0.0
+    b0 = b1 = b2 = u0 = u1 = u2 = f0 = f1 = f2 = 0.0
+    pend = 0.0  # angle of the pending T1 rotation (rad)
     for k in range(step_dt.shape[0]):
         dt = step_dt[k]
-        for s in range(ns):
-            a = weights[s] * dt
+        for st in range(ns):
+            a = weights[st] * dt
             ha = 0.5 * a
             if rotor_mode == 2:
-                h_rot[:] = h_table[k, s]
-            _rotate_about_axis(M, q, 0, pend + (M[0] - h_rot[0]) * i0 * ha)
+                h0, h1, h2 = h_table[k, st, 0], h_table[k, st, 1], h_table[k, st, 2]
+            c, s, ca, sa = _axis_rotation_trig(pend + (m0 - h0) * i0 * ha)
+            m0, m1, m2, e0, e1, e2, e3 = _turn_body(0, c, s, ca, sa, m0, m1, m2, e0, e1, e2, e3)
             if parts != 0:
-                if orbit_mode == 1:
-                    _orbit_position(orbit_rv, gg_mu, step_t[k] + mids[s] * dt, orbit_nodes, r)
-                elif orbit_mode == 2:
-                    r[:] = r_kick[k, s]
-                _kick(M, q, ha, parts, tau_body, tau_inertial, com, force, gg_mu, gg_inertia, r)
-            _rotate_about_axis(M, q, 1, (M[1] - h_rot[1]) * i1 * ha)
-            _rotate_about_axis(M, q, 2, (M[2] - h_rot[2]) * i2 * a)
-            _rotate_about_axis(M, q, 1, (M[1] - h_rot[1]) * i1 * ha)
+                if parts & KICK_GRAVITY_GRADIENT:
+                    if orbit_mode == 1:
+                        _orbit_position(orbit_rv, gg_mu, step_t[k] + mids[st] * dt, orbit_nodes, r)
+                    elif orbit_mode == 2:
+                        r[:] = r_kick[k, st]
+                    kg = _gg_factor(mu3, r)
+                b0, b1, b2, u0, u1, u2, f0, f1, f2 = _body_copies(e0, e1, e2, e3, parts, r, tau_inertial, force)
+                m0, m1, m2 = _kicked(ha, m0, m1, m2, parts, kc, kg, b0, b1, b2, u0, u1, u2, f0, f1, f2)
+            m0, m1, m2, e0, e1, e2, e3, b0, b1, b2, u0, u1, u2, f0, f1, f2 = _turn_carry(
+                1, (m1 - h1) * i1 * ha, parts, m0, m1, m2, e0, e1, e2, e3, b0, b1, b2, u0, u1, u2, f0, f1, f2
+            )
+            m0, m1, m2, e0, e1, e2, e3, b0, b1, b2, u0, u1, u2, f0, f1, f2 = _turn_carry(
+                2, (m2 - h2) * i2 * a, parts, m0, m1, m2, e0, e1, e2, e3, b0, b1, b2, u0, u1, u2, f0, f1, f2
+            )
+            m0, m1, m2, e0, e1, e2, e3, b0, b1, b2, u0, u1, u2, f0, f1, f2 = _turn_carry(
+                1, (m1 - h1) * i1 * ha, parts, m0, m1, m2, e0, e1, e2, e3, b0, b1, b2, u0, u1, u2, f0, f1, f2
+            )
             if parts != 0:
-                _kick(M, q, ha, parts, tau_body, tau_inertial, com, force, gg_mu, gg_inertia, r)
-            pend = (M[0] - h_rot[0]) * i0 * ha
-        _renormalize(q)
+                m0, m1, m2 = _kicked(ha, m0, m1, m2, parts, kc, kg, b0, b1, b2, u0, u1, u2, f0, f1, f2)
+            pend = (m0 - h0) * i0 * ha
+        # one Newton step towards |q| = 1, as _renormalize (round-off drift only)
+        fn = 1.5 - 0.5 * (e0 * e0 + e1 * e1 + e2 * e2 + e3 * e3)
+        e0 *= fn
+        e1 *= fn
+        e2 *= fn
+        e3 *= fn
         j = record[k]
         if j >= 0:
-            _rotate_about_axis(M, q, 0, pend)
+            c, s, ca, sa = _axis_rotation_trig(pend)
+            m0, m1, m2, e0, e1, e2, e3 = _turn_body(0, c, s, ca, sa, m0, m1, m2, e0, e1, e2, e3)
             pend = 0.0
-            out_M[j] = M
-            out_q[j] = q
+            out_M[j, 0], out_M[j, 1], out_M[j, 2] = m0, m1, m2
+            out_q[j, 0], out_q[j, 1], out_q[j, 2], out_q[j, 3] = e0, e1, e2, e3
     if pend != 0.0:
-        _rotate_about_axis(M, q, 0, pend)
-
+        c, s, ca, sa = _axis_rotation_trig(pend)
+        m0, m1, m2, e0, e1, e2, e3 = _turn_body(0, c, s, ca, sa, m0, m1, m2, e0, e1, e2, e3)
+    M[0], M[1], M[2] = m0, m1, m2
+    q[0], q[1], q[2], q[3] = e0, e1, e2, e3
 
 def free_rigid_body_step(inertia, M, q, dt, rotor_momentum=(0.0, 0.0, 0.0)):
     """One symmetric splitting step of the free body (or gyrostat) in principal axes.
