@@ -230,8 +230,8 @@ KICK_CONSTANT, KICK_FORCE, KICK_GRAVITY_GRADIENT = 1, 2, 4
 
 
 @jit(inline="always")
-def _dcm_apply(e0, e1, e2, e3, v):
-    """``C(q) v`` for an inertial ``v`` (3,): its body components (``C`` of Baruh eq. 7.x, scalar first)."""
+def _dcm_apply(e0, e1, e2, e3, v0, v1, v2):
+    """``C(q) v`` for an inertial ``v = (v0, v1, v2)``: its body components (``C`` of Baruh eq. 7.x, scalar first)."""
     c00 = e0 * e0 + e1 * e1 - e2 * e2 - e3 * e3
     c11 = e0 * e0 - e1 * e1 + e2 * e2 - e3 * e3
     c22 = e0 * e0 - e1 * e1 - e2 * e2 + e3 * e3
@@ -242,16 +242,16 @@ def _dcm_apply(e0, e1, e2, e3, v):
     c12 = 2.0 * (e2 * e3 + e0 * e1)
     c21 = 2.0 * (e2 * e3 - e0 * e1)
     return (
-        c00 * v[0] + c01 * v[1] + c02 * v[2],
-        c10 * v[0] + c11 * v[1] + c12 * v[2],
-        c20 * v[0] + c21 * v[1] + c22 * v[2],
+        c00 * v0 + c01 * v1 + c02 * v2,
+        c10 * v0 + c11 * v1 + c12 * v2,
+        c20 * v0 + c21 * v1 + c22 * v2,
     )
 
 
 @jit(inline="always")
-def _gg_factor(mu3, r):
-    """``3 mu / |r|^5`` (1/s^2 m^-2) of the gravity-gradient torque, from the inertial position ``r`` (m)."""
-    rr = r[0] * r[0] + r[1] * r[1] + r[2] * r[2]
+def _gg_factor(mu3, x, y, z):
+    """``3 mu / |r|^5`` (m^-2 s^-2) of the gravity-gradient torque, from the inertial position ``r = (x, y, z)`` (m)."""
+    rr = x * x + y * y + z * z
     return mu3 / (rr * rr * math.sqrt(rr))
 
 
@@ -296,16 +296,16 @@ def _kicked(dt, m0, m1, m2, parts, kc, kg, b0, b1, b2, u0, u1, u2, f0, f1, f2):
 
 
 @jit(inline="always")
-def _body_copies(e0, e1, e2, e3, parts, r, tau_inertial, force):
+def _body_copies(e0, e1, e2, e3, parts, x, y, z, tau_inertial, force):
     """Body components ``C(q) v`` of the inertial vectors the kick needs: orbit position
-    ``r_b``, inertial torque ``u``, gravity force ``f`` (zeros for absent terms)."""
+    ``r_b`` (from ``r = (x, y, z)``), inertial torque ``u``, gravity force ``f`` (zeros for absent terms)."""
     b0 = b1 = b2 = u0 = u1 = u2 = f0 = f1 = f2 = 0.0
     if parts & KICK_GRAVITY_GRADIENT:
-        b0, b1, b2 = _dcm_apply(e0, e1, e2, e3, r)
+        b0, b1, b2 = _dcm_apply(e0, e1, e2, e3, x, y, z)
     if parts & KICK_CONSTANT:
-        u0, u1, u2 = _dcm_apply(e0, e1, e2, e3, tau_inertial)
+        u0, u1, u2 = _dcm_apply(e0, e1, e2, e3, tau_inertial[0], tau_inertial[1], tau_inertial[2])
     if parts & KICK_FORCE:
-        f0, f1, f2 = _dcm_apply(e0, e1, e2, e3, force)
+        f0, f1, f2 = _dcm_apply(e0, e1, e2, e3, force[0], force[1], force[2])
     return b0, b1, b2, u0, u1, u2, f0, f1, f2
 
 
@@ -317,8 +317,8 @@ def _kick(M, q, dt, parts, tau_body, tau_inertial, com, force, gg_mu, gg_inertia
     KICK_GRAVITY_GRADIENT``): absent terms cost nothing.  ``r`` inertial orbit
     position (m), ``gg_mu`` m^3/s^2, ``gg_inertia`` (3, 3) kg m^2.
     """
-    kg = _gg_factor(3.0 * gg_mu, r) if parts & KICK_GRAVITY_GRADIENT else 0.0
-    b0, b1, b2, u0, u1, u2, f0, f1, f2 = _body_copies(q[0], q[1], q[2], q[3], parts, r, tau_inertial, force)
+    kg = _gg_factor(3.0 * gg_mu, r[0], r[1], r[2]) if parts & KICK_GRAVITY_GRADIENT else 0.0
+    b0, b1, b2, u0, u1, u2, f0, f1, f2 = _body_copies(q[0], q[1], q[2], q[3], parts, r[0], r[1], r[2], tau_inertial, force)
     M[0], M[1], M[2] = _kicked(dt, M[0], M[1], M[2], parts, _kick_constants(tau_body, com, gg_inertia), kg, b0, b1, b2, u0, u1, u2, f0, f1, f2)
 
 
@@ -341,48 +341,78 @@ def _orbit_node(orbit_rv, mu, t, node):
 
 
 @jit
-def _orbit_position(orbit_rv, mu, t, nodes, r):
-    """``r[:] =`` the two-body orbit position at time ``t`` (s).
+def _hermite_power_coefficients(nodes):
+    """Rows ``3 + p`` of ``nodes`` = coefficients of ``x^p`` (p = 0..5) of the quintic Hermite
+    interpolant between the node states in rows 0 and 1, ``x = (t - k D) / D`` in [0, 1].
 
-    ``nodes[2, 0] == 0``: exact Kepler evaluation at ``t``.  Otherwise quintic
-    Hermite interpolation in ``(r, v, a)`` between grid nodes ``k D`` and
-    ``(k + 1) D`` (``D = nodes[2, 0]`` s, ``k = nodes[2, 1]`` the cached node
-    pair, ``nodes[2, 2] = 1/D``), each node exact.  The error bound ``|r^(6)| D^6 / 46080`` with
-    ``D = 0.005 / w_max`` (``w_max`` the fastest angular rate on the orbit,
-    ``|r^(6)| ~ w_max^6 |r|``) is ``3e-19 |r|``: below round-off.
+    With ``P, V = D v, A = D^2 a`` at the two ends (Hermite basis
+    ``1 - 10x^3 + 15x^4 - 6x^5``, ``x - 6x^3 + 8x^4 - 3x^5``, ``x^2/2 - 3x^3/2 + 3x^4/2 - x^5/2``
+    and their mirror images): ``c0 = P0``, ``c1 = V0``, ``c2 = A0/2`` and
+    ``c3, c4, c5`` from ``dP = P1 - P0`` (formed once, so the higher coefficients
+    carry no cancellation of the large ``|r|``).
     """
     D = nodes[2, 0]
-    if D == 0.0:  # no cache: node 0 is scratch space
+    D2 = D * D
+    for j in range(3):
+        dP = nodes[1, j] - nodes[0, j]
+        V0 = D * nodes[0, 3 + j]
+        V1 = D * nodes[1, 3 + j]
+        A0 = D2 * nodes[0, 6 + j]
+        A1 = D2 * nodes[1, 6 + j]
+        nodes[3, j] = nodes[0, j]
+        nodes[4, j] = V0
+        nodes[5, j] = 0.5 * A0
+        nodes[6, j] = 10.0 * dP - 6.0 * V0 - 4.0 * V1 - 1.5 * A0 + 0.5 * A1
+        nodes[7, j] = -15.0 * dP + 8.0 * V0 + 7.0 * V1 + 1.5 * A0 - A1
+        nodes[8, j] = 6.0 * dP - 3.0 * V0 - 3.0 * V1 - 0.5 * A0 + 0.5 * A1
+
+
+@jit
+def _orbit_nodes_update(orbit_rv, mu, k, nodes):
+    """Move the node pair of the interpolation cache ``nodes`` to ``(k D, (k + 1) D)`` (reusing
+    a node when ``k`` moves by one) and refresh the power-basis coefficients."""
+    D = nodes[2, 0]
+    if k == nodes[2, 1] + 1.0:
+        nodes[0, :] = nodes[1, :]
+    elif k == nodes[2, 1] - 1.0:
+        nodes[1, :] = nodes[0, :]
+        _orbit_node(orbit_rv, mu, k * D, nodes[0])
+    else:
+        _orbit_node(orbit_rv, mu, k * D, nodes[0])
+    if not k == nodes[2, 1] - 1.0:
+        _orbit_node(orbit_rv, mu, (k + 1.0) * D, nodes[1])
+    nodes[2, 1] = k
+    _hermite_power_coefficients(nodes)
+
+
+@jit(inline="always")
+def _orbit_position(orbit_rv, mu, t, nodes):
+    """The two-body orbit position ``(x, y, z)`` (m) at time ``t`` (s).
+
+    ``nodes`` (9, 9) is the interpolation cache.  ``nodes[2, 0] == 0``: exact
+    Kepler evaluation at ``t``.  Otherwise quintic Hermite interpolation in
+    ``(r, v, a)`` between grid nodes ``k D`` and ``(k + 1) D`` (``D = nodes[2, 0]``
+    s, ``k = nodes[2, 1]`` the cached node pair, ``nodes[2, 2] = 1/D``), each node
+    exact (rows 0, 1), evaluated by Horner's rule from its power-basis
+    coefficients (rows 3-8, :func:`_hermite_power_coefficients`).  The error
+    bound ``|r^(6)| D^6 / 46080`` with ``D = 0.005 / w_max`` (``w_max`` the fastest
+    angular rate on the orbit, ``|r^(6)| ~ w_max^6 |r|``) is ``3e-19 |r|``: below round-off.
+    Inlined into the kernel; only a node move calls out (so the kernel's state
+    stays in registers between moves).
+    """
+    if nodes[2, 0] == 0.0:  # no cache: node 0 is scratch space
         _orbit_node(orbit_rv, mu, t, nodes[0])
-        r[:] = nodes[0, :3]
-        return
+        return nodes[0, 0], nodes[0, 1], nodes[0, 2]
     u = t * nodes[2, 2]  # t / D
     k = math.floor(u)
     if not k == nodes[2, 1]:
-        if k == nodes[2, 1] + 1.0:
-            nodes[0, :] = nodes[1, :]
-        elif k == nodes[2, 1] - 1.0:
-            nodes[1, :] = nodes[0, :]
-            _orbit_node(orbit_rv, mu, k * D, nodes[0])
-        else:
-            _orbit_node(orbit_rv, mu, k * D, nodes[0])
-        if not k == nodes[2, 1] - 1.0:
-            _orbit_node(orbit_rv, mu, (k + 1.0) * D, nodes[1])
-        nodes[2, 1] = k
+        _orbit_nodes_update(orbit_rv, mu, k, nodes)
     x = u - k
-    x2 = x * x
-    x3 = x2 * x
-    b0 = 1.0 - x3 * (10.0 - x * (15.0 - 6.0 * x))
-    b1 = x - x3 * (6.0 - x * (8.0 - 3.0 * x))
-    b2 = 0.5 * x2 - x3 * (1.5 - x * (1.5 - 0.5 * x))
-    b3 = x3 * (10.0 - x * (15.0 - 6.0 * x))
-    b4 = -x3 * (4.0 - x * (7.0 - 3.0 * x))
-    b5 = x3 * (0.5 - x * (1.0 - 0.5 * x))
-    D2 = D * D
-    for j in range(3):
-        r[j] = (b0 * nodes[0, j] + b3 * nodes[1, j]) + D * (b1 * nodes[0, 3 + j] + b4 * nodes[1, 3 + j]) + D2 * (
-            b2 * nodes[0, 6 + j] + b5 * nodes[1, 6 + j]
-        )
+    return (
+        nodes[3, 0] + x * (nodes[4, 0] + x * (nodes[5, 0] + x * (nodes[6, 0] + x * (nodes[7, 0] + x * nodes[8, 0])))),
+        nodes[3, 1] + x * (nodes[4, 1] + x * (nodes[5, 1] + x * (nodes[6, 1] + x * (nodes[7, 1] + x * nodes[8, 1])))),
+        nodes[3, 2] + x * (nodes[4, 2] + x * (nodes[5, 2] + x * (nodes[6, 2] + x * (nodes[7, 2] + x * nodes[8, 2])))),
+    )
 
 
 @jit
@@ -453,8 +483,7 @@ def _split_kernel(
     i2 = 1.0 / inertia[2]
     mu3 = 3.0 * gg_mu
     kc = _kick_constants(tau_body, com, gg_inertia)
-    r = np.zeros(3)
-    kg = 0.0
+    x = y = z = kg = 0.0
     b0 = b1 = b2 = u0 = u1 = u2 = f0 = f1 = f2 = 0.0
     pend = 0.0  # angle of the pending T1 rotation (rad)
     for k in range(step_dt.shape[0]):
@@ -469,11 +498,11 @@ def _split_kernel(
             if parts != 0:
                 if parts & KICK_GRAVITY_GRADIENT:
                     if orbit_mode == 1:
-                        _orbit_position(orbit_rv, gg_mu, step_t[k] + mids[st] * dt, orbit_nodes, r)
-                    elif orbit_mode == 2:
-                        r[:] = r_kick[k, st]
-                    kg = _gg_factor(mu3, r)
-                b0, b1, b2, u0, u1, u2, f0, f1, f2 = _body_copies(e0, e1, e2, e3, parts, r, tau_inertial, force)
+                        x, y, z = _orbit_position(orbit_rv, gg_mu, step_t[k] + mids[st] * dt, orbit_nodes)
+                    else:
+                        x, y, z = r_kick[k, st, 0], r_kick[k, st, 1], r_kick[k, st, 2]
+                    kg = _gg_factor(mu3, x, y, z)
+                b0, b1, b2, u0, u1, u2, f0, f1, f2 = _body_copies(e0, e1, e2, e3, parts, x, y, z, tau_inertial, force)
                 m0, m1, m2 = _kicked(ha, m0, m1, m2, parts, kc, kg, b0, b1, b2, u0, u1, u2, f0, f1, f2)
             m0, m1, m2, e0, e1, e2, e3, b0, b1, b2, u0, u1, u2, f0, f1, f2 = _turn_carry(
                 1, (m1 - h1) * i1 * ha, parts, m0, m1, m2, e0, e1, e2, e3, b0, b1, b2, u0, u1, u2, f0, f1, f2
@@ -679,7 +708,7 @@ def _run_split(frame, M0, q0, t_out, step, weights, ktorque, rotor, torque, even
         h_table1 = np.zeros((1, 1, 3)) if mode != 1 else h_const.reshape(1, 1, 3).copy()
         dummy_r = np.zeros((1, 1, 3))
         orbit_rv = np.zeros((3, 3))
-        orbit_nodes = np.zeros((3, 9))
+        orbit_nodes = np.zeros((9, 9))
         orbit_mode = 0
         if gg is not None:
             orbit_mode = 2
