@@ -99,3 +99,23 @@ def test_file_written_through_many_chunks_reads_back_with_indexes(tmp_path):
     # the seeking reader uses the message indexes: every message, time order
     times = [msg.log_time for _, _, msg in reader.iter_messages(topics=[keys[7]])]
     assert times == [EPOCH_NS + k * 500_000_000 for k in range(30)]
+
+
+def test_chunk_index_record_equals_mcap_serialiser():
+    from mcap.records import ChunkIndex
+
+    from astrodyn.recording._mcapfast import chunk_index_record
+
+    rng = np.random.default_rng(5)
+    for n in (0, 1, 7, 300):
+        ids = sorted(rng.choice(65535, size=n, replace=False) + 1)
+        offs = rng.integers(0, 2**63, size=n).tolist()
+        args = [int(x) for x in rng.integers(0, 2**63, size=4)]
+        sizes = [int(x) for x in rng.integers(0, 2**40, size=3)]
+        builder = RecordBuilder()
+        ChunkIndex(
+            message_start_time=args[0], message_end_time=args[1], chunk_start_offset=args[2], chunk_length=args[3],
+            message_index_offsets=dict(zip(ids, offs)), message_index_length=sizes[0], compression="zstd",
+            compressed_size=sizes[1], uncompressed_size=sizes[2],
+        ).write(builder)
+        assert chunk_index_record(*args, ids, offs, sizes[0], "zstd", sizes[1], sizes[2]) == builder.end()

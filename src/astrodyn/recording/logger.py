@@ -8,8 +8,12 @@ What it does with each sample (keys in :mod:`astrodyn.bus`):
   by :class:`~astrodyn.recording.writer.McapRecorder`, which accounts ``seq`` per channel
   (gaps, late arrivals, duplicates -- duplicates are not written).  Event seqs are
   accounted per (channel, process), since every process numbers its own events.
-* ``@batch/<process>``: split with :func:`astrodyn.messages.decode_batch`; each entry is
-  handled as if it had arrived on its own key.
+* ``@batch/<process>``: each entry is handled as if it had arrived on its own key.  The
+  common entries (canonical orbit / attitude states with the next seq of their channel)
+  are checked and written by one compiled pass over the envelope
+  (:mod:`astrodyn.recording._ingest`, :meth:`McapRecorder.write_batch`: about 1.7 us per
+  message with compression, against 7.7 us per message in Python); every other entry goes
+  through the per-message path above, in arrival order, so the file is the same.
 * ``@heartbeat/<process>``: not recorded; a process whose heartbeat stops while its
   liveliness token stays is reported as ``stalled`` (an ``error`` event in the file).
 * anything else, and any payload that fails validation: counted as malformed with the
@@ -44,16 +48,20 @@ import threading
 import time
 from typing import Any, Iterable
 
+import numpy as np
 import zenoh
 
 from astrodyn import bus, messages
-from astrodyn.recording.writer import DUPLICATE, McapRecorder
+from astrodyn.recording import _ingest
+from astrodyn.recording.writer import DUPLICATE, BatchLayout, McapRecorder
 
 __all__ = ["Logger"]
 
 _STATE_KINDS = frozenset(("orbit", "attitude", "crosscheck"))
 _MAX_EXAMPLES = 20
 _MAX_KEY_CACHE = 100_000
+_MAX_LAYOUTS = 64
+_FAST_KIND = {"orbit": _ingest.KIND_ORBIT, "attitude": _ingest.KIND_ATTITUDE}
 
 
 class Logger:
@@ -109,7 +117,8 @@ class Logger:
         self.max_t = 0.0
         self._own_event_seq = 0
         self._key_kind: dict[str, str | None] = {}
-        self._fast_of: dict[str, Any] = {}  # key -> canonical-layout checker or False
+        self._layouts: dict[str, BatchLayout] = {}  # batch key -> its last envelope's keys
+        self._spans = tuple(np.empty(4096, dtype=np.int64) for _ in range(4))  # frame_batch output
         self._stop_reason: str | None = None
         self._stop_requested_at: float | None = None
         self._stop_requests: list[bus.ControlRequest] = []
@@ -181,49 +190,60 @@ class Logger:
         elif kind == "event":
             self._on_event(msg)
 
-    def _fast_check_of(self, key: str):
-        """The canonical-layout checker for a state key of this scenario, else False (cached)."""
-        kind = self._kind(key)
-        fast = messages.FAST_CHECKS.get(kind, False) if kind is not None else False
-        if len(self._fast_of) < _MAX_KEY_CACHE:
-            self._fast_of[key] = fast
-        return fast
-
-    def _record_many(self, items: list[tuple[str, bytes]], now_ns: int) -> None:
-        """:meth:`_record` for every entry of a batch, with the common case inlined.
-
-        The common case is a state in the batch encoders' canonical layout on a known
-        key (:data:`astrodyn.messages.FAST_CHECKS`); everything else goes through
-        :meth:`_record` and its full decode.
-        """
-        fast_of = self._fast_of
-        write = self.recorder.write_encoded
-        record = self._record
-        max_t = self.max_t
-        states = 0
+    def _layout_of(self, batch_key: str, payload: bytes, buf: np.ndarray, count: int) -> BatchLayout | None:
+        """The :class:`BatchLayout` of this envelope's keys (cached per batch key); None
+        (and reported as malformed) when the envelope cannot be split."""
+        spans = self._spans
+        layout = self._layouts.get(batch_key)
+        if layout is not None and _ingest.same_keys(buf, spans[0], spans[1], count, layout.blob, layout.blob_start, layout.blob_len):
+            return layout
         try:
-            for key, payload in items:
-                fast = fast_of.get(key)
-                if fast is None:
-                    fast = self._fast_check_of(key)
-                found = fast(payload) if fast else None
-                if found is None:
-                    record(key, payload, now_ns)
-                    continue
-                t, seq = found
-                try:
-                    status = write(key, payload, t, seq, now_ns, None)
-                except ValueError as exc:  # t outside MCAP's log_time range
-                    self._bad(key, str(exc))
-                    continue
-                if status != DUPLICATE:
-                    states += 1
-                    if t > max_t:
-                        max_t = t
-        finally:
-            self.states += states
-            if max_t > self.max_t:
-                self.max_t = max_t
+            items = messages.decode_batch(payload)
+        except messages.MessageError as exc:
+            self._bad(batch_key, str(exc))
+            return None
+        keys = [key for key, _ in items]
+        kinds = np.array([_FAST_KIND.get(self._kind(key), _ingest.KIND_OTHER) for key in keys], dtype=np.int8)
+        layout = BatchLayout(keys, kinds)
+        if len(self._layouts) < _MAX_LAYOUTS:
+            self._layouts[batch_key] = layout
+        return layout
+
+    def _record_batch(self, batch_key: str, payload: bytes, now_ns: int) -> None:
+        """Every entry of an envelope, as if each had arrived on its own key: canonical
+        states in one compiled pass (:meth:`McapRecorder.write_batch`), the rest through
+        :meth:`_record`, in arrival order."""
+        buf = np.frombuffer(payload, dtype=np.uint8)
+        spans = self._spans
+        count = _ingest.frame_batch(buf, *spans)
+        if count < 0 and len(payload) >= 8:  # too many entries for the span arrays, or damage
+            need = int.from_bytes(payload[4:8], "little")
+            if need > spans[0].shape[0] and need <= len(payload) // 6:
+                self._spans = spans = tuple(np.empty(need, dtype=np.int64) for _ in range(4))
+                count = _ingest.frame_batch(buf, *spans)
+        if count < 0:
+            try:
+                messages.decode_batch(payload)
+            except messages.MessageError as exc:
+                self._bad(batch_key, str(exc))
+            return
+        layout = self._layout_of(batch_key, payload, buf, count)
+        if layout is None:
+            return
+        keys, starts, lens = layout.keys, spans[2], spans[3]
+
+        def slow(i: int) -> None:
+            a = int(starts[i])
+            self._record(keys[i], payload[a : a + int(lens[i])], now_ns)
+
+        try:
+            written, max_t = self.recorder.write_batch(buf, count, starts, lens, layout, now_ns, slow)
+        except messages.MessageError as exc:  # a key the recorder cannot register
+            self._bad(batch_key, str(exc))
+            return
+        self.states += written
+        if max_t > self.max_t:
+            self.max_t = max_t
 
     def _on_event(self, msg: dict) -> None:
         process = msg["process"]
@@ -243,12 +263,7 @@ class Logger:
         now_ns = time.time_ns()
         rest = key[len(self.prefix):] if key.startswith(self.prefix) else None
         if rest is not None and rest.startswith("@batch/"):
-            try:
-                items = messages.decode_batch(payload)
-            except messages.MessageError as exc:
-                self._bad(key, str(exc))
-                return
-            self._record_many(items, now_ns)
+            self._record_batch(key, payload, now_ns)
         elif rest is not None and rest.startswith("@heartbeat/"):
             self.heartbeats[rest[len("@heartbeat/"):]] = time.monotonic()
         else:

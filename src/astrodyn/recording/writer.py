@@ -40,16 +40,19 @@ import os
 import time
 from typing import Any, Mapping
 
+import numpy as np
 
 from astrodyn import __version__, messages
+from astrodyn.recording import _ingest
 from astrodyn.recording._mcapfast import ChunkedWriter
 
-__all__ = ["RecordingError", "McapRecorder", "SeqTracker", "OK", "GAP", "LATE", "DUPLICATE"]
+__all__ = ["RecordingError", "McapRecorder", "BatchLayout", "SeqTracker", "OK", "GAP", "LATE", "DUPLICATE"]
 
 OK, GAP, LATE, DUPLICATE = 0, 1, 2, 3
 _STATUS_NAMES = ("ok", "gap", "late", "duplicate")
 _U32 = 0xFFFFFFFF
 _U64_END = 2**64
+_GRAMMAR = _ingest.grammar_tables(messages.ORBIT_MODELS, messages.ATTITUDE_MODELS)
 
 
 class RecordingError(Exception):
@@ -57,16 +60,36 @@ class RecordingError(Exception):
 
 
 class _ChannelSeq:
-    __slots__ = ("next", "count", "missing", "duplicates", "out_of_order", "gaps", "gaps_truncated")
+    """One channel's seq accounting; ``next`` and ``count`` live in the tracker's arrays
+    (slot ``slot``) so the compiled batch ingest (:mod:`astrodyn.recording._ingest`) can
+    advance them for in-order messages."""
 
-    def __init__(self) -> None:
-        self.next = 0
-        self.count = 0
+    __slots__ = ("tracker", "slot", "missing", "duplicates", "out_of_order", "gaps", "gaps_truncated")
+
+    def __init__(self, tracker: SeqTracker, slot: int) -> None:
+        self.tracker = tracker
+        self.slot = slot
         self.missing = 0
         self.duplicates = 0
         self.out_of_order = 0
         self.gaps: list[list[int]] = []  # sorted, disjoint inclusive [first, last] missing ranges
         self.gaps_truncated = False
+
+    @property
+    def next(self) -> int:
+        return int(self.tracker.next_seq[self.slot])
+
+    @next.setter
+    def next(self, value: int) -> None:
+        self.tracker.next_seq[self.slot] = value
+
+    @property
+    def count(self) -> int:
+        return int(self.tracker.counts[self.slot])
+
+    @count.setter
+    def count(self, value: int) -> None:
+        self.tracker.counts[self.slot] = value
 
 
 class SeqTracker:
@@ -75,16 +98,32 @@ class SeqTracker:
     :meth:`add` returns ``OK``, ``GAP``, ``LATE`` or ``DUPLICATE`` (see the module
     docstring).  Missing ranges are kept for the first ``max_gaps`` gaps per channel; the
     counts are always exact for an arrival order where late messages fill stored gaps.
+    Each channel has a slot (:meth:`slot`) in the int64 arrays ``next_seq`` and
+    ``counts``; the compiled batch ingest advances those for in-order messages only.
     """
 
     def __init__(self, max_gaps: int = 1000):
         self.max_gaps = int(max_gaps)
         self.channels: dict[str, _ChannelSeq] = {}
+        self.next_seq = np.zeros(64, dtype=np.int64)
+        self.counts = np.zeros(64, dtype=np.int64)
 
-    def add(self, channel: str, seq: int) -> int:
+    def _channel(self, channel: str) -> _ChannelSeq:
         c = self.channels.get(channel)
         if c is None:
-            c = self.channels[channel] = _ChannelSeq()
+            slot = len(self.channels)
+            if slot == self.next_seq.shape[0]:  # grow both arrays (callers re-read them)
+                self.next_seq = np.concatenate([self.next_seq, np.zeros(slot, dtype=np.int64)])
+                self.counts = np.concatenate([self.counts, np.zeros(slot, dtype=np.int64)])
+            c = self.channels[channel] = _ChannelSeq(self, slot)
+        return c
+
+    def slot(self, channel: str) -> int:
+        """The channel's index into ``next_seq`` / ``counts`` (created on first use)."""
+        return self._channel(channel).slot
+
+    def add(self, channel: str, seq: int) -> int:
+        c = self._channel(channel)
         nxt = c.next
         if seq == nxt:
             c.next = nxt + 1
@@ -155,6 +194,40 @@ def _metadata_strings(name: str, data: Mapping[str, Any]) -> dict[str, str]:
     return out
 
 
+class BatchLayout:
+    """The keys of one publisher's envelopes, resolved to channels once per file.
+
+    ``keys`` in envelope order; ``kinds`` (int8, :data:`astrodyn.recording._ingest.KIND_*`)
+    says which entries the compiled path may take (canonical orbit / attitude states on
+    known keys); :meth:`resolve` fills ``cids`` (MCAP channel ids of the current file,
+    registering them) and ``slots`` (:meth:`SeqTracker.slot`).  ``blob``/``blob_start``/
+    ``blob_len`` hold the key bytes, to recognise the next envelope with the same keys
+    (:func:`astrodyn.recording._ingest.same_keys`).
+    """
+
+    def __init__(self, keys: list[str], kinds: np.ndarray):
+        self.keys = keys
+        self.kinds = np.ascontiguousarray(kinds, dtype=np.int8)
+        raw = [k.encode("utf-8") for k in keys]
+        self.blob = np.frombuffer(b"".join(raw), dtype=np.uint8).copy() if raw else np.zeros(0, np.uint8)
+        self.blob_len = np.array([len(k) for k in raw], dtype=np.int64)
+        self.blob_start = np.concatenate([[0], np.cumsum(self.blob_len)[:-1]]).astype(np.int64) if raw else np.zeros(0, np.int64)
+        self.cids = np.zeros(len(keys), dtype=np.int64)
+        self.slots = np.zeros(len(keys), dtype=np.int64)
+        self.writer = None
+
+    def resolve(self, recorder: McapRecorder) -> None:
+        for i, key in enumerate(self.keys):
+            if self.kinds[i] == _ingest.KIND_OTHER:
+                continue
+            cid = recorder._channels.get(key)
+            if cid is None:
+                cid = recorder._channel_for(key)
+            self.cids[i] = cid
+            self.slots[i] = recorder.seq.slot(key)
+        self.writer = recorder._writer
+
+
 class McapRecorder:
     """Write astrodyn messages to an MCAP file (layout and crash behaviour: module docstring).
 
@@ -214,6 +287,10 @@ class McapRecorder:
         self.paths: list[str] = []  # every file written, in order (more than one when rolling)
         self._error: RecordingError | None = None
         self._scenario = _metadata_strings("scenario_metadata", scenario_metadata)
+        # write_batch's t cache: the text of the last t, its float and its log_time
+        self._t_text = np.zeros(0, dtype=np.uint8)
+        self._t_value = 0.0
+        self._t_log_time = 0
         self._open(self.path)
 
     def _open(self, path: str) -> None:
@@ -318,6 +395,68 @@ class McapRecorder:
         if time.monotonic() >= self._next_flush:
             self.flush()
         return status
+
+    def write_batch(self, buf: np.ndarray, count: int, pay_start: np.ndarray, pay_len: np.ndarray,
+                    layout: BatchLayout, publish_time: int, slow) -> tuple[int, float]:
+        """Record the ``count`` entries of a framed envelope, compiled where it can.
+
+        ``buf`` is the envelope as a uint8 array, ``pay_start/pay_len`` the payload spans
+        (:func:`astrodyn.recording._ingest.frame_batch`), ``layout`` its keys.  Entries in
+        the canonical state layout with the next seq of their channel are checked and
+        written by :func:`astrodyn.recording._ingest.ingest_batch`; every other entry
+        ``i`` is handed to ``slow(i)`` (the caller's per-message path, which ends in
+        :meth:`write_encoded`), in arrival order, so the file is what per-message writes
+        would give.  Returns ``(messages written here, largest t among them)``.
+        """
+        if self._error is not None:
+            raise self._error
+        lits, lit_start, lit_len, names, name_start, name_len = _GRAMMAR
+        result = np.zeros(4, dtype=np.int64)
+        written = 0
+        max_t = -np.inf
+        i = 0
+        while i < count:
+            w = self._writer
+            if layout.writer is not w:
+                layout.resolve(self)
+            state = w.chunk_state
+            state[2] = 0
+            _ingest.ingest_batch(
+                buf, i, count, pay_start, pay_len, layout.kinds, layout.cids, layout.slots,
+                lits, lit_start, lit_len, names, name_start, name_len, messages.QUAT_NORM_TOL,
+                self._t_text, self._t_log_time, publish_time, self.seq.next_seq, self.seq.counts,
+                w.chunk, state, w.chunk_size, w.idx_channel, w.idx_time, w.idx_offset, result,
+            )  # fmt: skip
+            n = int(state[2])
+            if n:
+                written += n
+                max_t = max(max_t, self._t_value)
+            code, i = int(result[0]), int(result[1])
+            if code == _ingest.DONE:
+                break
+            if code == _ingest.NEED_T:
+                text = buf[result[2] : result[3]].tobytes()
+                try:
+                    t = float(text)
+                    log_time = self.log_time(t)
+                except ValueError:  # let the per-message path report it
+                    slow(i)
+                    i += 1
+                    continue
+                self._t_text = np.frombuffer(text, dtype=np.uint8)
+                self._t_value, self._t_log_time = t, log_time
+            elif code == _ingest.CHUNK_FULL and int(state[0]) > 0:
+                try:
+                    w.finalize_chunk()
+                except OSError as exc:
+                    self._fail(exc)
+            else:  # SLOW, or one record larger than the whole buffer
+                slow(i)
+                i += 1
+        self.message_count += written
+        if time.monotonic() >= self._next_flush:
+            self.flush()
+        return written, max_t
 
     def add_metadata(self, name: str, data: Mapping[str, Any]) -> None:
         """Write one more metadata record into the current file (e.g. the logger's "end":
