@@ -493,7 +493,11 @@ def _split_kernel(
             ha = 0.5 * a
             if rotor_mode == 2:
                 h0, h1, h2 = h_table[k, st, 0], h_table[k, st, 1], h_table[k, st, 2]
-            c, s, ca, sa = _axis_rotation_trig(pend + (m0 - h0) * i0 * ha)
+            # rotation angle per unit momentum and the rotor's share, off the serial chain:
+            # angle_i = (M_i - h_i) dt_i / I_i = M_i g_i - p_i
+            g0, g1, g2 = i0 * ha, i1 * ha, i2 * a
+            p0, p1, p2 = h0 * g0, h1 * g1, h2 * g2
+            c, s, ca, sa = _axis_rotation_trig(pend + (m0 * g0 - p0))
             m0, m1, m2, e0, e1, e2, e3 = _turn_body(0, c, s, ca, sa, m0, m1, m2, e0, e1, e2, e3)
             if parts != 0:
                 if parts & KICK_GRAVITY_GRADIENT:
@@ -505,17 +509,17 @@ def _split_kernel(
                 b0, b1, b2, u0, u1, u2, f0, f1, f2 = _body_copies(e0, e1, e2, e3, parts, x, y, z, tau_inertial, force)
                 m0, m1, m2 = _kicked(ha, m0, m1, m2, parts, kc, kg, b0, b1, b2, u0, u1, u2, f0, f1, f2)
             m0, m1, m2, e0, e1, e2, e3, b0, b1, b2, u0, u1, u2, f0, f1, f2 = _turn_carry(
-                1, (m1 - h1) * i1 * ha, parts, m0, m1, m2, e0, e1, e2, e3, b0, b1, b2, u0, u1, u2, f0, f1, f2
+                1, m1 * g1 - p1, parts, m0, m1, m2, e0, e1, e2, e3, b0, b1, b2, u0, u1, u2, f0, f1, f2
             )
             m0, m1, m2, e0, e1, e2, e3, b0, b1, b2, u0, u1, u2, f0, f1, f2 = _turn_carry(
-                2, (m2 - h2) * i2 * a, parts, m0, m1, m2, e0, e1, e2, e3, b0, b1, b2, u0, u1, u2, f0, f1, f2
+                2, m2 * g2 - p2, parts, m0, m1, m2, e0, e1, e2, e3, b0, b1, b2, u0, u1, u2, f0, f1, f2
             )
             m0, m1, m2, e0, e1, e2, e3, b0, b1, b2, u0, u1, u2, f0, f1, f2 = _turn_carry(
-                1, (m1 - h1) * i1 * ha, parts, m0, m1, m2, e0, e1, e2, e3, b0, b1, b2, u0, u1, u2, f0, f1, f2
+                1, m1 * g1 - p1, parts, m0, m1, m2, e0, e1, e2, e3, b0, b1, b2, u0, u1, u2, f0, f1, f2
             )
             if parts != 0:
                 m0, m1, m2 = _kicked(ha, m0, m1, m2, parts, kc, kg, b0, b1, b2, u0, u1, u2, f0, f1, f2)
-            pend = (m0 - h0) * i0 * ha
+            pend = m0 * g0 - p0
         # one Newton step towards |q| = 1, as _renormalize (round-off drift only)
         fn = 1.5 - 0.5 * (e0 * e0 + e1 * e1 + e2 * e2 + e3 * e3)
         e0 *= fn
