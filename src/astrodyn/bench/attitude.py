@@ -35,6 +35,7 @@ CASES = {
     "fast spin 300 rad/s": ((1.0, 2.0, 3.0), (1.0, 0.5, 300.0), 2.0, False),
 }
 Q0 = np.array([0.9, 0.1, -0.3, 0.3]) / np.linalg.norm([0.9, 0.1, -0.3, 0.3])
+TARGET_NS_PER_STEP = 200.0  # design.md section 5: torqued propagation <= 200 ns per step
 
 
 def _best(fn, repeats):
@@ -54,7 +55,8 @@ def _angle(qa, qb):
 
 
 def kernel_ns_per_step(method, torque_kind, repeats, n_steps):
-    """Best ns per step of the compiled splitting kernel (output only at the end).
+    """Best ns per step of the compiled splitting kernel (output only at the end), and
+    ``||q| - 1|`` at the end of the run (``n_steps`` steps).
 
     ``torque_kind``: ``"none"``; ``"gg-kepler"`` gravity gradient on a circular
     LEO orbit evaluated inside the kernel (:meth:`GravityGradientTorque.kepler`);
@@ -90,8 +92,8 @@ def kernel_ns_per_step(method, torque_kind, repeats, n_steps):
             return propagate_attitude(I, w0, Q0, [n_steps * h], torque=torque, rotor_momentum=rotor, method=method, step=h, error_estimate=False)
 
     run()  # compile / load cache
-    sec, _ = _best(run, repeats)
-    return 1e9 * sec / n_steps
+    sec, (_, q, _) = _best(run, repeats)
+    return 1e9 * sec / n_steps, float(np.max(np.abs(np.linalg.norm(q, axis=-1) - 1.0)))
 
 
 def run_case(name, inertia, w0, span, mp_ok, quick, repeats):
@@ -179,12 +181,13 @@ def main(argv=None) -> int:
     os.makedirs(args.out, exist_ok=True)
 
     load0 = os.getloadavg()
-    kernel = {}
+    kernel, qdrift = {}, {}
     nsteps = 20000 if args.quick else 200000
     for method in ("split2", "split4", "split4-yoshida"):
         for kind in ("none", "gg-kepler", "gg-callable"):
-            kernel[(method, kind)] = kernel_ns_per_step(method, kind, repeats, nsteps)
-    kernel[("top4", "uniform gravity (heavy top)")] = kernel_ns_per_step("top4", None, repeats, nsteps)
+            kernel[(method, kind)], qdrift[(method, kind)] = kernel_ns_per_step(method, kind, repeats, nsteps)
+    top_key = ("top4", "uniform gravity (heavy top)")
+    kernel[top_key], qdrift[top_key] = kernel_ns_per_step("top4", None, repeats, nsteps)
     results = {}
     for name, (inertia, w0, span, mp_ok) in CASES.items():
         print(f"[bench attitude] {name} ...", file=sys.stderr, flush=True)
@@ -219,6 +222,15 @@ def main(argv=None) -> int:
     ]
     for (m, kind), ns in kernel.items():
         lines.append(f"| {m} | {kind_label.get(kind, kind)} | {ns:.0f} |")
+    g2, g4 = kernel[("split2", "gg-kepler")], kernel[("split4", "gg-kepler")]
+    lines += [
+        "",
+        f"Design target (design.md section 5): torqued propagation <= {TARGET_NS_PER_STEP:.0f} ns/step."
+        f" split2 + gravity gradient (Kepler orbit in the kernel): {g2:.0f} ns/step = {g2 / TARGET_NS_PER_STEP:.2f} x the target"
+        f" ({'met' if g2 <= TARGET_NS_PER_STEP else 'NOT met'}); split4 + gravity gradient: {g4:.0f} ns/step ="
+        f" {g4 / 5:.0f} ns per stage (5 stages; {g4 / (5 * TARGET_NS_PER_STEP):.2f} x the target per stage).",
+        f"||q| - 1| at the end of every run above ({nsteps} steps): at most {max(qdrift.values()):.1e}.",
+    ]
     for name, rows in results.items():
         inertia, w0, span, _ = CASES[name]
         lines += ["", f"## {name}: I = {inertia} kg m^2, w0 = {w0} rad/s, span {span:g} s", "",
