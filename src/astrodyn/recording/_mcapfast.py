@@ -134,6 +134,7 @@ class ChunkedWriter:
         # grouped at finalize_chunk.  chunk_state = [bytes used, index entries, spare]
         # is shared with the compiled batch ingest (astrodyn.recording._ingest).
         self.chunk_state = np.zeros(3, dtype=np.int64)
+        self._state_view = memoryview(self.chunk_state)
         self._alloc(chunk_size + (64 << 10), chunk_size // 31 + 64)
         self._write(MAGIC + _serialise(Header(profile="", library=library)))
 
@@ -150,11 +151,13 @@ class ChunkedWriter:
             idx_time[:n] = self.idx_time[:n]
             idx_offset[:n] = self.idx_offset[:n]
         self.chunk, self.idx_channel, self.idx_time, self.idx_offset = buf, idx_channel, idx_time, idx_offset
+        # memoryviews for the per-message Python path (element access at list speed)
         self._chunk_view = memoryview(buf)
+        self._index_views = (memoryview(idx_channel), memoryview(idx_time), memoryview(idx_offset))
 
     def _reserve(self, nbytes: int, nindex: int = 0) -> int:
         """Room for ``nbytes`` more bytes and ``nindex`` more index entries; returns the write offset."""
-        used, n = int(self.chunk_state[0]), int(self.chunk_state[1])
+        used, n = self._state_view[0], self._state_view[1]
         if used + nbytes > self.chunk.shape[0] or n + nindex > self.idx_channel.shape[0]:
             self._alloc(max(2 * self.chunk.shape[0], used + nbytes), max(2 * self.idx_channel.shape[0], n + nindex))
         return used
@@ -189,14 +192,16 @@ class ChunkedWriter:
             raise ValueError(f"channel_id: expected a registered channel (1 ... {len(self.channels)}), got {channel_id!r}")
         size = _MESSAGE.size + len(data)
         at = self._reserve(size, 1)
-        n = int(self.chunk_state[1])
-        self.idx_channel[n] = channel_id
-        self.idx_time[n] = log_time
-        self.idx_offset[n] = at
+        state = self._state_view
+        n = state[1]
+        channels, times, offsets = self._index_views
+        channels[n] = channel_id
+        times[n] = log_time
+        offsets[n] = at
         _MESSAGE.pack_into(self.chunk, at, _MESSAGE_OPCODE, 22 + len(data), channel_id, sequence, log_time, publish_time)
         self._chunk_view[at + _MESSAGE.size : at + size] = data
-        self.chunk_state[0] = at + size
-        self.chunk_state[1] = n + 1
+        state[0] = at + size
+        state[1] = n + 1
         if at + size > self.chunk_size:
             self.finalize_chunk()
 

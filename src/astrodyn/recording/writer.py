@@ -77,19 +77,19 @@ class _ChannelSeq:
 
     @property
     def next(self) -> int:
-        return int(self.tracker.next_seq[self.slot])
+        return self.tracker._next_view[self.slot]
 
     @next.setter
     def next(self, value: int) -> None:
-        self.tracker.next_seq[self.slot] = value
+        self.tracker._next_view[self.slot] = value
 
     @property
     def count(self) -> int:
-        return int(self.tracker.counts[self.slot])
+        return self.tracker._count_view[self.slot]
 
     @count.setter
     def count(self, value: int) -> None:
-        self.tracker.counts[self.slot] = value
+        self.tracker._count_view[self.slot] = value
 
 
 class SeqTracker:
@@ -105,16 +105,20 @@ class SeqTracker:
     def __init__(self, max_gaps: int = 1000):
         self.max_gaps = int(max_gaps)
         self.channels: dict[str, _ChannelSeq] = {}
-        self.next_seq = np.zeros(64, dtype=np.int64)
-        self.counts = np.zeros(64, dtype=np.int64)
+        self._set_arrays(np.zeros(64, dtype=np.int64), np.zeros(64, dtype=np.int64))
+
+    def _set_arrays(self, next_seq: np.ndarray, counts: np.ndarray) -> None:
+        self.next_seq, self.counts = next_seq, counts
+        # memoryviews: element access from Python at list speed (numpy scalars are ~3x slower)
+        self._next_view, self._count_view = memoryview(next_seq), memoryview(counts)
 
     def _channel(self, channel: str) -> _ChannelSeq:
         c = self.channels.get(channel)
         if c is None:
             slot = len(self.channels)
             if slot == self.next_seq.shape[0]:  # grow both arrays (callers re-read them)
-                self.next_seq = np.concatenate([self.next_seq, np.zeros(slot, dtype=np.int64)])
-                self.counts = np.concatenate([self.counts, np.zeros(slot, dtype=np.int64)])
+                self._set_arrays(np.concatenate([self.next_seq, np.zeros(slot, dtype=np.int64)]),
+                                 np.concatenate([self.counts, np.zeros(slot, dtype=np.int64)]))
             c = self.channels[channel] = _ChannelSeq(self, slot)
         return c
 
@@ -123,11 +127,14 @@ class SeqTracker:
         return self._channel(channel).slot
 
     def add(self, channel: str, seq: int) -> int:
-        c = self._channel(channel)
-        nxt = c.next
+        c = self.channels.get(channel)
+        if c is None:
+            c = self._channel(channel)
+        slot = c.slot
+        nxt = self._next_view[slot]
         if seq == nxt:
-            c.next = nxt + 1
-            c.count += 1
+            self._next_view[slot] = nxt + 1
+            self._count_view[slot] += 1
             return OK
         if seq > nxt:
             c.missing += seq - nxt
