@@ -466,3 +466,27 @@ def grammar_tables(orbit_models, attitude_models):
             name_len[r, j] = len(m)
             at += len(m)
     return lits, lit_start, lit_len, names, name_start, name_len
+
+
+def warm_up(grammar) -> None:
+    """Run every kernel once on a two-entry envelope with the argument types the logger
+    uses, so a cold numba cache compiles (a few seconds, once per install) before the
+    logger declares itself ready instead of while publishers wait on it."""
+    payloads = [
+        b'{"t":0.5,"seq":0,"model":"kepler","r":[1.0,0.0,0.0],"v":[0.0,1.0,0.0],"mu":1.0,"frame":"GCRF"}',
+        b'{"t":0.5,"seq":0,"model":"torque_free","q":[1.0,0.0,0.0,0.0],"w":[0.0,0.0,0.1]}',
+    ]
+    env = b"ADB1" + (2).to_bytes(4, "little") + b"".join(
+        (1).to_bytes(2, "little") + b"k" + len(p).to_bytes(4, "little") + p for p in payloads)
+    buf = np.frombuffer(env, dtype=np.uint8)  # read-only, as the logger's payloads
+    spans = tuple(np.zeros(4, dtype=np.int64) for _ in range(4))
+    count = frame_batch(buf, *spans)
+    blob = np.frombuffer(b"kk", dtype=np.uint8).copy()
+    same_keys(buf, spans[0], spans[1], count, blob, np.array([0, 1], dtype=np.int64), np.ones(2, dtype=np.int64))
+    ingest_batch(
+        buf, 0, count, spans[2], spans[3], np.array([KIND_ORBIT, KIND_ATTITUDE], dtype=np.int8),
+        np.ones(2, dtype=np.int64), np.arange(2, dtype=np.int64), *grammar, 1e-9,
+        np.frombuffer(b"0.5", dtype=np.uint8).copy(), 1, 1, np.zeros(2, dtype=np.int64), np.zeros(2, dtype=np.int64),
+        np.zeros(4096, dtype=np.uint8), np.zeros(3, dtype=np.int64), 2048, np.zeros(8, dtype=np.uint16),
+        np.zeros(8, dtype=np.uint64), np.zeros(8, dtype=np.uint64), np.zeros(4, dtype=np.int64),
+    )  # fmt: skip

@@ -53,7 +53,7 @@ import zenoh
 
 from astrodyn import bus, messages
 from astrodyn.recording import _ingest
-from astrodyn.recording.writer import DUPLICATE, BatchLayout, McapRecorder
+from astrodyn.recording.writer import _GRAMMAR, DUPLICATE, BatchLayout, McapRecorder
 
 __all__ = ["Logger"]
 
@@ -395,6 +395,7 @@ class Logger:
                 extra_keys={messages.status_key(self.scenario): "status"}))
             alive = stack.enter_context(bus.AliveWatcher(self.session, self.scenario))
             heartbeat = stack.enter_context(bus.Heartbeat(self.session, self.scenario, self.name))
+            _ingest.warm_up(_GRAMMAR)  # compile / load the batch kernels before we say ready
             stack.enter_context(bus.declare_alive(self.session, self.scenario, self.name))  # last: ready
             receivers = [sub.try_recv for sub in subs]
             handle = self.handle

@@ -450,7 +450,7 @@ class McapRecorder:
                     slow(i)
                     i += 1
                     continue
-                self._t_text = np.frombuffer(text, dtype=np.uint8)
+                self._t_text = np.frombuffer(text, dtype=np.uint8).copy()  # writable: one kernel signature
                 self._t_value, self._t_log_time = t, log_time
             elif code == _ingest.CHUNK_FULL and int(state[0]) > 0:
                 try:
