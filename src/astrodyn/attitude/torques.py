@@ -71,9 +71,12 @@ class GravityGradientTorque:
         (the full mass distribution, rotors included).
 
     For a two-body (Kepler) orbit use :meth:`kepler` instead: the integrator then
-    evaluates the position inside its compiled kernel (universal-variable
-    Lagrange coefficients of :mod:`astrodyn.orbit.universal`), about 5x cheaper
-    per step than calling ``position`` from Python.
+    evaluates the position inside its compiled kernel (exact universal-variable
+    Lagrange coefficients of :mod:`astrodyn.orbit.universal` at nodes a few
+    seconds apart, quintic Hermite in between, below round-off), 2.5-4x cheaper
+    per step than a ``position`` that calls :func:`astrodyn.orbit.propagate`
+    (measured 125 vs 480 ns per ``split2`` step, 558 vs 1404 per ``split4`` step,
+    LEO, 10 ms steps).
     """
 
     def __init__(self, mu, position, inertia):
