@@ -111,7 +111,11 @@ __all__ = [
     "status_message",
     "encode_orbit_batch",
     "encode_attitude_batch",
+    "frame_orbit_batch",
+    "frame_attitude_batch",
     "encode_batch",
+    "frame_entries",
+    "batch_envelope",
     "decode_batch",
 ]
 
@@ -826,7 +830,7 @@ def status_message(t: float, seq: int, state: str, real_time_factor: float, **op
 # Fast batch encoders: one payload per body (per-body channels stay intact)
 
 
-def _batch_arrays(kind: str, seqs: Any, arrays: dict[str, tuple[Any, int]]) -> tuple[list, dict[str, list]]:
+def _batch_arrays(kind: str, seqs: Any, arrays: dict[str, tuple[Any, int]]) -> tuple[np.ndarray, dict[str, np.ndarray]]:
     n = None
     out = {}
     for field, (x, width) in arrays.items():
@@ -837,7 +841,7 @@ def _batch_arrays(kind: str, seqs: Any, arrays: dict[str, tuple[Any, int]]) -> t
         if not np.isfinite(a).all():
             bad = int(np.argwhere(~np.isfinite(a))[0, 0])
             raise MessageError(f"{kind}.{field}[{bad}]: expected array of {width} finite numbers, got {_show(a[bad].tolist())}")
-        out[field] = a.tolist()
+        out[field] = a
     s = np.asarray(seqs)
     if s.ndim == 0:
         s = np.full(n, s)
@@ -845,16 +849,13 @@ def _batch_arrays(kind: str, seqs: Any, arrays: dict[str, tuple[Any, int]]) -> t
         raise MessageError(f"{kind}.seq: expected an integer or an array of {n} integers, got {_show(s.tolist())}")
     if n and (s.min() < 0 or s.max() > MAX_SEQ):
         raise MessageError(f"{kind}.seq: expected integers 0 <= seq <= 2**53-1, got range [{s.min()}, {s.max()}]")
-    return s.astype(np.int64).tolist(), out
+    return s.astype(np.int64), out
 
 
-def encode_orbit_batch(t: float, seqs: Any, model: str, r: Any, v: Any, mu: float, frame: str = "GCRF") -> list[bytes]:
-    """Encode N orbit states at one time ``t``: one JSON payload per body, in order.
+def _orbit_records(t: float, seqs: Any, model: str, r: Any, v: Any, mu: float, frame: str, keys: Any) -> tuple[bytes, np.ndarray]:
+    """Validate like :func:`orbit_message`, then write every payload in one compiled pass."""
+    from astrodyn import _shortest  # numba: loaded on first use, not with this module
 
-    ``seqs`` is one integer (the same for every body) or N integers; ``r``, ``v`` shape
-    (N, 3) in m and m/s. The bytes equal ``encode(orbit_message(...))`` for each body
-    (tested), written by string formatting for speed (a few us per body, see the bench).
-    """
     tf = _float(t, "orbit", "t")
     muf = _float(mu, "orbit", "mu")
     if muf <= 0:
@@ -863,14 +864,64 @@ def encode_orbit_batch(t: float, seqs: Any, model: str, r: Any, v: Any, mu: floa
         raise MessageError(f"orbit.model: expected one of {', '.join(ORBIT_MODELS)}, got {_show(model)}")
     if not isinstance(frame, str) or not _NAME_FULL.search(frame):
         raise MessageError(f"orbit.frame: expected a frame name matching {NAME_PATTERN}, got {_show(frame)}")
-    seq_list, a = _batch_arrays("orbit", seqs, {"r": (r, 3), "v": (v, 3)})
-    head = f'{{"t":{tf!r},"seq":'
-    mid = f',"model":"{model}","r":['
-    tail = f'],"mu":{muf!r},"frame":"{frame}"}}'
-    return [
-        f"{head}{s}{mid}{ri[0]!r},{ri[1]!r},{ri[2]!r}],\"v\":[{vi[0]!r},{vi[1]!r},{vi[2]!r}{tail}".encode()
-        for s, ri, vi in zip(seq_list, a["r"], a["v"])
-    ]
+    seq_arr, a = _batch_arrays("orbit", seqs, {"r": (r, 3), "v": (v, 3)})
+    pieces = [f'{{"t":{tf!r},"seq":'.encode(), f',"model":"{model}","r":['.encode(), b",", b",",
+              b'],"v":[', b",", b",", f'],"mu":{muf!r},"frame":"{frame}"}}'.encode()]
+    return _shortest.format_records(seq_arr, np.concatenate([a["r"], a["v"]], axis=1), pieces,
+                                    _batch_keys(keys, seq_arr.shape[0]))
+
+
+def _attitude_records(t: float, seqs: Any, model: str, q: Any, w: Any, keys: Any) -> tuple[bytes, np.ndarray]:
+    """Validate like :func:`attitude_message`, then write every payload in one compiled pass."""
+    from astrodyn import _shortest
+
+    tf = _float(t, "attitude", "t")
+    if model not in ATTITUDE_MODELS:
+        raise MessageError(f"attitude.model: expected one of {', '.join(ATTITUDE_MODELS)}, got {_show(model)}")
+    seq_arr, a = _batch_arrays("attitude", seqs, {"q": (q, 4), "w": (w, 3)})
+    qa = a["q"]
+    if qa.size:
+        err = np.abs(np.sqrt(np.einsum("ij,ij->i", qa, qa)) - 1.0)
+        if not np.all(err <= QUAT_NORM_TOL):
+            bad = int(np.argmax(err))
+            raise MessageError(f"attitude.q[{bad}]: expected a unit quaternion (| |q| - 1 | <= {QUAT_NORM_TOL:g}), got |q| = {float(np.linalg.norm(qa[bad]))!r}")
+    pieces = [f'{{"t":{tf!r},"seq":'.encode(), f',"model":"{model}","q":['.encode(), b",", b",", b",",
+              b'],"w":[', b",", b",", b"]}"]
+    return _shortest.format_records(seq_arr, np.concatenate([qa, a["w"]], axis=1), pieces,
+                                    _batch_keys(keys, seq_arr.shape[0]))
+
+
+def _batch_keys(keys: Any, n: int) -> list[bytes] | None:
+    """UTF-8 keys for framed records (checked as :func:`encode_batch` checks them), or None."""
+    if keys is None:
+        return None
+    if isinstance(keys, (str, bytes)) or len(keys) != n:
+        raise MessageError(f"batch.keys: expected a sequence of {n} key strings, got {_show(keys)}")
+    out = []
+    for i, key in enumerate(keys):
+        if not isinstance(key, str):
+            raise MessageError(f"batch[{i}].key: expected a string, got {_show(key)}")
+        kb = key.encode("utf-8")
+        if len(kb) > _MAX_KEY:
+            raise MessageError(f"batch[{i}]: expected key <= 65535 bytes and payload < 4 GiB, got {len(kb)} and 0")
+        out.append(kb)
+    return out
+
+
+def _split(data: bytes, offsets: np.ndarray) -> list[bytes]:
+    o = offsets.tolist()
+    return [data[o[i]:o[i + 1]] for i in range(len(o) - 1)]
+
+
+def encode_orbit_batch(t: float, seqs: Any, model: str, r: Any, v: Any, mu: float, frame: str = "GCRF") -> list[bytes]:
+    """Encode N orbit states at one time ``t``: one JSON payload per body, in order.
+
+    ``seqs`` is one integer (the same for every body) or N integers; ``r``, ``v`` shape
+    (N, 3) in m and m/s. The bytes equal ``encode(orbit_message(...))`` for each body
+    (tested): every float is written by a compiled shortest round-trip formatter that
+    gives ``repr``'s bytes (:mod:`astrodyn._shortest`), all N payloads in one pass.
+    """
+    return _split(*_orbit_records(t, seqs, model, r, v, mu, frame, None))
 
 
 def encode_attitude_batch(t: float, seqs: Any, model: str, q: Any, w: Any) -> list[bytes]:
@@ -879,22 +930,23 @@ def encode_attitude_batch(t: float, seqs: Any, model: str, q: Any, w: Any) -> li
     ``q`` shape (N, 4) scalar first, unit norm (checked to :data:`QUAT_NORM_TOL`); ``w``
     shape (N, 3) rad/s body axes. Bytes equal ``encode(attitude_message(...))`` per body.
     """
-    tf = _float(t, "attitude", "t")
-    if model not in ATTITUDE_MODELS:
-        raise MessageError(f"attitude.model: expected one of {', '.join(ATTITUDE_MODELS)}, got {_show(model)}")
-    seq_list, a = _batch_arrays("attitude", seqs, {"q": (q, 4), "w": (w, 3)})
-    qa = np.asarray(a["q"])
-    if qa.size:
-        err = np.abs(np.sqrt(np.einsum("ij,ij->i", qa, qa)) - 1.0)
-        if not np.all(err <= QUAT_NORM_TOL):
-            bad = int(np.argmax(err))
-            raise MessageError(f"attitude.q[{bad}]: expected a unit quaternion (| |q| - 1 | <= {QUAT_NORM_TOL:g}), got |q| = {float(np.linalg.norm(qa[bad]))!r}")
-    head = f'{{"t":{tf!r},"seq":'
-    mid = f',"model":"{model}","q":['
-    return [
-        f"{head}{s}{mid}{qi[0]!r},{qi[1]!r},{qi[2]!r},{qi[3]!r}],\"w\":[{wi[0]!r},{wi[1]!r},{wi[2]!r}]}}".encode()
-        for s, qi, wi in zip(seq_list, a["q"], a["w"])
-    ]
+    return _split(*_attitude_records(t, seqs, model, q, w, None))
+
+
+def frame_orbit_batch(keys: Sequence[str], t: float, seqs: Any, model: str, r: Any, v: Any, mu: float,
+                      frame: str = "GCRF") -> bytes:
+    """:func:`encode_orbit_batch` with each payload framed as an envelope entry under ``keys[i]``.
+
+    Returns the entries back to back (``key_len u16, key, payload_len u32, payload``);
+    :func:`batch_envelope` puts one or more such runs into an envelope, equal byte for
+    byte to ``encode_batch(zip(keys, encode_orbit_batch(...)))`` (tested).
+    """
+    return _orbit_records(t, seqs, model, r, v, mu, frame, keys)[0]
+
+
+def frame_attitude_batch(keys: Sequence[str], t: float, seqs: Any, model: str, q: Any, w: Any) -> bytes:
+    """:func:`encode_attitude_batch` framed as envelope entries (see :func:`frame_orbit_batch`)."""
+    return _attitude_records(t, seqs, model, q, w, keys)[0]
 
 
 # ---------------------------------------------------------------------------------------
@@ -909,7 +961,12 @@ _MAX_PAYLOAD = 0xFFFFFFFF
 
 def encode_batch(items: Iterable[tuple[str, bytes]]) -> bytes:
     """Frame ``(key, payload)`` pairs into one envelope (layout in the module docstring)."""
-    parts = [BATCH_MAGIC, b""]
+    return batch_envelope([frame_entries(items)])
+
+
+def frame_entries(items: Iterable[tuple[str, bytes]]) -> tuple[bytes, int]:
+    """The entries of an envelope for ``(key, payload)`` pairs, without the header: (run, count)."""
+    parts = []
     count = 0
     pack16, pack32 = _U16.pack, _U32.pack
     for item in items:
@@ -926,8 +983,14 @@ def encode_batch(items: Iterable[tuple[str, bytes]]) -> bytes:
             raise MessageError(f"batch[{count}]: expected key <= 65535 bytes and payload < 4 GiB, got {len(kb)} and {len(payload)}")
         parts += (pack16(len(kb)), kb, pack32(len(payload)), payload)
         count += 1
-    parts[1] = pack32(count)
-    return b"".join(parts)
+    return b"".join(parts), count
+
+
+def batch_envelope(runs: Iterable[tuple[bytes, int]]) -> bytes:
+    """One envelope from runs of framed entries, each ``(run, count)``: :func:`frame_entries`'s
+    result, or ``(frame_orbit_batch(keys, ...), len(keys))`` and likewise for attitude."""
+    runs = list(runs)
+    return b"".join([BATCH_MAGIC, _U32.pack(sum(c for _, c in runs))] + [r for r, _ in runs])
 
 
 def decode_batch(data: bytes | bytearray | memoryview) -> list[tuple[str, bytes]]:
