@@ -213,3 +213,78 @@ def exact_midpoint_decimals(count: int, seed: int) -> np.ndarray:
 def test_short_decimals_at_exact_midpoints():
     x = exact_midpoint_decimals(20_000, seed=1)
     assert_same_as_repr(np.concatenate([x, -x, x * 2.0**-60, x * 2.0**200]))
+
+
+# ------------------------------------------------------------------------ records and the encoders
+
+
+def test_format_records_template():
+    seqs = np.array([0, 7, 2**53 - 1])
+    values = np.array([[0.1, -0.0], [1e16, 5e-324], [123.0, 1e-4]])
+    data, offsets = sh.format_records(seqs, values, [b"<", b"|", b",", b">"])
+    expected = [f"<{s}|{a!r},{b!r}>".encode() for s, (a, b) in zip(seqs.tolist(), values.tolist())]
+    assert data == b"".join(expected)
+    assert np.diff(offsets).tolist() == [len(e) for e in expected]
+    with pytest.raises(ValueError, match="pieces: expected 4 byte strings"):
+        sh.format_records(seqs, values, [b"<", b">"])
+
+
+def random_unit_quats(rng, n):
+    q = rng.normal(size=(n, 4))
+    return q / np.linalg.norm(q, axis=1)[:, None]
+
+
+def test_encoders_equal_encode_of_the_message_on_random_bit_patterns():
+    """Any finite value (subnormal, huge, -0.0, 17 digits) gives json.dumps/repr's bytes."""
+    from astrodyn import messages as m
+
+    rng = np.random.default_rng(17)
+    r = random_finite_bits(3100, seed=3)[:3000].reshape(-1, 3)
+    v = random_finite_bits(3100, seed=4)[:3000].reshape(-1, 3)
+    n = r.shape[0]
+    seqs = rng.integers(0, 2**53, size=n)
+    mu, t = 3.986004418e14, float(random_finite_bits(10, seed=5)[0])
+    got = m.encode_orbit_batch(t, seqs, "j2", r, v, mu, "EME2000")
+    assert got == [m.encode(m.orbit_message(t, int(s), "j2", ri, vi, mu, "EME2000")) for s, ri, vi in zip(seqs, r, v)]
+    q = random_unit_quats(rng, n)
+    got = m.encode_attitude_batch(t, seqs, "gyrostat", q, v)
+    assert got == [m.encode(m.attitude_message(t, int(s), "gyrostat", qi, wi)) for s, qi, wi in zip(seqs, q, v)]
+
+
+def test_framed_encoders_equal_encode_batch_of_the_payloads():
+    from astrodyn import messages as m
+
+    rng = np.random.default_rng(23)
+    n = 300
+    r, v, w = rng.normal(size=(n, 3)) * 7e6, rng.normal(size=(n, 3)) * 7.5e3, rng.normal(size=(n, 3)) * 1e-3
+    q = random_unit_quats(rng, n)
+    okeys = [m.orbit_key("scen", f"sat-{i}") for i in range(n)]
+    akeys = [f"astrodyn/scen/s\u00e4t{i}/attitude" for i in range(n)]  # non-ASCII: UTF-8 byte lengths
+    orbit = m.frame_orbit_batch(okeys, 4.5, 9, "kepler", r, v, 3.986004418e14)
+    att = m.frame_attitude_batch(akeys, 4.5, np.arange(n), "torque_free", q, w)
+    extra = m.frame_entries([(m.crosscheck_key("scen", "x"), b"{}")])
+    env = m.batch_envelope([(orbit, n), (att, n), extra])
+    items = (list(zip(okeys, m.encode_orbit_batch(4.5, 9, "kepler", r, v, 3.986004418e14)))
+             + list(zip(akeys, m.encode_attitude_batch(4.5, np.arange(n), "torque_free", q, w)))
+             + [(m.crosscheck_key("scen", "x"), b"{}")])
+    assert env == m.encode_batch(items)
+    assert m.decode_batch(env) == items
+    assert m.batch_envelope([(m.frame_orbit_batch([], 0.0, 0, "kepler", np.zeros((0, 3)), np.zeros((0, 3)), 1.0), 0)]) == m.encode_batch([])
+
+
+def test_framed_encoders_reject_bad_keys_and_values_like_the_plain_ones():
+    from astrodyn import messages as m
+
+    ones = np.ones((2, 3))
+    with pytest.raises(m.MessageError, match=r"batch.keys: expected a sequence of 2 key strings"):
+        m.frame_orbit_batch(["a"], 0.0, 0, "kepler", ones, ones, 1.0)
+    with pytest.raises(m.MessageError, match=r"batch\[1\].key: expected a string"):
+        m.frame_orbit_batch(["a", b"b"], 0.0, 0, "kepler", ones, ones, 1.0)
+    with pytest.raises(m.MessageError, match=r"batch\[0\]: expected key <= 65535 bytes"):
+        m.frame_orbit_batch(["a" * 70000, "b"], 0.0, 0, "kepler", ones, ones, 1.0)
+    bad = ones.copy()
+    bad[1, 2] = np.nan
+    with pytest.raises(m.MessageError, match=r"orbit.v\[1\]: expected array of 3 finite numbers"):
+        m.frame_orbit_batch(["a", "b"], 0.0, 0, "kepler", ones, bad, 1.0)
+    with pytest.raises(m.MessageError, match=r"attitude.q\[0\]: expected a unit quaternion"):
+        m.frame_attitude_batch(["a", "b"], 0.0, 0, "torque_free", np.ones((2, 4)), ones)
