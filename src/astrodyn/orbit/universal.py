@@ -346,14 +346,151 @@ def _fg_hyperbolic(r0, sig, q, beta, n, dt, mu, h2):
     return _hyp_fg(r0, sqb, p, Ch, Sh, e, em1, m, F0, beta, n, F1, sh1, chm1_1)
 
 
-@jit
-def _fg_universal(r0, sg, q, alpha, dt, sqmu):
-    """Lagrange coefficients from the universal variable chi (near-parabolic, parabolic).
+# ---------------------------------------------------------------------------
+# universal variable (near-parabolic window)
+# ---------------------------------------------------------------------------
+# Bound on z = alpha chi^2 in the window.  z is the square of the eccentric-anomaly
+# change x (ellipse) or minus the square of the hyperbolic-anomaly change (hyperbola),
+# and x solves the difference form of Kepler's equation (module doc)
+#     q x + C (x - sin x) + S (1 - cos x) = n dt,   C = 1 - q,  S^2 = e^2 - C^2 < 1 - C^2
+# (hyperbola: p x + Ch (sinh x - x) + Sh (cosh x - 1) = n dt, p = -q, Sh^2 < Ch^2 - 1).
+# With |q| <= Q_UNIVERSAL = 0.05 and |n dt| <= M_UNIVERSAL = 1 the root is largest for
+# q = 0.05 and the extreme S against the motion: |x| <= 2.2483 (ellipse; z <= 5.055),
+# |x| <= 2.0413 (hyperbola; z >= -4.167) (root-finding over q and S, scipy brentq).
+# _Z_WINDOW leaves room for float64 rounding of q and the starter's iterates.
+_Z_WINDOW = 6.0
+# Number of Taylor terms for |z| <= 6: the first omitted terms are z^13 / 28! = 4.3e-20
+# (c2 >= c2(6) = 0.295: 1.5e-19 relative) and z^13 / 29! = 1.5e-21 (c3 >= c3(6) = 0.123:
+# 1.2e-20 relative), far below the float64 rounding.  The alternating sum at z = 6 has
+# sum |terms| = c2(-6) = 0.80 against c2(6) = 0.295 (c3: 0.24 / 0.123), so Estrin's
+# rounding stays within a few ulp.  Coefficients 1 / (2k+2)!, 1 / (2k+3)! correctly
+# rounded (int / int true division).
+_N_STUMPFF = 13
+_C2_TAYLOR = tuple(1 / math.factorial(2 * k + 2) for k in range(_N_STUMPFF))
+_C3_TAYLOR = tuple(1 / math.factorial(2 * k + 3) for k in range(_N_STUMPFF))
 
-    Solves ``sqrt(mu) dt = r0 chi + sg chi^2 c2 + (1 - q) chi^3 c3`` (Vallado eq.
-    2-50 / Curtis eq. 3.49) with ``sg = r0.v0 / sqrt(mu)``, ``z = alpha chi^2``.
+
+@jit(inline="always")
+def _estrin13(a, y):
+    """``sum_{k=0}^{12} a[k] y^k`` by Estrin's scheme (depth 4 instead of Horner's 12)."""
+    y2 = y * y
+    y4 = y2 * y2
+    y8 = y4 * y4
+    b0 = a[0] + a[1] * y
+    b1 = a[2] + a[3] * y
+    b2 = a[4] + a[5] * y
+    b3 = a[6] + a[7] * y
+    b4 = a[8] + a[9] * y
+    b5 = a[10] + a[11] * y
+    d0 = (b0 + b1 * y2) + (b2 + b3 * y2) * y4
+    d1 = (b4 + b5 * y2) + a[12] * y4
+    return d0 + d1 * y8
+
+
+@jit(inline="always")
+def _stumpff_window(z):
+    """``(c2(z), c3(z))`` by their 13-term Taylor series, for ``|z| <= _Z_WINDOW`` (= 6).
+
+    Straight-line code (vectorizes); accurate to a few ulp there (see the comment
+    at ``_Z_WINDOW``).  Outside that range it is not used (the fast path checks).
     """
-    tau = sqmu * dt
+    return _estrin13(_C2_TAYLOR, -z), _estrin13(_C3_TAYLOR, -z)
+
+
+@jit(inline="always")
+def _uni_start(r0, sg, omq, tau):
+    """Starter: the root of the parabolic (``z = 0``) time equation, a cubic in chi.
+
+    ``cc chi^3 / 6 + sg chi^2 / 2 + r0 chi = tau`` with ``cc = max(1 - q, sg^2 / (2 r0))``
+    (``1 - q`` is the exact leading coefficient; the max keeps the cubic monotonic,
+    ``r0 + sg chi + cc chi^2 / 2 > 0``, so it has one real root).  With
+    ``chi = y - s``, ``s = sg / cc`` it reads ``y^3 + P y = R``, ``P >= 0``, and
+    Cardano's root ``y = A - B``, ``A^3 = R/2 + sqrt(R^2/4 + P^3/27)``,
+    ``B = P / (3 A)``, is formed without cancellation as ``R / (A^2 + A B + B^2)``
+    (``A^3 - B^3 = R``; Barker's solution when ``sg = 0``, ``cc = 1``).
+    The ``z`` terms left out make it a starter only (Laguerre-Conway then
+    converges in one or two steps: the module doc).  Overflow (``|tau| > 1e150``)
+    gives a useless starter and the caller's check sends the state to the safeguarded loop.
+    """
+    w = sg * sg / (2.0 * r0)
+    cc = omq if omq >= w else w
+    icc = 1.0 / cc
+    s = sg * icc
+    P = 6.0 * r0 * icc - 3.0 * s * s
+    P = P if P > 0.0 else 0.0
+    R = 6.0 * icc * (tau + s * (r0 - cc * s * s * (1.0 / 3.0)))
+    u = 0.5 * abs(R)
+    A = _cbrt_start(u + math.sqrt(u * u + P * P * P * (1.0 / 27.0)))
+    B = P / (3.0 * A)
+    return math.copysign(2.0 * u / (A * A + A * B + B * B), R) - s
+
+
+@jit(inline="always")
+def _uni_radius(chi, z, c2, c3, r0, sg):
+    """``r / sqrt(mu)``-scaled radius ``dT/dchi = chi^2 c2 + sg chi (1 - z c3) + r0 (1 - z c2)`` [m]."""
+    return chi * chi * c2 + sg * chi * (1.0 - z * c3) + r0 * (1.0 - z * c2)
+
+
+@jit(inline="always")
+def _uni_time(chi, z, c2, c3, r0, sg, omq, tau):
+    """Time-equation residual ``T`` (Vallado eq. 2-50 times sqrt(mu)) [m^(3/2)], its slope
+    ``rr = dT/dchi`` (the radius) and the rounding noise of ``T``, at ``chi`` with
+    ``z = alpha chi^2`` and ``c2(z), c3(z)`` given."""
+    chi2 = chi * chi
+    t1 = r0 * chi
+    t2 = sg * chi2 * c2
+    t3 = omq * chi * chi2 * c3
+    T = (t1 + t2 + t3) - tau
+    noise = EPS * (abs(t1) + abs(t2) + abs(t3) + abs(tau))
+    return T, _uni_radius(chi, z, c2, c3, r0, sg), noise
+
+
+@jit(inline="always")
+def _uni_laguerre(chi, r0, sg, omq, alpha, tau):
+    """One Laguerre-Conway step (n = 5; Conway 1986) on the time equation, window series."""
+    z = alpha * (chi * chi)
+    c2, c3 = _stumpff_window(z)
+    T, rr, noise = _uni_time(chi, z, c2, c3, r0, sg, omq, tau)
+    drr = sg * (1.0 - z * c2) + omq * chi * (1.0 - z * c3)  # dr/dchi
+    return chi - 5.0 * T / (rr + math.sqrt(abs(16.0 * rr * rr - 20.0 * T * drr)))
+
+
+@jit(inline="always")
+def _uni_fast(r0, sg, q, alpha, tau):
+    """Straight-line universal-variable solve (no loop, no libm call but sqrt: vectorizes).
+
+    Parabolic-cubic starter (:func:`_uni_start`), two Laguerre-Conway steps, the
+    residual check ``|T| <= 4 noise`` of the safeguarded loop, its Newton polish and
+    final evaluation, all with the fixed-length window series.  Returns
+    ``(ok, chi, z, c2, c3, rr)``; ``ok`` is False (the caller then runs
+    :func:`_uni_solve_safe`) when the check fails or ``|z| > _Z_WINDOW`` or
+    anything is NaN.
+    """
+    omq = 1.0 - q
+    chi = _uni_start(r0, sg, omq, tau)
+    chi = _uni_laguerre(chi, r0, sg, omq, alpha, tau)
+    chi = _uni_laguerre(chi, r0, sg, omq, alpha, tau)
+    z = alpha * (chi * chi)
+    c2, c3 = _stumpff_window(z)
+    T, rr, noise = _uni_time(chi, z, c2, c3, r0, sg, omq, tau)
+    ok = (abs(T) <= 4.0 * noise) & (abs(z) <= _Z_WINDOW)
+    chi = chi - T / rr
+    z = alpha * (chi * chi)
+    c2, c3 = _stumpff_window(z)
+    rr = _uni_radius(chi, z, c2, c3, r0, sg)
+    ok = ok & (abs(z) <= _Z_WINDOW) & (rr > 0.0)
+    return ok, chi, z, c2, c3, rr
+
+
+@jit
+def _uni_solve_safe(r0, sg, q, alpha, tau):
+    """The safeguarded universal-variable solve (reference path, any input of the window).
+
+    Laguerre-Conway iteration kept inside a bracket of the root (Conway 1986,
+    Celest. Mech. 39, 199) from a linear/cubic starter, general Stumpff functions
+    (:func:`_stumpff`), stopped on the residual at its noise level and capped.
+    Returns ``(chi, z, c2, c3, rr)`` like :func:`_uni_fast`.
+    """
     omq = 1.0 - q
     chi = tau / r0
     cub = _cbrt_start(6.0 * abs(tau) / omq)
@@ -368,18 +505,14 @@ def _fg_universal(r0, sg, q, alpha, dt, sqmu):
     z = 0.0
     rr = r0
     for _ in range(MAX_ITER + 28):
-        chi2 = chi * chi
-        z = alpha * chi2
+        z = alpha * (chi * chi)
         c2, c3 = _stumpff(z)
-        T = (r0 * chi + sg * chi2 * c2 + omq * chi * chi2 * c3) - tau
-        rr = chi2 * c2 + sg * chi * (1.0 - z * c3) + r0 * (1.0 - z * c2)
-        noise = EPS * (abs(r0 * chi) + abs(sg * chi2 * c2) + abs(omq * chi * chi2 * c3) + abs(tau))
+        T, rr, noise = _uni_time(chi, z, c2, c3, r0, sg, omq, tau)
         if abs(T) <= 4.0 * noise:
             chi -= T / rr
-            chi2 = chi * chi
-            z = alpha * chi2
+            z = alpha * (chi * chi)
             c2, c3 = _stumpff(z)
-            rr = chi2 * c2 + sg * chi * (1.0 - z * c3) + r0 * (1.0 - z * c2)
+            rr = _uni_radius(chi, z, c2, c3, r0, sg)
             break
         if T > 0.0:
             hi = min(hi, chi)
@@ -399,18 +532,41 @@ def _fg_universal(r0, sg, q, alpha, dt, sqmu):
         if chin == chi:
             break
         chi = chin
+    return chi, z, c2, c3, rr
+
+
+@jit(inline="always")
+def _uni_fg(r0, sg, dt, sqmu, tau, chi, z, c2, c3, rr):
+    """Lagrange coefficients from the solved universal variable (Vallado eqs. 2-65..2-68).
+
+    ``g`` from the time equation or ``dt - chi^3 c3 / sqrt(mu)``, whichever cancels
+    less (both formed, one selected: straight-line code).
+    """
     chi2 = chi * chi
-    # g: the time equation form or dt - chi^3 c3 / sqrt(mu), whichever cancels less
     ta = abs(sg * chi2 * c2) + abs(r0 * chi * (1.0 - z * c3))
     tb = abs(tau) + abs(chi * chi2 * c3)
-    if ta <= tb:
-        g = (sg * chi2 * c2 + r0 * chi * (1.0 - z * c3)) / sqmu
-    else:
-        g = dt - chi * chi2 * c3 / sqmu
+    ga = (sg * chi2 * c2 + r0 * chi * (1.0 - z * c3)) / sqmu
+    gb = dt - chi * chi2 * c3 / sqmu
+    g = ga if ta <= tb else gb
     f = 1.0 - chi2 * c2 / r0
     fdot = sqmu * chi * (z * c3 - 1.0) / (rr * r0)
     gdot = 1.0 - chi2 * c2 / rr
     return f, g, fdot, gdot
+
+
+@jit
+def _fg_universal(r0, sg, q, alpha, dt, sqmu):
+    """Lagrange coefficients from the universal variable chi (near-parabolic, parabolic).
+
+    Solves ``sqrt(mu) dt = r0 chi + sg chi^2 c2 + (1 - q) chi^3 c3`` (Vallado eq.
+    2-50 / Curtis eq. 3.49) with ``sg = r0.v0 / sqrt(mu)``, ``z = alpha chi^2``:
+    the straight-line :func:`_uni_fast`, or :func:`_uni_solve_safe` where its check fails.
+    """
+    tau = sqmu * dt
+    ok, chi, z, c2, c3, rr = _uni_fast(r0, sg, q, alpha, tau)
+    if not ok:
+        chi, z, c2, c3, rr = _uni_solve_safe(r0, sg, q, alpha, tau)
+    return _uni_fg(r0, sg, dt, sqmu, tau, chi, z, c2, c3, rr)
 
 
 @jit(inline="always")
@@ -504,6 +660,9 @@ _HDT, _SQB, _P, _CH, _SH, _HE, _EM1, _M, _F0, _M1 = 7, 8, 9, 10, 11, 12, 13, 14,
 _HOK, _F1, _SH1, _CHM1 = 17, 18, 19, 20  # solve
 _NW = 19
 _NWH = 21
+# near-parabolic states: their own work array WU (rows _RN, _SIG, _Q, _ALPHA as in W), then
+_UDT, _UMU, _UOK, _UF, _UG, _UFD, _UGD = 4, 5, 6, 7, 8, 9, 10
+_NWU = 11
 
 
 @jit
@@ -550,13 +709,52 @@ def _ell_passes(W, m, idx, r0, v0, r, v):
         _store(r0, v0, r, v, idx[k], f, g, fd, gd)
 
 
+@jit
+def _uni_fast_pass(W, nu):
+    """Pass 1 of :func:`_uni_passes`: straight-line solve and f, g of every column (LLVM vectorizes it)."""
+    for k in range(nu):
+        rn = W[_RN, k]
+        dt = W[_UDT, k]
+        sqmu = math.sqrt(W[_UMU, k])
+        sg = W[_SIG, k] / sqmu
+        tau = sqmu * dt
+        ok, chi, z, c2, c3, rr = _uni_fast(rn, sg, W[_Q, k], W[_ALPHA, k], tau)
+        f, g, fd, gd = _uni_fg(rn, sg, dt, sqmu, tau, chi, z, c2, c3, rr)
+        W[_UOK, k] = 1.0 if ok else 0.0
+        W[_UF, k] = f
+        W[_UG, k] = g
+        W[_UFD, k] = fd
+        W[_UGD, k] = gd
+
+
+@jit
+def _uni_passes(W, nu, idx, r0, v0, r, v):
+    """The near-parabolic states of a block (columns ``0:nu`` of their work array ``W``).
+
+    Pass 1 (:func:`_uni_fast_pass`): starter, two Laguerre-Conway steps, check,
+    polish and f, g as straight-line code over all columns (vectorized); pass 2:
+    the safeguarded loop (:func:`_fg_universal`) for the columns whose check
+    failed, and the store.  Bit-identical to :func:`_fg_universal` on each state.
+    """
+    _uni_fast_pass(W, nu)
+    for k in range(nu):
+        if W[_UOK, k] == 0.0:
+            sqmu = math.sqrt(W[_UMU, k])
+            f, g, fd, gd = _fg_universal(W[_RN, k], W[_SIG, k] / sqmu, W[_Q, k], W[_ALPHA, k], W[_UDT, k], sqmu)
+        else:
+            f, g, fd, gd = W[_UF, k], W[_UG, k], W[_UFD, k], W[_UGD, k]
+        _store(r0, v0, r, v, idx[k], f, g, fd, gd)
+
+
 @jit(inline="always")
-def _propagate_block(r0, v0, dt, mu, r, v, lo, hi, idx, W, idxh, WH):
+def _propagate_block(r0, v0, dt, mu, r, v, lo, hi, idx, W, idxh, WH, idxu, WU):
     """States ``lo:hi``: ellipses (``idx, W``) gathered and solved in vectorized passes
-    (:func:`_ell_passes`), hyperbolas likewise (:func:`_hyp_passes`),
-    the rest (near-parabolic, identity, NaN; ellipses with a phase beyond 2**52 rad) directly."""
+    (:func:`_ell_passes`), hyperbolas (:func:`_hyp_passes`) and near-parabolic states
+    (:func:`_uni_passes`) likewise, the rest (identity, NaN; ellipses with a phase
+    beyond 2**52 rad) directly."""
     m = 0
     mh = 0
+    mu_ = 0
     for i in range(lo, hi):
         rx, ry, rz = r0[i, 0], r0[i, 1], r0[i, 2]
         vx, vy, vz = v0[i, 0], v0[i, 1], v0[i, 2]
@@ -574,11 +772,17 @@ def _propagate_block(r0, v0, dt, mu, r, v, lo, hi, idx, W, idxh, WH):
             WH[_RN, mh], WH[_SIG, mh], WH[_Q, mh], WH[_ALPHA, mh], WH[_N, mh] = rn, sig, q, alpha, n
             WH[_H2, mh], WH[_MU, mh], WH[_HDT, mh] = hx * hx + hy * hy + hz * hz, mu[i], dt[i]
             mh += 1
+        elif kind == 4:
+            idxu[mu_] = i
+            WU[_RN, mu_], WU[_SIG, mu_], WU[_Q, mu_], WU[_ALPHA, mu_] = rn, sig, q, alpha
+            WU[_UDT, mu_], WU[_UMU, mu_] = dt[i], mu[i]
+            mu_ += 1
         else:
             f, g, fd, gd = _dispatch(kind, rn, sig, q, alpha, n, rx, ry, rz, vx, vy, vz, dt[i], mu[i])
             _store(r0, v0, r, v, i, f, g, fd, gd)
     _ell_passes(W, m, idx, r0, v0, r, v)
     _hyp_passes(WH, mh, idxh, r0, v0, r, v)
+    _uni_passes(WU, mu_, idxu, r0, v0, r, v)
 
 
 @jit
@@ -620,10 +824,10 @@ def _hyp_passes(W, nh, idx, r0, v0, r, v):
 
 
 @jit
-def _propagate_range(r0, v0, dt, mu, r, v, lo, hi, idx, W, idxh, WH):
+def _propagate_range(r0, v0, dt, mu, r, v, lo, hi, idx, W, idxh, WH, idxu, WU):
     """States ``lo:hi`` block by block (one compiled body shared by the serial and parallel loops)."""
     for blo in range(lo, hi, _BLOCK):
-        _propagate_block(r0, v0, dt, mu, r, v, blo, min(blo + _BLOCK, hi), idx, W, idxh, WH)
+        _propagate_block(r0, v0, dt, mu, r, v, blo, min(blo + _BLOCK, hi), idx, W, idxh, WH, idxu, WU)
 
 
 @jit
@@ -632,7 +836,9 @@ def _propagate_loop(r0, v0, dt, mu, r, v):
     W = np.empty((_NW, _BLOCK))
     idxh = np.empty(_BLOCK, dtype=np.int64)
     WH = np.empty((_NWH, _BLOCK))
-    _propagate_range(r0, v0, dt, mu, r, v, 0, r0.shape[0], idx, W, idxh, WH)
+    idxu = np.empty(_BLOCK, dtype=np.int64)
+    WU = np.empty((_NWU, _BLOCK))
+    _propagate_range(r0, v0, dt, mu, r, v, 0, r0.shape[0], idx, W, idxh, WH, idxu, WU)
 
 
 _CHUNK = 8 * _BLOCK  # states per parallel task (one block per task below 16 chunks)
@@ -649,8 +855,10 @@ def _propagate_loop_par(r0, v0, dt, mu, r, v):
         W = np.empty((_NW, _BLOCK))
         idxh = np.empty(_BLOCK, dtype=np.int64)
         WH = np.empty((_NWH, _BLOCK))
+        idxu = np.empty(_BLOCK, dtype=np.int64)
+        WU = np.empty((_NWU, _BLOCK))
         lo = np.int64(c) * chunk  # prange's index is unsigned: keep one int64 specialization
-        _propagate_range(r0, v0, dt, mu, r, v, lo, min(lo + chunk, n), idx, W, idxh, WH)
+        _propagate_range(r0, v0, dt, mu, r, v, lo, min(lo + chunk, n), idx, W, idxh, WH, idxu, WU)
 
 
 @jit
