@@ -126,6 +126,22 @@ _COS1, _COS2, _COS3, _COS4, _COS5 = -0.5, 1.0 / 24.0, -1.0 / 720.0, 1.0 / 40320.
 
 
 @jit(inline="always")
+def _cos_sinc_minus_one(z):
+    """``(cos x - 1, sin(x)/x - 1)`` from ``z = x^2`` (rad^2), for ``z <= _SMALL_ANGLE^2``.
+
+    Both are even in ``x``, so they need no square root: Taylor polynomials in
+    ``z`` (A&S 4.3.65-66, terms to ``x^10`` and ``x^11``) in Estrin's form (a short
+    dependency chain).  Returned as the small corrections so the caller adds the
+    leading 1 (or ``x``) last, which keeps the result within about 1 ulp.
+    """
+    z2 = z * z
+    z4 = z2 * z2
+    cos_m1 = z * ((_COS1 + z * _COS2) + z2 * (_COS3 + z * _COS4) + z4 * _COS5)
+    sinc_m1 = z * ((_SIN1 + z * _SIN2) + z2 * (_SIN3 + z * _SIN4) + z4 * _SIN5)
+    return cos_m1, sinc_m1
+
+
+@jit(inline="always")
 def _axis_rotation_trig(angle):
     """``(c, s, ca, sa)``: cos and sin of ``angle/2`` (for ``q``) and of ``angle`` (for ``M``), rad.
 
@@ -141,10 +157,9 @@ def _axis_rotation_trig(angle):
     """
     if abs(angle) <= _SMALL_ANGLE:
         z = angle * angle
-        z2 = z * z
-        z4 = z2 * z2
-        sa = angle + angle * (z * ((_SIN1 + z * _SIN2) + z2 * (_SIN3 + z * _SIN4) + z4 * _SIN5))
-        ca = 1.0 + z * ((_COS1 + z * _COS2) + z2 * (_COS3 + z * _COS4) + z4 * _COS5)
+        cos_m1, sinc_m1 = _cos_sinc_minus_one(z)
+        sa = angle + angle * sinc_m1
+        ca = 1.0 + cos_m1
         y = 0.25 * angle
         y2 = 0.0625 * z
         u = y + y * (y2 * ((_TAN3 + y2 * _TAN5) + (y2 * y2) * (_TAN7 + y2 * _TAN9)))

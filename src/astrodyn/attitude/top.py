@@ -57,15 +57,16 @@ import numpy as np
 
 from astrodyn._jit import jit
 from astrodyn.attitude.integrators import (
+    _SMALL_ANGLE,
     SPLIT2_WEIGHTS,
     SPLIT4_WEIGHTS,
-    KICK_FORCE,
     _attitude_difference,
-    _kick,
-    _renormalize,
-    _rotate_about_axis,
+    _axis_rotation_trig,
+    _cos_sinc_minus_one,
+    _renormalized,
     _step_chunks,
     _step_plan,
+    _turn_body,
 )
 from astrodyn.attitude.torques import UniformGravityTorque
 from astrodyn.rotation import dcm_from_quat, omega_from_euler_rates, quat_from_euler, quat_hamilton_scalar
@@ -246,11 +247,9 @@ class HeavyTop:
         out_q = np.full((len(t_out), 4), np.nan)
         M = np.array(M0, dtype=np.float64)
         q = np.array(q0, dtype=np.float64)
-        com = np.array([0.0, 0.0, self.cm_distance])
-        force = np.array([0.0, 0.0, -self.mass * self.gravity])
         inv = np.array([1.0 / self.transverse_inertia, 1.0 / self.axial_inertia - 1.0 / self.transverse_inertia])
         for _, sd, rec in _step_chunks(starts, n, dt):
-            _top_kernel(M, q, inv, com, force, weights, sd, rec, out_M, out_q)
+            _top_kernel(M, q, inv, self.mgl, weights, sd, rec, out_M, out_q)
         for k in range(len(t_out)):
             if n[k] == 0:
                 out_M[k] = M0 if k == 0 else out_M[k - 1]
@@ -258,45 +257,91 @@ class HeavyTop:
         return out_M, out_q, int(n.sum())
 
 
-@jit
-def _rotate_about_momentum(M, q, inv_I, dt):
-    """Exact flow of ``|M|^2 / (2 I)`` for ``dt`` s: ``q <- q (x) (cos(a/2), sin(a/2) M/|M|)``,
-    ``a = |M| dt / I`` (the body turns about the fixed body vector ``M``; ``M`` unchanged)."""
-    m = math.sqrt(M[0] * M[0] + M[1] * M[1] + M[2] * M[2])
-    if m == 0.0:
-        return
-    half = 0.5 * m * dt * inv_I
-    c = math.cos(half)
-    s = math.sin(half) / m
-    q[0], q[1], q[2], q[3] = quat_hamilton_scalar(q[0], q[1], q[2], q[3], c, s * M[0], s * M[1], s * M[2])
+@jit(inline="always")
+def _momentum_turn(mm, k):
+    """``(c, s)`` with ``(c, s M)`` the Euler parameters of the exact flow of ``|M|^2 / (2 I)`` over ``dt`` s.
+
+    The body turns about the (fixed) body vector ``M`` by ``2x``, ``x = |M| k``,
+    ``k = dt / (2 I)`` (s / (kg m^2)); ``mm = |M|^2`` ((N m s)^2).  So ``c = cos x``
+    and ``s = sin(x) / |M| = k sin(x)/x``: both even in ``x``, functions of
+    ``x^2 = mm k^2`` with no square root or division.  For ``|x| <= 1/8`` rad they
+    come from the Taylor polynomials of
+    :func:`astrodyn.attitude.integrators._cos_sinc_minus_one` (within about 1 ulp;
+    tested against mpmath), above from libm ``sqrt``, ``cos``, ``sin``.  ``c^2 +
+    s^2 |M|^2 = 1`` to rounding (the kernel renormalises ``q`` once per step).
+    NaN in gives NaN out (it fails the range test).
+    """
+    z = mm * (k * k)
+    if z <= _SMALL_ANGLE * _SMALL_ANGLE:
+        cos_m1, sinc_m1 = _cos_sinc_minus_one(z)
+        return 1.0 + cos_m1, k + k * sinc_m1
+    m = math.sqrt(mm)
+    x = m * k
+    return math.cos(x), math.sin(x) / m
 
 
 @jit
-def _top_kernel(M, q, inv, com, force, weights, step_dt, record, out_M, out_q):
+def _top_kernel(M, q, inv, mgl, weights, step_dt, record, out_M, out_q):
     """Advance ``(M, q)`` of the symmetric top over ``len(step_dt)`` composed steps (in place).
 
     Stage of weight ``g`` (``a = g dt``): ``K(a/2) F(a) K(a/2)`` with ``F`` the exact
     free symmetric top (``inv = (1/I, 1/J - 1/I)``); the half kicks that meet at
     stage and step boundaries are applied as one (pending until an output or the
-    end of the call).  ``com`` centre of mass (body), ``force`` ``m g`` (inertial).
+    end of the call).  ``mgl`` = ``m g l`` (N m).
+
+    The state is held in scalars.  Kick: the gravity torque about O is
+    ``r_c x C(q) (0, 0, -m g) = m g l (Z_2, -Z_1, 0)`` with ``Z = C(q) e_Z`` the
+    body components of the vertical, ``(Z_1, Z_2) = 2 (e1 e3 - e0 e2, e2 e3 + e0 e1)``
+    (third column of ``C``); ``M3`` is never written.  Free flow: the two commuting
+    exact rotations, the ``M3^2`` one first (``q <- q (x) (cos(b/2), sin(b/2) e_3)``,
+    ``M <- C_3(b) M``, ``b = (1/J - 1/I) M3 a``: ``M3`` is constant, so its
+    cos/sin are formed once per stage weight and step size, off the serial chain),
+    then the turn about the new ``M`` by ``|M| a / I`` (:func:`_momentum_turn`,
+    with ``|M|^2`` kept as ``M1^2 + M2^2 + M3^2``, ``M3^2`` formed once).  Turning
+    about ``C_3(b) M`` after ``C_3(b)`` is the same rotation as turning about ``M``
+    before it (``B* (x) A(M) (x) B = A(C_3(b) M)``), so either order is the exact
+    free flow; this one lets ``q (x) B`` run while the kick and ``|M|^2`` are formed.
     """
-    zero = np.zeros(3)
-    eye = np.zeros((3, 3))
-    pend = 0.0
+    ns = weights.shape[0]
+    trig3 = np.empty((ns, 4))  # (c, s, ca, sa) of each stage's b3 turn for the current dt
+    half_k = np.empty(ns)  # a / (2 I) per stage
+    m0, m1, m2 = M[0], M[1], M[2]
+    e0, e1, e2, e3 = q[0], q[1], q[2], q[3]
+    m2sq = m2 * m2
+    kick_rate = 2.0 * mgl  # torque = 2 m g l (e2 e3 + e0 e1, -(e1 e3 - e0 e2), 0)
+    dt_tables = math.nan
+    pend = 0.0  # pending half-kick time (s)
     for k in range(step_dt.shape[0]):
         dt = step_dt[k]
-        for s in range(weights.shape[0]):
-            a = weights[s] * dt
-            _kick(M, q, pend + 0.5 * a, KICK_FORCE, zero, zero, com, force, 0.0, eye, zero)
-            _rotate_about_momentum(M, q, inv[0], a)
-            _rotate_about_axis(M, q, 2, inv[1] * M[2] * a)
-            pend = 0.5 * a
-        _renormalize(q)
+        if not dt == dt_tables:
+            for st in range(ns):
+                a = weights[st] * dt
+                trig3[st, 0], trig3[st, 1], trig3[st, 2], trig3[st, 3] = _axis_rotation_trig(inv[1] * m2 * a)
+                half_k[st] = 0.5 * a * inv[0]
+            dt_tables = dt
+        for st in range(ns):
+            ha = 0.5 * weights[st] * dt
+            kd = (pend + ha) * kick_rate
+            m0 = m0 + kd * (e2 * e3 + e0 * e1)
+            m1 = m1 - kd * (e1 * e3 - e0 * e2)
+            m0, m1, m2, e0, e1, e2, e3 = _turn_body(
+                2, trig3[st, 0], trig3[st, 1], trig3[st, 2], trig3[st, 3], m0, m1, m2, e0, e1, e2, e3
+            )
+            c, s = _momentum_turn(m0 * m0 + m1 * m1 + m2sq, half_k[st])
+            e0, e1, e2, e3 = quat_hamilton_scalar(e0, e1, e2, e3, c, s * m0, s * m1, s * m2)
+            pend = ha
+        e0, e1, e2, e3 = _renormalized(e0, e1, e2, e3)
         j = record[k]
         if j >= 0:
-            _kick(M, q, pend, KICK_FORCE, zero, zero, com, force, 0.0, eye, zero)
+            kd = pend * kick_rate
+            m0 = m0 + kd * (e2 * e3 + e0 * e1)
+            m1 = m1 - kd * (e1 * e3 - e0 * e2)
             pend = 0.0
-            out_M[j] = M
-            out_q[j] = q
+            out_M[j, 0], out_M[j, 1], out_M[j, 2] = m0, m1, m2
+            out_q[j, 0], out_q[j, 1], out_q[j, 2], out_q[j, 3] = e0, e1, e2, e3
     if pend != 0.0:
-        _kick(M, q, pend, KICK_FORCE, zero, zero, com, force, 0.0, eye, zero)
+        kd = pend * kick_rate
+        m0 = m0 + kd * (e2 * e3 + e0 * e1)
+        m1 = m1 - kd * (e1 * e3 - e0 * e2)
+    M[0], M[1], M[2] = m0, m1, m2
+    q[0], q[1], q[2], q[3] = e0, e1, e2, e3
