@@ -269,6 +269,9 @@ def test_framed_encoders_equal_encode_batch_of_the_payloads():
              + [(m.crosscheck_key("scen", "x"), b"{}")])
     assert env == m.encode_batch(items)
     assert m.decode_batch(env) == items
+    packed = m.BatchKeys(okeys)  # packed once, reused at every step
+    for _ in range(2):
+        assert m.frame_orbit_batch(packed, 4.5, 9, "kepler", r, v, 3.986004418e14) == orbit
     assert m.batch_envelope([(m.frame_orbit_batch([], 0.0, 0, "kepler", np.zeros((0, 3)), np.zeros((0, 3)), 1.0), 0)]) == m.encode_batch([])
 
 
@@ -276,7 +279,7 @@ def test_framed_encoders_reject_bad_keys_and_values_like_the_plain_ones():
     from astrodyn import messages as m
 
     ones = np.ones((2, 3))
-    with pytest.raises(m.MessageError, match=r"batch.keys: expected a sequence of 2 key strings"):
+    with pytest.raises(m.MessageError, match=r"batch.keys: expected a sequence of 2 key strings, got 1"):
         m.frame_orbit_batch(["a"], 0.0, 0, "kepler", ones, ones, 1.0)
     with pytest.raises(m.MessageError, match=r"batch\[1\].key: expected a string"):
         m.frame_orbit_batch(["a", b"b"], 0.0, 0, "kepler", ones, ones, 1.0)

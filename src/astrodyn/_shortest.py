@@ -33,7 +33,7 @@ import numpy as np
 
 from astrodyn._jit import jit
 
-__all__ = ["MAX_REPR_LEN", "format_floats", "format_records", "shortest_repr", "write_shortest", "write_uint"]
+__all__ = ["MAX_REPR_LEN", "format_floats", "format_records", "pack_keys", "shortest_repr", "write_shortest", "write_uint"]
 
 #: The longest ``repr`` of any float64, e.g. ``-2.2250738585072014e-308`` (24 bytes).
 MAX_REPR_LEN = 24
@@ -516,14 +516,20 @@ def _concat(chunks: list[bytes]) -> tuple[np.ndarray, np.ndarray]:
     return np.frombuffer(b"".join(chunks), np.uint8), offsets
 
 
-def format_records(seqs, values, pieces: list[bytes], keys: list[bytes] | None = None) -> tuple[bytes, np.ndarray]:
+def pack_keys(keys: list[bytes]) -> tuple[np.ndarray, np.ndarray]:
+    """Keys packed for :func:`format_records`: (uint8 buffer, int64 offsets), built once, reused."""
+    return _concat(keys)
+
+
+def format_records(seqs, values, pieces: list[bytes], keys=None) -> tuple[bytes, np.ndarray]:
     """N texts of one template, written in one compiled pass.
 
     Record ``i`` is ``pieces[0] + str(seqs[i]) + pieces[1] + repr(values[i, 0]) + pieces[2]
     + ... + repr(values[i, m - 1]) + pieces[m + 1]`` (``len(pieces) == m + 2``), ``seqs``
     integers 0 <= seq < 2**63 shape (N,), ``values`` finite float64 shape (N, m).  With
-    ``keys`` (N UTF-8 byte strings < 65536 bytes) each record is framed as an
-    ``encode_batch`` entry (u16 key length, key, u32 payload length, payload).
+    ``keys`` (N UTF-8 byte strings < 65536 bytes, or :func:`pack_keys` of them) each
+    record is framed as an ``encode_batch`` entry (u16 key length, key, u32 payload
+    length, payload).
 
     Returns ``(data, offsets)``: record ``i`` is ``data[offsets[i]:offsets[i + 1]]``.
     The caller validates the inputs (the message encoders do).
@@ -536,9 +542,9 @@ def format_records(seqs, values, pieces: list[bytes], keys: list[bytes] | None =
     if keys is None:
         key_buf, key_offsets = np.zeros(0, np.uint8), np.zeros(0, np.int64)
     else:
-        if len(keys) != n:
-            raise ValueError(f"keys: expected {n} keys, got {len(keys)}")
-        key_buf, key_offsets = _concat(keys)
+        key_buf, key_offsets = keys if isinstance(keys, tuple) else _concat(keys)
+        if key_offsets.shape != (n + 1,):
+            raise ValueError(f"keys: expected {n} keys, got {key_offsets.shape[0] - 1}")
     size = n * (len(piece_buf) + m * MAX_REPR_LEN + 20 + 6) + len(key_buf)
     buf = np.empty(size, np.uint8)
     offsets = np.empty(n + 1, np.int64)

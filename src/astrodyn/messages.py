@@ -111,6 +111,7 @@ __all__ = [
     "status_message",
     "encode_orbit_batch",
     "encode_attitude_batch",
+    "BatchKeys",
     "frame_orbit_batch",
     "frame_attitude_batch",
     "encode_batch",
@@ -891,21 +892,43 @@ def _attitude_records(t: float, seqs: Any, model: str, q: Any, w: Any, keys: Any
                                     _batch_keys(keys, seq_arr.shape[0]))
 
 
-def _batch_keys(keys: Any, n: int) -> list[bytes] | None:
-    """UTF-8 keys for framed records (checked as :func:`encode_batch` checks them), or None."""
+class BatchKeys:
+    """Channel keys checked and packed once for :func:`frame_orbit_batch` / :func:`frame_attitude_batch`.
+
+    ``BatchKeys(keys)`` with ``keys`` a sequence of strings (UTF-8 <= 65535 bytes each, as
+    :func:`encode_batch` requires); pass it instead of the list when the same keys are
+    framed at every step (a propagator's bodies), which saves re-encoding them.
+    """
+
+    def __init__(self, keys: Sequence[str]):
+        if isinstance(keys, (str, bytes)):
+            raise MessageError(f"batch.keys: expected a sequence of key strings, got {_show(keys)}")
+        encoded = []
+        for i, key in enumerate(keys):
+            if not isinstance(key, str):
+                raise MessageError(f"batch[{i}].key: expected a string, got {_show(key)}")
+            kb = key.encode("utf-8")
+            if len(kb) > _MAX_KEY:
+                raise MessageError(f"batch[{i}]: expected key <= 65535 bytes and payload < 4 GiB, got {len(kb)} and 0")
+            encoded.append(kb)
+        from astrodyn import _shortest
+
+        self.count = len(encoded)
+        self.packed = _shortest.pack_keys(encoded)
+
+    def __len__(self) -> int:
+        return self.count
+
+
+def _batch_keys(keys: Any, n: int) -> tuple[np.ndarray, np.ndarray] | None:
+    """Packed UTF-8 keys for framed records (checked as :func:`encode_batch` checks them), or None."""
     if keys is None:
         return None
-    if isinstance(keys, (str, bytes)) or len(keys) != n:
-        raise MessageError(f"batch.keys: expected a sequence of {n} key strings, got {_show(keys)}")
-    out = []
-    for i, key in enumerate(keys):
-        if not isinstance(key, str):
-            raise MessageError(f"batch[{i}].key: expected a string, got {_show(key)}")
-        kb = key.encode("utf-8")
-        if len(kb) > _MAX_KEY:
-            raise MessageError(f"batch[{i}]: expected key <= 65535 bytes and payload < 4 GiB, got {len(kb)} and 0")
-        out.append(kb)
-    return out
+    if not isinstance(keys, BatchKeys):
+        keys = BatchKeys(keys)
+    if keys.count != n:
+        raise MessageError(f"batch.keys: expected a sequence of {n} key strings, got {keys.count}")
+    return keys.packed
 
 
 def _split(data: bytes, offsets: np.ndarray) -> list[bytes]:
@@ -933,10 +956,11 @@ def encode_attitude_batch(t: float, seqs: Any, model: str, q: Any, w: Any) -> li
     return _split(*_attitude_records(t, seqs, model, q, w, None))
 
 
-def frame_orbit_batch(keys: Sequence[str], t: float, seqs: Any, model: str, r: Any, v: Any, mu: float,
+def frame_orbit_batch(keys: Sequence[str] | BatchKeys, t: float, seqs: Any, model: str, r: Any, v: Any, mu: float,
                       frame: str = "GCRF") -> bytes:
     """:func:`encode_orbit_batch` with each payload framed as an envelope entry under ``keys[i]``.
 
+    ``keys``: N key strings, or a :class:`BatchKeys` of them packed once for reuse.
     Returns the entries back to back (``key_len u16, key, payload_len u32, payload``);
     :func:`batch_envelope` puts one or more such runs into an envelope, equal byte for
     byte to ``encode_batch(zip(keys, encode_orbit_batch(...)))`` (tested).
@@ -944,7 +968,7 @@ def frame_orbit_batch(keys: Sequence[str], t: float, seqs: Any, model: str, r: A
     return _orbit_records(t, seqs, model, r, v, mu, frame, keys)[0]
 
 
-def frame_attitude_batch(keys: Sequence[str], t: float, seqs: Any, model: str, q: Any, w: Any) -> bytes:
+def frame_attitude_batch(keys: Sequence[str] | BatchKeys, t: float, seqs: Any, model: str, q: Any, w: Any) -> bytes:
     """:func:`encode_attitude_batch` framed as envelope entries (see :func:`frame_orbit_batch`)."""
     return _attitude_records(t, seqs, model, q, w, keys)[0]
 

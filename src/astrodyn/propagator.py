@@ -143,6 +143,7 @@ def run_propagator(scenario: Scenario, session, opts: PropagatorOptions, log=pri
     for i, m in enumerate(models):
         groups.setdefault(m, []).append(i)  # type: ignore[arg-type]
     groups = {m: np.asarray(ix) for m, ix in groups.items()}
+    group_keys = {m: messages.BatchKeys([keys[i] for i in ix]) for m, ix in groups.items()}
     n_total = scenario.n_steps if not opts.endless else 2**53
     start = int(opts.start_step)
     stop_at = n_total if opts.max_steps is None else min(n_total, start + int(opts.max_steps))
@@ -200,21 +201,26 @@ def run_propagator(scenario: Scenario, session, opts: PropagatorOptions, log=pri
                         wait = pacer.wait_time(t)
                     if stopping["why"]:
                         raise _Stop
-                    items = []
-                    for model, ix in groups.items():
-                        if opts.kind == "orbit":
-                            payloads = messages.encode_orbit_batch(t, k, model, a[j, ix], b[j, ix], engine.mu, engine.frame)
-                        else:
-                            payloads = messages.encode_attitude_batch(t, k, model, a[j, ix], b[j, ix])
-                        items.extend(zip((keys[i] for i in ix), payloads))
-                    if xc is not None:
-                        items.extend(xc(j, k, t))
                     if per_body is None:
-                        batch.publish(items)
+                        # payloads written as envelope entries in the same compiled pass
+                        runs = [(_encode_group(opts.kind, engine, t, k, model, a[j, ix], b[j, ix], group_keys[model]),
+                                 len(ix)) for model, ix in groups.items()]
+                        if xc is not None:
+                            runs.append(messages.frame_entries(xc(j, k, t)))
+                        # bus.BatchPublisher.publish takes (key, payload) pairs; a finished envelope goes to
+                        # its publisher entity directly (a publish_envelope method would be cleaner: bus.py)
+                        batch._entity.put(messages.batch_envelope(runs))
+                        published += sum(count for _, count in runs)
                     else:
+                        items = []
+                        for model, ix in groups.items():
+                            payloads = _encode_group(opts.kind, engine, t, k, model, a[j, ix], b[j, ix])
+                            items.extend(zip((keys[i] for i in ix), payloads))
+                        if xc is not None:
+                            items.extend(xc(j, k, t))
                         for key, payload in items:
                             per_body[key].put(payload)
-                    published += len(items)
+                        published += len(items)
                     rows_done = j + 1
                     t_reached = t
                     k += 1
@@ -238,6 +244,17 @@ def run_propagator(scenario: Scenario, session, opts: PropagatorOptions, log=pri
             per_body[name]["crosscheck_max_dr"] = dr
     summary["per_body"] = per_body
     return summary
+
+
+def _encode_group(kind: str, engine, t: float, k: int, model: str, a, b, keys=None):
+    """One model group's payloads (list of bytes), or with ``keys`` their envelope entries (bytes)."""
+    if kind == "orbit":
+        if keys is None:
+            return messages.encode_orbit_batch(t, k, model, a, b, engine.mu, engine.frame)
+        return messages.frame_orbit_batch(keys, t, k, model, a, b, engine.mu, engine.frame)
+    if keys is None:
+        return messages.encode_attitude_batch(t, k, model, a, b)
+    return messages.frame_attitude_batch(keys, t, k, model, a, b)
 
 
 class _Conservation:
