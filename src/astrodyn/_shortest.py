@@ -23,8 +23,13 @@ uint64 halves.  numba has no 128-bit integer: the 64 x 64 -> 128 bit products ar
 from 32-bit limbs (:func:`_umul128`).
 
 Entry points: :func:`format_floats` (an array in, one byte buffer plus offsets out),
-:func:`shortest_repr` (one float, for checks) and, for compiled callers,
+:func:`shortest_repr` (one float, for checks), :func:`format_records` (N texts of one
+template -- constant pieces, an integer, floats -- optionally framed as batch-envelope
+entries: the message batch encoders' one compiled pass) and, for compiled callers,
 :func:`write_shortest` (one float64's bit pattern written into a uint8 buffer).
+
+Speed (``python -m astrodyn.bench.encode``, shared 2-core EPYC at load ~2): 55-70 ns per
+float against 610-1430 ns for ``repr``.
 """
 
 from __future__ import annotations

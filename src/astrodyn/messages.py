@@ -60,7 +60,10 @@ MCAP channel without re-encoding. Binary layout, all integers little-endian unsi
     entries  count x  { key_len u16, key (UTF-8, key_len bytes),
                         payload_len u32, payload (payload_len bytes) }
 
-Nothing may follow the last entry.
+Nothing may follow the last entry. A publisher of many bodies can write the entries
+directly: :func:`frame_orbit_batch` / :func:`frame_attitude_batch` (payloads and framing
+in one compiled pass), :func:`frame_entries` for other pairs, :func:`batch_envelope` to
+join them; the bytes equal :func:`encode_batch` of the same pairs.
 """
 
 from __future__ import annotations
