@@ -301,6 +301,11 @@ def _top_kernel(M, q, inv, mgl, weights, step_dt, record, out_M, out_q):
     about ``C_3(b) M`` after ``C_3(b)`` is the same rotation as turning about ``M``
     before it (``B* (x) A(M) (x) B = A(C_3(b) M)``), so either order is the exact
     free flow; this one lets ``q (x) B`` run while the kick and ``|M|^2`` are formed.
+    ``|M|^2`` is taken before the ``b3`` turn (which keeps it), and the turn about
+    ``M`` is applied as ``c q + s (q (x) (0, M))`` so that product, too, runs while
+    ``c, s`` are formed: a stage's serial chain is ``q -> kick -> |M|^2 -> c, s ->
+    q``, about 1/5 of a step's cost (``astrodyn bench attitude``: about 110 ns per
+    ``top4`` step, 5 stages, against 286 ns for the former array kernel with libm).
     """
     ns = weights.shape[0]
     trig3 = np.empty((ns, 4))  # (c, s, ca, sa) of each stage's b3 turn for the current dt
@@ -324,11 +329,14 @@ def _top_kernel(M, q, inv, mgl, weights, step_dt, record, out_M, out_q):
             kd = (pend + ha) * kick_rate
             m0 = m0 + kd * (e2 * e3 + e0 * e1)
             m1 = m1 - kd * (e1 * e3 - e0 * e2)
+            mm = m0 * m0 + m1 * m1 + m2sq  # |M|^2 before the b3 turn (which keeps it): off the chain
             m0, m1, m2, e0, e1, e2, e3 = _turn_body(
                 2, trig3[st, 0], trig3[st, 1], trig3[st, 2], trig3[st, 3], m0, m1, m2, e0, e1, e2, e3
             )
-            c, s = _momentum_turn(m0 * m0 + m1 * m1 + m2sq, half_k[st])
-            e0, e1, e2, e3 = quat_hamilton_scalar(e0, e1, e2, e3, c, s * m0, s * m1, s * m2)
+            # q (x) (c, s M) = c q + s (q (x) (0, M)): the product runs while c, s are formed
+            p0, p1, p2, p3 = quat_hamilton_scalar(e0, e1, e2, e3, 0.0, m0, m1, m2)
+            c, s = _momentum_turn(mm, half_k[st])
+            e0, e1, e2, e3 = c * e0 + s * p0, c * e1 + s * p1, c * e2 + s * p2, c * e3 + s * p3
             pend = ha
         e0, e1, e2, e3 = _renormalized(e0, e1, e2, e3)
         j = record[k]
