@@ -44,7 +44,8 @@ flow keeps the inertial momentum), the energy to the method's bounded
 splitting (``method="split4"`` etc., through
 :func:`astrodyn.attitude.integrators.propagate_attitude` with
 :class:`~astrodyn.attitude.torques.UniformGravityTorque`) keeps ``p_phi`` only to
-its truncation error.
+its truncation error.  The compiled step (:func:`_top_kernel`) costs about 110 ns
+for ``top4`` (docs/bench-attitude.md), within design.md's 200 ns per torqued step.
 """
 
 from __future__ import annotations
