@@ -365,6 +365,9 @@ _Z_WINDOW = 6.0
 # sum |terms| = c2(-6) = 0.80 against c2(6) = 0.295 (c3: 0.24 / 0.123), so Estrin's
 # rounding stays within a few ulp.  Coefficients 1 / (2k+2)!, 1 / (2k+3)! correctly
 # rounded (int / int true division).
+# The Laguerre step from the starter only needs T to ~1e-8 (the series step after it
+# starts from the Laguerre iterate's ~1e-4 error anyway): its 8 terms leave
+# z^8 / 18! = 2.6e-10 (c2: 9e-10 relative) and z^8 / 19! = 1.4e-11 (c3: 1e-10) at |z| = 6.
 _N_STUMPFF = 13
 _C2_TAYLOR = tuple(1 / math.factorial(2 * k + 2) for k in range(_N_STUMPFF))
 _C3_TAYLOR = tuple(1 / math.factorial(2 * k + 3) for k in range(_N_STUMPFF))
@@ -385,6 +388,13 @@ def _estrin13(a, y):
     d0 = (b0 + b1 * y2) + (b2 + b3 * y2) * y4
     d1 = (b4 + b5 * y2) + a[12] * y4
     return d0 + d1 * y8
+
+
+@jit(inline="always")
+def _estrin8(a, y):
+    """``sum_{k=0}^{7} a[k] y^k`` by Estrin's scheme."""
+    y2 = y * y
+    return ((a[0] + a[1] * y) + (a[2] + a[3] * y) * y2) + ((a[4] + a[5] * y) + (a[6] + a[7] * y) * y2) * (y2 * y2)
 
 
 @jit(inline="always")
@@ -447,9 +457,10 @@ def _uni_time(chi, z, c2, c3, r0, sg, omq, tau):
 
 @jit(inline="always")
 def _uni_laguerre(chi, r0, sg, omq, alpha, tau):
-    """One Laguerre-Conway step (n = 5; Conway 1986) on the time equation, window series."""
+    """One Laguerre-Conway step (n = 5; Conway 1986) on the time equation, with the
+    8-term series (1e-9 relative: enough for the step from the starter, see ``_N_STUMPFF``)."""
     z = alpha * (chi * chi)
-    c2, c3 = _stumpff_window(z)
+    c2, c3 = _estrin8(_C2_TAYLOR, -z), _estrin8(_C3_TAYLOR, -z)
     T, rr, noise = _uni_time(chi, z, c2, c3, r0, sg, omq, tau)
     drr = sg * (1.0 - z * c2) + omq * chi * (1.0 - z * c3)  # dr/dchi
     return chi - 5.0 * T / (rr + math.sqrt(abs(16.0 * rr * rr - 20.0 * T * drr)))
@@ -485,9 +496,12 @@ def _uni_fast(r0, sg, q, alpha, tau):
     Parabolic-cubic starter (:func:`_uni_start`; relative error up to ~5 % where
     ``|z| ~ 3``), one Laguerre-Conway step (robust from a poor start; ~1e-4 left),
     one fifth-order series step (:func:`_uni_series_step`), the
-    residual check ``|T| <= 4 noise`` of the safeguarded loop, its Newton polish and
-    final evaluation, all with the fixed-length window series.  Returns
-    ``(ok, chi, z, c2, c3, rr)``; ``ok`` is False (the caller then runs
+    residual check ``|T| <= 4 noise`` of the safeguarded loop and its Newton polish
+    ``d = -T / r``.  The polish is at the rounding level (``|d| <= 4 noise / r``), so
+    the universal functions ``U1 = chi (1 - z c3)``, ``U2 = chi^2 c2``, ``U3 = chi^3 c3``
+    and ``r`` are carried through it to first order (``U_k' = U_(k-1)``; the
+    neglected ``d^2`` terms are ~eps^2 relative) instead of a fifth evaluation.
+    Returns ``(ok, U1, U2, U3, r)``; ``ok`` is False (the caller then runs
     :func:`_uni_solve_safe`) when the check fails or ``|z| > _Z_WINDOW`` or
     anything is NaN.
     """
@@ -498,13 +512,12 @@ def _uni_fast(r0, sg, q, alpha, tau):
     z = alpha * (chi * chi)
     c2, c3 = _stumpff_window(z)
     T, rr, noise = _uni_time(chi, z, c2, c3, r0, sg, omq, tau)
-    ok = (abs(T) <= 4.0 * noise) & (abs(z) <= _Z_WINDOW)
-    chi = chi - T / rr
-    z = alpha * (chi * chi)
-    c2, c3 = _stumpff_window(z)
-    rr = _uni_radius(chi, z, c2, c3, r0, sg)
-    ok = ok & (abs(z) <= _Z_WINDOW) & (rr > 0.0)
-    return ok, chi, z, c2, c3, rr
+    ok = (abs(T) <= 4.0 * noise) & (abs(z) <= _Z_WINDOW) & (rr > 0.0)
+    U0 = 1.0 - z * c2
+    U1, U2, U3 = _uni_functions(chi, z, c2, c3)
+    drr = sg * U0 + omq * U1  # dr/dchi
+    d = -T / rr
+    return ok, U1 + U0 * d, U2 + U1 * d, U3 + U2 * d, rr + drr * d
 
 
 @jit
@@ -514,7 +527,7 @@ def _uni_solve_safe(r0, sg, q, alpha, tau):
     Laguerre-Conway iteration kept inside a bracket of the root (Conway 1986,
     Celest. Mech. 39, 199) from a linear/cubic starter, general Stumpff functions
     (:func:`_stumpff`), stopped on the residual at its noise level and capped.
-    Returns ``(chi, z, c2, c3, rr)`` like :func:`_uni_fast`.
+    Returns ``(chi, z, c2, c3, rr)`` at the polished root.
     """
     omq = 1.0 - q
     chi = tau / r0
@@ -561,21 +574,28 @@ def _uni_solve_safe(r0, sg, q, alpha, tau):
 
 
 @jit(inline="always")
-def _uni_fg(r0, sg, dt, sqmu, tau, chi, z, c2, c3, rr):
-    """Lagrange coefficients from the solved universal variable (Vallado eqs. 2-65..2-68).
-
-    ``g`` from the time equation or ``dt - chi^3 c3 / sqrt(mu)``, whichever cancels
-    less (both formed, one selected: straight-line code).
-    """
+def _uni_functions(chi, z, c2, c3):
+    """Universal functions ``U1 = chi (1 - z c3)``, ``U2 = chi^2 c2``, ``U3 = chi^3 c3`` [m^(k/2)]."""
     chi2 = chi * chi
-    ta = abs(sg * chi2 * c2) + abs(r0 * chi * (1.0 - z * c3))
-    tb = abs(tau) + abs(chi * chi2 * c3)
-    ga = (sg * chi2 * c2 + r0 * chi * (1.0 - z * c3)) / sqmu
-    gb = dt - chi * chi2 * c3 / sqmu
+    return chi * (1.0 - z * c3), chi2 * c2, chi * chi2 * c3
+
+
+@jit(inline="always")
+def _uni_fg(r0, sg, dt, sqmu, tau, U1, U2, U3, rr):
+    """Lagrange coefficients from the universal functions at the root (Vallado eqs. 2-65..2-68):
+    ``f = 1 - U2 / r0``, ``fdot = -sqrt(mu) U1 / (r r0)``, ``gdot = 1 - U2 / r`` and
+    ``g`` from the time equation, ``(sg U2 + r0 U1) / sqrt(mu)``, or
+    ``dt - U3 / sqrt(mu)``, whichever cancels less (both formed, one selected:
+    straight-line code).
+    """
+    ta = abs(sg * U2) + abs(r0 * U1)
+    tb = abs(tau) + abs(U3)
+    ga = (sg * U2 + r0 * U1) / sqmu
+    gb = dt - U3 / sqmu
     g = ga if ta <= tb else gb
-    f = 1.0 - chi2 * c2 / r0
-    fdot = sqmu * chi * (z * c3 - 1.0) / (rr * r0)
-    gdot = 1.0 - chi2 * c2 / rr
+    f = 1.0 - U2 / r0
+    fdot = -sqmu * U1 / (rr * r0)
+    gdot = 1.0 - U2 / rr
     return f, g, fdot, gdot
 
 
@@ -588,10 +608,11 @@ def _fg_universal(r0, sg, q, alpha, dt, sqmu):
     the straight-line :func:`_uni_fast`, or :func:`_uni_solve_safe` where its check fails.
     """
     tau = sqmu * dt
-    ok, chi, z, c2, c3, rr = _uni_fast(r0, sg, q, alpha, tau)
+    ok, U1, U2, U3, rr = _uni_fast(r0, sg, q, alpha, tau)
     if not ok:
         chi, z, c2, c3, rr = _uni_solve_safe(r0, sg, q, alpha, tau)
-    return _uni_fg(r0, sg, dt, sqmu, tau, chi, z, c2, c3, rr)
+        U1, U2, U3 = _uni_functions(chi, z, c2, c3)
+    return _uni_fg(r0, sg, dt, sqmu, tau, U1, U2, U3, rr)
 
 
 @jit(inline="always")
@@ -743,8 +764,8 @@ def _uni_fast_pass(W, nu):
         sqmu = math.sqrt(W[_UMU, k])
         sg = W[_SIG, k] / sqmu
         tau = sqmu * dt
-        ok, chi, z, c2, c3, rr = _uni_fast(rn, sg, W[_Q, k], W[_ALPHA, k], tau)
-        f, g, fd, gd = _uni_fg(rn, sg, dt, sqmu, tau, chi, z, c2, c3, rr)
+        ok, U1, U2, U3, rr = _uni_fast(rn, sg, W[_Q, k], W[_ALPHA, k], tau)
+        f, g, fd, gd = _uni_fg(rn, sg, dt, sqmu, tau, U1, U2, U3, rr)
         W[_UOK, k] = 1.0 if ok else 0.0
         W[_UF, k] = f
         W[_UG, k] = g
@@ -762,6 +783,13 @@ def _uni_passes(W, nu, idx, r0, v0, r, v):
     failed, and the store.  Bit-identical to :func:`_fg_universal` on each state.
     """
     _uni_fast_pass(W, nu)
+    _uni_finish_pass(W, nu, idx, r0, v0, r, v)
+
+
+@jit
+def _uni_finish_pass(W, nu, idx, r0, v0, r, v):
+    """Pass 2 of :func:`_uni_passes`: :func:`_fg_universal` (its safeguarded loop) for the
+    columns with ``W[_UOK] == 0``, then the store of every column."""
     for k in range(nu):
         if W[_UOK, k] == 0.0:
             sqmu = math.sqrt(W[_UMU, k])
