@@ -509,6 +509,12 @@ def _uni_fast(r0, sg, q, alpha, tau):
     chi = _uni_start(r0, sg, omq, tau)
     chi = _uni_laguerre(chi, r0, sg, omq, alpha, tau)
     chi = _uni_series_step(chi, r0, sg, omq, alpha, tau)
+    return _uni_check_polish(chi, r0, sg, omq, alpha, tau)
+
+
+@jit(inline="always")
+def _uni_check_polish(chi, r0, sg, omq, alpha, tau):
+    """The end of :func:`_uni_fast`: residual check and first-order polish at ``chi``."""
     z = alpha * (chi * chi)
     c2, c3 = _stumpff_window(z)
     T, rr, noise = _uni_time(chi, z, c2, c3, r0, sg, omq, tau)
@@ -708,7 +714,8 @@ _NW = 19
 _NWH = 21
 # near-parabolic states: their own work array WU (rows _RN, _SIG, _Q, _ALPHA as in W), then
 _UDT, _UMU, _UOK, _UF, _UG, _UFD, _UGD = 4, 5, 6, 7, 8, 9, 10
-_NWU = 11
+_USQMU, _USG, _UTAU, _UCHI = 11, 12, 13, 14
+_NWU = 15
 
 
 @jit
@@ -757,15 +764,29 @@ def _ell_passes(W, m, idx, r0, v0, r, v):
 
 @jit
 def _uni_fast_pass(W, nu):
-    """Pass 1 of :func:`_uni_passes`: straight-line solve and f, g of every column (LLVM vectorizes it)."""
+    """Pass 1 of :func:`_uni_passes`: :func:`_uni_fast` and f, g of every column, as
+    straight-line loops that LLVM vectorizes.  Cut into four loops (starter; Laguerre
+    step; series step; check, polish, f, g): each state's chain of dependent divisions
+    and square roots is long, and shorter loop bodies let the core overlap more
+    states (measured 43 -> 30 ns/state).  The same operations as :func:`_uni_fast`."""
     for k in range(nu):
-        rn = W[_RN, k]
-        dt = W[_UDT, k]
         sqmu = math.sqrt(W[_UMU, k])
         sg = W[_SIG, k] / sqmu
-        tau = sqmu * dt
-        ok, U1, U2, U3, rr = _uni_fast(rn, sg, W[_Q, k], W[_ALPHA, k], tau)
-        f, g, fd, gd = _uni_fg(rn, sg, dt, sqmu, tau, U1, U2, U3, rr)
+        tau = sqmu * W[_UDT, k]
+        W[_USQMU, k] = sqmu
+        W[_USG, k] = sg
+        W[_UTAU, k] = tau
+        W[_UCHI, k] = _uni_start(W[_RN, k], sg, 1.0 - W[_Q, k], tau)
+    for k in range(nu):
+        W[_UCHI, k] = _uni_laguerre(W[_UCHI, k], W[_RN, k], W[_USG, k], 1.0 - W[_Q, k], W[_ALPHA, k], W[_UTAU, k])
+    for k in range(nu):
+        W[_UCHI, k] = _uni_series_step(W[_UCHI, k], W[_RN, k], W[_USG, k], 1.0 - W[_Q, k], W[_ALPHA, k], W[_UTAU, k])
+    for k in range(nu):
+        rn = W[_RN, k]
+        sg = W[_USG, k]
+        tau = W[_UTAU, k]
+        ok, U1, U2, U3, rr = _uni_check_polish(W[_UCHI, k], rn, sg, 1.0 - W[_Q, k], W[_ALPHA, k], tau)
+        f, g, fd, gd = _uni_fg(rn, sg, W[_UDT, k], W[_USQMU, k], tau, U1, U2, U3, rr)
         W[_UOK, k] = 1.0 if ok else 0.0
         W[_UF, k] = f
         W[_UG, k] = g
