@@ -221,12 +221,15 @@ def test_short_decimals_at_exact_midpoints():
 def test_format_records_template():
     seqs = np.array([0, 7, 2**53 - 1])
     values = np.array([[0.1, -0.0], [1e16, 5e-324], [123.0, 1e-4]])
-    data, offsets = sh.format_records(seqs, values, [b"<", b"|", b",", b">"])
-    expected = [f"<{s}|{a!r},{b!r}>".encode() for s, (a, b) in zip(seqs.tolist(), values.tolist())]
+    template = sh.RecordTemplate([b"<", b"|", b"|", b",", b"|", b">"], [sh.shared(0), sh.SEQ, 0, 1, sh.shared(1)])
+    data, offsets = sh.format_records(template, seqs, values, (2.5e-7, -1e300))
+    expected = [f"<2.5e-07|{s}|{a!r},{b!r}|-1e+300>".encode() for s, (a, b) in zip(seqs.tolist(), values.tolist())]
     assert data == b"".join(expected)
     assert np.diff(offsets).tolist() == [len(e) for e in expected]
-    with pytest.raises(ValueError, match="pieces: expected 4 byte strings"):
-        sh.format_records(seqs, values, [b"<", b">"])
+    with pytest.raises(ValueError, match="pieces: expected 6 byte strings for 5 slots"):
+        sh.RecordTemplate([b"<", b">"], [sh.shared(0), sh.SEQ, 0, 1, sh.shared(1)])
+    with pytest.raises(ValueError, match="values: expected 2 columns and 2 shared values, got 2 and 1"):
+        sh.format_records(template, seqs, values, (1.0,))
 
 
 def random_unit_quats(rng, n):

@@ -34,11 +34,13 @@ float against 610-1430 ns for ``repr``.
 
 from __future__ import annotations
 
+from itertools import accumulate
+
 import numpy as np
 
 from astrodyn._jit import jit
 
-__all__ = ["MAX_REPR_LEN", "format_floats", "format_records", "pack_keys", "shortest_repr", "write_shortest", "write_uint"]
+__all__ = ["MAX_REPR_LEN", "SEQ", "RecordTemplate", "format_floats", "format_records", "pack_keys", "shared", "shortest_repr", "write_shortest", "write_uint"]
 
 #: The longest ``repr`` of any float64, e.g. ``-2.2250738585072014e-308`` (24 bytes).
 MAX_REPR_LEN = 24
@@ -479,15 +481,32 @@ def _copy_into(src, start, stop, buf, pos):
     return pos
 
 
-@jit
-def _fill_records(seqs, bits, pieces, piece_offsets, keys, key_offsets, buf, offsets):
-    """Record i = piece 0, seqs[i], piece 1, value (i, 0), piece 2, ..., value (i, m-1), piece m+1.
+#: Slot code of the record's integer (``seqs[i]``) in a :class:`RecordTemplate`.
+SEQ = -1
 
+
+def shared(j: int) -> int:
+    """Slot code of shared float ``j`` (the same value in every record, e.g. t or mu)."""
+    return -2 - j
+
+
+@jit
+def _fill_records(seqs, bits, shared_bits, pieces, piece_offsets, slots, keys, key_offsets, buf, offsets):
+    """Record i = piece 0, slot 0, piece 1, slot 1, ..., slot s-1, piece s (see RecordTemplate).
+
+    Shared floats are formatted once into a scratch buffer and copied into each record.
     With keys (``key_offsets.size == n + 1``) each record is framed as an entry of
     :func:`astrodyn.messages.encode_batch`: u16 key length, key, u32 payload length
     (little-endian), payload.  ``offsets[i]:offsets[i + 1]`` spans record i.
     """
-    n, m = bits.shape
+    n = bits.shape[0]
+    n_slots = slots.shape[0]
+    n_shared = shared_bits.shape[0]
+    scratch = np.empty(n_shared * MAX_REPR_LEN, np.uint8)
+    scratch_offsets = np.empty(n_shared + 1, np.int64)
+    scratch_offsets[0] = 0
+    for j in range(n_shared):
+        scratch_offsets[j + 1] = write_shortest(shared_bits[j], scratch, scratch_offsets[j])
     framed = key_offsets.shape[0] == n + 1
     pos = 0
     len_at = 0
@@ -501,12 +520,17 @@ def _fill_records(seqs, bits, pieces, piece_offsets, keys, key_offsets, buf, off
             len_at = pos
             pos += 4
         start = pos
-        pos = _copy_into(pieces, piece_offsets[0], piece_offsets[1], buf, pos)
-        pos = write_uint(seqs[i], buf, pos)
-        for k in range(m):
-            pos = _copy_into(pieces, piece_offsets[k + 1], piece_offsets[k + 2], buf, pos)
-            pos = write_shortest(bits[i, k], buf, pos)
-        pos = _copy_into(pieces, piece_offsets[m + 1], piece_offsets[m + 2], buf, pos)
+        for k in range(n_slots):
+            pos = _copy_into(pieces, piece_offsets[k], piece_offsets[k + 1], buf, pos)
+            code = slots[k]
+            if code >= 0:
+                pos = write_shortest(bits[i, code], buf, pos)
+            elif code == SEQ:
+                pos = write_uint(seqs[i], buf, pos)
+            else:
+                j = -2 - code
+                pos = _copy_into(scratch, scratch_offsets[j], scratch_offsets[j + 1], buf, pos)
+        pos = _copy_into(pieces, piece_offsets[n_slots], piece_offsets[n_slots + 1], buf, pos)
         if framed:
             plen = pos - start
             for b in range(4):
@@ -516,9 +540,11 @@ def _fill_records(seqs, bits, pieces, piece_offsets, keys, key_offsets, buf, off
 
 
 def _concat(chunks: list[bytes]) -> tuple[np.ndarray, np.ndarray]:
-    offsets = np.zeros(len(chunks) + 1, np.int64)
-    offsets[1:] = np.cumsum([len(c) for c in chunks])
+    offsets = np.fromiter(accumulate(map(len, chunks), initial=0), np.int64, len(chunks) + 1)
     return np.frombuffer(b"".join(chunks), np.uint8), offsets
+
+
+_NO_KEYS = (np.zeros(0, np.uint8), np.zeros(0, np.int64))
 
 
 def pack_keys(keys: list[bytes]) -> tuple[np.ndarray, np.ndarray]:
@@ -526,33 +552,51 @@ def pack_keys(keys: list[bytes]) -> tuple[np.ndarray, np.ndarray]:
     return _concat(keys)
 
 
-def format_records(seqs, values, pieces: list[bytes], keys=None) -> tuple[bytes, np.ndarray]:
-    """N texts of one template, written in one compiled pass.
+class RecordTemplate:
+    """The fixed layout of a family of records: constant byte pieces between slots.
 
-    Record ``i`` is ``pieces[0] + str(seqs[i]) + pieces[1] + repr(values[i, 0]) + pieces[2]
-    + ... + repr(values[i, m - 1]) + pieces[m + 1]`` (``len(pieces) == m + 2``), ``seqs``
-    integers 0 <= seq < 2**63 shape (N,), ``values`` finite float64 shape (N, m).  With
-    ``keys`` (N UTF-8 byte strings < 65536 bytes, or :func:`pack_keys` of them) each
-    record is framed as an ``encode_batch`` entry (u16 key length, key, u32 payload
-    length, payload).
+    A record is ``pieces[0] + slot 0 + pieces[1] + ... + slot s-1 + pieces[s]``
+    (``len(pieces) == len(slots) + 1``); a slot is a column ``k >= 0`` of the per-record
+    floats, :data:`SEQ` (the record's integer) or :func:`shared` ``(j)`` (shared float j).
+    Build it once per layout (the message encoders cache one per model and frame).
+    """
+
+    def __init__(self, pieces: list[bytes], slots: list[int]):
+        if len(pieces) != len(slots) + 1:
+            raise ValueError(f"pieces: expected {len(slots) + 1} byte strings for {len(slots)} slots, got {len(pieces)}")
+        self.columns = max([k + 1 for k in slots if k >= 0], default=0)
+        self.n_shared = max([-1 - k for k in slots if k < SEQ], default=0)
+        self.pieces, self.piece_offsets = _concat(pieces)
+        self.slots = np.asarray(slots, dtype=np.int64)
+
+
+def format_records(template: RecordTemplate, seqs, values, shared_values=(), keys=None) -> tuple[bytes, np.ndarray]:
+    """N records of one template, written in one compiled pass.
+
+    ``seqs`` integers 0 <= seq < 2**63 shape (N,); ``values`` finite float64 shape
+    (N, template.columns), each written as ``repr`` would; ``shared_values`` the shared
+    floats.  With ``keys`` (N UTF-8 byte strings < 65536 bytes, or :func:`pack_keys` of
+    them) each record is framed as an ``encode_batch`` entry (u16 key length, key, u32
+    payload length, payload).
 
     Returns ``(data, offsets)``: record ``i`` is ``data[offsets[i]:offsets[i + 1]]``.
     The caller validates the inputs (the message encoders do).
     """
     bits = np.ascontiguousarray(values, dtype=np.float64).view(np.uint64)
     n, m = bits.shape
-    if len(pieces) != m + 2:
-        raise ValueError(f"pieces: expected {m + 2} byte strings for {m} values per record, got {len(pieces)}")
-    piece_buf, piece_offsets = _concat(pieces)
+    shared_bits = np.array(shared_values, dtype=np.float64).reshape(-1).view(np.uint64)
+    if m != template.columns or shared_bits.shape[0] != template.n_shared:
+        raise ValueError(f"values: expected {template.columns} columns and {template.n_shared} shared values, "
+                         f"got {m} and {shared_bits.shape[0]}")
     if keys is None:
-        key_buf, key_offsets = np.zeros(0, np.uint8), np.zeros(0, np.int64)
+        key_buf, key_offsets = _NO_KEYS
     else:
         key_buf, key_offsets = keys if isinstance(keys, tuple) else _concat(keys)
         if key_offsets.shape != (n + 1,):
             raise ValueError(f"keys: expected {n} keys, got {key_offsets.shape[0] - 1}")
-    size = n * (len(piece_buf) + m * MAX_REPR_LEN + 20 + 6) + len(key_buf)
-    buf = np.empty(size, np.uint8)
+    per_record = len(template.pieces) + MAX_REPR_LEN * len(template.slots) + 6  # a seq slot: <= 19 digits
+    buf = np.empty(n * per_record + len(key_buf), np.uint8)
     offsets = np.empty(n + 1, np.int64)
-    end = _fill_records(np.ascontiguousarray(seqs, dtype=np.int64), bits, piece_buf, piece_offsets,
-                        key_buf, key_offsets, buf, offsets)
+    end = _fill_records(np.ascontiguousarray(seqs, dtype=np.int64), bits, shared_bits, template.pieces,
+                        template.piece_offsets, template.slots, key_buf, key_offsets, buf, offsets)
     return buf[:end].tobytes(), offsets

@@ -846,6 +846,8 @@ def _batch_arrays(kind: str, seqs: Any, arrays: dict[str, tuple[Any, int]]) -> t
             bad = int(np.argwhere(~np.isfinite(a))[0, 0])
             raise MessageError(f"{kind}.{field}[{bad}]: expected array of {width} finite numbers, got {_show(a[bad].tolist())}")
         out[field] = a
+    if isinstance(seqs, (int, np.integer)) and not isinstance(seqs, (bool, np.bool_)) and 0 <= seqs <= MAX_SEQ:
+        return np.full(n, seqs, dtype=np.int64), out  # the common case: one valid seq for every body
     s = np.asarray(seqs)
     if s.ndim == 0:
         s = np.full(n, s)
@@ -869,10 +871,28 @@ def _orbit_records(t: float, seqs: Any, model: str, r: Any, v: Any, mu: float, f
     if not isinstance(frame, str) or not _NAME_FULL.search(frame):
         raise MessageError(f"orbit.frame: expected a frame name matching {NAME_PATTERN}, got {_show(frame)}")
     seq_arr, a = _batch_arrays("orbit", seqs, {"r": (r, 3), "v": (v, 3)})
-    pieces = [f'{{"t":{tf!r},"seq":'.encode(), f',"model":"{model}","r":['.encode(), b",", b",",
-              b'],"v":[', b",", b",", f'],"mu":{muf!r},"frame":"{frame}"}}'.encode()]
-    return _shortest.format_records(seq_arr, np.concatenate([a["r"], a["v"]], axis=1), pieces,
-                                    _batch_keys(keys, seq_arr.shape[0]))
+    return _shortest.format_records(_orbit_template(model, frame), seq_arr, np.concatenate([a["r"], a["v"]], axis=1),
+                                    (tf, muf), _batch_keys(keys, seq_arr.shape[0]))
+
+
+@functools.lru_cache(maxsize=256)
+def _orbit_template(model: str, frame: str):
+    """``{"t":T,"seq":S,"model":"<model>","r":[0,1,2],"v":[3,4,5],"mu":MU,"frame":"<frame>"}``."""
+    from astrodyn._shortest import SEQ, RecordTemplate, shared
+
+    pieces = [b'{"t":', b',"seq":', f',"model":"{model}","r":['.encode(), b",", b",", b'],"v":[', b",", b",",
+              b'],"mu":', f',"frame":"{frame}"}}'.encode()]
+    return RecordTemplate(pieces, [shared(0), SEQ, 0, 1, 2, 3, 4, 5, shared(1)])
+
+
+@functools.lru_cache(maxsize=64)
+def _attitude_template(model: str):
+    """``{"t":T,"seq":S,"model":"<model>","q":[0,1,2,3],"w":[4,5,6]}``."""
+    from astrodyn._shortest import SEQ, RecordTemplate, shared
+
+    pieces = [b'{"t":', b',"seq":', f',"model":"{model}","q":['.encode(), b",", b",", b",", b'],"w":[', b",", b",",
+              b"]}"]
+    return RecordTemplate(pieces, [shared(0), SEQ, 0, 1, 2, 3, 4, 5, 6])
 
 
 def _attitude_records(t: float, seqs: Any, model: str, q: Any, w: Any, keys: Any) -> tuple[bytes, np.ndarray]:
@@ -889,9 +909,7 @@ def _attitude_records(t: float, seqs: Any, model: str, q: Any, w: Any, keys: Any
         if not np.all(err <= QUAT_NORM_TOL):
             bad = int(np.argmax(err))
             raise MessageError(f"attitude.q[{bad}]: expected a unit quaternion (| |q| - 1 | <= {QUAT_NORM_TOL:g}), got |q| = {float(np.linalg.norm(qa[bad]))!r}")
-    pieces = [f'{{"t":{tf!r},"seq":'.encode(), f',"model":"{model}","q":['.encode(), b",", b",", b",",
-              b'],"w":[', b",", b",", b"]}"]
-    return _shortest.format_records(seq_arr, np.concatenate([qa, a["w"]], axis=1), pieces,
+    return _shortest.format_records(_attitude_template(model), seq_arr, np.concatenate([qa, a["w"]], axis=1), (tf,),
                                     _batch_keys(keys, seq_arr.shape[0]))
 
 
