@@ -267,11 +267,25 @@ def test_case_mcap_is_complete(config, tmp_path):
                      "--mcap", "--out", str(tmp_path), "--quiet"])
     assert rc == 0
     seqs: dict[str, list[int]] = {}
+    ecc: dict[str, list[float]] = {}
     with open(tmp_path / "mcap" / "case-000000.mcap", "rb") as f:
-        for _, channel, message in make_reader(f).iter_messages():
-            seqs.setdefault(channel.topic, []).append(json.loads(message.data)["seq"])
+        reader = make_reader(f)
+        for _, channel, message in reader.iter_messages():
+            msg = json.loads(message.data)
+            seqs.setdefault(channel.topic, []).append(msg["seq"])
+            # eccentricity vector from the recorded state (two-body, independent of the sweep code)
+            r, v, mu = np.array(msg["r"]), np.array(msg["v"]), msg["mu"]
+            e_vec = ((v @ v - mu / np.linalg.norm(r)) * r - (r @ v) * v) / mu
+            ecc.setdefault(channel.topic, []).append(float(np.linalg.norm(e_vec)))
+        f.seek(0)
+        meta = {m.name: m.metadata for m in make_reader(f).iter_metadata()}
     assert set(seqs) == {"astrodyn/sweep-test/sat1/orbit", "astrodyn/sweep-test/sat2/orbit"}
     assert all(s == list(range(61)) for s in seqs.values())
+    # each channel carries its own body's states: sat1 has the drawn e, sat2 the config's
+    drawn = json.loads(meta["scenario"]["sweep_draws"])["bodies.sat1.orbit.e"]
+    # 1e-9: e from a state has ~1e-16 / e relative round-off, far below this
+    np.testing.assert_allclose(ecc["astrodyn/sweep-test/sat1/orbit"], drawn, atol=1e-9)
+    np.testing.assert_allclose(ecc["astrodyn/sweep-test/sat2/orbit"], 0.01, atol=1e-9)
 
 
 def test_cli_errors_exit_2(config, tmp_path, capsys):

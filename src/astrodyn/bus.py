@@ -326,6 +326,11 @@ class BatchPublisher(_Declared):
             for (key, _), seq in zip(items, seqs):
                 self.last_seq[key] = int(seq)
 
+    def publish_envelope(self, data: bytes) -> None:
+        """Send an envelope already framed (:func:`astrodyn.messages.batch_envelope` of the
+        compiled encoders' runs: the propagators' hot path)."""
+        self._entity.put(data)
+
 
 
 #: Event kind a publishing process sends last; its detail is JSON ``{"messages": M}``,

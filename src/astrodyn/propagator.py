@@ -207,9 +207,7 @@ def run_propagator(scenario: Scenario, session, opts: PropagatorOptions, log=pri
                                  len(ix)) for model, ix in groups.items()]
                         if xc is not None:
                             runs.append(messages.frame_entries(xc(j, k, t)))
-                        # bus.BatchPublisher.publish takes (key, payload) pairs; a finished envelope goes to
-                        # its publisher entity directly (a publish_envelope method would be cleaner: bus.py)
-                        batch._entity.put(messages.batch_envelope(runs))
+                        batch.publish_envelope(messages.batch_envelope(runs))
                         published += sum(count for _, count in runs)
                     else:
                         items = []

@@ -725,18 +725,29 @@ def write_case_mcap(path: Path, scenario, result, draws: dict, k: int) -> None:
     att_models = {bp.name: bp.attitude_model for bp in result.plan.bodies}
     okeys = [messages.orbit_key(scenario.name, n) for n in result.orbit_names]
     akeys = [messages.attitude_key(scenario.name, n) for n in result.attitude_names]
-    omodels = [orbit_models[n] for n in result.orbit_names]
-    amodels = [att_models[n] for n in result.attitude_names]
+    # one compiled encoder call per (step, model): bodies grouped by model
+    ogroups = _index_groups([orbit_models[n] for n in result.orbit_names])
+    agroups = _index_groups([att_models[n] for n in result.attitude_names])
     mu, frame = scenario.central_body.mu, scenario.frame
     with McapRecorder(path, meta, epoch_ns=scenario.epoch_unix_ns, flush_interval_s=3600.0) as rec:
         for s, t in enumerate(result.t):
             t = float(t)
-            for j, key in enumerate(okeys):
-                payload = messages.encode_orbit_batch(t, s, omodels[j], result.r[s, j:j + 1], result.v[s, j:j + 1], mu, frame)[0]
-                rec.write_encoded(key, payload, t, s)
-            for j, key in enumerate(akeys):
-                payload = messages.encode_attitude_batch(t, s, amodels[j], result.q[s, j:j + 1], result.w[s, j:j + 1])[0]
-                rec.write_encoded(key, payload, t, s)
+            for model, ix in ogroups:
+                payloads = messages.encode_orbit_batch(t, s, model, result.r[s, ix], result.v[s, ix], mu, frame)
+                for j, payload in zip(ix, payloads):
+                    rec.write_encoded(okeys[j], payload, t, s)
+            for model, ix in agroups:
+                payloads = messages.encode_attitude_batch(t, s, model, result.q[s, ix], result.w[s, ix])
+                for j, payload in zip(ix, payloads):
+                    rec.write_encoded(akeys[j], payload, t, s)
+
+
+def _index_groups(labels: list[str]) -> list[tuple[str, list[int]]]:
+    """``[(label, [indices with that label]), ...]`` in order of first appearance."""
+    groups: dict[str, list[int]] = {}
+    for i, label in enumerate(labels):
+        groups.setdefault(label, []).append(i)
+    return list(groups.items())
 
 
 # --------------------------------------------------------------------------- many cases

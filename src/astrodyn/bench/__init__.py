@@ -17,6 +17,7 @@ SUITES = {
     "service": "astrodyn.bench.service",
     "sweep": "astrodyn.bench.sweep",
     "soak": "astrodyn.bench.soak",
+    "encode": "astrodyn.bench.encode",
 }
 
 
