@@ -616,8 +616,16 @@ def _fg_universal(r0, sg, q, alpha, dt, sqmu):
     tau = sqmu * dt
     ok, U1, U2, U3, rr = _uni_fast(r0, sg, q, alpha, tau)
     if not ok:
-        chi, z, c2, c3, rr = _uni_solve_safe(r0, sg, q, alpha, tau)
-        U1, U2, U3 = _uni_functions(chi, z, c2, c3)
+        return _fg_universal_safe(r0, sg, q, alpha, dt, sqmu)
+    return _uni_fg(r0, sg, dt, sqmu, tau, U1, U2, U3, rr)
+
+
+@jit
+def _fg_universal_safe(r0, sg, q, alpha, dt, sqmu):
+    """:func:`_fg_universal` by the safeguarded loop alone (its fallback; the reference path)."""
+    tau = sqmu * dt
+    chi, z, c2, c3, rr = _uni_solve_safe(r0, sg, q, alpha, tau)
+    U1, U2, U3 = _uni_functions(chi, z, c2, c3)
     return _uni_fg(r0, sg, dt, sqmu, tau, U1, U2, U3, rr)
 
 
@@ -809,12 +817,11 @@ def _uni_passes(W, nu, idx, r0, v0, r, v):
 
 @jit
 def _uni_finish_pass(W, nu, idx, r0, v0, r, v):
-    """Pass 2 of :func:`_uni_passes`: :func:`_fg_universal` (its safeguarded loop) for the
-    columns with ``W[_UOK] == 0``, then the store of every column."""
+    """Pass 2 of :func:`_uni_passes`: the safeguarded loop (:func:`_fg_universal_safe`) for
+    the columns with ``W[_UOK] == 0``, then the store of every column."""
     for k in range(nu):
         if W[_UOK, k] == 0.0:
-            sqmu = math.sqrt(W[_UMU, k])
-            f, g, fd, gd = _fg_universal(W[_RN, k], W[_SIG, k] / sqmu, W[_Q, k], W[_ALPHA, k], W[_UDT, k], sqmu)
+            f, g, fd, gd = _fg_universal_safe(W[_RN, k], W[_USG, k], W[_Q, k], W[_ALPHA, k], W[_UDT, k], W[_USQMU, k])
         else:
             f, g, fd, gd = W[_UF, k], W[_UG, k], W[_UFD, k], W[_UGD, k]
         _store(r0, v0, r, v, idx[k], f, g, fd, gd)
