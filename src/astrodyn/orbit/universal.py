@@ -28,9 +28,18 @@ with ``alpha = 1 / a = 2 / r0 - v0^2 / mu``):
   three equivalent expressions has the least cancellation (the plain
   ``dt - (sinh x - x)/n`` loses ~700x on such arcs).
 * **Near-parabolic and parabolic** (``|r0 alpha| <= 0.05`` and ``|n dt| <= 1``):
-  the universal variable ``chi`` with the Stumpff functions ``c2, c3`` (series
-  for ``|z| < 1``), Laguerre-Conway iteration safeguarded by a bracket (Conway
-  1986, Celest. Mech. 39, 199).  ``alpha = 0`` exactly is a parabola.
+  the universal variable ``chi`` with the Stumpff functions ``c2, c3``
+  (Vallado eq. 2-50).  In this window ``|z| = |alpha| chi^2 <= 5.06`` (the square
+  of the anomaly change; derivation at ``_Z_WINDOW``), so a fixed 13-term series
+  gives ``c2, c3`` to float64 accuracy.  Straight-line solve: the root of the
+  parabolic (``z = 0``) cubic by a cancellation-free Cardano form, one
+  Laguerre-Conway step (Conway 1986, Celest. Mech. 39, 199), one fifth-order
+  step from the inverted Taylor series (the derivatives of the time equation
+  are ``r``, ``dr/dchi``, ``1 - alpha r``, ``-alpha dr/dchi``), the residual
+  check and a first-order Newton polish.  Where the check fails (none of the
+  benchmark's 118k window states; e.g. ``|dt| ~ 1e-100 s``, or ``|tau| > 1e154``
+  on a parabola) the safeguarded loop takes over: Laguerre-Conway kept in a
+  bracket, general Stumpff functions.  ``alpha = 0`` exactly is a parabola.
 
 Speed (``astrodyn bench orbit``, docs/bench-orbit.md): large batches are cut
 into blocks of 512 states; in each block the ellipses are gathered and solved
@@ -38,7 +47,11 @@ in passes over all of them (setup, own ``atan2`` and starter; own ``sin/cos``,
 one fifth-order step, residual check and polish; the safeguarded solver for the
 few that fail the check; f, g), straight-line code that LLVM vectorizes four
 states wide; the hyperbolas likewise (the straight-line solve with an own
-``exp`` vectorized, setup and f, g scalar).  Each state goes through exactly the
+``exp`` vectorized, setup and f, g scalar); the near-parabolic states in four
+vectorized loops (starter; Laguerre step; series step; check, polish, f, g: short
+loop bodies, because each state's chain of divisions and square roots is too
+long for the core to overlap two states of one long body), then the safeguarded
+loop for the rare failures.  Each state goes through exactly the
 operations of a single call, so a batch gives the same bits as one call per
 state, serial or parallel (``prange`` over chunks of eight blocks).
 
@@ -419,7 +432,7 @@ def _uni_start(r0, sg, omq, tau):
     ``B = P / (3 A)``, is formed without cancellation as ``R / (A^2 + A B + B^2)``
     (``A^3 - B^3 = R``; Barker's solution when ``sg = 0``, ``cc = 1``).
     The ``z`` terms left out make it a starter only (Laguerre-Conway then
-    converges in one or two steps: the module doc).  Overflow (``|tau| > 1e150``)
+    converges in one or two steps: the module doc).  Overflow (``|tau| > ~1e154``)
     gives a useless starter and the caller's check sends the state to the safeguarded loop.
     """
     w = sg * sg / (2.0 * r0)
