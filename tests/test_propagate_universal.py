@@ -166,7 +166,7 @@ def _mpmath_sample():
     z = np.array([_uni_solve_safe(x[1], x[2], x[3], x[4], x[6] * DT[i])[1] for i, x in enumerate(inv)])
     picks = []
     for sel in (q > 1e-3, q < -1e-3, np.abs(q) < 1e-12, DT < 0, np.abs(DT) < 1e-3, z > 2.0, z < -1.5):
-        picks += list(np.flatnonzero(sel)[:4])
+        picks += list(np.flatnonzero(sel)[:8])
     cases = [(R0[i], V0[i], DT[i], MU_E) for i in dict.fromkeys(picks)]
     pr, pv = exact_parabolas(3, 5)
     cases += [(pr[k], pv[k], dt, MU_E) for k, dt in enumerate((86400.0, -3.1e7, 1e-6))]
