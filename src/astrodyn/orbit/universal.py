@@ -925,13 +925,15 @@ def _propagate_range(r0, v0, dt, mu, r, v, lo, hi, idx, W, idxh, WH, idxu, WU):
 
 
 @jit
+def _block_workspace():
+    """Scratch arrays of one block: ellipse, hyperbola and universal-variable gathers and work rows."""
+    return (np.empty(_BLOCK, dtype=np.int64), np.empty((_NW, _BLOCK)), np.empty(_BLOCK, dtype=np.int64),
+            np.empty((_NWH, _BLOCK)), np.empty(_BLOCK, dtype=np.int64), np.empty((_NWU, _BLOCK)))
+
+
+@jit
 def _propagate_loop(r0, v0, dt, mu, r, v):
-    idx = np.empty(_BLOCK, dtype=np.int64)
-    W = np.empty((_NW, _BLOCK))
-    idxh = np.empty(_BLOCK, dtype=np.int64)
-    WH = np.empty((_NWH, _BLOCK))
-    idxu = np.empty(_BLOCK, dtype=np.int64)
-    WU = np.empty((_NWU, _BLOCK))
+    idx, W, idxh, WH, idxu, WU = _block_workspace()
     _propagate_range(r0, v0, dt, mu, r, v, 0, r0.shape[0], idx, W, idxh, WH, idxu, WU)
 
 
@@ -945,12 +947,7 @@ def _propagate_loop_par(r0, v0, dt, mu, r, v):
     chunk = _CHUNK if n >= 16 * _CHUNK else _BLOCK  # small batches: one block per task
     nchunks = (n + chunk - 1) // chunk
     for c in prange(nchunks):
-        idx = np.empty(_BLOCK, dtype=np.int64)
-        W = np.empty((_NW, _BLOCK))
-        idxh = np.empty(_BLOCK, dtype=np.int64)
-        WH = np.empty((_NWH, _BLOCK))
-        idxu = np.empty(_BLOCK, dtype=np.int64)
-        WU = np.empty((_NWU, _BLOCK))
+        idx, W, idxh, WH, idxu, WU = _block_workspace()
         lo = np.int64(c) * chunk  # prange's index is unsigned: keep one int64 specialization
         _propagate_range(r0, v0, dt, mu, r, v, lo, min(lo + chunk, n), idx, W, idxh, WH, idxu, WU)
 
