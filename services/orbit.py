@@ -1,14 +1,14 @@
-"""Orbit propagator process: publishes every orbit of a scenario on Zenoh.
+"""Orbit propagator process: publishes every orbit state of a scenario on Zenoh.
 
     python services/orbit.py configs/demo.toml --connect tcp/127.0.0.1:7447 [--real-time-factor 10]
 
-One message per body per output step on ``astrodyn/<scenario>/<body>/orbit`` (batched per
-step on the bus, see astrodyn.propagator). Started by ``astrodyn run`` / ``astrodyn serve``.
+The same as ``python -m astrodyn.service.propagator orbit ...`` (what ``astrodyn run`` /
+``serve`` start). Keys, batching and pacing: astrodyn.service.propagator.
 """
 
 import sys
 
-from astrodyn.propagator import service_main
+from astrodyn.service.propagator import service_main
 
 if __name__ == "__main__":
     sys.exit(service_main("orbit"))

@@ -1,4 +1,4 @@
-"""The compiled batch ingest (astrodyn.recording._ingest) against the logger's Python path.
+"""The compiled batch ingest (astrodyn.recording.ingest) against the logger's Python path.
 
 References, both independent of the compiled code:
 
@@ -27,8 +27,8 @@ from mcap.stream_reader import StreamReader
 from test_messages_fast import BASE, EDITS, byte_mutants, canonical, ordinary, slow
 
 from astrodyn import messages as m
-from astrodyn.recording import _ingest
-from astrodyn.recording.logger import Logger
+from astrodyn.recording import ingest
+from astrodyn.service.logger import Logger
 from astrodyn.recording.writer import _GRAMMAR, McapRecorder
 
 EPOCH_NS = 1_774_008_000_000_000_000
@@ -38,8 +38,8 @@ def compiled(data: bytes, kind: str):
     """The compiled check of one payload: None (not taken) or (t text, seq)."""
     buf = np.frombuffer(data, dtype=np.uint8)
     out = np.zeros(3, dtype=np.int64)
-    code = _ingest.KIND_ORBIT if kind == "orbit" else _ingest.KIND_ATTITUDE
-    ok = _ingest._check_entry(buf, 0, buf.shape[0], code, *_GRAMMAR, m.QUAT_NORM_TOL, out)
+    code = ingest.KIND_ORBIT if kind == "orbit" else ingest.KIND_ATTITUDE
+    ok = ingest._check_entry(buf, 0, buf.shape[0], code, *_GRAMMAR, m.QUAT_NORM_TOL, out)
     return (data[out[0] : out[1]], int(out[2])) if ok else None
 
 

@@ -16,7 +16,7 @@ from pathlib import Path
 import pytest
 
 from astrodyn import messages
-from astrodyn.propagator import BATCH_THRESHOLD
+from astrodyn.service.propagator import BATCH_THRESHOLD
 from astrodyn.scenario import load, plan
 
 ROOT = Path(__file__).resolve().parents[1]

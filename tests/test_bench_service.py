@@ -52,10 +52,10 @@ def test_check_recording_counts_loss_and_disorder(tmp_path):
 
 
 def test_scene_config_replaces_size_and_duration():
-    from astrodyn.runner import repo_dir
+    from astrodyn.scenario.catalogue import config_path
     from astrodyn.scenario import loads
 
-    template = (repo_dir("configs", "constellation-1000.toml") / "constellation-1000.toml").read_text()
+    template = config_path("constellation-1000").read_text()
     text = service.scene_config(service.Scene("tiny", 6, 3, 1.5), template)
     sc = loads(text)
     assert sc.name == "tiny" and len(sc.bodies) == 6 and sc.n_steps == 16

@@ -229,7 +229,7 @@ def test_elliptic_beyond_resolved_phase_is_finite():
 # own vectorizable kernels (astrodyn.orbit.kepler._sincos, _atan2, _cbrt_start)
 # ---------------------------------------------------------------------------
 def _kernel_loops():
-    from astrodyn._jit import jit
+    from astrodyn.jit import jit
     from astrodyn.orbit.kepler import _asinh_upper_own, _atan2, _cbrt_start, _exp, _log, _sincos
 
     @jit(cache=False)

@@ -15,8 +15,8 @@ from mcap.reader import make_reader
 from mcap.records import MessageIndex
 
 from astrodyn import messages as m
-from astrodyn.recording._mcapfast import _message_indexes
-from astrodyn.recording.logger import Logger
+from astrodyn.recording.chunked_writer import _message_indexes
+from astrodyn.service.logger import Logger
 from astrodyn.recording.writer import McapRecorder
 
 EPOCH_NS = 1_774_008_000_000_000_000
@@ -104,7 +104,7 @@ def test_file_written_through_many_chunks_reads_back_with_indexes(tmp_path):
 def test_chunk_index_record_equals_mcap_serialiser():
     from mcap.records import ChunkIndex
 
-    from astrodyn.recording._mcapfast import chunk_index_record
+    from astrodyn.recording.chunked_writer import chunk_index_record
 
     rng = np.random.default_rng(5)
     for n in (0, 1, 7, 300):

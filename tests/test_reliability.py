@@ -239,7 +239,7 @@ def test_resume_continues_a_cut_run_bit_for_bit(full_run, tmp_path):
 
 
 def test_resume_rejects_what_it_cannot_continue(full_run, tmp_path, capsys):
-    from astrodyn.runner import main as runner_main
+    from astrodyn.service.runner import main as runner_main
 
     cfg, full = full_run
     other = tmp_path / "other.toml"

@@ -29,7 +29,7 @@ import pytest
 from mcap.reader import make_reader
 
 from astrodyn import bus
-from astrodyn.router import is_wildcard
+from astrodyn.service.router import is_wildcard
 from astrodyn.scenario import load
 from astrodyn.simulate import simulate
 from test_service import _stop  # stop a child by PID: SIGTERM, then SIGKILL (one helper)

@@ -148,7 +148,7 @@ def test_demo_summary_reports_models_and_crosscheck(demo_run):
 def test_demo_summary_matches_the_file(demo_run):
     """The drifts the propagators measured on what they published equal those measured on
     what the file holds (read back independently)."""
-    from astrodyn.runner import drift_summary
+    from astrodyn.service.runner import drift_summary
 
     out, result, _ = demo_run
     from_file = {r["body"]: r for r in drift_summary(out, load(CONFIGS / "demo.toml"))}

@@ -1,4 +1,4 @@
-"""astrodyn._shortest: compiled shortest round-trip formatting against Python's ``repr``.
+"""astrodyn.messages.shortest: compiled shortest round-trip formatting against Python's ``repr``.
 
 The reference is CPython's ``repr(float)`` (David Gay's ``dtoa``, mode 0, bignum
 arithmetic), an implementation independent of the Ryu algorithm under test; every check
@@ -16,7 +16,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from astrodyn import _shortest as sh
+from astrodyn.messages import shortest as sh
 
 
 def reference(values) -> bytes:

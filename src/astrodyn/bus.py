@@ -344,7 +344,7 @@ class EventPublisher(_Declared):
     Each process numbers its own events (seq 0, 1, ...); the logger accounts event seqs
     per (channel, process).  :meth:`end` sends the end-of-run marker: kind
     :data:`END_EVENT` with ``{"messages": M}`` so the logger can tell when it holds every
-    state message of the run (see :mod:`astrodyn.recording.logger`).
+    state message of the run (see :mod:`astrodyn.service.logger`).
     """
 
     def __init__(self, session: zenoh.Session, scenario: str, process: str):

@@ -14,15 +14,15 @@ import sys
 COMMANDS: dict[str, tuple[str, str]] = {
     "demo": ("astrodyn.demo", "run the demo scene (the README's main job)"),
     "bench": ("astrodyn.bench", "speed-against-error benchmarks: orbit | attitude | service | all"),
-    "run": ("astrodyn.runner", "run a scenario headless into an MCAP file"),
-    "serve": ("astrodyn.serve", "long-running real-time service controlled over Zenoh"),
-    "replay": ("astrodyn.recording.replay", "republish a recorded MCAP on Zenoh"),
+    "run": ("astrodyn.service.runner", "run a scenario headless into an MCAP file"),
+    "serve": ("astrodyn.service.serve", "long-running real-time service controlled over Zenoh"),
+    "replay": ("astrodyn.service.replay", "republish a recorded MCAP on Zenoh"),
     "analyze": ("astrodyn.analysis", "report and plots from an MCAP file (or a sweep directory)"),
     "export": ("astrodyn.recording.export", "export an MCAP to csv | parquet | oem | aem | foxglove"),
     "recover": ("astrodyn.recording.recover", "rewrite a crashed writer's MCAP with a summary"),
     "validate": ("astrodyn.scenario", "check a scenario config and print what it would run"),
     "sweep": ("astrodyn.sweep", "Monte Carlo dispersions / parameter sweeps of a scenario on Dask"),
-    "router": ("astrodyn.router", "a Zenoh router so processes on several hosts meet"),
+    "router": ("astrodyn.service.router", "a Zenoh router so processes on several hosts meet"),
 }
 
 

@@ -10,7 +10,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from astrodyn import runner
+from astrodyn.scenario.catalogue import config_path
+from astrodyn.service import runner
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -18,7 +19,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--out", default="out/demo.mcap", help="MCAP file to write (default out/demo.mcap)")
     ap.add_argument("--config", default=None, help="scenario (default configs/demo.toml)")
     args = ap.parse_args(argv)
-    config = Path(args.config) if args.config else runner.repo_dir("configs", "demo.toml") / "demo.toml"
+    config = Path(args.config) if args.config else config_path("demo")
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     rc = runner.main([str(config), "--out", str(out), "--cross-check"])

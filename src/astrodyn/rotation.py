@@ -61,7 +61,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from astrodyn._jit import jit
+from astrodyn.jit import jit
 
 __all__ = [
     "EULER_SEQUENCES",

@@ -43,7 +43,7 @@ Algorithms:
   (likewise with the complete ``Pi``); ``Pi`` for ``n < 1``.
 
 Scalar kernels (``_sncndn``, ``_rf``, ``_rj``, ...) are compiled with
-:func:`astrodyn._jit.jit` and used directly by
+:func:`astrodyn.jit.jit` and used directly by
 :mod:`astrodyn.attitude.torque_free`; the public functions broadcast arrays and
 loop in compiled code.  NaN inputs give NaN outputs; loops have iteration caps.
 
@@ -63,7 +63,7 @@ import math
 
 import numpy as np
 
-from astrodyn._jit import jit, pjit, prange
+from astrodyn.jit import jit, pjit, prange
 
 __all__ = ["ellipj", "ellipk", "elliprf", "elliprd", "elliprj", "ellipf", "ellippi"]
 

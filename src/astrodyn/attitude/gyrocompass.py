@@ -43,7 +43,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from astrodyn._jit import jit
+from astrodyn.jit import jit
 from astrodyn.attitude.elliptic import ellipk
 from astrodyn.attitude.integrators import SPLIT4_WEIGHTS, _step_chunks, _step_plan
 

@@ -76,7 +76,7 @@ import time as _time
 
 import numpy as np
 
-from astrodyn._jit import jit
+from astrodyn.jit import jit
 from astrodyn.attitude.euler import inertia_tensor, principal_axes
 from astrodyn.orbit.universal import _lagrange_scalar
 from astrodyn.rotation import quat_conjugate, quat_from_dcm, quat_multiply

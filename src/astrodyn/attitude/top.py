@@ -56,7 +56,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from astrodyn._jit import jit
+from astrodyn.jit import jit
 from astrodyn.attitude.integrators import (
     _SMALL_ANGLE,
     SPLIT2_WEIGHTS,

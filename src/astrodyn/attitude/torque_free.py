@@ -94,7 +94,7 @@ import math
 
 import numpy as np
 
-from astrodyn._jit import jit, pjit, prange
+from astrodyn.jit import jit, pjit, prange
 from astrodyn.attitude.elliptic import _ellipk, _reduce_half_period, _rf, _rj, _sncndn_half
 from astrodyn.rotation import quat_hamilton_scalar
 

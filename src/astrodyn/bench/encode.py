@@ -2,7 +2,7 @@
 
 ``python -m astrodyn.bench.encode [--bodies N] [--repeat K]`` prints
 
-* ns per float64: :func:`astrodyn._shortest.format_floats` against Python's ``repr``
+* ns per float64: :func:`astrodyn.messages.shortest.format_floats` against Python's ``repr``
   on three value sets (random bit patterns, positions ~7e6 m, quaternion components);
 * us per message for N bodies at one instant (constellation-like states):
   the former pure-Python encoder (f-strings of ``repr``, reproduced here as the
@@ -23,7 +23,7 @@ import time
 
 import numpy as np
 
-from astrodyn import _shortest
+from astrodyn.messages import shortest
 from astrodyn import messages as m
 from astrodyn.bench import cpu_model
 
@@ -63,8 +63,8 @@ def float_rows(repeat: int, n: int = 200_000) -> list[tuple[str, float, float]]:
     rows = []
     for name, x in sets.items():
         values = x.tolist()
-        assert _shortest.format_floats(x)[0].tobytes() == "".join(map(repr, values)).encode()
-        compiled = _best(lambda: _shortest.format_floats(x), repeat) / x.size * 1e9
+        assert shortest.format_floats(x)[0].tobytes() == "".join(map(repr, values)).encode()
+        compiled = _best(lambda: shortest.format_floats(x), repeat) / x.size * 1e9
         python = _best(lambda: [repr(v) for v in values], repeat) / x.size * 1e9
         rows.append((name, compiled, python))
     return rows

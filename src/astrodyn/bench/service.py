@@ -1,7 +1,7 @@
 """``astrodyn bench service``: the whole service, propagators -> Zenoh -> logger -> MCAP.
 
 What is measured (design.md section 5, issues 4 and 6), each scene run headless through
-the machinery of ``astrodyn run`` (:func:`astrodyn.runner.run_scenario`: real OS
+the machinery of ``astrodyn run`` (:func:`astrodyn.service.runner.run_scenario`: real OS
 processes, loopback Zenoh, the end-of-run protocol):
 
 * ``constellation-1000`` (``configs/constellation-1000.toml``: 1000 Walker satellites,
@@ -110,7 +110,7 @@ def _proc_hwm_mb(pid: int) -> float | None:
 
 
 def _children_by_name(parent: int) -> dict[str, int]:
-    """pid of each ``services/<name>.py`` child of ``parent``, by reading /proc."""
+    """pid of each logger / propagator child of ``parent`` (by its ``python -m`` command line in /proc)."""
     found = {}
     for entry in os.listdir("/proc"):
         if not entry.isdigit():
@@ -124,10 +124,15 @@ def _children_by_name(parent: int) -> dict[str, int]:
                 argv = f.read().split(b"\0")
         except (OSError, ValueError, IndexError):
             continue
-        for a in argv[1:3]:
-            name = os.path.basename(a.decode(errors="replace"))
-            if name.endswith(".py") and name[:-3] in _PROCESSES:
-                found[name[:-3]] = int(entry)
+        words = [a.decode(errors="replace") for a in argv[1:4]]
+        if words[:2] == ["-m", "astrodyn.service.logger"]:
+            name = "logger"
+        elif words[:2] == ["-m", "astrodyn.service.propagator"] and len(words) > 2:
+            name = words[2]
+        else:
+            continue
+        if name in _PROCESSES:
+            found[name] = int(entry)
     return found
 
 
@@ -213,8 +218,8 @@ def check_recording(path: str | os.PathLike, n_channels: int, n_steps: int) -> d
 
 
 def run_scene(scene: Scene, workdir: Path, template: str, keep: bool = False) -> dict:
-    """Run ``scene`` through :func:`astrodyn.runner.run_scenario`; measure and check it."""
-    from astrodyn.runner import run_scenario
+    """Run ``scene`` through :func:`astrodyn.service.runner.run_scenario`; measure and check it."""
+    from astrodyn.service.runner import run_scenario
     from astrodyn.scenario import load
 
     config = workdir / f"{scene.name}.toml"
@@ -319,7 +324,7 @@ def run_flood(steps: int, bodies: int, queue: int, workdir: Path) -> dict:
     import subprocess
 
     from astrodyn import bus
-    from astrodyn.runner import services_dir
+    from astrodyn.service.children import logger_command
 
     name = f"flood-q{queue}"
     out = workdir / f"{name}.mcap"
@@ -330,7 +335,7 @@ def run_flood(steps: int, bodies: int, queue: int, workdir: Path) -> dict:
                  "expected": 2 * bodies * steps, "queue": queue}
     t0 = time.monotonic()
     with bus.open_session(listen=[hub]), ProcSampler() as sampler:
-        logger = subprocess.Popen([py, str(services_dir() / "logger.py"), "--scenario", name, "--out", str(out),
+        logger = subprocess.Popen([*logger_command(), "--scenario", name, "--out", str(out),
                                    "--epoch-ns", "1774008000000000000", "--expect", "flood", "--queue", str(queue),
                                    "--connect", hub], stdout=subprocess.PIPE, stderr=subprocess.PIPE)
         pub = subprocess.Popen([py, "-m", "astrodyn.bench.service", "--flood-publisher", hub, name, str(steps), str(bodies)],
@@ -428,9 +433,9 @@ def main(argv: list[str] | None = None) -> int:
         flood_publisher(rest[0], rest[1], int(rest[2]), int(rest[3]))
         return 0
     args = ap.parse_args(argv)
-    from astrodyn.runner import repo_dir
+    from astrodyn.scenario.catalogue import config_path
 
-    template = (repo_dir("configs", "constellation-1000.toml") / "constellation-1000.toml").read_text()
+    template = config_path("constellation-1000").read_text()
     if args.bodies:
         planes = max(1, min(20, args.bodies // 10))
         while args.bodies % planes:

@@ -26,7 +26,7 @@ import time
 from pathlib import Path
 
 from astrodyn import bus
-from astrodyn.runner import repo_dir
+from astrodyn.scenario.catalogue import config_path
 
 _TICK = os.sysconf("SC_CLK_TCK")
 
@@ -45,7 +45,7 @@ def _proc(pid: int) -> tuple[float, float]:
 
 
 def _scene(out: Path, satellites: int) -> Path:
-    text = (repo_dir("configs", "demo.toml") / "constellation-1000.toml").read_text()
+    text = config_path("constellation-1000").read_text()
     text = text.replace('name = "constellation-1000"', 'name = "soak"').replace("t = 1000", f"t = {satellites}")
     text = text.replace("p = 20", "p = 10")
     path = out / "soak.toml"

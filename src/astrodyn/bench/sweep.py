@@ -84,13 +84,13 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--repeat", type=int, default=2)
     ap.add_argument("--out", default=None, help="Markdown file for the table (default: print only)")
     args = ap.parse_args(argv)
-    from astrodyn.runner import repo_dir
+    from astrodyn.scenario.catalogue import config_path
 
     results: dict[tuple[str, int], dict] = {}
     with tempfile.TemporaryDirectory() as tmp:
         for scene, (text, varies, n, chunk) in SCENES.items():
             if text is None:
-                config = repo_dir("configs", "demo.toml") / "demo.toml"
+                config = config_path("demo")
             else:
                 config = Path(tmp) / "orbit-only.toml"
                 config.write_text(text)

@@ -94,7 +94,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from astrodyn._jit import jit
+from astrodyn.jit import jit
 from astrodyn.orbit.kepler import _sinh_parts, _x_minus_sin, solve_kepler, solve_kepler_hyperbolic
 
 __all__ = [

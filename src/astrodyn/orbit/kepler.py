@@ -48,7 +48,7 @@ import math
 
 import numpy as np
 
-from astrodyn._jit import jit, pjit, prange
+from astrodyn.jit import jit, pjit, prange
 
 __all__ = ["solve_kepler", "solve_kepler_hyperbolic"]
 

@@ -91,7 +91,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from astrodyn._jit import jit
+from astrodyn.jit import jit
 
 __all__ = [
     "CentralBody",

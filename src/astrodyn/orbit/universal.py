@@ -67,7 +67,7 @@ import math
 
 import numpy as np
 
-from astrodyn._jit import jit, pjit, prange
+from astrodyn.jit import jit, pjit, prange
 from astrodyn.orbit.kepler import (
     _INV_EVEN_FACT,
     _INV_ODD_FACT,

@@ -3,7 +3,7 @@
 * :mod:`astrodyn.recording.writer`  -- :class:`McapRecorder`, :class:`SeqTracker`, :class:`RecordingError`
 * :mod:`astrodyn.recording.reader`  -- :func:`load` -> :class:`Run` (numpy arrays per body, metadata,
   gap report; reads files cut by a crash up to the last complete record)
-* :mod:`astrodyn.recording.logger`  -- the logger process (Zenoh -> MCAP), ``services/logger.py``
+* :mod:`astrodyn.service.logger`  -- the logger process (Zenoh -> MCAP), ``services/logger.py``
 
 File layout and crash behaviour: :mod:`astrodyn.recording.writer`.
 """

@@ -35,7 +35,7 @@ from mcap.records import Channel, Chunk, Message, Metadata, Schema
 from mcap.stream_reader import breakup_chunk
 
 from astrodyn import __version__
-from astrodyn.recording._mcapfast import ChunkedWriter
+from astrodyn.recording.chunked_writer import ChunkedWriter
 from astrodyn.recording.reader import _parse, _records
 from astrodyn.recording.writer import RecordingError
 

@@ -43,8 +43,8 @@ from typing import Any, Mapping
 import numpy as np
 
 from astrodyn import __version__, messages
-from astrodyn.recording import _ingest
-from astrodyn.recording._mcapfast import ChunkedWriter
+from astrodyn.recording import ingest
+from astrodyn.recording.chunked_writer import ChunkedWriter
 
 __all__ = ["RecordingError", "McapRecorder", "BatchLayout", "SeqTracker", "OK", "GAP", "LATE", "DUPLICATE"]
 
@@ -52,7 +52,7 @@ OK, GAP, LATE, DUPLICATE = 0, 1, 2, 3
 _STATUS_NAMES = ("ok", "gap", "late", "duplicate")
 _U32 = 0xFFFFFFFF
 _U64_END = 2**64
-_GRAMMAR = _ingest.grammar_tables(messages.ORBIT_MODELS, messages.ATTITUDE_MODELS)
+_GRAMMAR = ingest.grammar_tables(messages.ORBIT_MODELS, messages.ATTITUDE_MODELS)
 
 
 class RecordingError(Exception):
@@ -61,7 +61,7 @@ class RecordingError(Exception):
 
 class _ChannelSeq:
     """One channel's seq accounting; ``next`` and ``count`` live in the tracker's arrays
-    (slot ``slot``) so the compiled batch ingest (:mod:`astrodyn.recording._ingest`) can
+    (slot ``slot``) so the compiled batch ingest (:mod:`astrodyn.recording.ingest`) can
     advance them for in-order messages."""
 
     __slots__ = ("tracker", "slot", "missing", "duplicates", "out_of_order", "gaps", "gaps_truncated")
@@ -204,12 +204,12 @@ def _metadata_strings(name: str, data: Mapping[str, Any]) -> dict[str, str]:
 class BatchLayout:
     """The keys of one publisher's envelopes, resolved to channels once per file.
 
-    ``keys`` in envelope order; ``kinds`` (int8, :data:`astrodyn.recording._ingest.KIND_*`)
+    ``keys`` in envelope order; ``kinds`` (int8, :data:`astrodyn.recording.ingest.KIND_*`)
     says which entries the compiled path may take (canonical orbit / attitude states on
     known keys); :meth:`resolve` fills ``cids`` (MCAP channel ids of the current file,
     registering them) and ``slots`` (:meth:`SeqTracker.slot`).  ``blob``/``blob_start``/
     ``blob_len`` hold the key bytes, to recognise the next envelope with the same keys
-    (:func:`astrodyn.recording._ingest.same_keys`).
+    (:func:`astrodyn.recording.ingest.same_keys`).
     """
 
     def __init__(self, keys: list[str], kinds: np.ndarray):
@@ -225,7 +225,7 @@ class BatchLayout:
 
     def resolve(self, recorder: McapRecorder) -> None:
         for i, key in enumerate(self.keys):
-            if self.kinds[i] == _ingest.KIND_OTHER:
+            if self.kinds[i] == ingest.KIND_OTHER:
                 continue
             cid = recorder._channels.get(key)
             if cid is None:
@@ -408,9 +408,9 @@ class McapRecorder:
         """Record the ``count`` entries of a framed envelope, compiled where it can.
 
         ``buf`` is the envelope as a uint8 array, ``pay_start/pay_len`` the payload spans
-        (:func:`astrodyn.recording._ingest.frame_batch`), ``layout`` its keys.  Entries in
+        (:func:`astrodyn.recording.ingest.frame_batch`), ``layout`` its keys.  Entries in
         the canonical state layout with the next seq of their channel are checked and
-        written by :func:`astrodyn.recording._ingest.ingest_batch`; every other entry
+        written by :func:`astrodyn.recording.ingest.ingest_batch`; every other entry
         ``i`` is handed to ``slow(i)`` (the caller's per-message path, which ends in
         :meth:`write_encoded`), in arrival order, so the file is what per-message writes
         would give.  Returns ``(messages written here, largest t among them)``.
@@ -428,7 +428,7 @@ class McapRecorder:
                 layout.resolve(self)
             state = w.chunk_state
             state[2] = 0
-            _ingest.ingest_batch(
+            ingest.ingest_batch(
                 buf, i, count, pay_start, pay_len, layout.kinds, layout.cids, layout.slots,
                 lits, lit_start, lit_len, names, name_start, name_len, messages.QUAT_NORM_TOL,
                 self._t_text, self._t_log_time, publish_time, self.seq.next_seq, self.seq.counts,
@@ -439,9 +439,9 @@ class McapRecorder:
                 written += n
                 max_t = max(max_t, self._t_value)
             code, i = int(result[0]), int(result[1])
-            if code == _ingest.DONE:
+            if code == ingest.DONE:
                 break
-            if code == _ingest.NEED_T:
+            if code == ingest.NEED_T:
                 text = buf[result[2] : result[3]].tobytes()
                 try:
                     t = float(text)
@@ -452,7 +452,7 @@ class McapRecorder:
                     continue
                 self._t_text = np.frombuffer(text, dtype=np.uint8).copy()  # writable: one kernel signature
                 self._t_value, self._t_log_time = t, log_time
-            elif code == _ingest.CHUNK_FULL and int(state[0]) > 0:
+            elif code == ingest.CHUNK_FULL and int(state[0]) > 0:
                 try:
                     w.finalize_chunk()
                 except OSError as exc:

@@ -15,7 +15,7 @@ What happens, in order:
    logger is told to finish the file (everything logged so far stays readable) and the
    run exits 1.
 4. The logger ends by itself once it holds every message the propagators announced
-   (end-of-run protocol of :mod:`astrodyn.recording.logger`); the runner then reads the
+   (end-of-run protocol of :mod:`astrodyn.service.logger`); the runner then reads the
    file back and prints a summary per body: model, steps, states logged, and the drift of
    the conserved quantities (orbit: specific energy and angular momentum, exact for
    two-body models; attitude: |q| - 1, and for torque-free bodies rotational energy and
@@ -41,95 +41,11 @@ from pathlib import Path
 import numpy as np
 
 from astrodyn import bus
+from astrodyn.service.children import Child, logger_command, propagator_command
+from astrodyn.service.output import check_output_path
 from astrodyn.scenario import Scenario, ScenarioError, load, plan as make_plan
 
-__all__ = ["main", "run_scenario", "services_dir", "summary_rows", "drift_summary"]
-
-
-def repo_dir(name: str, marker: str) -> Path:
-    """The folder ``name`` (holding ``marker``) of the repository these sources live in.
-
-    ``services/`` and ``configs/`` sit beside ``src/``; ``make install`` installs the
-    package in editable mode, so they are found from the package's own path.
-    """
-    here = Path(__file__).resolve()
-    for parent in here.parents:
-        cand = parent / name
-        if (cand / marker).is_file():
-            return cand
-    raise FileNotFoundError(f"{name}/: not found beside the astrodyn sources; install with `make install` "
-                            "(an editable install of the repository)")
-
-
-def services_dir() -> Path:
-    """The ``services/`` folder (process entry points)."""
-    return repo_dir("services", "logger.py")
-
-
-def _check_output(path: Path) -> None:
-    parent = path.resolve().parent
-    if not parent.is_dir():
-        raise ScenarioError(f"--out {path}: expected a file in an existing directory, got missing directory {parent}")
-    if not os.access(parent, os.W_OK):
-        raise ScenarioError(f"--out {path}: expected a writable directory, {parent} is not writable")
-    if path.is_dir():
-        raise ScenarioError(f"--out {path}: expected a file path, got a directory")
-
-
-class _Child:
-    def __init__(self, name: str, argv: list[str], log_dir: Path):
-        self.name = name
-        self.stdout_path = log_dir / f"{name}.out"
-        self.stderr_path = log_dir / f"{name}.err"
-        self._out = open(self.stdout_path, "wb")
-        self._err = open(self.stderr_path, "wb")
-        self.proc = subprocess.Popen(argv, stdout=self._out, stderr=self._err, stdin=subprocess.DEVNULL,
-                                     start_new_session=True)
-
-    @property
-    def pid(self) -> int:
-        return self.proc.pid
-
-    def poll(self):
-        return self.proc.poll()
-
-    def stop(self, sig=signal.SIGTERM, timeout: float = 10.0) -> int | None:
-        """Signal this child by PID, wait, SIGKILL if it does not go."""
-        if self.proc.poll() is None:
-            try:
-                os.kill(self.proc.pid, sig)
-                self.proc.wait(timeout=timeout)
-            except subprocess.TimeoutExpired:
-                os.kill(self.proc.pid, signal.SIGKILL)
-                self.proc.wait(timeout=5)
-            except ProcessLookupError:
-                pass
-        return self.proc.returncode
-
-    def close(self) -> None:
-        self._out.close()
-        self._err.close()
-
-    def summary(self) -> dict | None:
-        """The one-line JSON summary the process printed last on stdout, if any."""
-        try:
-            lines = self.stdout_path.read_text(errors="replace").strip().splitlines()
-        except OSError:
-            return None
-        for line in reversed(lines):
-            try:
-                obj = json.loads(line)
-            except ValueError:
-                continue
-            if isinstance(obj, dict):
-                return obj
-        return None
-
-    def stderr_tail(self, n: int = 5) -> str:
-        try:
-            return "\n".join(self.stderr_path.read_text(errors="replace").strip().splitlines()[-n:])
-        except OSError:
-            return ""
+__all__ = ["main", "run_scenario", "summary_rows", "drift_summary"]
 
 
 def run_scenario(scenario: Scenario, config_path: Path, out: Path, *, cross_check: bool = False,
@@ -145,7 +61,6 @@ def run_scenario(scenario: Scenario, config_path: Path, out: Path, *, cross_chec
     (summary, indexes, footer, and an "end" metadata record with the sim time reached);
     ``result["interrupted"]`` names the signal.
     """
-    services = services_dir()
     p = make_plan(scenario)
     propagators = [k for k in p.processes if k != "logger"]
     port = bus.free_port()
@@ -168,24 +83,24 @@ def run_scenario(scenario: Scenario, config_path: Path, out: Path, *, cross_chec
         tmpd = Path(tmp)
         meta_path = tmpd / "scenario.json"
         meta_path.write_text(json.dumps(scenario.to_metadata()))
-        children: dict[str, _Child] = {}
+        children: dict[str, Child] = {}
         try:
-            logger_argv = [py, str(services / "logger.py"), "--scenario", scenario.name, "--out", str(out),
+            logger_argv = [*logger_command(), "--scenario", scenario.name, "--out", str(out),
                            "--epoch-ns", str(scenario.epoch_unix_ns), "--metadata", str(meta_path),
                            "--config", str(config_path), *sum((["--expect", k] for k in propagators), []),
                            *(logger_args or []), *connect_args]
-            children["logger"] = _Child("logger", logger_argv, tmpd)
+            children["logger"] = Child("logger", logger_argv, tmpd)
             failure = _wait_ready(session, scenario.name, children["logger"], 60.0, interrupted)
             if failure is None:
                 for kind in propagators:
-                    argv = [py, str(services / f"{kind}.py"), str(config_path), *connect_args]
+                    argv = [*propagator_command(kind), str(config_path), *connect_args]
                     if not math.isinf(real_time_factor):
                         argv += ["--real-time-factor", str(real_time_factor)]
                     if cross_check and kind == "orbit":
                         argv.append("--cross-check")
                     for k, v in (extra_args or {}).get(kind, {}).items():
                         argv += [k, str(v)]
-                    children[kind] = _Child(kind, argv, tmpd)
+                    children[kind] = Child(kind, argv, tmpd)
                 if progress:
                     print("  started " + ", ".join(f"{n} (pid {c.pid})" for n, c in children.items()), file=sys.stderr, flush=True)
                 failure = _watch(scenario, p, children, beats, alive, progress, timeout_s, interrupted)
@@ -230,7 +145,7 @@ def run_scenario(scenario: Scenario, config_path: Path, out: Path, *, cross_chec
     return result
 
 
-def _wait_ready(session, scenario: str, child: _Child, timeout_s: float, interrupted: dict) -> str | None:
+def _wait_ready(session, scenario: str, child: Child, timeout_s: float, interrupted: dict) -> str | None:
     """Wait for ``child``'s liveliness token; a failure description if it exits first (e.g.
     the logger cannot write its file), is interrupted, or is not ready within ``timeout_s``."""
     deadline = time.monotonic() + timeout_s
@@ -410,7 +325,7 @@ def main(argv: list[str] | None = None) -> int:
         try:
             scenario = load(args.config)
             out = Path(args.out) if args.out else (scenario.output_path or Path(f"{scenario.name}.mcap"))
-            _check_output(out)
+            check_output_path(out)
             if args.zenoh_config:
                 try:
                     bus.make_config(mode="peer", config_file=args.zenoh_config)
@@ -453,7 +368,7 @@ def resume_plan(path: Path, scenario: Scenario, out: Path, work: Path) -> dict:
     anything that cannot be resumed (not MCAP, another scenario or config, nothing or
     everything recorded, ``--out`` the same file)."""
     from astrodyn.recording import RecordingError, load as load_run
-    from astrodyn.resume import contiguous_steps, propagator_resume_args, state_topics
+    from astrodyn.service.resume import contiguous_steps, propagator_resume_args, state_topics
 
     if path.resolve() == out.resolve():
         raise ScenarioError(f"--out {out}: expected a new file, not the --resume file itself")

@@ -29,7 +29,7 @@ is lost).  SIGTERM / Ctrl-C to the supervisor is a ``stop``.
 A propagator that dies (SIGKILL, crash) is noticed from its exit status and its Zenoh
 liveliness token (measured: well under a second, docs/reliability.md), reported on stderr
 and in the ``status`` reply (``restarts``), and restarted from the last state the logger
-flushed to the file (:mod:`astrodyn.resume`: the latest step every one of its channels
+flushed to the file (:mod:`astrodyn.service.resume`: the latest step every one of its channels
 holds; exact models are re-evaluated from the initial state, integrated ones continue from
 that state with ``--resume-state``).  A ``restart`` event (process ``serve``) is recorded
 in the MCAP with the step it restarted from.  Steps the dead process published after the
@@ -52,8 +52,9 @@ import time
 from pathlib import Path
 
 from astrodyn import bus
-from astrodyn.propagator import command_key
-from astrodyn.runner import _check_output, _Child, services_dir
+from astrodyn.service.propagator import command_key
+from astrodyn.service.children import Child, logger_command, propagator_command
+from astrodyn.service.output import check_output_path
 from astrodyn.scenario import ScenarioError, load, plan as make_plan
 
 __all__ = ["main", "Supervisor"]
@@ -77,25 +78,24 @@ class Supervisor:
         self.failures: list[str] = []
         p = make_plan(scenario)
         self.propagators = [k for k in p.processes if k != "logger"]
-        services = services_dir()
         connect_args = sum((["--connect", e] for e in [hub, *connect]), [])
         if zenoh_config:
             connect_args += ["--zenoh-config", str(zenoh_config)]
         meta = tmp / "scenario.json"
         meta.write_text(json.dumps(scenario.to_metadata()))
-        logger_argv = [sys.executable, str(services / "logger.py"), "--scenario", scenario.name, "--out", str(out),
+        logger_argv = [*logger_command(), "--scenario", scenario.name, "--out", str(out),
                        "--epoch-ns", str(scenario.epoch_unix_ns), "--metadata", str(meta), "--config", str(config_path),
                        "--no-control", *sum((["--expect", k] for k in self.propagators), []), *connect_args]
         if roll_size:
             logger_argv += ["--roll-size", str(roll_size)]
         if roll_interval:
             logger_argv += ["--roll-interval", str(roll_interval)]
-        self.children: dict[str, _Child] = {"logger": _Child("logger", logger_argv, tmp)}
+        self.children: dict[str, Child] = {"logger": Child("logger", logger_argv, tmp)}
         bus.wait_for_process(session, scenario.name, "logger", timeout_s=30.0)
-        self._argv = {kind: [sys.executable, str(services / f"{kind}.py"), str(config_path), "--endless", *connect_args]
+        self._argv = {kind: [*propagator_command(kind), str(config_path), "--endless", *connect_args]
                       for kind in self.propagators}
         for kind in self.propagators:
-            self.children[kind] = _Child(kind, [*self._argv[kind], "--real-time-factor", str(self.rate)], tmp)
+            self.children[kind] = Child(kind, [*self._argv[kind], "--real-time-factor", str(self.rate)], tmp)
         self.commands = session.declare_publisher(command_key(scenario.name))
         self.beats = bus.HeartbeatMonitor(session, scenario.name)
         self.alive = bus.AliveWatcher(session, scenario.name)
@@ -186,7 +186,7 @@ class Supervisor:
     def restart(self, kind: str, why: str, n: int) -> None:
         """Start ``kind`` again after the last step every one of its channels has in the file."""
         from astrodyn.recording import load as load_run
-        from astrodyn.resume import last_common_step, propagator_resume_args, state_topics
+        from astrodyn.service.resume import last_common_step, propagator_resume_args, state_topics
 
         topics = list(state_topics(self.scenario, kind).values())
         args: dict = {"--start-step": 0}
@@ -203,7 +203,7 @@ class Supervisor:
         argv = [*self._argv[kind], "--real-time-factor", str(self.rate), "--first-event-seq", str(n + 1)]
         for k, v in args.items():
             argv += [k, str(v)]
-        self.children[kind] = _Child(f"{kind}-r{n + 1}", argv, self.tmp)
+        self.children[kind] = Child(f"{kind}-r{n + 1}", argv, self.tmp)
         self.children[kind].name = kind
         record = {"process": kind, "old_pid": old.pid, "new_pid": self.children[kind].pid, "why": why,
                   "from_step": args["--start-step"], "state_from": source, "time": time.time()}
@@ -261,7 +261,7 @@ def main(argv: list[str] | None = None) -> int:
         scenario = load(args.config)
         out = Path(args.out) if args.out else (scenario.output_path or Path("out") / f"{scenario.name}.mcap")
         out.parent.mkdir(parents=True, exist_ok=True)
-        _check_output(out)
+        check_output_path(out)
         rate = args.rate if args.rate is not None else scenario.real_time_factor
         if not rate > 0:
             raise ScenarioError(f"--rate: expected a real-time factor > 0, got {rate}")

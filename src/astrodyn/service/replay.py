@@ -18,7 +18,7 @@ queries until ``stop``; a ``seek`` replays again), ``--listen`` / ``--connect`` 
 ``--mode`` / ``--port`` (Zenoh endpoints; default one loopback endpoint, multicast
 scouting off, as every astrodyn process).
 
-Control, mirroring ``astrodyn serve`` (:mod:`astrodyn.serve`), as Zenoh queryables on
+Control, mirroring ``astrodyn serve`` (:mod:`astrodyn.service.serve`), as Zenoh queryables on
 ``astrodyn/<scenario>/@control/<verb>`` (``--control-scenario`` to use another name):
 
 =========  ==================================  =========================================

@@ -416,7 +416,8 @@ class _CrossCheck:
 
 
 def service_main(kind: str, argv: list[str] | None = None) -> int:
-    """Entry point of ``services/<kind>.py``: parse, load the scenario, wire, run.
+    """Entry point of a propagator process (``python -m astrodyn.service.propagator KIND``,
+    ``services/<kind>.py``): parse, load the scenario, wire, run.
 
     Exit status: 0 done (or stopped cleanly), 1 runtime/bus error, 2 bad arguments or config.
     Prints a one-line JSON summary on stdout.
@@ -425,7 +426,7 @@ def service_main(kind: str, argv: list[str] | None = None) -> int:
 
     from astrodyn.scenario import ScenarioError, load
 
-    ap = argparse.ArgumentParser(prog=f"services/{kind}.py",
+    ap = argparse.ArgumentParser(prog=f"python -m astrodyn.service.propagator {kind}",
                                  description=f"astrodyn {kind} propagator: publish the scenario's {kind} states on Zenoh")
     ap.add_argument("config", help="scenario TOML file")
     ap.add_argument("--real-time-factor", type=float, default=math.inf,
@@ -433,7 +434,7 @@ def service_main(kind: str, argv: list[str] | None = None) -> int:
     ap.add_argument("--cross-check", action="store_true", help="orbit: run REBOUND IAS15 alongside for every body")
     ap.add_argument("--start-step", type=int, default=0, help="first output step to publish (resume)")
     ap.add_argument("--resume-state", default=None, metavar="JSON",
-                    help="states at step START_STEP-1 for the integrated bodies (astrodyn.resume.write_state_file)")
+                    help="states at step START_STEP-1 for the integrated bodies (astrodyn.service.resume.write_state_file)")
     ap.add_argument("--first-event-seq", type=int, default=0, help="seq of this process's first event (a restart)")
     ap.add_argument("--max-steps", type=int, default=None, help="publish at most this many steps")
     ap.add_argument("--batch", choices=("auto", "always", "never"), default="auto",
@@ -450,7 +451,7 @@ def service_main(kind: str, argv: list[str] | None = None) -> int:
         return 2
     resume_state = None
     if args.resume_state is not None:
-        from astrodyn.resume import ResumeError, read_state_file
+        from astrodyn.service.resume import ResumeError, read_state_file
 
         try:
             resume_state = read_state_file(args.resume_state, kind)
@@ -478,3 +479,10 @@ def service_main(kind: str, argv: list[str] | None = None) -> int:
         return 2
     print(json.dumps(summary, separators=(",", ":")), flush=True)
     return 0
+
+
+if __name__ == "__main__":
+    if len(sys.argv) < 2 or sys.argv[1] not in ("orbit", "attitude"):
+        print("usage: python -m astrodyn.service.propagator {orbit,attitude} CONFIG [options]", file=sys.stderr)
+        sys.exit(2)
+    sys.exit(service_main(sys.argv[1], sys.argv[2:]))

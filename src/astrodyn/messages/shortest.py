@@ -38,7 +38,7 @@ from itertools import accumulate
 
 import numpy as np
 
-from astrodyn._jit import jit
+from astrodyn.jit import jit
 
 __all__ = ["MAX_REPR_LEN", "SEQ", "RecordTemplate", "format_floats", "format_records", "pack_keys", "shared", "shortest_repr", "write_shortest", "write_uint"]
 

@@ -1,7 +1,7 @@
 """Compiled batch ingest: a whole ``@batch`` envelope checked and written into the open
 MCAP chunk in one call.
 
-The logger's Python path (:meth:`astrodyn.recording.logger.Logger._record`) costs about
+The logger's Python path (:meth:`astrodyn.service.logger.Logger._record`) costs about
 7 us per message: envelope split, the canonical-layout regex, float/int conversions, the
 seq tracker and the record pack, each a few hundred ns of interpreter work.  For the
 common case (a state in the batch encoders' canonical layout, on a known key, with the
@@ -30,7 +30,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from astrodyn._jit import jit
+from astrodyn.jit import jit
 
 #: Return codes of :func:`ingest_batch` (with the index of the entry they concern).
 DONE, SLOW, NEED_T, CHUNK_FULL = 0, 1, 2, 3

@@ -11,7 +11,7 @@ What it does with each sample (keys in :mod:`astrodyn.bus`):
 * ``@batch/<process>``: each entry is handled as if it had arrived on its own key.  The
   common entries (canonical orbit / attitude states with the next seq of their channel)
   are checked and written by one compiled pass over the envelope
-  (:mod:`astrodyn.recording._ingest`, :meth:`McapRecorder.write_batch`: about 1.7 us per
+  (:mod:`astrodyn.recording.ingest`, :meth:`McapRecorder.write_batch`: about 1.7 us per
   message with compression, against 7.7 us per message in Python); every other entry goes
   through the per-message path above, in arrival order, so the file is the same.
 * ``@heartbeat/<process>``: not recorded; a process whose heartbeat stops while its
@@ -40,8 +40,10 @@ SIGTERM / SIGINT / ``stop``: the logger drains what is already queued, finishes 
 
 from __future__ import annotations
 
+import argparse
 import contextlib
 import json
+import os
 import signal
 import sys
 import threading
@@ -52,16 +54,16 @@ import numpy as np
 import zenoh
 
 from astrodyn import bus, messages
-from astrodyn.recording import _ingest
-from astrodyn.recording.writer import _GRAMMAR, DUPLICATE, BatchLayout, McapRecorder
+from astrodyn.recording import ingest
+from astrodyn.recording.writer import _GRAMMAR, DUPLICATE, BatchLayout, McapRecorder, RecordingError
 
-__all__ = ["Logger"]
+__all__ = ["Logger", "main"]
 
 _STATE_KINDS = frozenset(("orbit", "attitude", "crosscheck"))
 _MAX_EXAMPLES = 20
 _MAX_KEY_CACHE = 100_000
 _MAX_LAYOUTS = 64
-_FAST_KIND = {"orbit": _ingest.KIND_ORBIT, "attitude": _ingest.KIND_ATTITUDE}
+_FAST_KIND = {"orbit": ingest.KIND_ORBIT, "attitude": ingest.KIND_ATTITUDE}
 
 
 class Logger:
@@ -195,7 +197,7 @@ class Logger:
         (and reported as malformed) when the envelope cannot be split."""
         spans = self._spans
         layout = self._layouts.get(batch_key)
-        if layout is not None and _ingest.same_keys(buf, spans[0], spans[1], count, layout.blob, layout.blob_start, layout.blob_len):
+        if layout is not None and ingest.same_keys(buf, spans[0], spans[1], count, layout.blob, layout.blob_start, layout.blob_len):
             return layout
         try:
             items = messages.decode_batch(payload)
@@ -203,7 +205,7 @@ class Logger:
             self._bad(batch_key, str(exc))
             return None
         keys = [key for key, _ in items]
-        kinds = np.array([_FAST_KIND.get(self._kind(key), _ingest.KIND_OTHER) for key in keys], dtype=np.int8)
+        kinds = np.array([_FAST_KIND.get(self._kind(key), ingest.KIND_OTHER) for key in keys], dtype=np.int8)
         layout = BatchLayout(keys, kinds)
         if len(self._layouts) < _MAX_LAYOUTS:
             self._layouts[batch_key] = layout
@@ -215,12 +217,12 @@ class Logger:
         :meth:`_record`, in arrival order."""
         buf = np.frombuffer(payload, dtype=np.uint8)
         spans = self._spans
-        count = _ingest.frame_batch(buf, *spans)
+        count = ingest.frame_batch(buf, *spans)
         if count < 0 and len(payload) >= 8:  # too many entries for the span arrays, or damage
             need = int.from_bytes(payload[4:8], "little")
             if need > spans[0].shape[0] and need <= len(payload) // 6:
                 self._spans = spans = tuple(np.empty(need, dtype=np.int64) for _ in range(4))
-                count = _ingest.frame_batch(buf, *spans)
+                count = ingest.frame_batch(buf, *spans)
         if count < 0:
             try:
                 messages.decode_batch(payload)
@@ -395,7 +397,7 @@ class Logger:
                 extra_keys={messages.status_key(self.scenario): "status"}))
             alive = stack.enter_context(bus.AliveWatcher(self.session, self.scenario))
             heartbeat = stack.enter_context(bus.Heartbeat(self.session, self.scenario, self.name))
-            _ingest.warm_up(_GRAMMAR)  # compile / load the batch kernels before we say ready
+            ingest.warm_up(_GRAMMAR)  # compile / load the batch kernels before we say ready
             stack.enter_context(bus.declare_alive(self.session, self.scenario, self.name))  # last: ready
             receivers = [sub.try_recv for sub in subs]
             handle = self.handle
@@ -433,3 +435,102 @@ class Logger:
             for request in self._stop_requests:
                 request.reply(summary)
         return summary
+
+
+# --------------------------------------------------------------------------- process entry
+
+
+def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
+    p = argparse.ArgumentParser(prog="python -m astrodyn.service.logger", description="Logger process: record one scenario from the Zenoh bus into an MCAP file.")
+    p.add_argument("--scenario", required=True, help="scenario name (the <scenario> in astrodyn/<scenario>/**)")
+    p.add_argument("--out", required=True, help="MCAP file to write")
+    p.add_argument("--epoch-ns", type=int, required=True, help="scenario epoch as integer ns since the Unix epoch")
+    p.add_argument("--config", help="scenario config file; its text is stored in the 'scenario' metadata record")
+    p.add_argument("--metadata", help="JSON file with extra 'scenario' metadata (an object)")
+    p.add_argument("--expect", action="append", default=[], metavar="PROCESS",
+                   help="process whose end-of-run event ends the recording (repeatable)")
+    p.add_argument("--chunk-size", type=int, default=1 << 20, help="uncompressed bytes per zstd chunk")
+    p.add_argument("--flush-interval", type=float, default=1.0, help="max seconds between flushes (crash-loss bound)")
+    p.add_argument("--queue", type=int, default=256, help="bounded receive queue per subscription (samples; a full queue blocks the publishers, so memory stays bounded and nothing is lost)")
+    p.add_argument("--no-control", action="store_true",
+                   help="do not answer the stop verb (a supervisor such as `astrodyn serve` ends the run)")
+    p.add_argument("--roll-size", type=int, default=None, help="start a new file after this many bytes")
+    p.add_argument("--roll-interval", type=float, default=None, help="start a new file after this many wall seconds")
+    p.add_argument("--max-seconds", type=float, default=None, help="stop after this many wall seconds")
+    p.add_argument("--prefill", default=None, metavar="MCAP",
+                   help="first copy the state messages with seq < --prefill-steps from this recording (run --resume)")
+    p.add_argument("--prefill-steps", type=int, default=0, help="steps (seq 0 .. N-1) to copy from --prefill")
+    bus.add_bus_arguments(p)
+    return p.parse_args(argv)
+
+
+def scenario_metadata(args: argparse.Namespace) -> dict:
+    meta: dict = {"name": args.scenario}
+    if args.metadata:
+        with open(args.metadata, encoding="utf-8") as f:
+            extra = json.load(f)
+        if not isinstance(extra, dict):
+            raise ValueError(f"--metadata {args.metadata}: expected a JSON object, got {type(extra).__name__}")
+        meta.update(extra)
+    if args.config:
+        with open(args.config, encoding="utf-8") as f:
+            meta["config"] = f.read()
+        meta["config_path"] = args.config
+    return meta
+
+
+def prefill(recorder: McapRecorder, path: str, scenario: str, steps: int) -> int:
+    """Copy the state messages (orbit, attitude, crosscheck) with ``seq < steps`` of
+    ``scenario`` from the recording ``path`` into ``recorder``, payloads unchanged; this
+    also seeds the seq accounting, so the continuation counts no gap.  Returns the number
+    of messages copied.  Events of the old run are not copied (the new processes number
+    their own); the "resumed_from" metadata record says where the copy came from."""
+    from astrodyn.recording.stream import open_stream
+
+    n = 0
+    with open_stream(path) as stream:
+        for m in stream.messages(f"{messages.PREFIX}/{scenario}/*"):
+            try:
+                kind = messages.kind_of_key(m.topic)
+            except messages.MessageError:
+                continue
+            if kind not in ("orbit", "attitude", "crosscheck"):
+                continue
+            try:
+                msg = messages.decode(m.data, kind)
+            except messages.MessageError:
+                continue  # load() reports these; they are not states to continue from
+            if msg["seq"] < steps:
+                recorder.write_encoded(m.topic, m.data, msg["t"], msg["seq"], m.publish_time)
+                n += 1
+    recorder.add_metadata("resumed_from", {"path": os.path.abspath(path), "steps": str(steps), "messages": str(n)})
+    return n
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = parse_args(argv)
+    try:
+        meta = scenario_metadata(args)
+    except (OSError, ValueError) as exc:
+        print(f"logger: {exc}", file=sys.stderr)
+        return 2
+    try:
+        with bus.session_from_args(args) as session:
+            recorder = McapRecorder(args.out, meta, epoch_ns=args.epoch_ns,
+                                    chunk_size=args.chunk_size, flush_interval_s=args.flush_interval,
+                                    roll_size=args.roll_size, roll_interval_s=args.roll_interval)
+            copied = prefill(recorder, args.prefill, args.scenario, args.prefill_steps) if args.prefill else 0
+            logger = Logger(session, args.scenario, recorder, expect=args.expect, queue_capacity=args.queue,
+                            control=not args.no_control)
+            summary = logger.run(max_seconds=args.max_seconds)
+            if args.prefill:
+                summary["prefilled"] = copied
+    except (RecordingError, bus.BusError) as exc:
+        print(f"logger: {exc}", file=sys.stderr)
+        return 1
+    print(json.dumps(summary, separators=(",", ":")), flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

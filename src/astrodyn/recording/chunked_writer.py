@@ -7,7 +7,7 @@ so this writer keeps the open chunk in a numpy byte buffer (``chunk``, fill leve
 turned into the chunk's MessageIndex records by a few numpy operations when the chunk
 closes (a per-channel ``struct.pack`` cost about 1 us per message with 2000 channels and
 1 MiB chunks).  The same buffers are filled by the compiled batch ingest
-(:mod:`astrodyn.recording._ingest`).  ChunkIndex records are serialised with numpy too
+(:mod:`astrodyn.recording.ingest`).  ChunkIndex records are serialised with numpy too
 (:func:`chunk_index_record`; mcap's serialiser makes two Python calls per channel).
 Every other record (header, schema, channel, chunk, metadata, statistics, summary,
 footer) is serialised by mcap's own record classes, and the layout follows
@@ -132,7 +132,7 @@ class ChunkedWriter:
         # the open chunk: a byte buffer with headroom for one more record beyond
         # chunk_size, and its message index as flat arrays (channel, log_time, offset),
         # grouped at finalize_chunk.  chunk_state = [bytes used, index entries, spare]
-        # is shared with the compiled batch ingest (astrodyn.recording._ingest).
+        # is shared with the compiled batch ingest (astrodyn.recording.ingest).
         self.chunk_state = np.zeros(3, dtype=np.int64)
         self._state_view = memoryview(self.chunk_state)
         self._alloc(chunk_size + (64 << 10), chunk_size // 31 + 64)

@@ -860,7 +860,7 @@ def _batch_arrays(kind: str, seqs: Any, arrays: dict[str, tuple[Any, int]]) -> t
 
 def _orbit_records(t: float, seqs: Any, model: str, r: Any, v: Any, mu: float, frame: str, keys: Any) -> tuple[bytes, np.ndarray]:
     """Validate like :func:`orbit_message`, then write every payload in one compiled pass."""
-    from astrodyn import _shortest  # numba: loaded on first use, not with this module
+    from astrodyn.messages import shortest  # numba: loaded on first use, not with this module
 
     tf = _float(t, "orbit", "t")
     muf = _float(mu, "orbit", "mu")
@@ -871,14 +871,14 @@ def _orbit_records(t: float, seqs: Any, model: str, r: Any, v: Any, mu: float, f
     if not isinstance(frame, str) or not _NAME_FULL.search(frame):
         raise MessageError(f"orbit.frame: expected a frame name matching {NAME_PATTERN}, got {_show(frame)}")
     seq_arr, a = _batch_arrays("orbit", seqs, {"r": (r, 3), "v": (v, 3)})
-    return _shortest.format_records(_orbit_template(model, frame), seq_arr, np.concatenate([a["r"], a["v"]], axis=1),
+    return shortest.format_records(_orbit_template(model, frame), seq_arr, np.concatenate([a["r"], a["v"]], axis=1),
                                     (tf, muf), _batch_keys(keys, seq_arr.shape[0]))
 
 
 @functools.lru_cache(maxsize=256)
 def _orbit_template(model: str, frame: str):
     """``{"t":T,"seq":S,"model":"<model>","r":[0,1,2],"v":[3,4,5],"mu":MU,"frame":"<frame>"}``."""
-    from astrodyn._shortest import SEQ, RecordTemplate, shared
+    from astrodyn.messages.shortest import SEQ, RecordTemplate, shared
 
     pieces = [b'{"t":', b',"seq":', f',"model":"{model}","r":['.encode(), b",", b",", b'],"v":[', b",", b",",
               b'],"mu":', f',"frame":"{frame}"}}'.encode()]
@@ -888,7 +888,7 @@ def _orbit_template(model: str, frame: str):
 @functools.lru_cache(maxsize=64)
 def _attitude_template(model: str):
     """``{"t":T,"seq":S,"model":"<model>","q":[0,1,2,3],"w":[4,5,6]}``."""
-    from astrodyn._shortest import SEQ, RecordTemplate, shared
+    from astrodyn.messages.shortest import SEQ, RecordTemplate, shared
 
     pieces = [b'{"t":', b',"seq":', f',"model":"{model}","q":['.encode(), b",", b",", b",", b'],"w":[', b",", b",",
               b"]}"]
@@ -897,7 +897,7 @@ def _attitude_template(model: str):
 
 def _attitude_records(t: float, seqs: Any, model: str, q: Any, w: Any, keys: Any) -> tuple[bytes, np.ndarray]:
     """Validate like :func:`attitude_message`, then write every payload in one compiled pass."""
-    from astrodyn import _shortest
+    from astrodyn.messages import shortest
 
     tf = _float(t, "attitude", "t")
     if model not in ATTITUDE_MODELS:
@@ -909,7 +909,7 @@ def _attitude_records(t: float, seqs: Any, model: str, q: Any, w: Any, keys: Any
         if not np.all(err <= QUAT_NORM_TOL):
             bad = int(np.argmax(err))
             raise MessageError(f"attitude.q[{bad}]: expected a unit quaternion (| |q| - 1 | <= {QUAT_NORM_TOL:g}), got |q| = {float(np.linalg.norm(qa[bad]))!r}")
-    return _shortest.format_records(_attitude_template(model), seq_arr, np.concatenate([qa, a["w"]], axis=1), (tf,),
+    return shortest.format_records(_attitude_template(model), seq_arr, np.concatenate([qa, a["w"]], axis=1), (tf,),
                                     _batch_keys(keys, seq_arr.shape[0]))
 
 
@@ -932,10 +932,10 @@ class BatchKeys:
             if len(kb) > _MAX_KEY:
                 raise MessageError(f"batch[{i}]: expected key <= 65535 bytes and payload < 4 GiB, got {len(kb)} and 0")
             encoded.append(kb)
-        from astrodyn import _shortest
+        from astrodyn.messages import shortest
 
         self.count = len(encoded)
-        self.packed = _shortest.pack_keys(encoded)
+        self.packed = shortest.pack_keys(encoded)
 
     def __len__(self) -> int:
         return self.count
@@ -963,7 +963,7 @@ def encode_orbit_batch(t: float, seqs: Any, model: str, r: Any, v: Any, mu: floa
     ``seqs`` is one integer (the same for every body) or N integers; ``r``, ``v`` shape
     (N, 3) in m and m/s. The bytes equal ``encode(orbit_message(...))`` for each body
     (tested): every float is written by a compiled shortest round-trip formatter that
-    gives ``repr``'s bytes (:mod:`astrodyn._shortest`), all N payloads in one pass.
+    gives ``repr``'s bytes (:mod:`astrodyn.messages.shortest`), all N payloads in one pass.
     """
     return _split(*_orbit_records(t, seqs, model, r, v, mu, frame, None))
 
