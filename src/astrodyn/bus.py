@@ -58,10 +58,13 @@ from typing import Any
 
 import zenoh
 
-from astrodyn import messages
+from astrodyn import auth, messages
 
 __all__ = [
     "DEFAULT_HOST",
+    "process_signer",
+    "signed_put",
+    "RATE_BOUNDS",
     "CONTROL_VERBS",
     "BusError",
     "free_port",
@@ -261,6 +264,27 @@ def declare_state_publisher(session: zenoh.Session, key: str) -> zenoh.Publisher
     )
 
 
+def signed_put(entity: Any, key: str, payload: bytes, signer: auth.Signer | None) -> None:
+    """Put ``payload`` on a declared publisher, with ``signer``'s authenticator as the
+    sample's attachment when a signer is given (:mod:`astrodyn.auth`)."""
+    if signer is None:
+        entity.put(payload)
+    else:
+        entity.put(payload, attachment=signer.attachment(key, payload))
+
+
+def process_signer(process: str) -> auth.Signer | None:
+    """The signer of a run's child process: the run secret named by
+    ``ASTRODYN_RUN_SECRET_FILE`` (:data:`astrodyn.auth.SECRET_ENV`) signs as ``process``;
+    None for a process started by hand outside a supervisor.  :class:`BusError` when the
+    variable names a file that is missing or not private (mode 0600)."""
+    try:
+        secret = auth.secret_from_environment()
+    except auth.AuthError as exc:
+        raise BusError(str(exc)) from None
+    return None if secret is None else auth.Signer(secret, process)
+
+
 class Publisher(_Declared):
     """A state publisher for one channel that stamps the per-channel ``seq`` (0, 1, 2, ...).
 
@@ -271,10 +295,11 @@ class Publisher(_Declared):
     or call :meth:`close`.
     """
 
-    def __init__(self, session: zenoh.Session, key: str, *, first_seq: int = 0):
+    def __init__(self, session: zenoh.Session, key: str, *, first_seq: int = 0, signer: auth.Signer | None = None):
         self.key = key
         self.next_seq = int(first_seq)
         self._entity = declare_state_publisher(session, key)
+        self._signer = signer
 
     @property
     def last_seq(self) -> int | None:
@@ -284,14 +309,14 @@ class Publisher(_Declared):
     def publish(self, msg: dict) -> int:
         seq = self.next_seq
         msg["seq"] = seq
-        self._entity.put(messages.encode(msg))
+        signed_put(self._entity, self.key, messages.encode(msg), self._signer)
         self.next_seq = seq + 1
         return seq
 
     def publish_encoded(self, payload: bytes, seq: int) -> None:
         if seq != self.next_seq:
             raise ValueError(f"{self.key}: seq: expected {self.next_seq}, got {seq}")
-        self._entity.put(payload)
+        signed_put(self._entity, self.key, payload, self._signer)
         self.next_seq = seq + 1
 
     def matching(self) -> bool:
@@ -309,9 +334,10 @@ class BatchPublisher(_Declared):
     ``last_seq`` tracks the highest seq sent per key (for the end-of-run event).
     """
 
-    def __init__(self, session: zenoh.Session, scenario: str, process: str):
+    def __init__(self, session: zenoh.Session, scenario: str, process: str, *, signer: auth.Signer | None = None):
         self.key = messages.batch_key(scenario, process)
         self.last_seq: dict[str, int] = {}
+        self._signer = signer
         self._entity = session.declare_publisher(
             self.key,
             encoding=zenoh.Encoding.APPLICATION_OCTET_STREAM,
@@ -321,7 +347,7 @@ class BatchPublisher(_Declared):
 
     def publish(self, items: Sequence[tuple[str, bytes]], seqs: Iterable[int] | None = None) -> None:
         """Send ``items`` (key, payload) as one envelope; ``seqs`` (same order) updates ``last_seq``."""
-        self._entity.put(messages.encode_batch(list(items)))
+        signed_put(self._entity, self.key, messages.encode_batch(list(items)), self._signer)
         if seqs is not None:
             for (key, _), seq in zip(items, seqs):
                 self.last_seq[key] = int(seq)
@@ -329,7 +355,7 @@ class BatchPublisher(_Declared):
     def publish_envelope(self, data: bytes) -> None:
         """Send an envelope already framed (:func:`astrodyn.messages.batch_envelope` of the
         compiled encoders' runs: the propagators' hot path)."""
-        self._entity.put(data)
+        signed_put(self._entity, self.key, data, self._signer)
 
 
 
@@ -347,15 +373,16 @@ class EventPublisher(_Declared):
     state message of the run (see :mod:`astrodyn.service.logger`).
     """
 
-    def __init__(self, session: zenoh.Session, scenario: str, process: str):
+    def __init__(self, session: zenoh.Session, scenario: str, process: str, *, signer: auth.Signer | None = None):
         self.process = messages.check_name(process, "process")
         self.key = messages.event_key(scenario)
         self.next_seq = 0
         self._entity = declare_state_publisher(session, self.key)
+        self._signer = signer
 
     def emit(self, kind: str, t: float, detail: str = "") -> None:
         msg = messages.event_message(t, self.next_seq, self.process, kind, detail)
-        self._entity.put(messages.encode(msg))
+        signed_put(self._entity, self.key, messages.encode(msg), self._signer)
         self.next_seq += 1
 
     def end(self, t: float, messages_published: int, **extra: Any) -> None:
@@ -456,14 +483,15 @@ class Heartbeat(_Declared):
     though the liveliness token stays alive.
     """
 
-    def __init__(self, session: zenoh.Session, scenario: str, process: str, period_s: float = 0.5):
+    def __init__(self, session: zenoh.Session, scenario: str, process: str, period_s: float = 0.5, *,
+                 signer: auth.Signer | None = None):
         self.process = process
+        self.key = heartbeat_key(scenario, process)
+        self._signer = signer
         self.period_s = float(period_s)
         self.count = 0
         self._next = 0.0
-        self._entity = session.declare_publisher(
-            heartbeat_key(scenario, process), encoding=zenoh.Encoding.APPLICATION_JSON
-        )
+        self._entity = session.declare_publisher(self.key, encoding=zenoh.Encoding.APPLICATION_JSON)
 
     def beat(self, force: bool = False, **progress: Any) -> bool:
         """Send a heartbeat if ``period_s`` has passed (or ``force``); returns whether it sent."""
@@ -473,7 +501,7 @@ class Heartbeat(_Declared):
         self._next = now + self.period_s
         self.count += 1
         body = {"process": self.process, "time_ns": time.time_ns(), "n": self.count, **progress}
-        self._entity.put(json.dumps(body, separators=(",", ":")))
+        signed_put(self._entity, self.key, json.dumps(body, separators=(",", ":")).encode(), self._signer)
         return True
 
 
@@ -557,12 +585,22 @@ def _parse_query_args(query: Any) -> dict:
     return args
 
 
+#: Real-time factors a ``rate`` verb may set (both ends included); "inf" is also accepted
+#: by ``serve`` (as fast as possible).
+RATE_BOUNDS = (1e-3, 1e6)
+
+
 class ControlServer(_Declared):
     """Queryables for control verbs on ``astrodyn/<scenario>/@control/<verb>``.
 
     ``poll()`` returns pending :class:`ControlRequest` objects (FIFO handlers, so the owner
     handles them in its own loop and thread).  ``extra_keys`` adds queryables on other keys
     (e.g. the logger's ``@status``); their requests carry the last key segment as verb.
+
+    ``token``: the run's control token (:mod:`astrodyn.auth`); a query that does not carry
+    it in its attachment is answered with an error naming the verb and never reaches
+    ``poll()``; ``rejected`` counts such queries per verb.  ``token=None`` serves every
+    query (``--open-control``, or a supervisor's private queryables).
     """
 
     def __init__(
@@ -571,7 +609,11 @@ class ControlServer(_Declared):
         scenario: str,
         verbs: Iterable[str] = CONTROL_VERBS,
         extra_keys: Mapping[str, str] | None = None,
+        *,
+        token: str | None = None,
     ):
+        self.token = token
+        self.rejected: dict[str, int] = {}
         keys = {messages.control_key(scenario, verb): verb for verb in verbs}
         keys.update(extra_keys or {})
         self._queryables = [
@@ -583,6 +625,13 @@ class ControlServer(_Declared):
         requests = []
         for key, verb, queryable in self._queryables:
             while (query := queryable.try_recv()) is not None:
+                if self.token is not None and not auth.token_matches(
+                        self.token, auth.token_from_attachment(_attachment_bytes(query))):
+                    self.rejected[verb] = self.rejected.get(verb, 0) + 1
+                    query.reply_err(json.dumps({"error": f"{verb}: unauthorised: this run's control verbs need its "
+                                                         "control token (docs/security.md)"}))
+                    query.drop()
+                    continue
                 try:
                     args = _parse_query_args(query)
                 except ValueError as exc:
@@ -597,18 +646,26 @@ class ControlServer(_Declared):
             queryable.undeclare()
 
 
+def _attachment_bytes(obj: Any) -> bytes | None:
+    a = obj.attachment
+    return None if a is None else a.to_bytes()
+
+
 def query_json(
-    session: zenoh.Session, key: str, args: Mapping[str, Any] | None = None, timeout_s: float = 5.0
+    session: zenoh.Session, key: str, args: Mapping[str, Any] | None = None, timeout_s: float = 5.0,
+    token: str | None = None,
 ) -> list[dict]:
     """Query ``key`` (all matching queryables) and return the JSON replies.
 
     An error reply becomes ``{"error": ...}``; no replies within ``timeout_s`` gives [].
+    ``token``: a control token to present (:func:`astrodyn.auth.token_attachment`).
     """
     payload = json.dumps(dict(args)) if args else None
     replies = []
     handler = session.get(
         key, target=zenoh.QueryTarget.ALL, payload=payload, timeout=timeout_s,
         consolidation=zenoh.QueryConsolidation(zenoh.ConsolidationMode.NONE),
+        attachment=None if token is None else auth.token_attachment(token),
     )
     for reply in handler:
         sample = reply.ok
@@ -625,13 +682,15 @@ def query_json(
 
 def send_control(
     session: zenoh.Session, scenario: str, verb: str, args: Mapping[str, Any] | None = None,
-    timeout_s: float = 5.0,
+    timeout_s: float = 5.0, token: str | None = None,
 ) -> list[dict]:
     """Send a control verb (``status``, ``pause``, ``resume``, ``rate``, ``stop``) to a scenario.
 
     ``rate`` takes ``{"factor": 2.0}``.  Returns every answering process's JSON reply.
+    ``token``: the run's control token (printed by ``serve``, stored in its 0600 token
+    file); a server that requires one answers ``{"error": "...unauthorised..."}`` without it.
     """
-    return query_json(session, messages.control_key(scenario, verb), args, timeout_s)
+    return query_json(session, messages.control_key(scenario, verb), args, timeout_s, token=token)
 
 
 # --------------------------------------------------------------------------- consumers

@@ -1,0 +1,256 @@
+"""A run's identity on the bus: the run secret, message authenticators, control tokens.
+
+Zenoh does not authenticate publishers: any process that reaches a session's port can put
+on any key. A run therefore signs what its own processes publish with a secret that never
+travels on the bus or on a command line, and its consumers (logger, supervisor, replay
+consumers that opt in) drop every sample that does not verify. The trust model, what it
+covers and what it does not: docs/security.md.
+
+The run secret
+--------------
+``astrodyn run`` / ``serve`` create a :class:`RunSecret` at start (32 bytes from
+:func:`os.urandom`), write it to a file readable by the owner only (mode 0600, in the run's
+private working directory) and hand its path to the children in the environment variable
+:data:`SECRET_ENV` (``ASTRODYN_RUN_SECRET_FILE``). :func:`secret_from_environment` reads it
+back in the child. Another user of the machine can read neither the file nor a child's
+environment; a process of the same user can (it could also attach a debugger): the secret
+protects a run against other users and other hosts, not against its own account.
+
+Authenticator
+-------------
+Every sample a run's process publishes carries an authenticator in its Zenoh attachment::
+
+    magic     4 bytes   b"ADA1"
+    name_len  u8        length of the process name (1..128)
+    process   name_len  UTF-8 process name ("orbit", "attitude", "logger", "serve", ...)
+    instance  8 bytes   random per signer (a restarted process gets a new one)
+    counter   u64 LE    per (signer, key), 1, 2, 3, ... strictly increasing
+    mac       32 bytes  HMAC-SHA256(secret, everything above || key || 0x00 || payload)
+
+One authenticator per Zenoh sample, so a batch envelope of 1000 states costs one HMAC
+(about 1 us for the header plus the hashing of the payload bytes at ~1 GB/s).
+:class:`Verifier` checks the MAC in constant time, then the counter (a replayed sample is
+rejected), and returns the authenticated process name; every rejection is a
+:class:`AuthError` whose ``reason`` is one of :data:`REJECT_REASONS`.
+
+Control tokens
+--------------
+Control verbs (``serve``, ``replay``) need the run's control token unless the owner opened
+control explicitly (``--open-control``). The token is a random string (:func:`new_token`),
+printed to the owner and stored in a 0600 file; a request carries it in its attachment
+(:func:`token_attachment`) and the server compares it in constant time
+(:func:`token_matches`).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import hmac
+import os
+import secrets
+import struct
+from dataclasses import dataclass, field
+from pathlib import Path
+
+__all__ = [
+    "SECRET_ENV",
+    "TOKEN_ENV",
+    "MAGIC",
+    "REJECT_REASONS",
+    "AuthError",
+    "RunSecret",
+    "Signer",
+    "Verifier",
+    "secret_from_environment",
+    "write_private_file",
+    "new_token",
+    "token_attachment",
+    "token_from_attachment",
+    "token_matches",
+]
+
+#: Environment variable that holds the path of the run secret file in a run's children.
+SECRET_ENV = "ASTRODYN_RUN_SECRET_FILE"
+#: Environment variable an outside client may set to the path of a control-token file.
+TOKEN_ENV = "ASTRODYN_CONTROL_TOKEN_FILE"
+MAGIC = b"ADA1"
+SECRET_BYTES = 32
+MAC_BYTES = 32
+_MAX_NAME = 128
+_COUNTER = struct.Struct("<Q")
+_TOKEN_MAGIC = b"ADT1"
+
+#: Why a sample was rejected (the logger counts rejections per reason).
+REJECT_REASONS: tuple[str, ...] = ("unsigned", "malformed", "bad-mac", "replay")
+
+
+class AuthError(ValueError):
+    """A sample that does not verify; ``reason`` is one of :data:`REJECT_REASONS`."""
+
+    def __init__(self, reason: str, detail: str = ""):
+        super().__init__(f"{reason}: {detail}" if detail else reason)
+        self.reason = reason
+
+
+def write_private_file(path: str | os.PathLike, data: bytes) -> Path:
+    """Write ``data`` to a new file at ``path`` readable and writable by the owner only
+    (mode 0600 from creation: no moment where another user could open it). Refuses to
+    replace an existing file (``FileExistsError``)."""
+    path = Path(path)
+    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_NOFOLLOW", 0), 0o600)
+    try:
+        os.write(fd, data)
+    finally:
+        os.close(fd)
+    return path
+
+
+def _read_private_file(path: str | os.PathLike, what: str) -> bytes:
+    path = Path(path)
+    try:
+        st = path.stat()
+        data = path.read_bytes()
+    except OSError as exc:
+        raise AuthError("malformed", f"{what} {path}: cannot read ({exc.strerror})") from None
+    if st.st_mode & 0o077:
+        raise AuthError("malformed", f"{what} {path}: expected mode 0600 (owner only), got {oct(st.st_mode & 0o777)}")
+    return data
+
+
+@dataclass(frozen=True, repr=False)
+class RunSecret:
+    """The 32-byte secret of one run (``repr`` never shows it)."""
+
+    key: bytes
+
+    def __post_init__(self):
+        if not isinstance(self.key, bytes) or len(self.key) != SECRET_BYTES:
+            raise ValueError(f"run secret: expected {SECRET_BYTES} bytes")
+
+    def __repr__(self) -> str:
+        return "RunSecret(<hidden>)"
+
+    @classmethod
+    def generate(cls) -> RunSecret:
+        """A new secret from :func:`os.urandom`."""
+        return cls(os.urandom(SECRET_BYTES))
+
+    def save(self, directory: str | os.PathLike, name: str = "run.secret") -> Path:
+        """Write the secret to ``directory/name`` with mode 0600; returns the path (what
+        the supervisor puts in :data:`SECRET_ENV` for its children)."""
+        return write_private_file(Path(directory) / name, self.key)
+
+    @classmethod
+    def load(cls, path: str | os.PathLike) -> RunSecret:
+        """Read a secret file written by :meth:`save` (refused unless mode 0600)."""
+        data = _read_private_file(path, "run secret file")
+        if len(data) != SECRET_BYTES:
+            raise AuthError("malformed", f"run secret file {path}: expected {SECRET_BYTES} bytes, got {len(data)}")
+        return cls(data)
+
+
+def secret_from_environment(environ: dict | None = None) -> RunSecret | None:
+    """The run secret named by :data:`SECRET_ENV`, or None when the variable is not set
+    (a process started by hand, outside a supervisor)."""
+    path = (os.environ if environ is None else environ).get(SECRET_ENV)
+    return RunSecret.load(path) if path else None
+
+
+def _mac(secret: bytes, header: bytes, key: str, payload: bytes) -> bytes:
+    h = hmac.new(secret, header, hashlib.sha256)
+    h.update(key.encode())
+    h.update(b"\0")
+    h.update(payload)
+    return h.digest()
+
+
+class Signer:
+    """Makes the authenticators of one process (see the module docstring).
+
+    ``signer.attachment(key, payload)`` returns the bytes to put in the sample's attachment;
+    counters are kept per key, so each key's samples verify in publication order.
+    """
+
+    def __init__(self, secret: RunSecret, process: str):
+        name = process.encode()
+        if not 1 <= len(name) <= _MAX_NAME:
+            raise ValueError(f"process name: expected 1..{_MAX_NAME} bytes, got {process!r}")
+        self.process = process
+        self._secret = secret.key
+        self._prefix = MAGIC + bytes([len(name)]) + name + os.urandom(8)
+        self._counters: dict[str, int] = {}
+
+    def attachment(self, key: str, payload: bytes) -> bytes:
+        n = self._counters.get(key, 0) + 1
+        self._counters[key] = n
+        header = self._prefix + _COUNTER.pack(n)
+        return header + _mac(self._secret, header, key, payload)
+
+
+@dataclass
+class Verifier:
+    """Checks authenticators against one run's secret (see the module docstring).
+
+    ``verify(key, payload, attachment)`` returns the authenticated process name or raises
+    :class:`AuthError`. Counters are remembered per (process instance, key) only after a MAC
+    verified, so a forger cannot grow this state.
+    """
+
+    secret: RunSecret
+    _last: dict[tuple[bytes, str], int] = field(default_factory=dict, repr=False)
+
+    def verify(self, key: str, payload: bytes, attachment: bytes | None) -> str:
+        if not attachment:
+            raise AuthError("unsigned", key)
+        a = bytes(attachment)
+        if len(a) < 4 + 1 + 1 + 8 + 8 + MAC_BYTES or a[:4] != MAGIC:
+            raise AuthError("malformed", f"{key}: not an astrodyn authenticator")
+        n = a[4]
+        header_len = 5 + n + 8 + 8
+        if not 1 <= n <= _MAX_NAME or len(a) != header_len + MAC_BYTES:
+            raise AuthError("malformed", f"{key}: authenticator of the wrong length")
+        header = a[:header_len]
+        if not hmac.compare_digest(a[header_len:], _mac(self.secret.key, header, key, payload)):
+            raise AuthError("bad-mac", key)
+        try:
+            process = header[5:5 + n].decode()
+        except UnicodeDecodeError:
+            raise AuthError("malformed", f"{key}: process name is not UTF-8") from None
+        instance = header[:5 + n + 8]
+        (counter,) = _COUNTER.unpack_from(header, 5 + n + 8)
+        last = self._last.get((instance, key), 0)
+        if counter <= last:
+            raise AuthError("replay", f"{key}: counter {counter} after {last}")
+        self._last[(instance, key)] = counter
+        return process
+
+
+# --------------------------------------------------------------------------- control tokens
+
+
+def new_token() -> str:
+    """A fresh control token: 43 URL-safe characters (256 random bits)."""
+    return secrets.token_urlsafe(32)
+
+
+def token_attachment(token: str) -> bytes:
+    """The attachment that carries ``token`` on a control query."""
+    return _TOKEN_MAGIC + token.encode()
+
+
+def token_from_attachment(attachment: bytes | None) -> str | None:
+    """The token carried by a control query's attachment, or None."""
+    if not attachment:
+        return None
+    a = bytes(attachment)
+    if a[:4] != _TOKEN_MAGIC or len(a) > 4 + 256:
+        return None
+    try:
+        return a[4:].decode()
+    except UnicodeDecodeError:
+        return None
+
+
+def token_matches(expected: str, presented: str | None) -> bool:
+    """Constant-time comparison of a presented token with the expected one."""
+    return presented is not None and hmac.compare_digest(expected.encode(), presented.encode())
