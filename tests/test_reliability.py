@@ -267,10 +267,12 @@ def test_serve_restarts_a_killed_propagator_from_the_last_state(tmp_path):
     proc = subprocess.Popen([*ASTRODYN, "serve", str(cfg), "--out", str(out), "--rate", "300", "--port", str(port),
                              "--max-wall", "150"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
-        assert json.loads(proc.stdout.readline())["serving"] == "demo"
+        hello = json.loads(proc.stdout.readline())
+        assert hello["serving"] == "demo"
+        token = hello["control_token"]
         with bus.open_session(connect=[bus.loopback_endpoint(port)]) as s, bus.AliveWatcher(s, "demo") as alive:
             def status():
-                return bus.send_control(s, "demo", "status")[0]
+                return bus.send_control(s, "demo", "status", token=token)[0]
 
             deadline = time.monotonic() + 90
             while status()["t"] < 60:
@@ -301,7 +303,7 @@ def test_serve_restarts_a_killed_propagator_from_the_last_state(tmp_path):
             while status()["t"] < t_restart + 60:  # the new process publishes
                 assert time.monotonic() < deadline, "the restarted propagator does not advance"
                 time.sleep(0.2)
-            (final,) = bus.send_control(s, "demo", "stop", timeout_s=120)
+            (final,) = bus.send_control(s, "demo", "stop", timeout_s=120, token=token)
             assert final.get("state") == "stopped", final
         proc.communicate(timeout=60)
         assert proc.returncode == 0

@@ -11,6 +11,7 @@ import json
 import os
 import re
 import signal
+import stat
 import subprocess
 import sys
 import time
@@ -245,32 +246,43 @@ def test_serve_control_over_zenoh(tmp_path):
     try:
         hello = json.loads(proc.stdout.readline())
         assert hello["serving"] == "demo"
+        token = hello["control_token"]
+        token_file = Path(hello["control_token_file"])
+        assert token_file.read_text() == token and stat.S_IMODE(token_file.stat().st_mode) == 0o600
         with bus.open_session(connect=[bus.loopback_endpoint(port)]) as s:
             def status():
-                (reply,) = bus.send_control(s, "demo", "status")
+                (reply,) = bus.send_control(s, "demo", "status", token=token)
                 return reply
 
             deadline = time.monotonic() + 60
             while status()["t"] < 20 and time.monotonic() < deadline:
                 time.sleep(0.2)
             st = status()
+            # without the token (or with another) nothing is obeyed
+            for bad in (None, token[::-1]):
+                (refused,) = bus.send_control(s, "demo", "pause", token=bad)
+                assert "unauthorised" in refused["error"]
+            for factor in (1e-300, 1e7, "nan", -1):
+                (refused,) = bus.send_control(s, "demo", "rate", {"factor": factor}, token=token)
+                assert "1e+06" in refused["error"] and "0.001" in refused["error"], refused
+            assert status()["state"] == "running" and status()["real_time_factor"] == 50.0
             assert st["state"] == "running" and st["real_time_factor"] == 50.0
-            assert bus.send_control(s, "demo", "pause")[0]["state"] == "paused"
+            assert bus.send_control(s, "demo", "pause", token=token)[0]["state"] == "paused"
             time.sleep(1.5)  # heartbeats (0.5 s period) settle
             t1 = status()["t"]
             time.sleep(1.5)
             assert status()["t"] == t1  # nothing advances while paused
-            bus.send_control(s, "demo", "resume")
-            bus.send_control(s, "demo", "rate", {"factor": 200})
+            bus.send_control(s, "demo", "resume", token=token)
+            bus.send_control(s, "demo", "rate", {"factor": 200}, token=token)
             time.sleep(1.0)
             t1, w1 = status()["t"], time.monotonic()
             time.sleep(3.0)
             t2, w2 = status()["t"], time.monotonic()
             # 200 sim s per wall s; heartbeat granularity 0.5 s and 1 s output steps
             assert 100 < (t2 - t1) / (w2 - w1) < 300
-            err = bus.send_control(s, "demo", "rate", {"factor": -1})
+            err = bus.send_control(s, "demo", "rate", {"factor": -1}, token=token)
             assert "error" in err[0] and "factor" in err[0]["error"]
-            (final,) = bus.send_control(s, "demo", "stop", timeout_s=60)
+            (final,) = bus.send_control(s, "demo", "stop", timeout_s=60, token=token)
             assert final["state"] == "stopped" and final["logger"]["missing"] == 0
         proc.communicate(timeout=60)
         assert proc.returncode == 0

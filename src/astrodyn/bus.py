@@ -50,6 +50,7 @@ together cover everything a scenario publishes.
 from __future__ import annotations
 
 import json
+import math
 import socket
 import time
 from collections.abc import Iterable, Mapping, Sequence
@@ -65,6 +66,7 @@ __all__ = [
     "process_signer",
     "signed_put",
     "RATE_BOUNDS",
+    "parse_rate_factor",
     "CONTROL_VERBS",
     "BusError",
     "free_port",
@@ -588,6 +590,19 @@ def _parse_query_args(query: Any) -> dict:
 #: Real-time factors a ``rate`` verb may set (both ends included); "inf" is also accepted
 #: by ``serve`` (as fast as possible).
 RATE_BOUNDS = (1e-3, 1e6)
+
+
+def parse_rate_factor(raw: Any) -> float:
+    """The real-time factor of a ``rate`` verb: a number within :data:`RATE_BOUNDS` or
+    ``"inf"`` (as fast as possible); ``ValueError`` naming the allowed range otherwise."""
+    try:
+        factor = float(raw)
+    except (TypeError, ValueError):
+        factor = math.nan
+    if factor == math.inf or RATE_BOUNDS[0] <= factor <= RATE_BOUNDS[1]:
+        return factor
+    raise ValueError(f'rate: expected {{"factor": x}} with {RATE_BOUNDS[0]:g} <= x <= {RATE_BOUNDS[1]:g} '
+                     f'or "inf", got {raw!r}')
 
 
 class ControlServer(_Declared):

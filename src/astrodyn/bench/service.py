@@ -111,20 +111,11 @@ def _proc_hwm_mb(pid: int) -> float | None:
 
 def _children_by_name(parent: int) -> dict[str, int]:
     """pid of each logger / propagator child of ``parent`` (by its ``python -m`` command line in /proc)."""
+    from astrodyn.service.children import children_of
+
     found = {}
-    for entry in os.listdir("/proc"):
-        if not entry.isdigit():
-            continue
-        try:
-            with open(f"/proc/{entry}/stat", "rb") as f:
-                ppid = int(f.read().rsplit(b")", 1)[1].split()[1])
-            if ppid != parent:
-                continue
-            with open(f"/proc/{entry}/cmdline", "rb") as f:
-                argv = f.read().split(b"\0")
-        except (OSError, ValueError, IndexError):
-            continue
-        words = [a.decode(errors="replace") for a in argv[1:4]]
+    for pid, argv in children_of(parent).items():
+        words = argv[1:4]
         if words[:2] == ["-m", "astrodyn.service.logger"]:
             name = "logger"
         elif words[:2] == ["-m", "astrodyn.service.propagator"] and len(words) > 2:
@@ -132,7 +123,7 @@ def _children_by_name(parent: int) -> dict[str, int]:
         else:
             continue
         if name in _PROCESSES:
-            found[name] = int(entry)
+            found[name] = pid
     return found
 
 

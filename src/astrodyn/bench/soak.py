@@ -80,7 +80,7 @@ def main(argv: list[str] | None = None) -> int:
             while time.monotonic() < end and serve.poll() is None:
                 if time.monotonic() >= next_sample:
                     q0 = time.perf_counter()
-                    replies = bus.send_control(s, "soak", "status", timeout_s=10)
+                    replies = bus.send_control(s, "soak", "status", timeout_s=10, token=hello["control_token"])
                     rtt = time.perf_counter() - q0
                     st = replies[0] if replies else {}
                     row = {"wall_s": round(time.monotonic() - t_start, 1), "status_rtt_ms": round(rtt * 1e3, 2),
@@ -95,7 +95,7 @@ def main(argv: list[str] | None = None) -> int:
                     print(f"[soak] {json.dumps(row)}", file=sys.stderr, flush=True)
                     next_sample += args.sample
                 time.sleep(0.5)
-            replies = bus.send_control(s, "soak", "stop", timeout_s=120)
+            replies = bus.send_control(s, "soak", "stop", timeout_s=120, token=hello["control_token"])
             final = replies[0] if replies else {}
         serve.wait(timeout=120)
     finally:

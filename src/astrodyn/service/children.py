@@ -18,7 +18,27 @@ import subprocess
 import sys
 from pathlib import Path
 
-__all__ = ["Child", "logger_command", "propagator_command"]
+__all__ = ["Child", "children_of", "logger_command", "propagator_command"]
+
+
+def children_of(parent: int) -> dict[int, list[str]]:
+    """The live child processes of ``parent`` with their command lines (Linux ``/proc``:
+    what ``ps`` shows any user); processes that vanish while being read are skipped."""
+    found: dict[int, list[str]] = {}
+    for entry in os.listdir("/proc"):
+        if not entry.isdigit():
+            continue
+        try:
+            with open(f"/proc/{entry}/stat", "rb") as f:
+                ppid = int(f.read().rsplit(b")", 1)[1].split()[1])
+            if ppid != parent:
+                continue
+            with open(f"/proc/{entry}/cmdline", "rb") as f:
+                argv = f.read().split(b"\0")
+        except (OSError, ValueError, IndexError):
+            continue
+        found[int(entry)] = [a.decode(errors="replace") for a in argv if a]
+    return found
 
 
 def logger_command() -> list[str]:
@@ -35,14 +55,18 @@ def propagator_command(kind: str) -> list[str]:
 
 
 class Child:
-    def __init__(self, name: str, argv: list[str], log_dir: Path):
+    """One child process: ``argv`` started in its own session, stdout / stderr to
+    ``log_dir/<name>.out|.err``; ``env`` adds variables to the supervisor's environment
+    (e.g. :data:`astrodyn.auth.SECRET_ENV`, the path of the run secret)."""
+
+    def __init__(self, name: str, argv: list[str], log_dir: Path, env: dict[str, str] | None = None):
         self.name = name
         self.stdout_path = log_dir / f"{name}.out"
         self.stderr_path = log_dir / f"{name}.err"
         self._out = open(self.stdout_path, "wb")
         self._err = open(self.stderr_path, "wb")
         self.proc = subprocess.Popen(argv, stdout=self._out, stderr=self._err, stdin=subprocess.DEVNULL,
-                                     start_new_session=True)
+                                     start_new_session=True, env={**os.environ, **env} if env else None)
 
     @property
     def pid(self) -> int:

@@ -53,7 +53,7 @@ from typing import Any, Iterable
 import numpy as np
 import zenoh
 
-from astrodyn import bus, messages
+from astrodyn import auth, bus, messages
 from astrodyn.recording import ingest
 from astrodyn.recording.writer import _GRAMMAR, DUPLICATE, BatchLayout, McapRecorder, RecordingError
 
@@ -64,6 +64,49 @@ _MAX_EXAMPLES = 20
 _MAX_KEY_CACHE = 100_000
 _MAX_LAYOUTS = 64
 _FAST_KIND = {"orbit": ingest.KIND_ORBIT, "attitude": ingest.KIND_ATTITUDE}
+
+
+def publisher_of(rest: str) -> str | None:
+    """The process entitled to publish on ``astrodyn/<scenario>/<rest>``: ``orbit`` for
+    ``<body>/orbit`` and ``<body>/crosscheck``, ``attitude`` for ``<body>/attitude``, the
+    named process for ``@batch/<p>`` and ``@heartbeat/<p>``; None for keys any of the
+    run's processes may use (``@event``: there the event's own ``process`` field must
+    match its signer)."""
+    head, _, tail = rest.rpartition("/")
+    if head in ("@batch", "@heartbeat"):
+        return tail
+    if tail in ("orbit", "crosscheck") and head and not head.startswith("@"):
+        return "orbit"
+    if tail == "attitude" and head and not head.startswith("@"):
+        return "attitude"
+    return None
+
+
+def scene_state_keys(scenario) -> set[str]:
+    """Every state key a run of ``scenario`` (an :class:`astrodyn.scenario.Scenario`) may
+    publish: orbit and cross-check keys of the bodies with an orbit model, attitude keys
+    of the bodies with an attitude model."""
+    from astrodyn.scenario import plan as make_plan
+
+    keys = set()
+    for bp in make_plan(scenario).bodies:
+        if bp.orbit_model:
+            keys.add(messages.orbit_key(scenario.name, bp.name))
+            keys.add(messages.crosscheck_key(scenario.name, bp.name))
+        if bp.attitude_model:
+            keys.add(messages.attitude_key(scenario.name, bp.name))
+    return keys
+
+
+def _claimed_process(attachment: bytes | None) -> str:
+    """The process name an unverified authenticator claims (for counting only), else
+    "unsigned" / "malformed"."""
+    if not attachment:
+        return "unsigned"
+    if attachment[:4] == auth.MAGIC and len(attachment) > 5:
+        name = attachment[5:5 + attachment[4]]
+        return "claims " + name.decode("utf-8", "replace")[:64]
+    return "malformed"
 
 
 class Logger:
@@ -78,6 +121,12 @@ class Logger:
     queue_capacity : bound of the subscriber's FIFO; when full, Zenoh blocks the publishers
         (they use ``CongestionControl.BLOCK``), so memory stays bounded and nothing is lost.
     stall_timeout_s : a heartbeat older than this marks a live process as stalled.
+    verifier : the run's :class:`astrodyn.auth.Verifier`; when given, every sample must carry
+        a valid authenticator of the run (docs/security.md) from the process entitled to its
+        key (:func:`publisher_of`), anything else is rejected, counted per reason and never
+        written.
+    scene_keys : the state keys of the scene (:func:`scene_state_keys`); when given, a state
+        message on any other key is rejected (no channel is created for it).
     """
 
     def __init__(
@@ -93,6 +142,9 @@ class Logger:
         stall_timeout_s: float = 5.0,
         name: str = "logger",
         control: bool = True,
+        verifier: auth.Verifier | None = None,
+        scene_keys: Iterable[str] | None = None,
+        signer: auth.Signer | None = None,
     ):
         self.session = session
         self.scenario = messages.check_name(scenario, "scenario")
@@ -129,6 +181,12 @@ class Logger:
         self._drained_at = 0.0  # last time a receive pass found every queue empty
         self._started = time.monotonic()
         self.reason = ""
+        self.verifier = verifier
+        self.signer = signer
+        self.scene_keys = None if scene_keys is None else frozenset(scene_keys)
+        self.rejected: dict[str, int] = {}  # reason -> samples rejected (trust, scene)
+        self.rejected_by_sender: dict[str, int] = {}  # claimed process / Zenoh id -> samples
+        self.rejected_examples: list[str] = []
 
     # ------------------------------------------------------------------ control
 
@@ -143,6 +201,16 @@ class Logger:
         self.malformed += 1
         if len(self.malformed_examples) < _MAX_EXAMPLES:
             self.malformed_examples.append(f"{key}: {why}")
+
+    def _reject(self, key: str, reason: str, sender: str, detail: str = "") -> None:
+        """Count a sample refused for trust or scene reasons (never written)."""
+        self.rejected[reason] = self.rejected.get(reason, 0) + 1
+        if sender in self.rejected_by_sender or len(self.rejected_by_sender) < _MAX_EXAMPLES:
+            self.rejected_by_sender[sender] = self.rejected_by_sender.get(sender, 0) + 1
+        else:
+            self.rejected_by_sender["(others)"] = self.rejected_by_sender.get("(others)", 0) + 1
+        if len(self.rejected_examples) < _MAX_EXAMPLES:
+            self.rejected_examples.append(f"{key[:200]}: {reason}{': ' + detail[:200] if detail else ''}")
 
     def _kind(self, key: str) -> str | None:
         """Message kind of a key of this scenario ("orbit", ..., "event", "status"), else None."""
@@ -159,10 +227,13 @@ class Logger:
             self._key_kind[key] = kind
         return kind
 
-    def _record(self, key: str, payload: bytes, now_ns: int) -> None:
+    def _record(self, key: str, payload: bytes, now_ns: int, sender: str | None = None) -> None:
         kind = self._kind(key)
         if kind is None:
             self._bad(key, "not a message key of this scenario")
+            return
+        if self.scene_keys is not None and kind in _STATE_KINDS and key not in self.scene_keys:
+            self._reject(key, "not-in-scene", sender or "unauthenticated")
             return
         fast = messages.FAST_CHECKS.get(kind)
         found = fast(payload) if fast is not None and type(payload) is bytes else None
@@ -177,6 +248,9 @@ class Logger:
         t, seq = found
         track = None
         if kind == "event":
+            if sender is not None and msg["process"] != sender:
+                self._reject(key, "impersonation", sender, f"event of process {msg['process']!r} signed by {sender!r}")
+                return
             track = f"{key}#{msg['process']}"
         try:
             status = self.recorder.write_encoded(key, payload, t, seq, now_ns, track)
@@ -205,13 +279,16 @@ class Logger:
             self._bad(batch_key, str(exc))
             return None
         keys = [key for key, _ in items]
-        kinds = np.array([_FAST_KIND.get(self._kind(key), ingest.KIND_OTHER) for key in keys], dtype=np.int8)
+        # keys outside the scene take the per-message path, which rejects them
+        kinds = np.array([_FAST_KIND.get(self._kind(key), ingest.KIND_OTHER)
+                          if self.scene_keys is None or key in self.scene_keys else ingest.KIND_OTHER
+                          for key in keys], dtype=np.int8)
         layout = BatchLayout(keys, kinds)
         if len(self._layouts) < _MAX_LAYOUTS:
             self._layouts[batch_key] = layout
         return layout
 
-    def _record_batch(self, batch_key: str, payload: bytes, now_ns: int) -> None:
+    def _record_batch(self, batch_key: str, payload: bytes, now_ns: int, sender: str | None = None) -> None:
         """Every entry of an envelope, as if each had arrived on its own key: canonical
         states in one compiled pass (:meth:`McapRecorder.write_batch`), the rest through
         :meth:`_record`, in arrival order."""
@@ -236,7 +313,7 @@ class Logger:
 
         def slow(i: int) -> None:
             a = int(starts[i])
-            self._record(keys[i], payload[a : a + int(lens[i])], now_ns)
+            self._record(keys[i], payload[a : a + int(lens[i])], now_ns, sender)
 
         try:
             written, max_t = self.recorder.write_batch(buf, count, starts, lens, layout, now_ns, slow)
@@ -259,17 +336,29 @@ class Logger:
                 pass
             self.ended[process] = count
 
-    def handle(self, key: str, payload: bytes) -> None:
-        """Handle one sample (exposed for tests and for replaying captured traffic)."""
+    def handle(self, key: str, payload: bytes, attachment: bytes | None = None) -> None:
+        """Handle one sample (exposed for tests and for replaying captured traffic);
+        ``attachment`` is the sample's Zenoh attachment (its authenticator)."""
         self.received += 1
         now_ns = time.time_ns()
         rest = key[len(self.prefix):] if key.startswith(self.prefix) else None
+        sender = None
+        if self.verifier is not None:
+            try:
+                sender = self.verifier.verify(key, payload, attachment)
+            except auth.AuthError as exc:
+                self._reject(key, exc.reason, _claimed_process(attachment))
+                return
+            entitled = publisher_of(rest) if rest is not None else None
+            if entitled is not None and entitled != sender:
+                self._reject(key, "wrong-publisher", sender, f"{key} belongs to process {entitled!r}")
+                return
         if rest is not None and rest.startswith("@batch/"):
-            self._record_batch(key, payload, now_ns)
+            self._record_batch(key, payload, now_ns, sender)
         elif rest is not None and rest.startswith("@heartbeat/"):
             self.heartbeats[rest[len("@heartbeat/"):]] = time.monotonic()
         else:
-            self._record(key, payload, now_ns)
+            self._record(key, payload, now_ns, sender)
 
     def _own_event(self, kind: str, detail: str) -> None:
         msg = messages.event_message(self.max_t, self._own_event_seq, self.name, kind, detail[:4096])
@@ -298,6 +387,9 @@ class Logger:
             "out_of_order": totals["out_of_order"],
             "malformed": self.malformed,
             "malformed_examples": list(self.malformed_examples),
+            "rejected": dict(self.rejected),
+            "rejected_by_sender": dict(self.rejected_by_sender),
+            "rejected_examples": list(self.rejected_examples),
             "ended": dict(self.ended),
             "died": dict(self.died),
             "stalled": sorted(self.stalled),
@@ -396,7 +488,7 @@ class Logger:
                 self.session, self.scenario, verbs=("stop",) if self.control else (),
                 extra_keys={messages.status_key(self.scenario): "status"}))
             alive = stack.enter_context(bus.AliveWatcher(self.session, self.scenario))
-            heartbeat = stack.enter_context(bus.Heartbeat(self.session, self.scenario, self.name))
+            heartbeat = stack.enter_context(bus.Heartbeat(self.session, self.scenario, self.name, signer=self.signer))
             ingest.warm_up(_GRAMMAR)  # compile / load the batch kernels before we say ready
             stack.enter_context(bus.declare_alive(self.session, self.scenario, self.name))  # last: ready
             receivers = [sub.try_recv for sub in subs]
@@ -409,7 +501,9 @@ class Logger:
                         sample = try_recv()
                         if sample is None:
                             break
-                        handle(str(sample.key_expr), sample.payload.to_bytes())
+                        attachment = sample.attachment
+                        handle(str(sample.key_expr), sample.payload.to_bytes(),
+                               None if attachment is None else attachment.to_bytes())
                         n += 1
                 now = time.monotonic()
                 if n:
@@ -430,6 +524,12 @@ class Logger:
             # how far the run got, in the file itself (read back by load().metadata["end"])
             self.recorder.add_metadata("end", {k: summary[k] for k in (
                 "reason", "t", "states", "missing", "duplicates", "malformed", "ended", "died", "stalled", "complete")})
+            if self.verifier is not None or self.scene_keys is not None:
+                # what was refused, in the file itself (read back by load().metadata["rejected"])
+                self.recorder.add_metadata("rejected", {
+                    "authenticated": self.verifier is not None, "scene_only": self.scene_keys is not None,
+                    "total": sum(self.rejected.values()), "by_reason": self.rejected,
+                    "by_sender": self.rejected_by_sender, "examples": self.rejected_examples})
             self.recorder.close()
             summary["file_complete"] = True
             for request in self._stop_requests:
@@ -507,11 +607,38 @@ def prefill(recorder: McapRecorder, path: str, scenario: str, steps: int) -> int
     return n
 
 
+def trust_from_environment(args: argparse.Namespace) -> dict:
+    """The Logger's trust arguments for this process: a verifier and a signer from the run
+    secret a supervisor handed down (:data:`astrodyn.auth.SECRET_ENV`; none for a logger
+    started by hand), and the scene's state keys from ``--config`` (scene-only recording)."""
+    out: dict = {}
+    signer = bus.process_signer("logger")
+    if signer is not None:
+        out["signer"] = signer
+        out["verifier"] = auth.Verifier(auth.secret_from_environment())
+    if args.config:
+        from astrodyn.scenario import ScenarioError, load
+
+        try:
+            scenario = load(args.config)
+        except ScenarioError as exc:
+            raise ValueError(f"--config: {exc}") from None
+        if scenario.name != args.scenario:
+            raise ValueError(f"--config: expected scenario {args.scenario!r}, the file names {scenario.name!r}")
+        out["scene_keys"] = scene_state_keys(scenario)
+    return out
+
+
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
     try:
         meta = scenario_metadata(args)
     except (OSError, ValueError) as exc:
+        print(f"logger: {exc}", file=sys.stderr)
+        return 2
+    try:
+        trust = trust_from_environment(args)
+    except (OSError, ValueError, auth.AuthError, bus.BusError) as exc:
         print(f"logger: {exc}", file=sys.stderr)
         return 2
     try:
@@ -521,7 +648,7 @@ def main(argv: list[str] | None = None) -> int:
                                     roll_size=args.roll_size, roll_interval_s=args.roll_interval)
             copied = prefill(recorder, args.prefill, args.scenario, args.prefill_steps) if args.prefill else 0
             logger = Logger(session, args.scenario, recorder, expect=args.expect, queue_capacity=args.queue,
-                            control=not args.no_control)
+                            control=not args.no_control, **trust)
             summary = logger.run(max_seconds=args.max_seconds)
             if args.prefill:
                 summary["prefilled"] = copied

@@ -167,10 +167,12 @@ def run_propagator(scenario: Scenario, session, opts: PropagatorOptions, log=pri
     published = 0
     t_reached = start / rate
     wall0 = time.monotonic()
+    signer = bus.process_signer(opts.kind)  # the run's identity (docs/security.md); None outside a run
+    commands_from = CommandVerifier()
     with bus.declare_alive(session, scenario.name, opts.kind), \
-            bus.Heartbeat(session, scenario.name, opts.kind) as heartbeat, \
-            bus.BatchPublisher(session, scenario.name, opts.kind) as batch, \
-            bus.EventPublisher(session, scenario.name, opts.kind) as events, \
+            bus.Heartbeat(session, scenario.name, opts.kind, signer=signer) as heartbeat, \
+            bus.BatchPublisher(session, scenario.name, opts.kind, signer=signer) as batch, \
+            bus.EventPublisher(session, scenario.name, opts.kind, signer=signer) as events, \
             session.declare_subscriber(command_key(scenario.name), _fifo()) as commands:
         batched = opts.batch == "always" or (opts.batch == "auto" and len(names) > BATCH_THRESHOLD)
         per_body = None
@@ -192,12 +194,12 @@ def run_propagator(scenario: Scenario, session, opts: PropagatorOptions, log=pri
                 rows_done = 0
                 for j in range(tb.shape[0]):
                     t = float(tb[j])
-                    _obey(commands, pacer, t, stopping, heartbeat)
+                    _obey(commands, pacer, t, stopping, heartbeat, commands_from)
                     wait = pacer.wait_time(t)
                     while wait > 0 or pacer.paused:
                         time.sleep(min(wait, 0.05) if wait > 0 else 0.05)
                         heartbeat.beat(t=t_reached, paused=pacer.paused)
-                        _obey(commands, pacer, t, stopping, heartbeat)
+                        _obey(commands, pacer, t, stopping, heartbeat, commands_from)
                         wait = pacer.wait_time(t)
                     if stopping["why"]:
                         raise _Stop
@@ -217,7 +219,7 @@ def run_propagator(scenario: Scenario, session, opts: PropagatorOptions, log=pri
                         if xc is not None:
                             items.extend(xc(j, k, t))
                         for key, payload in items:
-                            per_body[key].put(payload)
+                            bus.signed_put(per_body[key], key, payload, signer)
                         published += len(items)
                     rows_done = j + 1
                     t_reached = t
@@ -342,9 +344,47 @@ def _fifo():
     return zenoh.handlers.FifoChannel(256)
 
 
-def _obey(commands, pacer: Pacer, t: float, stopping: dict, heartbeat) -> None:
-    """Apply pending supervisor commands (malformed ones are ignored with a note on stderr)."""
+class CommandVerifier:
+    """Accepts a supervisor command only when it carries a valid authenticator of the run
+    signed by the supervisor (``serve``) -- when this process runs under a supervisor (the
+    run secret is in its environment); outside a run every command is accepted.  Refused
+    commands are counted in ``refused`` and noted on stderr (at most 20 notes)."""
+
+    SUPERVISORS = ("serve", "run")
+
+    def __init__(self):
+        from astrodyn import auth
+
+        secret = auth.secret_from_environment()
+        self._verifier = None if secret is None else auth.Verifier(secret)
+        self.refused = 0
+
+    def accepts(self, sample) -> bool:
+        if self._verifier is None:
+            return True
+        from astrodyn import auth
+
+        attachment = sample.attachment
+        try:
+            sender = self._verifier.verify(str(sample.key_expr), sample.payload.to_bytes(),
+                                           None if attachment is None else attachment.to_bytes())
+            if sender in self.SUPERVISORS:
+                return True
+            why = f"signed by {sender!r}, not the supervisor"
+        except auth.AuthError as exc:
+            why = exc.reason
+        self.refused += 1
+        if self.refused <= 20:
+            print(f"propagator: refused a command ({why})", file=sys.stderr)
+        return False
+
+
+def _obey(commands, pacer: Pacer, t: float, stopping: dict, heartbeat, commands_from: CommandVerifier) -> None:
+    """Apply pending supervisor commands (malformed ones are ignored with a note on stderr,
+    unauthenticated ones refused, see :class:`CommandVerifier`)."""
     while (sample := commands.try_recv()) is not None:
+        if not commands_from.accepts(sample):
+            continue
         try:
             cmd = json.loads(sample.payload.to_bytes())
             verb = cmd["verb"]

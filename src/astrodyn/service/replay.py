@@ -27,7 +27,7 @@ verb       arguments (JSON payload)            reply
 status     --                                  state, rate, t, messages published, progress
 pause      --                                  the new status (nothing is sent while paused)
 resume     --                                  the new status (pacing re-anchored at t)
-rate       ``{"factor": x}`` (x > 0 or "inf")  the new status
+rate       ``{"factor": x}`` (1e-3..1e6, "inf")  the new status
 seek       ``{"t": T}`` (s since the epoch)    the new status; replay continues from T
 stop       --                                  the final summary
 =========  ==================================  =========================================
@@ -47,12 +47,15 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import shutil
 import signal
 import sys
+import tempfile
 import time
+from pathlib import Path
 from typing import Any
 
-from astrodyn import bus, messages
+from astrodyn import auth, bus, messages
 from astrodyn.recording.stream import McapStream, RawMessage
 from astrodyn.recording.writer import RecordingError
 
@@ -64,14 +67,13 @@ _POLL_S = 0.02  # control queries are answered within about this long
 
 
 def parse_rate(raw: Any, what: str = "rate") -> float:
-    """A real-time factor: a number > 0, or "inf" (as fast as possible)."""
+    """A real-time factor within :data:`astrodyn.bus.RATE_BOUNDS`, or "inf" (as fast as
+    possible); ``ValueError`` naming ``what`` and the allowed range otherwise."""
     try:
-        factor = float(raw)
-    except (TypeError, ValueError):
-        factor = math.nan
-    if not factor > 0:
-        raise ValueError(f'{what}: expected a real-time factor > 0 or "inf", got {raw!r}')
-    return factor
+        return bus.parse_rate_factor(raw)
+    except ValueError:
+        lo, hi = bus.RATE_BOUNDS
+        raise ValueError(f'{what}: expected a real-time factor with {lo:g} <= x <= {hi:g} or "inf", got {raw!r}') from None
 
 
 def scenario_of(stream: McapStream) -> str:
@@ -342,6 +344,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--control-scenario", default=None, help="scenario name of the control keys (default: the recorded one)")
     ap.add_argument("--port", type=int, default=None, help="loopback port to listen on (default: a free one)")
     ap.add_argument("--quiet", action="store_true", help="no progress line")
+    ap.add_argument("--open-control", action="store_true",
+                    help="answer control verbs from anyone who reaches the bus (default: only with the control token "
+                         "printed at start and stored in a 0600 file; docs/security.md)")
     bus.add_bus_arguments(ap)
     args = ap.parse_args(argv)
     try:
@@ -383,11 +388,18 @@ def main(argv: list[str] | None = None) -> int:
                 return 2
             if stream.truncated or stream.corrupt_chunks:
                 print(f"astrodyn replay: warning: {stream.path}: {stream.report()}", file=sys.stderr, flush=True)
+            token, token_dir = None, None
+            if not args.open_control:
+                token, token_dir = auth.new_token(), Path(tempfile.mkdtemp(prefix="astrodyn-replay-"))
+                auth.write_private_file(token_dir / "control-token", token.encode())
             print(json.dumps({"replaying": stream.path, "scenario": scenario, "listen": listen, "connect": args.connect,
-                              "control": f"astrodyn/{scenario}/@control/*", "real_time_factor": args.rate}), flush=True)
+                              "control": f"astrodyn/{scenario}/@control/*", "real_time_factor": args.rate,
+                              "control_token": token,
+                              "control_token_file": None if token_dir is None else str(token_dir / "control-token")}),
+                  flush=True)
             stop_requests: list[bus.ControlRequest] = []
             try:
-                with bus.ControlServer(session, scenario, verbs=REPLAY_VERBS) as control:
+                with bus.ControlServer(session, scenario, verbs=REPLAY_VERBS, token=token) as control:
                     rep.wait_for_subscriber(args.wait)
                     last_print = 0.0
                     while True:
@@ -417,6 +429,8 @@ def main(argv: list[str] | None = None) -> int:
                     time.sleep(0.05)  # let the last puts and replies leave before the session closes
             finally:
                 rep.close()
+                if token_dir is not None:
+                    shutil.rmtree(token_dir, ignore_errors=True)
     if not args.quiet:
         print(("\r" if tty else "") + _progress_line(rep), file=sys.stderr, flush=True)
         if not summary["complete"]:

@@ -21,7 +21,8 @@ What happens, in order:
    two-body models; attitude: |q| - 1, and for torque-free bodies rotational energy and
    inertial angular momentum).
 
-Exit status: 0 complete, 1 a process failed or messages were lost, 2 bad config/arguments.
+Exit status: 0 complete, 1 a process failed or messages were lost, 2 bad config/arguments, 3 complete
+but the logger rejected messages that were not the run's own (``--tolerate-rejected`` makes that 0).
 """
 
 from __future__ import annotations
@@ -29,7 +30,6 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import os
 import signal
 import subprocess
 import sys
@@ -40,12 +40,16 @@ from pathlib import Path
 
 import numpy as np
 
-from astrodyn import bus
+from astrodyn import auth, bus
 from astrodyn.service.children import Child, logger_command, propagator_command
 from astrodyn.service.output import check_output_path
 from astrodyn.scenario import Scenario, ScenarioError, load, plan as make_plan
 
-__all__ = ["main", "run_scenario", "summary_rows", "drift_summary"]
+__all__ = ["main", "run_scenario", "summary_rows", "drift_summary", "EXIT_REJECTED"]
+
+#: Exit status of ``astrodyn run`` when the run completed but the logger rejected messages
+#: that were not the run's own (forged, replayed, ghost bodies): the record was attacked.
+EXIT_REJECTED = 3
 
 
 def run_scenario(scenario: Scenario, config_path: Path, out: Path, *, cross_check: bool = False,
@@ -68,7 +72,6 @@ def run_scenario(scenario: Scenario, config_path: Path, out: Path, *, cross_chec
     connect_args = sum((["--connect", e] for e in [hub, *(connect or [])]), [])
     if zenoh_config:
         connect_args += ["--zenoh-config", str(zenoh_config)]
-    py = sys.executable
     started = time.monotonic()
     result: dict = {"scenario": scenario.name, "out": str(out), "processes": {}, "ok": False}
     interrupted: dict = {"signal": None}
@@ -81,6 +84,8 @@ def run_scenario(scenario: Scenario, config_path: Path, out: Path, *, cross_chec
             bus.HeartbeatMonitor(session, scenario.name) as beats, \
             bus.AliveWatcher(session, scenario.name) as alive:
         tmpd = Path(tmp)
+        # the run's identity: children sign what they publish (docs/security.md)
+        child_env = {auth.SECRET_ENV: str(auth.RunSecret.generate().save(tmpd))}
         meta_path = tmpd / "scenario.json"
         meta_path.write_text(json.dumps(scenario.to_metadata()))
         children: dict[str, Child] = {}
@@ -89,7 +94,7 @@ def run_scenario(scenario: Scenario, config_path: Path, out: Path, *, cross_chec
                            "--epoch-ns", str(scenario.epoch_unix_ns), "--metadata", str(meta_path),
                            "--config", str(config_path), *sum((["--expect", k] for k in propagators), []),
                            *(logger_args or []), *connect_args]
-            children["logger"] = Child("logger", logger_argv, tmpd)
+            children["logger"] = Child("logger", logger_argv, tmpd, env=child_env)
             failure = _wait_ready(session, scenario.name, children["logger"], 60.0, interrupted)
             if failure is None:
                 for kind in propagators:
@@ -100,7 +105,7 @@ def run_scenario(scenario: Scenario, config_path: Path, out: Path, *, cross_chec
                         argv.append("--cross-check")
                     for k, v in (extra_args or {}).get(kind, {}).items():
                         argv += [k, str(v)]
-                    children[kind] = Child(kind, argv, tmpd)
+                    children[kind] = Child(kind, argv, tmpd, env=child_env)
                 if progress:
                     print("  started " + ", ".join(f"{n} (pid {c.pid})" for n, c in children.items()), file=sys.stderr, flush=True)
                 failure = _watch(scenario, p, children, beats, alive, progress, timeout_s, interrupted)
@@ -320,6 +325,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--json", metavar="FILE", help="write the full result (per-body summary included) as JSON")
     ap.add_argument("--resume", metavar="MCAP", help="continue the scenario from the last complete step recorded in "
                     "this file: its states are copied into --out (which must differ) and the run goes on from there")
+    ap.add_argument("--tolerate-rejected", action="store_true",
+                    help="exit 0 even when the logger rejected messages that did not come from this run's own "
+                         "processes (default: exit 3, the record was attacked; docs/security.md)")
     args = ap.parse_args(argv)
     with tempfile.TemporaryDirectory(prefix="astrodyn-resume-") as work:
         try:
@@ -342,12 +350,14 @@ def main(argv: list[str] | None = None) -> int:
                               progress=not args.quiet, timeout_s=args.timeout, extra_args=resume.get("extra_args"),
                               logger_args=resume.get("logger_args"), zenoh_config=args.zenoh_config)
     print("", file=sys.stderr)
-    rows = summary_rows(result, scenario)
-    if rows is None and out.exists():  # a propagator died: measure what the file holds
+    rows = None
+    if out.exists():  # the summary measures what the file holds, not what the propagators say they sent
         try:
             rows = drift_summary(out, scenario)
         except Exception as exc:  # the file is still there; say why the summary is missing
             print(f"astrodyn run: could not read back {out} for the summary: {exc}", file=sys.stderr)
+    if rows is None:
+        rows = summary_rows(result, scenario)
     rows = rows or []
     result["bodies"] = rows
     _print_summary(result, rows, scenario)
@@ -358,6 +368,16 @@ def main(argv: list[str] | None = None) -> int:
         if result.get("interrupted"):  # shell convention: 128 + signal number
             return 128 + int(signal.Signals[result["interrupted"]])
         return 1
+    rejected = (result.get("logger") or {}).get("rejected") or {}
+    if rejected:
+        total = sum(rejected.values())
+        why = ", ".join(f"{n} {reason}" for reason, n in sorted(rejected.items()))
+        senders = (result.get("logger") or {}).get("rejected_by_sender") or {}
+        print(f"astrodyn run: ATTACKED: the logger rejected {total} messages that were not this run's own ({why}; "
+              f"senders: {', '.join(f'{s} x{n}' for s, n in senders.items())}); the recording holds only the run's "
+              f"authenticated states (counts in its 'rejected' metadata record)", file=sys.stderr)
+        if not args.tolerate_rejected:
+            return EXIT_REJECTED
     return 0
 
 

@@ -11,7 +11,7 @@ verb       arguments (JSON payload)            reply
 status     --                                  state, rate, sim t per process, pids, logger counts
 pause      --                                  the new status (propagators hold their next step)
 resume     --                                  the new status (pacing re-anchored at the current t)
-rate       ``{"factor": x}`` (x > 0 or "inf")  the new status
+rate       ``{"factor": x}`` (1e-3..1e6, "inf")  the new status
 stop       --                                  the final summary once the file is finished
 =========  ==================================  =============================================
 
@@ -51,7 +51,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from astrodyn import bus
+from astrodyn import auth, bus
 from astrodyn.service.propagator import command_key
 from astrodyn.service.children import Child, logger_command, propagator_command
 from astrodyn.service.output import check_output_path
@@ -83,6 +83,10 @@ class Supervisor:
             connect_args += ["--zenoh-config", str(zenoh_config)]
         meta = tmp / "scenario.json"
         meta.write_text(json.dumps(scenario.to_metadata()))
+        # the run's identity: children sign what they publish, commands are signed by us
+        secret = auth.RunSecret.generate()
+        self.child_env = {auth.SECRET_ENV: str(secret.save(tmp))}
+        self.signer = auth.Signer(secret, "serve")
         logger_argv = [*logger_command(), "--scenario", scenario.name, "--out", str(out),
                        "--epoch-ns", str(scenario.epoch_unix_ns), "--metadata", str(meta), "--config", str(config_path),
                        "--no-control", *sum((["--expect", k] for k in self.propagators), []), *connect_args]
@@ -90,22 +94,23 @@ class Supervisor:
             logger_argv += ["--roll-size", str(roll_size)]
         if roll_interval:
             logger_argv += ["--roll-interval", str(roll_interval)]
-        self.children: dict[str, Child] = {"logger": Child("logger", logger_argv, tmp)}
+        self.children: dict[str, Child] = {"logger": Child("logger", logger_argv, tmp, env=self.child_env)}
         bus.wait_for_process(session, scenario.name, "logger", timeout_s=30.0)
         self._argv = {kind: [*propagator_command(kind), str(config_path), "--endless", *connect_args]
                       for kind in self.propagators}
         for kind in self.propagators:
-            self.children[kind] = Child(kind, [*self._argv[kind], "--real-time-factor", str(self.rate)], tmp)
+            self.children[kind] = Child(kind, [*self._argv[kind], "--real-time-factor", str(self.rate)], tmp, env=self.child_env)
         self.commands = session.declare_publisher(command_key(scenario.name))
         self.beats = bus.HeartbeatMonitor(session, scenario.name)
         self.alive = bus.AliveWatcher(session, scenario.name)
-        self.events = bus.EventPublisher(session, scenario.name, "serve")
+        self.events = bus.EventPublisher(session, scenario.name, "serve", signer=self.signer)
         self.state = "running"
 
     # ------------------------------------------------------------------ commands
 
     def command(self, verb: str, **args) -> None:
-        self.commands.put(json.dumps({"verb": verb, **args}))
+        bus.signed_put(self.commands, command_key(self.scenario.name), json.dumps({"verb": verb, **args}).encode(),
+                       self.signer)
 
     def status(self) -> dict:
         self.beats.poll()
@@ -134,13 +139,10 @@ class Supervisor:
             self.state = "running"
             request.reply(self.status())
         elif verb == "rate":
-            raw = request.args.get("factor")
             try:
-                factor = float(raw)
-                if not factor > 0:
-                    raise ValueError
-            except (TypeError, ValueError):
-                request.error(f'rate: expected {{"factor": x}} with x > 0 (or "inf"), got {raw!r}')
+                factor = bus.parse_rate_factor(request.args.get("factor"))
+            except ValueError as exc:
+                request.error(str(exc))
                 return False
             self.rate = factor
             self.command("rate", factor=factor)
@@ -203,7 +205,7 @@ class Supervisor:
         argv = [*self._argv[kind], "--real-time-factor", str(self.rate), "--first-event-seq", str(n + 1)]
         for k, v in args.items():
             argv += [k, str(v)]
-        self.children[kind] = Child(f"{kind}-r{n + 1}", argv, self.tmp)
+        self.children[kind] = Child(f"{kind}-r{n + 1}", argv, self.tmp, env=self.child_env)
         self.children[kind].name = kind
         record = {"process": kind, "old_pid": old.pid, "new_pid": self.children[kind].pid, "why": why,
                   "from_step": args["--start-step"], "state_from": source, "time": time.time()}
@@ -244,6 +246,12 @@ class Supervisor:
         self.commands.undeclare()
 
 
+def control_token_path(out: Path) -> Path:
+    """Where ``serve`` stores the control token of the run recording ``out`` (mode 0600):
+    ``.<name>.control-token`` beside it."""
+    return out.parent / f".{out.stem}.control-token"
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="astrodyn serve", description="Long-running real-time service controlled over Zenoh.")
     ap.add_argument("config", help="scenario TOML file")
@@ -256,6 +264,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--port", type=int, default=None, help="loopback port of the control hub (default: a free one)")
     ap.add_argument("--connect", action="append", default=[], metavar="ENDPOINT", help="also connect to this endpoint (router)")
     ap.add_argument("--zenoh-config", metavar="FILE", help="Zenoh JSON5 config every process starts from (TLS, access control)")
+    ap.add_argument("--open-control", action="store_true",
+                    help="answer control verbs from anyone who reaches the bus (default: only with this run's control "
+                         "token, printed at start and stored in a 0600 file beside --out; docs/security.md)")
     args = ap.parse_args(argv)
     try:
         scenario = load(args.config)
@@ -263,8 +274,11 @@ def main(argv: list[str] | None = None) -> int:
         out.parent.mkdir(parents=True, exist_ok=True)
         check_output_path(out)
         rate = args.rate if args.rate is not None else scenario.real_time_factor
-        if not rate > 0:
-            raise ScenarioError(f"--rate: expected a real-time factor > 0, got {rate}")
+        try:
+            rate = bus.parse_rate_factor(rate)
+        except ValueError:
+            raise ScenarioError(f"--rate: expected a real-time factor with {bus.RATE_BOUNDS[0]:g} <= x <= "
+                                f"{bus.RATE_BOUNDS[1]:g} (or inf), got {rate}") from None
     except ScenarioError as exc:
         print(f"astrodyn serve: {exc}", file=sys.stderr)
         return 2
@@ -276,11 +290,17 @@ def main(argv: list[str] | None = None) -> int:
         sup = Supervisor(scenario, Path(args.config), out, session, hub, rate=rate, roll_size=args.roll_size,
                          roll_interval=args.roll_interval, connect=args.connect, tmp=Path(tmp),
                          zenoh_config=args.zenoh_config)
+        token, token_file = None, None
+        if not args.open_control:
+            token, token_file = auth.new_token(), control_token_path(out)
+            token_file.unlink(missing_ok=True)  # a previous run's token: never valid again
+            auth.write_private_file(token_file, token.encode())
         print(json.dumps({"serving": scenario.name, "hub": hub, "control": f"astrodyn/{scenario.name}/@control/*",
-                          "out": str(out), "real_time_factor": rate}), flush=True)
+                          "out": str(out), "real_time_factor": rate, "control_token": token,
+                          "control_token_file": None if token_file is None else str(token_file)}), flush=True)
         stop_requests: list[bus.ControlRequest] = []
         try:
-            with bus.ControlServer(session, scenario.name) as control:
+            with bus.ControlServer(session, scenario.name, token=token) as control:
                 t_end = None if args.max_wall is None else time.monotonic() + args.max_wall
                 while True:
                     stopping = False
