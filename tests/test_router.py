@@ -28,7 +28,7 @@ import numpy as np
 import pytest
 from mcap.reader import make_reader
 
-from astrodyn import bus
+from astrodyn import auth, bus
 from astrodyn.service.router import is_wildcard
 from astrodyn.scenario import load
 from astrodyn.simulate import simulate
@@ -64,9 +64,9 @@ a = "8000 km"
 """
 
 
-def _start(argv: list[str], log: Path) -> subprocess.Popen:
+def _start(argv: list[str], log: Path, env: dict | None = None) -> subprocess.Popen:
     return subprocess.Popen(argv, stdout=open(log.with_suffix(".out"), "wb"), stderr=open(log.with_suffix(".err"), "wb"),
-                            stdin=subprocess.DEVNULL)
+                            stdin=subprocess.DEVNULL, env=None if env is None else {**os.environ, **env})
 
 
 def _wait_router(proc: subprocess.Popen, log: Path, timeout: float = 30.0) -> dict:
@@ -95,11 +95,13 @@ def _run_through_router(tmp: Path, endpoint: str, router_ns: list[str], logger_n
         procs.append(router)
         _wait_router(router, tmp / "router")
         client = ["--mode", "client", "--connect", endpoint]
+        # the run's identity crosses the router: every process signs, the logger verifies
+        env = {auth.SECRET_ENV: str(auth.RunSecret.generate().save(tmp))}
         logger = _start([*logger_ns, PY, str(SERVICES / "logger.py"), "--scenario", scenario.name, "--out", str(out),
                          "--epoch-ns", str(scenario.epoch_unix_ns), "--expect", "orbit", "--expect", "attitude",
-                         "--max-seconds", "120", *client], tmp / "logger")
+                         "--config", str(config), "--max-seconds", "120", *client], tmp / "logger", env)
         procs.append(logger)
-        props = [_start([*prop_ns, PY, str(SERVICES / f"{kind}.py"), str(config), *client], tmp / kind)
+        props = [_start([*prop_ns, PY, str(SERVICES / f"{kind}.py"), str(config), *client], tmp / kind, env)
                  for kind in ("orbit", "attitude")]
         procs += props
         for kind, p in zip(("orbit", "attitude"), props):
@@ -108,6 +110,10 @@ def _run_through_router(tmp: Path, endpoint: str, router_ns: list[str], logger_n
         assert logger.wait(timeout=120) == 0, (tmp / "logger").with_suffix(".err").read_text()[-2000:]
         summary = json.loads((tmp / "logger").with_suffix(".out").read_text().strip().splitlines()[-1])
         assert summary["complete"] and summary["missing"] == 0, summary
+        assert summary["rejected"] == {}, summary  # every sample verified after crossing the router
+        with open(out, "rb") as f:
+            trust = {m.name: m.metadata for m in make_reader(f).iter_metadata()}["rejected"]
+        assert trust["authenticated"] == "true" and trust["scene_only"] == "true" and trust["total"] == "0"
     finally:
         for p in procs:
             _stop(p)
