@@ -44,7 +44,6 @@ printed to the owner and stored in a 0600 file; a request carries it in its atta
 
 from __future__ import annotations
 
-import hashlib
 import hmac
 import os
 import secrets
@@ -157,11 +156,9 @@ def secret_from_environment(environ: dict | None = None) -> RunSecret | None:
 
 
 def _mac(secret: bytes, header: bytes, key: str, payload: bytes) -> bytes:
-    h = hmac.new(secret, header, hashlib.sha256)
-    h.update(key.encode())
-    h.update(b"\0")
-    h.update(payload)
-    return h.digest()
+    # one-shot hmac.digest (OpenSSL's C path) is ~2x cheaper per small message than
+    # hmac.new + update; the concatenation copies the payload once (~20 us per MB)
+    return hmac.digest(secret, b"".join((header, key.encode(), b"\0", payload)), "sha256")
 
 
 class Signer:

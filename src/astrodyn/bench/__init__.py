@@ -18,6 +18,7 @@ SUITES = {
     "sweep": "astrodyn.bench.sweep",
     "soak": "astrodyn.bench.soak",
     "encode": "astrodyn.bench.encode",
+    "auth": "astrodyn.bench.auth",
 }
 
 
