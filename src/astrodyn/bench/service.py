@@ -64,6 +64,7 @@ class Scene:
     duration_s: float
     real_time_factor: float = math.inf  # inf: as fast as possible; finite: paced (load test)
     rate_hz: float = 10.0
+    authenticate: bool = True  # False: no run secret (what authentication costs, same run)
 
     @property
     def n_steps(self) -> int:
@@ -220,7 +221,8 @@ def run_scene(scene: Scene, workdir: Path, template: str, keep: bool = False) ->
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.monotonic()
     with ProcSampler() as sampler:
-        result = run_scenario(scenario, config, out, real_time_factor=scene.real_time_factor, progress=False)
+        result = run_scenario(scenario, config, out, real_time_factor=scene.real_time_factor, progress=False,
+                              authenticate=scene.authenticate)
     wall = time.monotonic() - t0
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
     row: dict = {
@@ -400,6 +402,7 @@ def default_scenes(duration: float | None, load_duration: float, small: int) -> 
     return [
         Scene(f"constellation-{small}", small, max(1, small // 10), duration or 120.0),
         Scene("constellation-1000", 1000, 20, duration or 120.0),
+        Scene("constellation-1000-unauthenticated", 1000, 20, duration or 120.0, authenticate=False),
         Scene("load-10x", 1000, 20, load_duration, real_time_factor=10.0),
     ]
 

@@ -55,10 +55,13 @@ EXIT_REJECTED = 3
 def run_scenario(scenario: Scenario, config_path: Path, out: Path, *, cross_check: bool = False,
                  real_time_factor: float = math.inf, connect: list[str] | None = None,
                  progress: bool = True, timeout_s: float | None = None, extra_args: dict | None = None,
-                 logger_args: list[str] | None = None, zenoh_config: str | None = None) -> dict:
+                 logger_args: list[str] | None = None, zenoh_config: str | None = None,
+                 authenticate: bool = True) -> dict:
     """Run ``scenario`` with real processes; return the result dict (see :func:`main`).
 
     ``zenoh_config``: a Zenoh JSON5 file (TLS, access control) every process starts from.
+    ``authenticate=False`` runs without the run secret (children neither sign nor verify):
+    only for measuring what authentication costs (``astrodyn bench service``).
 
     SIGTERM / SIGINT (Ctrl-C) while it runs: the propagators are stopped first (each sends
     its end-of-run event saying how far it got), then the logger finishes the file
@@ -85,7 +88,7 @@ def run_scenario(scenario: Scenario, config_path: Path, out: Path, *, cross_chec
             bus.AliveWatcher(session, scenario.name) as alive:
         tmpd = Path(tmp)
         # the run's identity: children sign what they publish (docs/security.md)
-        child_env = {auth.SECRET_ENV: str(auth.RunSecret.generate().save(tmpd))}
+        child_env = {auth.SECRET_ENV: str(auth.RunSecret.generate().save(tmpd))} if authenticate else None
         meta_path = tmpd / "scenario.json"
         meta_path.write_text(json.dumps(scenario.to_metadata()))
         children: dict[str, Child] = {}
