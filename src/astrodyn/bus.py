@@ -512,10 +512,15 @@ class HeartbeatMonitor(_Declared):
     """Watches the heartbeats of a scenario; :meth:`stale` lists processes silent too long.
 
     ``last[process]`` holds the last heartbeat body received (dict) and ``seen[process]``
-    the monotonic time it arrived.  Call :meth:`poll` from the owner's loop.
+    the monotonic time it arrived.  Call :meth:`poll` from the owner's loop.  With a
+    ``verifier`` (a supervisor's, :mod:`astrodyn.auth`) a heartbeat counts only when it
+    carries a valid authenticator of the process it names; ``rejected`` counts the others.
     """
 
-    def __init__(self, session: zenoh.Session, scenario: str, timeout_s: float = 2.0):
+    def __init__(self, session: zenoh.Session, scenario: str, timeout_s: float = 2.0, *,
+                 verifier: auth.Verifier | None = None):
+        self.verifier = verifier
+        self.rejected = 0
         self.timeout_s = float(timeout_s)
         self.last: dict[str, dict] = {}
         self.seen: dict[str, float] = {}
@@ -524,9 +529,18 @@ class HeartbeatMonitor(_Declared):
 
     def poll(self) -> None:
         while (sample := self._entity.try_recv()) is not None:
-            process = str(sample.key_expr).rsplit("/", 1)[-1]
+            key = str(sample.key_expr)
+            process = key.rsplit("/", 1)[-1]
+            payload = sample.payload.to_bytes()
+            if self.verifier is not None:
+                try:
+                    if self.verifier.verify(key, payload, _attachment_bytes(sample)) != process:
+                        raise auth.AuthError("bad-mac", "heartbeat signed by another process")
+                except auth.AuthError:
+                    self.rejected += 1
+                    continue
             try:
-                body = json.loads(sample.payload.to_bytes())
+                body = json.loads(payload)
             except ValueError:
                 continue
             self.last[process] = body if isinstance(body, dict) else {}

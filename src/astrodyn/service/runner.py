@@ -82,13 +82,14 @@ def run_scenario(scenario: Scenario, config_path: Path, out: Path, *, cross_chec
     if threading.current_thread() is threading.main_thread():
         for sig in (signal.SIGTERM, signal.SIGINT):
             previous[sig] = signal.signal(sig, lambda s, f: interrupted.update(signal=signal.Signals(s).name))
+    secret = auth.RunSecret.generate() if authenticate else None
     with tempfile.TemporaryDirectory(prefix="astrodyn-run-") as tmp, \
             bus.open_session(listen=[hub], config_file=zenoh_config) as session, \
-            bus.HeartbeatMonitor(session, scenario.name) as beats, \
+            bus.HeartbeatMonitor(session, scenario.name, verifier=secret and auth.Verifier(secret)) as beats, \
             bus.AliveWatcher(session, scenario.name) as alive:
         tmpd = Path(tmp)
         # the run's identity: children sign what they publish (docs/security.md)
-        child_env = {auth.SECRET_ENV: str(auth.RunSecret.generate().save(tmpd))} if authenticate else None
+        child_env = {auth.SECRET_ENV: str(secret.save(tmpd))} if secret is not None else None
         meta_path = tmpd / "scenario.json"
         meta_path.write_text(json.dumps(scenario.to_metadata()))
         children: dict[str, Child] = {}

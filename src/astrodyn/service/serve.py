@@ -101,7 +101,7 @@ class Supervisor:
         for kind in self.propagators:
             self.children[kind] = Child(kind, [*self._argv[kind], "--real-time-factor", str(self.rate)], tmp, env=self.child_env)
         self.commands = session.declare_publisher(command_key(scenario.name))
-        self.beats = bus.HeartbeatMonitor(session, scenario.name)
+        self.beats = bus.HeartbeatMonitor(session, scenario.name, verifier=auth.Verifier(secret))
         self.alive = bus.AliveWatcher(session, scenario.name)
         self.events = bus.EventPublisher(session, scenario.name, "serve", signer=self.signer)
         self.state = "running"
