@@ -196,3 +196,38 @@ def test_a_hostile_local_client_cannot_change_the_record(tmp_path):
     assert by_reason.get("unsigned", 0) > 0 and by_reason.get("bad-mac", 0) > 0, by_reason
     if sent.get("replay"):
         assert by_reason.get("replay", 0) > 0, by_reason
+
+
+@pytest.mark.parametrize("scene_only", [False, True])
+def test_a_70000_key_envelope_never_crashes_a_logger_and_the_file_stays_valid(tmp_path, scene_only):
+    """A logger without a run secret (started by hand) gets an envelope of 70,000 keys:
+    more channels than an MCAP file can hold (16-bit ids).  It neither crashes nor writes
+    an unreadable file; with the scene's keys (``--config``) no ghost channel is created."""
+    from astrodyn import messages
+    from astrodyn.recording.writer import McapRecorder
+    from astrodyn.service.logger import Logger
+
+    def orbit(seq):
+        return messages.encode(messages.orbit_message(float(seq), seq, "kepler", [7.0e6, 0.0, 0.0], [0.0, 7.5e3, 0.0],
+                                                      3.986004418e14))
+
+    out = tmp_path / "flood.mcap"
+    recorder = McapRecorder(str(out), {"name": "s"}, epoch_ns=1_774_008_000_000_000_000)
+    real = messages.orbit_key("s", "sat")
+    logger = Logger(None, "s", recorder, scene_keys={real} if scene_only else None)
+    logger.handle(real, orbit(0))
+    envelope = messages.encode_batch([(messages.orbit_key("s", f"g{i}"), orbit(0)) for i in range(70_000)])
+    logger.handle(messages.batch_key("s", "orbit"), envelope)
+    logger.handle(real, orbit(1))
+    recorder.close()
+    with open(out, "rb") as f:
+        reader = make_reader(f)
+        summary = reader.get_summary()
+        on_real = [m.data for _, ch, m in reader.iter_messages(topics=[real])]
+    assert on_real == [orbit(0), orbit(1)]
+    assert len(summary.channels) <= 65535
+    if scene_only:
+        assert len(summary.channels) == 1 and logger.rejected == {"not-in-scene": 70_000}
+    else:
+        assert logger.malformed >= 1  # the overflow is counted, with its reason
+        assert any("channel limit" in e for e in logger.malformed_examples), logger.malformed_examples

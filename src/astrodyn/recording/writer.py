@@ -51,6 +51,8 @@ __all__ = ["RecordingError", "McapRecorder", "BatchLayout", "SeqTracker", "OK", 
 OK, GAP, LATE, DUPLICATE = 0, 1, 2, 3
 _STATUS_NAMES = ("ok", "gap", "late", "duplicate")
 _U32 = 0xFFFFFFFF
+#: Channels one MCAP file can hold (channel ids are uint16; id 0 is never used by the writer).
+MAX_CHANNELS = 65535
 _U64_END = 2**64
 _GRAMMAR = ingest.grammar_tables(messages.ORBIT_MODELS, messages.ATTITUDE_MODELS)
 
@@ -348,7 +350,13 @@ class McapRecorder:
     # -- channels ------------------------------------------------------------------------
 
     def add_channel(self, topic: str, schema_name: str, schema: Mapping | bytes, message_encoding: str = "json") -> int:
-        """Register a channel with a JSON Schema (e.g. a ``foxglove.FrameTransform`` extra)."""
+        """Register a channel with a JSON Schema (e.g. a ``foxglove.FrameTransform`` extra).
+
+        ``MessageError`` (a ``ValueError``) once the file holds :data:`MAX_CHANNELS`
+        channels: MCAP channel ids are 16-bit, and a file must stay readable."""
+        if topic not in self._channels and len(self._channels) >= MAX_CHANNELS:
+            raise messages.MessageError(f"{topic}: channel limit reached ({MAX_CHANNELS} channels per MCAP file, "
+                                        "16-bit channel ids); not recorded")
         sid = self._schemas.get(schema_name)
         try:
             if sid is None:
