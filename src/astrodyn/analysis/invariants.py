@@ -1,0 +1,155 @@
+"""The quantities each model conserves, and how far a recording drifts from them.
+
+One table for the end-of-run summary of ``astrodyn run`` and for ``astrodyn analyze``:
+each row names the quantity, its unit, its initial value and its largest drift over the
+recording, so a drift is read against the model's own physics (a J2 orbit does not
+conserve the two-body energy: its summary shows the energy *with* the zonal potential).
+
+Orbit (per model; ``V`` the gravitational potential, acceleration ``= grad V``):
+
+* ``kepler`` -- specific energy ``E = |v|^2/2 - mu/|r|`` (J/kg) and angular momentum
+  ``h = r x v`` (m^2/s, vector): two-body constants (Vallado 4th ed. sec. 1.3).
+* ``j2`` / ``zonal`` (no third body) -- ``E = |v|^2/2 - mu/|r| - V_zonal(r)`` (J/kg) with
+  the zonal potential of :func:`astrodyn.orbit.zonal_potential` (J2..Jn of the central
+  body, axisymmetric about the frame's z axis), and ``h_z`` (m^2/s), the polar component
+  of ``h``: a zonal field exerts no torque about z.
+* ``third_body`` -- none: the third body moves, so no energy or momentum of the orbit is
+  constant (the row says so).
+
+Attitude (H. Baruh, *Analytical Dynamics*, ch. 8-10; ``C(q)`` with ``v_body = C v_inertial``):
+
+* ``torque_free`` -- kinetic energy ``T = w.Iw/2`` (J) and inertial angular momentum
+  ``H_i = C^T I w`` (N m s, vector).
+* ``gyrostat`` (rotor momentum ``h`` constant relative to the body) -- ``T = w.Iw/2``
+  (J; ``d/dt`` of it is ``-w.(w x (Iw + h)) = 0``) and ``H_i = C^T (I w + h)`` (N m s).
+* ``heavy_top`` (fixed point, body axis 3 along the centre of mass at ``cm`` m, gravity
+  ``g`` along -Z inertial) -- energy ``T + m g cm (C^T e3)_z`` (J), the vertical momentum
+  ``L_z = (C^T I w)_z`` and, for a symmetric top (I1 = I2), the spin momentum
+  ``H_3 = (I w)_3`` (N m s; Baruh sec. 10.3).
+* ``gravity_gradient``, ``user`` -- none beyond the unit norm of ``q``.
+
+Every attitude row list ends with ``|q| - 1`` (absolute).  Drifts are
+``max_k |x_k - x_0| / scale`` with ``scale = |x_0|`` (vectors: Euclidean norms), except
+where ``|x_0|`` is not the size of the terms: orbit energies use ``mu / |r_0|`` when
+``|E_0| < 1e-6 mu/|r_0|`` (near-parabolic), ``h_z`` uses ``|h_0|``, ``L_z`` and ``H_3``
+use ``|H_0|``, the top's energy uses ``T_0 + m g cm`` -- the row's ``scale`` says which.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from astrodyn.orbit import zonal_potential
+from astrodyn.rotation import dcm_from_quat
+
+__all__ = ["Invariant", "orbit_invariants", "attitude_invariants"]
+
+
+@dataclass(frozen=True)
+class Invariant:
+    """One conserved quantity of a body's model and its drift over a recording."""
+
+    name: str  #: e.g. "E (two-body)", "h_z"
+    unit: str  #: SI unit of the quantity, e.g. "J/kg"
+    initial: float  #: value (norm, for vectors) at the first recorded state
+    drift: float  #: largest deviation from the initial value, divided by ``scale``
+    scale: str  #: what the drift is relative to ("|E0|", "mu/r0", "absolute", ...)
+    conserved: bool = True  #: False: a row that says the model conserves nothing
+
+    def as_dict(self) -> dict:
+        return {"name": self.name, "unit": self.unit, "initial": self.initial, "drift": self.drift,
+                "scale": self.scale, "conserved": self.conserved}
+
+
+def _drift(x: np.ndarray, scale: float) -> float:
+    x = np.asarray(x, dtype=np.float64)
+    d = x - x[:1]
+    dev = np.linalg.norm(d, axis=-1) if x.ndim > 1 else np.abs(d)
+    if scale == 0:
+        return 0.0 if not np.any(dev) else float("inf")
+    return float(np.max(dev) / scale)
+
+
+def _norm0(x: np.ndarray) -> float:
+    x = np.asarray(x, dtype=np.float64)
+    return float(np.linalg.norm(x[0]))
+
+
+def _energy_row(name: str, energy: np.ndarray, mu: float, r0: float) -> Invariant:
+    e0 = float(energy[0])
+    terms = mu / r0
+    if abs(e0) < 1e-6 * terms:
+        return Invariant(name, "J/kg", e0, _drift(energy, terms), "mu/r0")
+    return Invariant(name, "J/kg", e0, _drift(energy, abs(e0)), "|E0|")
+
+
+def orbit_invariants(model: str, r: np.ndarray, v: np.ndarray, mu: float, *, radius: float | None = None,
+                     j: tuple[float, ...] | list[float] = (), degree: int = 0,
+                     third_body: bool = False) -> list[Invariant]:
+    """The invariants of orbit ``model`` over states ``r`` (m), ``v`` (m/s), shape (n, 3).
+
+    ``mu`` m^3/s^2; for zonal models ``radius`` (m, the J's reference radius), ``j`` the
+    coefficients J2, J3, ... and ``degree`` the highest degree the run used (2 for
+    ``j2``).  ``third_body``: the orbit had a third-body perturbation (no invariant).
+    """
+    r = np.asarray(r, dtype=np.float64)
+    v = np.asarray(v, dtype=np.float64)
+    if r.ndim != 2 or r.shape[-1] != 3 or r.shape != v.shape or r.shape[0] == 0:
+        raise ValueError(f"r, v: expected matching (n, 3) arrays with n >= 1, got {r.shape} and {v.shape}")
+    rn = np.linalg.norm(r, axis=-1)
+    kinetic = 0.5 * np.einsum("ij,ij->i", v, v)
+    h = np.cross(r, v)
+    if third_body or model == "third_body":
+        return [Invariant("none (a third body moves: no orbit invariant)", "-", float("nan"), float("nan"), "-",
+                          conserved=False)]
+    if model == "kepler" or degree < 2:
+        return [_energy_row("E (two-body)", kinetic - mu / rn, mu, float(rn[0])),
+                Invariant("h", "m^2/s", _norm0(h), _drift(h, _norm0(h)), "|h0|")]
+    if radius is None or len(j) < degree - 1:
+        raise ValueError(f"orbit_invariants({model!r}): expected radius and J2..J{degree}, got radius={radius}, j={j}")
+    potential = mu / rn + zonal_potential(r, mu, radius, tuple(j[: degree - 1]))
+    return [_energy_row(f"E (with J2..J{degree})" if degree > 2 else "E (with J2)", kinetic - potential, mu,
+                        float(rn[0])),
+            Invariant("h_z", "m^2/s", float(h[0, 2]), _drift(h[:, 2], _norm0(h)), "|h0|")]
+
+
+def attitude_invariants(model: str, q: np.ndarray, w: np.ndarray, inertia: np.ndarray | None, *,
+                        rotor_momentum: np.ndarray | None = None, mass: float | None = None,
+                        cm: float | None = None, g: float | None = None) -> list[Invariant]:
+    """The invariants of attitude ``model`` over ``q`` (n, 4, scalar first) and body rates
+    ``w`` (n, 3, rad/s); ``inertia`` (3, 3) kg m^2 in body axes (about the fixed point for a
+    top); ``rotor_momentum`` (3,) N m s, the gyrostat's constant rotor momentum relative to
+    the body; ``mass`` kg, ``cm`` m, ``g`` m/s^2 for a heavy top."""
+    q = np.asarray(q, dtype=np.float64)
+    w = np.asarray(w, dtype=np.float64)
+    if q.ndim != 2 or q.shape[-1] != 4 or w.shape != (q.shape[0], 3) or q.shape[0] == 0:
+        raise ValueError(f"q, w: expected (n, 4) and (n, 3) with n >= 1, got {q.shape} and {w.shape}")
+    qn = np.linalg.norm(q, axis=-1)
+    rows: list[Invariant] = []
+    if inertia is not None and model in ("torque_free", "gyrostat", "heavy_top"):
+        inertia = np.asarray(inertia, dtype=np.float64).reshape(3, 3)
+        hb = w @ inertia.T
+        energy = 0.5 * np.einsum("ij,ij->i", w, hb)
+        c = dcm_from_quat(q / qn[:, None])
+        if model == "gyrostat" and rotor_momentum is not None:
+            hb = hb + np.asarray(rotor_momentum, dtype=np.float64)
+        hi = np.einsum("kji,kj->ki", c, hb)  # C^T H_b
+        if model == "heavy_top":
+            m, l, gg = float(mass or 0.0), float(cm or 0.0), float(g or 0.0)
+            height = c[:, 2, 2]  # (C^T e3)_z: the vertical component of body axis 3
+            total = energy + m * gg * l * height
+            scale = float(energy[0]) + m * gg * l
+            rows.append(Invariant("E = T + m g cm cos(theta)", "J", float(total[0]), _drift(total, scale), "T0 + m g cm"))
+            h0 = _norm0(hi)
+            rows.append(Invariant("L_z", "N m s", float(hi[0, 2]), _drift(hi[:, 2], h0), "|H0|"))
+            if abs(inertia[0, 0] - inertia[1, 1]) <= 1e-12 * abs(inertia[0, 0]) and not inertia[0, 1] and not inertia[0, 2] \
+                    and not inertia[1, 2]:
+                rows.append(Invariant("H_3 (spin)", "N m s", float(hb[0, 2]), _drift(hb[:, 2], h0), "|H0|"))
+        else:
+            t0 = float(energy[0])
+            rows.append(Invariant("T", "J", t0, _drift(energy, abs(t0)), "|T0|"))
+            rows.append(Invariant("H_i", "N m s", _norm0(hi), _drift(hi, _norm0(hi)), "|H0|"))
+    rows.append(Invariant("|q| - 1", "-", float(qn[0] - 1.0), float(np.max(np.abs(qn - 1.0))), "absolute"))
+    return rows
