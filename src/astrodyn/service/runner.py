@@ -38,14 +38,13 @@ import threading
 import time
 from pathlib import Path
 
-import numpy as np
-
 from astrodyn import auth, bus
 from astrodyn.service.children import Child, logger_command, propagator_command
 from astrodyn.service.output import check_output_path
+from astrodyn.service.summary import file_summary, print_summary, propagator_rows
 from astrodyn.scenario import Scenario, ScenarioError, load, plan as make_plan
 
-__all__ = ["main", "run_scenario", "summary_rows", "drift_summary", "EXIT_REJECTED"]
+__all__ = ["main", "run_scenario", "EXIT_REJECTED"]
 
 #: Exit status of ``astrodyn run`` when the run completed but the logger rejected messages
 #: that were not the run's own (forged, replayed, ghost bodies): the record was attacked.
@@ -222,100 +221,6 @@ def _watch(scenario: Scenario, p, children: dict, beats, alive, progress: bool, 
         time.sleep(0.05)
 
 
-# --------------------------------------------------------------------------- summary
-
-
-def summary_rows(result: dict, scenario: Scenario) -> list[dict] | None:
-    """Per body: models, states logged (the logger's per-channel counts) and the drift of
-    the conserved quantities the propagators measured on what they published; None when
-    a propagator left no summary (killed), so the caller reads the file instead."""
-    procs = result.get("processes", {})
-    per_kind = {}
-    for kind in ("orbit", "attitude"):
-        if kind in procs:
-            summary = procs[kind].get("summary") or {}
-            if "per_body" not in summary:
-                return None
-            per_kind[kind] = summary["per_body"]
-    channels = (result.get("logger") or {}).get("channels") or {}
-    rows = []
-    for bp in make_plan(scenario).bodies:
-        row = {"body": bp.name, "orbit_model": bp.orbit_model, "attitude_model": bp.attitude_model}
-        for kind in ("orbit", "attitude"):
-            stats = per_kind.get(kind, {}).get(bp.name)
-            if stats is not None:
-                row[f"{kind}_states"] = int(channels.get(f"astrodyn/{scenario.name}/{bp.name}/{kind}", 0))
-                row.update(stats)
-        rows.append(row)
-    return rows
-
-
-def drift_summary(path: Path, scenario: Scenario) -> list[dict]:
-    """Per body: model, steps and states logged, conserved-quantity drift, read from the file."""
-    from astrodyn.recording import load as load_run
-
-    run = load_run(path)
-    p = {bp.name: bp for bp in make_plan(scenario).bodies}
-    mu = scenario.central_body.mu
-    rows = []
-    for b in scenario.bodies:
-        rec = run.bodies.get(b.name)
-        bp = p[b.name]
-        row = {"body": b.name, "orbit_model": bp.orbit_model, "attitude_model": bp.attitude_model}
-        if rec is not None and rec.orbit is not None and len(rec.orbit):
-            r, v = rec.orbit.r, rec.orbit.v
-            rn = np.linalg.norm(r, axis=1)
-            energy = 0.5 * np.einsum("ij,ij->i", v, v) - mu / rn
-            h = np.linalg.norm(np.cross(r, v), axis=1)
-            # relative to mu/|r0| (the size of the terms), not to the energy itself, which is
-            # ~0 near parabolic orbits and would turn round-off into a huge "relative drift"
-            row.update(orbit_states=len(rec.orbit), orbit_last_seq=int(rec.orbit.seq[-1]),
-                       energy_drift=float(np.max(np.abs(energy - energy[0])) * rn[0] / mu),
-                       momentum_drift=float(np.max(np.abs(h - h[0])) / h[0]) if h[0] else 0.0)
-        if rec is not None and rec.attitude is not None and len(rec.attitude):
-            q, w = rec.attitude.q, rec.attitude.w
-            row.update(attitude_states=len(rec.attitude),
-                       quat_norm_error=float(np.max(np.abs(np.linalg.norm(q, axis=1) - 1.0))))
-            if bp.attitude_model == "torque_free" and b.attitude is not None:
-                from astrodyn.rotation import dcm_from_quat
-
-                J = np.asarray(b.attitude.inertia, dtype=np.float64)
-                Hb = w @ J.T
-                T = 0.5 * np.einsum("ij,ij->i", w, Hb)
-                Hi = np.einsum("nji,nj->ni", dcm_from_quat(q), Hb)  # C^T H_body
-                hn = np.linalg.norm(Hi[0])
-                row.update(rot_energy_drift=float(np.max(np.abs(T - T[0])) / T[0]) if T[0] else 0.0,
-                           inertial_momentum_drift=float(np.max(np.linalg.norm(Hi - Hi[0], axis=1)) / hn) if hn else 0.0)
-        if rec is not None and rec.crosscheck is not None and len(rec.crosscheck):
-            row["crosscheck_max_dr"] = float(np.max(rec.crosscheck.dr_norm))
-        rows.append(row)
-    return rows
-
-
-def _print_summary(result: dict, rows: list[dict], scenario: Scenario) -> None:
-    log = result.get("logger") or {}
-    print(f"\nscenario {scenario.name}: {result['out']}")
-    print(f"  wall {result['wall_s']:.2f} s for {scenario.duration:.6g} s of sim time "
-          f"(real-time factor {scenario.duration / max(result['wall_s'], 1e-9):.1f}x); "
-          f"states logged {log.get('states', '?')}, missing {log.get('missing', '?')}, malformed {log.get('malformed', '?')}")
-    if log.get("t") is not None and log.get("reason"):
-        print(f"  sim t reached {log['t']:.6g} s of {scenario.duration:.6g} s; logger stopped: {log['reason']}")
-    hdr = f"  {'body':<16} {'orbit model':<12} {'att. model':<17} {'states':>8} {'energy drift':>12} {'h drift':>9} {'|q|-1':>9} {'xcheck dr':>10}"
-    print(hdr)
-    shown = rows if len(rows) <= 25 else rows[:20]
-    for r in shown:
-        states = r.get("orbit_states", 0) + r.get("attitude_states", 0)
-        e = r.get("energy_drift", r.get("rot_energy_drift"))
-        h = r.get("momentum_drift", r.get("inertial_momentum_drift"))
-        qn = r.get("quat_norm_error")
-        xc = r.get("crosscheck_max_dr")
-        f = lambda x, spec: "-" if x is None else format(x, spec)  # noqa: E731
-        print(f"  {r['body']:<16} {r['orbit_model'] or '-':<12} {r['attitude_model'] or '-':<17} {states:>8d}"
-              f" {f(e, '12.2e')} {f(h, '9.1e')} {f(qn, '9.1e')} {f(xc, '10.2e')}")
-    if len(rows) > len(shown):
-        print(f"  ... {len(rows) - len(shown)} more bodies (all in the --json summary)")
-
-
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="astrodyn run", description="Run a scenario headless into an MCAP file.")
     ap.add_argument("config", help="scenario TOML file (see configs/)")
@@ -357,14 +262,15 @@ def main(argv: list[str] | None = None) -> int:
     rows = None
     if out.exists():  # the summary measures what the file holds, not what the propagators say they sent
         try:
-            rows = drift_summary(out, scenario)
+            rows = file_summary(out, scenario)
         except Exception as exc:  # the file is still there; say why the summary is missing
             print(f"astrodyn run: could not read back {out} for the summary: {exc}", file=sys.stderr)
     if rows is None:
-        rows = summary_rows(result, scenario)
+        rows = propagator_rows(result, scenario)
     rows = rows or []
     result["bodies"] = rows
-    _print_summary(result, rows, scenario)
+    result["propagator_bodies"] = propagator_rows(result, scenario)
+    print_summary(result, rows, scenario)
     if args.json:
         Path(args.json).write_text(json.dumps(result, indent=1, default=str))
     if result.get("failure"):

@@ -1,0 +1,168 @@
+"""The end-of-run summary of ``astrodyn run``: what the file holds, body by body.
+
+Everything here is read back from the recording (:func:`astrodyn.recording.load`), not
+taken from what the propagators say they published, so anything in the file that did
+not come from the run would show (docs/security.md).  Per body and kind: the model, the
+states recorded, and the drift of each quantity the model conserves
+(:mod:`astrodyn.analysis.invariants`: two-body energy and h for Kepler orbits, energy
+with the zonal potential and h_z for J2 / zonal orbits, T and H_i for torque-free
+bodies, ...), with its unit and what the drift is relative to; the REBOUND cross-check
+difference in metres.  :func:`propagator_rows` gives what the propagators measured on
+what they published, for comparison.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+
+from astrodyn.analysis.invariants import attitude_invariants, orbit_invariants
+from astrodyn.scenario import Scenario, plan as make_plan
+
+__all__ = ["file_summary", "propagator_rows", "print_summary"]
+
+
+def propagator_rows(result: dict, scenario: Scenario) -> list[dict] | None:
+    """Per body: models, states logged (the logger's per-channel counts) and the drifts the
+    propagators measured on what they published (two-body energy relative to mu/|r0| and
+    |h|; |q| - 1, and for torque-free bodies T and H_i); None when a propagator left no
+    summary (killed)."""
+    procs = result.get("processes", {})
+    per_kind = {}
+    for kind in ("orbit", "attitude"):
+        if kind in procs:
+            summary = procs[kind].get("summary") or {}
+            if "per_body" not in summary:
+                return None
+            per_kind[kind] = summary["per_body"]
+    channels = (result.get("logger") or {}).get("channels") or {}
+    rows = []
+    for bp in make_plan(scenario).bodies:
+        row = {"body": bp.name, "orbit_model": bp.orbit_model, "attitude_model": bp.attitude_model}
+        for kind in ("orbit", "attitude"):
+            stats = per_kind.get(kind, {}).get(bp.name)
+            if stats is not None:
+                row[f"{kind}_states"] = int(channels.get(f"astrodyn/{scenario.name}/{bp.name}/{kind}", 0))
+                row.update(stats)
+        rows.append(row)
+    return rows
+
+
+def _orbit_meta(meta: dict) -> dict:
+    bodies = {}
+    for b in meta.get("bodies", []) if isinstance(meta, dict) else []:
+        if isinstance(b, dict) and isinstance(b.get("name"), str):
+            bodies[b["name"]] = b
+    return bodies
+
+
+def file_summary(path: Path, scenario: Scenario) -> list[dict]:
+    """Per body, from the file: models, states recorded per kind, the invariant rows
+    (``orbit_invariants`` / ``attitude_invariants``: lists of :class:`Invariant` dicts),
+    the cross-check difference, and the legacy drift keys (``energy_drift`` and
+    ``momentum_drift`` relative to mu/|r0| and |h0|, ``quat_norm_error``,
+    ``rot_energy_drift``, ``inertial_momentum_drift``, ``crosscheck_max_dr``) that
+    :func:`propagator_rows` also reports."""
+    from astrodyn.recording import load as load_run
+
+    run = load_run(path)
+    try:
+        meta = json.loads(run.scenario.get("json") or "{}")
+    except ValueError:
+        meta = {}
+    central = meta.get("central_body") or {}
+    body_meta = _orbit_meta(meta)
+    plan = {bp.name: bp for bp in make_plan(scenario).bodies}
+    mu = scenario.central_body.mu
+    rows = []
+    for b in scenario.bodies:
+        rec = run.bodies.get(b.name)
+        bp = plan[b.name]
+        row: dict = {"body": b.name, "orbit_model": bp.orbit_model, "attitude_model": bp.attitude_model}
+        bm = body_meta.get(b.name, {})
+        if rec is not None and rec.orbit is not None and len(rec.orbit):
+            r, v = rec.orbit.r, rec.orbit.v
+            om = bm.get("orbit") or {}
+            inv = orbit_invariants(bp.orbit_model, r, v, mu, radius=central.get("radius"), j=central.get("j") or (),
+                                   degree=int(om.get("degree") or (2 if bp.orbit_model == "j2" else 0)),
+                                   third_body=bool(om.get("perturbers")))
+            rn = np.linalg.norm(r, axis=1)
+            energy = 0.5 * np.einsum("ij,ij->i", v, v) - mu / rn
+            h = np.linalg.norm(np.cross(r, v), axis=1)
+            row.update(orbit_states=len(rec.orbit), orbit_last_seq=int(rec.orbit.seq[-1]),
+                       orbit_invariants=[i.as_dict() for i in inv],
+                       energy_drift=float(np.max(np.abs(energy - energy[0])) * rn[0] / mu),
+                       momentum_drift=float(np.max(np.abs(h - h[0])) / h[0]) if h[0] else 0.0)
+        if rec is not None and rec.attitude is not None and len(rec.attitude):
+            q, w = rec.attitude.q, rec.attitude.w
+            am = bm.get("attitude") or {}
+            inertia = np.asarray(am["inertia"], dtype=np.float64) if am.get("inertia") is not None else None
+            rotors = am.get("rotors") or []
+            h_rotor = sum((np.asarray(rt["axis"], dtype=np.float64) * float(rt["h"]) for rt in rotors), np.zeros(3)) \
+                if rotors else None
+            inv = attitude_invariants(bp.attitude_model, q, w, inertia, rotor_momentum=h_rotor,
+                                      mass=am.get("mass"), cm=am.get("cm"), g=am.get("g"))
+            row.update(attitude_states=len(rec.attitude), attitude_invariants=[i.as_dict() for i in inv],
+                       quat_norm_error=float(np.max(np.abs(np.linalg.norm(q, axis=1) - 1.0))))
+            named = {i.name: i for i in inv}
+            if bp.attitude_model == "torque_free" and "T" in named:
+                row.update(rot_energy_drift=named["T"].drift, inertial_momentum_drift=named["H_i"].drift)
+        if rec is not None and rec.crosscheck is not None and len(rec.crosscheck):
+            row["crosscheck_states"] = len(rec.crosscheck)
+            row["crosscheck_max_dr"] = float(np.max(rec.crosscheck.dr_norm))
+        rows.append(row)
+    return rows
+
+
+def _fmt(x: float, spec: str = ".1e") -> str:
+    return "-" if x is None or (isinstance(x, float) and math.isnan(x)) else format(x, spec)
+
+
+def print_summary(result: dict, rows: list[dict], scenario: Scenario, max_bodies: int = 25) -> None:
+    """The end-of-run table on stdout: one line per conserved quantity of each body."""
+    log = result.get("logger") or {}
+    states = sum(r.get("orbit_states", 0) + r.get("attitude_states", 0) for r in rows)
+    xchecks = sum(r.get("crosscheck_states", 0) for r in rows)
+    print(f"\nscenario {scenario.name}: {result['out']}")
+    print(f"  wall {result['wall_s']:.2f} s for {scenario.duration:.6g} s of sim time "
+          f"(real-time factor {scenario.duration / max(result['wall_s'], 1e-9):.1f}x)")
+    print(f"  in the file: {states} state messages (orbit + attitude)"
+          + (f" + {xchecks} cross-check messages" if xchecks else "")
+          + f"; logger: missing {log.get('missing', '?')}, malformed {log.get('malformed', '?')}, "
+          f"rejected {sum((log.get('rejected') or {}).values())}")
+    if log.get("t") is not None and log.get("reason"):
+        print(f"  sim t reached {log['t']:.6g} s of {scenario.duration:.6g} s; logger stopped: {log['reason']}")
+    print(f"  {'body':<14} {'kind':<9} {'model':<17} {'states':>7}  {'conserved quantity':<26} {'unit':<6} "
+          f"{'max drift':>9}  relative to")
+    shown = rows if len(rows) <= max_bodies else rows[: max_bodies - 5]
+    for r in shown:
+        first = True
+        for kind in ("orbit", "attitude"):
+            invs = r.get(f"{kind}_invariants")
+            if not invs:
+                continue
+            model = r.get(f"{kind}_model") or "-"
+            for k, inv in enumerate(invs):
+                lead = (f"  {r['body'] if first else '':<14} {kind if k == 0 else '':<9} {model if k == 0 else '':<17} "
+                        f"{r.get(f'{kind}_states', 0) if k == 0 else '':>7}")
+                drift = _fmt(inv["drift"]) if inv["conserved"] else "-"
+                print(f"{lead}  {inv['name']:<26} {inv['unit']:<6} {drift:>9}  {inv['scale'] if inv['conserved'] else ''}")
+                first = False
+        if r.get("crosscheck_max_dr") is not None:
+            print(f"  {'':<14} {'x-check':<9} {'rebound-ias15':<17} {r.get('crosscheck_states', 0):>7}  "
+                  f"{'max |r - r_REBOUND|':<26} {'m':<6} {_fmt(r['crosscheck_max_dr'], '.2e'):>9}  absolute")
+    if len(rows) > len(shown):
+        print(f"  ... {len(rows) - len(shown)} more bodies (all in the --json summary); worst drift per quantity:")
+        worst: dict[tuple, float] = {}
+        for r in rows:
+            for kind in ("orbit", "attitude"):
+                for inv in r.get(f"{kind}_invariants") or []:
+                    if inv["conserved"]:
+                        key = (kind, r.get(f"{kind}_model"), inv["name"], inv["unit"], inv["scale"])
+                        worst[key] = max(worst.get(key, 0.0), inv["drift"])
+        for (kind, model, name, unit, scale), d in worst.items():
+            print(f"  {'(all)':<14} {kind:<9} {model or '-':<17} {'':>7}  {name:<26} {unit:<6} {_fmt(d):>9}  {scale}")
+
