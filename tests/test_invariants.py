@@ -111,3 +111,30 @@ def test_bad_shapes_name_the_arrays():
         orbit_invariants("kepler", np.zeros((3,)), np.zeros((3,)), MU)
     with pytest.raises(ValueError, match="q, w"):
         attitude_invariants("torque_free", np.zeros((2, 3)), np.zeros((2, 3)), np.eye(3))
+
+
+def test_rows_from_a_recording_and_in_the_analysis_report(tmp_path):
+    """The recording made before the refactor (tests/fixtures): models and constants come
+    from its scenario metadata; the J2 body is judged by the energy with J2."""
+    from pathlib import Path
+
+    from astrodyn.analysis import analyze
+    from astrodyn.analysis.invariants import recorded_invariants
+    from astrodyn.recording import load
+
+    path = Path(__file__).parent / "fixtures" / "legacy-v0.mcap"
+    run = load(path)
+    m = run.bodies["molniya"].orbit
+    rows = _rows(recorded_invariants(run.scenario, "molniya", orbit=("j2", m.r, m.v))["orbit"])
+    assert set(rows) == {"E (with J2)", "h_z"}
+    assert rows["E (with J2)"].drift < 1e-9  # the recorded J2 run, DOP853 at the service's tolerance
+    assert _rows(orbit_invariants("kepler", m.r, m.v, MU))["E (two-body)"].drift > 1e-6  # J2 moves it
+    c = run.bodies["cubesat"].attitude
+    assert _rows(recorded_invariants(run.scenario, "cubesat", attitude=("torque_free", c.q, c.w))["attitude"])["T"].drift < 1e-13
+    report = analyze(path, tmp_path / "report")
+    section = report["bodies"]["molniya"]["conserved quantities"]
+    assert any(k.startswith("orbit: E (with J2) [J/kg]") for k in section)
+    assert "E (with J2)" in (tmp_path / "report" / "report.md").read_text()
+    # a recording without metadata constants still gets the rows that need none
+    bare = recorded_invariants({}, "molniya", orbit=("j2", m.r, m.v), attitude=("torque_free", c.q, c.w))
+    assert "orbit" not in bare and [i.name for i in bare["attitude"]] == ["|q| - 1"]

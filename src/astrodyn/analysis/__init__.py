@@ -112,12 +112,36 @@ def analyze(path: str | os.PathLike, out: str | os.PathLike | None = None, seq: 
                                                                  Path(f"{stem}-attitude-drift.png"))))
                 if inertia.is_top:
                     figs.append(("top-angles", fg.top_angles(name, tr.t, am["precession"], am["nutation"], Path(f"{stem}-top-angles.png"))))
+        numbers.update(_conserved(run.scenario, name, body))
         report["bodies"][name] = numbers
         report["figures"][name] = {kind: p.name for kind, p in figs}
     _write_markdown(report, out / "report.md")
     _write_html(report, out / "report.html")
     (out / "report.json").write_text(json.dumps(report, indent=1, default=str))
     return report
+
+
+def _conserved(scenario: dict, name: str, body) -> dict:
+    """The section "conserved quantities": each invariant of the body's model
+    (:mod:`astrodyn.analysis.invariants`), the same rows as ``astrodyn run``'s summary."""
+    from astrodyn.analysis.invariants import recorded_invariants
+
+    kinds = {}
+    if body.orbit is not None and len(body.orbit) > 0:
+        kinds["orbit"] = (body.orbit.model[-1], body.orbit.r, body.orbit.v)
+    if body.attitude is not None and len(body.attitude) > 0:
+        kinds["attitude"] = (body.attitude.model[-1], body.attitude.q, body.attitude.w)
+    if not kinds:
+        return {}
+    rows = recorded_invariants(scenario, name, **kinds)
+    section = {}
+    for kind, invs in rows.items():
+        for inv in invs:
+            if inv.conserved:
+                section[f"{kind}: {inv.name} [{inv.unit}], max drift relative to {inv.scale}"] = inv.drift
+            else:
+                section[f"{kind}: {inv.name}"] = "-"
+    return {"conserved quantities": section} if section else {}
 
 
 _LABELS = {

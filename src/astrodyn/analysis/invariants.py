@@ -44,7 +44,7 @@ import numpy as np
 from astrodyn.orbit import zonal_potential
 from astrodyn.rotation import dcm_from_quat
 
-__all__ = ["Invariant", "orbit_invariants", "attitude_invariants"]
+__all__ = ["Invariant", "orbit_invariants", "attitude_invariants", "recorded_invariants"]
 
 
 @dataclass(frozen=True)
@@ -153,3 +153,52 @@ def attitude_invariants(model: str, q: np.ndarray, w: np.ndarray, inertia: np.nd
             rows.append(Invariant("H_i", "N m s", _norm0(hi), _drift(hi, _norm0(hi)), "|H0|"))
     rows.append(Invariant("|q| - 1", "-", float(qn[0] - 1.0), float(np.max(np.abs(qn - 1.0))), "absolute"))
     return rows
+
+
+def recorded_invariants(scenario: dict, body: str, *, orbit: tuple | None = None,
+                        attitude: tuple | None = None) -> dict[str, list[Invariant]]:
+    """The invariant rows of one recorded body, its models and constants taken from the
+    recording's ``scenario`` metadata (``load(path).scenario``: the config as run).
+
+    ``orbit = (model, r, v)``, ``attitude = (model, q, w)`` (arrays as recorded); returns
+    ``{"orbit": [...], "attitude": [...]}`` for the kinds given.  Constants missing from
+    the metadata (a recording of another tool) leave only the rows that need none."""
+    import json
+
+    try:
+        meta = json.loads(scenario.get("json") or "{}")
+    except (TypeError, ValueError):
+        meta = {}
+    meta = meta if isinstance(meta, dict) else {}
+    central = meta.get("central_body") if isinstance(meta.get("central_body"), dict) else {}
+    bm = next((b for b in meta.get("bodies") or [] if isinstance(b, dict) and b.get("name") == body), {})
+    out: dict[str, list[Invariant]] = {}
+    if orbit is not None:
+        model, r, v = orbit
+        om = bm.get("orbit") if isinstance(bm.get("orbit"), dict) else {}
+        mu = central.get("mu")
+        if isinstance(mu, (int, float)) and mu > 0:
+            degree = int(om.get("degree") or (2 if model == "j2" else 0))
+            j = central.get("j") or ()
+            if degree >= 2 and (central.get("radius") is None or len(j) < degree - 1):
+                degree = 0  # constants not recorded: two-body rows only
+            out["orbit"] = orbit_invariants(model, r, v, float(mu), radius=central.get("radius"), j=j, degree=degree,
+                                            third_body=bool(om.get("perturbers")))
+    if attitude is not None:
+        model, q, w = attitude
+        am = bm.get("attitude") if isinstance(bm.get("attitude"), dict) else {}
+        inertia = None
+        try:
+            inertia = np.asarray(am["inertia"], dtype=np.float64).reshape(3, 3)
+        except (KeyError, TypeError, ValueError):
+            pass
+        h = None
+        try:
+            rotors = am.get("rotors") or []
+            if rotors:
+                h = sum((np.asarray(rt["axis"], dtype=np.float64).reshape(3) * float(rt["h"]) for rt in rotors), np.zeros(3))
+        except (KeyError, TypeError, ValueError):
+            h = None
+        out["attitude"] = attitude_invariants(model, q, w, inertia, rotor_momentum=h, mass=am.get("mass"),
+                                              cm=am.get("cm"), g=am.get("g"))
+    return out

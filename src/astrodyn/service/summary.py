@@ -13,13 +13,12 @@ what they published, for comparison.
 
 from __future__ import annotations
 
-import json
 import math
 from pathlib import Path
 
 import numpy as np
 
-from astrodyn.analysis.invariants import attitude_invariants, orbit_invariants
+from astrodyn.analysis.invariants import recorded_invariants
 from astrodyn.scenario import Scenario, plan as make_plan
 
 __all__ = ["file_summary", "propagator_rows", "print_summary"]
@@ -51,14 +50,6 @@ def propagator_rows(result: dict, scenario: Scenario) -> list[dict] | None:
     return rows
 
 
-def _orbit_meta(meta: dict) -> dict:
-    bodies = {}
-    for b in meta.get("bodies", []) if isinstance(meta, dict) else []:
-        if isinstance(b, dict) and isinstance(b.get("name"), str):
-            bodies[b["name"]] = b
-    return bodies
-
-
 def file_summary(path: Path, scenario: Scenario) -> list[dict]:
     """Per body, from the file: models, states recorded per kind, the invariant rows
     (``orbit_invariants`` / ``attitude_invariants``: lists of :class:`Invariant` dicts),
@@ -69,12 +60,6 @@ def file_summary(path: Path, scenario: Scenario) -> list[dict]:
     from astrodyn.recording import load as load_run
 
     run = load_run(path)
-    try:
-        meta = json.loads(run.scenario.get("json") or "{}")
-    except ValueError:
-        meta = {}
-    central = meta.get("central_body") or {}
-    body_meta = _orbit_meta(meta)
     plan = {bp.name: bp for bp in make_plan(scenario).bodies}
     mu = scenario.central_body.mu
     rows = []
@@ -82,13 +67,9 @@ def file_summary(path: Path, scenario: Scenario) -> list[dict]:
         rec = run.bodies.get(b.name)
         bp = plan[b.name]
         row: dict = {"body": b.name, "orbit_model": bp.orbit_model, "attitude_model": bp.attitude_model}
-        bm = body_meta.get(b.name, {})
         if rec is not None and rec.orbit is not None and len(rec.orbit):
             r, v = rec.orbit.r, rec.orbit.v
-            om = bm.get("orbit") or {}
-            inv = orbit_invariants(bp.orbit_model, r, v, mu, radius=central.get("radius"), j=central.get("j") or (),
-                                   degree=int(om.get("degree") or (2 if bp.orbit_model == "j2" else 0)),
-                                   third_body=bool(om.get("perturbers")))
+            inv = recorded_invariants(run.scenario, b.name, orbit=(bp.orbit_model, r, v))["orbit"]
             rn = np.linalg.norm(r, axis=1)
             energy = 0.5 * np.einsum("ij,ij->i", v, v) - mu / rn
             h = np.linalg.norm(np.cross(r, v), axis=1)
@@ -98,13 +79,7 @@ def file_summary(path: Path, scenario: Scenario) -> list[dict]:
                        momentum_drift=float(np.max(np.abs(h - h[0])) / h[0]) if h[0] else 0.0)
         if rec is not None and rec.attitude is not None and len(rec.attitude):
             q, w = rec.attitude.q, rec.attitude.w
-            am = bm.get("attitude") or {}
-            inertia = np.asarray(am["inertia"], dtype=np.float64) if am.get("inertia") is not None else None
-            rotors = am.get("rotors") or []
-            h_rotor = sum((np.asarray(rt["axis"], dtype=np.float64) * float(rt["h"]) for rt in rotors), np.zeros(3)) \
-                if rotors else None
-            inv = attitude_invariants(bp.attitude_model, q, w, inertia, rotor_momentum=h_rotor,
-                                      mass=am.get("mass"), cm=am.get("cm"), g=am.get("g"))
+            inv = recorded_invariants(run.scenario, b.name, attitude=(bp.attitude_model, q, w))["attitude"]
             row.update(attitude_states=len(rec.attitude), attitude_invariants=[i.as_dict() for i in inv],
                        quat_norm_error=float(np.max(np.abs(np.linalg.norm(q, axis=1) - 1.0))))
             named = {i.name: i for i in inv}
