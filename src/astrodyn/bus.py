@@ -31,7 +31,7 @@ Facts measured on eclipse-zenoh 1.10.2 that this module is built around:
   so a stuck propagator is detected with the application :class:`Heartbeat` as well as with
   :func:`declare_alive` / :class:`AliveWatcher` (which catch a process that exits or is killed).
 
-Key layout (design.md section 3; builders live in :mod:`astrodyn.messages`)::
+Key layout (docs/architecture.md, "Processes and keys"; builders live in :mod:`astrodyn.messages`)::
 
     astrodyn/<scenario>/<body>/orbit | attitude | crosscheck   state messages (JSON)
     astrodyn/<scenario>/@batch/<process>                       batch envelopes of state messages

@@ -1,6 +1,6 @@
 """``astrodyn bench service``: the whole service, propagators -> Zenoh -> logger -> MCAP.
 
-What is measured (design.md section 5, issues 4 and 6), each scene run headless through
+What is measured (docs/architecture.md, "Performance targets"), each scene run headless through
 the machinery of ``astrodyn run`` (:func:`astrodyn.service.runner.run_scenario`: real OS
 processes, loopback Zenoh, the end-of-run protocol):
 
@@ -507,7 +507,7 @@ def markdown(rows: list[dict], floods: list[dict], info: dict, argv: list[str] |
         "Each row is one `astrodyn run` (real processes, loopback Zenoh, end-of-run protocol); wall time includes",
         "process start-up. Loss and order are checked by reading the MCAP back with the plain `mcap` reader: every",
         "channel must hold exactly n_steps messages, sequence 0, 1, 2, ... in file order. CPU seconds and peak RSS",
-        "(VmHWM) per process are sampled from /proc. Target (design.md section 5): constellation-1000 at >= 5x",
+        "(VmHWM) per process are sampled from /proc. Target (docs/architecture.md, section 7): constellation-1000 at >= 5x",
         "real time, i.e. 100 000 msg/s, zero loss. The load row paces the propagators at 10x real time",
         "(200 000 msg/s offered): blocking congestion control must slow them instead of dropping.",
         "",
