@@ -20,6 +20,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "analyze": ("astrodyn.analysis", "report and plots from an MCAP file (or a sweep directory)"),
     "export": ("astrodyn.recording.export", "export an MCAP to csv | parquet | oem | aem | foxglove"),
     "recover": ("astrodyn.recording.recover", "rewrite a crashed writer's MCAP with a summary"),
+    "merge": ("astrodyn.recording.merge", "merge partial recordings of one run into one file, without duplicates"),
     "validate": ("astrodyn.scenario", "check a scenario config and print what it would run"),
     "sweep": ("astrodyn.sweep", "Monte Carlo dispersions / parameter sweeps of a scenario on Dask"),
     "router": ("astrodyn.service.router", "a Zenoh router so processes on several hosts meet"),

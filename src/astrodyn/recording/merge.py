@@ -1,0 +1,173 @@
+"""Merge partial recordings of one run into one file, without duplicates.
+
+Two loggers of one run (a hot standby beside the main one, or the parts a restarted
+logger left) each hold some of the run's messages, many of them twice.  :func:`merge`
+reads every input with the crash-tolerant stream reader (:func:`astrodyn.recording.
+stream.open_stream`: complete files and files cut by a killed writer alike), walks all of
+them together in log-time order, and writes each distinct message once, payload and times
+unchanged, with the schemas, channels and metadata records of the inputs (the first
+input's record wins when two carry the same name) and a ``merged_from`` record naming the
+sources.
+
+What counts as the same message: same topic, same log time and same payload bytes (the
+loggers record payloads as received, so two copies of one message are identical).  On a
+state channel (``<body>/orbit|attitude|crosscheck``) ``seq`` also rises with time: a
+message whose ``seq`` is not above the last one written for its topic, with other bytes,
+is a *conflict* (two different states claim one seq) -- counted, the first kept.
+Inputs of different scenarios are refused (their ``scenario`` records disagree).
+
+Writing uses the ``mcap`` package's own :class:`mcap.writer.Writer` (zstd chunks, full
+summary): merging is not a hot path, and a writer this project did not write checks ours.
+"""
+
+from __future__ import annotations
+
+import heapq
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from mcap.writer import CompressionType, Writer
+
+from astrodyn.recording.stream import open_stream
+from astrodyn.recording.writer import RecordingError
+
+__all__ = ["MergeReport", "merge"]
+
+_STATE_KINDS = ("orbit", "attitude", "crosscheck")
+
+
+@dataclass
+class MergeReport:
+    """What :func:`merge` wrote: messages per topic, duplicates dropped, conflicts kept out,
+    and each input's reader report (complete, or where it was cut)."""
+
+    out: str
+    messages: int = 0
+    duplicates: int = 0
+    conflicts: int = 0
+    per_topic: dict[str, int] = field(default_factory=dict)
+    inputs: dict[str, str] = field(default_factory=dict)
+
+    def as_dict(self) -> dict:
+        return {"out": self.out, "messages": self.messages, "duplicates": self.duplicates, "conflicts": self.conflicts,
+                "topics": len(self.per_topic), "inputs": self.inputs}
+
+
+def _seq_of(topic: str, sequence: int) -> int | None:
+    kind = topic.rsplit("/", 1)[-1]
+    return sequence if kind in _STATE_KINDS and "/@" not in topic else None
+
+
+def merge(inputs: list[str | os.PathLike], out: str | os.PathLike, *, chunk_size: int = 1 << 20) -> MergeReport:
+    """Merge the recordings ``inputs`` (paths) into ``out`` (a new file; see the module
+    docstring).  :class:`RecordingError` for an unreadable input, inputs of different
+    scenarios, or an ``out`` that is one of the inputs or exists already."""
+    paths = [Path(p) for p in inputs]
+    out = Path(out)
+    if len(paths) < 1:
+        raise RecordingError("merge: expected at least one input recording")
+    if out.exists():
+        raise RecordingError(f"--out {out}: exists already; merge writes a new file (nothing is overwritten)")
+    if any(p.resolve() == out.resolve() for p in paths):
+        raise RecordingError(f"--out {out}: is one of the inputs")
+    streams = [open_stream(p) for p in paths]
+    try:
+        names = {s.metadata.get("scenario", {}).get("name") for s in streams} - {None}
+        if len(names) > 1:
+            raise RecordingError(f"merge: the inputs record different scenarios ({', '.join(sorted(names))}); "
+                                 "expected parts of one run")
+        report = MergeReport(str(out))
+        tmp = out.with_name(f".{out.name}.merging")
+        with open(tmp, "wb") as f:
+            writer = Writer(f, chunk_size=chunk_size, compression=CompressionType.ZSTD)
+            writer.start(profile="", library="astrodyn merge")
+            _copy(streams, writer, report)
+            seen_meta: set[str] = set()
+            for s in streams:
+                for name, data in s.metadata.items():
+                    if name not in seen_meta:
+                        writer.add_metadata(name, {str(k): str(v) for k, v in data.items()})
+                        seen_meta.add(name)
+            writer.add_metadata("merged_from", {"files": ";".join(str(p) for p in paths),
+                                                "duplicates": str(report.duplicates), "conflicts": str(report.conflicts)})
+            writer.finish()
+        os.replace(tmp, out)
+        for p, s in zip(paths, streams):
+            report.inputs[str(p)] = s.report()
+        return report
+    finally:
+        for s in streams:
+            s.close()
+
+
+def _copy(streams, writer: Writer, report: MergeReport) -> None:
+    iters = [s.messages() for s in streams]
+    heap = []
+    for k, it in enumerate(iters):
+        m = next(it, None)
+        if m is not None:
+            heap.append((m.log_time, k, m))
+    heapq.heapify(heap)
+    schema_ids: dict[tuple, int] = {}
+    channel_ids: dict[str, int] = {}
+    last_seq: dict[str, int] = {}
+    window_time = None
+    window: set[tuple] = set()
+    while heap:
+        log_time, k, m = heapq.heappop(heap)
+        nxt = next(iters[k], None)
+        if nxt is not None:
+            heapq.heappush(heap, (nxt.log_time, k, nxt))
+        if log_time != window_time:
+            window_time, window = log_time, set()
+        key = (m.topic, m.data)
+        if key in window:
+            report.duplicates += 1
+            continue
+        seq = _seq_of(m.topic, m.sequence)
+        if seq is not None and m.topic in last_seq and seq <= last_seq[m.topic]:
+            report.conflicts += 1  # same seq again with other bytes (or out of order)
+            continue
+        window.add(key)
+        cid = channel_ids.get(m.topic)
+        if cid is None:
+            cid = channel_ids[m.topic] = _register(streams[k], writer, m, schema_ids)
+        writer.add_message(cid, log_time=m.log_time, data=m.data, publish_time=m.publish_time, sequence=m.sequence)
+        if seq is not None:
+            last_seq[m.topic] = seq
+        report.messages += 1
+        report.per_topic[m.topic] = report.per_topic.get(m.topic, 0) + 1
+
+
+def _register(stream, writer: Writer, m, schema_ids: dict) -> int:
+    channel = next((c for c in stream.channels.values() if c.topic == m.topic), None)
+    schema = stream.schemas.get(channel.schema_id) if channel is not None else None
+    sid = 0
+    if schema is not None:
+        skey = (schema.name, schema.encoding, schema.data)
+        sid = schema_ids.get(skey)
+        if sid is None:
+            sid = schema_ids[skey] = writer.register_schema(schema.name, schema.encoding, schema.data)
+    return writer.register_channel(m.topic, m.message_encoding, sid,
+                                   dict(channel.metadata) if channel is not None else {})
+
+
+def main(argv: list[str] | None = None) -> int:
+    import argparse
+    import json
+    import sys
+
+    ap = argparse.ArgumentParser(prog="astrodyn merge",
+                                 description="Merge partial recordings of one run (standby loggers, restarted "
+                                             "loggers' parts) into one file without duplicates.")
+    ap.add_argument("inputs", nargs="+", help="MCAP recordings of the same run (complete or cut)")
+    ap.add_argument("--out", required=True, help="the merged MCAP file to write (must not exist)")
+    args = ap.parse_args(argv)
+    try:
+        report = merge(args.inputs, args.out)
+    except RecordingError as exc:
+        print(f"astrodyn merge: {exc}", file=sys.stderr)
+        return 1
+    print(json.dumps(report.as_dict()))
+    return 0
