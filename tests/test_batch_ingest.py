@@ -172,7 +172,7 @@ def test_compiled_and_python_paths_write_the_same_file(tmp_path, chaos, chunk_si
     ref_logger, ref_rec = _logger(str(tmp_path / "ref.mcap"), **kw)
     slow_calls = []
     python_path = fast_logger._record
-    fast_logger._record = lambda key, payload, now_ns: (slow_calls.append(key), python_path(key, payload, now_ns))
+    fast_logger._record = lambda key, payload, now_ns, *sender: (slow_calls.append(key), python_path(key, payload, now_ns, *sender))
     for k, items in enumerate(batches):
         now_ns = EPOCH_NS + 10**9 * k  # the receive time, recorded as publish_time
         fast_logger._record_batch(m.batch_key("c", "orbit"), m.encode_batch(items), now_ns)
