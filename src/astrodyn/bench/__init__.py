@@ -19,6 +19,7 @@ SUITES = {
     "soak": "astrodyn.bench.soak",
     "encode": "astrodyn.bench.encode",
     "auth": "astrodyn.bench.auth",
+    "calls": "astrodyn.bench.calls",
 }
 
 

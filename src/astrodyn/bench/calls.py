@@ -1,0 +1,245 @@
+"""Small calls on busy cores (``astrodyn bench calls [--load]``): where the service lives.
+
+The service calls the kernels with small batches once per step, from several processes
+that share the cores.  This suite times, in one process and one run:
+
+* exact torque-free, 1 body x 1001 times (the 1000 s Dzhanibekov flip), a new state each call;
+* exact torque-free, 1000 bodies x 1 time;
+* exact torque-free, one new state at one time (the scalar call);
+* orbit ``propagate``, one state (the scalar call);
+* peers on the same problems: heyoka's Taylor integrator (tolerance 1e-15; the batch mode,
+  SIMD width 4, for 1000 bodies), and for the DOP853 row scipy's DOP853 against
+  ``propagate_attitude(method="dop853")`` per function evaluation;
+
+each with numba at 1 and at 2 threads, on an idle machine and -- with ``--load`` -- while
+other astrodyn processes (one per core) run the service's kernels in a loop (started and
+stopped by the benchmark, by PID).  Output: a Markdown table for docs/benchmarks.md.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+
+DZHANIBEKOV = (np.array([1.0, 2.0, 3.0]), np.array([1e-3, 1.0, 1e-3]))
+
+
+def _best(fn, repeat: int, number: int) -> float:
+    """Best of ``repeat`` timings of ``number`` calls, seconds per call."""
+    best = float("inf")
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        for _ in range(number):
+            fn()
+        best = min(best, (time.perf_counter() - t0) / number)
+    return best
+
+
+# --------------------------------------------------------------------------- load
+
+
+def load_worker(seconds: float) -> None:
+    """One background process of the load: the service's kernels in a loop (numba's
+    default threads, as a propagator process has them today)."""
+    from astrodyn.attitude import torque_free
+    from astrodyn.orbit import propagate
+
+    rng = np.random.default_rng(os.getpid())
+    r0 = np.array([7e6, 0.0, 0.0]) + rng.normal(scale=1e5, size=(1000, 3))
+    v0 = np.array([0.0, 7.5e3, 1e3]) + rng.normal(scale=50.0, size=(1000, 3))
+    inertia, w0 = DZHANIBEKOV
+    w0s = w0 + rng.normal(scale=1e-3, size=(200, 3))
+    end = time.monotonic() + seconds
+    k = 0
+    while time.monotonic() < end:
+        propagate(r0, v0, 10.0 * k, 3.986004418e14)
+        torque_free(inertia, w0s, np.array([1.0, 0.0, 0.0, 0.0]), 0.1 * k)
+        k += 1
+
+
+class Load:
+    """``n`` background :func:`load_worker` processes for the duration of a ``with``."""
+
+    def __init__(self, n: int, seconds: float = 3600.0):
+        self.n, self.seconds = n, seconds
+        self.procs: list[subprocess.Popen] = []
+
+    def __enter__(self) -> Load:
+        for _ in range(self.n):
+            self.procs.append(subprocess.Popen([sys.executable, "-m", "astrodyn.bench.calls", "--load-worker",
+                                                str(self.seconds)], stdin=subprocess.DEVNULL))
+        time.sleep(20.0)  # past their kernels' first (cached) load
+        return self
+
+    def __exit__(self, *exc) -> None:
+        for p in self.procs:
+            if p.poll() is None:
+                os.kill(p.pid, signal.SIGTERM)
+        for p in self.procs:
+            try:
+                p.wait(timeout=10)
+            except subprocess.TimeoutExpired:
+                os.kill(p.pid, signal.SIGKILL)
+                p.wait(timeout=10)
+
+
+# --------------------------------------------------------------------------- cases
+
+
+def _astrodyn_cases(repeat: int) -> dict[str, float]:
+    from astrodyn.attitude import torque_free
+    from astrodyn.orbit import propagate
+
+    inertia, w0 = DZHANIBEKOV
+    q0 = np.array([1.0, 0.0, 0.0, 0.0])
+    t1001 = np.linspace(0.0, 1000.0, 1001)
+    states = [w0 * (1.0 + 1e-9 * k) for k in range(64)]
+    w1000 = w0 + np.random.default_rng(1).normal(scale=1e-3, size=(1000, 3))
+    r0, v0 = np.array([7e6, 1e5, -2e5]), np.array([10.0, 7.5e3, 1e3])
+    it = iter(range(10**12))
+    out = {
+        "torque-free 1 body x 1001 times": _best(lambda: torque_free(inertia, states[next(it) % 64], q0, t1001), repeat, 20),
+        "torque-free 1000 bodies x 1 time": _best(lambda: torque_free(inertia, w1000, q0, 12.5), repeat, 20),
+        "torque-free scalar (new state, 1 time)": _best(lambda: torque_free(inertia, states[next(it) % 64], q0, 12.5),
+                                                         repeat, 2000),
+        "propagate scalar (1 state)": _best(lambda: propagate(r0, v0, 60.0, 3.986004418e14), repeat, 5000),
+    }
+    return out
+
+
+def _rigid_body_rhs(inertia):
+    I1, I2, I3 = inertia
+
+    def rhs(t, y):
+        w1, w2, w3, e0, e1, e2, e3 = y
+        return [(I2 - I3) / I1 * w2 * w3, (I3 - I1) / I2 * w3 * w1, (I1 - I2) / I3 * w1 * w2,
+                -0.5 * (e1 * w1 + e2 * w2 + e3 * w3),
+                0.5 * (e0 * w1 + e2 * w3 - e3 * w2),
+                0.5 * (e0 * w2 + e3 * w1 - e1 * w3),
+                0.5 * (e0 * w3 + e1 * w2 - e2 * w1)]
+
+    return rhs
+
+
+def _heyoka_cases(repeat: int) -> dict[str, float]:
+    """heyoka on the same torque-free problem (Euler's equations + Euler-parameter
+    kinematics of ``astrodyn.rotation.quat_rate``), tolerance 1e-15."""
+    import heyoka as hy
+
+    inertia, w0 = DZHANIBEKOV
+    w1, w2, w3, e0, e1, e2, e3 = hy.make_vars("w1", "w2", "w3", "e0", "e1", "e2", "e3")
+    f = _rigid_body_rhs(inertia)(0.0, [w1, w2, w3, e0, e1, e2, e3])
+    sys_ = list(zip((w1, w2, w3, e0, e1, e2, e3), f))
+    y0 = [*w0, 1.0, 0.0, 0.0, 0.0]
+    ta = hy.taylor_adaptive(sys_, y0, tol=1e-15)
+    t1001 = np.linspace(0.0, 1000.0, 1001)
+
+    def one_body():
+        ta.time = 0.0
+        ta.state[:] = y0
+        ta.propagate_grid(t1001)
+
+    batch = hy.taylor_adaptive_batch(sys_, np.array([y0] * 4).T.copy(), tol=1e-15)
+    w1000 = w0 + np.random.default_rng(1).normal(scale=1e-3, size=(1000, 3))
+
+    def many_bodies():
+        for k in range(0, 1000, 4):
+            batch.set_time(0.0)
+            batch.state[:3] = w1000[k:k + 4].T
+            batch.state[3] = 1.0
+            batch.state[4:] = 0.0
+            batch.propagate_until(12.5)
+
+    return {"torque-free 1 body x 1001 times": _best(one_body, repeat, 5),
+            "torque-free 1000 bodies x 1 time": _best(many_bodies, repeat, 3)}
+
+
+def _dop853_case(repeat: int) -> tuple[dict, dict]:
+    """astrodyn's DOP853 vs scipy's on the same torque-free problem: seconds per function
+    evaluation and the number of evaluations."""
+    from scipy.integrate import solve_ivp
+
+    from astrodyn.attitude import propagate_attitude
+
+    inertia, w0 = DZHANIBEKOV
+    q0 = np.array([1.0, 0.0, 0.0, 0.0])
+    t = np.linspace(0.0, 100.0, 101)
+    info = {}
+
+    def ours():
+        info.update(propagate_attitude(inertia, w0, q0, t, method="dop853", rtol=1e-12, atol=1e-14)[2])
+
+    secs = _best(ours, repeat, 1)
+    rhs = _rigid_body_rhs(inertia)
+    sol = {}
+
+    def scipy_run():
+        sol["r"] = solve_ivp(rhs, (0.0, 100.0), [*w0, *q0], method="DOP853", t_eval=t, rtol=1e-12, atol=1e-14)
+
+    secs_sp = _best(scipy_run, repeat, 1)
+    return ({"s": secs, "nfev": info.get("nfev")}, {"s": secs_sp, "nfev": int(sol["r"].nfev)})
+
+
+def measure(repeat: int, with_peers: bool = True) -> dict:
+    import numba
+
+    rows: dict = {}
+    for threads in (1, 2):
+        numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
+        for name, s in _astrodyn_cases(repeat).items():
+            rows.setdefault(name, {})[f"astrodyn {threads} thr"] = s
+    numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)
+    if with_peers:
+        try:
+            for name, s in _heyoka_cases(repeat).items():
+                rows.setdefault(name, {})["heyoka"] = s
+        except ImportError:
+            pass
+        ours, sp = _dop853_case(repeat)
+        rows["DOP853 torque-free 100 s, rtol 1e-12"] = {
+            "astrodyn 2 thr": ours["s"], "scipy": sp["s"],
+            "note": f"nfev {ours['nfev']} vs {sp['nfev']}; per evaluation "
+                    f"{ours['s'] / max(1, ours['nfev'] or 1) * 1e6:.2f} vs {sp['s'] / sp['nfev'] * 1e6:.2f} us"}
+    return rows
+
+
+def _fmt(s) -> str:
+    if s is None or isinstance(s, str):
+        return s or ""
+    return f"{s * 1e3:.3f} ms" if s >= 1e-3 else f"{s * 1e6:.2f} us"
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog="astrodyn bench calls", description=__doc__.split("\n\n")[0])
+    ap.add_argument("--load", action="store_true", help="also measure while one astrodyn kernel loop per core runs")
+    ap.add_argument("--repeat", type=int, default=5, help="best of this many timings (default 5)")
+    ap.add_argument("--load-worker", type=float, default=None, help=argparse.SUPPRESS)
+    args = ap.parse_args(argv)
+    if args.load_worker is not None:
+        load_worker(args.load_worker)
+        return 0
+    if args.repeat < 1:
+        print(f"astrodyn bench calls: --repeat: expected an integer >= 1, got {args.repeat}", file=sys.stderr)
+        return 2
+    regimes = {"idle": measure(args.repeat)}
+    if args.load:
+        with Load(os.cpu_count() or 2):
+            regimes["loaded"] = measure(args.repeat)
+    cols = ["astrodyn 1 thr", "astrodyn 2 thr", "heyoka", "scipy", "note"]
+    print(f"load average at the end: {os.getloadavg()[0]:.2f}")
+    print("| case | regime | " + " | ".join(cols) + " |")
+    print("| --- | --- | " + " | ".join("---:" for _ in cols) + " |")
+    for regime, rows in regimes.items():
+        for name, row in rows.items():
+            print(f"| {name} | {regime} | " + " | ".join(_fmt(row.get(c)) for c in cols) + " |")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
