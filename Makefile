@@ -27,6 +27,7 @@ demo: $(STAMP)
 	$(VENV)/bin/astrodyn demo
 
 bench: $(STAMP)
+	$(PY) -m pip install -q -e '.[test,plot,bench]'
 	$(VENV)/bin/astrodyn bench all
 
 clean:
