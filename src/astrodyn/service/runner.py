@@ -176,7 +176,7 @@ def _watch(scenario: Scenario, p, children: dict, beats, alive, progress: bool, 
            interrupted: dict | None = None) -> str | None:
     """Wait for the propagators to finish; return a failure description or None."""
     propagators = [k for k in children if k != "logger"]
-    duration = scenario.output_times()[-1] if scenario.n_steps else 0.0
+    duration = (scenario.n_steps - 1) / scenario.rate if scenario.n_steps else 0.0  # last output instant, no array
     last_print = 0.0
     t0 = time.monotonic()
     last_msgs, last_time = 0, t0
