@@ -144,3 +144,26 @@ def test_analyze_the_real_demo_run(tmp_path):
         for file in figs.values():
             assert (tmp_path / "rep" / file).stat().st_size > 10_000
     assert rep["bodies"]["iss"]["orbit"]["energy_drift_max"] < 1e-13  # Kepler body
+
+
+def test_report_opens_with_one_line_per_body_from_the_file(report):
+    """The "At a glance" lines come before any table and state, per body, the number of
+    states actually in the file (counted here with the plain ``mcap`` reader) and the worst
+    drift among the conserved quantities listed further down."""
+    from mcap.reader import make_reader
+
+    out, rep, _, _ = report
+    counts: dict[str, int] = {}
+    with open(rep["file"], "rb") as f:
+        for _, channel, _ in make_reader(f).iter_messages():
+            counts[channel.topic] = counts.get(channel.topic, 0) + 1
+    md = (out / "report.md").read_text()
+    page = (out / "report.html").read_text()
+    glance = md.split("At a glance:", 1)[1].split("## ", 1)[0]
+    assert md.index("At a glance:") < md.index("| quantity |") and "At a glance:" in page
+    for body in ("leo", "geo"):
+        line = next(x for x in glance.splitlines() if x.startswith(f"- {body}:"))
+        n_orbit = next(n for topic, n in counts.items() if topic.endswith(f"/{body}/orbit"))
+        assert f"orbit (kepler): {n_orbit} states" in line
+        drifts = [v for v in rep["bodies"][body]["conserved quantities"].values() if isinstance(v, float)]
+        assert f"largest drift of a conserved quantity {max(drifts):.2g}" in line

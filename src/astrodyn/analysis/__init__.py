@@ -158,12 +158,37 @@ def _rows(section: dict) -> list[tuple[str, str]]:
     return [(_LABELS.get(k, k), ", ".join(v) if isinstance(v, list) else _fmt(v)) for k, v in section.items()]
 
 
+def at_a_glance(report: dict) -> list[str]:
+    """One sentence per body for the top of the report: what was recorded, over what span,
+    and the worst figure of merit (the largest drift of a conserved quantity of the body's
+    model, and the largest difference to the REBOUND cross-check), so a reader sees whether
+    the run is trustworthy before any table."""
+    lines = []
+    for name, numbers in report["bodies"].items():
+        parts = []
+        for kind in ("orbit", "attitude"):
+            sec = numbers.get(kind)
+            if sec:
+                parts.append(f"{kind} ({', '.join(sec.get('models', []))}): {sec.get('states', '?')} states over "
+                             f"{_fmt(float(sec.get('t_span_s', 0.0)))} s")
+        conserved = {k: v for k, v in numbers.get("conserved quantities", {}).items() if isinstance(v, float)}
+        if conserved:
+            worst = max(conserved, key=lambda k: conserved[k])
+            parts.append(f"largest drift of a conserved quantity {conserved[worst]:.2g} ({worst.split(',')[0]})")
+        cc = numbers.get("crosscheck")
+        if cc:
+            parts.append(f"differs from {cc.get('reference', 'REBOUND')} by at most {cc['dr_max_m']:.2g} m")
+        lines.append(f"{name}: " + ("; ".join(parts) if parts else "no states") + ".")
+    return lines
+
+
 def _write_markdown(report: dict, path: Path) -> None:
     lines = [f"# astrodyn report: {report['scenario']}", "",
              f"File `{report['file']}`, epoch {report['epoch']}, {report['messages']} messages, "
              f"Euler sequence {report['euler_sequence']}.", ""]
     if not report["complete"]:
         lines += [f"**Incomplete file**: {report['file_report'] or 'invalid messages skipped'}.", ""]
+    lines += ["At a glance:", ""] + [f"- {line}" for line in at_a_glance(report)] + [""]
     for name, numbers in report["bodies"].items():
         lines += [f"## {name}", ""]
         for section, values in numbers.items():
@@ -185,6 +210,7 @@ def _write_html(report: dict, path: Path) -> None:
              f"Euler sequence {e(report['euler_sequence'])}.</p>"]
     if not report["complete"]:
         parts.append(f"<p><b>Incomplete file</b>: {e(report['file_report'] or 'invalid messages skipped')}.</p>")
+    parts.append("<p>At a glance:</p><ul>" + "".join(f"<li>{e(line)}</li>" for line in at_a_glance(report)) + "</ul>")
     for name, numbers in report["bodies"].items():
         parts.append(f"<h2>{e(name)}</h2>")
         for section, values in numbers.items():

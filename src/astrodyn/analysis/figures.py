@@ -37,9 +37,11 @@ def _save(fig, path: Path) -> Path:
     return path
 
 
-def _stacked(t, series, labels, title, path, dots=()):
+def _stacked(t, series, labels, title, path, dots=(), log=False):
     """One panel per series over a shared time axis; series indices in ``dots`` are drawn
-    as points (angles that wrap at +-180 deg would otherwise draw vertical lines)."""
+    as points (angles that wrap at +-180 deg would otherwise draw vertical lines).  With
+    ``log`` the y axes are logarithmic (errors and drifts span decades; exact zeros, such as
+    the drift at the first instant, are left out of the plot, not clipped to a made-up floor)."""
     ts, tl = time_axis(t)
     fig, axes = plt.subplots(len(series), 1, figsize=(7.5, 1.6 + 1.45 * len(series)), sharex=True,
                              constrained_layout=True)
@@ -49,6 +51,8 @@ def _stacked(t, series, labels, title, path, dots=()):
             ax.plot(ts, y, ".", ms=1.5)
         else:
             ax.plot(ts, y, lw=1.0)
+        if log and np.any(np.asarray(y) > 0):
+            ax.set_yscale("log", nonpositive="mask")
         ax.set_ylabel(label)
     axes[-1].set_xlabel(tl)
     fig.suptitle(title)
@@ -111,12 +115,12 @@ def elements(name: str, t: np.ndarray, el, path: Path) -> Path:
 def orbit_drift(name: str, t: np.ndarray, energy_drift, h_drift, path: Path) -> Path:
     """Relative energy and angular-momentum drift (dimensionless)."""
     return _stacked(t, [energy_drift, h_drift], ["|E - E0| / |E0| (-)", "|h - h0| / |h0| (-)"],
-                    f"{name}: specific energy and angular momentum drift", path)
+                    f"{name}: specific energy and angular momentum drift (log scale)", path, log=True)
 
 
 def crosscheck(name: str, t: np.ndarray, dr_norm, dv_norm, path: Path) -> Path:
     """Difference to the REBOUND cross-check (m, m/s)."""
-    return _stacked(t, [dr_norm, dv_norm], ["|dr| (m)", "|dv| (m/s)"], f"{name}: difference to REBOUND", path)
+    return _stacked(t, [dr_norm, dv_norm], ["|dr| (m)", "|dv| (m/s)"], f"{name}: difference to REBOUND (log scale)", path, log=True)
 
 
 def euler_angles(name: str, t: np.ndarray, angles, seq: str, path: Path) -> Path:
@@ -185,7 +189,7 @@ def polhode(name: str, h_body: np.ndarray, inertia: np.ndarray, path: Path) -> P
 
 def attitude_drift(name: str, t: np.ndarray, energy_drift, h_drift, path: Path) -> Path:
     return _stacked(t, [energy_drift, h_drift], ["|T - T0| / |T0| (-)", "|Hi - Hi0| / |Hi0| (-)"],
-                    f"{name}: kinetic energy and inertial angular momentum drift", path)
+                    f"{name}: kinetic energy and inertial angular momentum drift (log scale)", path, log=True)
 
 
 def top_angles(name: str, t: np.ndarray, precession, nutation, path: Path) -> Path:

@@ -125,6 +125,7 @@ def attitude_metrics(t: np.ndarray, q: np.ndarray, w: np.ndarray, seq: str,
     out = {"t": t, "euler": angles, "seq": seq}
     summary = {
         "states": int(t.size),
+        "t_span_s": float(t[-1] - t[0]) if t.size else 0.0,
         "quat_norm_error_max": float(np.max(np.abs(np.linalg.norm(q, axis=-1) - 1.0))) if t.size else 0.0,
         "rate_max_rad_s": float(np.max(np.linalg.norm(w, axis=-1))) if t.size else 0.0,
     }
