@@ -32,6 +32,9 @@ What each format writes (one file per channel or body, named after the body):
                same line) are the angular velocity of frame B relative to frame A, in
                frame-B (body) components, in **deg/s**: ``w * 180/pi`` of the recorded
                ``w`` (rad/s), so ``dC/dt = -[w x] C``.
+``aem1``     the same attitude ephemeris as ADM version 1.0 (CCSDS 504.0-B-1) for readers
+             that know only version 1: ``ATTITUDE_DIR = A2B``, ``QUATERNION_TYPE = LAST``,
+             plain QUATERNION lines (no rates: see :func:`write_aem`).
 ``foxglove`` ``<file>.foxglove.mcap``: every recorded channel copied unchanged, plus a
              ``foxglove.FrameTransform`` JSON channel per body on ``foxglove/<body>/tf``
              (parent frame = the orbit frame, e.g. ``GCRF``, child = the body name).
@@ -79,12 +82,12 @@ from astrodyn.recording.writer import McapRecorder, RecordingError
 from astrodyn.rotation import quat_to_scalar_last
 
 __all__ = [
-    "FORMATS", "ExportError", "export", "write_csv", "write_parquet", "write_oem", "write_aem",
+    "FORMATS", "ExportError", "export", "write_csv", "write_parquet", "write_oem", "write_aem", "write_aem_v1",
     "write_foxglove", "ccsds_epochs", "parse_ccsds_epoch", "FRAME_TRANSFORM_SCHEMA", "SCENE_UPDATE_SCHEMA",
     "SCENE_TOPIC", "MAX_LINE_POINTS", "MAX_SCENE_POINTS", "scene_updates", "line_indices", "main",
 ]
 
-FORMATS = ("csv", "parquet", "oem", "aem", "foxglove")
+FORMATS = ("csv", "parquet", "oem", "aem", "aem1", "foxglove")
 _CCSDS_SCALES = {"utc": "UTC", "tai": "TAI", "tt": "TT", "tdb": "TDB", "tcb": "TCB", "tcg": "TCG", "ut1": "UT1"}
 _XYZ = ("x", "y", "z")
 
@@ -373,10 +376,19 @@ def _body_rates(tr: Track) -> np.ndarray | None:
     return w
 
 
-def write_aem(run: Run, out: Path) -> list[Path]:
-    """``<body>.aem`` per body with an attitude channel (CCSDS 504.0-B-2 KVN):
-    QUATERNION/ANGVEL when every attitude message carries finite body rates ``w``,
-    plain QUATERNION otherwise (see the module docstring)."""
+def write_aem(run: Run, out: Path, version: str = "2.0") -> list[Path]:
+    """``<body>.aem`` per body with an attitude channel, CCSDS KVN.
+
+    ``version="2.0"`` (504.0-B-2, the default): QUATERNION/ANGVEL when every attitude
+    message carries finite body rates ``w``, plain QUATERNION otherwise (see the module
+    docstring).  ``version="1.0"`` (504.0-B-1, ``--format aem1``) for readers that know
+    only ADM version 1 (e.g. the ``ccsds-ndm`` package): ``ATTITUDE_DIR = A2B``,
+    ``QUATERNION_TYPE = LAST`` and plain QUATERNION data lines; the rates are left out,
+    because version 1's QUATERNION/RATE gives its rates in the order of an
+    ``EULER_ROT_SEQ`` and readers differ on what they mean (version 2's ANGVEL is exact).
+    """
+    if version not in ("1.0", "2.0"):
+        raise ExportError(f"AEM version: expected 1.0 or 2.0, got {version!r}")
     written = []
     for name, body in run.bodies.items():
         tr = body.attitude
@@ -384,17 +396,21 @@ def write_aem(run: Run, out: Path) -> list[Path]:
             continue
         epochs, system = ccsds_epochs(run, tr.t, tr.log_time)
         frame_a = _orbit_frame(body)
-        w = _body_rates(tr)
+        w = _body_rates(tr) if version == "2.0" else None
         comments = ["Quaternion rotates REF_FRAME_A into REF_FRAME_B: v_B = C(q) v_A (Baruh ch. 7),",
                     "data columns Q1 Q2 Q3 QC with the scalar QC last (astrodyn q = (QC, Q1, Q2, Q3))."]
+        frames = [("REF_FRAME_A", frame_a), ("REF_FRAME_B", "SC_BODY_1")]
         meta_tail = [_kvn("ATTITUDE_TYPE", "QUATERNION")]
-        if w is not None:
+        if version == "1.0":
+            comments.append("ADM version 1 output: body rates are in the version 2.0 export (QUATERNION/ANGVEL).")
+            frames.append(("ATTITUDE_DIR", "A2B"))
+            meta_tail.append(_kvn("QUATERNION_TYPE", "LAST"))
+        elif w is not None:
             comments += ["ANGVEL_X ANGVEL_Y ANGVEL_Z: angular velocity of REF_FRAME_B relative to REF_FRAME_A,",
                          "components in ANGVEL_FRAME = SC_BODY_1 (body axes), deg/s: the recorded w (rad/s) * 180/pi;",
                          "dC/dt = -[w x] C."]
             meta_tail = [_kvn("ATTITUDE_TYPE", "QUATERNION/ANGVEL"), _kvn("ANGVEL_FRAME", "SC_BODY_1")]
-        lines = _message_head("CCSDS_AEM_VERS", "2.0", run, tr, comments, name,
-                              [("REF_FRAME_A", frame_a), ("REF_FRAME_B", "SC_BODY_1")], system, epochs) + [
+        lines = _message_head("CCSDS_AEM_VERS", version, run, tr, comments, name, frames, system, epochs) + [
             *meta_tail,
             "META_STOP",
             "",
@@ -412,6 +428,11 @@ def write_aem(run: Run, out: Path) -> list[Path]:
         path.write_text("\n".join(lines) + "\n")
         written.append(path)
     return written
+
+
+def write_aem_v1(run: Run, out: Path) -> list[Path]:
+    """``--format aem1``: :func:`write_aem` with ``version="1.0"``."""
+    return write_aem(run, out, version="1.0")
 
 
 # ------------------------------------------------------------------------------ Foxglove
@@ -610,7 +631,8 @@ def write_foxglove(run: Run, out: Path, max_line_points: int = MAX_LINE_POINTS) 
 
 # ------------------------------------------------------------------------------ driver
 
-_WRITERS = {"csv": write_csv, "parquet": write_parquet, "oem": write_oem, "aem": write_aem, "foxglove": write_foxglove}
+_WRITERS = {"csv": write_csv, "parquet": write_parquet, "oem": write_oem, "aem": write_aem, "aem1": write_aem_v1,
+            "foxglove": write_foxglove}
 
 
 def export(path: str | os.PathLike, fmt: str, out: str | os.PathLike) -> list[Path]:
@@ -628,7 +650,7 @@ def export(path: str | os.PathLike, fmt: str, out: str | os.PathLike) -> list[Pa
         raise ExportError(f"--out: cannot create directory {out}: {exc.strerror or exc}") from None
     files = _WRITERS[fmt](run, out)
     if not files:
-        what = {"oem": "orbit", "aem": "attitude"}.get(fmt, "message")
+        what = {"oem": "orbit", "aem": "attitude", "aem1": "attitude"}.get(fmt, "message")
         raise ExportError(f"{run.path}: no {what} channels to export as {fmt}")
     return files
 
@@ -636,7 +658,7 @@ def export(path: str | os.PathLike, fmt: str, out: str | os.PathLike) -> list[Pa
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="astrodyn export", description="Export an MCAP recording to other formats.")
     ap.add_argument("file", help="MCAP file recorded by astrodyn")
-    ap.add_argument("--format", required=True, choices=FORMATS, help="csv | parquet | oem | aem | foxglove")
+    ap.add_argument("--format", required=True, choices=FORMATS, help="csv | parquet | oem | aem | aem1 (CCSDS ADM version 1) | foxglove")
     ap.add_argument("--out", required=True, help="output directory (created if missing)")
     args = ap.parse_args(argv)
     try:
