@@ -226,37 +226,37 @@ def test_elliptic_beyond_resolved_phase_is_finite():
 
 
 # ---------------------------------------------------------------------------
-# own vectorizable kernels (astrodyn.orbit.kepler._sincos, _atan2, _cbrt_start)
+# own vectorizable kernels (astrodyn.orbit.floating.sincos_vec, atan2_vec, cbrt_start)
 # ---------------------------------------------------------------------------
 def _kernel_loops():
     from astrodyn.jit import jit
-    from astrodyn.orbit.kepler import _asinh_upper_own, _atan2, _cbrt_start, _exp, _log, _sincos
+    from astrodyn.orbit.floating import asinh_upper_vec, atan2_vec, cbrt_start, exp_vec, log_vec, sincos_vec
 
     @jit(cache=False)
     def sincos_loop(x, s, c):
         for i in range(x.shape[0]):
-            s[i], c[i] = _sincos(x[i])
+            s[i], c[i] = sincos_vec(x[i])
 
     @jit(cache=False)
     def atan2_loop(y, x, out):
         for i in range(x.shape[0]):
-            out[i] = _atan2(y[i], x[i])
+            out[i] = atan2_vec(y[i], x[i])
 
     @jit(cache=False)
     def cbrt_loop(x, out):
         for i in range(x.shape[0]):
-            out[i] = _cbrt_start(x[i])
+            out[i] = cbrt_start(x[i])
 
     @jit(cache=False)
     def exp_loop(x, out):
         for i in range(x.shape[0]):
-            out[i] = _exp(x[i])
+            out[i] = exp_vec(x[i])
 
     @jit(cache=False)
     def log_loop(x, out, bound):
         for i in range(x.shape[0]):
-            out[i] = _log(x[i])
-            bound[i] = _asinh_upper_own(x[i])
+            out[i] = log_vec(x[i])
+            bound[i] = asinh_upper_vec(x[i])
 
     return sincos_loop, atan2_loop, cbrt_loop, exp_loop, log_loop
 

@@ -38,7 +38,7 @@ from astrodyn.orbit.universal import (
     _Z_WINDOW,
     _classify,
     _fg_universal_safe,
-    _kind_loop,
+    formulation_rows,
     _stumpff_window,
     _uni_fast,
     _uni_fast_pass,
@@ -83,7 +83,7 @@ def window_states(n, seed, mu=MU_E):
     r0, v0 = np.ascontiguousarray(r0), np.ascontiguousarray(v0)
     dt = rng.choice([-1.0, 1.0], m) * np.sqrt(rp**3 / mu) * 10 ** rng.uniform(-12.0, 4.0, m)
     kinds = np.empty(m, np.int64)
-    _kind_loop(r0, v0, dt, np.full(m, mu), kinds)
+    formulation_rows(r0, v0, dt, np.full(m, mu), kinds)
     sel = np.flatnonzero(kinds == WINDOW)[:n]
     assert len(sel) == n
     return r0[sel], v0[sel], dt[sel]

@@ -78,7 +78,7 @@ import numpy as np
 
 from astrodyn.jit import jit
 from astrodyn.attitude.euler import inertia_tensor, principal_axes
-from astrodyn.orbit.universal import _lagrange_scalar
+from astrodyn.orbit.universal import lagrange_coefficients_scalar
 from astrodyn.rotation import quat_conjugate, quat_from_dcm, quat_multiply
 from astrodyn.attitude.torques import (
     ConstantTorque,
@@ -362,9 +362,9 @@ def _kick(M, q, dt, parts, tau_body, tau_inertial, com, force, gg_mu, gg_inertia
 @jit
 def _orbit_node(orbit_rv, mu, t, node):
     """``node[:] = (r, v, a)`` of the two-body orbit at time ``t`` (s): exact
-    Lagrange coefficients (:func:`astrodyn.orbit.universal._lagrange_scalar`),
+    Lagrange coefficients (:func:`astrodyn.orbit.universal.lagrange_coefficients_scalar`),
     ``a = -mu r / |r|^3``."""
-    f, g, fd, gd = _lagrange_scalar(
+    f, g, fd, gd = lagrange_coefficients_scalar(
         orbit_rv[0, 0], orbit_rv[0, 1], orbit_rv[0, 2], orbit_rv[1, 0], orbit_rv[1, 1], orbit_rv[1, 2],
         t + orbit_rv[2, 0], mu,
     )  # fmt: skip

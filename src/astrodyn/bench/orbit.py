@@ -239,18 +239,18 @@ def branch_timings(r0, v0, dt, mu: float, repeats: int) -> list[tuple[str, int, 
 
     The states are split by the formulation :mod:`astrodyn.orbit.universal` picks
     for them (ellipse, hyperbola, near-parabolic universal variable), and the
-    serial kernel ``_propagate_loop`` (one thread, the same code each parallel
+    serial kernel ``propagate_rows`` (one thread, the same code each parallel
     worker runs) is timed on each subset and on all of them ("mixed").  CPU time
     of the process (``time.process_time``), best of ``repeats``: on a shared
     machine it is steadier than wall time.  Returns ``(name, count, cpu_ns,
     wall_ns)`` rows.
     """
-    from astrodyn.orbit.universal import _kind_loop, _propagate_loop
+    from astrodyn.orbit.universal import formulation_rows, propagate_rows
 
     n = len(dt)
     muf = np.full(n, mu)
     kinds = np.empty(n, dtype=np.int64)
-    _kind_loop(r0, v0, dt, muf, kinds)
+    formulation_rows(r0, v0, dt, muf, kinds)
     subsets = [(name, kinds == k) for k, name in BRANCH_NAMES.items()] + [("mixed", np.ones(n, bool))]
     rows = []
     for name, sel in subsets:
@@ -260,9 +260,9 @@ def branch_timings(r0, v0, dt, mu: float, repeats: int) -> list[tuple[str, int, 
         rr, vv, dd, mm = (np.ascontiguousarray(a[sel]) for a in (r0, v0, dt, muf))
         r = np.empty_like(rr)
         v = np.empty_like(vv)
-        _propagate_loop(rr[:2], vv[:2], dd[:2], mm[:2], r[:2], v[:2])  # compile / cache load
+        propagate_rows(rr[:2], vv[:2], dd[:2], mm[:2], r[:2], v[:2])  # compile / cache load
         cpu = {}
-        wall = _best_seconds(lambda: _propagate_loop(rr, vv, dd, mm, r, v), repeats, cpu=cpu)
+        wall = _best_seconds(lambda: propagate_rows(rr, vv, dd, mm, r, v), repeats, cpu=cpu)
         rows.append((name, m, cpu["seconds"] / m * 1e9, wall / m * 1e9))
     return rows
 

@@ -95,7 +95,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from astrodyn.jit import jit
-from astrodyn.orbit.kepler import _sinh_parts, _x_minus_sin, solve_kepler, solve_kepler_hyperbolic
+from astrodyn.orbit.floating import sinh_parts, x_minus_sin
+from astrodyn.orbit.kepler import solve_kepler, solve_kepler_hyperbolic
 
 __all__ = [
     "SINGULAR_TOLERANCE",
@@ -376,7 +377,7 @@ def _unwrap_like(angle, reference):
 
 
 # Kepler's equation residual pieces: the series kernels of astrodyn.orbit.kepler
-# (``_x_minus_sin``: E - sin E; ``_sinh_parts``: sinh F - F) keep every digit
+# (``x_minus_sin``: E - sin E; ``sinh_parts``: sinh F - F) keep every digit
 # near e -> 1, M -> 0.
 
 
@@ -384,13 +385,13 @@ def _unwrap_like(angle, reference):
 def _mean_from_eccentric_flat(E, e, out):
     for j in range(E.size):
         x = E[j]
-        out[j] = (1.0 - e[j]) * x + e[j] * _x_minus_sin(x, math.sin(x))
+        out[j] = (1.0 - e[j]) * x + e[j] * x_minus_sin(x, math.sin(x))
 
 
 @jit
 def _mean_from_hyperbolic_flat(F, e, out):
     for j in range(F.size):
-        sh, _, sh_minus_x = _sinh_parts(F[j])
+        sh, _, sh_minus_x = sinh_parts(F[j])
         out[j] = (e[j] - 1.0) * sh + sh_minus_x
 
 

@@ -92,6 +92,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from astrodyn.jit import jit
+from astrodyn.orbit.universal import propagate, propagate_rows
 
 __all__ = [
     "CentralBody",
@@ -358,23 +359,6 @@ def zonal_potential(r, mu, R, J):
 # --------------------------------------------------------------------------- declarative models
 
 
-def _kepler_propagate():
-    from astrodyn.orbit.universal import propagate  # exact two-body propagation on every conic
-
-    return propagate
-
-
-def _propagate_loop(r0, v0, dt, mu, r, v):
-    """Row-wise exact Kepler propagation into preallocated (N, 3) arrays
-    (the compiled kernel behind astrodyn.orbit.propagate; imported on first
-    use because astrodyn.orbit imports this module)."""
-    global _propagate_loop
-    from astrodyn.orbit.universal import _propagate_loop as kernel
-
-    _propagate_loop = kernel
-    kernel(r0, v0, dt, mu, r, v)
-
-
 @dataclass(frozen=True)
 class Zonal:
     """Zonal harmonics of the central body: ``mu`` (m^3/s^2), reference radius
@@ -423,7 +407,7 @@ class KeplerOrbit:
     t0: float = 0.0
 
     def __call__(self, t):
-        r, _ = _kepler_propagate()(np.asarray(self.r0, float), np.asarray(self.v0, float), float(t) - self.t0, self.mu)
+        r, _ = propagate(np.asarray(self.r0, float), np.asarray(self.v0, float), float(t) - self.t0, self.mu)
         return r
 
 
@@ -554,7 +538,7 @@ class _System:
         r_ref, v_ref, t_ref = self.ref
         rho, rho_dot = np.empty((self.n, 3)), np.empty((self.n, 3))
         self._dt_rows.fill(t - t_ref)
-        _propagate_loop(r_ref, v_ref, self._dt_rows, self._mu_rows, rho, rho_dot)
+        propagate_rows(r_ref, v_ref, self._dt_rows, self._mu_rows, rho, rho_dot)
         return rho, rho_dot
 
     def state(self, t, y):
@@ -735,7 +719,6 @@ def propagate_perturbed(
         return x[..., 0] if t_arr.ndim == 0 else x
 
     if not active:
-        propagate = _kepler_propagate()
         r, v = propagate(r0[..., None, :], v0[..., None, :], t_flat, mu)
         if t_arr.ndim == 0:
             r, v = r[..., 0, :], v[..., 0, :]

@@ -15,7 +15,7 @@ with ``alpha = 1 / a = 2 / r0 - v0^2 / mu``):
 
 * **Ellipse** (``r0 alpha > 0`` outside the near-parabolic window): the mean
   anomaly change ``n dt`` is formed as an exact double-double product and
-  reduced modulo ``2 pi`` exactly (:func:`astrodyn.orbit.kepler._reduce_2pi`),
+  reduced modulo ``2 pi`` exactly (:func:`astrodyn.orbit.floating.reduce_2pi`),
   then the *difference form* of Kepler's equation in the eccentric-anomaly change
   ``x`` is solved, ``(r0/a) x + C (x - sin x) + S (1 - cos x) = n dt mod 2 pi``
   with ``C = e cos E0 = 1 - r0/a`` and ``S = e sin E0 = r0.v0 / sqrt(mu a)``.
@@ -68,32 +68,34 @@ import math
 import numpy as np
 
 from astrodyn.jit import jit, pjit, prange
-from astrodyn.orbit.kepler import (
-    _INV_EVEN_FACT,
-    _INV_ODD_FACT,
+from astrodyn.orbit.floating import (
     EPS,
     HUGE_ANGLE,
-    MAX_ITER,
+    INV6,
+    INV24,
+    INV_EVEN_FACT,
+    INV_ODD_FACT,
+    INV_TWO_PI,
     PI,
     TWO_PI_1,
-    _INV_TWO_PI,
-    _cbrt_start,
-    _hyp_upper_start_own,
-    _kepler_hyp_fast,
-    _kepler_hyp_solve,
-    _INV6,
-    _INV24,
-    _kepler_start,
-    _one_minus_cos,
-    _reduce_2pi,
-    _reduce_2pi_core,
-    _rotate,
-    _sinh_parts,
-    _solve_diff_ell,
-    _two_prod,
-    _atan2,
-    _sincos,
-    _x_minus_sin,
+    atan2_vec,
+    cbrt_start,
+    one_minus_cos,
+    reduce_2pi,
+    reduce_2pi_core,
+    rotate_sincos,
+    sincos_vec,
+    sinh_parts,
+    two_prod,
+    x_minus_sin,
+)
+from astrodyn.orbit.kepler import (
+    MAX_ITER,
+    hyperbolic_upper_start_vec,
+    markley_start,
+    solve_kepler_difference,
+    solve_kepler_hyperbolic_kernel,
+    solve_kepler_hyperbolic_vec,
 )
 
 __all__ = ["propagate", "lagrange_coefficients", "stumpff"]
@@ -114,8 +116,8 @@ def _stumpff(z):
     (ten terms, truncation below 1e-19 relative).
     """
     if abs(z) < 1.0:
-        a = _INV_EVEN_FACT
-        b = _INV_ODD_FACT
+        a = INV_EVEN_FACT
+        b = INV_ODD_FACT
         c2 = a[9]
         c3 = b[9]
         for k in range(8, -1, -1):
@@ -125,9 +127,9 @@ def _stumpff(z):
     if z > 0.0:
         s = math.sqrt(z)
         sh = math.sin(0.5 * s)
-        return 2.0 * sh * sh / z, _x_minus_sin(s, math.sin(s)) / (z * s)
+        return 2.0 * sh * sh / z, x_minus_sin(s, math.sin(s)) / (z * s)
     s = math.sqrt(-z)
-    sh, chm1, shmx = _sinh_parts(s)
+    sh, chm1, shmx = sinh_parts(s)
     return chm1 / (-z), shmx / (-z * s)
 
 
@@ -166,10 +168,10 @@ def _ell_setup(sig, q, alpha, n, dt, mu):
     ``c0 = mh - S`` (the root obeys ``|x - c0| <= e``).
     """
     if abs(n * dt) < HUGE_ANGLE:  # exact product (double-double) and exact reduction
-        mh, ml = _two_prod(n, dt)
-        _, mh, ml = _reduce_2pi_core(mh, ml)
-    else:  # the phase is lost anyway (see _reduce_2pi); never taken by the block passes
-        _, mh, ml = _reduce_2pi(n * dt, 0.0)
+        mh, ml = two_prod(n, dt)
+        _, mh, ml = reduce_2pi_core(mh, ml)
+    else:  # the phase is lost anyway (see reduce_2pi); never taken by the block passes
+        _, mh, ml = reduce_2pi(n * dt, 0.0)
     return _ell_setup_core(sig, q, alpha, mu, mh, ml)
 
 
@@ -181,20 +183,20 @@ def _ell_setup_core(sig, q, alpha, mu, mh, ml):
     S = sig * sqa  # e sin E0
     e = math.sqrt(C * C + S * S)
     e = e if e < 1.0 - EPS else 1.0 - EPS
-    E0 = _atan2(S, C)
+    E0 = atan2_vec(S, C)
     M1 = E0 - S + mh
     M1 = M1 - TWO_PI_1 if M1 > PI else (M1 + TWO_PI_1 if M1 < -PI else M1)
-    x0 = _kepler_start(M1, e) - E0
+    x0 = markley_start(M1, e) - E0
     c0 = mh - S
-    x0 += TWO_PI_1 * np.floor((c0 - x0) * _INV_TWO_PI + 0.5)
+    x0 += TWO_PI_1 * np.floor((c0 - x0) * INV_TWO_PI + 0.5)
     return sqa, C, S, mh, ml, e, x0, c0
 
 
 @jit(inline="always")
 def _ell_residual(q, C, S, mh, ml, x, s, c):
-    """Difference-form residual (see :func:`astrodyn.orbit.kepler._solve_diff_ell`), its slope ``r/a`` and noise."""
-    omc = _one_minus_cos(s, c)
-    xms = _x_minus_sin(x, s)
+    """Difference-form residual (see :func:`astrodyn.orbit.kepler.solve_kepler_difference`), its slope ``r/a`` and noise."""
+    omc = one_minus_cos(s, c)
+    xms = x_minus_sin(x, s)
     rda = q + C * omc + S * s
     F = (q * x + C * xms + S * omc - mh) - ml
     noise = EPS * (abs(q * x) + abs(C * xms) + abs(S * omc) + abs(mh))
@@ -204,13 +206,13 @@ def _ell_residual(q, C, S, mh, ml, x, s, c):
 @jit(inline="always")
 def _ell_one_step(q, C, S, mh, ml, x, s, c):
     """Ellipse, part 2 (straight-line fast path): one fifth-order step from the starter, then
-    the residual check and Newton polish of :func:`astrodyn.orbit.kepler._solve_diff_ell`.
+    the residual check and Newton polish of :func:`astrodyn.orbit.kepler.solve_kepler_difference`.
 
     The same arithmetic as that solver's first iteration when it converges there
     (the usual case after Markley's starter); ``ok`` is False when it would not
     (series outside its range, step > 0.05 rad, residual above the noise), and the
     caller then runs the general safeguarded solver from the starter instead.
-    No loop and no libm call (own :func:`astrodyn.orbit.kepler._sincos` before it), so a loop
+    No loop and no libm call (own :func:`astrodyn.orbit.floating.sincos_vec` before it), so a loop
     over many states vectorizes (:func:`_ell_passes`).
     Returns ``(ok, x, s, c, 1 - cos x, r / a)``.
     """
@@ -220,13 +222,13 @@ def _ell_one_step(q, C, S, mh, ml, x, s, c):
     inv = 1.0 / rda
     u = F * inv
     a2u = 0.5 * F2 * inv * u
-    a3u2 = F3 * _INV6 * inv * u * u
-    a4u3 = -F2 * _INV24 * inv * u * u * u
-    # inverted Taylor series of the residual (fifth order; see _solve_diff_ell)
+    a3u2 = F3 * INV6 * inv * u * u
+    a4u3 = -F2 * INV24 * inv * u * u * u
+    # inverted Taylor series of the residual (fifth order; see solve_kepler_difference)
     dx = -u * (1.0 + a2u + (2.0 * a2u * a2u - a3u2) + (5.0 * a2u * (a2u * a2u - a3u2) + a4u3))
     ok = abs(a2u) < 0.1 and abs(dx) <= 0.05
     x = x + dx
-    s, c = _rotate(s, c, dx)
+    s, c = rotate_sincos(s, c, dx)
     omc, rda, F, noise = _ell_residual(q, C, S, mh, ml, x, s, c)
     ok = ok and abs(F) <= 2.0 * noise
     F2 = C * s + S * c
@@ -253,7 +255,7 @@ def _ell_fg(r0, q, alpha, n, sqa, S, s, omc, rda):
 def _ell_fallback(q, C, S, mh, ml, e, x0, c0):
     """The general safeguarded solver from the starter (bracket ``c0 +- e``)."""
     pad = 4.0 * EPS * (abs(c0) + 1.0)
-    x, s, c, omc, rda = _solve_diff_ell(q, C, S, mh, ml, x0, c0 - e - pad, c0 + e + pad)
+    x, s, c, omc, rda = solve_kepler_difference(q, C, S, mh, ml, x0, c0 - e - pad, c0 + e + pad)
     return x, s, c, omc, rda
 
 
@@ -261,7 +263,7 @@ def _ell_fallback(q, C, S, mh, ml, e, x0, c0):
 def _fg_elliptic(r0, sig, q, alpha, n, dt, mu):
     """Lagrange coefficients on an ellipse via the exactly reduced difference form."""
     sqa, C, S, mh, ml, e, x0, c0 = _ell_setup(sig, q, alpha, n, dt, mu)
-    s0, c0s = _sincos(x0)
+    s0, c0s = sincos_vec(x0)
     ok, x, s, c, omc, rda = _ell_one_step(q, C, S, mh, ml, x0, s0, c0s)
     if not ok:
         x, s, c, omc, rda = _ell_fallback(q, C, S, mh, ml, e, x0, c0)
@@ -291,10 +293,10 @@ def _hyp_setup(sig, q, beta, n, dt, mu, h2):
 @jit(inline="always")
 def _hyp_solve_fast(M1, e, em1):
     """Hyperbola, part 2: ``(ok, F1, sinh F1, cosh F1 - 1)`` by the straight-line path (own
-    starter and exp, :func:`astrodyn.orbit.kepler._kepler_hyp_fast`; vectorizable); ``ok`` is
+    starter and exp, :func:`astrodyn.orbit.kepler.solve_kepler_hyperbolic_vec`; vectorizable); ``ok`` is
     False where the safeguarded solver must take over (its check failed, ``|M1| >= 1e100``)."""
     M = abs(M1)
-    ok, F1, sh1, chm1_1 = _kepler_hyp_fast(M, e, em1, _hyp_upper_start_own(M, e, em1))
+    ok, F1, sh1, chm1_1 = solve_kepler_hyperbolic_vec(M, e, em1, hyperbolic_upper_start_vec(M, e, em1))
     return ok & (M < 1e100), math.copysign(F1, M1), math.copysign(sh1, M1), chm1_1
 
 
@@ -304,7 +306,7 @@ def _hyp_solve(M1, e, em1):
     ok, F1, sh1, chm1_1 = _hyp_solve_fast(M1, e, em1)
     if ok:
         return F1, sh1, chm1_1
-    return _kepler_hyp_solve(M1, e, em1)
+    return solve_kepler_hyperbolic_kernel(M1, e, em1)
 
 
 @jit(inline="always")
@@ -315,7 +317,7 @@ def _hyp_fg(r0, sqb, p, Ch, Sh, e, em1, m, F0, beta, n, F1, sh1, chm1_1):
     Compiled on its own (not inlined): it holds a loop and libm calls, and
     inlining it into the block kernel costs compile time for no speed."""
     x = F1 - F0
-    sh, chm1, shmx = _sinh_parts(x)
+    sh, chm1, shmx = sinh_parts(x)
     if abs(x) < 1.0:
         # short arc: the difference form G(x) = p x + Ch (sinh x - x) + Sh (cosh x - 1) = m
         # is better conditioned than F1 - F0 (Newton, stopped on the residual)
@@ -327,7 +329,7 @@ def _hyp_fg(r0, sqb, p, Ch, Sh, e, em1, m, F0, beta, n, F1, sh1, chm1_1):
             if not (abs(dx) < 0.5):
                 break
             x += dx
-            sh, chm1, shmx = _sinh_parts(x)
+            sh, chm1, shmx = sinh_parts(x)
             if abs(G) <= 4.0 * noise:
                 break
         rb = p + Ch * chm1 + Sh * sh  # r / |a|
@@ -443,7 +445,7 @@ def _uni_start(r0, sg, omq, tau):
     P = P if P > 0.0 else 0.0
     R = 6.0 * icc * (tau + s * (r0 - cc * s * s * (1.0 / 3.0)))
     u = 0.5 * abs(R)
-    A = _cbrt_start(u + math.sqrt(u * u + P * P * P * (1.0 / 27.0)))
+    A = cbrt_start(u + math.sqrt(u * u + P * P * P * (1.0 / 27.0)))
     B = P / (3.0 * A)
     return math.copysign(2.0 * u / (A * A + A * B + B * B), R) - s
 
@@ -497,8 +499,8 @@ def _uni_series_step(chi, r0, sg, omq, alpha, tau):
     inv = 1.0 / rr
     u = T * inv
     a2u = 0.5 * drr * inv * u
-    a3u2 = (1.0 - alpha * rr) * _INV6 * inv * u * u
-    a4u3 = -alpha * drr * _INV24 * inv * u * u * u
+    a3u2 = (1.0 - alpha * rr) * INV6 * inv * u * u
+    a4u3 = -alpha * drr * INV24 * inv * u * u * u
     return chi - u * (1.0 + a2u + (2.0 * a2u * a2u - a3u2) + (5.0 * a2u * (a2u * a2u - a3u2) + a4u3))
 
 
@@ -550,7 +552,7 @@ def _uni_solve_safe(r0, sg, q, alpha, tau):
     """
     omq = 1.0 - q
     chi = tau / r0
-    cub = _cbrt_start(6.0 * abs(tau) / omq)
+    cub = cbrt_start(6.0 * abs(tau) / omq)
     if abs(chi) > cub:
         chi = math.copysign(cub, tau)
     if tau > 0.0:
@@ -703,7 +705,7 @@ def _dispatch(kind, r0, sig, q, alpha, n, rx, ry, rz, vx, vy, vz, dt, mu):
 
 
 @jit
-def _lagrange_scalar(rx, ry, rz, vx, vy, vz, dt, mu):
+def lagrange_coefficients_scalar(rx, ry, rz, vx, vy, vz, dt, mu):
     """``(f, g, fdot, gdot)`` for one state; picks the formulation (see module doc)."""
     kind, r0, sig, q, alpha, n = _classify(rx, ry, rz, vx, vy, vz, dt, mu)
     return _dispatch(kind, r0, sig, q, alpha, n, rx, ry, rz, vx, vy, vz, dt, mu)
@@ -751,8 +753,8 @@ def _ell_passes(W, m, idx, r0, v0, r, v):
     :func:`_fg_elliptic`, so the results are bit-identical to a single call.
     """
     for k in range(m):
-        mh, ml = _two_prod(W[_N, k], W[_DT, k])  # |n dt| < HUGE_ANGLE (see the gather)
-        _, mh, ml = _reduce_2pi_core(mh, ml)
+        mh, ml = two_prod(W[_N, k], W[_DT, k])  # |n dt| < HUGE_ANGLE (see the gather)
+        _, mh, ml = reduce_2pi_core(mh, ml)
         sqa, C, S, mh, ml, e, x0, c0 = _ell_setup_core(W[_SIG, k], W[_Q, k], W[_ALPHA, k], W[_MU, k], mh, ml)
         W[_SQA, k] = sqa
         W[_C, k] = C
@@ -764,7 +766,7 @@ def _ell_passes(W, m, idx, r0, v0, r, v):
         W[_C0, k] = c0
     for k in range(m):
         x0 = W[_X0, k]
-        s, c = _sincos(x0)
+        s, c = sincos_vec(x0)
         ok, x, s, c, omc, rda = _ell_one_step(W[_Q, k], W[_C, k], W[_S, k], W[_MH, k], W[_ML, k], x0, s, c)
         W[_OK, k] = 1.0 if ok else 0.0
         W[_SX, k] = s
@@ -908,7 +910,7 @@ def _hyp_passes(W, nh, idx, r0, v0, r, v):
     _hyp_fast_pass(W, nh)
     for k in range(nh):
         if W[_HOK, k] == 0.0:
-            W[_F1, k], W[_SH1, k], W[_CHM1, k] = _kepler_hyp_solve(W[_M1, k], W[_HE, k], W[_EM1, k])
+            W[_F1, k], W[_SH1, k], W[_CHM1, k] = solve_kepler_hyperbolic_kernel(W[_M1, k], W[_HE, k], W[_EM1, k])
     for k in range(nh):
         f, g, fd, gd = _hyp_fg(
             W[_RN, k], W[_SQB, k], W[_P, k], W[_CH, k], W[_SH, k], W[_HE, k], W[_EM1, k], W[_M, k], W[_F0, k],
@@ -932,7 +934,7 @@ def _block_workspace():
 
 
 @jit
-def _propagate_loop(r0, v0, dt, mu, r, v):
+def propagate_rows(r0, v0, dt, mu, r, v):
     idx, W, idxh, WH, idxu, WU = _block_workspace()
     _propagate_range(r0, v0, dt, mu, r, v, 0, r0.shape[0], idx, W, idxh, WH, idxu, WU)
 
@@ -953,7 +955,7 @@ def _propagate_loop_par(r0, v0, dt, mu, r, v):
 
 
 @jit
-def _kind_loop(r0, v0, dt, mu, out):
+def formulation_rows(r0, v0, dt, mu, out):
     """Formulation of each state (:func:`_classify`'s kind), for benchmarks and tests."""
     for i in range(r0.shape[0]):
         out[i] = _classify(r0[i, 0], r0[i, 1], r0[i, 2], v0[i, 0], v0[i, 1], v0[i, 2], dt[i], mu[i])[0]
@@ -964,7 +966,7 @@ def _propagate_single(r0, v0, dt, mu):
     """One state, no broadcasting: the cheap path for scalar calls."""
     r = np.empty(3)
     v = np.empty(3)
-    f, g, fd, gd = _lagrange_scalar(r0[0], r0[1], r0[2], v0[0], v0[1], v0[2], dt, mu)
+    f, g, fd, gd = lagrange_coefficients_scalar(r0[0], r0[1], r0[2], v0[0], v0[1], v0[2], dt, mu)
     for j in range(3):
         r[j] = f * r0[j] + g * v0[j]
         v[j] = fd * r0[j] + gd * v0[j]
@@ -974,7 +976,7 @@ def _propagate_single(r0, v0, dt, mu):
 @jit
 def _lagrange_loop(r0, v0, dt, mu, out):
     for i in range(r0.shape[0]):
-        out[i, 0], out[i, 1], out[i, 2], out[i, 3] = _lagrange_scalar(
+        out[i, 0], out[i, 1], out[i, 2], out[i, 3] = lagrange_coefficients_scalar(
             r0[i, 0], r0[i, 1], r0[i, 2], v0[i, 0], v0[i, 1], v0[i, 2], dt[i], mu[i]
         )
 
@@ -1045,7 +1047,7 @@ def propagate(r0, v0, dt, mu):
     lead, r0f, v0f, dtf, muf = _prepare(r0, v0, dt, mu, "propagate")
     r = np.empty_like(r0f)
     v = np.empty_like(v0f)
-    (_propagate_loop_par if r0f.shape[0] >= PROPAGATE_PARALLEL_MIN else _propagate_loop)(r0f, v0f, dtf, muf, r, v)
+    (_propagate_loop_par if r0f.shape[0] >= PROPAGATE_PARALLEL_MIN else propagate_rows)(r0f, v0f, dtf, muf, r, v)
     return r.reshape(lead + (3,)), v.reshape(lead + (3,))
 
 
