@@ -221,7 +221,11 @@ def test_csv_round_trip_is_exact(recording, tmp_path):
     files = export(path, "csv", tmp_path)
     assert sorted(f.name for f in files) == ["geo.orbit.csv", "leo.attitude.csv", "leo.orbit.csv"]
     with open(tmp_path / "leo.orbit.csv") as f:
-        rows = list(csv.DictReader(f))
+        lines = f.read().splitlines()
+    head = dict(line[2:].split(": ", 1) for line in lines if line.startswith("# "))
+    rows = list(csv.DictReader(line for line in lines if not line.startswith("#")))
+    assert head["epoch"] == sc.epoch and head["time_scale"] == sc.epoch_scale.upper()
+    assert head["frame"].startswith("GCRF") and "r_x=m" in head["units"] and "v_z=m/s" in head["units"]
     assert len(rows) == res.t.size
     assert [int(r["seq"]) for r in rows] == list(range(res.t.size))
     np.testing.assert_array_equal([float(r["t"]) for r in rows], res.t)
@@ -233,9 +237,23 @@ def test_csv_round_trip_is_exact(recording, tmp_path):
     epoch_ns = sc.epoch_unix_ns
     assert [int(row["log_time_ns"]) for row in rows] == [epoch_ns + round(t * 1e9) for t in res.t]
     with open(tmp_path / "leo.attitude.csv") as f:
-        rows = list(csv.DictReader(f))
+        lines = f.read().splitlines()
+    assert any(line.startswith("# quaternion: q_0 q_1 q_2 q_3 = Euler parameters (e0, e1, e2, e3), scalar FIRST")
+               for line in lines)
+    rows = list(csv.DictReader(line for line in lines if not line.startswith("#")))
     q = np.array([[float(row[f"q_{i}"]) for i in range(4)] for row in rows])
     np.testing.assert_array_equal(q, res.q[:, 0])
+
+
+def sc_epoch(path) -> str:
+    """The scenario epoch string as stored in the file's metadata (read with the plain mcap reader)."""
+    from mcap.reader import make_reader
+
+    with open(path, "rb") as f:
+        for meta in make_reader(f).iter_metadata():
+            if meta.name == "scenario":
+                return meta.metadata["epoch"]
+    raise AssertionError("no scenario metadata")
 
 
 def test_parquet_round_trip_or_clear_error(recording, tmp_path, monkeypatch):
@@ -247,8 +265,14 @@ def test_parquet_round_trip_or_clear_error(recording, tmp_path, monkeypatch):
             export(path, "parquet", tmp_path)
         return
     export(path, "parquet", tmp_path)
-    tab = pq.read_table(tmp_path / "leo.orbit.parquet").to_pydict()
+    table = pq.read_table(tmp_path / "leo.orbit.parquet")
+    tab = table.to_pydict()
     np.testing.assert_array_equal(np.array([tab[f"r_{c}"] for c in "xyz"]).T, res.r[:, 0])
+    meta = {k.decode(): v.decode() for k, v in table.schema.metadata.items()}
+    assert meta["astrodyn.epoch"] == sc_epoch(path) and meta["astrodyn.frame"].startswith("GCRF")
+    assert table.schema.field("r_x").metadata == {b"unit": b"m"}
+    assert table.schema.field("v_y").metadata == {b"unit": b"m/s"}
+    assert table.schema.field("t").metadata == {b"unit": b"s"}
 
 
 def test_parquet_without_pyarrow_names_the_extra(recording, tmp_path, monkeypatch):

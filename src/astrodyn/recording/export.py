@@ -8,8 +8,12 @@ What each format writes (one file per channel or body, named after the body):
              into ``r_x r_y r_z`` (3-vectors) and ``q_0 .. q_3`` (``q`` scalar first, as in
              the messages).  Floats are written with ``repr`` (shortest round-trip form),
              so reading the CSV back gives the recorded float64 values exactly.  SI units.
+             The file opens with ``# key: value`` lines: epoch, time scale, frame,
+             quaternion order and every column's unit (:func:`channel_header`).
 ``parquet``  the same columns, one ``.parquet`` file per channel (needs the optional
-             ``pyarrow``: ``pip install 'astrodyn[parquet]'``).
+             ``pyarrow``: ``pip install 'astrodyn[parquet]'``); the header entries are the
+             file's key-value metadata (``astrodyn.epoch``, ...), each column's unit its
+             field metadata ``unit``.
 ``oem``      ``<body>.oem``: a CCSDS Orbit Ephemeris Message, KVN, version 3.0
              (CCSDS 502.0-B-3): header, one segment per body, data lines
              ``epoch X Y Z X_DOT Y_DOT Z_DOT`` in km and km/s.  ``REF_FRAME`` is the
@@ -82,7 +86,7 @@ from astrodyn.recording.writer import McapRecorder, RecordingError
 from astrodyn.rotation import quat_to_scalar_last
 
 __all__ = [
-    "FORMATS", "ExportError", "export", "write_csv", "write_parquet", "write_oem", "write_aem", "write_aem_v1",
+    "FORMATS", "FIELD_UNITS", "column_units", "channel_header", "ExportError", "export", "write_csv", "write_parquet", "write_oem", "write_aem", "write_aem_v1",
     "write_foxglove", "ccsds_epochs", "parse_ccsds_epoch", "FRAME_TRANSFORM_SCHEMA", "SCENE_UPDATE_SCHEMA",
     "SCENE_TOPIC", "MAX_LINE_POINTS", "MAX_SCENE_POINTS", "scene_updates", "line_indices", "main",
 ]
@@ -208,6 +212,48 @@ def table(track: Track) -> dict[str, np.ndarray]:
     return cols
 
 
+#: Unit of each message field as exported (SI; "1" for dimensionless, "" for text).
+FIELD_UNITS = {
+    "t": "s", "seq": "1", "log_time_ns": "ns", "r": "m", "v": "m/s", "mu": "m^3/s^2", "q": "1", "w": "rad/s",
+    "dr": "m", "dv": "m/s", "dr_norm": "m", "dv_norm": "m/s", "model": "", "frame": "", "reference": "",
+    "process": "", "event": "", "detail": "", "json": "",
+}
+
+
+def column_units(columns) -> dict[str, str]:
+    """Unit of each exported column (``r_x`` -> ``m``, ``q_0`` -> ``1``); ``?`` for fields
+    of foreign channels that astrodyn does not define."""
+    out = {}
+    for col in columns:
+        field = col if col in FIELD_UNITS else col.rsplit("_", 1)[0]
+        out[col] = FIELD_UNITS.get(field, "?")
+    return out
+
+
+def channel_header(run: Run, topic: str, columns) -> dict[str, str]:
+    """What a reader of one exported channel needs besides the numbers: the channel, the
+    scenario epoch and its time scale (``t`` counts SI seconds from it in that scale), the
+    frame of the vectors, the quaternion order and every column's unit.  Written as the
+    ``# key: value`` lines at the top of a CSV and as the Parquet key-value metadata."""
+    track = run.channels[topic]
+    frames = sorted(set(map(str, track.fields["frame"]))) if "frame" in track.fields else []
+    head = {
+        "astrodyn_export": f"astrodyn {__version__}, file {os.path.basename(run.path)}, channel {topic}",
+        "epoch": str(run.scenario.get("epoch", "none (t is absent; log_time_ns is POSIX time, UTC)")),
+        "time_scale": str(run.scenario.get("epoch_scale", "utc")).upper(),
+        "t": "SI seconds since the epoch, in the epoch's time scale",
+        "log_time_ns": "MCAP log time, POSIX ns (epoch + t, leap seconds ignored)",
+    }
+    if frames:
+        head["frame"] = ", ".join(frames) + " (inertial, origin at the central body)"
+    if "q" in track.fields:
+        head["quaternion"] = "q_0 q_1 q_2 q_3 = Euler parameters (e0, e1, e2, e3), scalar FIRST; v_body = C(q) v_inertial"
+    if "w" in track.fields:
+        head["w"] = "body angular velocity, body-axis components"
+    head["units"] = ", ".join(f"{c}={u}" for c, u in column_units(columns).items() if u)
+    return head
+
+
 def _cell(x) -> str:
     if isinstance(x, (float, np.floating)):
         return repr(float(x))
@@ -217,12 +263,19 @@ def _cell(x) -> str:
 
 
 def write_csv(run: Run, out: Path) -> list[Path]:
-    """One CSV per channel (see the module docstring); returns the files written."""
+    """One CSV per channel (see the module docstring); returns the files written.
+
+    Each file starts with ``# key: value`` comment lines (:func:`channel_header`: epoch,
+    time scale, frame, quaternion order, units), then the column names, then one row per
+    message.  ``pandas.read_csv(path, comment="#")`` reads it; so does any CSV reader
+    told to skip lines starting with ``#``."""
     written = []
     for topic, track in run.channels.items():
         cols = table(track)
         path = out / f"{channel_file_stem(topic)}.csv"
         with open(path, "w", newline="") as f:
+            for key, value in channel_header(run, topic, cols).items():
+                f.write(f"# {key}: {value}\n")
             w = csv.writer(f)
             w.writerow(cols)
             for row in zip(*cols.values()):
@@ -232,7 +285,9 @@ def write_csv(run: Run, out: Path) -> list[Path]:
 
 
 def write_parquet(run: Run, out: Path) -> list[Path]:
-    """One Parquet file per channel (needs pyarrow)."""
+    """One Parquet file per channel (needs pyarrow); the :func:`channel_header` entries are
+    the file's key-value metadata (keys prefixed ``astrodyn.``) and each column's unit is
+    its field metadata ``unit``."""
     try:
         import pyarrow as pa
         import pyarrow.parquet as pq
@@ -241,9 +296,15 @@ def write_parquet(run: Run, out: Path) -> list[Path]:
     written = []
     for topic, track in run.channels.items():
         cols = table(track)
-        arrays = {k: pa.array(list(v) if v.dtype == object else v) for k, v in cols.items()}
+        units = column_units(cols)
+        fields, arrays = [], []
+        for k, v in cols.items():
+            arr = pa.array(list(v) if v.dtype == object else v)
+            fields.append(pa.field(k, arr.type, metadata={"unit": units[k]}))
+            arrays.append(arr)
+        meta = {f"astrodyn.{k}": v for k, v in channel_header(run, topic, cols).items()}
         path = out / f"{channel_file_stem(topic)}.parquet"
-        pq.write_table(pa.table(arrays), path)
+        pq.write_table(pa.Table.from_arrays(arrays, schema=pa.schema(fields, metadata=meta)), path)
         written.append(path)
     return written
 
