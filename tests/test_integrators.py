@@ -202,16 +202,16 @@ def test_axis_rotation_trig_against_mpmath():
     # subnormal angles, and large ones, against 40-digit mpmath.
     import mpmath as mp
 
-    from astrodyn.attitude.integrators import _SMALL_ANGLE, _axis_rotation_trig
+    from astrodyn.attitude.integrators import SMALL_ANGLE, axis_rotation_trig
 
     rng = np.random.default_rng(11)
-    edge = [_SMALL_ANGLE, np.nextafter(_SMALL_ANGLE, 0.0), np.nextafter(_SMALL_ANGLE, 1.0), _SMALL_ANGLE * (1 - 2**-40)]
-    small = np.concatenate([rng.uniform(-_SMALL_ANGLE, _SMALL_ANGLE, 400), 10.0 ** rng.uniform(-310, -1, 100), [0.0, 5e-324], edge[:2], edge[3:]])
-    large = np.concatenate([rng.uniform(_SMALL_ANGLE, 3.1, 200), [edge[2], 1.0, 2.0]])
+    edge = [SMALL_ANGLE, np.nextafter(SMALL_ANGLE, 0.0), np.nextafter(SMALL_ANGLE, 1.0), SMALL_ANGLE * (1 - 2**-40)]
+    small = np.concatenate([rng.uniform(-SMALL_ANGLE, SMALL_ANGLE, 400), 10.0 ** rng.uniform(-310, -1, 100), [0.0, 5e-324], edge[:2], edge[3:]])
+    large = np.concatenate([rng.uniform(SMALL_ANGLE, 3.1, 200), [edge[2], 1.0, 2.0]])
     eps = 2.0**-52
     for angles, poly in ((small, True), (-small, True), (large, False), (-large, False)):
         for x in angles:
-            got = _axis_rotation_trig(float(x))
+            got = axis_rotation_trig(float(x))
             ref = _trig_reference(x)
             for j, (g, r) in enumerate(zip(got, ref)):
                 err = float(abs(mp.mpf(g) - r))
@@ -228,7 +228,7 @@ def test_axis_rotation_trig_against_mpmath():
             c, s, ca, sa = got
             assert abs(c * c + s * s - 1.0) <= 4 * eps  # unit half-angle pair by construction
             assert abs(ca * ca + sa * sa - 1.0) <= 4 * eps
-    assert all(np.isnan(_axis_rotation_trig(np.nan)))
+    assert all(np.isnan(axis_rotation_trig(np.nan)))
 
 
 @pytest.mark.parametrize("axis", [0, 1, 2])

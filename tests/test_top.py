@@ -99,9 +99,9 @@ def test_top_splitting_long_run():
     assert np.max(np.abs(pa2 - pa0)) / abs(pa0) > 1e-12  # the generic splitting does not keep J w3
     assert info["error_attitude"] < info2["error_attitude"] / 10
     # the step-doubling estimates are honest: the two runs differ by about split4's error
-    from astrodyn.attitude.integrators import _attitude_difference
+    from astrodyn.rotation import attitude_difference
 
-    gap = np.max(_attitude_difference(q, q2))
+    gap = np.max(attitude_difference(q, q2))
     assert info2["error_attitude"] / 3 < gap < 3 * info2["error_attitude"]
 
 
@@ -219,7 +219,7 @@ def test_gravity_free_top_is_exact(step):
     # any step: compare with the exact torque-free solution (Jacobi elliptic
     # functions, astrodyn.attitude.torque_free: independent code)
     from astrodyn.attitude import torque_free
-    from astrodyn.attitude.integrators import _attitude_difference
+    from astrodyn.rotation import attitude_difference
 
     free = HeavyTop(mass=0.5, cm_distance=0.04, transverse_inertia=2e-3, axial_inertia=1e-3, gravity=0.0)
     w0, q0 = free.state_from_euler(0.3, 0.7, -0.2, 3.0, 1.5, 55.0)
@@ -230,7 +230,7 @@ def test_gravity_free_top_is_exact(step):
     # by ~1 eps: worst-case linear build-up 5e4 x 2.2e-16 ~ 1.1e-11 rad, the bound.
     # Measured 4.0e-13 / 6.7e-14 rad (the previous libm kernel: 3.7e-13 / 5.9e-14);
     # a 1e-6 relative error in the turn rate |M| / I (~29 rad/s) would give 1.4e-4 rad.
-    assert np.max(_attitude_difference(q, q_ex)) < 1e-11
+    assert np.max(attitude_difference(q, q_ex)) < 1e-11
     np.testing.assert_allclose(w, w_ex, rtol=0, atol=1e-11 * np.linalg.norm(w0))
     assert info["error_attitude"] < 1e-11  # no truncation error: step doubling sees only rounding
 
@@ -240,13 +240,13 @@ def test_momentum_turn_against_mpmath():
     # (polynomials for |x| <= 1/8, libm above), against 40-digit mpmath
     import mpmath as mp
 
-    from astrodyn.attitude.integrators import _SMALL_ANGLE
+    from astrodyn.attitude.integrators import SMALL_ANGLE
     from astrodyn.attitude.top import _momentum_turn
 
     rng = np.random.default_rng(5)
     eps = 2.0**-52
-    edge = _SMALL_ANGLE * np.array([1.0, 1 - 2**-50, 1 + 2**-50, 0.999, 1.001])
-    xs = np.concatenate([rng.uniform(0, _SMALL_ANGLE, 300), 10.0 ** rng.uniform(-200, -1, 50), [0.0], edge, rng.uniform(_SMALL_ANGLE, 3.0, 100)])
+    edge = SMALL_ANGLE * np.array([1.0, 1 - 2**-50, 1 + 2**-50, 0.999, 1.001])
+    xs = np.concatenate([rng.uniform(0, SMALL_ANGLE, 300), 10.0 ** rng.uniform(-200, -1, 50), [0.0], edge, rng.uniform(SMALL_ANGLE, 3.0, 100)])
     for x in xs:
         m = float(10.0 ** rng.uniform(-3, 3))  # |M|, N m s
         for k in (x / m, -x / m):  # dt / (2 I): both signs (negative stage weights, backward time)
@@ -263,8 +263,8 @@ def test_momentum_turn_against_mpmath():
             # so cos within 2 eps absolute and s within 3 eps relative (measured <= 1.1
             # eps and 1.6 eps); libm branch (x up to 3): cos within (2 + |x|) eps,
             # s within (3 + |x cot x|) eps relative.
-            tol_c = 2 * eps if x <= _SMALL_ANGLE else (2 + x) * eps
-            tol_s = 3 * eps if x <= _SMALL_ANGLE else (3 + abs(x / np.tan(x))) * eps
+            tol_c = 2 * eps if x <= SMALL_ANGLE else (2 + x) * eps
+            tol_s = 3 * eps if x <= SMALL_ANGLE else (3 + abs(x / np.tan(x))) * eps
             assert err_c <= tol_c, (x, k, err_c / eps)
             assert err_s <= tol_s, (x, k, err_s / eps)
     assert all(np.isnan(_momentum_turn(np.nan, 0.01)))

@@ -76,6 +76,7 @@ __all__ = [
     "quat_multiply",
     "quat_hamilton_scalar",
     "quat_rotate",
+    "attitude_difference",
     "dcm_from_quat",
     "quat_from_dcm",
     "dcm_from_euler",
@@ -520,6 +521,16 @@ def axis_angle_from_quat(q):
     zero = ne == 0.0
     axis = np.where(zero[..., None], np.array([1.0, 0.0, 0.0]), e / np.where(zero, 1.0, ne)[..., None])
     return axis, angle
+
+
+def attitude_difference(qa, qb):
+    """Rotation angle (rad, in ``[0, pi]``) between two attitudes ``qa``, ``qb`` ``(..., 4)``.
+
+    The angle of ``qb (x) qa*``, ``2 atan2(|e|, |e0|)`` (the sign of either quaternion is
+    irrelevant; well conditioned at every angle).  Inputs are not normalized.
+    """
+    d = quat_multiply(qb, quat_conjugate(qa))
+    return 2.0 * np.arctan2(np.linalg.norm(d[..., 1:], axis=-1), np.abs(d[..., 0]))
 
 
 def quat_from_rotvec(rotvec):

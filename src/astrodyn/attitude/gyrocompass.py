@@ -45,7 +45,7 @@ import numpy as np
 
 from astrodyn.jit import jit
 from astrodyn.attitude.elliptic import ellipk
-from astrodyn.attitude.integrators import SPLIT4_WEIGHTS, _step_chunks, _step_plan
+from astrodyn.attitude.integrators import SPLIT4_WEIGHTS, step_chunks, step_plan
 
 __all__ = ["Gyrocompass", "EARTH_ROTATION_RATE"]
 
@@ -146,10 +146,10 @@ class Gyrocompass:
         if not (step > 0 and math.isfinite(step)):
             raise ValueError(f"step: expected a positive finite step in s, got {step}")
         coef = np.array([h * wh / self.gimbal_inertia, self.inertia_difference * wh * wh / self.gimbal_inertia])
-        starts, n, dt = _step_plan(t_out, step, False)
+        starts, n, dt = step_plan(t_out, step, False)
         out = np.empty((len(t_out), 2))
         state = np.array([float(alpha0), float(alpha_dot0)])
-        for _, sd, rec in _step_chunks(starts, n, dt):
+        for _, sd, rec in step_chunks(starts, n, dt):
             _swing_kernel(state, coef, SPLIT4_WEIGHTS, sd, rec, out)
         for k in range(len(t_out)):
             if n[k] == 0:

@@ -79,7 +79,7 @@ import numpy as np
 from astrodyn.jit import jit
 from astrodyn.attitude.euler import inertia_tensor, principal_axes
 from astrodyn.orbit.universal import lagrange_coefficients_scalar
-from astrodyn.rotation import quat_conjugate, quat_from_dcm, quat_multiply
+from astrodyn.rotation import attitude_difference, quat_from_dcm, quat_multiply
 from astrodyn.attitude.torques import (
     ConstantTorque,
     GravityGradientTorque,
@@ -119,15 +119,15 @@ _CHUNK = 1 << 15  # steps per kernel call (bounds the size of per-step tables)
 #       first omitted term 1382/155925 y^11 <= 8.1e-18 |y| (0.08 ulp);
 #   sin x = x - x^3/3! + ... - x^11/11!,  cos x = 1 - x^2/2! + ... - x^10/10!   |x| <= 1/8:
 #       first omitted terms x^13/13! <= 1.2e-23 |x| and x^12/12! <= 3e-20.
-_SMALL_ANGLE = 0.125  # rad: |angle| up to which the polynomials are used (y = angle/4 <= 1/32)
+SMALL_ANGLE = 0.125  # rad: |angle| up to which the polynomials are used (y = angle/4 <= 1/32)
 _TAN3, _TAN5, _TAN7, _TAN9 = 1.0 / 3.0, 2.0 / 15.0, 17.0 / 315.0, 62.0 / 2835.0
 _SIN1, _SIN2, _SIN3, _SIN4, _SIN5 = -1.0 / 6.0, 1.0 / 120.0, -1.0 / 5040.0, 1.0 / 362880.0, -1.0 / 39916800.0
 _COS1, _COS2, _COS3, _COS4, _COS5 = -0.5, 1.0 / 24.0, -1.0 / 720.0, 1.0 / 40320.0, -1.0 / 3628800.0
 
 
 @jit(inline="always")
-def _cos_sinc_minus_one(z):
-    """``(cos x - 1, sin(x)/x - 1)`` from ``z = x^2`` (rad^2), for ``z <= _SMALL_ANGLE^2``.
+def cos_sinc_minus_one(z):
+    """``(cos x - 1, sin(x)/x - 1)`` from ``z = x^2`` (rad^2), for ``z <= SMALL_ANGLE^2``.
 
     Both are even in ``x``, so they need no square root: Taylor polynomials in
     ``z`` (A&S 4.3.65-66, terms to ``x^10`` and ``x^11``) in Estrin's form (a short
@@ -142,7 +142,7 @@ def _cos_sinc_minus_one(z):
 
 
 @jit(inline="always")
-def _axis_rotation_trig(angle):
+def axis_rotation_trig(angle):
     """``(c, s, ca, sa)``: cos and sin of ``angle/2`` (for ``q``) and of ``angle`` (for ``M``), rad.
 
     ``c, s`` come from ``u = tan(angle/4)`` through the rational half-angle forms
@@ -155,9 +155,9 @@ def _axis_rotation_trig(angle):
     is within about 1 ulp of the true values (tested against mpmath); NaN gives
     NaN (it fails the range test).
     """
-    if abs(angle) <= _SMALL_ANGLE:
+    if abs(angle) <= SMALL_ANGLE:
         z = angle * angle
-        cos_m1, sinc_m1 = _cos_sinc_minus_one(z)
+        cos_m1, sinc_m1 = cos_sinc_minus_one(z)
         sa = angle + angle * sinc_m1
         ca = 1.0 + cos_m1
         y = 0.25 * angle
@@ -181,11 +181,11 @@ def _rot2(ca, sa, x, y):
 
 
 @jit(inline="always")
-def _turn_body(axis, c, s, ca, sa, m0, m1, m2, e0, e1, e2, e3):
+def turn_body(axis, c, s, ca, sa, m0, m1, m2, e0, e1, e2, e3):
     """Exact rotation of the body by ``angle`` about principal axis ``axis`` (0, 1, 2), in scalars.
 
     ``M <- C_i(angle) M`` and ``q <- q (x) (c, s e_i)`` with ``(c, s, ca, sa)``
-    from :func:`_axis_rotation_trig`.
+    from :func:`axis_rotation_trig`.
     """
     if axis == 0:
         m1, m2 = _rot2(ca, sa, m1, m2)
@@ -217,12 +217,12 @@ def _turn_vector(axis, ca, sa, v0, v1, v2):
 @jit(inline="always")
 def _turned(axis, angle, m0, m1, m2, e0, e1, e2, e3):
     """``(M, q)`` after the exact rotation by ``angle`` (rad) about principal axis ``axis``, in scalars."""
-    c, s, ca, sa = _axis_rotation_trig(angle)
-    return _turn_body(axis, c, s, ca, sa, m0, m1, m2, e0, e1, e2, e3)
+    c, s, ca, sa = axis_rotation_trig(angle)
+    return turn_body(axis, c, s, ca, sa, m0, m1, m2, e0, e1, e2, e3)
 
 
 @jit(inline="always")
-def _renormalized(e0, e1, e2, e3):
+def renormalized(e0, e1, e2, e3):
     """One Newton step towards ``|q| = 1`` (removes round-off drift only: ``|q|^2 - 1 ~ 1e-16``)."""
     f = 1.5 - 0.5 * (e0 * e0 + e1 * e1 + e2 * e2 + e3 * e3)
     return e0 * f, e1 * f, e2 * f, e3 * f
@@ -259,8 +259,8 @@ def _inner_rotations(M, q, inertia, h_rot, a):
 
 @jit
 def _renormalize(q):
-    """In place: one Newton step towards |q| = 1 (:func:`_renormalized`)."""
-    q[0], q[1], q[2], q[3] = _renormalized(q[0], q[1], q[2], q[3])
+    """In place: one Newton step towards |q| = 1 (:func:`renormalized`)."""
+    q[0], q[1], q[2], q[3] = renormalized(q[0], q[1], q[2], q[3])
 
 
 KICK_CONSTANT, KICK_FORCE, KICK_GRAVITY_GRADIENT = 1, 2, 4
@@ -467,8 +467,8 @@ def _stage_midpoints(weights):
 def _turn_carry(axis, angle, parts, m0, m1, m2, e0, e1, e2, e3, b0, b1, b2, u0, u1, u2, f0, f1, f2):
     """:func:`_turned` by ``angle`` about ``axis``, also turning the kick's body copies
     (a body copy of a fixed inertial vector obeys ``v <- C_i(angle) v`` like ``M``)."""
-    c, s, ca, sa = _axis_rotation_trig(angle)
-    m0, m1, m2, e0, e1, e2, e3 = _turn_body(axis, c, s, ca, sa, m0, m1, m2, e0, e1, e2, e3)
+    c, s, ca, sa = axis_rotation_trig(angle)
+    m0, m1, m2, e0, e1, e2, e3 = turn_body(axis, c, s, ca, sa, m0, m1, m2, e0, e1, e2, e3)
     if parts & KICK_GRAVITY_GRADIENT:
         b0, b1, b2 = _turn_vector(axis, ca, sa, b0, b1, b2)
     if parts & KICK_CONSTANT:
@@ -557,7 +557,7 @@ def _split_kernel(
             if parts != 0:
                 m0, m1, m2 = _kicked(ha, m0, m1, m2, parts, kc, kg, b0, b1, b2, u0, u1, u2, f0, f1, f2)
             pend = m0 * g0 - p0
-        e0, e1, e2, e3 = _renormalized(e0, e1, e2, e3)
+        e0, e1, e2, e3 = renormalized(e0, e1, e2, e3)
         j = record[k]
         if j >= 0:
             m0, m1, m2, e0, e1, e2, e3 = _turned(0, pend, m0, m1, m2, e0, e1, e2, e3)
@@ -671,7 +671,7 @@ def _rotor_function(rotor_momentum, frame):
     return 1, (lambda t: np.broadcast_to(hp, np.shape(t) + (3,))), hp
 
 
-def _step_plan(t_out, step, even):
+def step_plan(t_out, step, even):
     """Per-interval step counts and sizes: interval k from t_{k-1} (t_{-1}=0) to t_k."""
     starts = np.concatenate([[0.0], t_out[:-1]])
     span = t_out - starts
@@ -682,7 +682,7 @@ def _step_plan(t_out, step, even):
     return starts, n, dt
 
 
-def _step_chunks(starts, n, dt, chunk=_CHUNK):
+def step_chunks(starts, n, dt, chunk=_CHUNK):
     """Yield ``(step_t, step_dt, record)`` arrays of at most ``chunk`` steps."""
     bt, bd, br, size = [], [], [], 0
     for k in range(len(n)):
@@ -730,7 +730,7 @@ def _run_split(frame, M0, q0, t_out, step, weights, ktorque, rotor, torque, even
     mode, h_p, h_const = rotor
     ns = len(weights)
     mids = _stage_midpoints(weights)
-    starts, n, dt = _step_plan(t_out, step, even)
+    starts, n, dt = step_plan(t_out, step, even)
     nout = len(t_out)
     out_M = np.full((nout, 3), np.nan)
     out_q = np.full((nout, 4), np.nan)
@@ -752,7 +752,7 @@ def _run_split(frame, M0, q0, t_out, step, weights, ktorque, rotor, torque, even
                 orbit_rv[0], orbit_rv[1], orbit_rv[2, 0] = gg.orbit[0], gg.orbit[1], -gg.orbit[2]
                 D = _hermite_spacing(gg.orbit[0], gg.orbit[1], gg.mu, np.max(np.abs(dt)))
                 orbit_nodes[2, :3] = D, math.nan, (1.0 / D if D > 0 else 0.0)
-        for st, sd, rec in _step_chunks(starts, n, dt):
+        for st, sd, rec in step_chunks(starts, n, dt):
             if orbit_mode == 2:
                 tk = st[:, None] + sd[:, None] * mids[None, :]
                 r_kick = np.asarray(gg.position(tk.ravel()), dtype=np.float64).reshape(len(st), ns, 3)
@@ -823,12 +823,6 @@ def _run_split_python(frame, M, q, starts, n, dt, weights, mids, torque, h_p, ou
         if n[k] > 0:
             out_M[k] = M
             out_q[k] = q
-
-
-def _attitude_difference(qa, qb):
-    """Rotation angle (rad) between two attitudes (sign of q irrelevant)."""
-    d = quat_multiply(qb, quat_conjugate(qa))
-    return 2.0 * np.arctan2(np.linalg.norm(d[..., 1:], axis=-1), np.abs(d[..., 0]))
 
 
 def _default_step(frame, M0, h0, ktorque, torque, w0):
@@ -967,7 +961,7 @@ def propagate_attitude(
         # the coarse plan uses exactly half the (even) step counts of the fine one
         f = 1.0 / (2.0 ** _ORDER[method] - 1.0)
         w2 = (M2 - t_h) / frame.moments
-        info["error_attitude"] = float(np.max(_attitude_difference(q_p, q2))) * f
+        info["error_attitude"] = float(np.max(attitude_difference(q_p, q2))) * f
         info["error_rate"] = float(np.max(np.linalg.norm(w_p - w2, axis=-1))) * f
     return finish(frame.vec_from_p(w_p), frame.quat_from_p(q_p), info)
 

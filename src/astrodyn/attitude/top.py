@@ -58,19 +58,18 @@ import numpy as np
 
 from astrodyn.jit import jit
 from astrodyn.attitude.integrators import (
-    _SMALL_ANGLE,
+    SMALL_ANGLE,
     SPLIT2_WEIGHTS,
     SPLIT4_WEIGHTS,
-    _attitude_difference,
-    _axis_rotation_trig,
-    _cos_sinc_minus_one,
-    _renormalized,
-    _step_chunks,
-    _step_plan,
-    _turn_body,
+    axis_rotation_trig,
+    cos_sinc_minus_one,
+    renormalized,
+    step_chunks,
+    step_plan,
+    turn_body,
 )
 from astrodyn.attitude.torques import UniformGravityTorque
-from astrodyn.rotation import dcm_from_quat, omega_from_euler_rates, quat_from_euler, quat_hamilton_scalar
+from astrodyn.rotation import attitude_difference, dcm_from_quat, omega_from_euler_rates, quat_from_euler, quat_hamilton_scalar
 
 __all__ = ["HeavyTop"]
 
@@ -237,19 +236,19 @@ class HeavyTop:
         if error_estimate:
             M2, q2, _ = self._run(M0, q0, t_out, 2.0 * step, weights, False)
             f = 1.0 / (2.0**order - 1.0)
-            info["error_attitude"] = float(np.max(_attitude_difference(q, q2))) * f
+            info["error_attitude"] = float(np.max(attitude_difference(q, q2))) * f
             info["error_rate"] = float(np.max(np.linalg.norm(w - M2 / self.inertia, axis=-1))) * f
         info["seconds"] = _time.perf_counter() - tick
         return (w[0], q[0], info) if scalar_t else (w, q, info)
 
     def _run(self, M0, q0, t_out, step, weights, even):
-        starts, n, dt = _step_plan(t_out, step, even)
+        starts, n, dt = step_plan(t_out, step, even)
         out_M = np.full((len(t_out), 3), np.nan)
         out_q = np.full((len(t_out), 4), np.nan)
         M = np.array(M0, dtype=np.float64)
         q = np.array(q0, dtype=np.float64)
         inv = np.array([1.0 / self.transverse_inertia, 1.0 / self.axial_inertia - 1.0 / self.transverse_inertia])
-        for _, sd, rec in _step_chunks(starts, n, dt):
+        for _, sd, rec in step_chunks(starts, n, dt):
             _top_kernel(M, q, inv, self.mgl, weights, sd, rec, out_M, out_q)
         for k in range(len(t_out)):
             if n[k] == 0:
@@ -267,14 +266,14 @@ def _momentum_turn(mm, k):
     and ``s = sin(x) / |M| = k sin(x)/x``: both even in ``x``, functions of
     ``x^2 = mm k^2`` with no square root or division.  For ``|x| <= 1/8`` rad they
     come from the Taylor polynomials of
-    :func:`astrodyn.attitude.integrators._cos_sinc_minus_one` (within about 1 ulp;
+    :func:`astrodyn.attitude.integrators.cos_sinc_minus_one` (within about 1 ulp;
     tested against mpmath), above from libm ``sqrt``, ``cos``, ``sin``.  ``c^2 +
     s^2 |M|^2 = 1`` to rounding (the kernel renormalises ``q`` once per step).
     NaN in gives NaN out (it fails the range test).
     """
     z = mm * (k * k)
-    if z <= _SMALL_ANGLE * _SMALL_ANGLE:
-        cos_m1, sinc_m1 = _cos_sinc_minus_one(z)
+    if z <= SMALL_ANGLE * SMALL_ANGLE:
+        cos_m1, sinc_m1 = cos_sinc_minus_one(z)
         return 1.0 + cos_m1, k + k * sinc_m1
     m = math.sqrt(mm)
     x = m * k
@@ -322,7 +321,7 @@ def _top_kernel(M, q, inv, mgl, weights, step_dt, record, out_M, out_q):
         if not dt == dt_tables:
             for st in range(ns):
                 a = weights[st] * dt
-                trig3[st, 0], trig3[st, 1], trig3[st, 2], trig3[st, 3] = _axis_rotation_trig(inv[1] * m2 * a)
+                trig3[st, 0], trig3[st, 1], trig3[st, 2], trig3[st, 3] = axis_rotation_trig(inv[1] * m2 * a)
                 half_k[st] = 0.5 * a * inv[0]
             dt_tables = dt
         for st in range(ns):
@@ -331,7 +330,7 @@ def _top_kernel(M, q, inv, mgl, weights, step_dt, record, out_M, out_q):
             m0 = m0 + kd * (e2 * e3 + e0 * e1)
             m1 = m1 - kd * (e1 * e3 - e0 * e2)
             mm = m0 * m0 + m1 * m1 + m2sq  # |M|^2 before the b3 turn (which keeps it): off the chain
-            m0, m1, m2, e0, e1, e2, e3 = _turn_body(
+            m0, m1, m2, e0, e1, e2, e3 = turn_body(
                 2, trig3[st, 0], trig3[st, 1], trig3[st, 2], trig3[st, 3], m0, m1, m2, e0, e1, e2, e3
             )
             # q (x) (c, s M) = c q + s (q (x) (0, M)): the product runs while c, s are formed
@@ -339,7 +338,7 @@ def _top_kernel(M, q, inv, mgl, weights, step_dt, record, out_M, out_q):
             c, s = _momentum_turn(mm, half_k[st])
             e0, e1, e2, e3 = c * e0 + s * p0, c * e1 + s * p1, c * e2 + s * p2, c * e3 + s * p3
             pend = ha
-        e0, e1, e2, e3 = _renormalized(e0, e1, e2, e3)
+        e0, e1, e2, e3 = renormalized(e0, e1, e2, e3)
         j = record[k]
         if j >= 0:
             kd = pend * kick_rate
