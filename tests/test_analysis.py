@@ -167,3 +167,17 @@ def test_report_opens_with_one_line_per_body_from_the_file(report):
         assert f"orbit (kepler): {n_orbit} states" in line
         drifts = [v for v in rep["bodies"][body]["conserved quantities"].values() if isinstance(v, float)]
         assert f"largest drift of a conserved quantity {max(drifts):.2g}" in line
+
+
+def test_repr_of_a_loaded_run_is_one_short_line(report):
+    """``repr(load(...))`` names the file, scenario, bodies, channels and span, and does not
+    dump the config as run (which stays in ``run.scenario``)."""
+    from astrodyn.recording import load
+
+    _, rep, sc, res = report
+    run = load(rep["file"])
+    text = repr(run)
+    assert "\n" not in text and len(text) < 300
+    assert "'an'" in text and "leo" in text and "geo" in text and f"{run.messages} messages" in text
+    assert f"t 0..{res.t[-1]:.6g} s" in text
+    assert run.scenario["epoch"] not in text  # the config is one attribute away, not printed

@@ -128,6 +128,17 @@ class Run:
         """True for a finished file with every record intact and every message valid."""
         return not self.truncated and self.corrupt_chunks == 0 and self.invalid == 0
 
+    def __repr__(self) -> str:
+        """One line: file, scenario, bodies, channels, span of t, messages, state.  The
+        config as run is one attribute away (``run.scenario``), not printed."""
+        ts = [tr.fields["t"] for tr in self.channels.values() if "t" in tr.fields and len(tr)]
+        span = f", t {min(float(t.min()) for t in ts):.6g}..{max(float(t.max()) for t in ts):.6g} s" if ts else ""
+        names = list(self.bodies)
+        shown = ", ".join(names[:5]) + (f", ... ({len(names)} in all)" if len(names) > 5 else "")
+        state = "complete" if self.complete else f"incomplete: {self.truncation or f'{self.invalid} invalid messages'}"
+        return (f"Run({os.path.basename(self.path)!r}, scenario {self.scenario.get('name', '?')!r}, bodies [{shown}], "
+                f"{len(self.channels)} channels{span}, {self.messages} messages, {state})")
+
 
 # ------------------------------------------------------------------------------- scanning
 
