@@ -42,7 +42,7 @@ Algorithms:
   19.25.14 for ``|phi| <= pi/2``, extended by ``F(phi + j pi) = F(phi) + 2 j K``
   (likewise with the complete ``Pi``); ``Pi`` for ``n < 1``.
 
-Scalar kernels (``_sncndn``, ``_rf``, ``_rj``, ...) are compiled with
+Scalar kernels (``_sncndn``, ``elliprf_scalar``, ``elliprj_scalar``, ...) are compiled with
 :func:`astrodyn.jit.jit` and used directly by
 :mod:`astrodyn.attitude.torque_free`; the public functions broadcast arrays and
 loop in compiled code.  NaN inputs give NaN outputs; loops have iteration caps.
@@ -80,7 +80,7 @@ _LANDEN_BASE_M1 = 1e-17  # below this m1 the first-order expansion about m = 1 i
 
 
 @jit
-def _ellipk(m1):
+def ellipk_scalar(m1):
     """K from the complementary parameter only: ``pi / (2 AGM(1, sqrt(m1)))``."""
     if not (m1 >= 0.0):  # NaN or negative
         return math.nan
@@ -243,7 +243,7 @@ def _sncndn_reduced(u, m, m1):
 
 
 @jit
-def _sncndn_half(r, m, m1):
+def sncndn_half(r, m, m1):
     """sn, cn, dn for |r| <= K (K finite): parity (sn odd, cn and dn even)."""
     s, c, d = _sncndn_reduced(abs(r), m, m1)
     # rounding can leave |sn|, |cn|, dn one ulp above 1 (e.g. cn(0) from the Landen steps)
@@ -256,7 +256,7 @@ def _sncndn_half(r, m, m1):
 
 
 @jit
-def _reduce_half_period(u, K):
+def reduce_half_period(u, K):
     """u = j 2K + r with |r| <= K (K finite); returns (j as float, r)."""
     twoK = 2.0 * K
     j = math.floor(u / twoK + 0.5)
@@ -281,8 +281,8 @@ def _sncndn(u, m, m1, K):
         return th, sech, sech
     if m == 0.0:
         return math.sin(u), math.cos(u), 1.0
-    j, r = _reduce_half_period(u, K)
-    s, c, d = _sncndn_half(r, m, m1)
+    j, r = reduce_half_period(u, K)
+    s, c, d = sncndn_half(r, m, m1)
     if j % 2.0 != 0.0:
         s = -s
         c = -c
@@ -294,7 +294,7 @@ def _sncndn(u, m, m1, K):
 
 
 @jit
-def _rf(x, y, z):
+def elliprf_scalar(x, y, z):
     """Carlson R_F(x, y, z), x, y, z >= 0, at most one zero (Carlson 1995, sec. 2)."""
     a0 = (x + y + z) / 3.0
     q = _Q_RF * max(abs(a0 - x), abs(a0 - y), abs(a0 - z))
@@ -349,7 +349,7 @@ def _rj_series(e2, e3, e4, e5):
 
 
 @jit
-def _rj(x, y, z, p):
+def elliprj_scalar(x, y, z, p):
     """Carlson R_J(x, y, z, p), x, y, z >= 0 (at most one zero), p > 0 (Carlson 1995, sec. 2)."""
     a0 = (x + y + z + 2.0 * p) / 5.0
     delta = (p - x) * (p - y) * (p - z)
@@ -435,9 +435,9 @@ def _reduce_amplitude(phi):
 @jit
 def _ellipf(phi, m, m1):
     j, s, c = _reduce_amplitude(phi)
-    f = s * _rf(c * c, m1 + m * c * c, 1.0)  # 1 - m s^2 = m1 + m c^2: no cancellation
+    f = s * elliprf_scalar(c * c, m1 + m * c * c, 1.0)  # 1 - m s^2 = m1 + m c^2: no cancellation
     if j != 0.0:
-        f += 2.0 * j * _ellipk(m1)
+        f += 2.0 * j * ellipk_scalar(m1)
     return f
 
 
@@ -446,9 +446,9 @@ def _ellippi(n, phi, m, m1):
     j, s, c = _reduce_amplitude(phi)
     d2 = m1 + m * c * c
     p = 1.0 - n * s * s
-    val = s * _rf(c * c, d2, 1.0) + n / 3.0 * s * s * s * _rj(c * c, d2, 1.0, p)
+    val = s * elliprf_scalar(c * c, d2, 1.0) + n / 3.0 * s * s * s * elliprj_scalar(c * c, d2, 1.0, p)
     if j != 0.0:
-        complete = _rf(0.0, m1, 1.0) + n / 3.0 * _rj(0.0, m1, 1.0, 1.0 - n)
+        complete = elliprf_scalar(0.0, m1, 1.0) + n / 3.0 * elliprj_scalar(0.0, m1, 1.0, 1.0 - n)
         val += 2.0 * j * complete
     return val
 
@@ -460,20 +460,20 @@ def _ellippi(n, phi, m, m1):
 @pjit
 def _ellipj_loop(u, m, m1, sn, cn, dn):
     for i in prange(u.shape[0]):
-        K = _ellipk(m1[i])
+        K = ellipk_scalar(m1[i])
         sn[i], cn[i], dn[i] = _sncndn(u[i], m[i], m1[i], K)
 
 
 @pjit
 def _ellipk_loop(m1, out):
     for i in prange(m1.shape[0]):
-        out[i] = _ellipk(m1[i])
+        out[i] = ellipk_scalar(m1[i])
 
 
 @pjit
 def _rf_loop(x, y, z, out):
     for i in prange(x.shape[0]):
-        out[i] = _rf(x[i], y[i], z[i])
+        out[i] = elliprf_scalar(x[i], y[i], z[i])
 
 
 @pjit
@@ -485,7 +485,7 @@ def _rd_loop(x, y, z, out):
 @pjit
 def _rj_loop(x, y, z, p, out):
     for i in prange(x.shape[0]):
-        out[i] = _rj(x[i], y[i], z[i], p[i])
+        out[i] = elliprj_scalar(x[i], y[i], z[i], p[i])
 
 
 @pjit

@@ -95,7 +95,7 @@ import math
 import numpy as np
 
 from astrodyn.jit import jit, pjit, prange
-from astrodyn.attitude.elliptic import _ellipk, _reduce_half_period, _rf, _rj, _sncndn_half
+from astrodyn.attitude.elliptic import ellipk_scalar, elliprf_scalar, elliprj_scalar, reduce_half_period, sncndn_half
 from astrodyn.rotation import quat_hamilton_scalar
 
 __all__ = ["torque_free", "polhode", "herpolhode", "rate_period", "flip_period"]
@@ -154,11 +154,11 @@ def _j_g(s, c, d, r, n, sq1n, m1, m, pf, gpf):
         n2 = m / n
         jv = math.atan2(gpf * s, c * d) / gpf
         if n2 != 0.0 and s != 0.0:
-            jv -= n2 / 3.0 * s * s * s * _rj(c * c, d * d, 1.0, 1.0 - n2 * s * s)
+            jv -= n2 / 3.0 * s * s * s * elliprj_scalar(c * c, d * d, 1.0, 1.0 - n2 * s * s)
     elif n == 0.0 or s == 0.0:
         jv = 0.0
     else:
-        jv = n / 3.0 * s * s * s * _rj(c * c, d * d, 1.0, 1.0 - n * s * s)
+        jv = n / 3.0 * s * s * s * elliprj_scalar(c * c, d * d, 1.0, 1.0 - n * s * s)
     gv = math.atan2(sq1n * s, c) / sq1n
     return jv, gv
 
@@ -177,8 +177,8 @@ def _phase(par, t):
         sech = 1.0 / math.cosh(tau) if abs(tau) < 710.0 else 0.0
         jv, gv = _j_g(th, sech, sech, tau, n, sq1n, m1, m, 0.0, 0.0)
         return th, sech, sech, jv, gv
-    j, r = _reduce_half_period(tau, K)
-    s, c, d = _sncndn_half(r, m, m1)
+    j, r = reduce_half_period(tau, K)
+    s, c, d = sncndn_half(r, m, m1)
     jv, gv = _j_g(s, c, d, r, n, sq1n, m1, m, par[_PF], par[_GPF])
     jv += j * par[_DJ]
     gv += j * par[_DG]
@@ -316,7 +316,7 @@ def _setup(inertia, w0, q0, par):
     m1 = d31 * sep / (d32 * p31)
     m = min(max(m, 0.0), 1.0)
     m1 = min(max(m1, 0.0), 1.0)
-    K = _ellipk(m1)
+    K = ellipk_scalar(m1)
     sig = 1.0 if wc > 0.0 else -1.0
     e1 = 1.0
     if m1 == 0.0 and wa < 0.0:
@@ -330,7 +330,7 @@ def _setup(inertia, w0, q0, par):
     cn0 /= nr
     sn0 /= nr
     dn0 = min(abs(wc) / a3, 1.0)
-    f = sn0 * _rf(cn0 * cn0, dn0 * dn0, 1.0)
+    f = sn0 * elliprf_scalar(cn0 * cn0, dn0 * dn0, 1.0)
     if cn0 >= 0.0:
         tau0 = f
     else:
@@ -364,11 +364,11 @@ def _setup(inertia, w0, q0, par):
         par[_LIN] = hmag / Ic
         pk = 0.5 * math.pi / gpf
         if n2 != 0.0:
-            pk -= n2 / 3.0 * _rj(0.0, m1, 1.0, 1.0 - n2)
+            pk -= n2 / 3.0 * elliprj_scalar(0.0, m1, 1.0, 1.0 - n2)
         par[_DJ] = 2.0 * pk
         par[_DG] = math.pi / sq1n
     elif m1 > 0.0:
-        par[_DJ] = 2.0 * n / 3.0 * _rj(0.0, m1, 1.0, 1.0 - n) if n != 0.0 else 0.0
+        par[_DJ] = 2.0 * n / 3.0 * elliprj_scalar(0.0, m1, 1.0, 1.0 - n) if n != 0.0 else 0.0
         par[_DG] = math.pi / sq1n
     # J, G at tau0 through the same reduction as every later time (psi(0) == 0 exactly)
     s_, c_, d_, j0, g0 = _phase(par, 0.0)
