@@ -29,7 +29,7 @@ from test_messages_fast import BASE, EDITS, byte_mutants, canonical, ordinary, s
 from astrodyn import messages as m
 from astrodyn.recording import ingest
 from astrodyn.service.logger import Logger
-from astrodyn.recording.writer import _GRAMMAR, McapRecorder
+from astrodyn.recording.writer import INGEST_GRAMMAR, McapRecorder
 
 EPOCH_NS = 1_774_008_000_000_000_000
 
@@ -39,7 +39,7 @@ def compiled(data: bytes, kind: str):
     buf = np.frombuffer(data, dtype=np.uint8)
     out = np.zeros(3, dtype=np.int64)
     code = ingest.KIND_ORBIT if kind == "orbit" else ingest.KIND_ATTITUDE
-    ok = ingest._check_entry(buf, 0, buf.shape[0], code, *_GRAMMAR, m.QUAT_NORM_TOL, out)
+    ok = ingest._check_entry(buf, 0, buf.shape[0], code, *INGEST_GRAMMAR, m.QUAT_NORM_TOL, out)
     return (data[out[0] : out[1]], int(out[2])) if ok else None
 
 

@@ -147,7 +147,7 @@ class _Truncated(Exception):
     pass
 
 
-def _records(f: BinaryIO, size: int, path: str, state: dict) -> Iterator[tuple[int, bytes, int]]:
+def read_records(f: BinaryIO, size: int, path: str, state: dict) -> Iterator[tuple[int, bytes, int]]:
     """Yield (opcode, body, offset) of each complete top-level record up to the footer."""
     head = f.read(8)
     if head != MCAP_MAGIC:
@@ -183,7 +183,7 @@ def _records(f: BinaryIO, size: int, path: str, state: dict) -> Iterator[tuple[i
             return
 
 
-def _parse(opcode: int, body: bytes) -> Any:
+def parse_record(opcode: int, body: bytes) -> Any:
     stream = ReadDataStream(io.BytesIO(body))
     if opcode == Opcode.MESSAGE:
         return Message.read(stream, len(body))
@@ -358,9 +358,9 @@ def load(path: str | os.PathLike) -> Run:
 
     handlers = {Schema: on_schema, Channel: on_channel, Message: on_message}
     with f:
-        for opcode, body, offset in _records(f, size, path, state):
+        for opcode, body, offset in read_records(f, size, path, state):
             try:
-                rec = _parse(opcode, body)
+                rec = parse_record(opcode, body)
             except Exception as exc:  # a damaged record whose framing is intact
                 counters["corrupt"] += 1
                 notes.append(f"damaged {Opcode(opcode).name if opcode in Opcode._value2member_map_ else opcode} record at byte {offset}: {exc}")

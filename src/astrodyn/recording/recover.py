@@ -36,7 +36,7 @@ from mcap.stream_reader import breakup_chunk
 
 from astrodyn import __version__
 from astrodyn.recording.chunked_writer import ChunkedWriter
-from astrodyn.recording.reader import _parse, _records
+from astrodyn.recording.reader import parse_record, read_records
 from astrodyn.recording.writer import RecordingError
 
 __all__ = ["recover", "main"]
@@ -126,9 +126,9 @@ def recover(path: str | os.PathLike, out: str | os.PathLike | None = None, *, ch
                 with stream:
                     writer = ChunkedWriter(stream, chunk_size=chunk_size, library=f"astrodyn {__version__} (recover)")
                     copier = _Copier(writer)
-                    for opcode, body, offset in _records(f, size, src, state):
+                    for opcode, body, offset in read_records(f, size, src, state):
                         try:
-                            rec = _parse(opcode, body)
+                            rec = parse_record(opcode, body)
                         except Exception as exc:  # framing intact, content damaged
                             corrupt += 1
                             notes.append(f"damaged record at byte {offset} skipped: {exc}")

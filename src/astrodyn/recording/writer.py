@@ -54,7 +54,7 @@ _U32 = 0xFFFFFFFF
 #: Channels one MCAP file can hold (channel ids are uint16; id 0 is never used by the writer).
 MAX_CHANNELS = 65535
 _U64_END = 2**64
-_GRAMMAR = ingest.grammar_tables(messages.ORBIT_MODELS, messages.ATTITUDE_MODELS)
+INGEST_GRAMMAR = ingest.grammar_tables(messages.ORBIT_MODELS, messages.ATTITUDE_MODELS)
 
 
 class RecordingError(Exception):
@@ -425,7 +425,7 @@ class McapRecorder:
         """
         if self._error is not None:
             raise self._error
-        lits, lit_start, lit_len, names, name_start, name_len = _GRAMMAR
+        lits, lit_start, lit_len, names, name_start, name_len = INGEST_GRAMMAR
         result = np.zeros(4, dtype=np.int64)
         written = 0
         max_t = -np.inf

@@ -55,7 +55,7 @@ import zenoh
 
 from astrodyn import auth, bus, messages
 from astrodyn.recording import ingest
-from astrodyn.recording.writer import _GRAMMAR, DUPLICATE, BatchLayout, McapRecorder, RecordingError
+from astrodyn.recording.writer import INGEST_GRAMMAR, DUPLICATE, BatchLayout, McapRecorder, RecordingError
 
 __all__ = ["Logger", "main"]
 
@@ -489,7 +489,7 @@ class Logger:
                 extra_keys={messages.status_key(self.scenario): "status"}))
             alive = stack.enter_context(bus.AliveWatcher(self.session, self.scenario))
             heartbeat = stack.enter_context(bus.Heartbeat(self.session, self.scenario, self.name, signer=self.signer))
-            ingest.warm_up(_GRAMMAR)  # compile / load the batch kernels before we say ready
+            ingest.warm_up(INGEST_GRAMMAR)  # compile / load the batch kernels before we say ready
             stack.enter_context(bus.declare_alive(self.session, self.scenario, self.name))  # last: ready
             receivers = [sub.try_recv for sub in subs]
             handle = self.handle
