@@ -5,7 +5,11 @@
 """
 
 import os
+import os as _os
+import signal as _signal
+import subprocess as _subprocess
 
+import pytest
 from hypothesis import HealthCheck, settings
 
 try:  # astropy is only at the edges, but never let a test reach the network
@@ -27,12 +31,6 @@ settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "ci"))
 
 
 # --------------------------------------------------------------------------- processes and the bus
-
-import os as _os
-import signal as _signal
-import subprocess as _subprocess
-
-import pytest
 
 
 @pytest.fixture

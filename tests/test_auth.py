@@ -113,7 +113,7 @@ def test_forged_headers_with_valid_length_are_rejected_without_growing_state():
         forged = b"ADA1" + bytes([5]) + b"orbit" + os.urandom(8) + struct.pack("<Q", n) + os.urandom(32)
         with pytest.raises(auth.AuthError):
             v.verify("astrodyn/s/b/orbit", b"{}", forged)
-    assert len(v._last) == 0  # noqa: SLF001 - the bound is the point of this test
+    assert len(v._last) == 0  # private on purpose: the bound is the point of this test
 
 
 def test_secret_file_is_private_and_checked(tmp_path):

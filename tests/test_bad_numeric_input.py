@@ -215,7 +215,7 @@ def run_cases(selected: set[str] | None = None, hangs: bool = False) -> list[dic
                 new[i] = bad
                 try:
                     result, exc = fn(*new, **kwargs), None
-                except BaseException as e:  # noqa: BLE001 - judged below
+                except BaseException as e:  # any exception at all: judged below
                     result, exc = None, e
                 why = _judge(label, case, result, exc)
                 report.append({"case": case, "ok": why is None, "why": why})

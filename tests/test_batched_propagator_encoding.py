@@ -16,8 +16,8 @@ from pathlib import Path
 import pytest
 
 from astrodyn import messages
-from astrodyn.service.propagator import BATCH_THRESHOLD
 from astrodyn.scenario import load, plan
+from astrodyn.service.propagator import BATCH_THRESHOLD
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -52,8 +52,8 @@ def test_check_recording_counts_loss_and_disorder(tmp_path):
 
 
 def test_scene_config_replaces_size_and_duration():
-    from astrodyn.scenario.catalogue import config_path
     from astrodyn.scenario import loads
+    from astrodyn.scenario.catalogue import config_path
 
     template = config_path("constellation-1000").read_text()
     text = service.scene_config(service.Scene("tiny", 6, 3, 1.5), template)

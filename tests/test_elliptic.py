@@ -13,8 +13,7 @@ import math
 import mpmath as mp
 import numpy as np
 import pytest
-from hypothesis import given
-from hypothesis import strategies as st
+from hypothesis import given, strategies as st
 
 from astrodyn.attitude.elliptic import ellipf, ellipj, ellipk, ellippi, elliprd, elliprf, elliprj
 

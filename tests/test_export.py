@@ -25,7 +25,7 @@ from astrodyn.recording import load
 from astrodyn.recording.export import ExportError, export, parse_ccsds_epoch, write_aem
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _recordings import LEO_TWO_BODIES, leo_recording, record  # noqa: E402
+from _recordings import LEO_TWO_BODIES, leo_recording, record
 
 
 @pytest.fixture(scope="module")

@@ -23,8 +23,8 @@ from astrodyn.recording import load
 from astrodyn.recording.export import export, line_indices, scene_updates
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _recordings import LEO_TWO_BODIES, record  # noqa: E402
-from test_export import _rotate_active  # noqa: E402  (written independently of the exporter)
+from _recordings import LEO_TWO_BODIES, record
+from test_export import _rotate_active  # written independently of the exporter
 
 # foxglove-sdk schemas/jsonschema/SceneUpdate.json: the "required" list of each object
 # astrodyn writes (SceneUpdate, SceneEntity, and the primitives it fills).

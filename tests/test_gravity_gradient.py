@@ -142,8 +142,8 @@ def test_kernel_orbit_interpolation_against_propagate(ecc):
     # between them) against astrodyn.orbit.propagate at random times, both directions
     import math
 
-    from astrodyn.jit import jit
     from astrodyn.attitude.integrators import _hermite_spacing, _orbit_position
+    from astrodyn.jit import jit
     from astrodyn.orbit import propagate
 
     @jit

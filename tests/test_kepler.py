@@ -18,8 +18,7 @@ import math
 import mpmath as mp
 import numpy as np
 import pytest
-from hypothesis import given
-from hypothesis import strategies as st
+from hypothesis import given, strategies as st
 
 from astrodyn.orbit import solve_kepler, solve_kepler_hyperbolic
 

@@ -16,8 +16,8 @@ from mcap.records import MessageIndex
 
 from astrodyn import messages as m
 from astrodyn.recording.chunked_writer import _message_indexes
-from astrodyn.service.logger import Logger
 from astrodyn.recording.writer import McapRecorder
+from astrodyn.service.logger import Logger
 
 EPOCH_NS = 1_774_008_000_000_000_000
 

@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from astrodyn.orbit import propagate, propagate_perturbed
-from astrodyn.orbit.maneuvers import ConstantThrust, G0, apply_impulse, hohmann, rocket_dv
+from astrodyn.orbit.maneuvers import G0, ConstantThrust, apply_impulse, hohmann, rocket_dv
 
 MU_KM = 398600.4418
 R_E = 6378.137

@@ -15,8 +15,7 @@ import struct
 import jsonschema
 import numpy as np
 import pytest
-from hypothesis import given
-from hypothesis import strategies as st
+from hypothesis import given, strategies as st
 
 from astrodyn import messages as m
 

@@ -20,8 +20,7 @@ composed propagation can amplify the first leg's error by the second leg's
 import math
 
 import numpy as np
-from hypothesis import assume, given
-from hypothesis import strategies as st
+from hypothesis import assume, given, strategies as st
 
 from astrodyn.orbit import propagate
 from astrodyn.orbit.elements import state_from_elements

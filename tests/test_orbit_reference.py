@@ -43,8 +43,10 @@ def hyperbolic_kepler_position(r0, v0, dt, mu):
     r0 = [mp.mpf(float(x)) for x in r0]
     v0 = [mp.mpf(float(x)) for x in v0]
     dt, mu = mp.mpf(float(dt)), mp.mpf(float(mu))
-    dot = lambda a, b: sum(x * y for x, y in zip(a, b))  # noqa: E731
-    cross = lambda a, b: [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]  # noqa: E731
+    def dot(a, b):
+        return sum(x * y for x, y in zip(a, b))
+    def cross(a, b):
+        return [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
     rn = mp.sqrt(dot(r0, r0))
     h = cross(r0, v0)
     hn = mp.sqrt(dot(h, h))

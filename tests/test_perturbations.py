@@ -95,7 +95,8 @@ def test_zonal_acceleration_is_gradient_of_potential(degree):
         Jm = [mp.mpf(j) for j in J]
         for p, a, V in zip(pts, got, gotV):
             x, y, z = (mp.mpf(float(c)) for c in p)
-            f = lambda X, Y, Z: mp_zonal_potential(X, Y, Z, mp.mpf(MU), mp.mpf(RE), Jm)  # noqa: E731
+            def f(X, Y, Z):
+                return mp_zonal_potential(X, Y, Z, mp.mpf(MU), mp.mpf(RE), Jm)
             ref = [mp.diff(f, (x, y, z), (1, 0, 0)), mp.diff(f, (x, y, z), (0, 1, 0)), mp.diff(f, (x, y, z), (0, 0, 1))]
             r = float(mp.sqrt(x * x + y * y + z * z))
             scale = MU / r**2 * sum(abs(j) * (RE / r) ** n * (2 * n + 2) for n, j in enumerate(J, start=2))
@@ -161,7 +162,8 @@ def test_point_mass_difference_small_offsets():
         with mp.workdps(40):
             x = [mp.mpf(float(c)) for c in rho]
             y = [mp.mpf(float(a)) + mp.mpf(float(b)) for a, b in zip(rho, delta)]
-            g = lambda u: [-mp.mpf(MU) * c / mp.sqrt(sum(w * w for w in u)) ** 3 for c in u]  # noqa: E731
+            def g(u):
+                return [-mp.mpf(MU) * c / mp.sqrt(sum(w * w for w in u)) ** 3 for c in u]
             ref = np.array([float(a - b) for a, b in zip(g(y), g(x))])
         assert np.linalg.norm(got - ref) <= 100 * EPS * np.linalg.norm(ref)
 

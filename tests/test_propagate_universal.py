@@ -29,27 +29,27 @@ import pytest
 from astrodyn.orbit import propagate
 from astrodyn.orbit.elements import state_from_elements
 from astrodyn.orbit.universal import (
+    _ALPHA,
     _NWU,
-    _UOK,
+    _Q,
+    _RN,
+    _SIG,
+    _UDT,
     _UF,
-    _UG,
     _UFD,
+    _UG,
     _UGD,
+    _UMU,
+    _UOK,
     _Z_WINDOW,
     _classify,
     _fg_universal_safe,
-    formulation_rows,
     _stumpff_window,
     _uni_fast,
     _uni_fast_pass,
     _uni_finish_pass,
     _uni_solve_safe,
-    _RN,
-    _SIG,
-    _Q,
-    _ALPHA,
-    _UDT,
-    _UMU,
+    formulation_rows,
 )
 from astrodyn.reference.conditioning import ulp_sensitivity
 from astrodyn.reference.orbit_mp import propagate_mp, stumpff_mp

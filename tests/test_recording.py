@@ -280,7 +280,7 @@ def test_seq_tracker_against_set_model():
     assert [tr.add("k", s) for s in [0, 1, 4, 2, 2, 3, 5, 0]] == [OK, OK, GAP, LATE, DUPLICATE, LATE, OK, DUPLICATE]
     assert tr.report()["k"]["gaps"] == [] and tr.report()["k"]["missing"] == 0
     rng = random.Random(7)
-    for trial in range(300):
+    for _trial in range(300):
         n = rng.randrange(1, 60)
         arrivals = [s for s in range(n) if rng.random() > 0.2]
         for _ in range(rng.randrange(0, 10)):  # local swaps and duplicates

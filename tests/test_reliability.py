@@ -30,7 +30,7 @@ from astrodyn.scenario import load as load_scenario
 from astrodyn.simulate import OrbitEngine
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from test_service import ASTRODYN, CONFIGS, _stop  # noqa: E402  (same process handling as the service tests)
+from test_service import ASTRODYN, CONFIGS, _stop  # same process handling as the service tests
 
 pytestmark = pytest.mark.network
 
@@ -417,7 +417,8 @@ def test_rogue_publisher_during_a_run_and_loopback_only_sockets(tmp_path):
     scn = load_scenario(cfg)
     iss = messages.orbit_key("demo", "iss")
     rogue = messages.orbit_key("demo", "rogue")
-    good = lambda seq: messages.encode(messages.orbit_message(seq * 1.0, seq, "kepler", [7e6, 0, 0], [0, 7.5e3, 0], 3.986e14))  # noqa: E731
+    def good(seq):
+        return messages.encode(messages.orbit_message(seq * 1.0, seq, "kepler", [7e6, 0, 0], [0, 7.5e3, 0], 3.986e14))
     bad = [
         (iss, b"\x00\xff garbage"),
         (iss, b'{"t": 1.0, "seq": 1,'),  # cut JSON

@@ -26,7 +26,7 @@ from astrodyn.recording import McapRecorder, RecordingError
 from astrodyn.recording.stream import open_stream
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _recordings import leo_recording  # noqa: E402
+from _recordings import leo_recording
 
 pytestmark = pytest.mark.network
 EPOCH_NS = 1_774_008_000_000_000_000

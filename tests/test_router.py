@@ -29,8 +29,8 @@ import pytest
 from mcap.reader import make_reader
 
 from astrodyn import auth, bus
-from astrodyn.service.router import is_wildcard
 from astrodyn.scenario import load
+from astrodyn.service.router import is_wildcard
 from astrodyn.simulate import simulate
 from test_service import _stop  # stop a child by PID: SIGTERM, then SIGKILL (one helper)
 
@@ -127,7 +127,7 @@ def _check_complete(path: Path, config: Path) -> None:
     assert n == 101  # 20 s at 5 Hz, t = 0 included: independent of the code's count
     channels: dict[str, list] = {}
     with open(path, "rb") as f:
-        for schema, channel, message in make_reader(f).iter_messages(log_time_order=False):
+        for _schema, channel, message in make_reader(f).iter_messages(log_time_order=False):
             channels.setdefault(channel.topic, []).append(json.loads(message.data))
     expected = {"astrodyn/router-test/sat/orbit", "astrodyn/router-test/sat/attitude", "astrodyn/router-test/probe/orbit"}
     assert expected <= set(channels), sorted(channels)

@@ -19,8 +19,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, given, settings
-from hypothesis import strategies as st
+from hypothesis import HealthCheck, given, settings, strategies as st
 
 from astrodyn import scenario as S
 from astrodyn.scenario import ScenarioError
@@ -192,7 +191,7 @@ def test_vector_forms():
 
 
 def _unix(y, mo, d, h=0, mi=0, s=0):
-    return int(dt.datetime(y, mo, d, h, mi, s, tzinfo=dt.timezone.utc).timestamp()) * 10**9
+    return int(dt.datetime(y, mo, d, h, mi, s, tzinfo=dt.UTC).timestamp()) * 10**9
 
 
 def test_epochs_in_every_scale():

@@ -14,7 +14,7 @@ import math
 import numpy as np
 import pytest
 
-from astrodyn.rotation import quat_from_euler, quat_multiply, quat_conjugate, rotvec_from_quat
+from astrodyn.rotation import quat_conjugate, quat_from_euler, quat_multiply, rotvec_from_quat
 from astrodyn.sensors import PositionReceiver, RateGyro, StarTracker, WheelTachometer
 
 N = 20_000

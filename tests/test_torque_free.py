@@ -30,7 +30,7 @@ EPS = np.finfo(float).eps
 Q0 = tuple(np.array([0.9, 0.1, -0.3, 0.2]) / np.linalg.norm([0.9, 0.1, -0.3, 0.2]))
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _mp_reference(inertia, w0, span, npts=5):
     t = np.linspace(0.0, span, npts)
     w, C, q = torque_free_reference(inertia, w0, Q0, t, dps=30, order=28)
@@ -147,7 +147,8 @@ def test_flip_period_formula_and_zero_crossings():
     w, _ = torque_free(inertia, w0, Q0, np.array([0.0, T / 2, T, 7 * T]))
     assert np.abs(w[2] - w[0]).max() <= 1e-13 and np.abs(w[3] - w[0]).max() <= 1e-12
     # DOP853 zero crossings of w2 (independent), good to its ~1e-9
-    ev = lambda t, y: y[1]  # noqa: E731
+    def ev(t, y):
+        return y[1]
     I = np.asarray(inertia)
     sol = solve_ivp(
         lambda t, y: np.cross(I * y, y) / I, (0, 1.6 * T), np.array(w0), method="DOP853",

@@ -25,7 +25,7 @@ from astrodyn.recording.recover import recover
 from astrodyn.scenario import ScenarioError, load as load_scenario, loads
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _recordings import leo_recording  # noqa: E402
+from _recordings import leo_recording
 
 ROOT = Path(__file__).resolve().parents[1]
 SRC = ROOT / "src" / "astrodyn"

@@ -299,8 +299,8 @@ class AttitudeEngine:
 
     def states(self, times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``(q, w)`` of shapes ``(len(times), n_bodies, 4)`` and ``(..., 3)`` at increasing times."""
-        from astrodyn.attitude.torque_free import torque_free
         from astrodyn.attitude.integrators import propagate_attitude
+        from astrodyn.attitude.torque_free import torque_free
 
         times = np.asarray(times, dtype=np.float64).reshape(-1)
         T, N = times.shape[0], len(self.bodies)
@@ -388,6 +388,7 @@ def simulate(scenario: Scenario, block: int = 1000) -> SimulationResult:
         r, v = orbits.states(tb)
         q, w = attitudes.states(tb)
         rs.append(r), vs.append(v), qs.append(q), ws.append(w)
-    cat = lambda xs, n, d: np.concatenate(xs) if xs else np.empty((0, n, d))  # noqa: E731
+    def cat(xs, n, d):
+        return np.concatenate(xs) if xs else np.empty((0, n, d))
     return SimulationResult(t, orbits.names, cat(rs, len(orbits.names), 3), cat(vs, len(orbits.names), 3),
                             attitudes.names, cat(qs, len(attitudes.names), 4), cat(ws, len(attitudes.names), 3), p)

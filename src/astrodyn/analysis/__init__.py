@@ -59,8 +59,7 @@ def _fmt(x) -> str:
 
 def analyze(path: str | os.PathLike, out: str | os.PathLike | None = None, seq: str = "321") -> dict:
     """Write the report of ``path`` into ``out``; returns the numbers (as in report.json)."""
-    from astrodyn.analysis import figures as fg
-    from astrodyn.analysis import metrics as mt
+    from astrodyn.analysis import figures as fg, metrics as mt
 
     if seq not in _SEQS:
         raise ValueError(f"seq: expected one of {', '.join(_SEQS)}, got {seq!r}")

@@ -12,8 +12,8 @@ from pathlib import Path
 import matplotlib
 
 matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
+import matplotlib.pyplot as plt
+import numpy as np
 
 __all__ = ["time_axis", "orbit_3d", "ground_track", "elements", "orbit_drift", "crosscheck",
            "euler_angles", "quaternion", "body_rates", "polhode", "attitude_drift", "top_angles"]

@@ -19,12 +19,24 @@ from astrodyn.attitude.torque_free import flip_period, herpolhode, polhode, rate
 __all__ = ["torque_free", "polhode", "herpolhode", "rate_period", "flip_period"]
 
 # --- other attitude modules: append their imports (and extend __all__) below this line ---
-from astrodyn.attitude.euler import attitude_state_rates, body_momentum_rates, euler_rates, inertia_tensor, principal_axes
+from astrodyn.attitude.euler import (
+    attitude_state_rates,
+    body_momentum_rates,
+    euler_rates,
+    inertia_tensor,
+    principal_axes,
+)
 from astrodyn.attitude.gyrocompass import Gyrocompass
 from astrodyn.attitude.gyrostat import Gyrostat, spin_stability_product, spin_transverse_rate
 from astrodyn.attitude.integrators import propagate_attitude
 from astrodyn.attitude.top import HeavyTop
-from astrodyn.attitude.torques import ConstantTorque, GravityGradientTorque, TorqueSum, UniformGravityTorque, gravity_gradient_torque
+from astrodyn.attitude.torques import (
+    ConstantTorque,
+    GravityGradientTorque,
+    TorqueSum,
+    UniformGravityTorque,
+    gravity_gradient_torque,
+)
 
 __all__ += [
     "attitude_state_rates", "body_momentum_rates", "euler_rates", "inertia_tensor", "principal_axes",

@@ -43,9 +43,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from astrodyn.jit import jit
 from astrodyn.attitude.elliptic import ellipk
 from astrodyn.attitude.integrators import SPLIT4_WEIGHTS, step_chunks, step_plan
+from astrodyn.jit import jit
 
 __all__ = ["Gyrocompass", "EARTH_ROTATION_RATE"]
 

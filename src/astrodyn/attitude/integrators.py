@@ -76,16 +76,16 @@ import time as _time
 
 import numpy as np
 
-from astrodyn.jit import jit
 from astrodyn.attitude.euler import inertia_tensor, principal_axes
-from astrodyn.orbit.universal import lagrange_coefficients_scalar
-from astrodyn.rotation import attitude_difference, quat_from_dcm, quat_multiply
 from astrodyn.attitude.torques import (
     ConstantTorque,
     GravityGradientTorque,
     TorqueSum,
     UniformGravityTorque,
 )
+from astrodyn.jit import jit
+from astrodyn.orbit.universal import lagrange_coefficients_scalar
+from astrodyn.rotation import attitude_difference, quat_from_dcm, quat_multiply
 
 __all__ = ["propagate_attitude", "SPLIT2_WEIGHTS", "SPLIT4_WEIGHTS", "YOSHIDA4_WEIGHTS", "free_rigid_body_step"]
 

@@ -56,7 +56,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from astrodyn.jit import jit
 from astrodyn.attitude.integrators import (
     SMALL_ANGLE,
     SPLIT2_WEIGHTS,
@@ -69,7 +68,14 @@ from astrodyn.attitude.integrators import (
     turn_body,
 )
 from astrodyn.attitude.torques import UniformGravityTorque
-from astrodyn.rotation import attitude_difference, dcm_from_quat, omega_from_euler_rates, quat_from_euler, quat_hamilton_scalar
+from astrodyn.jit import jit
+from astrodyn.rotation import (
+    attitude_difference,
+    dcm_from_quat,
+    omega_from_euler_rates,
+    quat_from_euler,
+    quat_hamilton_scalar,
+)
 
 __all__ = ["HeavyTop"]
 

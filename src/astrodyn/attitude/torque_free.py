@@ -94,8 +94,8 @@ import math
 
 import numpy as np
 
-from astrodyn.jit import jit, pjit, prange
 from astrodyn.attitude.elliptic import ellipk_scalar, elliprf_scalar, elliprj_scalar, reduce_half_period, sncndn_half
+from astrodyn.jit import jit, pjit, prange
 from astrodyn.rotation import quat_hamilton_scalar
 
 __all__ = ["torque_free", "polhode", "herpolhode", "rate_period", "flip_period"]

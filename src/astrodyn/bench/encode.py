@@ -23,9 +23,9 @@ import time
 
 import numpy as np
 
-from astrodyn.messages import shortest
 from astrodyn import messages as m
 from astrodyn.bench import cpu_model
+from astrodyn.messages import shortest
 
 MU_EARTH = 3.986004418e14
 

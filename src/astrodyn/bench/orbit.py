@@ -219,7 +219,8 @@ def _fmt(x, spec=".3g"):
 def _table(rows, headers) -> tuple[str, str]:
     cells = [[str(c) for c in row] for row in rows]
     widths = [max(len(h), *(len(r[i]) for r in cells)) for i, h in enumerate(headers)]
-    line = lambda r: "  ".join(c.rjust(w) if i else c.ljust(w) for i, (c, w) in enumerate(zip(r, widths)))  # noqa: E731
+    def line(r):
+        return "  ".join(c.rjust(w) if i else c.ljust(w) for i, (c, w) in enumerate(zip(r, widths)))
     text = "\n".join([line(headers), "  ".join("-" * w for w in widths), *(line(r) for r in cells)])
     md = "\n".join(
         [
@@ -434,7 +435,7 @@ def main(argv: list[str] | None = None) -> int:
     verdict = "within" if result["astrodyn_ok"] else "ABOVE"
     print(f"\nastrodyn max err/floor {ratio_ad.max():.2f}: {verdict} the stated target {ACCURACY_TARGET:g}")
     if args.markdown:
-        stamp = _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
+        stamp = _dt.datetime.now(_dt.UTC).strftime("%Y-%m-%d %H:%M UTC")
         cmd = "astrodyn bench orbit " + " ".join(argv if argv is not None else sys.argv[1:])
         with open(args.markdown, "w") as f:
             f.write(f"<!-- written by `{cmd.strip()}` on {stamp} -->\n")

@@ -211,8 +211,8 @@ def check_recording(path: str | os.PathLike, n_channels: int, n_steps: int) -> d
 
 def run_scene(scene: Scene, workdir: Path, template: str, keep: bool = False) -> dict:
     """Run ``scene`` through :func:`astrodyn.service.runner.run_scenario`; measure and check it."""
-    from astrodyn.service.runner import run_scenario
     from astrodyn.scenario import load
+    from astrodyn.service.runner import run_scenario
 
     config = workdir / f"{scene.name}.toml"
     config.write_text(scene_config(scene, template))

@@ -75,7 +75,7 @@ import json
 import os
 import re
 import sys
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from pathlib import Path
 
 import numpy as np
@@ -352,7 +352,7 @@ def parse_ccsds_epoch(text: str, scale: str = "utc"):
 
 
 def _creation_date() -> str:
-    return datetime.now(timezone.utc).strftime("%Y-%m-%dT%H:%M:%S")
+    return datetime.now(UTC).strftime("%Y-%m-%dT%H:%M:%S")
 
 
 def _kvn(key: str, value) -> str:

@@ -106,9 +106,7 @@ from typing import Any
 import numpy as np
 
 from astrodyn.messages import ATTITUDE_MODELS, NAME_PATTERN, ORBIT_MODELS
-from astrodyn.orbit.perturbations import EARTH_EGM2008 as _EARTH
-from astrodyn.orbit.perturbations import MOON as _MOON
-from astrodyn.orbit.perturbations import SUN as _SUN
+from astrodyn.orbit.perturbations import EARTH_EGM2008 as _EARTH, MOON as _MOON, SUN as _SUN
 
 __all__ = [
     "ScenarioError",
@@ -370,7 +368,7 @@ def _jsonable(x: Any) -> Any:
     return x
 
 
-def _body_dict(b: Body, bp: "BodyPlan") -> dict[str, Any]:
+def _body_dict(b: Body, bp: BodyPlan) -> dict[str, Any]:
     out: dict[str, Any] = {"name": b.name, "cross_check": b.cross_check}
     if b.orbit is not None:
         out["orbit"] = _jsonable(dataclasses.asdict(b.orbit)) | {"model_used": bp.orbit_model}
@@ -609,7 +607,7 @@ def _epoch(ctx: _Ctx, value: Any, path: str) -> tuple[str, str, int]:
     expected = 'an epoch like "2026-03-20T12:00:00 TDB" (scales: ' + ", ".join(s.upper() for s in _SCALES) + ")"
     if isinstance(value, _dt.datetime):
         if value.tzinfo is not None:
-            value = value.astimezone(_dt.timezone.utc).replace(tzinfo=None)
+            value = value.astimezone(_dt.UTC).replace(tzinfo=None)
         text, scale = value.isoformat(), "utc"
         given = text + " UTC"
     elif isinstance(value, str) and 0 < len(value) <= 64:

@@ -48,14 +48,15 @@ import signal
 import sys
 import threading
 import time
-from typing import Any, Iterable
+from collections.abc import Iterable
+from typing import Any
 
 import numpy as np
 import zenoh
 
 from astrodyn import auth, bus, messages
 from astrodyn.recording import ingest
-from astrodyn.recording.writer import INGEST_GRAMMAR, DUPLICATE, BatchLayout, McapRecorder, RecordingError
+from astrodyn.recording.writer import DUPLICATE, INGEST_GRAMMAR, BatchLayout, McapRecorder, RecordingError
 
 __all__ = ["Logger", "main"]
 

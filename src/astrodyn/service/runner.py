@@ -39,10 +39,10 @@ import time
 from pathlib import Path
 
 from astrodyn import auth, bus
+from astrodyn.scenario import Scenario, ScenarioError, load, plan as make_plan
 from astrodyn.service.children import Child, logger_command, propagator_command
 from astrodyn.service.output import check_output_path
 from astrodyn.service.summary import file_summary, print_summary, propagator_rows
-from astrodyn.scenario import Scenario, ScenarioError, load, plan as make_plan
 
 __all__ = ["main", "run_scenario", "EXIT_REJECTED"]
 

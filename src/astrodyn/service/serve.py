@@ -52,10 +52,10 @@ import time
 from pathlib import Path
 
 from astrodyn import auth, bus
-from astrodyn.service.propagator import command_key
+from astrodyn.scenario import ScenarioError, load, plan as make_plan
 from astrodyn.service.children import Child, logger_command, propagator_command
 from astrodyn.service.output import check_output_path
-from astrodyn.scenario import ScenarioError, load, plan as make_plan
+from astrodyn.service.propagator import command_key
 
 __all__ = ["main", "Supervisor"]
 
