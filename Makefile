@@ -14,9 +14,10 @@ $(STAMP): pyproject.toml
 
 install: $(STAMP)
 
-# Representative suite (slow exhaustive sweeps excluded); CI runs this.
+# The one CI command: the layer contract (import-linter, [tool.importlinter] in
+# pyproject.toml), ruff, then the representative suite (slow exhaustive sweeps excluded).
 test: $(STAMP)
-	$(PY) -m pytest -q
+	$(VENV)/bin/lint-imports && $(VENV)/bin/ruff check src tests && $(PY) -m pytest -q
 
 # Everything, slow sweeps included.
 test-all: $(STAMP)

@@ -23,7 +23,7 @@ exactly what :func:`simulate` returns for the same scenario.
 
 Third bodies (``model = "third_body"``) move on the two-body conic fitted to their
 geocentric (central-body-centric) state at the epoch, taken from astropy's built-in
-ephemeris (ERFA ``epv00`` / ``moon98``): a deliberate approximation, stated in the run
+ephemeris (ERFA ``epv00`` / ``moon98``, :mod:`astrodyn.scenario.ephemeris`): a deliberate approximation, stated in the run
 summary, that needs no ephemeris download.
 
 Units: SI; times in s since the scenario epoch; quaternions scalar first with
@@ -40,27 +40,12 @@ from astrodyn.orbit import propagate
 from astrodyn.orbit.perturbations import KeplerOrbit, ThirdBody, Zonal, propagate_perturbed
 from astrodyn.rotation import dcm_from_quat, quat_from_dcm
 from astrodyn.scenario import CENTRAL_BODIES, Plan, Scenario, plan as make_plan
+from astrodyn.scenario.ephemeris import third_body_state
 
 __all__ = ["OrbitEngine", "AttitudeEngine", "SimulationResult", "simulate", "third_body_state"]
 
 
 # --------------------------------------------------------------------------- orbits
-
-
-def third_body_state(name: str, central: str, epoch_unix_ns: int) -> tuple[np.ndarray, np.ndarray]:
-    """Position (m) and velocity (m/s) of body ``name`` relative to ``central`` at the
-    epoch (ns since the Unix epoch), ICRS-aligned axes, from astropy's built-in
-    ephemeris (no download)."""
-    from astropy.coordinates import get_body_barycentric_posvel, solar_system_ephemeris
-    from astropy.time import Time
-
-    t = Time(epoch_unix_ns // 1_000_000_000, epoch_unix_ns % 1_000_000_000 * 1e-9, format="unix")
-    with solar_system_ephemeris.set("builtin"):
-        p3, v3 = get_body_barycentric_posvel(name, t)
-        pc, vc = get_body_barycentric_posvel(central, t)
-    r = (p3 - pc).xyz.to_value("m")
-    v = (v3 - vc).xyz.to_value("m/s")
-    return np.asarray(r, dtype=np.float64), np.asarray(v, dtype=np.float64)
 
 
 @dataclass

@@ -1,0 +1,133 @@
+"""The layering of docs/architecture.md (section 1, "Layers") as checks that run with
+every ``pytest``: the import-linter contracts of ``pyproject.toml``, ruff, and no
+underscored name imported from another astrodyn module."""
+
+from __future__ import annotations
+
+import ast
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+SRC = ROOT / "src"
+
+
+def _tool(name: str) -> str:
+    """The console script ``name`` of this interpreter's environment (the venv), else PATH."""
+    local = Path(sys.executable).parent / name
+    if local.exists():
+        return str(local)
+    found = shutil.which(name)
+    if found is None:
+        pytest.fail(f"{name} is not installed: it is in the 'test' extra (pip install -e '.[test]')")
+    return found
+
+
+def _run(args: list[str]) -> subprocess.CompletedProcess:
+    return subprocess.run(args, cwd=ROOT, capture_output=True, text=True, timeout=300)
+
+
+def test_import_contracts_hold():
+    """lint-imports: every [tool.importlinter] contract of pyproject.toml is kept."""
+    p = _run([_tool("lint-imports"), "--no-cache"])
+    assert p.returncode == 0, p.stdout[-4000:] + p.stderr[-2000:]
+    assert "broken" in p.stdout and " 0 broken" in p.stdout, p.stdout[-2000:]
+
+
+def test_ruff_is_clean():
+    """ruff check src tests with the [tool.ruff] configuration of pyproject.toml."""
+    p = _run([_tool("ruff"), "check", "--no-cache", "src", "tests"])
+    assert p.returncode == 0, p.stdout[-4000:] + p.stderr[-2000:]
+
+
+def _module_name(path: Path) -> str:
+    parts = list(path.relative_to(SRC).with_suffix("").parts)
+    if parts[-1] == "__init__":
+        parts.pop()
+    return ".".join(parts)
+
+
+def _private(name: str) -> bool:
+    return name.startswith("_") and not (name.startswith("__") and name.endswith("__"))
+
+
+def private_imports(path: Path, module: str | None = None) -> list[str]:
+    """Places in ``path`` (the module ``module``, by default named from its place under
+    src/) that take an underscored name from another astrodyn module:
+    ``from astrodyn.x import _name``, ``import astrodyn._x``, or ``x._name`` where ``x``
+    was bound to an astrodyn module by an import."""
+    module = module or _module_name(path)
+    package = module if path.name == "__init__.py" else module.rpartition(".")[0]
+    tree = ast.parse(path.read_text(encoding="utf-8"), filename=str(path))
+    found, module_aliases = [], {}
+    for node in ast.walk(tree):
+        if isinstance(node, ast.ImportFrom):
+            base = node.module or ""
+            if node.level:
+                anchor = package.split(".")[: len(package.split(".")) - node.level + 1]
+                base = ".".join(anchor + ([node.module] if node.module else []))
+            if base != "astrodyn" and not base.startswith("astrodyn."):
+                continue
+            if base != module and any(_private(p) for p in base.split(".")):
+                found.append(f"{path}:{node.lineno}: from {base} import ...")
+            for alias in node.names:
+                if _private(alias.name) and base != module:
+                    found.append(f"{path}:{node.lineno}: from {base} import {alias.name}")
+                module_aliases[alias.asname or alias.name] = f"{base}.{alias.name}"
+        elif isinstance(node, ast.Import):
+            for alias in node.names:
+                if alias.name.startswith("astrodyn"):
+                    if any(_private(p) for p in alias.name.split(".")):
+                        found.append(f"{path}:{node.lineno}: import {alias.name}")
+                    if alias.asname:
+                        module_aliases[alias.asname] = alias.name
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Attribute) and _private(node.attr) and isinstance(node.value, ast.Name):
+            target = module_aliases.get(node.value.id)
+            if target is not None and target != module:
+                found.append(f"{path}:{node.lineno}: {node.value.id}.{node.attr} ({target})")
+    return found
+
+
+def test_no_private_names_across_modules():
+    """docs/architecture.md section 1: what is shared gets a public name in the module
+    named for it; no module reaches into another's underscored names."""
+    found = [hit for path in sorted(SRC.rglob("*.py")) for hit in private_imports(path)]
+    assert not found, "underscored names imported across modules:\n" + "\n".join(found)
+
+
+def test_private_import_check_catches_each_form(tmp_path):
+    """The checker itself: each form of reaching into another module is reported, and a
+    module's own names and public names are not."""
+    probe = tmp_path / "probe.py"
+    probe.write_text(
+        "from astrodyn.orbit.kepler import _run, solve_kepler\n"
+        "from . import kepler\n"
+        "from astrodyn.orbit import universal as uni\n"
+        "import astrodyn.orbit._hidden\n"
+        "x = kepler._broadcast_flat\n"
+        "y = uni._stumpff\n"
+        "z = uni.propagate\n",
+        encoding="utf-8",
+    )
+    hits = private_imports(probe, "astrodyn.orbit.probe")
+    text = "\n".join(hits)
+    assert "import _run" in text and "solve_kepler" not in text
+    assert "kepler._broadcast_flat" in text and "uni._stumpff" in text
+    assert "astrodyn.orbit._hidden" in text and "propagate" not in text
+    assert len(hits) == 4, text
+
+
+def test_orbit_package_reexports_its_modules():
+    """astrodyn.orbit lists its names explicitly (no star imports): the list is the union of
+    the public lists of the modules it gathers, so a name added there is not forgotten."""
+    import astrodyn.orbit as orbit
+    from astrodyn.orbit import elements, kepler, perturbations, universal
+
+    expected = set(elements.__all__) | set(perturbations.__all__) | set(kepler.__all__) | set(universal.__all__)
+    assert set(orbit.__all__) == expected
+    assert all(getattr(orbit, name) is not None for name in orbit.__all__)
