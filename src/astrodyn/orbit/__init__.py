@@ -15,40 +15,10 @@ radians, arrays of shape ``(..., 3)`` in and out; a single state works too
   (:mod:`astrodyn.orbit.maneuvers`).
 """
 
-from astrodyn.orbit.elements import (
-    SINGULAR_TOLERANCE,
-    Elements,
-    ModifiedEquinoctial,
-    eccentric_from_true,
-    elements_from_state,
-    equinoctial_from_state,
-    hyperbolic_from_true,
-    mean_from_eccentric,
-    mean_from_hyperbolic,
-    mean_from_true,
-    state_from_elements,
-    state_from_equinoctial,
-    true_from_eccentric,
-    true_from_hyperbolic,
-    true_from_mean,
-)
+from astrodyn.orbit import elements, perturbations
+from astrodyn.orbit.elements import *  # noqa: F403 - re-export: elements.__all__ is the public list
 from astrodyn.orbit.kepler import solve_kepler, solve_kepler_hyperbolic
-from astrodyn.orbit.perturbations import (
-    EARTH_EGM2008,
-    EARTH_WGS84,
-    MOON,
-    SUN,
-    CentralBody,
-    KeplerOrbit,
-    PerturbedStates,
-    ThirdBody,
-    Zonal,
-    point_mass_difference,
-    propagate_perturbed,
-    third_body_acceleration,
-    zonal_acceleration,
-    zonal_potential,
-)
+from astrodyn.orbit.perturbations import *  # noqa: F403 - re-export: perturbations.__all__ is the public list
 from astrodyn.orbit.universal import lagrange_coefficients, propagate, stumpff
 
 __all__ = [
@@ -57,35 +27,6 @@ __all__ = [
     "stumpff",
     "solve_kepler",
     "solve_kepler_hyperbolic",
-    # astrodyn.orbit.elements
-    "SINGULAR_TOLERANCE",
-    "Elements",
-    "ModifiedEquinoctial",
-    "elements_from_state",
-    "state_from_elements",
-    "equinoctial_from_state",
-    "state_from_equinoctial",
-    "eccentric_from_true",
-    "true_from_eccentric",
-    "hyperbolic_from_true",
-    "true_from_hyperbolic",
-    "mean_from_eccentric",
-    "mean_from_hyperbolic",
-    "mean_from_true",
-    "true_from_mean",
-    # astrodyn.orbit.perturbations
-    "CentralBody",
-    "EARTH_EGM2008",
-    "EARTH_WGS84",
-    "MOON",
-    "SUN",
-    "Zonal",
-    "ThirdBody",
-    "KeplerOrbit",
-    "PerturbedStates",
-    "zonal_acceleration",
-    "zonal_potential",
-    "third_body_acceleration",
-    "point_mass_difference",
-    "propagate_perturbed",
+    *elements.__all__,
+    *perturbations.__all__,
 ]
