@@ -1,13 +1,13 @@
 """Every public function of the numeric core (``astrodyn.orbit``, ``astrodyn.rotation``,
 ``astrodyn.attitude``) fed NaN, +inf, -inf, empty and wrong-shape inputs.
 
-The contract (design.md, working rules): a NaN or inf input gives a non-finite output or a
+The contract (docs/architecture.md, section 2, bad numbers): a NaN or inf input gives a non-finite output or a
 clear ``ValueError`` / ``TypeError``; an empty input gives an empty output or such an
 error; a wrong shape is such an error; nothing loops forever.  Compiled kernels cannot be
 interrupted from Python, so the cases run in a child process under a time bound; the
 child prints each case before running it, so a hang names its case.
 
-``CASES`` holds one valid call per function (inputs from the design.md hard-case ranges);
+``CASES`` holds one valid call per function (inputs from the hard-case ranges of docs/architecture.md, section 6);
 every float argument of it is mutated in turn.
 """
 

@@ -1,4 +1,4 @@
-"""astrodyn against REBOUND on the hard orbit cases (design.md section 4), through astrodyn.crosscheck.
+"""astrodyn against REBOUND on the hard orbit cases (docs/architecture.md, section 6), through astrodyn.crosscheck.
 
 Tolerance, one rule for every case
 ----------------------------------
@@ -12,7 +12,7 @@ of the one-ulp sensitivity from the initial state and from the periapsis state
 passed on the way (at e -> 1 rounding the periapsis state moves the semi-major
 axis by ~eps * 4/(1 - e), e.g. 1e-10 relative at e = 0.999999, which is what
 IAS15 shows from apoapsis to apoapsis).  Both sides are held to 100x their floor
-(design.md section 4), the path floor bounds the one-ulp floor, so
+(docs/architecture.md, section 6), the path floor bounds the one-ulp floor, so
 
     |astrodyn - REBOUND| <= |astrodyn - truth| + |REBOUND - truth| <= 2 * 100 * path floor.
 
@@ -42,7 +42,7 @@ MU_EARTH = 3.986004418e14  # m^3/s^2
 MU_SUN = 1.32712440018e20  # m^3/s^2
 AU = 1.495978707e11  # m
 RP = 7.0e6  # m, LEO periapsis radius
-FLOOR_FACTOR = 100.0  # design.md section 4: 100 x the one-ulp change
+FLOOR_FACTOR = 100.0  # docs/architecture.md, section 6: 100 x the one-ulp change
 DPS = 30  # reference digits for the floors: 14 digits below the float64 differences they measure
 
 

@@ -304,7 +304,7 @@ def test_elements_round_trip_regular(p, e, i, raan, argp, nu_frac):
 @pytest.mark.parametrize("raan, argp, nu", [(0.4, 1.1, 2.0), (5.0, 3.5, 0.3), (0.0, 0.0, 0.0)])
 def test_singular_cases_conventions(e, i, expect, raan, argp, nu):
     # Exactly singular orbits built independently from the geometric meaning of
-    # each convention, then checked against it (design.md section 2).
+    # each convention, then checked against it (docs/architecture.md, section 2).
     p = 8e6
     # canonical elements per convention: circular -> argp = 0, nu = u;
     # equatorial -> raan = 0, argp = longitude of periapsis in the direction of motion.

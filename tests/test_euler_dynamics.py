@@ -71,7 +71,7 @@ def test_gyrostat_rate_form_agrees_with_momentum_form():
 
 
 def test_state_form_quaternion_rates_match_dcm_kinematics():
-    # dC/dt = -[w x] C (design.md) checked by a central difference of C(q(t))
+    # dC/dt = -[w x] C (docs/architecture.md) checked by a central difference of C(q(t))
     q = quat_from_axis_angle([1.0, 2.0, -0.5], 1.3)
     w = np.array([0.4, -0.2, 0.9])
     x = np.concatenate([q, w])

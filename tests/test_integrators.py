@@ -237,7 +237,7 @@ def test_axis_rotation_trig_against_mpmath():
 def test_pure_spin_about_each_axis_is_exact(axis, method, angle_per_step):
     # spin about a principal axis: every other split term has zero angle, so the
     # splitting is exact for any step and q(t) = C_i(w t) C0 in closed form
-    # (design.md: dC/dt = -[w x] C); the kernel's merged T1 halves (axis 0), the
+    # (docs/architecture.md: dC/dt = -[w x] C); the kernel's merged T1 halves (axis 0), the
     # polynomial and the libm rotation branches all have to give it.
     from astrodyn.rotation import quat_from_axis_angle as qaa
 

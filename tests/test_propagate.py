@@ -1,4 +1,4 @@
-"""Two-body propagation (astrodyn.orbit.propagate) on the hard cases of design.md section 4.
+"""Two-body propagation (astrodyn.orbit.propagate) on the hard cases of docs/architecture.md, section 6.
 
 References, all independent of the code under test:
 
@@ -50,7 +50,7 @@ def period(a, mu):
 
 
 def hard_cases():
-    """name -> (r0, v0, dt, mu, slow?) covering design.md section 4."""
+    """name -> (r0, v0, dt, mu, slow?) covering docs/architecture.md, section 6."""
     C = {}
     I, O, W = 0.9, 0.7, 1.1
 

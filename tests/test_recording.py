@@ -1,4 +1,4 @@
-"""MCAP recorder and reader: layout (design.md section 3), round trips, crashes, bad files.
+"""MCAP recorder and reader: layout (docs/architecture.md, section 5), round trips, crashes, bad files.
 
 References are independent of the code under test: the plain ``mcap`` library reads
 the files back; log_time is checked with integer arithmetic on times that are exact

@@ -1,7 +1,7 @@
 """Tests of astrodyn.rotation against independent constructions.
 
 References used (none of them calls the code under test to make its expected
-value): the elementary matrices of design.md written out by hand, the
+value): the elementary matrices of docs/architecture.md written out by hand, the
 Euler-parameter DCM of Baruh ch. 7 in its textbook form
 ``(e0^2 - e.e) I + 2 e e^T - 2 e0 [e x]``, Rodrigues' formula, the matrix
 exponential ``expm(-[w x] t)`` (scipy.linalg), a DOP853 integration of the
@@ -172,7 +172,7 @@ def test_dcm_from_quat_matches_baruh_form_and_is_orthonormal():
     # both forms are O(1)-conditioned polynomials of q: a few ulp apart
     assert np.abs(C - ref).max() <= 8 * EPS
     CCt = np.einsum("nij,nkj->nik", C, C)
-    assert np.abs(CCt - np.eye(3)).max() <= 6 * EPS  # few ulp, as design.md asks
+    assert np.abs(CCt - np.eye(3)).max() <= 6 * EPS  # few ulp, as docs/architecture.md asks
     np.testing.assert_allclose(np.linalg.det(C), 1.0, rtol=0, atol=8 * EPS)
     # q and -q (and a scaled q) are the same attitude
     np.testing.assert_array_equal(dcm_from_quat(-q), C)
@@ -603,7 +603,7 @@ def test_scalar_last_order():
 def test_scipy_conversion_pinned_by_independent_construction():
     # Independent construction: scipy's own active rotation of vectors by +a about z.
     # Applied to the inertial basis it gives the body axes of a frame turned by +a about z,
-    # whose DCM (v_body = C v_inertial) is C_3(a) of design.md; its matrix is C_3(a)^T.
+    # whose DCM (v_body = C v_inertial) is C_3(a) of docs/architecture.md; its matrix is C_3(a)^T.
     a = 0.7
     R = Rotation.from_euler("z", a)
     np.testing.assert_allclose(R.as_matrix(), C3(a).T, rtol=0, atol=2 * EPS)

@@ -317,7 +317,7 @@ def test_parabolic_mean_anomaly_satisfies_barker():
 
 
 def test_euler_angles_give_the_dcm_of_the_sequence():
-    # seq "321": C = C1(a3) C2(a2) C3(a1) (design.md section 2); check v_body = C v_inertial
+    # seq "321": C = C1(a3) C2(a2) C3(a1) (docs/architecture.md, section 2); check v_body = C v_inertial
     d = base()
     att = load(d).bodies[2].attitude
     a1, a2, a3 = map(math.radians, (10, 20, 30))

@@ -105,7 +105,7 @@ def test_demo_states_equal_the_core_from_the_first_state(demo_run):
     """Kepler orbits and torque-free attitudes equal the core run from the first recorded
     state (both are exact solutions evaluated from the initial state at each t).  The
     tolerance is 100x the change a one-ulp perturbation of the first state causes
-    (design.md section 4): the service's first state is itself the result of one
+    (docs/architecture.md, section 6): the service's first state is itself the result of one
     evaluation, so the two runs start an ulp or so apart."""
     out, _, _ = demo_run
     scn = load(CONFIGS / "demo.toml")

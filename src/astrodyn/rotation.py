@@ -1,7 +1,7 @@
 """Rotation kinematics: Euler parameters, direction cosines, Euler angles.
 
 Conventions follow H. Baruh, *Analytical Dynamics* (WCB/McGraw-Hill, 1999),
-chapter 7, exactly as ``docs``/design.md section 2 fixes them.  Everything here
+chapter 7, exactly as docs/architecture.md (section 2) fixes them.  Everything here
 is a *frame* (passive) description of a body's attitude relative to an
 inertial frame:
 
@@ -199,7 +199,7 @@ def skew(v):
 
 
 def elementary_dcm(axis, angle):
-    """Elementary frame rotation ``C_axis(angle)`` (design.md section 2; Baruh ch. 7).
+    """Elementary frame rotation ``C_axis(angle)`` (docs/architecture.md, section 2; Baruh ch. 7).
 
     ``axis`` is 1, 2 or 3; ``angle`` in rad, any shape; returns ``(..., 3, 3)``.
     ``C_3(a) = [[c, s, 0], [-s, c, 0], [0, 0, 1]]`` and cyclically

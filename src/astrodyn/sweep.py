@@ -716,7 +716,7 @@ def run_case(k: int, spec: SweepSpec) -> dict[str, Any]:
 
 
 def write_case_mcap(path: Path, scenario, result, draws: dict, k: int) -> None:
-    """One case as an MCAP in the service's layout (design.md section 3): seq = output step."""
+    """One case as an MCAP in the service's layout (docs/architecture.md, section 5): seq = output step."""
     from astrodyn import messages
     from astrodyn.recording.writer import McapRecorder
 

@@ -1,6 +1,6 @@
 """Rigid-body attitude dynamics (numeric core: numpy/numba, SI units, no I/O).
 
-Conventions (design.md section 2; H. Baruh, *Analytical Dynamics*, ch. 7-10):
+Conventions (docs/architecture.md, section 2; H. Baruh, *Analytical Dynamics*, ch. 7-10):
 principal moments of inertia in kg m^2, body angular velocity ``w`` in rad/s
 (body components), Euler parameters ``q = (e0, e1, e2, e3)`` scalar first with
 ``v_body = C(q) @ v_inertial`` and ``dC/dt = -[w x] C``.

@@ -2,7 +2,7 @@
 
 Following H. Baruh, *Analytical Dynamics*, ch. 8 (Euler's equations, sec. 8.5-8.7;
 state form for numerical integration) and ch. 10 (gyrostats).  Conventions are
-those of ``design.md``:
+those of docs/architecture.md (section 2):
 
 * ``w``: body angular velocity in **body** components, rad/s.
 * Euler parameters ``q = (e0, e1, e2, e3)``, scalar first, with

@@ -64,7 +64,7 @@ One entry point, :func:`propagate_attitude`, with the method stated explicitly:
     (no integration).  ``method="auto"`` selects it when there is no torque and
     no rotor, and ``split4`` otherwise.
 
-Conventions (design.md): Euler parameters ``q = (e0, e1, e2, e3)`` scalar first,
+Conventions (docs/architecture.md, section 2): Euler parameters ``q = (e0, e1, e2, e3)`` scalar first,
 ``v_body = C(q) @ v_inertial``, ``dC/dt = -[w x] C``, ``w`` body rates in rad/s,
 SI units throughout (s, kg m^2, N m, N m s).  The initial state is at ``t = 0``.
 """

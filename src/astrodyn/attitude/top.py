@@ -8,7 +8,7 @@ to the centre of mass along ``+b3``, ``gravity`` ``g`` (m/s^2) pointing along
 inertial ``-Z`` (inertial ``Z`` up).
 
 3-1-3 Euler angles ``(psi, theta, phi)`` (precession, nutation, spin):
-``C = C_3(phi) C_1(theta) C_3(psi)`` (design.md sequence ``"313"``), so
+``C = C_3(phi) C_1(theta) C_3(psi)`` (sequence ``"313"`` of docs/architecture.md, section 2), so
 ``cos(theta) = b3 . Z = C[2, 2]``.  The Lagrangian
 
     L = I/2 (theta'^2 + psi'^2 sin^2 theta) + J/2 (phi' + psi' cos theta)^2 - m g l cos theta
@@ -45,7 +45,7 @@ splitting (``method="split4"`` etc., through
 :func:`astrodyn.attitude.integrators.propagate_attitude` with
 :class:`~astrodyn.attitude.torques.UniformGravityTorque`) keeps ``p_phi`` only to
 its truncation error.  The compiled step (:func:`_top_kernel`) costs about 110 ns
-for ``top4`` (docs/bench-attitude.md), within design.md's 200 ns per torqued step.
+for ``top4`` (docs/bench-attitude.md), within the 200 ns per torqued step of docs/architecture.md, section 7.
 """
 
 from __future__ import annotations

@@ -4,7 +4,7 @@
 ``q(t)`` of a free rigid body for any array of times, without integrating.
 Cost per (body, time) is the same at ``t = 1 s`` and ``t = 1e9 s``.
 
-Conventions (design.md section 2): principal moments ``inertia`` (kg m^2, any
+Conventions (docs/architecture.md, section 2): principal moments ``inertia`` (kg m^2, any
 order), body rates ``w`` (rad/s, body components), Euler parameters
 ``q = (e0, e1, e2, e3)`` scalar first with ``v_body = C(q) @ v_inertial`` and
 ``dC/dt = -[w x] C`` (H. Baruh, *Analytical Dynamics*, ch. 7).
@@ -447,7 +447,7 @@ def torque_free(inertia, w0, q0, t):
         Euler parameters, unit to rounding.
 
     Leading (batch) axes of ``inertia``, ``w0``, ``q0`` broadcast; a single
-    body gives ``(N, 3)`` and ``(N, 4)`` as in design.md section 2.  The method
+    body gives ``(N, 3)`` and ``(N, 4)`` as in docs/architecture.md, section 2.  The method
     and its accuracy are described in the module docstring.
     """
     batch, par = _prepare(inertia, w0, q0)

@@ -1,6 +1,6 @@
 """``astrodyn bench attitude``: time against error for attitude propagation.
 
-All in one run, on the hard torque-free cases of design.md section 4 (where an
+All in one run, on the hard torque-free cases of docs/architecture.md, section 6 (where an
 exact answer exists):
 
 * ``exact``: :func:`astrodyn.attitude.torque_free` (no integration), cost per
@@ -35,7 +35,7 @@ CASES = {
     "fast spin 300 rad/s": ((1.0, 2.0, 3.0), (1.0, 0.5, 300.0), 2.0, False),
 }
 Q0 = np.array([0.9, 0.1, -0.3, 0.3]) / np.linalg.norm([0.9, 0.1, -0.3, 0.3])
-TARGET_NS_PER_STEP = 200.0  # design.md section 5: torqued propagation <= 200 ns per step
+TARGET_NS_PER_STEP = 200.0  # docs/architecture.md, section 7: torqued propagation <= 200 ns per step
 
 
 def _best(fn, repeats):
@@ -225,7 +225,7 @@ def main(argv=None) -> int:
     g2, g4 = kernel[("split2", "gg-kepler")], kernel[("split4", "gg-kepler")]
     lines += [
         "",
-        f"Design target (design.md section 5): torqued propagation <= {TARGET_NS_PER_STEP:.0f} ns/step."
+        f"Design target (docs/architecture.md, section 7): torqued propagation <= {TARGET_NS_PER_STEP:.0f} ns/step."
         f" split2 + gravity gradient (Kepler orbit in the kernel): {g2:.0f} ns/step = {g2 / TARGET_NS_PER_STEP:.2f} x the target"
         f" ({'met' if g2 <= TARGET_NS_PER_STEP else 'NOT met'}); split4 + gravity gradient: {g4:.0f} ns/step ="
         f" {g4 / 5:.0f} ns per stage (5 stages; {g4 / (5 * TARGET_NS_PER_STEP):.2f} x the target per stage);"

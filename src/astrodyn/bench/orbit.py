@@ -15,7 +15,7 @@ What is measured, all in one process and one run:
   step-by-step integrators the floor is
   :func:`~astrodyn.reference.conditioning.path_sensitivity` (the rounding of
   the periapsis state on the way counts too).  The stated accuracy target is
-  ``err/floor <= 100`` (design.md section 4).
+  ``err/floor <= 100`` (docs/architecture.md, section 6).
 * REBOUND IAS15, REBOUND WHFast (bound orbits only: step = period / 20) and
   scipy's DOP853 (rtol 1e-12, atol 1e-12 x the initial |r| or |v|) on the first
   ``--compare`` states of that sample, the same initial states and times: one
@@ -57,7 +57,7 @@ MU_EARTH = 3.986004418e14
 """Earth's gravitational parameter [m^3/s^2] (WGS-84 / EGM96 value)."""
 
 ACCURACY_TARGET = 100.0
-"""Stated accuracy: error <= 100 x the one-ulp floor of the case (design.md section 4)."""
+"""Stated accuracy: error <= 100 x the one-ulp floor of the case (docs/architecture.md, section 6)."""
 
 KIND_NAMES = ("ellipse", "hyperbola", "near-parabolic")
 

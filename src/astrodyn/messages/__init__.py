@@ -1,6 +1,6 @@
 """Message types of the astrodyn bus and logs: keys, JSON Schemas, encode/decode.
 
-One source for the Zenoh bus and the MCAP files (design.md section 3). Pure Python
+One source for the Zenoh bus and the MCAP files (docs/architecture.md, sections 3 and 5). Pure Python
 and numpy; no zenoh or mcap import, so every layer can use it.
 
 Keys

@@ -20,7 +20,7 @@ Astrodynamics and Applications*, 4th ed., sec. 2.5 (RV2COE / COE2RV) and
 Curtis, *Orbital Mechanics for Engineering Students*, 3rd ed., Algorithms 4.2
 and 4.5.
 
-Singular cases (design.md section 2) are defined, finite and round-trip:
+Singular cases (docs/architecture.md, section 2) are defined, finite and round-trip:
 
 * **circular** (``e <= SINGULAR_TOLERANCE``): ``e`` is reported as 0,
   ``argp = 0`` and ``nu`` is the argument of latitude (angle from the

@@ -1,6 +1,6 @@
 """MCAP recorder: one channel per key, JSON Schema schemas, zstd chunks, crash-safe flushing.
 
-File layout (design.md section 3)::
+File layout (docs/architecture.md, section 5)::
 
     topic            the Zenoh key, e.g. astrodyn/<scenario>/<body>/orbit
     message encoding "json"      (the payload exactly as it travelled on the bus)

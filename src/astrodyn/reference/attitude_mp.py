@@ -1,7 +1,7 @@
 """Independent 30+ digit reference for torque-free rigid-body motion (mpmath Taylor series).
 
 Integrates, in mpmath arithmetic, Euler's equations for a principal-axis body
-together with the attitude kinematics of design.md section 2:
+together with the attitude kinematics of docs/architecture.md, section 2:
 
     I dw/dt + w x (I w) = 0,
     dq/dt = Omega(w) q / 2:  de0/dt = -e.w/2,  de/dt = (e0 w + e x w)/2,

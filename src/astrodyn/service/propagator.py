@@ -3,10 +3,10 @@
 One loop, two kinds: it asks an engine of :mod:`astrodyn.simulate` for the states of a
 block of output instants, encodes one JSON payload per body per instant
 (:func:`astrodyn.messages.encode_orbit_batch` / ``encode_attitude_batch``), and publishes
-them on the per-body keys of design.md section 3.  Large scenes (more than
+them on the per-body keys of docs/architecture.md, section 3.  Large scenes (more than
 :data:`BATCH_THRESHOLD` bodies, or ``--batch always``) instead publish each instant's
 payloads as one batch envelope on ``astrodyn/<scenario>/@batch/<kind>``
-(the logger splits it back into the per-body channels of design.md section 3; ``seq`` of
+(the logger splits it back into the per-body channels of docs/architecture.md, section 3; ``seq`` of
 every channel is the output step index ``k``, so 0, 1, 2, ... with no gaps).
 
 Around the loop:

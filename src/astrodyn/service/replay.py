@@ -1,7 +1,7 @@
 """``astrodyn replay FILE.mcap``: republish a recorded run on Zenoh, paced like the original.
 
-Every recorded message is put on its own key (the MCAP topic *is* the Zenoh key, design.md
-section 3) with its payload bytes unchanged, in ``log_time`` order, at ``--rate`` times
+Every recorded message is put on its own key (the MCAP topic *is* the Zenoh key,
+docs/architecture.md, section 5) with its payload bytes unchanged, in ``log_time`` order, at ``--rate`` times
 real time (``--rate inf``: as fast as the bus takes them).  State keys use the same
 publisher settings as the live service (reliable, ``CongestionControl.BLOCK``, JSON
 encoding), so a consumer subscribed to ``astrodyn/<scenario>/**`` (and ``@event``) sees

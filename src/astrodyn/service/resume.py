@@ -2,8 +2,8 @@
 
 Used by ``astrodyn run --resume FILE.mcap`` (continue a stopped or crashed run into a new
 file) and by ``astrodyn serve`` (restart a killed propagator from the last state the
-logger flushed).  ``seq`` of every state channel is the output step index (design.md
-section 3), so "how far a recording got" is a step number:
+logger flushed).  ``seq`` of every state channel is the output step index
+(docs/architecture.md, section 5), so "how far a recording got" is a step number:
 
 * :func:`contiguous_steps` -- how many steps from 0 every channel holds without a hole
   (``run --resume`` copies exactly those into the new file and continues after them);
