@@ -131,3 +131,20 @@ def test_orbit_package_reexports_its_modules():
     expected = set(elements.__all__) | set(perturbations.__all__) | set(kepler.__all__) | set(universal.__all__)
     assert set(orbit.__all__) == expected
     assert all(getattr(orbit, name) is not None for name in orbit.__all__)
+
+
+def test_code_cites_docs_in_the_repository():
+    """Code cites docs/architecture.md (or another page of docs/), never notes outside the
+    repository, and every docs/ page it names exists."""
+    import re
+
+    outside, missing = [], []
+    for path in sorted(SRC.rglob("*.py")):
+        text = path.read_text(encoding="utf-8")
+        if "design.md" in text:
+            outside.append(str(path.relative_to(ROOT)))
+        for page in set(re.findall(r"docs/[\w.-]+\.md", text)):
+            if not (ROOT / page).exists():
+                missing.append(f"{path.relative_to(ROOT)}: {page}")
+    assert not outside, f"cite docs/architecture.md instead of design.md in: {outside}"
+    assert not missing, f"cited pages that do not exist: {missing}"
