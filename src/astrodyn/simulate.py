@@ -37,7 +37,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from astrodyn.orbit import propagate
-from astrodyn.orbit.perturbations import KeplerOrbit, ThirdBody, Zonal, propagate_perturbed
+from astrodyn.orbit.perturbations import KeplerOrbit, ThirdBody, propagate_perturbed
 from astrodyn.rotation import dcm_from_quat, quat_from_dcm
 from astrodyn.scenario import CENTRAL_BODIES, Plan, Scenario, plan as make_plan
 from astrodyn.scenario.ephemeris import third_body_state
@@ -94,9 +94,9 @@ class OrbitEngine:
     def _perturbations(self, model: str, degree: int, perturbers: tuple[str, ...]) -> tuple:
         cb = self.scenario.central_body
         if model == "j2":
-            return (Zonal(cb.mu, cb.radius, cb.j[:1]),)
+            return (cb.zonal(2),)
         if model == "zonal":
-            return (Zonal(cb.mu, cb.radius, cb.j[: max(1, degree - 1)]),)
+            return (cb.zonal(max(2, degree)),)
         if model == "third_body":
             out = []
             for name in perturbers:

@@ -106,7 +106,12 @@ from typing import Any
 import numpy as np
 
 from astrodyn.messages import ATTITUDE_MODELS, NAME_PATTERN, ORBIT_MODELS
-from astrodyn.orbit.perturbations import EARTH_EGM2008 as _EARTH, MOON as _MOON, SUN as _SUN
+from astrodyn.orbit.perturbations import (
+    EARTH_EGM2008 as _EARTH,
+    MOON as _MOON,
+    SUN as _SUN,
+    CentralBody as GravityCentralBody,
+)
 
 __all__ = [
     "ScenarioError",
@@ -154,15 +159,24 @@ class ScenarioError(ValueError):
 
 
 @dataclass(frozen=True)
-class CentralBody:
-    """Gravitating body at the origin: ``mu`` m^3/s^2, equatorial ``radius`` m, zonal
-    coefficients ``j = (J2, J3, J4, J5, J6)`` (unnormalized), inertial ``frame`` name."""
+class CentralBody(GravityCentralBody):
+    """The scene's gravitating body at the origin: the constants of
+    :class:`astrodyn.orbit.perturbations.CentralBody` (``mu`` m^3/s^2, equatorial
+    ``radius`` m, zonal coefficients ``J = (J2, J3, J4, J5, J6)``, unnormalized, always
+    five, zeros where unknown) and the scene's inertial ``frame`` name."""
 
-    name: str
-    mu: float
-    radius: float
-    j: tuple[float, float, float, float, float]
-    frame: str
+    frame: str = "GCRF"
+
+    @property
+    def j(self) -> tuple[float, ...]:
+        """Deprecated old name of :attr:`J` (the same tuple ``(J2, ..., J6)``)."""
+        return self.J
+
+    def to_dict(self) -> dict[str, Any]:
+        """The ``central_body`` table of the recorded scenario metadata: keys ``name, mu,
+        radius, j, frame`` in that order (the names recordings have always carried;
+        docs/architecture.md, section 5)."""
+        return {"name": self.name, "mu": self.mu, "radius": self.radius, "j": tuple(self.J), "frame": self.frame}
 
 
 def _j5(J: tuple[float, ...]) -> tuple[float, float, float, float, float]:
@@ -327,7 +341,7 @@ class Scenario:
             "n_steps": self.n_steps,
             "real_time_factor": self.real_time_factor,
             "frame": self.frame,
-            "central_body": dataclasses.asdict(self.central_body),
+            "central_body": self.central_body.to_dict(),
             "bodies": [_body_dict(b, bp) for b, bp in zip(self.bodies, p.bodies)],
             "processes": list(p.processes),
             "walker": self.walker,
@@ -677,7 +691,7 @@ def _central_body(ctx: _Ctx, data: Any) -> CentralBody:
             _check(ctx, abs(jn) < 1.0, f"central_body.j{n}", f"|j{n}| < 1 (an unnormalized zonal coefficient)", tb.get(f"j{n}"))
             j[n - 2] = jn
     frame = _name(ctx, tb.get("frame", "GCRF" if key == "earth" else "ICRF"), "central_body.frame")
-    return CentralBody(name=key if key in CENTRAL_BODIES else name, mu=mu, radius=radius, j=tuple(j), frame=frame)
+    return CentralBody(name=key if key in CENTRAL_BODIES else name, mu=mu, radius=radius, J=tuple(j), frame=frame)
 
 
 _ORBIT_KEYS = ("model", "r", "v", "a", "p", "rp", "e", "i", "raan", "argp", "nu", "M", "degree", "perturbers")
@@ -1160,7 +1174,7 @@ def plan(scenario: Scenario) -> Plan:
         om = am = None
         if b.orbit is not None:
             om = b.orbit.model
-            if om in ("j2", "zonal") and not any(cb.j[: b.orbit.degree - 1]):
+            if om in ("j2", "zonal") and not any(cb.J[: b.orbit.degree - 1]):
                 notes.append(f"{om} requested but J2..J{b.orbit.degree} of {cb.name} are 0: analytic kepler is exact")
                 om = "kepler"
             rp = _periapsis(b.orbit, cb.mu)

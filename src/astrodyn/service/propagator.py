@@ -424,7 +424,7 @@ class _CrossCheck:
             idx = [i for i in chosen if engine.models[i] == model]
             if not idx:
                 continue
-            kw = dict(model="j2", j2=cb.j[0], body_radius=cb.radius) if model == "j2" else {}
+            kw = dict(model="j2", j2=cb.J[0], body_radius=cb.radius) if model == "j2" else {}
             scene = ReboundScene(engine.r0[idx], engine.v0[idx], engine.mu, **kw)
             keys = [messages.crosscheck_key(scenario.name, engine.names[i]) for i in idx]
             self.scenes.append((np.asarray(idx), keys, scene))
