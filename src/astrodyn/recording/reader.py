@@ -39,7 +39,7 @@ from mcap.stream_reader import breakup_chunk
 from astrodyn import messages
 from astrodyn.recording.writer import RecordingError
 
-__all__ = ["load", "Run", "Body", "Track", "gap_report", "MCAP_MAGIC"]
+__all__ = ["load", "Run", "BodyTracks", "Body", "Track", "gap_report", "MCAP_MAGIC"]
 
 MCAP_MAGIC = b"\x89MCAP0\r\n"
 _HEADER = struct.Struct("<BQ")
@@ -97,13 +97,17 @@ class Track:
 
 
 @dataclass
-class Body:
+class BodyTracks:
     """The tracks of one body: ``orbit``, ``attitude``, ``crosscheck`` (None if absent)."""
 
     name: str
     orbit: Track | None = None
     attitude: Track | None = None
     crosscheck: Track | None = None
+
+
+Body = BodyTracks
+"""Deprecated old name of :class:`BodyTracks` (the scene's body is :class:`astrodyn.scenario.Body`)."""
 
 
 @dataclass
@@ -113,7 +117,7 @@ class Run:
     path: str
     scenario: dict[str, str]
     metadata: dict[str, dict[str, str]]
-    bodies: dict[str, Body]
+    bodies: dict[str, BodyTracks]
     channels: dict[str, Track]
     events: list[dict]
     gaps: dict[str, dict]
@@ -383,12 +387,12 @@ def load(path: str | os.PathLike) -> Run:
                 handlers[type(rec)](rec)
 
     channels = {topic: b.build() for topic, b in builders.items()}
-    bodies: dict[str, Body] = {}
+    bodies: dict[str, BodyTracks] = {}
     gaps: dict[str, dict] = {}
     for topic, track in channels.items():
         if track.kind in ("orbit", "attitude", "crosscheck"):
             _, body, kind = messages.parse_key(topic)
-            setattr(bodies.setdefault(body, Body(body)), kind, track)
+            setattr(bodies.setdefault(body, BodyTracks(body)), kind, track)
         if track.kind == "event":
             for process in sorted(set(track.fields["process"])):
                 gaps[f"{topic}#{process}"] = gap_report(track.seq[track.fields["process"] == process])
