@@ -94,7 +94,7 @@ def _cases():
         ("attitude.flip_period", a.flip_period, (J, W0), {}),
         ("attitude.attitude_state_rates", a.attitude_state_rates, (0.0, np.concatenate([W0, Q0]), J), {}),
         ("attitude.body_momentum_rates", a.body_momentum_rates, (J, J * W0), {}),
-        ("attitude.euler_rates", a.euler_rates, (J, W0), {}),
+        ("attitude.angular_acceleration", a.angular_acceleration, (J, W0), {}),
         ("attitude.inertia_tensor", a.inertia_tensor, (J,), {}),
         ("attitude.principal_axes", a.principal_axes, (np.diag(J) + 1e-4,), {}),
         ("attitude.spin_stability_product", a.spin_stability_product, (J, 0.3, 0.01, 1), {}),

@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 
 from astrodyn.attitude.euler import (
+    angular_acceleration,
     attitude_state_rates,
     body_momentum_rates,
-    euler_rates,
     inertia_tensor,
     principal_axes,
 )
@@ -29,7 +29,7 @@ def test_principal_form_matches_component_equations():
     w = RNG.normal(size=(50, 3))
     tau = RNG.normal(size=(50, 3))
     I1, I2, I3 = I_P
-    wd = euler_rates(I_P, w, tau)
+    wd = angular_acceleration(I_P, w, tau)
     ref = np.stack(
         [
             ((I2 - I3) * w[:, 1] * w[:, 2] + tau[:, 0]) / I1,
@@ -48,8 +48,8 @@ def test_full_tensor_is_covariant_under_rotation():
     w_p = RNG.normal(size=(20, 3))
     tau_p = RNG.normal(size=(20, 3))
     h_p = RNG.normal(size=(20, 3))
-    wd_body = euler_rates(J, w_p @ R, tau_p @ R, h_p @ R)
-    wd_p = euler_rates(I_P, w_p, tau_p, h_p)
+    wd_body = angular_acceleration(J, w_p @ R, tau_p @ R, h_p @ R)
+    wd_p = angular_acceleration(I_P, w_p, tau_p, h_p)
     # R has ~1 ulp errors; the inverse of J has condition number I3/I1 ~ 2.6
     np.testing.assert_allclose(wd_body @ R.T, wd_p, rtol=0, atol=1e-13)
     m, P = principal_axes(J)
@@ -64,7 +64,7 @@ def test_gyrostat_rate_form_agrees_with_momentum_form():
     h = RNG.normal(size=(10, 3))
     hd = RNG.normal(size=(10, 3))
     tau = RNG.normal(size=(10, 3))
-    wd = euler_rates(I_P, w, tau, h, hd)
+    wd = angular_acceleration(I_P, w, tau, h, hd)
     Hd, w_back = body_momentum_rates(I_P, I_P * w + h, tau, h)
     np.testing.assert_allclose(w_back, w, atol=1e-14)
     np.testing.assert_allclose(I_P * wd + hd, Hd, atol=1e-13)
@@ -83,7 +83,7 @@ def test_state_form_quaternion_rates_match_dcm_kinematics():
     wx = np.array([[0, -w[2], w[1]], [w[2], 0, -w[0]], [-w[1], w[0], 0]])
     # central difference error ~ eps^2 |q'''| ~ 1e-12, round-off ~ 1e-16/eps = 1e-10
     np.testing.assert_allclose(Cdot, -wx @ dcm_from_quat(q), atol=1e-9)
-    np.testing.assert_allclose(d[4:], euler_rates(I_P, w), atol=1e-15)
+    np.testing.assert_allclose(d[4:], angular_acceleration(I_P, w), atol=1e-15)
 
 
 @pytest.mark.parametrize(
@@ -103,5 +103,5 @@ def test_bad_inertia_is_rejected(bad, msg):
 
 def test_nan_rates_give_nan():
     # w1 = NaN reaches w2' and w3' (w1' = (I2 - I3) w2 w3 / I1 does not involve w1)
-    wd = euler_rates(I_P, [np.nan, 0.0, 1.0])
+    wd = angular_acceleration(I_P, [np.nan, 0.0, 1.0])
     assert np.isnan(wd[1]) and np.isnan(wd[2]) and wd[0] == 0.0

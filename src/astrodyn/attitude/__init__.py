@@ -20,6 +20,7 @@ __all__ = ["torque_free", "polhode", "herpolhode", "rate_period", "flip_period"]
 
 # --- other attitude modules: append their imports (and extend __all__) below this line ---
 from astrodyn.attitude.euler import (
+    angular_acceleration,
     attitude_state_rates,
     body_momentum_rates,
     euler_rates,
@@ -39,7 +40,7 @@ from astrodyn.attitude.torques import (
 )
 
 __all__ += [
-    "attitude_state_rates", "body_momentum_rates", "euler_rates", "inertia_tensor", "principal_axes",
+    "attitude_state_rates", "body_momentum_rates", "angular_acceleration", "euler_rates", "inertia_tensor", "principal_axes",
     "Gyrocompass", "Gyrostat", "spin_stability_product", "spin_transverse_rate", "propagate_attitude", "HeavyTop",
     "ConstantTorque", "GravityGradientTorque", "TorqueSum", "UniformGravityTorque", "gravity_gradient_torque",
 ]  # fmt: skip

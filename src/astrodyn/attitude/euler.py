@@ -35,6 +35,7 @@ from astrodyn.rotation import quat_rate
 __all__ = [
     "inertia_tensor",
     "principal_axes",
+    "angular_acceleration",
     "euler_rates",
     "body_momentum_rates",
     "attitude_state_rates",
@@ -94,7 +95,7 @@ def principal_axes(inertia):
     return m, P
 
 
-def euler_rates(inertia, w, torque=0.0, rotor_momentum=0.0, rotor_momentum_rate=0.0):
+def angular_acceleration(inertia, w, torque=0.0, rotor_momentum=0.0, rotor_momentum_rate=0.0):
     """Body angular acceleration ``w'`` from Euler's equations (rad/s^2).
 
     ``I w' = tau - h' - w x (I w + h)`` (Baruh eq. 8.5x for ``h = 0``; gyrostat
@@ -116,6 +117,11 @@ def euler_rates(inertia, w, torque=0.0, rotor_momentum=0.0, rotor_momentum_rate=
     H = w @ J.T + h
     rhs = tau - hd - np.cross(w, H)
     return rhs @ np.linalg.inv(J).T
+
+
+euler_rates = angular_acceleration
+"""Deprecated old name of :func:`angular_acceleration` (``astrodyn.rotation.euler_rates`` is the
+rate of the Euler *angles*)."""
 
 
 def body_momentum_rates(inertia, H, torque=0.0, rotor_momentum=0.0):
@@ -158,5 +164,5 @@ def attitude_state_rates(t, state, inertia, torque=None, rotor_momentum=None):
         hd = (np.asarray(rotor_momentum(t + d)) - np.asarray(rotor_momentum(t - d))) / (2 * d)
     elif rotor_momentum is not None:
         h = np.asarray(rotor_momentum, dtype=np.float64)
-    wd = euler_rates(inertia, w, tau, h, hd)
+    wd = angular_acceleration(inertia, w, tau, h, hd)
     return np.concatenate([quat_rate(q, w), wd], axis=-1)
