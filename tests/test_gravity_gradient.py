@@ -182,7 +182,7 @@ def test_kernel_with_every_torque_term_matches_python_path(rotor):
     tq = TorqueSum(
         GravityGradientTorque(MU, circular_orbit, inertia), ConstantTorque([1e-4, 0.0, -2e-4]),
         ConstantTorque([0.0, 3e-4, 1e-4], frame="inertial"), UniformGravityTorque(2.0, [0.0, 1e-3, 2e-3]),
-    )  # fmt: skip
+    )
     h = {
         "none": None,
         "constant": np.array([0.1, -0.2, 0.3]),

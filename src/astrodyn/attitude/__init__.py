@@ -39,6 +39,7 @@ from astrodyn.attitude.torques import (
     gravity_gradient_torque,
 )
 
+# one line per source module: fmt: skip keeps that grouping
 __all__ += [
     "attitude_state_rates", "body_momentum_rates", "angular_acceleration", "euler_rates", "inertia_tensor", "principal_axes",
     "Gyrocompass", "Gyrostat", "spin_stability_product", "spin_transverse_rate", "propagate_attitude", "HeavyTop",

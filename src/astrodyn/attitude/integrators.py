@@ -296,6 +296,7 @@ def _gg_factor(mu3, x, y, z):
 def _kick_constants(tau_body, com, gg_inertia):
     """The kick's fixed parameters as one tuple of scalars: ``tau_body`` (3,) N m, ``com`` (3,) m,
     ``gg_inertia`` (3, 3) kg m^2 row by row (held in registers by the kernel's loop)."""
+    # laid out as the arrays they come from (tau_body, com, then gg_inertia row by row): fmt: skip
     return (
         tau_body[0], tau_body[1], tau_body[2], com[0], com[1], com[2],
         gg_inertia[0, 0], gg_inertia[0, 1], gg_inertia[0, 2],
@@ -364,6 +365,7 @@ def _orbit_node(orbit_rv, mu, t, node):
     """``node[:] = (r, v, a)`` of the two-body orbit at time ``t`` (s): exact
     Lagrange coefficients (:func:`astrodyn.orbit.universal.lagrange_coefficients_scalar`),
     ``a = -mu r / |r|^3``."""
+    # the r row, the v row, then t and mu, as orbit_rv holds them: fmt: skip
     f, g, fd, gd = lagrange_coefficients_scalar(
         orbit_rv[0, 0], orbit_rv[0, 1], orbit_rv[0, 2], orbit_rv[1, 0], orbit_rv[1, 1], orbit_rv[1, 2],
         t + orbit_rv[2, 0], mu,
@@ -479,6 +481,7 @@ def _turn_carry(axis, angle, parts, m0, m1, m2, e0, e1, e2, e3, b0, b1, b2, u0, 
 
 
 @jit
+# parameters one group a line: state and outputs, torques, orbit, rotor (fmt: skip)
 def _split_kernel(
     M, q, inertia, weights, step_t, step_dt, record, out_M, out_q,
     parts, tau_body, tau_inertial, com, force, gg_mu, gg_inertia,
@@ -763,6 +766,7 @@ def _run_split(frame, M0, q0, t_out, step, weights, ktorque, rotor, torque, even
                 h_table = np.ascontiguousarray(h_p(tm.ravel()).reshape(len(st), ns, 3))
             else:
                 h_table = h_table1
+            # the groups of _split_kernel's parameters, one a line (fmt: skip)
             _split_kernel(
                 M, q, frame.moments, weights, st, sd, rec, out_M, out_q,
                 ktorque["parts"], ktorque["tau_b"], ktorque["tau_i"], ktorque["com"], ktorque["force"],
@@ -840,6 +844,7 @@ def _default_step(frame, M0, h0, ktorque, torque, w0):
 # ---------------------------------------------------------------------------
 
 
+# the initial state and times on the first line, the options on the second (fmt: skip)
 def propagate_attitude(
     inertia, w0, q0, t, torque=None, rotor_momentum=None, method="auto", step=None,
     rtol=1e-12, atol=1e-14, error_estimate=True,
@@ -991,6 +996,8 @@ def _run_dop853(frame, w0, q0, t_out, torque, rotor_momentum, rtol, atol):
         M = y[4:] * scale
         w = Jinv @ (M - hfun(t))
         tau = np.zeros(3) if torque is None else np.asarray(torque(t, q, w), dtype=np.float64)
+        # the four rows of the Euler-parameter kinematics dq/dt = Omega(w) q / 2 (Baruh ch. 7;
+        # astrodyn.rotation.quat_rate), one component a line: fmt: skip
         dq = 0.5 * np.array([
             -q[1] * w[0] - q[2] * w[1] - q[3] * w[2],
             q[0] * w[0] + q[2] * w[2] - q[3] * w[1],

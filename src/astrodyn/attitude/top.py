@@ -204,7 +204,7 @@ class HeavyTop:
             return propagate_attitude(
                 self.inertia, w0, q0, t, torque=self.gravity_torque(), method=method, step=step,
                 error_estimate=error_estimate, **kwargs,
-            )  # fmt: skip
+            )
         if kwargs:
             raise ValueError(f"method: {method!r} takes only t, step and error_estimate, got {sorted(kwargs)}")
         return self._simulate_split(w0, q0, t, method, step, error_estimate)

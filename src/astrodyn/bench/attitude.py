@@ -129,7 +129,7 @@ def run_case(name, inertia, w0, span, mp_ok, quick, repeats):
 
             sec, (w, q, info) = _best(run, repeats)
             rows.append(dict(method=method, param=f"h={h:.3g} s", seconds=sec, per=1e9 * sec / info["n_steps"], per_unit="ns/step",
-                             err_a=float(np.max(_angle(q, q_ex))), err_w=float(np.max(np.linalg.norm(w - w_ex, axis=-1)) / wscale), ref="exact"))  # fmt: skip
+                             err_a=float(np.max(_angle(q, q_ex))), err_w=float(np.max(np.linalg.norm(w - w_ex, axis=-1)) / wscale), ref="exact"))
     rtols = [1e-6, 1e-9, 1e-12] if not quick else [1e-6, 1e-9]
     for rtol in rtols:
 
@@ -138,7 +138,7 @@ def run_case(name, inertia, w0, span, mp_ok, quick, repeats):
 
         sec, (w, q, info) = _best(run, 1 if quick else max(1, repeats - 1))
         rows.append(dict(method="dop853", param=f"rtol={rtol:g}", seconds=sec, per=1e9 * sec / info["nfev"], per_unit="ns/fev",
-                         err_a=float(np.max(_angle(q, q_ex))), err_w=float(np.max(np.linalg.norm(w - w_ex, axis=-1)) / wscale), ref="exact"))  # fmt: skip
+                         err_a=float(np.max(_angle(q, q_ex))), err_w=float(np.max(np.linalg.norm(w - w_ex, axis=-1)) / wscale), ref="exact"))
     ref = next(r for r in rows[::-1] if r["method"] == "dop853")  # the tightest rtol
     for r in rows:
         r["ratio"] = r["seconds"] / ref["seconds"]
@@ -235,6 +235,7 @@ def main(argv=None) -> int:
     ]
     for name, rows in results.items():
         inertia, w0, span, _ = CASES[name]
+        # the markdown table's rows as they print (fmt: skip)
         lines += ["", f"## {name}: I = {inertia} kg m^2, w0 = {w0} rad/s, span {span:g} s", "",
                   "| method | setting | wall time (s) | cost | attitude error (rad) | rate error (rel.) | reference | time / DOP853 |",
                   "| --- | --- | --- | --- | --- | --- | --- | --- |"]  # fmt: skip

@@ -346,6 +346,7 @@ def _numbers(buf, p, end, n, sumsq):
 
 
 @jit
+# parameters one role a line: batch spans, grammar, times, seq accounting, chunk, result (fmt: skip)
 def ingest_batch(
     buf, i, count, pay_start, pay_len, kinds, cids, slots,
     lits, lit_start, lit_len, names, name_start, name_len, quat_tol,
@@ -489,4 +490,4 @@ def warm_up(grammar) -> None:
         np.frombuffer(b"0.5", dtype=np.uint8).copy(), 1, 1, np.zeros(2, dtype=np.int64), np.zeros(2, dtype=np.int64),
         np.zeros(4096, dtype=np.uint8), np.zeros(3, dtype=np.int64), 2048, np.zeros(8, dtype=np.uint16),
         np.zeros(8, dtype=np.uint64), np.zeros(8, dtype=np.uint64), np.zeros(4, dtype=np.int64),
-    )  # fmt: skip
+    )

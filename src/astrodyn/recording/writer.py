@@ -437,6 +437,7 @@ class McapRecorder:
                 layout.resolve(self)
             state = w.chunk_state
             state[2] = 0
+            # the roles of ingest_batch's parameters, one a line (fmt: skip)
             ingest.ingest_batch(
                 buf, i, count, pay_start, pay_len, layout.kinds, layout.cids, layout.slots,
                 lits, lit_start, lit_len, names, name_start, name_len, messages.QUAT_NORM_TOL,
