@@ -18,10 +18,10 @@ import pytest
 
 ccsds_ndm = pytest.importorskip("ccsds_ndm.ndm_io")
 
-from astrodyn.recording.export import export  # noqa: E402
+from astrodyn.recording.export import export  # noqa: E402 - after the importorskip: no reader, no test
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _recordings import leo_recording  # noqa: E402
+from _recordings import leo_recording  # noqa: E402 - the tests/ helpers, importable once on sys.path
 
 
 def _payloads(path: Path, suffix: str) -> list[dict]:
