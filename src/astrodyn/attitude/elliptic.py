@@ -63,7 +63,7 @@ import math
 
 import numpy as np
 
-from astrodyn.jit import jit, pjit, prange
+from astrodyn.jit import jit, parallel_kernel, prange
 
 __all__ = ["ellipj", "ellipk", "elliprf", "elliprd", "elliprj", "ellipf", "ellippi"]
 
@@ -457,44 +457,47 @@ def _ellippi(n, phi, m, m1):
 # array wrappers
 
 
-@pjit
-def _ellipj_loop(u, m, m1, sn, cn, dn):
+@parallel_kernel("elliptic")
+def ellipj_loop(u, m, m1, sn, cn, dn):
+    """``(sn, cn, dn)`` of ``u[i]`` at parameter ``m[i]`` (complement ``m1[i]``) into the
+    output arrays; call as ``ellipj_loop(n, ...)`` (:mod:`astrodyn.jit` thread policy)."""
     for i in prange(u.shape[0]):
         K = ellipk_scalar(m1[i])
         sn[i], cn[i], dn[i] = _sncndn(u[i], m[i], m1[i], K)
 
 
-@pjit
+@parallel_kernel("elliptic")
 def _ellipk_loop(m1, out):
     for i in prange(m1.shape[0]):
         out[i] = ellipk_scalar(m1[i])
 
 
-@pjit
+@parallel_kernel("elliptic")
 def _rf_loop(x, y, z, out):
     for i in prange(x.shape[0]):
         out[i] = elliprf_scalar(x[i], y[i], z[i])
 
 
-@pjit
+@parallel_kernel("elliptic")
 def _rd_loop(x, y, z, out):
     for i in prange(x.shape[0]):
         out[i] = _rd(x[i], y[i], z[i])
 
 
-@pjit
-def _rj_loop(x, y, z, p, out):
+@parallel_kernel("elliptic")
+def elliprj_loop(x, y, z, p, out):
+    """Carlson ``R_J(x[i], y[i], z[i], p[i])`` into ``out``; call as ``elliprj_loop(n, ...)``."""
     for i in prange(x.shape[0]):
         out[i] = elliprj_scalar(x[i], y[i], z[i], p[i])
 
 
-@pjit
+@parallel_kernel("elliptic")
 def _ellipf_loop(phi, m, m1, out):
     for i in prange(phi.shape[0]):
         out[i] = _ellipf(phi[i], m[i], m1[i])
 
 
-@pjit
+@parallel_kernel("elliptic")
 def _ellippi_loop(n, phi, m, m1, out):
     for i in prange(phi.shape[0]):
         out[i] = _ellippi(n[i], phi[i], m[i], m1[i])
@@ -534,7 +537,7 @@ def ellipj(u, m, m1=None):
     shape, (u_, m_, m1_) = _flat(u, m, m1)
     _check_m(m_, m1_)
     sn, cn, dn = (np.empty_like(u_) for _ in range(3))
-    _ellipj_loop(u_, m_, m1_, sn, cn, dn)
+    ellipj_loop(u_.shape[0], u_, m_, m1_, sn, cn, dn)
     return _out(sn, shape), _out(cn, shape), _out(dn, shape)
 
 
@@ -545,7 +548,7 @@ def ellipk(m, m1=None):
     shape, (m_, m1_) = _flat(m, m1)
     _check_m(m_, m1_)
     out = np.empty_like(m_)
-    _ellipk_loop(m1_, out)
+    _ellipk_loop(m1_.shape[0], m1_, out)
     return _out(out, shape)
 
 
@@ -555,7 +558,7 @@ def elliprf(x, y, z):
     if np.any((x_ < 0) | (y_ < 0) | (z_ < 0)):
         raise ValueError("x, y, z: expected non-negative arguments of R_F")
     out = np.empty_like(x_)
-    _rf_loop(x_, y_, z_, out)
+    _rf_loop(x_.shape[0], x_, y_, z_, out)
     return _out(out, shape)
 
 
@@ -565,7 +568,7 @@ def elliprd(x, y, z):
     if np.any((x_ < 0) | (y_ < 0) | (z_ <= 0)):
         raise ValueError("x, y, z: expected x, y >= 0 and z > 0 for R_D")
     out = np.empty_like(x_)
-    _rd_loop(x_, y_, z_, out)
+    _rd_loop(x_.shape[0], x_, y_, z_, out)
     return _out(out, shape)
 
 
@@ -575,7 +578,7 @@ def elliprj(x, y, z, p):
     if np.any((x_ < 0) | (y_ < 0) | (z_ < 0) | (p_ <= 0)):
         raise ValueError("x, y, z, p: expected x, y, z >= 0 and p > 0 for R_J (no principal value)")
     out = np.empty_like(x_)
-    _rj_loop(x_, y_, z_, p_, out)
+    elliprj_loop(x_.shape[0], x_, y_, z_, p_, out)
     return _out(out, shape)
 
 
@@ -586,7 +589,7 @@ def ellipf(phi, m, m1=None):
     shape, (phi_, m_, m1_) = _flat(phi, m, m1)
     _check_m(m_, m1_)
     out = np.empty_like(phi_)
-    _ellipf_loop(phi_, m_, m1_, out)
+    _ellipf_loop(phi_.shape[0], phi_, m_, m1_, out)
     return _out(out, shape)
 
 
@@ -599,5 +602,5 @@ def ellippi(n, phi, m, m1=None):
     if np.any(n_ >= 1):
         raise ValueError("n: expected characteristic n < 1 (no principal value)")
     out = np.empty_like(phi_)
-    _ellippi_loop(n_, phi_, m_, m1_, out)
+    _ellippi_loop(n_.shape[0], n_, phi_, m_, m1_, out)
     return _out(out, shape)

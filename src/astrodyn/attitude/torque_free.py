@@ -95,7 +95,7 @@ import math
 import numpy as np
 
 from astrodyn.attitude.elliptic import ellipk_scalar, elliprf_scalar, elliprj_scalar, reduce_half_period, sncndn_half
-from astrodyn.jit import jit, pjit, prange
+from astrodyn.jit import jit, parallel_kernel, prange
 from astrodyn.rotation import quat_hamilton_scalar
 
 __all__ = ["torque_free", "polhode", "herpolhode", "rate_period", "flip_period"]
@@ -125,6 +125,7 @@ _INER = 32  # 3 entries: body principal moments
 _PF = 36  # 1: "Pi form" for n < -1 (jv holds Pi(n; am tau|m) itself, see _j_g), else 0
 _GPF = 37  # sqrt(1 + m - n - m/n) (Pi form)
 _NPAR = 38
+NPAR = _NPAR  # parameters per body (the rows setup_all fills)
 
 
 # ---------------------------------------------------------------------------
@@ -383,14 +384,19 @@ def _setup(inertia, w0, q0, par):
     par[_QB0], par[_QB0 + 1], par[_QB0 + 2], par[_QB0 + 3] = r0, r1, r2, r3
 
 
-@jit
-def _setup_all(inertia, w0, q0, par):
-    for b in range(inertia.shape[0]):
+@parallel_kernel("torque_free_setup")
+def setup_all(inertia, w0, q0, par):
+    """Per-body constants ``par[b]`` of bodies ``(inertia[b], w0[b], q0[b])`` (rows of
+    ``(n, 3)``, ``(n, 3)``, ``(n, 4)``; ``par`` shape ``(n, NPAR)``); call as
+    ``setup_all(n, ...)`` (the work decides serial or parallel, :mod:`astrodyn.jit`)."""
+    for b in prange(inertia.shape[0]):
         _setup(inertia[b], w0[b], q0[b], par[b])
 
 
-@pjit
-def _evaluate_all(par, t, w_out, q_out):
+@parallel_kernel("torque_free")
+def evaluate_all(par, t, w_out, q_out):
+    """Rates ``w_out[b, i]`` and Euler parameters ``q_out[b, i]`` of the bodies set up in
+    ``par`` at the times ``t[i]``; call as ``evaluate_all(n_bodies * n_times, ...)``."""
     nb = par.shape[0]
     nt = t.shape[0]
     for k in prange(nb * nt):
@@ -420,7 +426,7 @@ def _prepare(inertia, w0, q0):
     w_ = np.ascontiguousarray(np.broadcast_to(w0, batch + (3,))).reshape(-1, 3)
     q_ = np.ascontiguousarray(np.broadcast_to(q0, batch + (4,))).reshape(-1, 4)
     par = np.empty((I_.shape[0], _NPAR))
-    _setup_all(I_, w_, q_, par)
+    setup_all(I_.shape[0], I_, w_, q_, par)
     return batch, par
 
 
@@ -459,7 +465,7 @@ def torque_free(inertia, w0, q0, t):
     nb, nt = par.shape[0], t_flat.shape[0]
     w = np.empty((nb, nt, 3))
     q = np.empty((nb, nt, 4))
-    _evaluate_all(par, t_flat, w, q)
+    evaluate_all(nb * nt, par, t_flat, w, q)
     if scalar_t:
         return w.reshape(batch + (3,)), q.reshape(batch + (4,))
     return w.reshape(batch + (nt, 3)), q.reshape(batch + (nt, 4))

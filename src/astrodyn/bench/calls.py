@@ -45,11 +45,14 @@ def _best(fn, repeat: int, number: int) -> float:
 
 
 def load_worker(seconds: float) -> None:
-    """One background process of the load: the service's kernels in a loop (numba's
-    default threads, as a propagator process has them today)."""
+    """One background process of the load: the service's kernels in a loop, with the
+    numba threads of a service process (:func:`astrodyn.jit.service_threads`: 1 unless
+    ``$ASTRODYN_THREADS`` says otherwise; ``--load-threads`` sets it)."""
     from astrodyn.attitude import torque_free
+    from astrodyn.jit import service_threads, set_threads
     from astrodyn.orbit import propagate
 
+    set_threads(service_threads())
     rng = np.random.default_rng(os.getpid())
     r0 = np.array([7e6, 0.0, 0.0]) + rng.normal(scale=1e5, size=(1000, 3))
     v0 = np.array([0.0, 7.5e3, 1e3]) + rng.normal(scale=50.0, size=(1000, 3))
@@ -66,14 +69,15 @@ def load_worker(seconds: float) -> None:
 class Load:
     """``n`` background :func:`load_worker` processes for the duration of a ``with``."""
 
-    def __init__(self, n: int, seconds: float = 3600.0):
-        self.n, self.seconds = n, seconds
+    def __init__(self, n: int, seconds: float = 3600.0, threads: int = 1):
+        self.n, self.seconds, self.threads = n, seconds, threads
         self.procs: list[subprocess.Popen] = []
 
     def __enter__(self) -> Load:
+        env = {**os.environ, "ASTRODYN_THREADS": str(self.threads)}
         for _ in range(self.n):
             self.procs.append(subprocess.Popen([sys.executable, "-m", "astrodyn.bench.calls", "--load-worker",
-                                                str(self.seconds)], stdin=subprocess.DEVNULL))
+                                                str(self.seconds)], stdin=subprocess.DEVNULL, env=env))
         time.sleep(20.0)  # past their kernels' first (cached) load
         return self
 
@@ -87,6 +91,60 @@ class Load:
             except subprocess.TimeoutExpired:
                 os.kill(p.pid, signal.SIGKILL)
                 p.wait(timeout=10)
+
+
+# --------------------------------------------------------------------------- thresholds
+
+
+def paired(fns, number: int, repeat: int = 7) -> list[float]:
+    """Median seconds per call of each of ``fns``, timed alternately (``number`` calls of
+    each in turn, ``repeat`` rounds), so a change of the machine's load hits all alike."""
+    ts: list[list[float]] = [[] for _ in fns]
+    for _ in range(repeat):
+        for k, fn in enumerate(fns):
+            t0 = time.perf_counter()
+            for _ in range(number):
+                fn()
+            ts[k].append((time.perf_counter() - t0) / number)
+    return [float(np.median(x)) for x in ts]
+
+
+def sweep(sizes=(64, 256, 512, 1024, 2048, 4096, 16384)) -> list[tuple]:
+    """Serial vs parallel (2 threads) compilation of each :class:`astrodyn.jit.ParallelKernel`
+    over batch sizes: rows ``(n, kernel, serial s, parallel s)`` (medians of 7, alternated).  The
+    thresholds of :data:`astrodyn.jit.PARALLEL_MIN` are where the parallel one wins."""
+    import numba
+
+    from astrodyn.attitude.elliptic import ellipj_loop, elliprj_loop
+    from astrodyn.attitude.torque_free import NPAR, evaluate_all, setup_all
+
+    inertia, w0 = DZHANIBEKOV
+    rng = np.random.default_rng(0)
+    numba.set_num_threads(min(2, numba.config.NUMBA_NUM_THREADS))
+    rows = []
+    for n in sizes:
+        w = w0 + rng.normal(scale=1e-3, size=(n, 3))
+        q = np.tile([1.0, 0.0, 0.0, 0.0], (n, 1))
+        moments = np.tile(inertia, (n, 1))
+        par = np.empty((n, NPAR))
+        setup_all.serial(moments, w, q, par)
+        t = np.array([12.5])
+        u, m = rng.uniform(-3.0, 3.0, n), rng.uniform(0.0, 1.0, n)
+        x, y, z, p = (rng.uniform(0.1, 2.0, n) for _ in range(4))
+        out = [np.empty(n) for _ in range(3)]
+        cases = {"torque_free": (evaluate_all, (par, t, np.empty((n, 1, 3)), np.empty((n, 1, 4)))),
+                 "torque_free_setup": (setup_all, (moments, w, q, par)),
+                 "elliptic (ellipj)": (ellipj_loop, (u, m, 1.0 - m, *out)),
+                 "elliptic (elliprj)": (elliprj_loop, (x, y, z, p, out[0]))}
+        number = max(10, 20000 // n)
+        for name, (kernel, args) in cases.items():
+            kernel.serial(*args)
+            kernel.parallel(*args)
+            ser, par_ = paired([lambda k=kernel, a=args: k.serial(*a), lambda k=kernel, a=args: k.parallel(*a)],
+                               number)
+            rows.append((n, name, ser, par_))
+    numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)
+    return rows
 
 
 # --------------------------------------------------------------------------- cases
@@ -219,6 +277,10 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="astrodyn bench calls", description=__doc__.split("\n\n")[0])
     ap.add_argument("--load", action="store_true", help="also measure while one astrodyn kernel loop per core runs")
     ap.add_argument("--repeat", type=int, default=5, help="best of this many timings (default 5)")
+    ap.add_argument("--load-threads", type=int, default=1,
+                    help="numba threads of each load process (default 1, the service default; 2: as before issue 15)")
+    ap.add_argument("--sweep", action="store_true",
+                    help="only the serial/parallel sweep of batch sizes behind astrodyn.jit.PARALLEL_MIN")
     ap.add_argument("--load-worker", type=float, default=None, help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     if args.load_worker is not None:
@@ -227,9 +289,24 @@ def main(argv: list[str] | None = None) -> int:
     if args.repeat < 1:
         print(f"astrodyn bench calls: --repeat: expected an integer >= 1, got {args.repeat}", file=sys.stderr)
         return 2
+    if not 1 <= args.load_threads <= 64:
+        print(f"astrodyn bench calls: --load-threads: expected an integer 1..64, got {args.load_threads}", file=sys.stderr)
+        return 2
+    if args.sweep:
+        regimes = {"idle": sweep()}
+        if args.load:
+            with Load(os.cpu_count() or 2, threads=args.load_threads):
+                regimes["loaded"] = sweep()
+        print(f"load average at the end: {os.getloadavg()[0]:.2f}; OMP_WAIT_POLICY={os.environ.get('OMP_WAIT_POLICY')}")
+        print("| kernel | n | regime | serial | parallel (2 thr) | serial / parallel |")
+        print("| --- | ---: | --- | ---: | ---: | ---: |")
+        for regime, rows in regimes.items():
+            for n, name, ser, par_ in sorted(rows, key=lambda r: (r[1], r[0])):
+                print(f"| {name} | {n} | {regime} | {_fmt(ser)} | {_fmt(par_)} | {ser / par_:.2f} |")
+        return 0
     regimes = {"idle": measure(args.repeat)}
     if args.load:
-        with Load(os.cpu_count() or 2):
+        with Load(os.cpu_count() or 2, threads=args.load_threads):
             regimes["loaded"] = measure(args.repeat)
     cols = ["astrodyn 1 thr", "astrodyn 2 thr", "heyoka", "scipy", "note"]
     print(f"load average at the end: {os.getloadavg()[0]:.2f}")

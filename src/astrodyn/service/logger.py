@@ -55,6 +55,7 @@ import numpy as np
 import zenoh
 
 from astrodyn import auth, bus, messages
+from astrodyn.jit import service_threads, set_threads
 from astrodyn.recording import ingest
 from astrodyn.recording.writer import DUPLICATE, INGEST_GRAMMAR, BatchLayout, McapRecorder, RecordingError
 
@@ -633,6 +634,7 @@ def trust_from_environment(args: argparse.Namespace) -> dict:
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
     try:
+        set_threads(service_threads())  # thread policy (astrodyn.jit): 1 numba thread unless $ASTRODYN_THREADS
         meta = scenario_metadata(args)
     except (OSError, ValueError) as exc:
         print(f"logger: {exc}", file=sys.stderr)

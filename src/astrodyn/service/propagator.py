@@ -36,6 +36,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from astrodyn import bus, messages
+from astrodyn.jit import service_threads, set_threads
 from astrodyn.scenario import Scenario, plan as make_plan
 from astrodyn.simulate import AttitudeEngine, OrbitEngine
 
@@ -482,8 +483,14 @@ def service_main(kind: str, argv: list[str] | None = None) -> int:
     ap.add_argument("--endless", action="store_true", help="keep going past the scenario's duration until stopped (serve)")
     ap.add_argument("--block", type=int, default=0, help="output steps per engine call (default automatic)")
     ap.add_argument("--wait-logger", type=float, default=30.0, help="seconds to wait for the logger's liveliness token")
+    ap.add_argument("--threads", default=None, help="numba threads (default $ASTRODYN_THREADS, else 1; 'all': every core)")
     bus.add_bus_arguments(ap)
     args = ap.parse_args(argv)
+    try:  # thread policy: one numba thread per service process unless asked (astrodyn.jit)
+        set_threads(service_threads(args.threads))
+    except ValueError as exc:
+        print(f"{kind}: {exc}", file=sys.stderr)
+        return 2
     try:
         scenario = load(args.config)
     except ScenarioError as exc:
