@@ -67,6 +67,13 @@ One entry point, :func:`propagate_attitude`, with the method stated explicitly:
 Conventions (docs/architecture.md, section 2): Euler parameters ``q = (e0, e1, e2, e3)`` scalar first,
 ``v_body = C(q) @ v_inertial``, ``dC/dt = -[w x] C``, ``w`` body rates in rad/s,
 SI units throughout (s, kg m^2, N m, N m s).  The initial state is at ``t = 0``.
+
+Building blocks shared with :mod:`astrodyn.attitude.top` and
+:mod:`astrodyn.attitude.gyrocompass` (public names, compiled unless noted):
+:func:`axis_rotation_trig` and :func:`cos_sinc_minus_one` (cos and sin of a splitting angle,
+Taylor below :data:`SMALL_ANGLE`), :func:`turn_body` (one exact principal-axis rotation of
+``M`` and ``q``), :func:`renormalized` (``q / |q|``), and in Python :func:`step_plan` /
+:func:`step_chunks` (step counts per output interval, and the steps in kernel-sized chunks).
 """
 
 from __future__ import annotations
