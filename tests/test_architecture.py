@@ -148,3 +148,20 @@ def test_code_cites_docs_in_the_repository():
                 missing.append(f"{path.relative_to(ROOT)}: {page}")
     assert not outside, f"cite docs/architecture.md instead of design.md in: {outside}"
     assert not missing, f"cited pages that do not exist: {missing}"
+
+
+def test_renamed_public_names_keep_working():
+    """Homonyms got distinct names in issue 12; the old public names stay as aliases."""
+    import astrodyn.attitude as attitude
+    import astrodyn.recording as recording
+    import astrodyn.simulate as simulate
+    from astrodyn.orbit.perturbations import CentralBody as GravityCentralBody
+    from astrodyn.scenario import CentralBody
+    from astrodyn.scenario.ephemeris import third_body_state
+
+    assert recording.Body is recording.BodyTracks
+    assert attitude.euler_rates is attitude.angular_acceleration
+    assert simulate.third_body_state is third_body_state
+    cb = CentralBody(name="earth", mu=3.986e14, radius=6.378e6, J=(1.08e-3, -2.5e-6, 0.0, 0.0, 0.0), frame="GCRF")
+    assert isinstance(cb, GravityCentralBody) and cb.j == cb.J
+    assert list(cb.to_dict()) == ["name", "mu", "radius", "j", "frame"]  # the recorded metadata's keys
