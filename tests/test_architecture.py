@@ -95,8 +95,11 @@ def private_imports(path: Path, module: str | None = None) -> list[str]:
 
 def test_no_private_names_across_modules():
     """docs/architecture.md section 1: what is shared gets a public name in the module
-    named for it; no module reaches into another's underscored names."""
+    named for it; no module of the package (nor a services/ script) reaches into
+    another's underscored names."""
     found = [hit for path in sorted(SRC.rglob("*.py")) for hit in private_imports(path)]
+    found += [hit for path in sorted((ROOT / "services").glob("*.py"))
+              for hit in private_imports(path, f"services.{path.stem}")]
     assert not found, "underscored names imported across modules:\n" + "\n".join(found)
 
 
