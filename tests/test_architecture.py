@@ -168,3 +168,21 @@ def test_renamed_public_names_keep_working():
     cb = CentralBody(name="earth", mu=3.986e14, radius=6.378e6, J=(1.08e-3, -2.5e-6, 0.0, 0.0, 0.0), frame="GCRF")
     assert isinstance(cb, GravityCentralBody) and cb.j == cb.J
     assert list(cb.to_dict()) == ["name", "mu", "radius", "j", "frame"]  # the recorded metadata's keys
+
+
+def test_every_top_level_module_has_a_layer():
+    """A new module or subpackage of astrodyn is placed in a layer: it appears in the layers
+    contract of pyproject.toml (else import-linter would not check it at all)."""
+    import re
+    import tomllib
+
+    config = tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))
+    layers = next(c for c in config["tool"]["importlinter"]["contracts"] if c["type"] == "layers")["layers"]
+    listed = {name for layer in layers for name in re.split(r"[|:]", layer) if name.strip()}
+    listed = {name.strip() for name in listed}
+    package = SRC / "astrodyn"
+    present = {f"astrodyn.{p.stem}" for p in package.glob("*.py") if p.stem not in ("__init__", "__main__")}
+    present |= {f"astrodyn.{p.name}" for p in package.iterdir() if p.is_dir() and (p / "__init__.py").exists()}
+    missing = sorted(present - listed)
+    assert not missing, (f"{missing}: add each to a layer of the layers contract in pyproject.toml "
+                         "([tool.importlinter]) and to the table of docs/architecture.md, section 1")
