@@ -281,15 +281,14 @@ def test_pi_form_against_mpmath(n, m):
     # the half-period constant of a body with about this (n, m): A = 1, C = 2, B from
     # n = -C (B - A) / (A (C - B)), w2 = 0 and w3 from m; compared with mpmath at the
     # body's own (n, m) (whatever rounding made of them)
-    par = np.empty(tf._NPAR)
     A, C = 1.0, 2.0
     B = C * A * (1.0 - n) / (C - n * A)
     w3 = math.sqrt((B - A) * A / ((C - B) * C * m))
-    tf._setup(np.array([A, B, C]), np.array([1.0, 0.0, w3]), np.array([1.0, 0, 0, 0]), par)
-    assert par[tf._PF] == 1.0 and 0.0 < par[tf._M] < 1.0
+    body = tf.PreparedBody([A, B, C], [1.0, 0.0, w3], [1.0, 0, 0, 0]).bodies[0]
+    assert body["pi_form"] == 1 and 0.0 < body["m"] < 1.0
     with mp.workdps(30):
-        ref2 = 2 * mp.ellippi(mp.mpf(par[tf._N]), mp.mpf(par[tf._M]))
-    assert abs(par[tf._DJ] - float(ref2)) <= 100 * EPS * abs(ref2)
+        ref2 = 2 * mp.ellippi(mp.mpf(body["n"]), mp.mpf(body["m"]))
+    assert abs(body["dj"] - float(ref2)) <= 100 * EPS * abs(ref2)
 
 
 def test_periodicity_cost_independent_of_t():

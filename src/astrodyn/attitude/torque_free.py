@@ -98,34 +98,34 @@ from astrodyn.attitude.elliptic import ellipk_scalar, elliprf_scalar, elliprj_sc
 from astrodyn.jit import jit, parallel_kernel, prange
 from astrodyn.rotation import quat_hamilton_scalar
 
-__all__ = ["torque_free", "polhode", "herpolhode", "rate_period", "flip_period"]
+__all__ = ["torque_free", "PreparedBody", "BODY_DTYPE", "polhode", "herpolhode", "rate_period", "flip_period"]
 
-# parameter vector layout (one row per body)
-_MODE = 0  # 0: NaN, 1: uniform rotation, 2: elliptic
-_IA, _IB, _IC = 1, 2, 3  # body indices of the ordered axes (ic = circulation axis)
-_SB = 4  # sign applied to the body's ib component (keeps the ordered frame right-handed)
-_SIG = 5  # s = sign of the circulation-axis rate
-_EPS1 = 6  # e = sign of cn branch (+1 except on the separatrix)
-_SNS = 35  # sign of the sn component: rho e s, rho = sign(C - B) (-1 on the minor-axis family)
-_A1, _A2, _A3 = 7, 8, 9
-_WP = 10
-_M, _M1, _K = 11, 12, 13
-_TAU0 = 14
-_HMAG = 15  # |H|
-_LIN = 16  # H / A
-_KJ = 17  # k H / C
-_KG = 18  # k a3
-_N = 19
-_SQ1N = 20  # sqrt(1 - n)
-_J0, _G0 = 21, 22
-_DJ, _DG = 23, 24  # increments of J and G per half period 2K
-_QB0 = 25  # 4 entries: q of C_B0 (uniform mode: q0)
-_W = 29  # 3 entries: constant rates (uniform mode)
-_INER = 32  # 3 entries: body principal moments
-_PF = 36  # 1: "Pi form" for n < -1 (jv holds Pi(n; am tau|m) itself, see _j_g), else 0
-_GPF = 37  # sqrt(1 + m - n - m/n) (Pi form)
-_NPAR = 38
-NPAR = _NPAR  # parameters per body (the rows setup_all fills)
+#: The constants of one body's exact solution, set once per body (:class:`PreparedBody`,
+#: :func:`setup_all`) and read by every evaluation; a numpy structured dtype whose fields
+#: numba reads by name.  Symbols as in the module docstring.
+BODY_DTYPE = np.dtype([
+    ("mode", np.int64),  # 0: NaN state, 1: uniform rotation, 2: elliptic
+    ("ia", np.int64), ("ib", np.int64), ("ic", np.int64),  # body indices of the ordered axes (ic: circulation axis)
+    ("sb", np.float64),  # sign applied to the body's ib component (keeps the ordered frame right-handed)
+    ("sig", np.float64),  # s = sign of the circulation-axis rate
+    ("eps1", np.float64),  # e = sign of the cn branch (+1 except on the separatrix)
+    ("sns", np.float64),  # sign of the sn component: rho e s, rho = sign(C - B) (-1 on the minor-axis family)
+    ("a1", np.float64), ("a2", np.float64), ("a3", np.float64),  # rate amplitudes (rad/s)
+    ("wp", np.float64),  # rate of the elliptic argument tau (rad/s)
+    ("m", np.float64), ("m1", np.float64), ("K", np.float64),  # parameter, complement, K(m)
+    ("tau0", np.float64),  # initial phase
+    ("hmag", np.float64),  # |H| (kg m^2/s)
+    ("lin", np.float64),  # H / A (H / C in the Pi form): the secular rate of psi
+    ("kj", np.float64), ("kg", np.float64),  # k H / C and k a3: the weights of J and G in psi
+    ("n", np.float64), ("sq1n", np.float64),  # characteristic n and sqrt(1 - n)
+    ("j0", np.float64), ("g0", np.float64),  # J and G at t = 0
+    ("dj", np.float64), ("dg", np.float64),  # increments of J and G per half period 2K
+    ("pi_form", np.int64),  # 1: J holds Pi(n; am tau|m) itself (n < -1, see _j_g), else 0
+    ("gpf", np.float64),  # sqrt(1 + m - n - m/n) (Pi form)
+    ("qb0", np.float64, (4,)),  # Euler parameters of C_B0 (uniform mode: q0)
+    ("w", np.float64, (3,)),  # constant rates (uniform mode)
+    ("inertia", np.float64, (3,)),  # principal moments (kg m^2), body order
+])
 
 
 # ---------------------------------------------------------------------------
@@ -151,7 +151,7 @@ def _j_g(s, c, d, r, n, sq1n, m1, m, pf, gpf):
         else:
             sn_ = math.sqrt(-n)
             jv = n / (1.0 - n) * (r - math.atan(sn_ * s) / sn_)
-    elif pf == 1.0:
+    elif pf == 1:
         n2 = m / n
         jv = math.atan2(gpf * s, c * d) / gpf
         if n2 != 0.0 and s != 0.0:
@@ -165,72 +165,50 @@ def _j_g(s, c, d, r, n, sq1n, m1, m, pf, gpf):
 
 
 @jit
-def _phase(par, t):
+def _phase(p, t):
     """Reduced phase: (sn, cn, dn) at tau = tau0 + wp t with J(tau), G(tau) including whole half periods."""
-    tau = par[_TAU0] + par[_WP] * t
-    K = par[_K]
-    m = par[_M]
-    m1 = par[_M1]
-    n = par[_N]
-    sq1n = par[_SQ1N]
-    if m1 == 0.0:
+    tau = p.tau0 + p.wp * t
+    if p.m1 == 0.0:
         th = math.tanh(tau)
         sech = 1.0 / math.cosh(tau) if abs(tau) < 710.0 else 0.0
-        jv, gv = _j_g(th, sech, sech, tau, n, sq1n, m1, m, 0.0, 0.0)
+        jv, gv = _j_g(th, sech, sech, tau, p.n, p.sq1n, p.m1, p.m, 0, 0.0)
         return th, sech, sech, jv, gv
-    j, r = reduce_half_period(tau, K)
-    s, c, d = sncndn_half(r, m, m1)
-    jv, gv = _j_g(s, c, d, r, n, sq1n, m1, m, par[_PF], par[_GPF])
-    jv += j * par[_DJ]
-    gv += j * par[_DG]
+    j, r = reduce_half_period(tau, p.K)
+    s, c, d = sncndn_half(r, p.m, p.m1)
+    jv, gv = _j_g(s, c, d, r, p.n, p.sq1n, p.m1, p.m, p.pi_form, p.gpf)
+    jv += j * p.dj
+    gv += j * p.dg
     if j % 2.0 != 0.0:
         s = -s
         c = -c
     return s, c, d, jv, gv
 
 
+@jit(inline="always")
+def _unit(r0, r1, r2, r3):
+    nrm = math.sqrt(r0 * r0 + r1 * r1 + r2 * r2 + r3 * r3)
+    return r0 / nrm, r1 / nrm, r2 / nrm, r3 / nrm
+
+
 @jit
-def _evaluate(par, t, w, q):
-    """Rates (3,) and Euler parameters (4,) at time t into w, q."""
-    mode = par[_MODE]
-    if mode == 0.0 or not (t == t):
-        for i in range(3):
-            w[i] = math.nan
-        for i in range(4):
-            q[i] = math.nan
-        return
-    if mode == 1.0:  # uniform rotation: C(t) = exp(-[w x] t) C0, q = q0 (x) (cos, n sin)
-        w0, w1, w2 = par[_W], par[_W + 1], par[_W + 2]
-        w[0], w[1], w[2] = w0, w1, w2
-        wn = math.sqrt(w0 * w0 + w1 * w1 + w2 * w2)
-        if wn == 0.0:
-            for i in range(4):
-                q[i] = par[_QB0 + i]
-            return
-        half = 0.5 * wn * t
-        sh = math.sin(half) / wn
-        r0, r1, r2, r3 = quat_hamilton_scalar(
-            par[_QB0], par[_QB0 + 1], par[_QB0 + 2], par[_QB0 + 3], math.cos(half), w0 * sh, w1 * sh, w2 * sh
-        )
-        nrm = math.sqrt(r0 * r0 + r1 * r1 + r2 * r2 + r3 * r3)
-        q[0], q[1], q[2], q[3] = r0 / nrm, r1 / nrm, r2 / nrm, r3 / nrm
-        return
-    s, c, d, jv, gv = _phase(par, t)
-    ia = int(par[_IA])
-    ib = int(par[_IB])
-    ic = int(par[_IC])
-    sig = par[_SIG]
-    e1 = par[_EPS1]
-    w[ia] = e1 * par[_A1] * c
-    w[ib] = par[_SB] * par[_SNS] * par[_A2] * s
-    w[ic] = sig * par[_A3] * d
+def _elliptic_state(p, t, s, c, d, jv, gv):
+    """Rates and Euler parameters ``(w0, w1, w2, q0, q1, q2, q3)`` of an elliptic-mode body at
+    time ``t`` from its reduced phase (:func:`_phase`)."""
+    ia, ib, ic = p.ia, p.ib, p.ic
+    sig = p.sig
+    va = p.eps1 * p.a1 * c  # the rates along the ordered axes a, b, c, put back in body order
+    vb = p.sb * p.sns * p.a2 * s
+    vc = sig * p.a3 * d
+    w0 = va if ia == 0 else (vb if ib == 0 else vc)
+    w1 = va if ia == 1 else (vb if ib == 1 else vc)
+    w2 = va if ia == 2 else (vb if ib == 2 else vc)
     # precession angle about the circulation axis
-    psi = par[_LIN] * t + par[_KJ] * (jv - par[_J0]) - par[_KG] * (gv - par[_G0])
+    psi = p.lin * t + p.kj * (jv - p.j0) - p.kg * (gv - p.g0)
     # Q(t): smallest rotation a -> h, as Euler parameters (1 + a.h, h x a) / norm
-    hm = par[_HMAG]
-    h0 = par[_INER] * w[0] / hm
-    h1 = par[_INER + 1] * w[1] / hm
-    h2 = par[_INER + 2] * w[2] / hm
+    hm = p.hmag
+    h0 = p.inertia[0] * w0 / hm
+    h1 = p.inertia[1] * w1 / hm
+    h2 = p.inertia[2] * w2 / hm
     # qm = (1 + s h_c, s h x e_c) with (h x e_c)[j1] = h[j2], [j2] = -h[j1] (j1, j2 cyclic after c)
     half = 0.5 * psi
     cps = math.cos(half)
@@ -247,18 +225,47 @@ def _evaluate(par, t, w, q):
     # C_a(psi) above: frame rotation by psi about a = s e_c
     # q = qB0 (x) qc (x) qm   <=>   C = Q C_a(psi) C_B0
     x0, x1, x2, x3 = quat_hamilton_scalar(qc[0], qc[1], qc[2], qc[3], qm[0], qm[1], qm[2], qm[3])
-    r0, r1, r2, r3 = quat_hamilton_scalar(par[_QB0], par[_QB0 + 1], par[_QB0 + 2], par[_QB0 + 3], x0, x1, x2, x3)
-    nrm = math.sqrt(r0 * r0 + r1 * r1 + r2 * r2 + r3 * r3)
-    q[0], q[1], q[2], q[3] = r0 / nrm, r1 / nrm, r2 / nrm, r3 / nrm
+    b = p.qb0
+    r0, r1, r2, r3 = quat_hamilton_scalar(b[0], b[1], b[2], b[3], x0, x1, x2, x3)
+    q0, q1, q2, q3 = _unit(r0, r1, r2, r3)
+    return w0, w1, w2, q0, q1, q2, q3
 
 
 @jit
-def _setup(inertia, w0, q0, par):
-    """Per-body constants of the exact solution into par (see the layout above)."""
-    for i in range(_NPAR):
-        par[i] = 0.0
+def _evaluate(p, t):
+    """Rates (rad/s) and Euler parameters ``(w0, w1, w2, q0, q1, q2, q3)`` of body ``p`` at time ``t`` (s)."""
+    nan = math.nan
+    if p.mode == 0 or not (t == t):
+        return nan, nan, nan, nan, nan, nan, nan
+    if p.mode == 1:  # uniform rotation: C(t) = exp(-[w x] t) C0, q = q0 (x) (cos, n sin)
+        w0, w1, w2 = p.w[0], p.w[1], p.w[2]
+        b = p.qb0
+        wn = math.sqrt(w0 * w0 + w1 * w1 + w2 * w2)
+        if wn == 0.0:
+            return w0, w1, w2, b[0], b[1], b[2], b[3]
+        half = 0.5 * wn * t
+        sh = math.sin(half) / wn
+        r0, r1, r2, r3 = quat_hamilton_scalar(b[0], b[1], b[2], b[3], math.cos(half), w0 * sh, w1 * sh, w2 * sh)
+        q0, q1, q2, q3 = _unit(r0, r1, r2, r3)
+        return w0, w1, w2, q0, q1, q2, q3
+    s, c, d, jv, gv = _phase(p, t)
+    return _elliptic_state(p, t, s, c, d, jv, gv)
+
+
+@jit
+def _setup(inertia, w0, q0, p):
+    """The constants of body ``(inertia, w0, q0)`` into the record ``p`` (:data:`BODY_DTYPE`)."""
+    p.mode = 0
+    p.ia, p.ib, p.ic = 0, 1, 2
+    p.sb = p.sig = p.eps1 = p.sns = 1.0
+    p.a1 = p.a2 = p.a3 = p.wp = p.m = p.m1 = p.K = p.tau0 = 0.0
+    p.hmag = p.lin = p.kj = p.kg = p.n = p.sq1n = p.j0 = p.g0 = p.dj = p.dg = p.gpf = 0.0
+    p.pi_form = 0
+    for i in range(4):
+        p.qb0[i] = 0.0
     for i in range(3):
-        par[_INER + i] = inertia[i]
+        p.w[i] = 0.0
+        p.inertia[i] = inertia[i]
     ok = True
     for i in range(3):
         if not (math.isfinite(w0[i]) and math.isfinite(inertia[i])):
@@ -269,7 +276,6 @@ def _setup(inertia, w0, q0, par):
             ok = False
         qn += q0[i] * q0[i]
     if not ok or qn == 0.0:
-        par[_MODE] = 0.0
         return
     qn = math.sqrt(qn)
     I0, I1, I2 = inertia[0], inertia[1], inertia[2]
@@ -279,13 +285,13 @@ def _setup(inertia, w0, q0, par):
     cy = W2 * I0 * W0 - W0 * I2 * W2
     cz = W0 * I1 * W1 - W1 * I0 * W0
     if cx == 0.0 and cy == 0.0 and cz == 0.0:
-        par[_MODE] = 1.0
+        p.mode = 1
         for i in range(4):
-            par[_QB0 + i] = q0[i] / qn
+            p.qb0[i] = q0[i] / qn
         for i in range(3):
-            par[_W + i] = w0[i]
+            p.w[i] = w0[i]
         return
-    par[_MODE] = 2.0
+    p.mode = 2
     # ascending order i1, i2, i3 (stable)
     i1, i2, i3 = 0, 1, 2
     if inertia[i2] < inertia[i1]:
@@ -340,76 +346,97 @@ def _setup(inertia, w0, q0, par):
     sq1n = math.sqrt(1.0 - n)
     hmag = math.sqrt((I0 * W0) ** 2 + (I1 * W1) ** 2 + (I2 * W2) ** 2)
     kco = d31 / (Ia * wp)
-    par[_IA], par[_IB], par[_IC] = ia, ib, ic
-    par[_SB] = sb
-    par[_SIG] = sig
-    par[_EPS1] = e1
-    par[_SNS] = sns
-    par[_A1], par[_A2], par[_A3] = a1, a2, a3
-    par[_WP] = wp
-    par[_M], par[_M1], par[_K] = m, m1, K
-    par[_TAU0] = tau0
-    par[_HMAG] = hmag
-    par[_LIN] = hmag / Ia
-    par[_KJ] = kco * hmag / Ic
-    par[_KG] = kco * a3
-    par[_N] = n
-    par[_SQ1N] = sq1n
+    p.ia, p.ib, p.ic = ia, ib, ic
+    p.sb = sb
+    p.sig = sig
+    p.eps1 = e1
+    p.sns = sns
+    p.a1, p.a2, p.a3 = a1, a2, a3
+    p.wp = wp
+    p.m, p.m1, p.K = m, m1, K
+    p.tau0 = tau0
+    p.hmag = hmag
+    p.lin = hmag / Ia
+    p.kj = kco * hmag / Ic
+    p.kg = kco * a3
+    p.n = n
+    p.sq1n = sq1n
     if m1 > 0.0 and n < -1.0:
         # Pi form (see _j_g): psi = (H/C) t + k [(H/C)(Pi - Pi0) - a3 (G - G0)]
         # (H/A - k (H/C) wp = H/C); per half period Pi gains 2 Pi(n|m)
         n2 = m / n
         gpf = math.sqrt(1.0 + m - n - n2)
-        par[_PF] = 1.0
-        par[_GPF] = gpf
-        par[_LIN] = hmag / Ic
+        p.pi_form = 1
+        p.gpf = gpf
+        p.lin = hmag / Ic
         pk = 0.5 * math.pi / gpf
         if n2 != 0.0:
             pk -= n2 / 3.0 * elliprj_scalar(0.0, m1, 1.0, 1.0 - n2)
-        par[_DJ] = 2.0 * pk
-        par[_DG] = math.pi / sq1n
+        p.dj = 2.0 * pk
+        p.dg = math.pi / sq1n
     elif m1 > 0.0:
-        par[_DJ] = 2.0 * n / 3.0 * elliprj_scalar(0.0, m1, 1.0, 1.0 - n) if n != 0.0 else 0.0
-        par[_DG] = math.pi / sq1n
+        p.dj = 2.0 * n / 3.0 * elliprj_scalar(0.0, m1, 1.0, 1.0 - n) if n != 0.0 else 0.0
+        p.dg = math.pi / sq1n
     # J, G at tau0 through the same reduction as every later time (psi(0) == 0 exactly)
-    s_, c_, d_, j0, g0 = _phase(par, 0.0)
-    par[_J0] = j0
-    par[_G0] = g0
-    # C_B0 = Q(0)^T C(q0): evaluate q at t = 0 with qB0 = identity, then qB0 = q0 (x) conj(qm0)
-    par[_QB0] = 1.0
-    wtmp = np.empty(3)
-    qm0 = np.empty(4)
-    _evaluate(par, 0.0, wtmp, qm0)
-    r0, r1, r2, r3 = quat_hamilton_scalar(q0[0] / qn, q0[1] / qn, q0[2] / qn, q0[3] / qn, qm0[0], -qm0[1], -qm0[2], -qm0[3])
-    par[_QB0], par[_QB0 + 1], par[_QB0 + 2], par[_QB0 + 3] = r0, r1, r2, r3
+    s_, c_, d_, j0, g0 = _phase(p, 0.0)
+    p.j0 = j0
+    p.g0 = g0
+    # C_B0 = Q(0)^T C(q0): the state at t = 0 with qB0 = identity, then qB0 = q0 (x) conj(qm0)
+    p.qb0[0] = 1.0
+    _, _, _, m0, m1_, m2, m3 = _elliptic_state(p, 0.0, s_, c_, d_, j0, g0)
+    r0, r1, r2, r3 = quat_hamilton_scalar(q0[0] / qn, q0[1] / qn, q0[2] / qn, q0[3] / qn, m0, -m1_, -m2, -m3)
+    p.qb0[0], p.qb0[1], p.qb0[2], p.qb0[3] = r0, r1, r2, r3
+
+
+@jit
+def _valid_inertia(inertia):
+    ok = True
+    for i in range(3):
+        if not (math.isfinite(inertia[i]) and inertia[i] > 0.0):
+            ok = False
+    return ok
 
 
 @parallel_kernel("torque_free_setup")
-def setup_all(inertia, w0, q0, par):
-    """Per-body constants ``par[b]`` of bodies ``(inertia[b], w0[b], q0[b])`` (rows of
-    ``(n, 3)``, ``(n, 3)``, ``(n, 4)``; ``par`` shape ``(n, NPAR)``); call as
-    ``setup_all(n, ...)`` (the work decides serial or parallel, :mod:`astrodyn.jit`)."""
+def setup_all(inertia, w0, q0, bodies):
+    """The constants ``bodies[b]`` (:data:`BODY_DTYPE`) of bodies ``(inertia[b], w0[b], q0[b])``
+    (rows of ``(n, 3)``, ``(n, 3)``, ``(n, 4)``); call as ``setup_all(n, ...)`` (the work
+    decides serial or parallel, :mod:`astrodyn.jit`)."""
     for b in prange(inertia.shape[0]):
-        _setup(inertia[b], w0[b], q0[b], par[b])
+        _setup(inertia[b], w0[b], q0[b], bodies[b])
 
 
 @parallel_kernel("torque_free")
-def evaluate_all(par, t, w_out, q_out):
-    """Rates ``w_out[b, i]`` and Euler parameters ``q_out[b, i]`` of the bodies set up in
-    ``par`` at the times ``t[i]``; call as ``evaluate_all(n_bodies * n_times, ...)``."""
-    nb = par.shape[0]
+def evaluate_all(bodies, t, w_out, q_out):
+    """Rates ``w_out[b, i]`` and Euler parameters ``q_out[b, i]`` of the prepared ``bodies`` at the
+    times ``t[i]``; call as ``evaluate_all(n_bodies * n_times, ...)``."""
+    nb = bodies.shape[0]
     nt = t.shape[0]
     for k in prange(nb * nt):
         b = k // nt
         i = k - b * nt
-        _evaluate(par[b], t[i], w_out[b, i], q_out[b, i])
+        w, q = w_out[b, i], q_out[b, i]
+        w[0], w[1], w[2], q[0], q[1], q[2], q[3] = _evaluate(bodies[b], t[i])
+
+
+@jit
+def _state_of_new_body(inertia, w0, q0, t, w, q):
+    """One body, one time, set up and evaluated into ``w``, ``q`` in one compiled call (the
+    scalar path of :func:`torque_free`); False (and NaN rows) for moments that must be refused."""
+    body = np.empty(1, dtype=BODY_DTYPE)
+    _setup(inertia, w0, q0, body[0])
+    ok = _valid_inertia(inertia)
+    if not ok:
+        body[0].mode = 0
+    w[0], w[1], w[2], q[0], q[1], q[2], q[3] = _evaluate(body[0], t)
+    return ok
 
 
 # ---------------------------------------------------------------------------
 # public API
 
 
-def _prepare(inertia, w0, q0):
+def _as_rows(inertia, w0, q0):
     inertia = np.asarray(inertia, dtype=np.float64)
     w0 = np.asarray(w0, dtype=np.float64)
     q0 = np.asarray(q0, dtype=np.float64)
@@ -419,15 +446,54 @@ def _prepare(inertia, w0, q0):
         raise ValueError(f"w0: expected body rates of shape (..., 3) rad/s, got shape {w0.shape}")
     if q0.ndim < 1 or q0.shape[-1] != 4:
         raise ValueError(f"q0: expected Euler parameters of shape (..., 4), scalar first, got shape {q0.shape}")
+    _check_inertia(inertia)
+    return inertia, w0, q0
+
+
+def _check_inertia(inertia):
     if not np.all(np.isfinite(inertia)) or np.any(inertia <= 0):
         raise ValueError(f"inertia: expected finite positive principal moments (kg m^2), got {inertia.tolist()}")
-    batch = np.broadcast_shapes(inertia.shape[:-1], w0.shape[:-1], q0.shape[:-1])
-    I_ = np.ascontiguousarray(np.broadcast_to(inertia, batch + (3,))).reshape(-1, 3)
-    w_ = np.ascontiguousarray(np.broadcast_to(w0, batch + (3,))).reshape(-1, 3)
-    q_ = np.ascontiguousarray(np.broadcast_to(q0, batch + (4,))).reshape(-1, 4)
-    par = np.empty((I_.shape[0], _NPAR))
-    setup_all(I_.shape[0], I_, w_, q_, par)
-    return batch, par
+
+
+def _times(t):
+    t_arr = np.asarray(t, dtype=np.float64)
+    if t_arr.ndim > 1:
+        raise ValueError(f"t: expected a scalar or a 1-D array of times (s), got shape {t_arr.shape}")
+    return t_arr.ndim == 0, np.ascontiguousarray(t_arr.reshape(-1))
+
+
+class PreparedBody:
+    """Torque-free bodies set up once, evaluated at any times: the per-body constants of
+    the exact solution (ordered axes, amplitudes, ``m``, ``K(m)``, the initial phase, the
+    ``J``/``G`` constants and ``C_B0``; :data:`BODY_DTYPE`) are computed here, and
+    :meth:`states` evaluates only the time-dependent part (about a quarter of the cost of a
+    new state).  A service holds one per scene for its torque-free bodies.
+
+    ``inertia`` (..., 3) kg m^2, ``w0`` (..., 3) rad/s, ``q0`` (..., 4) scalar first: as
+    :func:`torque_free`, whose results :meth:`states` reproduces bit for bit.
+    """
+
+    __slots__ = ("bodies", "shape")
+
+    def __init__(self, inertia, w0, q0):
+        inertia, w0, q0 = _as_rows(inertia, w0, q0)
+        self.shape = np.broadcast_shapes(inertia.shape[:-1], w0.shape[:-1], q0.shape[:-1])
+        rows = [np.ascontiguousarray(np.broadcast_to(a, self.shape + (a.shape[-1],))).reshape(-1, a.shape[-1])
+                for a in (inertia, w0, q0)]
+        self.bodies = np.empty(rows[0].shape[0], dtype=BODY_DTYPE)
+        setup_all(rows[0].shape[0], *rows, self.bodies)
+
+    def states(self, t):
+        """``(w, q)`` at the times ``t`` (s, scalar or 1-D): shapes ``(..., N, 3)`` and
+        ``(..., N, 4)``, or ``(..., 3)`` and ``(..., 4)`` for a scalar ``t`` (as :func:`torque_free`)."""
+        scalar_t, t_flat = _times(t)
+        nb, nt = self.bodies.shape[0], t_flat.shape[0]
+        w = np.empty((nb, nt, 3))
+        q = np.empty((nb, nt, 4))
+        evaluate_all(nb * nt, self.bodies, t_flat, w, q)
+        if scalar_t:
+            return w.reshape(self.shape + (3,)), q.reshape(self.shape + (4,))
+        return w.reshape(self.shape + (nt, 3)), q.reshape(self.shape + (nt, 4))
 
 
 def torque_free(inertia, w0, q0, t):
@@ -453,22 +519,19 @@ def torque_free(inertia, w0, q0, t):
         Euler parameters, unit to rounding.
 
     Leading (batch) axes of ``inertia``, ``w0``, ``q0`` broadcast; a single
-    body gives ``(N, 3)`` and ``(N, 4)`` as in docs/architecture.md, section 2.  The method
-    and its accuracy are described in the module docstring.
+    body gives ``(N, 3)`` and ``(N, 4)`` as in docs/architecture.md section 2.  The method
+    and its accuracy are described in the module docstring.  One body at one time takes
+    one compiled call; bodies evaluated again and again are cheaper as a :class:`PreparedBody`.
     """
-    batch, par = _prepare(inertia, w0, q0)
-    t_arr = np.asarray(t, dtype=np.float64)
-    scalar_t = t_arr.ndim == 0
-    if t_arr.ndim > 1:
-        raise ValueError(f"t: expected a scalar or a 1-D array of times (s), got shape {t_arr.shape}")
-    t_flat = np.ascontiguousarray(t_arr.reshape(-1))
-    nb, nt = par.shape[0], t_flat.shape[0]
-    w = np.empty((nb, nt, 3))
-    q = np.empty((nb, nt, 4))
-    evaluate_all(nb * nt, par, t_flat, w, q)
-    if scalar_t:
-        return w.reshape(batch + (3,)), q.reshape(batch + (4,))
-    return w.reshape(batch + (nt, 3)), q.reshape(batch + (nt, 4))
+    inertia = np.asarray(inertia, dtype=np.float64)
+    w0 = np.asarray(w0, dtype=np.float64)
+    q0 = np.asarray(q0, dtype=np.float64)
+    if isinstance(t, (float, int)) and inertia.shape == (3,) and w0.shape == (3,) and q0.shape == (4,):
+        w, q = np.empty(3), np.empty(4)
+        if not _state_of_new_body(inertia, w0, q0, float(t), w, q):
+            _check_inertia(inertia)
+        return w, q
+    return PreparedBody(inertia, w0, q0).states(t)
 
 
 def rate_period(inertia, w0):
@@ -479,13 +542,14 @@ def rate_period(inertia, w0):
     rates' precession about the symmetry axis.  Shape: the broadcast leading
     shape of ``inertia`` and ``w0``.
     """
-    batch, par = _prepare(inertia, w0, np.array([1.0, 0.0, 0.0, 0.0]))
+    prepared = PreparedBody(inertia, w0, np.array([1.0, 0.0, 0.0, 0.0]))
+    b = prepared.bodies
     out = np.where(
-        par[:, _MODE] == 2.0,
-        4.0 * par[:, _K] / np.where(par[:, _WP] > 0, par[:, _WP], np.nan),
-        np.where(par[:, _MODE] == 1.0, np.inf, np.nan),
+        b["mode"] == 2,
+        4.0 * b["K"] / np.where(b["wp"] > 0, b["wp"], np.nan),
+        np.where(b["mode"] == 1, np.inf, np.nan),
     )
-    return out.reshape(batch) if batch else float(out[0])
+    return out.reshape(prepared.shape) if prepared.shape else float(out[0])
 
 
 def flip_period(inertia, w0):
@@ -515,15 +579,15 @@ def polhode(inertia, w0, n=256):
     n = int(n)
     if n < 1:
         raise ValueError(f"n: expected a positive number of samples, got {n}")
-    _, par = _prepare(inertia, w0, np.array([1.0, 0.0, 0.0, 0.0]))
-    p = par[0]
-    if p[_MODE] != 2.0:
-        return np.tile(w0, (n, 1)) if p[_MODE] == 1.0 else np.full((n, 3), np.nan)
-    if p[_M1] == 0.0:
-        t = (np.linspace(-20.0, 20.0, n) - p[_TAU0]) / p[_WP]
+    prepared = PreparedBody(inertia, w0, np.array([1.0, 0.0, 0.0, 0.0]))
+    p = prepared.bodies[0]
+    if p["mode"] != 2:
+        return np.tile(w0, (n, 1)) if p["mode"] == 1 else np.full((n, 3), np.nan)
+    if p["m1"] == 0.0:
+        t = (np.linspace(-20.0, 20.0, n) - p["tau0"]) / p["wp"]
     else:
-        t = np.arange(n) * (4.0 * p[_K] / p[_WP] / n)
-    return torque_free(inertia, w0, np.array([1.0, 0.0, 0.0, 0.0]), t)[0]
+        t = np.arange(n) * (4.0 * p["K"] / p["wp"] / n)
+    return prepared.states(t)[0]
 
 
 def herpolhode(inertia, w0, q0, t):

@@ -116,7 +116,7 @@ def sweep(sizes=(64, 256, 512, 1024, 2048, 4096, 16384)) -> list[tuple]:
     import numba
 
     from astrodyn.attitude.elliptic import ellipj_loop, elliprj_loop
-    from astrodyn.attitude.torque_free import NPAR, evaluate_all, setup_all
+    from astrodyn.attitude.torque_free import PreparedBody, evaluate_all, setup_all
 
     inertia, w0 = DZHANIBEKOV
     rng = np.random.default_rng(0)
@@ -126,8 +126,7 @@ def sweep(sizes=(64, 256, 512, 1024, 2048, 4096, 16384)) -> list[tuple]:
         w = w0 + rng.normal(scale=1e-3, size=(n, 3))
         q = np.tile([1.0, 0.0, 0.0, 0.0], (n, 1))
         moments = np.tile(inertia, (n, 1))
-        par = np.empty((n, NPAR))
-        setup_all.serial(moments, w, q, par)
+        par = PreparedBody(moments, w, q).bodies
         t = np.array([12.5])
         u, m = rng.uniform(-3.0, 3.0, n), rng.uniform(0.0, 1.0, n)
         x, y, z, p = (rng.uniform(0.1, 2.0, n) for _ in range(4))
@@ -152,6 +151,7 @@ def sweep(sizes=(64, 256, 512, 1024, 2048, 4096, 16384)) -> list[tuple]:
 
 def _astrodyn_cases(repeat: int) -> dict[str, float]:
     from astrodyn.attitude import torque_free
+    from astrodyn.attitude.torque_free import PreparedBody
     from astrodyn.orbit import propagate
 
     inertia, w0 = DZHANIBEKOV
@@ -164,6 +164,8 @@ def _astrodyn_cases(repeat: int) -> dict[str, float]:
     out = {
         "torque-free 1 body x 1001 times": _best(lambda: torque_free(inertia, states[next(it) % 64], q0, t1001), repeat, 20),
         "torque-free 1000 bodies x 1 time": _best(lambda: torque_free(inertia, w1000, q0, 12.5), repeat, 20),
+        "torque-free 1000 prepared bodies x 1 time": _best(lambda p=PreparedBody(inertia, w1000, q0): p.states(12.5),
+                                                            repeat, 20),
         "torque-free scalar (new state, 1 time)": _best(lambda: torque_free(inertia, states[next(it) % 64], q0, 12.5),
                                                          repeat, 2000),
         "propagate scalar (1 state)": _best(lambda: propagate(r0, v0, 60.0, 3.986004418e14), repeat, 5000),
