@@ -159,13 +159,13 @@ def _astrodyn_cases(repeat: int) -> dict[str, float]:
     t1001 = np.linspace(0.0, 1000.0, 1001)
     states = [w0 * (1.0 + 1e-9 * k) for k in range(64)]
     w1000 = w0 + np.random.default_rng(1).normal(scale=1e-3, size=(1000, 3))
+    prepared = PreparedBody(inertia, w1000, q0)
     r0, v0 = np.array([7e6, 1e5, -2e5]), np.array([10.0, 7.5e3, 1e3])
     it = iter(range(10**12))
     out = {
         "torque-free 1 body x 1001 times": _best(lambda: torque_free(inertia, states[next(it) % 64], q0, t1001), repeat, 20),
         "torque-free 1000 bodies x 1 time": _best(lambda: torque_free(inertia, w1000, q0, 12.5), repeat, 20),
-        "torque-free 1000 prepared bodies x 1 time": _best(lambda p=PreparedBody(inertia, w1000, q0): p.states(12.5),
-                                                            repeat, 20),
+        "torque-free 1000 prepared bodies x 1 time": _best(lambda: prepared.states(12.5), repeat, 20),
         "torque-free scalar (new state, 1 time)": _best(lambda: torque_free(inertia, states[next(it) % 64], q0, 12.5),
                                                          repeat, 2000),
         "propagate scalar (1 state)": _best(lambda: propagate(r0, v0, 60.0, 3.986004418e14), repeat, 5000),
