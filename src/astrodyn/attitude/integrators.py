@@ -80,6 +80,7 @@ from __future__ import annotations
 
 import math
 import time as _time
+from collections import namedtuple
 
 import numpy as np
 
@@ -299,41 +300,55 @@ def _gg_factor(mu3, x, y, z):
     return mu3 / (rr * rr * math.sqrt(rr))
 
 
+#: The kick's fixed parameters (:func:`_kick_constants`), each vector a tuple of scalars so the
+#: kernel's loop holds them in registers: ``tau_body`` (3) N m, ``com`` (3) m, ``inertia`` the
+#: gravity-gradient tensor ``J`` (3 rows of 3) kg m^2.
+KickConstants = namedtuple("KickConstants", ["tau_body", "com", "inertia"])
+
+#: Body components ``C(q) v`` of the inertial vectors the kick needs (:func:`_body_copies`), 3-tuples:
+#: ``r`` orbit position (m), ``u`` inertial torque (N m), ``f`` uniform gravity force (N).
+BodyVectors = namedtuple("BodyVectors", ["r", "u", "f"])
+
+_ZERO3 = (0.0, 0.0, 0.0)
+
+
 @jit(inline="always")
 def _kick_constants(tau_body, com, gg_inertia):
-    """The kick's fixed parameters as one tuple of scalars: ``tau_body`` (3,) N m, ``com`` (3,) m,
-    ``gg_inertia`` (3, 3) kg m^2 row by row (held in registers by the kernel's loop)."""
-    # laid out as the arrays they come from (tau_body, com, then gg_inertia row by row): fmt: skip
-    return (
-        tau_body[0], tau_body[1], tau_body[2], com[0], com[1], com[2],
-        gg_inertia[0, 0], gg_inertia[0, 1], gg_inertia[0, 2],
-        gg_inertia[1, 0], gg_inertia[1, 1], gg_inertia[1, 2],
-        gg_inertia[2, 0], gg_inertia[2, 1], gg_inertia[2, 2],
-    )  # fmt: skip
+    """:data:`KickConstants` from ``tau_body`` (3,) N m, ``com`` (3,) m, ``gg_inertia`` (3, 3) kg m^2."""
+    J = gg_inertia
+    return KickConstants(
+        (tau_body[0], tau_body[1], tau_body[2]),
+        (com[0], com[1], com[2]),
+        ((J[0, 0], J[0, 1], J[0, 2]), (J[1, 0], J[1, 1], J[1, 2]), (J[2, 0], J[2, 1], J[2, 2])),
+    )
 
 
 @jit(inline="always")
-def _kicked(dt, m0, m1, m2, parts, kc, kg, b0, b1, b2, u0, u1, u2, f0, f1, f2):
+def _kicked(dt, m0, m1, m2, parts, kc, kg, v):
     """``M + dt tau`` with the body torque of the kernel's models, from body copies of inertial vectors.
 
     ``tau = tau_body + u`` (constant torques, ``u`` the inertial one in body axes),
     ``+ r_c x f`` (uniform gravity ``f`` at the centre of mass ``r_c``), ``+ kg
     r_b x (J r_b)`` (gravity gradient, ``kg = 3 mu / |r|^5``; Hughes ch. 8);
-    ``kc`` = :func:`_kick_constants` ``(tau_body, r_c, J)``.  ``parts`` selects the terms present.
+    ``kc``: :data:`KickConstants`, ``v``: :data:`BodyVectors`.  ``parts`` selects the terms present.
     """
     t0 = t1 = t2 = 0.0
     if parts & KICK_CONSTANT:
-        t0 = kc[0] + u0
-        t1 = kc[1] + u1
-        t2 = kc[2] + u2
+        tb, u = kc.tau_body, v.u
+        t0 = tb[0] + u[0]
+        t1 = tb[1] + u[1]
+        t2 = tb[2] + u[2]
     if parts & KICK_FORCE:
-        t0 += kc[4] * f2 - kc[5] * f1
-        t1 += kc[5] * f0 - kc[3] * f2
-        t2 += kc[3] * f1 - kc[4] * f0
+        c, f = kc.com, v.f
+        t0 += c[1] * f[2] - c[2] * f[1]
+        t1 += c[2] * f[0] - c[0] * f[2]
+        t2 += c[0] * f[1] - c[1] * f[0]
     if parts & KICK_GRAVITY_GRADIENT:
-        g0 = kc[6] * b0 + kc[7] * b1 + kc[8] * b2
-        g1 = kc[9] * b0 + kc[10] * b1 + kc[11] * b2
-        g2 = kc[12] * b0 + kc[13] * b1 + kc[14] * b2
+        J0, J1, J2 = kc.inertia
+        b0, b1, b2 = v.r
+        g0 = J0[0] * b0 + J0[1] * b1 + J0[2] * b2
+        g1 = J1[0] * b0 + J1[1] * b1 + J1[2] * b2
+        g2 = J2[0] * b0 + J2[1] * b1 + J2[2] * b2
         t0 += kg * (b1 * g2 - b2 * g1)
         t1 += kg * (b2 * g0 - b0 * g2)
         t2 += kg * (b0 * g1 - b1 * g0)
@@ -342,16 +357,16 @@ def _kicked(dt, m0, m1, m2, parts, kc, kg, b0, b1, b2, u0, u1, u2, f0, f1, f2):
 
 @jit(inline="always")
 def _body_copies(e0, e1, e2, e3, parts, x, y, z, tau_inertial, force):
-    """Body components ``C(q) v`` of the inertial vectors the kick needs: orbit position
-    ``r_b`` (from ``r = (x, y, z)``), inertial torque ``u``, gravity force ``f`` (zeros for absent terms)."""
-    b0 = b1 = b2 = u0 = u1 = u2 = f0 = f1 = f2 = 0.0
+    """:data:`BodyVectors` ``C(q) v`` of the orbit position ``r = (x, y, z)``, the inertial torque
+    and the gravity force (zeros for absent terms)."""
+    r = u = f = _ZERO3
     if parts & KICK_GRAVITY_GRADIENT:
-        b0, b1, b2 = _dcm_apply(e0, e1, e2, e3, x, y, z)
+        r = _dcm_apply(e0, e1, e2, e3, x, y, z)
     if parts & KICK_CONSTANT:
-        u0, u1, u2 = _dcm_apply(e0, e1, e2, e3, tau_inertial[0], tau_inertial[1], tau_inertial[2])
+        u = _dcm_apply(e0, e1, e2, e3, tau_inertial[0], tau_inertial[1], tau_inertial[2])
     if parts & KICK_FORCE:
-        f0, f1, f2 = _dcm_apply(e0, e1, e2, e3, force[0], force[1], force[2])
-    return b0, b1, b2, u0, u1, u2, f0, f1, f2
+        f = _dcm_apply(e0, e1, e2, e3, force[0], force[1], force[2])
+    return BodyVectors(r, u, f)
 
 
 @jit
@@ -363,8 +378,8 @@ def _kick(M, q, dt, parts, tau_body, tau_inertial, com, force, gg_mu, gg_inertia
     position (m), ``gg_mu`` m^3/s^2, ``gg_inertia`` (3, 3) kg m^2.
     """
     kg = _gg_factor(3.0 * gg_mu, r[0], r[1], r[2]) if parts & KICK_GRAVITY_GRADIENT else 0.0
-    b0, b1, b2, u0, u1, u2, f0, f1, f2 = _body_copies(q[0], q[1], q[2], q[3], parts, r[0], r[1], r[2], tau_inertial, force)
-    M[0], M[1], M[2] = _kicked(dt, M[0], M[1], M[2], parts, _kick_constants(tau_body, com, gg_inertia), kg, b0, b1, b2, u0, u1, u2, f0, f1, f2)
+    v = _body_copies(q[0], q[1], q[2], q[3], parts, r[0], r[1], r[2], tau_inertial, force)
+    M[0], M[1], M[2] = _kicked(dt, M[0], M[1], M[2], parts, _kick_constants(tau_body, com, gg_inertia), kg, v)
 
 
 @jit
@@ -473,18 +488,19 @@ def _stage_midpoints(weights):
 
 
 @jit(inline="always")
-def _turn_carry(axis, angle, parts, m0, m1, m2, e0, e1, e2, e3, b0, b1, b2, u0, u1, u2, f0, f1, f2):
-    """:func:`_turned` by ``angle`` about ``axis``, also turning the kick's body copies
+def _turn_carry(axis, angle, parts, m0, m1, m2, e0, e1, e2, e3, v):
+    """:func:`_turned` by ``angle`` about ``axis``, also turning the kick's :data:`BodyVectors` ``v``
     (a body copy of a fixed inertial vector obeys ``v <- C_i(angle) v`` like ``M``)."""
     c, s, ca, sa = axis_rotation_trig(angle)
     m0, m1, m2, e0, e1, e2, e3 = turn_body(axis, c, s, ca, sa, m0, m1, m2, e0, e1, e2, e3)
+    r, u, f = v
     if parts & KICK_GRAVITY_GRADIENT:
-        b0, b1, b2 = _turn_vector(axis, ca, sa, b0, b1, b2)
+        r = _turn_vector(axis, ca, sa, r[0], r[1], r[2])
     if parts & KICK_CONSTANT:
-        u0, u1, u2 = _turn_vector(axis, ca, sa, u0, u1, u2)
+        u = _turn_vector(axis, ca, sa, u[0], u[1], u[2])
     if parts & KICK_FORCE:
-        f0, f1, f2 = _turn_vector(axis, ca, sa, f0, f1, f2)
-    return m0, m1, m2, e0, e1, e2, e3, b0, b1, b2, u0, u1, u2, f0, f1, f2
+        f = _turn_vector(axis, ca, sa, f[0], f[1], f[2])
+    return m0, m1, m2, e0, e1, e2, e3, BodyVectors(r, u, f)
 
 
 @jit
@@ -532,7 +548,7 @@ def _split_kernel(
     mu3 = 3.0 * gg_mu
     kc = _kick_constants(tau_body, com, gg_inertia)
     x = y = z = kg = 0.0
-    b0 = b1 = b2 = u0 = u1 = u2 = f0 = f1 = f2 = 0.0
+    v = BodyVectors(_ZERO3, _ZERO3, _ZERO3)
     pend = 0.0  # angle of the pending T1 rotation (rad)
     for k in range(step_dt.shape[0]):
         dt = step_dt[k]
@@ -553,19 +569,13 @@ def _split_kernel(
                     else:
                         x, y, z = r_kick[k, st, 0], r_kick[k, st, 1], r_kick[k, st, 2]
                     kg = _gg_factor(mu3, x, y, z)
-                b0, b1, b2, u0, u1, u2, f0, f1, f2 = _body_copies(e0, e1, e2, e3, parts, x, y, z, tau_inertial, force)
-                m0, m1, m2 = _kicked(ha, m0, m1, m2, parts, kc, kg, b0, b1, b2, u0, u1, u2, f0, f1, f2)
-            m0, m1, m2, e0, e1, e2, e3, b0, b1, b2, u0, u1, u2, f0, f1, f2 = _turn_carry(
-                1, m1 * g1 - p1, parts, m0, m1, m2, e0, e1, e2, e3, b0, b1, b2, u0, u1, u2, f0, f1, f2
-            )
-            m0, m1, m2, e0, e1, e2, e3, b0, b1, b2, u0, u1, u2, f0, f1, f2 = _turn_carry(
-                2, m2 * g2 - p2, parts, m0, m1, m2, e0, e1, e2, e3, b0, b1, b2, u0, u1, u2, f0, f1, f2
-            )
-            m0, m1, m2, e0, e1, e2, e3, b0, b1, b2, u0, u1, u2, f0, f1, f2 = _turn_carry(
-                1, m1 * g1 - p1, parts, m0, m1, m2, e0, e1, e2, e3, b0, b1, b2, u0, u1, u2, f0, f1, f2
-            )
+                v = _body_copies(e0, e1, e2, e3, parts, x, y, z, tau_inertial, force)
+                m0, m1, m2 = _kicked(ha, m0, m1, m2, parts, kc, kg, v)
+            m0, m1, m2, e0, e1, e2, e3, v = _turn_carry(1, m1 * g1 - p1, parts, m0, m1, m2, e0, e1, e2, e3, v)
+            m0, m1, m2, e0, e1, e2, e3, v = _turn_carry(2, m2 * g2 - p2, parts, m0, m1, m2, e0, e1, e2, e3, v)
+            m0, m1, m2, e0, e1, e2, e3, v = _turn_carry(1, m1 * g1 - p1, parts, m0, m1, m2, e0, e1, e2, e3, v)
             if parts != 0:
-                m0, m1, m2 = _kicked(ha, m0, m1, m2, parts, kc, kg, b0, b1, b2, u0, u1, u2, f0, f1, f2)
+                m0, m1, m2 = _kicked(ha, m0, m1, m2, parts, kc, kg, v)
             pend = m0 * g0 - p0
         e0, e1, e2, e3 = renormalized(e0, e1, e2, e3)
         j = record[k]
