@@ -1007,22 +1007,36 @@ def _run_dop853(frame, w0, q0, t_out, torque, rotor_momentum, rtol, atol):
 
     M0 = J @ w0 + hfun(0.0)
     scale = float(np.linalg.norm(M0)) or float(np.max(frame.moments))
+    # The right-hand side in Python floats (scipy calls it once per stage): numpy calls on
+    # 3-vectors (cross, matmul, concatenate, zeros) cost 1-10 us each, three times scipy's own
+    # work per evaluation (issue 15).  w = J^-1 (M - h), entries of J^-1 as floats.
+    (j00, j01, j02), (j10, j11, j12), (j20, j21, j22) = Jinv.tolist()
+    h_const = None if callable(rotor_momentum) else hfun(0.0).tolist()
 
     def rhs(t, y):
-        q = y[:4]
-        M = y[4:] * scale
-        w = Jinv @ (M - hfun(t))
-        tau = np.zeros(3) if torque is None else np.asarray(torque(t, q, w), dtype=np.float64)
-        # the four rows of the Euler-parameter kinematics dq/dt = Omega(w) q / 2 (Baruh ch. 7;
-        # astrodyn.rotation.quat_rate), one component a line: fmt: skip
-        dq = 0.5 * np.array([
-            -q[1] * w[0] - q[2] * w[1] - q[3] * w[2],
-            q[0] * w[0] + q[2] * w[2] - q[3] * w[1],
-            q[0] * w[1] + q[3] * w[0] - q[1] * w[2],
-            q[0] * w[2] + q[1] * w[1] - q[2] * w[0],
-        ])  # fmt: skip
-        dM = np.cross(M, w) + tau
-        return np.concatenate([dq, dM / scale])
+        e0, e1, e2, e3, m0, m1, m2 = y.tolist()
+        m0 *= scale
+        m1 *= scale
+        m2 *= scale
+        h0, h1, h2 = h_const if h_const is not None else hfun(t).tolist()
+        a0, a1, a2 = m0 - h0, m1 - h1, m2 - h2
+        w0_ = j00 * a0 + j01 * a1 + j02 * a2
+        w1_ = j10 * a0 + j11 * a1 + j12 * a2
+        w2_ = j20 * a0 + j21 * a1 + j22 * a2
+        if torque is None:
+            t0 = t1 = t2 = 0.0
+        else:
+            t0, t1, t2 = np.asarray(torque(t, y[:4], np.array([w0_, w1_, w2_])), dtype=np.float64).tolist()
+        # dq/dt = Omega(w) q / 2 (Baruh ch. 7; astrodyn.rotation.quat_rate), dM/dt = M x w + tau
+        return [
+            0.5 * (-e1 * w0_ - e2 * w1_ - e3 * w2_),
+            0.5 * (e0 * w0_ + e2 * w2_ - e3 * w1_),
+            0.5 * (e0 * w1_ + e3 * w0_ - e1 * w2_),
+            0.5 * (e0 * w2_ + e1 * w1_ - e2 * w0_),
+            (m1 * w2_ - m2 * w1_ + t0) / scale,
+            (m2 * w0_ - m0 * w2_ + t1) / scale,
+            (m0 * w1_ - m1 * w0_ + t2) / scale,
+        ]
 
     y0 = np.concatenate([q0, M0 / scale])
     t_end = t_out[-1]
