@@ -152,7 +152,7 @@ def sweep(sizes=(64, 256, 512, 1024, 2048, 4096, 16384)) -> list[tuple]:
 def _astrodyn_cases(repeat: int) -> dict[str, float]:
     from astrodyn.attitude import torque_free
     from astrodyn.attitude.torque_free import PreparedBody
-    from astrodyn.orbit import propagate
+    from astrodyn.orbit import propagate, propagate_scalar
 
     inertia, w0 = DZHANIBEKOV
     q0 = np.array([1.0, 0.0, 0.0, 0.0])
@@ -161,6 +161,7 @@ def _astrodyn_cases(repeat: int) -> dict[str, float]:
     w1000 = w0 + np.random.default_rng(1).normal(scale=1e-3, size=(1000, 3))
     prepared = PreparedBody(inertia, w1000, q0)
     r0, v0 = np.array([7e6, 1e5, -2e5]), np.array([10.0, 7.5e3, 1e3])
+    rv0 = (*r0.tolist(), *v0.tolist())
     it = iter(range(10**12))
     out = {
         "torque-free 1 body x 1001 times": _best(lambda: torque_free(inertia, states[next(it) % 64], q0, t1001), repeat, 20),
@@ -169,6 +170,8 @@ def _astrodyn_cases(repeat: int) -> dict[str, float]:
         "torque-free scalar (new state, 1 time)": _best(lambda: torque_free(inertia, states[next(it) % 64], q0, 12.5),
                                                          repeat, 2000),
         "propagate scalar (1 state)": _best(lambda: propagate(r0, v0, 60.0, 3.986004418e14), repeat, 5000),
+        "propagate_scalar (1 state, 6 floats in and out)": _best(lambda: propagate_scalar(*rv0, 60.0, 3.986004418e14),
+                                                                  repeat, 5000),
     }
     return out
 

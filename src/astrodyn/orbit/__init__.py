@@ -6,6 +6,7 @@ radians, arrays of shape ``(..., 3)`` in and out; a single state works too
 
 * :func:`propagate` -- ``(r, v)`` after ``dt`` on ellipse, parabola or hyperbola
   (:mod:`astrodyn.orbit.universal`).
+* :func:`propagate_scalar` -- one state as six floats in and out (the cheap call of a control loop).
 * :func:`lagrange_coefficients` -- the ``f, g, fdot, gdot`` behind it.
 * :func:`stumpff` -- Stumpff functions ``c2, c3`` of the universal variable.
 * :func:`solve_kepler`, :func:`solve_kepler_hyperbolic` -- Kepler's equation
@@ -19,10 +20,11 @@ from astrodyn.orbit import elements, perturbations
 from astrodyn.orbit.elements import *  # noqa: F403 - re-export: elements.__all__ is the public list
 from astrodyn.orbit.kepler import solve_kepler, solve_kepler_hyperbolic
 from astrodyn.orbit.perturbations import *  # noqa: F403 - re-export: perturbations.__all__ is the public list
-from astrodyn.orbit.universal import lagrange_coefficients, propagate, stumpff
+from astrodyn.orbit.universal import lagrange_coefficients, propagate, propagate_scalar, stumpff
 
 __all__ = [
     "propagate",
+    "propagate_scalar",
     "lagrange_coefficients",
     "stumpff",
     "solve_kepler",
