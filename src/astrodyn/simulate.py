@@ -215,6 +215,7 @@ class AttitudeEngine:
         models = {bp.name: bp.attitude_model for bp in plan.bodies}
         self.scenario = scenario
         self.step = step
+        self.free_bodies = None  # PreparedBody of the torque-free bodies, set up at the first states() call
         self.bodies: list[_AttitudeBody] = []
         for b in scenario.bodies:
             model = models.get(b.name)
@@ -285,7 +286,7 @@ class AttitudeEngine:
     def states(self, times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``(q, w)`` of shapes ``(len(times), n_bodies, 4)`` and ``(..., 3)`` at increasing times."""
         from astrodyn.attitude.integrators import propagate_attitude
-        from astrodyn.attitude.torque_free import torque_free
+        from astrodyn.attitude.torque_free import PreparedBody
 
         times = np.asarray(times, dtype=np.float64).reshape(-1)
         T, N = times.shape[0], len(self.bodies)
@@ -293,10 +294,13 @@ class AttitudeEngine:
         w = np.empty((T, N, 3))
         free = [k for k, b in enumerate(self.bodies) if b.model == "torque_free"]
         if free and T:
-            # one batched call for every torque-free body (exact from its initial state)
-            wf, qf = torque_free(np.array([self.bodies[k].inertia for k in free]),
-                                 np.array([self.bodies[k].w0 for k in free]),
-                                 np.array([self.bodies[k].q0 for k in free]), times)
+            # one batched call for every torque-free body (exact from its initial state); their
+            # constants (the elliptic setup) are computed once per engine, not per block
+            if self.free_bodies is None:
+                self.free_bodies = PreparedBody(np.array([self.bodies[k].inertia for k in free]),
+                                                np.array([self.bodies[k].w0 for k in free]),
+                                                np.array([self.bodies[k].q0 for k in free]))
+            wf, qf = self.free_bodies.states(times)
             q[:, free], w[:, free] = np.swapaxes(qf, 0, 1), np.swapaxes(wf, 0, 1)
         for k, b in enumerate(self.bodies):
             if T == 0:

@@ -69,12 +69,12 @@ def load_worker(seconds: float) -> None:
 class Load:
     """``n`` background :func:`load_worker` processes for the duration of a ``with``."""
 
-    def __init__(self, n: int, seconds: float = 3600.0, threads: int = 1):
-        self.n, self.seconds, self.threads = n, seconds, threads
+    def __init__(self, n: int, seconds: float = 3600.0, threads: int = 1, src: str | None = None):
+        self.n, self.seconds, self.threads, self.src = n, seconds, threads, src
         self.procs: list[subprocess.Popen] = []
 
     def __enter__(self) -> Load:
-        env = {**os.environ, "ASTRODYN_THREADS": str(self.threads)}
+        env = _env_for(self.src, ASTRODYN_THREADS=str(self.threads))
         for _ in range(self.n):
             self.procs.append(subprocess.Popen([sys.executable, "-m", "astrodyn.bench.calls", "--load-worker",
                                                 str(self.seconds)], stdin=subprocess.DEVNULL, env=env))
@@ -91,6 +91,15 @@ class Load:
             except subprocess.TimeoutExpired:
                 os.kill(p.pid, signal.SIGKILL)
                 p.wait(timeout=10)
+
+
+def _env_for(src: str | None, **extra) -> dict:
+    """Environment of a child process that imports astrodyn from the source tree ``src``
+    (``None``: this one)."""
+    env = {**os.environ, **extra}
+    if src is not None:
+        env["PYTHONPATH"] = src + os.pathsep + env.get("PYTHONPATH", "")
+    return env
 
 
 # --------------------------------------------------------------------------- thresholds
@@ -272,6 +281,92 @@ def measure(repeat: int, with_peers: bool = True) -> dict:
     return rows
 
 
+def public_api_cases(repeat: int, threads: int) -> dict[str, float]:
+    """Seconds per call of the public calls that exist before and after issue 15, at
+    ``threads`` numba threads.  Self-contained (imports inside) so that ``--baseline`` runs
+    the same source against an older tree in a child process."""
+    import time
+
+    import numba
+    import numpy as np
+
+    from astrodyn.attitude import propagate_attitude, torque_free
+    from astrodyn.orbit import propagate
+
+    numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
+
+    def best(fn, number):
+        fn()
+        out = float("inf")
+        for _ in range(repeat):
+            t0 = time.perf_counter()
+            for _ in range(number):
+                fn()
+            out = min(out, (time.perf_counter() - t0) / number)
+        return out
+
+    inertia, w0 = np.array([1.0, 2.0, 3.0]), np.array([1e-3, 1.0, 1e-3])
+    q0 = np.array([1.0, 0.0, 0.0, 0.0])
+    t1001 = np.linspace(0.0, 1000.0, 1001)
+    states = [w0 * (1.0 + 1e-9 * k) for k in range(64)]
+    w1000 = w0 + np.random.default_rng(1).normal(scale=1e-3, size=(1000, 3))
+    r0, v0 = np.array([7e6, 1e5, -2e5]), np.array([10.0, 7.5e3, 1e3])
+    it = iter(range(10**12))
+    out = {
+        "torque-free 1 body x 1001 times": best(lambda: torque_free(inertia, states[next(it) % 64], q0, t1001), 20),
+        "torque-free 1000 bodies x 1 time": best(lambda: torque_free(inertia, w1000, q0, 12.5), 20),
+        "torque-free scalar (new state, 1 time)": best(lambda: torque_free(inertia, states[next(it) % 64], q0, 12.5), 2000),
+        "propagate scalar (1 state)": best(lambda: propagate(r0, v0, 60.0, 3.986004418e14), 5000),
+    }
+    t = np.linspace(0.0, 100.0, 101)
+    nfev = propagate_attitude(inertia, w0, q0, t, method="dop853", rtol=1e-12, atol=1e-14)[2]["nfev"]
+    secs = best(lambda: propagate_attitude(inertia, w0, q0, t, method="dop853", rtol=1e-12, atol=1e-14), 1)
+    out["DOP853 per evaluation (torque-free 100 s, rtol 1e-12)"] = secs / nfev
+    return out
+
+
+def _public_cases_in(src: str | None, repeat: int, threads: int) -> dict[str, float]:
+    """:func:`public_api_cases` in a child process importing astrodyn from ``src``."""
+    import inspect
+    import json
+
+    code = inspect.getsource(public_api_cases) + (
+        f"\nimport json\nprint(json.dumps(public_api_cases({int(repeat)}, {int(threads)})))\n")
+    done = subprocess.run([sys.executable, "-c", code], env=_env_for(src), capture_output=True, text=True,
+                          timeout=900, stdin=subprocess.DEVNULL)
+    if done.returncode != 0:
+        raise RuntimeError(f"bench calls --baseline: child failed: {done.stderr.strip().splitlines()[-1:]}")
+    return json.loads(done.stdout.strip().splitlines()[-1])
+
+
+def compare(baseline: str, repeat: int, rounds: int = 3) -> dict:
+    """Before (``baseline`` source tree) against after (this tree), at 1 and 2 threads, in
+    three regimes: idle; loaded by before-style services (the baseline's load workers: numba's
+    default threads, spinning OpenMP); loaded by after-style services (one thread each).  Runs
+    alternate before / after; each figure is the median of ``rounds`` child processes."""
+    ncores = os.cpu_count() or 2
+    regimes = {"idle": None,
+               "loaded, services as before": Load(ncores, threads=2, src=baseline),
+               "loaded, services as after": Load(ncores, threads=1)}
+    table: dict = {}
+    for regime, load in regimes.items():
+        samples: dict = {}
+        if load is not None:
+            load.__enter__()
+        try:
+            for _ in range(rounds):
+                for threads in (1, 2):
+                    for label, src in (("before", baseline), ("after", None)):
+                        for name, secs in _public_cases_in(src, repeat, threads).items():
+                            samples.setdefault((name, f"{label} {threads} thr"), []).append(secs)
+        finally:
+            if load is not None:
+                load.__exit__(None, None, None)
+        for (name, col), xs in samples.items():
+            table.setdefault((name, regime), {})[col] = float(np.median(xs))
+    return table
+
+
 def _fmt(s) -> str:
     if s is None or isinstance(s, str):
         return s or ""
@@ -286,6 +381,8 @@ def main(argv: list[str] | None = None) -> int:
                     help="numba threads of each load process (default 1, the service default; 2: as before issue 15)")
     ap.add_argument("--sweep", action="store_true",
                     help="only the serial/parallel sweep of batch sizes behind astrodyn.jit.PARALLEL_MIN")
+    ap.add_argument("--baseline", default=None, metavar="SRC",
+                    help="also compare with an older source tree (e.g. git archive of a commit, its src/ directory)")
     ap.add_argument("--load-worker", type=float, default=None, help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     if args.load_worker is not None:
@@ -308,6 +405,19 @@ def main(argv: list[str] | None = None) -> int:
         for regime, rows in regimes.items():
             for n, name, ser, par_ in sorted(rows, key=lambda r: (r[1], r[0])):
                 print(f"| {name} | {n} | {regime} | {_fmt(ser)} | {_fmt(par_)} | {ser / par_:.2f} |")
+        return 0
+    if args.baseline is not None:
+        if not os.path.isfile(os.path.join(args.baseline, "astrodyn", "__init__.py")):
+            print(f"astrodyn bench calls: --baseline: expected a source tree holding astrodyn/, got {args.baseline!r}",
+                  file=sys.stderr)
+            return 2
+        table = compare(os.path.abspath(args.baseline), args.repeat)
+        cols = ["before 1 thr", "after 1 thr", "before 2 thr", "after 2 thr"]
+        print(f"load average at the end: {os.getloadavg()[0]:.2f}")
+        print("| case | regime | " + " | ".join(cols) + " |")
+        print("| --- | --- | " + " | ".join("---:" for _ in cols) + " |")
+        for (name, regime), row in sorted(table.items()):
+            print(f"| {name} | {regime} | " + " | ".join(_fmt(row.get(c)) for c in cols) + " |")
         return 0
     regimes = {"idle": measure(args.repeat)}
     if args.load:
