@@ -80,3 +80,11 @@ def test_propagator_rejects_bad_threads(capsys):
     err = capsys.readouterr().err.strip()
     assert rc == 2
     assert err.count("\n") == 0 and "--threads: expected an integer >= 1 or 'all'" in err
+
+
+def test_bench_calls_refuses_a_bad_baseline(tmp_path, capsys):
+    from astrodyn.bench.calls import main
+
+    assert main(["--baseline", str(tmp_path / "nowhere")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and "--baseline: expected a source tree holding astrodyn/" in err
