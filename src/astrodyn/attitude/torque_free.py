@@ -2,7 +2,9 @@
 
 :func:`torque_free` returns the body rates ``w(t)`` and Euler parameters
 ``q(t)`` of a free rigid body for any array of times, without integrating.
-Cost per (body, time) is the same at ``t = 1 s`` and ``t = 1e9 s``.
+Cost per (body, time) is the same at ``t = 1 s`` and ``t = 1e9 s``.  Bodies
+evaluated again and again (a service's step loop) are set up once as a
+:class:`PreparedBody` (the per-body constants, :data:`BODY_DTYPE`).
 
 Conventions (docs/architecture.md, section 2): principal moments ``inertia`` (kg m^2, any
 order), body rates ``w`` (rad/s, body components), Euler parameters
@@ -466,8 +468,8 @@ class PreparedBody:
     """Torque-free bodies set up once, evaluated at any times: the per-body constants of
     the exact solution (ordered axes, amplitudes, ``m``, ``K(m)``, the initial phase, the
     ``J``/``G`` constants and ``C_B0``; :data:`BODY_DTYPE`) are computed here, and
-    :meth:`states` evaluates only the time-dependent part (about a quarter of the cost of a
-    new state).  A service holds one per scene for its torque-free bodies.
+    :meth:`states` evaluates only the time-dependent part (227 ns per body and time
+    against 745 ns for a new state, one thread; docs/benchmarks.md).  A service holds one per scene for its torque-free bodies.
 
     ``inertia`` (..., 3) kg m^2, ``w0`` (..., 3) rad/s, ``q0`` (..., 4) scalar first: as
     :func:`torque_free`, whose results :meth:`states` reproduces bit for bit.
