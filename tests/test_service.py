@@ -186,11 +186,16 @@ def _long_config(tmp_path: Path, duration: str = "30 d") -> Path:
     return cfg
 
 
-def test_killed_propagator_is_reported_and_the_file_stays_readable(tmp_path):
+def test_killed_propagator_is_restarted_and_the_file_has_no_hole(tmp_path):
+    """SIGKILL of the orbit propagator during `astrodyn run`: the runner restarts it after the
+    last step the logger flushed; the run goes on (stopped here by Ctrl-C after the restart)
+    and every orbit channel in the file is 0, 1, 2, ... without a hole or a duplicate,
+    reaching past the step where the process was killed."""
     from astrodyn.recording import load as load_run
 
     cfg = _long_config(tmp_path)
     out = tmp_path / "killed.mcap"
+    partial = tmp_path / "killed.partial.mcap"
     proc = subprocess.Popen([*ASTRODYN, "run", str(cfg), "--out", str(out)], stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True)
     try:
@@ -203,24 +208,35 @@ def test_killed_propagator_is_reported_and_the_file_stays_readable(tmp_path):
                 pid = int(m.group(1))
         assert pid is not None, "runner never reported the orbit process's pid"
         # let it publish for a while (orbit states flushed to the file), then kill it
+        before = 0
         deadline = time.monotonic() + 90
         while time.monotonic() < deadline:
             time.sleep(0.5)
-            if out.exists():
-                partial = load_run(out)  # reads a file still being written, up to its last chunk
-                if sum(len(b.orbit) for b in partial.bodies.values() if b.orbit is not None) > 1000:
+            if partial.exists():
+                run = load_run(partial)  # reads a file still being written, up to its last chunk
+                before = max((len(b.orbit) for b in run.bodies.values() if b.orbit is not None), default=0)
+                if before > 1000:
                     break
         os.kill(pid, signal.SIGKILL)
+        restarted, lines = False, []
+        deadline = time.monotonic() + 60
+        while not restarted and time.monotonic() < deadline:
+            line = proc.stderr.readline()
+            lines.append(line)
+            restarted = f"orbit (pid {pid}) killed by signal 9: restarted" in line
+        assert restarted, "".join(lines[-20:])
+        time.sleep(3.0)  # the new process publishes past the point of the kill
+        os.kill(proc.pid, signal.SIGINT)
         stdout, stderr = proc.communicate(timeout=120)
     finally:
         _stop(proc)
-    assert proc.returncode == 1
-    assert "process orbit" in stderr and "killed by signal 9" in stderr
-    run = load_run(out)
-    assert not run.truncated  # the logger finished the file after the kill
+    assert proc.returncode == 128 + signal.SIGINT
+    assert not out.exists()  # an interrupted run does not claim the final name
+    run = load_run(partial)
+    assert not run.truncated  # the logger finished the file at the interrupt
     orbit_tracks = [b.orbit for b in run.bodies.values() if b.orbit is not None]
-    assert orbit_tracks and all(len(t) > 0 for t in orbit_tracks)
-    for track in orbit_tracks:  # everything published before the kill, no holes
+    assert orbit_tracks and all(len(t) > before for t in orbit_tracks)
+    for track in orbit_tracks:  # the restart left no hole and no duplicate
         assert np.array_equal(track.seq, np.arange(len(track)))
 
 

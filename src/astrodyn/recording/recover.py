@@ -16,7 +16,16 @@ and counted; messages on channels whose definition was lost are counted as orpha
 A metadata record ``recovery`` says what was done: the source file, the messages kept,
 the last log time (how far the run got), why the source ended, chunks skipped.
 
-Without ``--out`` the file is rewritten in place; either way the new file is first
+A killed ``astrodyn run`` / ``serve`` leaves ``NAME.partial.mcap`` (the logger writes there
+and renames the finished file to ``NAME.mcap``): ``astrodyn recover NAME.partial.mcap``,
+``astrodyn recover NAME.mcap`` (the run's ``--out``: its partial file is found) or
+``astrodyn recover DIR`` (every partial file in the directory) finishes it as ``NAME.mcap``
+(``NAME.recovered.mcap`` if a ``NAME.mcap`` exists: an earlier recording is never
+replaced) and removes the partial file.  The work directories a killed supervisor left
+in that directory (``.astrodyn-run-*``: its children's logs and the run secret) are
+removed too.
+
+For any other file, without ``--out`` the file is rewritten in place; either way the new file is first
 written beside the target as ``<target>.recover-tmp`` and renamed over it only once it is
 finished, so a failure (disk full, unwritable directory) never leaves a half-written file
 under the final name.  Exit status: 0 recovered, 1 unreadable input or write failure,
@@ -28,6 +37,8 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import re
+import shutil
 import sys
 import time
 
@@ -39,7 +50,7 @@ from astrodyn.recording.chunked_writer import ChunkedWriter
 from astrodyn.recording.reader import parse_record, read_records
 from astrodyn.recording.writer import RecordingError
 
-__all__ = ["recover", "main"]
+__all__ = ["recover", "main", "finished_name", "find_partials", "stale_work_dirs"]
 
 
 class _Copier:
@@ -184,11 +195,70 @@ def recover(path: str | os.PathLike, out: str | os.PathLike | None = None, *, ch
     return summary
 
 
+_PARTIAL = re.compile(r"^(?P<root>.+)\.partial(?:-(?P<attempt>\d+))?(?P<ext>\.[^.]+)$")
+
+
+def finished_name(partial: str) -> str | None:
+    """``NAME.mcap`` for a partial recording ``NAME.partial.mcap`` / ``NAME.partial-N.mcap``
+    (:func:`astrodyn.recording.writer.partial_path`), None for any other name."""
+    m = _PARTIAL.match(os.fspath(partial))
+    return f"{m['root']}{m['ext']}" if m else None
+
+
+def find_partials(target: str) -> list[str]:
+    """The partial recordings ``recover TARGET`` finishes: TARGET itself when it is a file
+    (a recording or a ``.partial`` one); for a recording name that does not exist, its
+    partial files; for a directory, every partial file in it."""
+    if os.path.isdir(target):
+        return sorted(os.path.join(target, f) for f in os.listdir(target) if _PARTIAL.match(f) and f.endswith(".mcap"))
+    if os.path.exists(target):
+        return [target]
+    root, ext = os.path.splitext(target)
+    folder = os.path.dirname(target) or "."
+    stem = os.path.basename(root) + ".partial"
+    try:
+        names = os.listdir(folder)
+    except OSError:
+        return []
+    return sorted(os.path.join(folder, f) for f in names
+                  if f.startswith(stem) and _PARTIAL.match(f) and finished_name(os.path.join(folder, f)) == target)
+
+
+def stale_work_dirs(folder: str) -> list[str]:
+    """Work directories (``.astrodyn-run-*``, ``.astrodyn-serve-*``) in ``folder`` whose
+    supervisor is gone: a killed supervisor cannot remove its own (children's logs, the
+    run secret); ``recover`` removes them."""
+    out = []
+    try:
+        names = os.listdir(folder)
+    except OSError:
+        return out
+    for name in names:
+        if not (name.startswith(".astrodyn-run-") or name.startswith(".astrodyn-serve-")):
+            continue
+        path = os.path.join(folder, name)
+        try:
+            with open(os.path.join(path, "supervisor.pid")) as f:
+                pid = int(f.read().strip())
+            os.kill(pid, 0)
+            continue  # its supervisor still runs
+        except ProcessLookupError:
+            pass
+        except (OSError, ValueError):
+            pass  # no readable pid file: an unfinished start-up, or damaged
+        out.append(path)
+    return out
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="astrodyn recover",
                                  description="Rewrite a crashed writer's MCAP file with a proper summary and index.")
-    ap.add_argument("file", help="MCAP file (typically cut by a killed logger)")
-    ap.add_argument("--out", default=None, help="write the recovered file here (default: rewrite FILE in place)")
+    ap.add_argument("file", help="MCAP file (typically cut by a killed logger): a NAME.partial.mcap left by a killed "
+                    "run, the --out path of that run (its partial file is found), or a directory (every partial "
+                    "file in it)")
+    ap.add_argument("--out", default=None, help="write the recovered file here (default: NAME.mcap for "
+                    "NAME.partial.mcap when no NAME.mcap exists, NAME.recovered.mcap when it does; other files "
+                    "are rewritten in place)")
     ap.add_argument("--chunk-size", type=int, default=1 << 20, help="uncompressed bytes per zstd chunk of the new file")
     args = ap.parse_args(argv)
     if args.chunk_size <= 0:
@@ -197,13 +267,44 @@ def main(argv: list[str] | None = None) -> int:
     if args.out is not None and os.path.isdir(args.out):
         print(f"astrodyn recover: --out {args.out}: expected a file path, got a directory", file=sys.stderr)
         return 2
-    try:
-        summary = recover(args.file, args.out, chunk_size=args.chunk_size)
-    except RecordingError as exc:
-        print(f"astrodyn recover: error: {exc}", file=sys.stderr)
+    sources = find_partials(args.file)
+    if not sources and os.path.isdir(args.file):
+        print(json.dumps({"partial_recordings": 0, "directory": args.file}), flush=True)
+    elif not sources:
+        print(f"astrodyn recover: error: {args.file}: no such file, and no partial recording of it "
+              f"({os.path.splitext(args.file)[0]}.partial*.mcap)", file=sys.stderr)
         return 1
-    print(json.dumps(summary, separators=(",", ":")), flush=True)
-    return 0
+    if args.out is not None and len(sources) > 1:
+        print(f"astrodyn recover: --out: {len(sources)} partial files found ({', '.join(sources)}); recover them one "
+              f"at a time to choose each --out", file=sys.stderr)
+        return 2
+    status = 0
+    for src in sources:
+        dst, remove_source = args.out, False
+        final = finished_name(src)
+        if dst is None and final is not None:
+            root, ext = os.path.splitext(final)
+            dst = final if not os.path.exists(final) else f"{root}.recovered{ext}"
+            if os.path.exists(dst):
+                print(f"astrodyn recover: error: {src}: both {final} and {dst} exist; give --out", file=sys.stderr)
+                status = 1
+                continue
+            remove_source = True
+        try:
+            summary = recover(src, dst, chunk_size=args.chunk_size)
+        except RecordingError as exc:
+            print(f"astrodyn recover: error: {exc}", file=sys.stderr)
+            status = 1
+            continue
+        if remove_source and os.path.abspath(src) != os.path.abspath(summary["out"]):
+            os.unlink(src)  # everything it held is in the finished file
+            summary["removed"] = src
+        print(json.dumps(summary, separators=(",", ":")), flush=True)
+    folder = args.file if os.path.isdir(args.file) else (os.path.dirname(args.file) or ".")
+    for work in stale_work_dirs(folder):
+        shutil.rmtree(work, ignore_errors=True)
+        print(json.dumps({"removed_work_directory": work}), flush=True)
+    return status
 
 
 if __name__ == "__main__":  # pragma: no cover

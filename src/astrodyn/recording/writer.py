@@ -47,7 +47,7 @@ from astrodyn import __version__, messages
 from astrodyn.recording import ingest
 from astrodyn.recording.chunked_writer import ChunkedWriter
 
-__all__ = ["RecordingError", "McapRecorder", "BatchLayout", "SeqTracker", "OK", "GAP", "LATE", "DUPLICATE"]
+__all__ = ["RecordingError", "McapRecorder", "partial_path", "part_path", "fsync_directory", "BatchLayout", "SeqTracker", "OK", "GAP", "LATE", "DUPLICATE"]
 
 OK, GAP, LATE, DUPLICATE = 0, 1, 2, 3
 _STATUS_NAMES = ("ok", "gap", "late", "duplicate")
@@ -193,6 +193,37 @@ class SeqTracker:
         }
 
 
+def partial_path(path: str | os.PathLike, attempt: int = 0) -> str:
+    """Where a recording is written until it is finished: ``NAME.partial.mcap`` for
+    ``NAME.mcap`` (``NAME.partial-N.mcap`` for the N-th restarted logger of a run).  A file
+    with this name is what a killed run leaves; ``astrodyn recover`` finishes it."""
+    root, ext = os.path.splitext(os.fspath(path))
+    return f"{root}.partial{'' if attempt == 0 else f'-{attempt}'}{ext or '.mcap'}"
+
+
+def part_path(path: str | os.PathLike, part: int) -> str:
+    """The name of rolled part ``part`` of the recording ``path``: ``path`` itself for 0,
+    ``NAME-0001.mcap``, ``NAME-0002.mcap``, ... after it."""
+    if part == 0:
+        return os.fspath(path)
+    root, ext = os.path.splitext(os.fspath(path))
+    return f"{root}-{part:04d}{ext or '.mcap'}"
+
+
+def fsync_directory(path: str | os.PathLike) -> None:
+    """fsync the directory holding ``path`` (a rename survives a power cut only then)."""
+    try:
+        fd = os.open(os.path.dirname(os.path.abspath(path)) or ".", os.O_RDONLY)
+    except OSError:
+        return
+    try:
+        os.fsync(fd)
+    except OSError:
+        pass
+    finally:
+        os.close(fd)
+
+
 def _metadata_strings(name: str, data: Mapping[str, Any]) -> dict[str, str]:
     if not isinstance(data, Mapping):
         raise TypeError(f"{name}: expected a dict of metadata, got {type(data).__name__}")
@@ -255,6 +286,11 @@ class McapRecorder:
         ``roll_size`` bytes or is ``roll_interval_s`` old (checked at each flush).  Every
         finished part is a complete MCAP with both metadata records; seq accounting spans
         all parts; ``paths`` lists them.
+    atomic : write each file as :func:`partial_path` (``NAME.partial.mcap``) and rename it
+        to its name only once it is finished, so a failed or killed run never destroys
+        the previous recording of that name (the logger of ``run`` / ``serve`` does this).
+    first_part, attempt : for a restarted logger (``serve``): number its parts from
+        ``first_part`` and name its partial files ``NAME.partial-<attempt>.mcap``.
 
     Errors: :class:`RecordingError` naming the path for an unwritable path, a full disk or
     any other write failure; after such an error the file is left without footer (it does
@@ -273,8 +309,17 @@ class McapRecorder:
         flush_interval_s: float = 1.0,
         roll_size: int | None = None,
         roll_interval_s: float | None = None,
+        atomic: bool = False,
+        first_part: int = 0,
+        attempt: int = 0,
     ):
         self.path = os.fspath(path)
+        if not (isinstance(first_part, int) and first_part >= 0 and isinstance(attempt, int) and attempt >= 0):
+            raise ValueError(f"first_part, attempt: expected integers >= 0, got {first_part!r}, {attempt!r}")
+        self.atomic = bool(atomic)
+        self.attempt = attempt
+        self._base = self.path
+        self._first_part = first_part
         if isinstance(epoch_ns, bool) or not isinstance(epoch_ns, int):
             raise TypeError(f"epoch_ns: expected an integer (ns since the Unix epoch), got {epoch_ns!r}")
         if not (isinstance(chunk_size, int) and chunk_size > 0):
@@ -301,17 +346,28 @@ class McapRecorder:
         self._t_text = np.zeros(0, dtype=np.uint8)
         self._t_value = 0.0
         self._t_log_time = 0
-        self._open(self.path)
+        self._open(self._roll_path(first_part) if first_part else self.path)
 
     def _open(self, path: str) -> None:
-        """Start a new file at ``path`` with both metadata records (channels are re-registered lazily)."""
+        """Start a new file at ``path`` with both metadata records (channels are re-registered lazily).
+
+        With ``atomic`` the bytes go to :func:`partial_path` of ``path`` and the file takes
+        its name only when finished (:meth:`_finish_file`); an existing partial file (a
+        killed run's, for ``astrodyn recover``) is never overwritten."""
         self._channels: dict[str, int] = {}
         self._schemas: dict[str, int] = {}
         self.path = path
+        self.writing_path = partial_path(path, self.attempt) if self.atomic else path
         try:
-            self._stream = open(self.path, "wb")
+            if self.atomic:
+                self._stream = open(self.writing_path, "xb")
+            else:
+                self._stream = open(self.path, "wb")
+        except FileExistsError:
+            raise RecordingError(f"{self.writing_path}: exists (a killed run's partial recording?): finish it with "
+                                 f"`astrodyn recover {self.writing_path}` or remove it; it is never overwritten") from None
         except OSError as exc:
-            raise RecordingError(f"{self.path}: cannot open for writing: {exc.strerror or exc}") from None
+            raise RecordingError(f"{self.writing_path}: cannot open for writing: {exc.strerror or exc}") from None
         self.paths.append(self.path)
         self._opened_at = time.monotonic()
         try:
@@ -324,7 +380,7 @@ class McapRecorder:
                     "log_time": "epoch_unix_ns + round(t * 1e9)",
                     "sequence": "seq mod 2**32",
                     "astrodyn_version": __version__,
-                    "part": str(len(self.paths) - 1),
+                    "part": str(self._first_part + len(self.paths) - 1),
                 },
             )
             self._flush()
@@ -333,8 +389,7 @@ class McapRecorder:
         self._next_flush = time.monotonic() + self.flush_interval_s
 
     def _roll_path(self, n: int) -> str:
-        root, ext = os.path.splitext(self.paths[0])
-        return f"{root}-{n:04d}{ext or '.mcap'}"
+        return part_path(self._base, n)
 
     def _maybe_roll(self) -> None:
         """Finish this file and start the next one when it is over ``roll_size`` bytes or
@@ -346,7 +401,7 @@ class McapRecorder:
         if not (big or old):
             return
         self._finish_file()
-        self._open(self._roll_path(len(self.paths)))
+        self._open(self._roll_path(self._first_part + len(self.paths)))
 
     # -- channels ------------------------------------------------------------------------
 
@@ -515,7 +570,7 @@ class McapRecorder:
     def _fail(self, exc: OSError) -> None:
         reason = exc.strerror or str(exc)
         self._error = RecordingError(
-            f"{self.path}: write failed: {reason}; the file has no footer and holds what was "
+            f"{self.writing_path}: write failed: {reason}; the file has no footer and holds what was "
             "flushed before the failure (astrodyn.recording.load reads it, marked truncated)"
         )
         try:
@@ -525,22 +580,31 @@ class McapRecorder:
         self.closed = True
         raise self._error from None
 
-    def _finish_file(self) -> None:
+    def _finish_file(self, rename: bool = True) -> None:
         try:
             self._writer.finish()
             self._stream.flush()
             os.fsync(self._stream.fileno())
             self._stream.close()
+            if rename and self.writing_path != self.path:  # atomic: the finished file takes its name in one step
+                os.replace(self.writing_path, self.path)
+                fsync_directory(self.path)
         except OSError as exc:
             self._fail(exc)
 
-    def close(self) -> dict:
-        """Finish the file (summary, indexes, footer), fsync, close; returns :meth:`stats`."""
+    def close(self, rename: bool = True) -> dict:
+        """Finish the file (summary, indexes, footer), fsync, close; returns :meth:`stats`.
+
+        With ``atomic``, ``rename=False`` leaves the finished file under its partial name
+        (a run that was stopped by a signal or lost a process: it must not replace an
+        earlier recording; ``astrodyn recover`` renames it).  ``stats()["file"]`` says
+        where the file is."""
         if self._error is not None:
             raise self._error
         if not self.closed:
-            self._finish_file()
+            self._finish_file(rename=rename)
             self.closed = True
+            self.final_file = self.path if (rename or self.writing_path == self.path) else self.writing_path
         return self.stats()
 
     def stats(self) -> dict:
@@ -548,6 +612,8 @@ class McapRecorder:
         return {
             "path": self.path,
             "paths": list(self.paths),
+            "writing": None if self.closed else self.writing_path,
+            "file": getattr(self, "final_file", None),
             "messages": self.message_count,
             "channels": len(self._channels),
             "flushes": self.flushes,

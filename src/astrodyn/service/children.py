@@ -5,20 +5,94 @@ Every process of a run is started from the installed package (``python -m ...``)
 from a path in the source tree, so a plain ``pip install .`` runs every command
 (docs/architecture.md, "Processes").  Each child gets its own session (a signal to the
 supervisor's terminal group does not reach it) and its stdout / stderr go to files in
-the supervisor's working directory; :meth:`Child.summary` reads the one-line JSON summary
+the supervisor's work directory; :meth:`Child.summary` reads the one-line JSON summary
 a process prints last.
+
+Fate sharing: no child outlives its supervisor by more than about 2 s, whatever kills the
+supervisor and whenever.  :class:`Child` hands every child the supervisor's PID
+(:data:`SUPERVISOR_ENV`); the child calls :func:`share_fate_with_supervisor` first thing:
+on Linux ``prctl(PR_SET_PDEATHSIG, SIGTERM)`` (the kernel signals it when the supervisor
+dies), then a check that its parent is still that PID (the supervisor may have died
+between ``fork`` and the ``prctl``), and a watcher thread that polls the parent every
+0.2 s (any OS).  Orphaned, a child stops as on SIGTERM (a logger finishes its file) and
+is made to exit after :data:`ORPHAN_GRACE_S` at the latest.
+
+The work directory (:func:`work_directory`) lies beside the recording, so what a killed
+supervisor leaves there is found and removed by ``astrodyn recover``.
 """
 
 from __future__ import annotations
 
+import contextlib
+import ctypes
 import json
 import os
+import shutil
 import signal
 import subprocess
 import sys
+import tempfile
+import threading
+import time
+from collections.abc import Iterator
 from pathlib import Path
 
-__all__ = ["Child", "children_of", "logger_command", "propagator_command"]
+__all__ = ["Child", "children_of", "logger_command", "propagator_command", "share_fate_with_supervisor",
+           "work_directory", "SUPERVISOR_ENV", "ORPHAN_GRACE_S", "EXIT_ORPHANED"]
+
+#: Environment variable that carries the supervisor's PID to each child.
+SUPERVISOR_ENV = "ASTRODYN_SUPERVISOR_PID"
+#: Seconds an orphaned child has to stop cleanly after its SIGTERM before it is made to exit.
+ORPHAN_GRACE_S = 1.5
+#: Exit status of a child that found its supervisor gone.
+EXIT_ORPHANED = 70
+_PR_SET_PDEATHSIG = 1
+
+
+def share_fate_with_supervisor(poll_s: float = 0.2) -> int | None:
+    """Make this process end when the supervisor that started it ends (module docstring).
+
+    Does nothing (returns None) in a process not started by a supervisor; returns the
+    supervisor's PID otherwise.  Call it before any long work, in the main thread."""
+    text = os.environ.get(SUPERVISOR_ENV)
+    if not text or not text.isdigit():
+        return None
+    supervisor = int(text)
+    if sys.platform.startswith("linux"):
+        try:
+            libc = ctypes.CDLL(None, use_errno=True)
+            libc.prctl(_PR_SET_PDEATHSIG, int(signal.SIGTERM), 0, 0, 0)
+        except (OSError, AttributeError):
+            pass  # the watcher thread below still holds
+    if os.getppid() != supervisor:  # it died before the prctl took effect
+        os._exit(EXIT_ORPHANED)
+
+    def watch() -> None:
+        while os.getppid() == supervisor:
+            time.sleep(poll_s)
+        try:
+            os.kill(os.getpid(), signal.SIGTERM)  # stop as on SIGTERM: a logger finishes its file
+        except OSError:
+            pass
+        time.sleep(ORPHAN_GRACE_S)
+        os._exit(EXIT_ORPHANED)
+
+    threading.Thread(target=watch, name="astrodyn-supervisor-watch", daemon=True).start()
+    return supervisor
+
+
+@contextlib.contextmanager
+def work_directory(beside: Path, kind: str) -> Iterator[Path]:
+    """A private directory ``.astrodyn-<kind>-XXXX`` beside ``beside`` (the recording), with
+    the supervisor's PID in ``supervisor.pid``; removed on exit.  A killed supervisor's is
+    found by that PID and removed by ``astrodyn recover``."""
+    folder = Path(beside).resolve().parent
+    path = Path(tempfile.mkdtemp(prefix=f".astrodyn-{kind}-", dir=folder))
+    try:
+        (path / "supervisor.pid").write_text(str(os.getpid()))
+        yield path
+    finally:
+        shutil.rmtree(path, ignore_errors=True)
 
 
 def children_of(parent: int) -> dict[int, list[str]]:
@@ -66,7 +140,8 @@ class Child:
         self._out = open(self.stdout_path, "wb")
         self._err = open(self.stderr_path, "wb")
         self.proc = subprocess.Popen(argv, stdout=self._out, stderr=self._err, stdin=subprocess.DEVNULL,
-                                     start_new_session=True, env={**os.environ, **env} if env else None)
+                                     start_new_session=True,
+                                     env={**os.environ, **(env or {}), SUPERVISOR_ENV: str(os.getpid())})
 
     @property
     def pid(self) -> int:

@@ -58,6 +58,7 @@ from astrodyn import auth, bus, messages
 from astrodyn.jit import service_threads, set_threads
 from astrodyn.recording import ingest
 from astrodyn.recording.writer import DUPLICATE, INGEST_GRAMMAR, BatchLayout, McapRecorder, RecordingError
+from astrodyn.service.children import share_fate_with_supervisor
 
 __all__ = ["Logger", "main"]
 
@@ -183,6 +184,7 @@ class Logger:
         self._drained_at = 0.0  # last time a receive pass found every queue empty
         self._started = time.monotonic()
         self.reason = ""
+        self.rename_at_end = True  # False: the file keeps its partial name (the supervisor renames it)
         self.verifier = verifier
         self.signer = signer
         self.scene_keys = None if scene_keys is None else frozenset(scene_keys)
@@ -532,8 +534,14 @@ class Logger:
                     "authenticated": self.verifier is not None, "scene_only": self.scene_keys is not None,
                     "total": sum(self.rejected.values()), "by_reason": self.rejected,
                     "by_sender": self.rejected_by_sender, "examples": self.rejected_examples})
-            self.recorder.close()
+            # the file takes its name only when the run ended as it should (docs/reliability.md)
+            # (a supervisor's logger leaves that to the supervisor, who knows how the run ended)
+            finished = self.rename_at_end and (
+                self.reason in ("end of run: every expected message recorded", "stop requested")
+                or self.reason.startswith("max_seconds"))
+            stats = self.recorder.close(rename=finished)
             summary["file_complete"] = True
+            summary["file"] = stats.get("file") or self.recorder.path
             for request in self._stop_requests:
                 request.reply(summary)
         return summary
@@ -562,6 +570,13 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument("--prefill", default=None, metavar="MCAP",
                    help="first copy the state messages with seq < --prefill-steps from this recording (run --resume)")
     p.add_argument("--prefill-steps", type=int, default=0, help="steps (seq 0 .. N-1) to copy from --prefill")
+    p.add_argument("--in-place", action="store_true",
+                   help="write --out directly (default: write NAME.partial.mcap and rename it to --out once finished)")
+    p.add_argument("--leave-partial", action="store_true",
+                   help="finish the last file under its partial name; the supervisor renames it once the run succeeded")
+    p.add_argument("--first-part", type=int, default=0, help="number of the first rolled part (a restarted logger)")
+    p.add_argument("--attempt", type=int, default=0,
+                   help="restart count of this logger in its run: its partial files are NAME.partial-<attempt>.mcap")
     bus.add_bus_arguments(p)
     return p.parse_args(argv)
 
@@ -633,6 +648,7 @@ def trust_from_environment(args: argparse.Namespace) -> dict:
 
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
+    share_fate_with_supervisor()  # never outlive the run / serve that started us
     try:
         set_threads(service_threads())  # thread policy (astrodyn.jit): 1 numba thread unless $ASTRODYN_THREADS
         meta = scenario_metadata(args)
@@ -648,10 +664,12 @@ def main(argv: list[str] | None = None) -> int:
         with bus.session_from_args(args) as session:
             recorder = McapRecorder(args.out, meta, epoch_ns=args.epoch_ns,
                                     chunk_size=args.chunk_size, flush_interval_s=args.flush_interval,
-                                    roll_size=args.roll_size, roll_interval_s=args.roll_interval)
+                                    roll_size=args.roll_size, roll_interval_s=args.roll_interval,
+                                    atomic=not args.in_place, first_part=args.first_part, attempt=args.attempt)
             copied = prefill(recorder, args.prefill, args.scenario, args.prefill_steps) if args.prefill else 0
             logger = Logger(session, args.scenario, recorder, expect=args.expect, queue_capacity=args.queue,
                             control=not args.no_control, **trust)
+            logger.rename_at_end = not args.leave_partial
             summary = logger.run(max_seconds=args.max_seconds)
             if args.prefill:
                 summary["prefilled"] = copied

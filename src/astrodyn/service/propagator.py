@@ -38,6 +38,7 @@ import numpy as np
 from astrodyn import bus, messages
 from astrodyn.jit import service_threads, set_threads
 from astrodyn.scenario import Scenario, plan as make_plan
+from astrodyn.service.children import share_fate_with_supervisor
 from astrodyn.simulate import AttitudeEngine, OrbitEngine
 
 __all__ = ["Pacer", "PropagatorOptions", "run_propagator", "command_key"]
@@ -486,6 +487,7 @@ def service_main(kind: str, argv: list[str] | None = None) -> int:
     ap.add_argument("--threads", default=None, help="numba threads (default $ASTRODYN_THREADS, else 1; 'all': every core)")
     bus.add_bus_arguments(ap)
     args = ap.parse_args(argv)
+    share_fate_with_supervisor()  # never outlive the run / serve that started us
     try:  # thread policy: one numba thread per service process unless asked (astrodyn.jit)
         set_threads(service_threads(args.threads))
     except ValueError as exc:

@@ -30,6 +30,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import signal
 import subprocess
 import sys
@@ -39,10 +40,12 @@ import time
 from pathlib import Path
 
 from astrodyn import auth, bus
+from astrodyn.recording.writer import partial_path
 from astrodyn.scenario import Scenario, ScenarioError, load, plan as make_plan
-from astrodyn.service.children import Child, logger_command, propagator_command
+from astrodyn.service.children import Child, logger_command, propagator_command, work_directory
 from astrodyn.service.output import check_output_path
 from astrodyn.service.summary import file_summary, print_summary, propagator_rows
+from astrodyn.service.supervision import RestartBudget, plan_logger_restart, wait_until_gone
 
 __all__ = ["main", "run_scenario", "EXIT_REJECTED"]
 
@@ -82,7 +85,7 @@ def run_scenario(scenario: Scenario, config_path: Path, out: Path, *, cross_chec
         for sig in (signal.SIGTERM, signal.SIGINT):
             previous[sig] = signal.signal(sig, lambda s, f: interrupted.update(signal=signal.Signals(s).name))
     secret = auth.RunSecret.generate() if authenticate else None
-    with tempfile.TemporaryDirectory(prefix="astrodyn-run-") as tmp, \
+    with work_directory(out, "run") as tmp, \
             bus.open_session(listen=[hub], config_file=zenoh_config) as session, \
             bus.HeartbeatMonitor(session, scenario.name, verifier=secret and auth.Verifier(secret)) as beats, \
             bus.AliveWatcher(session, scenario.name) as alive:
@@ -95,23 +98,105 @@ def run_scenario(scenario: Scenario, config_path: Path, out: Path, *, cross_chec
         try:
             logger_argv = [*logger_command(), "--scenario", scenario.name, "--out", str(out),
                            "--epoch-ns", str(scenario.epoch_unix_ns), "--metadata", str(meta_path),
-                           "--config", str(config_path), *sum((["--expect", k] for k in propagators), []),
-                           *(logger_args or []), *connect_args]
-            children["logger"] = Child("logger", logger_argv, tmpd, env=child_env)
+                           "--config", str(config_path), "--leave-partial", "--no-control",
+                           *sum((["--expect", k] for k in propagators), []),
+                           *connect_args]
+            children["logger"] = Child("logger", [*logger_argv, *(logger_args or [])], tmpd, env=child_env)
             failure = _wait_ready(session, scenario.name, children["logger"], 60.0, interrupted)
+
+            def start_propagator(kind: str, resume_args: dict, n: int = 0, event_seq: int = 0) -> None:
+                argv = [*propagator_command(kind), str(config_path), *connect_args]
+                if event_seq:
+                    argv += ["--first-event-seq", str(event_seq)]
+                if not math.isinf(real_time_factor):
+                    argv += ["--real-time-factor", str(real_time_factor)]
+                if cross_check and kind == "orbit":
+                    argv.append("--cross-check")
+                for k, v in resume_args.items():
+                    argv += [k, str(v)]
+                children[kind] = Child(kind if not n else f"{kind}-r{n}", argv, tmpd, env=child_env)
+                children[kind].name = kind
+
+            budget = RestartBudget("logger")
+            restarts = result.setdefault("restarts", [])
+
+            def restart_logger(rc: int) -> str | None:
+                """The logger died mid-run: a new one continues the file (astrodyn.service.supervision).
+                A new logger that dies while starting is replaced again, within the restart budget."""
+                for kind in propagators:
+                    children[kind].stop(signal.SIGKILL, timeout=5)
+                    children[kind].close()
+                while True:
+                    dead = children["logger"]
+                    how = f"killed by signal {-rc}" if rc < 0 else f"exited with status {rc}"
+                    if not budget.allow():
+                        return f"{budget.refusal()}; last: logger (pid {dead.pid}) {how}: {dead.stderr_tail(3)}"
+                    dead.close()
+                    wait_until_gone(session, scenario.name, "logger")
+                    attempt = len(restarts_of("logger")) + 1
+                    plan = plan_logger_restart(scenario, out, attempt, propagators, tmpd, logger_args, extra_args)
+                    children["logger"] = Child(f"logger-r{attempt}", [*logger_argv, "--attempt", str(attempt),
+                                                                      *plan.logger_args], tmpd, env=child_env)
+                    children["logger"].name = "logger"
+                    restarts.append({"process": "logger", "old_pid": dead.pid, "new_pid": children["logger"].pid,
+                                     "why": how, "from_step": plan.steps, "state_from": plan.source})
+                    if progress:
+                        print(f"\n  logger (pid {dead.pid}) {how}: restarted (pid {children['logger'].pid}), "
+                              f"{plan.steps} steps copied from {plan.source or '-'}", file=sys.stderr, flush=True)
+                    why = _wait_ready(session, scenario.name, children["logger"], 60.0, interrupted)
+                    if why is None:
+                        break
+                    rc = children["logger"].poll()
+                    if rc is None or interrupted["signal"]:
+                        return f"logger (pid {dead.pid}) {how}; its restart failed: {why}"
+                for kind in propagators:  # a new file: their events number from 0 again
+                    start_propagator(kind, plan.propagator_args.get(kind, {}), attempt)
+                return None
+
+            budgets = {kind: RestartBudget(kind) for kind in propagators}
+
+            def restart_propagator(kind: str, rc: int) -> str | None:
+                """A propagator died: start it again after the last step of its own that the
+                logger's file holds; steps it publishes twice are recorded once (first copy)."""
+                from astrodyn.recording import RecordingError, load as load_run
+                from astrodyn.service.resume import last_common_step, propagator_resume_args, state_topics
+
+                dead = children[kind]
+                how = f"killed by signal {-rc}" if rc < 0 else f"exited with status {rc}"
+                if not budgets[kind].allow():
+                    return f"{budgets[kind].refusal()}; last: {kind} (pid {dead.pid}) {how}: {dead.stderr_tail(3)}"
+                dead.close()
+                wait_until_gone(session, scenario.name, kind)
+                args, step = dict((extra_args or {}).get(kind, {})), None
+                try:
+                    run = load_run(partial_path(out, len(restarts_of("logger"))))  # up to its last flushed chunk
+                    step = last_common_step(run, list(state_topics(scenario, kind).values()))
+                    if step is not None:
+                        args = propagator_resume_args(run, scenario, kind, step, tmpd)
+                except (RecordingError, OSError):
+                    pass  # nothing flushed yet: start again from the beginning
+                n = len(restarts_of(kind)) + 1
+                start_propagator(kind, args, n, event_seq=n)
+                restarts.append({"process": kind, "old_pid": dead.pid, "new_pid": children[kind].pid, "why": how,
+                                 "from_step": args.get("--start-step", 0)})
+                if progress:
+                    print(f"\n  {kind} (pid {dead.pid}) {how}: restarted (pid {children[kind].pid}) at step "
+                          f"{args.get('--start-step', 0)}", file=sys.stderr, flush=True)
+                return None
+
+            def restarts_of(name: str) -> list[dict]:
+                return [r for r in restarts if r["process"] == name]
+
+            def restart(name: str, rc: int) -> str | None:
+                return restart_logger(rc) if name == "logger" else restart_propagator(name, rc)
+
             if failure is None:
                 for kind in propagators:
-                    argv = [*propagator_command(kind), str(config_path), *connect_args]
-                    if not math.isinf(real_time_factor):
-                        argv += ["--real-time-factor", str(real_time_factor)]
-                    if cross_check and kind == "orbit":
-                        argv.append("--cross-check")
-                    for k, v in (extra_args or {}).get(kind, {}).items():
-                        argv += [k, str(v)]
-                    children[kind] = Child(kind, argv, tmpd, env=child_env)
+                    start_propagator(kind, (extra_args or {}).get(kind, {}))
                 if progress:
                     print("  started " + ", ".join(f"{n} (pid {c.pid})" for n, c in children.items()), file=sys.stderr, flush=True)
-                failure = _watch(scenario, p, children, beats, alive, progress, timeout_s, interrupted)
+                failure = _watch(scenario, p, children, beats, alive, progress, timeout_s, interrupted,
+                                 on_death=restart)
             logger = children["logger"]
             if failure:
                 for kind in propagators:
@@ -150,7 +235,27 @@ def run_scenario(scenario: Scenario, config_path: Path, out: Path, *, cross_chec
     result["ok"] = not result.get("failure") and bool(log) and not lost
     if not result.get("failure") and lost:
         result["failure"] = f"{lost} messages missing in the recording"
+    result["file"] = _name_the_recording(log.get("file") if isinstance(log, dict) else None, out, result)
     return result
+
+
+def _name_the_recording(written: str | None, out: Path, result: dict) -> str | None:
+    """Give the finished file its name: the logger left it as ``NAME.partial.mcap``; a run
+    that succeeded renames it over ``out`` (an earlier recording of that name is replaced
+    only now), a failed or interrupted one leaves it there for ``astrodyn recover``
+    (docs/reliability.md).  Returns the path that holds the recording."""
+    from astrodyn.recording.writer import fsync_directory, partial_path
+
+    if written is None:  # the logger died: its partial file (no footer) is all there is
+        partial = Path(partial_path(out))
+        return str(partial) if partial.exists() else None
+    if result.get("failure") or Path(written) == Path(out):
+        return written
+    os.replace(written, out)
+    fsync_directory(out)
+    for n in range(sum(r["process"] == "logger" for r in result.get("restarts", []))):  # dead loggers' files: copied
+        Path(partial_path(out, n)).unlink(missing_ok=True)
+    return str(out)
 
 
 def _wait_ready(session, scenario: str, child: Child, timeout_s: float, interrupted: dict) -> str | None:
@@ -173,8 +278,12 @@ def _wait_ready(session, scenario: str, child: Child, timeout_s: float, interrup
 
 
 def _watch(scenario: Scenario, p, children: dict, beats, alive, progress: bool, timeout_s: float | None,
-           interrupted: dict | None = None) -> str | None:
-    """Wait for the propagators to finish; return a failure description or None."""
+           interrupted: dict | None = None, on_death=None) -> str | None:
+    """Wait for the propagators to finish; return a failure description or None.
+
+    ``on_death(name, rc)``: called when a child dies before the end; it restarts it (and
+    for the logger the propagators too) in ``children`` (:mod:`astrodyn.service.supervision`)
+    and returns None, or a failure description when it cannot."""
     propagators = [k for k in children if k != "logger"]
     duration = (scenario.n_steps - 1) / scenario.rate if scenario.n_steps else 0.0  # last output instant, no array
     last_print = 0.0
@@ -184,8 +293,13 @@ def _watch(scenario: Scenario, p, children: dict, beats, alive, progress: bool, 
         now = time.monotonic()
         beats.poll()
         alive.poll()
-        for name, ch in children.items():
+        for name, ch in list(children.items()):
             rc = ch.poll()
+            if rc not in (None, 0) and on_death is not None and not (interrupted and interrupted["signal"]):
+                failure = on_death(name, rc)
+                if failure:
+                    return failure
+                break  # children were replaced: look again
             if rc is not None and (name == "logger" or rc != 0):
                 if name == "logger" and rc == 0:
                     # the logger ends by itself once it holds everything: give the
@@ -242,7 +356,7 @@ def main(argv: list[str] | None = None) -> int:
         try:
             scenario = load(args.config)
             out = Path(args.out) if args.out else (scenario.output_path or Path(f"{scenario.name}.mcap"))
-            check_output_path(out)
+            check_output_path(out, inputs=(args.config, args.resume, args.zenoh_config, args.json))
             if args.zenoh_config:
                 try:
                     bus.make_config(mode="peer", config_file=args.zenoh_config)
@@ -260,11 +374,15 @@ def main(argv: list[str] | None = None) -> int:
                               logger_args=resume.get("logger_args"), zenoh_config=args.zenoh_config)
     print("", file=sys.stderr)
     rows = None
-    if out.exists():  # the summary measures what the file holds, not what the propagators say they sent
+    recording = result.get("file")
+    if recording and Path(recording).exists():  # the summary measures what the file holds, not what was sent
+        if Path(recording) != out:
+            print(f"astrodyn run: the recording stays at {recording} (the run did not succeed, so {out} is not "
+                  f"replaced); `astrodyn recover {recording}` gives it its name", file=sys.stderr)
         try:
-            rows = file_summary(out, scenario)
+            rows = file_summary(Path(recording), scenario)
         except Exception as exc:  # the file is still there; say why the summary is missing
-            print(f"astrodyn run: could not read back {out} for the summary: {exc}", file=sys.stderr)
+            print(f"astrodyn run: could not read back {recording} for the summary: {exc}", file=sys.stderr)
     if rows is None:
         rows = propagator_rows(result, scenario)
     rows = rows or []

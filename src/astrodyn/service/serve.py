@@ -47,13 +47,12 @@ import math
 import os
 import signal
 import sys
-import tempfile
 import time
 from pathlib import Path
 
 from astrodyn import auth, bus
 from astrodyn.scenario import ScenarioError, load, plan as make_plan
-from astrodyn.service.children import Child, logger_command, propagator_command
+from astrodyn.service.children import Child, logger_command, propagator_command, work_directory
 from astrodyn.service.output import check_output_path
 from astrodyn.service.propagator import command_key
 
@@ -89,7 +88,8 @@ class Supervisor:
         self.signer = auth.Signer(secret, "serve")
         logger_argv = [*logger_command(), "--scenario", scenario.name, "--out", str(out),
                        "--epoch-ns", str(scenario.epoch_unix_ns), "--metadata", str(meta), "--config", str(config_path),
-                       "--no-control", *sum((["--expect", k] for k in self.propagators), []), *connect_args]
+                       "--no-control", "--leave-partial", *sum((["--expect", k] for k in self.propagators), []),
+                       *connect_args]
         if roll_size:
             logger_argv += ["--roll-size", str(roll_size)]
         if roll_interval:
@@ -180,10 +180,13 @@ class Supervisor:
             self.failures.append(msg)
 
     def _parts(self) -> list[str]:
-        """The files the logger has written so far, newest first (rolled parts included)."""
+        """The files the logger has written so far, newest first: the part being written
+        (``*.partial*.mcap``), then the finished rolled parts."""
         root, ext = os.path.splitext(str(self.out))
-        rolled = sorted(glob.glob(glob.escape(root) + "-[0-9][0-9][0-9][0-9]" + (ext or ".mcap")))
-        return [p for p in [*reversed(rolled), str(self.out)] if os.path.exists(p)]
+        ext = ext or ".mcap"
+        rolled = sorted(glob.glob(glob.escape(root) + "-[0-9][0-9][0-9][0-9]" + ext))
+        partial = sorted(glob.glob(glob.escape(root) + "*.partial*" + ext), key=os.path.getmtime)
+        return [p for p in [*reversed(partial), *reversed(rolled), str(self.out)] if os.path.exists(p)]
 
     def restart(self, kind: str, why: str, n: int) -> None:
         """Start ``kind`` again after the last step every one of its channels has in the file."""
@@ -233,8 +236,23 @@ class Supervisor:
             logger.stop(signal.SIGTERM, timeout=30)
         self.state = "stopped"
         summary = self.status()
-        summary["logger"] = logger.summary()
+        summary["logger"] = log = logger.summary()
+        summary["file"] = self.name_the_recording((log or {}).get("file"), bool(self.failures))
         return summary
+
+    def name_the_recording(self, written: str | None, failed: bool) -> str | None:
+        """The logger leaves its last file as ``NAME.partial.mcap`` (or ``NAME-000k.partial.mcap``
+        when rolling); a stop that ends a healthy service renames it to its name, a failed
+        one leaves it for ``astrodyn recover`` (docs/reliability.md)."""
+        from astrodyn.recording.recover import finished_name
+        from astrodyn.recording.writer import fsync_directory
+
+        final = finished_name(written) if written else None
+        if written is None or final is None or failed or not os.path.exists(written):
+            return written
+        os.replace(written, final)
+        fsync_directory(final)
+        return final
 
     def close(self) -> None:
         for ch in self.children.values():
@@ -272,7 +290,7 @@ def main(argv: list[str] | None = None) -> int:
         scenario = load(args.config)
         out = Path(args.out) if args.out else (scenario.output_path or Path("out") / f"{scenario.name}.mcap")
         out.parent.mkdir(parents=True, exist_ok=True)
-        check_output_path(out)
+        check_output_path(out, inputs=(args.config, args.zenoh_config))
         rate = args.rate if args.rate is not None else scenario.real_time_factor
         try:
             rate = bus.parse_rate_factor(rate)
@@ -286,7 +304,7 @@ def main(argv: list[str] | None = None) -> int:
     stop_signal = {"why": None}
     for sig in (signal.SIGTERM, signal.SIGINT):
         signal.signal(sig, lambda s, f: stop_signal.update(why=signal.Signals(s).name))
-    with tempfile.TemporaryDirectory(prefix="astrodyn-serve-") as tmp, bus.open_session(listen=[hub], config_file=args.zenoh_config) as session:
+    with work_directory(out, "serve") as tmp, bus.open_session(listen=[hub], config_file=args.zenoh_config) as session:
         sup = Supervisor(scenario, Path(args.config), out, session, hub, rate=rate, roll_size=args.roll_size,
                          roll_interval=args.roll_interval, connect=args.connect, tmp=Path(tmp),
                          zenoh_config=args.zenoh_config)

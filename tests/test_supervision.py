@@ -1,0 +1,235 @@
+"""Supervision of `astrodyn run` / `astrodyn serve` with real processes and real faults.
+
+* Fate sharing: SIGKILL of the supervisor at chosen moments (right after start, while the
+  children start, while they run): no process it started survives it by more than about
+  2 s (found by the supervisor's PID in each process's environment, which every child of
+  a supervisor carries: astrodyn.service.children.SUPERVISOR_ENV), and `astrodyn recover`
+  on the output directory finishes the partial recording and removes the work directory
+  the supervisor could not remove itself.
+* The recording is written as NAME.partial.mcap and renamed when finished: a killed run
+  never destroys an earlier recording of the same name.
+
+Every process is stopped by its PID; loops are bounded.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from astrodyn.service.children import SUPERVISOR_ENV
+
+pytestmark = pytest.mark.network
+
+ASTRODYN = [sys.executable, "-m", "astrodyn"]
+
+LONG = """
+[scenario]
+name = "longrun"
+epoch = "2026-03-20T12:00:00 TDB"
+duration = "200000 s"
+rate = "10 Hz"
+
+[[bodies]]
+name = "sat"
+[bodies.orbit]
+a = "7000 km"
+e = 0.01
+[bodies.attitude]
+q = [1, 0, 0, 0]
+w = [0.01, 0.2, 0.01]
+inertia = [1.0, 2.0, 3.0]
+"""
+
+
+def started_by(supervisor: int) -> list[int]:
+    """PIDs of live processes whose environment names ``supervisor`` as their supervisor."""
+    needle = f"{SUPERVISOR_ENV}={supervisor}".encode()
+    found = []
+    for entry in os.listdir("/proc"):
+        if not entry.isdigit():
+            continue
+        try:
+            with open(f"/proc/{entry}/environ", "rb") as f:
+                env = f.read().split(b"\0")
+            with open(f"/proc/{entry}/stat", "rb") as f:
+                state = f.read().rsplit(b")", 1)[1].split()[0]
+        except OSError:
+            continue
+        if needle in env and state != b"Z":
+            found.append(int(entry))
+    return found
+
+
+def _kill_all(pids) -> None:
+    for pid in pids:
+        try:
+            os.kill(pid, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
+
+
+def _orphans_after(supervisor: int, limit_s: float) -> tuple[list[int], float]:
+    """Wait up to ``limit_s`` for every process started by ``supervisor`` to end; return
+    the ones still alive then (killed here, so the test leaves nothing behind) and the
+    time it took the last one to go."""
+    t0 = time.monotonic()
+    while time.monotonic() - t0 < limit_s:
+        alive = started_by(supervisor)
+        if not alive:
+            return [], time.monotonic() - t0
+        time.sleep(0.05)
+    alive = started_by(supervisor)
+    _kill_all(alive)
+    return alive, time.monotonic() - t0
+
+
+def _recover_dir(folder: Path) -> list[dict]:
+    proc = subprocess.run([*ASTRODYN, "recover", str(folder)], capture_output=True, text=True, timeout=120)
+    assert proc.returncode in (0, 1), proc.stderr
+    return [json.loads(line) for line in proc.stdout.splitlines() if line.startswith("{")]
+
+
+@pytest.mark.parametrize("delay_s", [0.05, 0.6, 4.0])
+def test_no_child_outlives_a_killed_run_supervisor(tmp_path, processes, delay_s):
+    cfg = tmp_path / "long.toml"
+    cfg.write_text(LONG)
+    out = tmp_path / "long.mcap"
+    sup = processes([*ASTRODYN, "run", cfg, "--out", out, "--quiet"], stdout=subprocess.DEVNULL,
+                    stderr=subprocess.PIPE)
+    seen: set[int] = set()
+    t0 = time.monotonic()
+    while time.monotonic() - t0 < delay_s:
+        seen.update(started_by(sup.pid))
+        time.sleep(0.01)
+    os.kill(sup.pid, signal.SIGKILL)
+    sup.wait(timeout=10)
+    seen.update(started_by(sup.pid))
+    orphans, took = _orphans_after(sup.pid, 2.5)
+    assert orphans == [], f"still alive {took:.2f} s after the supervisor died: {orphans} (seen {sorted(seen)})"
+    if delay_s >= 4.0:
+        assert len(seen) >= 3  # the logger and both propagators had started: the check saw real children
+    # what the killed run left beside its recording is found and finished by recover
+    _recover_dir(tmp_path)
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".astrodyn-")]
+    assert not list(tmp_path.glob("*.partial*.mcap"))
+    if delay_s >= 4.0:
+        from astrodyn.recording import load
+
+        run = load(out)
+        assert run.messages > 0 and run.complete
+
+
+@pytest.mark.parametrize("delay_s", [0.3, 5.0])
+def test_no_child_outlives_a_killed_serve_supervisor(tmp_path, processes, delay_s):
+    cfg = tmp_path / "long.toml"
+    cfg.write_text(LONG)
+    out = tmp_path / "served.mcap"
+    sup = processes([*ASTRODYN, "serve", cfg, "--out", out, "--rate", "1000"], stdout=subprocess.PIPE,
+                    stderr=subprocess.PIPE, text=True)
+    seen: set[int] = set()
+    t0 = time.monotonic()
+    while time.monotonic() - t0 < delay_s:
+        seen.update(started_by(sup.pid))
+        time.sleep(0.01)
+    os.kill(sup.pid, signal.SIGKILL)
+    sup.wait(timeout=10)
+    seen.update(started_by(sup.pid))
+    orphans, took = _orphans_after(sup.pid, 2.5)
+    assert orphans == [], f"still alive {took:.2f} s after serve died: {orphans} (seen {sorted(seen)})"
+    if delay_s >= 5.0:
+        assert len(seen) >= 3
+    _recover_dir(tmp_path)
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".astrodyn-")]
+
+
+def test_a_killed_run_leaves_the_earlier_recording_intact(tmp_path, processes):
+    """The same --out twice; the second run is SIGKILLed: the first recording is untouched
+    (byte for byte) and the second's partial file is beside it for `recover`."""
+    cfg = tmp_path / "long.toml"
+    cfg.write_text(LONG.replace('duration = "200000 s"', 'duration = "20 s"'))
+    out = tmp_path / "same.mcap"
+    first = subprocess.run([*ASTRODYN, "run", cfg, "--out", out, "--quiet"], capture_output=True, text=True, timeout=300)
+    assert first.returncode == 0, first.stderr[-2000:]
+    before = out.read_bytes()
+    cfg.write_text(LONG)
+    sup = processes([*ASTRODYN, "run", cfg, "--out", out, "--quiet"], stdout=subprocess.DEVNULL,
+                    stderr=subprocess.DEVNULL)
+    partial = tmp_path / "same.partial.mcap"
+    t0 = time.monotonic()
+    while not (partial.exists() and partial.stat().st_size > 4096) and time.monotonic() - t0 < 120:
+        time.sleep(0.05)
+    os.kill(sup.pid, signal.SIGKILL)
+    sup.wait(timeout=10)
+    _orphans_after(sup.pid, 2.5)
+    assert out.read_bytes() == before
+    assert partial.exists()
+    again = subprocess.run([*ASTRODYN, "run", cfg, "--out", out, "--quiet"], capture_output=True, text=True, timeout=60)
+    assert again.returncode == 2 and "same.partial.mcap exists" in again.stderr and "astrodyn recover" in again.stderr
+    recovered = _recover_dir(tmp_path)
+    assert [r["out"] for r in recovered if "out" in r] == [str(tmp_path / "same.recovered.mcap")]
+    assert out.read_bytes() == before and not partial.exists()
+
+
+def _states(path: Path) -> dict[str, dict[int, bytes]]:
+    """topic -> seq -> payload of every state message (plain mcap reader; duplicates fail)."""
+    from mcap.reader import make_reader
+
+    out: dict[str, dict[int, bytes]] = {}
+    with open(path, "rb") as f:
+        for _, channel, message in make_reader(f).iter_messages():
+            kind = channel.topic.rsplit("/", 1)[-1]
+            if kind in ("orbit", "attitude"):
+                seq = json.loads(message.data)["seq"]
+                per = out.setdefault(channel.topic, {})
+                assert seq not in per, f"{channel.topic} seq {seq} recorded twice"
+                per[seq] = bytes(message.data)
+    return out
+
+
+def _logger_of(supervisor: int) -> int | None:
+    from astrodyn.service.children import children_of
+
+    for pid, argv in children_of(supervisor).items():
+        if "astrodyn.service.logger" in argv:
+            return pid
+    return None
+
+
+def test_a_killed_logger_under_run_is_restarted_and_no_state_is_lost(tmp_path, processes):
+    """SIGKILL of the logger twice during `astrodyn run`: the run restarts it each time,
+    exits 0, and the file holds exactly the states of an uninterrupted run of the same
+    config (same seqs, payloads byte for byte), each once."""
+    cfg = tmp_path / "mid.toml"
+    cfg.write_text(LONG.replace('duration = "200000 s"', 'duration = "6000 s"').replace('rate = "10 Hz"', 'rate = "20 Hz"'))
+    reference = tmp_path / "reference.mcap"
+    ref = subprocess.run([*ASTRODYN, "run", cfg, "--out", reference, "--quiet"], capture_output=True, text=True,
+                         timeout=600)
+    assert ref.returncode == 0, ref.stderr[-2000:]
+    out = tmp_path / "killed.mcap"
+    sup = processes([*ASTRODYN, "run", cfg, "--out", out, "--json", tmp_path / "result.json"],
+                    stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    kills = []
+    t0 = time.monotonic()
+    while len(kills) < 2 and time.monotonic() - t0 < 300 and sup.poll() is None:
+        own = tmp_path / ("killed.partial.mcap" if not kills else f"killed.partial-{len(kills)}.mcap")
+        pid = _logger_of(sup.pid)
+        # kill once the current logger has flushed something of its own and the propagators are under way
+        if pid is not None and pid not in kills and own.exists() and own.stat().st_size > 300_000:
+            os.kill(pid, signal.SIGKILL)
+            kills.append(pid)
+        time.sleep(0.05)
+    _, err = sup.communicate(timeout=600)
+    assert len(kills) == 2, f"the run ended before two logger kills: {err[-2000:]}"
+    assert sup.returncode == 0, err[-3000:]
+    result = json.loads((tmp_path / "result.json").read_text())
+    assert [r["old_pid"] for r in result["restarts"]] == kills
+    assert _states(out) == _states(reference)
+    assert not list(tmp_path.glob("*.partial*.mcap"))  # the dead loggers' files were copied, then removed
