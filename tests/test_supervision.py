@@ -233,3 +233,54 @@ def test_a_killed_logger_under_run_is_restarted_and_no_state_is_lost(tmp_path, p
     assert [r["old_pid"] for r in result["restarts"]] == kills
     assert _states(out) == _states(reference)
     assert not list(tmp_path.glob("*.partial*.mcap"))  # the dead loggers' files were copied, then removed
+
+
+def test_a_killed_logger_under_serve_is_restarted_and_no_state_is_lost(tmp_path, processes):
+    """SIGKILL of serve's logger: serve restarts it (no 'running' lie with states lost), the
+    stop then finishes NAME.mcap, and every state channel holds 0 .. N-1 once each, byte for
+    byte the states an uninterrupted `astrodyn run` of the same scene records."""
+    import threading
+
+    cfg = tmp_path / "serve.toml"
+    cfg.write_text(LONG)
+    out = tmp_path / "served.mcap"
+    sup = processes([*ASTRODYN, "serve", cfg, "--out", out, "--rate", "400"], stdout=subprocess.PIPE,
+                    stderr=subprocess.PIPE, text=True)
+    err_lines: list[str] = []
+    reader = threading.Thread(target=lambda: err_lines.extend(iter(sup.stderr.readline, "")), daemon=True)
+    reader.start()
+    hello = json.loads(sup.stdout.readline())
+    assert hello["serving"] == "longrun"
+    partial = tmp_path / "served.partial.mcap"
+    t0 = time.monotonic()
+    while not (partial.exists() and partial.stat().st_size > 100_000) and time.monotonic() - t0 < 120:
+        time.sleep(0.05)
+    victim = _logger_of(sup.pid)
+    assert victim is not None
+    os.kill(victim, signal.SIGKILL)
+    t0 = time.monotonic()
+    while not any("restarted logger" in line for line in err_lines) and time.monotonic() - t0 < 60:
+        time.sleep(0.05)
+    assert any("restarted logger" in line for line in err_lines), "".join(err_lines[-20:])
+    assert _logger_of(sup.pid) not in (None, victim)
+    time.sleep(3.0)  # the new logger records past the point of the kill
+    os.kill(sup.pid, signal.SIGTERM)  # = stop
+    out_text, _ = sup.communicate(timeout=120)
+    reader.join(timeout=10)
+    summary = json.loads(out_text.strip().splitlines()[-1])
+    assert sup.returncode == 0, "".join(err_lines[-30:])
+    assert [r["old_pid"] for r in summary["restarts"]] == [victim]
+    assert summary["file"] == str(out) and out.exists() and not list(tmp_path.glob("*.partial*.mcap"))
+    served = _states(out)
+    last = min(max(per) for per in served.values())
+    for per in served.values():
+        assert sorted(per) == list(range(len(per)))  # no hole, no duplicate
+    ref_cfg = tmp_path / "ref.toml"
+    ref_cfg.write_text(LONG.replace('duration = "200000 s"', f'duration = "{(last + 1) / 10} s"'))
+    reference = tmp_path / "reference.mcap"
+    ref = subprocess.run([*ASTRODYN, "run", ref_cfg, "--out", reference, "--quiet"], capture_output=True,
+                         text=True, timeout=600)
+    assert ref.returncode == 0, ref.stderr[-2000:]
+    expected = _states(reference)
+    for topic, per in served.items():
+        assert {s: per[s] for s in range(last + 1)} == {s: expected[topic][s] for s in range(last + 1)}

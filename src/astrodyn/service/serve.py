@@ -45,6 +45,7 @@ import glob
 import json
 import math
 import os
+import re
 import signal
 import sys
 import time
@@ -55,6 +56,7 @@ from astrodyn.scenario import ScenarioError, load, plan as make_plan
 from astrodyn.service.children import Child, logger_command, propagator_command, work_directory
 from astrodyn.service.output import check_output_path
 from astrodyn.service.propagator import command_key
+from astrodyn.service.supervision import RestartBudget, contiguous_end, wait_until_gone
 
 __all__ = ["main", "Supervisor"]
 
@@ -77,6 +79,7 @@ class Supervisor:
         self.failures: list[str] = []
         p = make_plan(scenario)
         self.propagators = [k for k in p.processes if k != "logger"]
+        self.budgets = {k: RestartBudget(k) for k in p.processes}
         connect_args = sum((["--connect", e] for e in [hub, *connect]), [])
         if zenoh_config:
             connect_args += ["--zenoh-config", str(zenoh_config)]
@@ -94,6 +97,8 @@ class Supervisor:
             logger_argv += ["--roll-size", str(roll_size)]
         if roll_interval:
             logger_argv += ["--roll-interval", str(roll_interval)]
+        self._logger_argv = logger_argv
+        self.logger_attempt = 0
         self.children: dict[str, Child] = {"logger": Child("logger", logger_argv, tmp, env=self.child_env)}
         bus.wait_for_process(session, scenario.name, "logger", timeout_s=30.0)
         self._argv = {kind: [*propagator_command(kind), str(config_path), "--endless", *connect_args]
@@ -171,7 +176,20 @@ class Supervisor:
             msg = f"process {name} (pid {ch.pid}) {how} at sim t {hb.get('t')}: {ch.stderr_tail(3)}"
             print(f"astrodyn serve: {msg}", file=sys.stderr, flush=True)
             n = sum(1 for r in self.restarts if r["process"] == name)
-            if name in self.propagators and self.state in ("running", "paused") and n < self.max_restarts:
+            if name == "logger" and self.state in ("running", "paused"):
+                if self.budgets["logger"].allow():
+                    try:
+                        self.restart_logger(msg)
+                        continue
+                    except Exception as exc:
+                        msg += f"; restart failed: {exc}"
+                else:
+                    msg = f"{self.budgets['logger'].refusal()}; last: {msg}"
+                self.failures.append(msg)
+                self.state = "failed"
+                continue
+            if name in self.propagators and self.state in ("running", "paused") and n < self.max_restarts \
+                    and self.budgets[name].allow():
                 try:
                     self.restart(name, msg, n)
                     continue
@@ -187,6 +205,70 @@ class Supervisor:
         rolled = sorted(glob.glob(glob.escape(root) + "-[0-9][0-9][0-9][0-9]" + ext))
         partial = sorted(glob.glob(glob.escape(root) + "*.partial*" + ext), key=os.path.getmtime)
         return [p for p in [*reversed(partial), *reversed(rolled), str(self.out)] if os.path.exists(p)]
+
+    def restart_logger(self, why: str) -> None:
+        """The logger died: a new one copies the dead one's flushed states of its current
+        part (``--prefill``) and records on; the propagators restart after the last step it
+        copied (:mod:`astrodyn.service.supervision`).  A restart costs wall time, not states."""
+        from astrodyn.recording import RecordingError, load as load_run
+        from astrodyn.recording.recover import finished_name
+        from astrodyn.service.resume import propagator_resume_args, state_topics
+
+        for kind in self.propagators:
+            self.children[kind].reported = True  # stopped here, not a death to restart
+            self.children[kind].stop(signal.SIGKILL, timeout=5)
+        dead = self.children["logger"]
+        dead.close()
+        wait_until_gone(self.session, self.scenario.name, "logger")
+        self.logger_attempt += 1
+        partials = [p for p in self._parts() if finished_name(p)]
+        dead_file = partials[0] if partials else None
+        part, steps, run = 0, None, None
+        if dead_file is not None:
+            final = finished_name(dead_file)
+            m = re.search(r"-(\d{4})\.[^.]+$", final) if final != str(self.out) else None
+            part = int(m.group(1)) if m else 0
+            try:
+                run = load_run(dead_file)
+                topics = [t for kind in self.propagators for t in state_topics(self.scenario, kind).values()]
+                steps = contiguous_end(run, topics)
+            except (RecordingError, OSError):
+                steps = None
+        argv = [*self._logger_argv, "--attempt", str(self.logger_attempt), "--first-part", str(part)]
+        if steps:
+            argv += ["--prefill", dead_file, "--prefill-steps", str(steps)]
+        self.children["logger"] = Child(f"logger-r{self.logger_attempt}", argv, self.tmp, env=self.child_env)
+        self.children["logger"].name = "logger"
+        bus.wait_for_process(self.session, self.scenario.name, "logger", timeout_s=30.0)
+        if steps and dead_file is not None:
+            os.unlink(dead_file)  # copied into the new logger's file before it declared itself ready
+        for kind in self.propagators:
+            args = propagator_resume_args(run, self.scenario, kind, steps - 1, self.tmp) if steps else {}
+            if not steps and part > 0:  # nothing flushed in this part: continue after the finished parts
+                args = self._resume_from_files(kind)
+            argv = [*self._argv[kind], "--real-time-factor", str(self.rate)]
+            for k, v in args.items():
+                argv += [k, str(v)]
+            self.children[kind].close()
+            self.children[kind] = Child(f"{kind}-l{self.logger_attempt}", argv, self.tmp, env=self.child_env)
+            self.children[kind].name = kind
+        record = {"process": "logger", "old_pid": dead.pid, "new_pid": self.children["logger"].pid, "why": why,
+                  "from_step": steps or 0, "state_from": dead_file, "time": time.time()}
+        self.restarts.append(record)
+        print(f"astrodyn serve: restarted logger (pid {record['new_pid']}); {steps or 0} steps copied from "
+              f"{dead_file or '-'}, propagators continue at step {steps or 0}", file=sys.stderr, flush=True)
+
+    def _resume_from_files(self, kind: str) -> dict:
+        from astrodyn.recording import load as load_run
+        from astrodyn.service.resume import last_common_step, propagator_resume_args, state_topics
+
+        topics = list(state_topics(self.scenario, kind).values())
+        for part in self._parts():
+            run = load_run(part)
+            step = last_common_step(run, topics)
+            if step is not None:
+                return propagator_resume_args(run, self.scenario, kind, step, self.tmp)
+        return {}
 
     def restart(self, kind: str, why: str, n: int) -> None:
         """Start ``kind`` again after the last step every one of its channels has in the file."""

@@ -31,7 +31,7 @@ from pathlib import Path
 
 from astrodyn.recording.writer import partial_path
 
-__all__ = ["wait_until_gone", "RESTART_LIMIT", "RESTART_WINDOW_S", "RestartBudget", "LoggerRestart", "plan_logger_restart"]
+__all__ = ["wait_until_gone", "contiguous_end", "RESTART_LIMIT", "RESTART_WINDOW_S", "RestartBudget", "LoggerRestart", "plan_logger_restart"]
 
 #: A process that dies this many times ...
 RESTART_LIMIT = 5
@@ -108,3 +108,21 @@ def plan_logger_restart(scenario, out: Path, attempt: int, kinds: list[str], wor
     logger_args = ["--prefill", dead, "--prefill-steps", str(steps)]
     props = {kind: propagator_resume_args(run, scenario, kind, steps - 1, work) for kind in kinds}
     return LoggerRestart(attempt, steps, dead, logger_args, props)
+
+
+def contiguous_end(run, topics) -> int | None:
+    """One past the last step that every channel of ``topics`` holds without a hole from
+    the channel's first step in ``run`` (a rolled part starts after step 0); None if a
+    channel is missing or empty."""
+    import numpy as np
+
+    end = None
+    for topic in topics:
+        track = run.channels.get(topic)
+        if track is None or len(track) == 0:
+            return None
+        seq = np.unique(track.seq)
+        n = int(np.searchsorted(seq - seq[0] - np.arange(seq.size), 0, side="right"))
+        e = int(seq[0]) + n
+        end = e if end is None else min(end, e)
+    return end
