@@ -299,3 +299,32 @@ def test_seq_tracker_against_set_model():
             absent = sorted(set(range(max(arrivals) + 1)) - set(arrivals))
             assert [s for a, b in gaps for s in range(a, b + 1)] == absent
             assert gap_report(np.array(arrivals))["gaps"] == gaps  # the reader's batch version agrees
+
+
+def test_load_blocks_is_load_in_pieces_and_the_run_summary_does_not_depend_on_them():
+    """load_blocks (bounded memory) against load (whole file) on the pre-refactor fixture:
+    the blocks' tracks concatenated are load's, field by field; the end-of-run summary
+    computed block by block (first state put in front of each block) equals the one from a
+    single block exactly, because every drift is a largest deviation from the first state."""
+    from pathlib import Path
+
+    from astrodyn.recording import load_blocks
+    from astrodyn.scenario import load as load_scenario
+    from astrodyn.service.summary import file_summary
+
+    fixtures = Path(__file__).parent / "fixtures"
+    path = fixtures / "legacy-v0.mcap"
+    whole = load(path)
+    blocks = list(load_blocks(path, 1))
+    assert len(blocks) >= 3 and sum(b.messages for b in blocks) == whole.messages
+    assert blocks[-1].truncated == whole.truncated and not any(b.truncated for b in blocks[:-1])
+    for topic, track in whole.channels.items():
+        parts = [b.channels[topic] for b in blocks if topic in b.channels and len(b.channels[topic])]
+        assert np.array_equal(np.concatenate([p.seq for p in parts]), track.seq), topic
+        for name, col in track.fields.items():
+            if col.dtype != object:
+                assert np.array_equal(np.concatenate([p.fields[name] for p in parts]), col, equal_nan=True), (topic, name)
+    scenario = load_scenario(fixtures / "legacy-v0.toml")
+    assert file_summary(path, scenario, block_messages=1) == file_summary(path, scenario, block_messages=10**9)
+    with pytest.raises(ValueError, match="block_messages"):
+        next(load_blocks(path, 0))

@@ -26,6 +26,7 @@ from mcap.stream_reader import StreamReader, breakup_chunk
 
 from astrodyn import bus, messages
 from astrodyn.recording import load
+from astrodyn.recording.writer import partial_path
 from astrodyn.scenario import load as load_scenario
 from astrodyn.simulate import OrbitEngine
 
@@ -41,9 +42,16 @@ def _config(tmp_path: Path, duration: str, name: str = "demo.toml") -> Path:
     return cfg
 
 
+def _recording_in_progress(path: Path) -> Path:
+    """The file a run is writing now: NAME.partial.mcap (or a restarted logger's
+    NAME.partial-N.mcap) until the run ends and renames it to NAME.mcap."""
+    partials = sorted(path.parent.glob(f"{path.stem}.partial*{path.suffix}"), key=lambda p: p.stat().st_mtime)
+    return partials[-1] if partials else path
+
+
 def _orbit_states(path: Path) -> int:
     try:
-        run = load(path)  # reads a file still being written, up to its last flushed chunk
+        run = load(_recording_in_progress(path))  # a file still being written, up to its last flushed chunk
     except Exception:
         return 0
     return min((len(b.orbit) for b in run.bodies.values() if b.orbit is not None), default=0)
@@ -109,6 +117,11 @@ def test_sigterm_to_run_finishes_the_file_and_says_how_far(tmp_path):
         _stop(proc)
     assert proc.returncode == 128 + signal.SIGTERM, stderr[-2000:]
     assert "interrupted by SIGTERM" in stderr and "sim t reached" in stdout
+    # an interrupted run is not finished: its (complete) file keeps the partial name and
+    # does not replace --out; `astrodyn recover` names it (docs/reliability.md)
+    partial = Path(partial_path(out))
+    assert not out.exists() and str(partial) in stderr and "astrodyn recover" in stderr
+    out = partial
     assert _seeking_count(out) > 0  # summary, indexes and footer are there
     run = load(out)
     assert run.complete
@@ -246,7 +259,7 @@ def test_resume_rejects_what_it_cannot_continue(full_run, tmp_path, capsys):
     other.write_text(cfg.read_text().replace("e = 0.74", "e = 0.7"))
     cases = [
         ([str(cfg), "--resume", str(full), "--out", str(tmp_path / "x.mcap")], "already holds all"),
-        ([str(cfg), "--resume", str(full), "--out", str(full)], "not the --resume file itself"),
+        ([str(cfg), "--resume", str(full), "--out", str(full)], "names an input of the run"),
         ([str(other), "--resume", str(full), "--out", str(tmp_path / "y.mcap")], "another config"),
         ([str(cfg), "--resume", str(cfg), "--out", str(tmp_path / "z.mcap")], "not an MCAP file"),
     ]
@@ -343,6 +356,8 @@ def test_full_disk_mid_run_is_a_clear_failure_and_no_complete_looking_file(tmp_p
     assert proc.returncode == 1, proc.stderr[-2000:]
     assert "process logger" in proc.stderr and "File too large" in proc.stderr
     assert "Traceback" not in proc.stderr.split("astrodyn run: FAILED")[-1]
+    assert not out.exists()  # a failed run leaves NAME.partial.mcap, never a complete-looking NAME.mcap
+    out = Path(partial_path(out))
     run = load(out)
     assert run.truncated and not run.complete  # no footer: it does not claim to be complete
     with open(out, "rb") as f, pytest.raises(Exception):
@@ -355,8 +370,9 @@ def test_dev_full_output_fails_at_once(tmp_path):
     t0 = time.monotonic()
     proc = subprocess.run([*ASTRODYN, "run", str(_config(tmp_path, "10 min")), "--out", "/dev/full", "--quiet"],
                           capture_output=True, text=True, timeout=120)
-    assert proc.returncode == 1
-    assert "No space left on device" in proc.stderr and "during start-up" in proc.stderr
+    # a device is not a recording: refused before anything starts (it is never written to)
+    assert proc.returncode == 2, proc.stderr
+    assert "/dev/full: exists and is not an MCAP recording" in proc.stderr and "Traceback" not in proc.stderr
     assert time.monotonic() - t0 < 60
 
 

@@ -104,8 +104,9 @@ __all__ = ["torque_free", "PreparedBody", "BODY_DTYPE", "polhode", "herpolhode",
 
 #: The constants of one body's exact solution, set once per body (:class:`PreparedBody`,
 #: :func:`setup_all`) and read by every evaluation; a numpy structured dtype whose fields
-#: numba reads by name.  Symbols as in the module docstring.
-BODY_DTYPE = np.dtype([
+#: numba reads by name.  Symbols as in the module docstring.  Its type is ``np.record``, so
+#: an element's fields are attributes in plain Python too (``NUMBA_DISABLE_JIT=1``).
+BODY_DTYPE = np.dtype((np.record, [
     ("mode", np.int64),  # 0: NaN state, 1: uniform rotation, 2: elliptic
     ("ia", np.int64), ("ib", np.int64), ("ic", np.int64),  # body indices of the ordered axes (ic: circulation axis)
     ("sb", np.float64),  # sign applied to the body's ib component (keeps the ordered frame right-handed)
@@ -127,7 +128,7 @@ BODY_DTYPE = np.dtype([
     ("qb0", np.float64, (4,)),  # Euler parameters of C_B0 (uniform mode: q0)
     ("w", np.float64, (3,)),  # constant rates (uniform mode)
     ("inertia", np.float64, (3,)),  # principal moments (kg m^2), body order
-])
+]))
 
 
 # ---------------------------------------------------------------------------

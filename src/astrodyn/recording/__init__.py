@@ -8,10 +8,10 @@
 File layout and crash behaviour: :mod:`astrodyn.recording.writer`.
 """
 
-from astrodyn.recording.reader import Body, BodyTracks, Run, Track, gap_report, load
+from astrodyn.recording.reader import Body, BodyTracks, Run, Track, gap_report, load, load_blocks
 from astrodyn.recording.writer import DUPLICATE, GAP, LATE, OK, McapRecorder, RecordingError, SeqTracker
 
 __all__ = [
     "McapRecorder", "RecordingError", "SeqTracker", "OK", "GAP", "LATE", "DUPLICATE",
-    "load", "Run", "BodyTracks", "Body", "Track", "gap_report",
+    "load", "load_blocks", "Run", "BodyTracks", "Body", "Track", "gap_report",
 ]

@@ -43,11 +43,10 @@ import sys
 import time
 
 from mcap.records import Channel, Chunk, Message, Metadata, Schema
-from mcap.stream_reader import breakup_chunk
 
 from astrodyn import __version__
 from astrodyn.recording.chunked_writer import ChunkedWriter
-from astrodyn.recording.reader import parse_record, read_records
+from astrodyn.recording.reader import chunk_records, parse_record, read_records
 from astrodyn.recording.writer import RecordingError
 
 __all__ = ["recover", "main", "finished_name", "find_partials", "stale_work_dirs"]
@@ -146,8 +145,8 @@ def recover(path: str | os.PathLike, out: str | os.PathLike | None = None, *, ch
                             continue
                         if isinstance(rec, Chunk):
                             try:
-                                inner = breakup_chunk(rec, validate_crc=True)
-                            except Exception as exc:  # zstd error, CRC mismatch, cut inner record
+                                inner = chunk_records(rec)
+                            except Exception as exc:  # a bomb, zstd error, CRC mismatch, cut inner record
                                 corrupt += 1
                                 notes.append(f"corrupt chunk at byte {offset} skipped: {type(exc).__name__}: {exc}")
                                 continue

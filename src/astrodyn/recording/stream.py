@@ -44,9 +44,8 @@ from typing import BinaryIO
 from mcap.data_stream import ReadDataStream
 from mcap.opcode import Opcode
 from mcap.records import Channel, Chunk, Message, Metadata, Schema
-from mcap.stream_reader import breakup_chunk
 
-from astrodyn.recording.reader import MCAP_MAGIC
+from astrodyn.recording.reader import MCAP_MAGIC, chunk_limits, chunk_records
 from astrodyn.recording.writer import RecordingError
 
 __all__ = ["RawMessage", "McapStream", "open_stream", "topic_matcher"]
@@ -108,6 +107,7 @@ class McapStream:
         self.corrupt_chunks = 0
         self.orphans = 0
         self.notes: list[str] = []
+        self._limits = chunk_limits()
         try:
             self._index()
         except BaseException:
@@ -223,8 +223,8 @@ class McapStream:
         body = self._f.read(ref.length)
         try:
             chunk = Chunk.read(ReadDataStream(io.BytesIO(body)))
-            records = breakup_chunk(chunk, validate_crc=True)
-        except Exception as exc:  # zstd error, CRC mismatch, cut inner record
+            records = chunk_records(chunk, self._limits)
+        except Exception as exc:  # a bomb, zstd error, CRC mismatch, cut inner record
             self.corrupt_chunks += 1
             self.notes.append(f"corrupt chunk at byte {ref.offset} skipped: {type(exc).__name__}: {exc}")
             return []

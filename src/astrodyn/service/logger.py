@@ -534,10 +534,11 @@ class Logger:
                     "authenticated": self.verifier is not None, "scene_only": self.scene_keys is not None,
                     "total": sum(self.rejected.values()), "by_reason": self.rejected,
                     "by_sender": self.rejected_by_sender, "examples": self.rejected_examples})
-            # the file takes its name only when the run ended as it should (docs/reliability.md)
-            # (a supervisor's logger leaves that to the supervisor, who knows how the run ended)
+            # the file takes its name when it was stopped as it should: the end of the run, a
+            # stop request, or SIGTERM / SIGINT to a logger run by hand (docs/reliability.md);
+            # a supervisor's logger leaves that to the supervisor, who knows how the run ended
             finished = self.rename_at_end and (
-                self.reason in ("end of run: every expected message recorded", "stop requested")
+                self.reason in ("end of run: every expected message recorded", "stop requested", "SIGTERM", "SIGINT")
                 or self.reason.startswith("max_seconds"))
             stats = self.recorder.close(rename=finished)
             summary["file_complete"] = True

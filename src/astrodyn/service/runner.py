@@ -31,6 +31,7 @@ import argparse
 import json
 import math
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -348,6 +349,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--json", metavar="FILE", help="write the full result (per-body summary included) as JSON")
     ap.add_argument("--resume", metavar="MCAP", help="continue the scenario from the last complete step recorded in "
                     "this file: its states are copied into --out (which must differ) and the run goes on from there")
+    ap.add_argument("--force", action="store_true",
+                    help="start even when the expected recording does not fit on the output disk")
     ap.add_argument("--tolerate-rejected", action="store_true",
                     help="exit 0 even when the logger rejected messages that did not come from this run's own "
                          "processes (default: exit 3, the record was attacked; docs/security.md)")
@@ -366,7 +369,16 @@ def main(argv: list[str] | None = None) -> int:
         except ScenarioError as exc:
             print(f"astrodyn run: {exc}", file=sys.stderr)
             return 2
-        print(make_plan(scenario).text(), file=sys.stderr)
+        the_plan = make_plan(scenario)
+        for w in the_plan.warnings:
+            print(f"astrodyn run: warning: {w}", file=sys.stderr)
+        free = shutil.disk_usage(out.resolve().parent).free
+        if the_plan.estimated_file_bytes > free and not args.force:
+            print(f"astrodyn run: the recording needs about {the_plan.estimated_file_bytes / 1e6:.4g} MB and "
+                  f"{out.resolve().parent} has {free / 1e6:.4g} MB free; shorten the run, lower the rate, choose "
+                  f"another --out, or pass --force", file=sys.stderr)
+            return 2
+        print(the_plan.text(), file=sys.stderr)
         if resume:
             print(f"  resuming from {args.resume} at step {resume['step']} (t = {resume['t']:.6g} s)", file=sys.stderr)
         result = run_scenario(scenario, Path(args.config), out, cross_check=args.cross_check, connect=args.connect,

@@ -1,6 +1,6 @@
 """The end-of-run summary of ``astrodyn run``: what the file holds, body by body.
 
-Everything here is read back from the recording (:func:`astrodyn.recording.load`), not
+Everything here is read back from the recording (:func:`astrodyn.recording.load_blocks`), not
 taken from what the propagators say they published, so anything in the file that did
 not come from the run would show (docs/security.md).  Per body and kind: the model, the
 states recorded, and the drift of each quantity the model conserves
@@ -50,46 +50,74 @@ def propagator_rows(result: dict, scenario: Scenario) -> list[dict] | None:
     return rows
 
 
-def file_summary(path: Path, scenario: Scenario) -> list[dict]:
+def file_summary(path: Path, scenario: Scenario, block_messages: int = 50_000) -> list[dict]:
     """Per body, from the file: models, states recorded per kind, the invariant rows
     (``orbit_invariants`` / ``attitude_invariants``: lists of :class:`Invariant` dicts),
     the cross-check difference, and the legacy drift keys (``energy_drift`` and
     ``momentum_drift`` relative to mu/|r0| and |h0|, ``quat_norm_error``,
     ``rot_energy_drift``, ``inertial_momentum_drift``, ``crosscheck_max_dr``) that
-    :func:`propagator_rows` also reports."""
-    from astrodyn.recording import load as load_run
+    :func:`propagator_rows` also reports.
 
-    run = load_run(path)
+    The file is read in blocks of ``block_messages`` (:func:`astrodyn.recording.load_blocks`),
+    so memory does not grow with the recording: every drift is a largest deviation from the
+    first recorded state, so each block is evaluated with that state put in front of it and
+    the blocks' maxima combined (a NaN anywhere stays NaN)."""
+    from astrodyn.recording import load_blocks
+
     plan = {bp.name: bp for bp in make_plan(scenario).bodies}
-    mu = scenario.central_body.mu
-    rows = []
-    for b in scenario.bodies:
-        rec = run.bodies.get(b.name)
-        bp = plan[b.name]
-        row: dict = {"body": b.name, "orbit_model": bp.orbit_model, "attitude_model": bp.attitude_model}
-        if rec is not None and rec.orbit is not None and len(rec.orbit):
-            r, v = rec.orbit.r, rec.orbit.v
-            inv = recorded_invariants(run.scenario, b.name, orbit=(bp.orbit_model, r, v))["orbit"]
-            rn = np.linalg.norm(r, axis=1)
-            energy = 0.5 * np.einsum("ij,ij->i", v, v) - mu / rn
-            h = np.linalg.norm(np.cross(r, v), axis=1)
-            row.update(orbit_states=len(rec.orbit), orbit_last_seq=int(rec.orbit.seq[-1]),
-                       orbit_invariants=[i.as_dict() for i in inv],
-                       energy_drift=float(np.max(np.abs(energy - energy[0])) * rn[0] / mu),
-                       momentum_drift=float(np.max(np.abs(h - h[0])) / h[0]) if h[0] else 0.0)
-        if rec is not None and rec.attitude is not None and len(rec.attitude):
-            q, w = rec.attitude.q, rec.attitude.w
-            inv = recorded_invariants(run.scenario, b.name, attitude=(bp.attitude_model, q, w))["attitude"]
-            row.update(attitude_states=len(rec.attitude), attitude_invariants=[i.as_dict() for i in inv],
-                       quat_norm_error=float(np.max(np.abs(np.linalg.norm(q, axis=1) - 1.0))))
-            named = {i.name: i for i in inv}
-            if bp.attitude_model == "torque_free" and "T" in named:
-                row.update(rot_energy_drift=named["T"].drift, inertial_momentum_drift=named["H_i"].drift)
-        if rec is not None and rec.crosscheck is not None and len(rec.crosscheck):
-            row["crosscheck_states"] = len(rec.crosscheck)
-            row["crosscheck_max_dr"] = float(np.max(rec.crosscheck.dr_norm))
-        rows.append(row)
-    return rows
+    rows = {b.name: {"body": b.name, "orbit_model": plan[b.name].orbit_model,
+                     "attitude_model": plan[b.name].attitude_model} for b in scenario.bodies}
+    first: dict[tuple[str, str], tuple[np.ndarray, np.ndarray]] = {}
+    for run in load_blocks(path, block_messages):
+        for b in scenario.bodies:
+            rec = run.bodies.get(b.name)
+            if rec is None:
+                continue
+            _add_block(rows[b.name], rec, run.scenario, plan[b.name], scenario.central_body.mu, first)
+    return list(rows.values())
+
+
+def _max_nan(a: float | None, b: float) -> float:
+    if a is None:
+        return b
+    return float("nan") if math.isnan(a) or math.isnan(b) else max(a, b)
+
+
+def _merge_invariants(old: list[dict] | None, new: list[dict]) -> list[dict]:
+    if old is None:
+        return new
+    return [{**n, "drift": _max_nan(o["drift"], n["drift"])} for o, n in zip(old, new, strict=True)]
+
+
+def _add_block(row: dict, rec, recorded_scenario: dict, bp, mu: float, first: dict) -> None:
+    """Fold one block of a body's tracks into its summary row (see :func:`file_summary`)."""
+    if rec.orbit is not None and len(rec.orbit):
+        r0, v0 = first.setdefault((bp.name, "orbit"), (rec.orbit.r[:1].copy(), rec.orbit.v[:1].copy()))
+        r, v = np.concatenate([r0, rec.orbit.r]), np.concatenate([v0, rec.orbit.v])
+        inv = recorded_invariants(recorded_scenario, bp.name, orbit=(bp.orbit_model, r, v))["orbit"]
+        rn = np.linalg.norm(r, axis=1)
+        energy = 0.5 * np.einsum("ij,ij->i", v, v) - mu / rn
+        h = np.linalg.norm(np.cross(r, v), axis=1)
+        row["orbit_states"] = row.get("orbit_states", 0) + len(rec.orbit)
+        row["orbit_last_seq"] = max(row.get("orbit_last_seq", -1), int(rec.orbit.seq[-1]))
+        row["orbit_invariants"] = _merge_invariants(row.get("orbit_invariants"), [i.as_dict() for i in inv])
+        row["energy_drift"] = _max_nan(row.get("energy_drift"), float(np.max(np.abs(energy - energy[0])) * rn[0] / mu))
+        row["momentum_drift"] = _max_nan(row.get("momentum_drift"),
+                                         float(np.max(np.abs(h - h[0])) / h[0]) if h[0] else 0.0)
+    if rec.attitude is not None and len(rec.attitude):
+        q0, w0 = first.setdefault((bp.name, "attitude"), (rec.attitude.q[:1].copy(), rec.attitude.w[:1].copy()))
+        q, w = np.concatenate([q0, rec.attitude.q]), np.concatenate([w0, rec.attitude.w])
+        inv = recorded_invariants(recorded_scenario, bp.name, attitude=(bp.attitude_model, q, w))["attitude"]
+        row["attitude_states"] = row.get("attitude_states", 0) + len(rec.attitude)
+        row["attitude_invariants"] = _merge_invariants(row.get("attitude_invariants"), [i.as_dict() for i in inv])
+        row["quat_norm_error"] = _max_nan(row.get("quat_norm_error"),
+                                          float(np.max(np.abs(np.linalg.norm(q, axis=1) - 1.0))))
+        named = {i["name"]: i for i in row["attitude_invariants"]}
+        if bp.attitude_model == "torque_free" and "T" in named:
+            row.update(rot_energy_drift=named["T"]["drift"], inertial_momentum_drift=named["H_i"]["drift"])
+    if rec.crosscheck is not None and len(rec.crosscheck):
+        row["crosscheck_states"] = row.get("crosscheck_states", 0) + len(rec.crosscheck)
+        row["crosscheck_max_dr"] = _max_nan(row.get("crosscheck_max_dr"), float(np.max(rec.crosscheck.dr_norm)))
 
 
 def _fmt(x: float, spec: str = ".1e") -> str:
