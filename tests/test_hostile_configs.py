@@ -2,7 +2,7 @@
 not fit on disk (issue 13 items 3 and 4; docs/architecture.md, section 6).
 
 The contract: refused by ``astrodyn validate`` and ``astrodyn run`` before any process
-starts, exit 2, one line naming the field (path of keys), the value and the
+starts, exit 2, one line naming the field (body index and name), the value and the
 allowed range; nothing written.  The limits are independent of the code: the float64
 range (products such as r^3 or I w^2 must stay below 1.8e308), MCAP's 16-bit channel
 ids (the MCAP specification), and the free space the operating system reports.
@@ -31,15 +31,15 @@ def _run_cli(*argv: str, timeout: float = 120) -> subprocess.CompletedProcess:
 
 # (description, replacement in demo.toml, field path expected in the message)
 OVERFLOWING = [
-    ("semi-major axis 1e308 m", ('a = "6795 km"', 'a = "1e308 m"'), "bodies[0].orbit.a"),
-    ("semi-major axis that overflows in km", ('a = "6795 km"', 'a = "1e306 km"'), "bodies[0].orbit.a"),
-    ("angular velocity 1e308 rad/s", ('w = ["0.3 rad/s"', 'w = ["1e308 rad/s"'), "bodies[1].attitude.w[0]"),
-    ("position 1e300 km", ('r = ["6878 km"', 'r = ["1e300 km"'), "bodies[1].orbit.r[0]"),
+    ("semi-major axis 1e308 m", ('a = "6795 km"', 'a = "1e308 m"'), "bodies[0] (iss).orbit.a"),
+    ("semi-major axis that overflows in km", ('a = "6795 km"', 'a = "1e306 km"'), "bodies[0] (iss).orbit.a"),
+    ("angular velocity 1e308 rad/s", ('w = ["0.3 rad/s"', 'w = ["1e308 rad/s"'), "bodies[1] (cubesat).attitude.w[0]"),
+    ("position 1e300 km", ('r = ["6878 km"', 'r = ["1e300 km"'), "bodies[1] (cubesat).orbit.r[0]"),
     ("speed faster than light", ('v = ["0 km/s", "4.8 km/s"', 'v = ["0 km/s", "4.8e6 km/s"'),
-     "bodies[1].orbit.v[1]"),
+     "bodies[1] (cubesat).orbit.v[1]"),
     ("subnormal inertia", ('"0.03 kg m2", "0.035 kg m2"', '"1e-320 kg m2", "0.035 kg m2"'),
-     "bodies[1].attitude.inertia[0]"),
-    ("inertia 1e300 kg m2", ('"1.2e8 kg m2"', '"1e300 kg m2"'), "bodies[0].attitude.inertia[0]"),
+     "bodies[1] (cubesat).attitude.inertia[0]"),
+    ("inertia 1e300 kg m2", ('"1.2e8 kg m2"', '"1e300 kg m2"'), "bodies[0] (iss).attitude.inertia[0]"),
 ]
 
 
@@ -83,7 +83,7 @@ def test_periapsis_below_the_surface_is_a_warning_naming_the_body(tmp_path):
     assert proc.returncode == 0, proc.stderr
     warning = [line for line in proc.stderr.splitlines() if "warning" in line]
     assert len(warning) == 1, proc.stderr
-    assert "'molniya'" in warning[0] and "bodies[2].orbit" in warning[0] and "5320" in warning[0], warning[0]
+    assert "bodies[2] (molniya).orbit: periapsis" in warning[0] and "5320" in warning[0], warning[0]
     # a plain config gets no warning
     assert "warning" not in _run_cli("validate", str(CONFIGS / "demo.toml")).stderr
 

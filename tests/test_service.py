@@ -169,7 +169,7 @@ def test_bad_config_exits_2_and_writes_nothing(tmp_path):
     out = tmp_path / "x.mcap"
     proc = subprocess.run([*ASTRODYN, "run", str(cfg), "--out", str(out)], capture_output=True, text=True, timeout=120)
     assert proc.returncode == 2
-    assert "bodies[0].orbit.e" in proc.stderr and "-0.1" in proc.stderr
+    assert "bodies[0] (iss).orbit.e" in proc.stderr and "-0.1" in proc.stderr
     assert not out.exists()
 
 

@@ -181,7 +181,7 @@ def test_serial_run_reports_failures_and_completes_the_rest(serial_run):
     fails = _read(serial_run / "failures.csv")
     assert {int(r["case"]) for r in fails} == failed
     for r in fails:
-        assert "bodies[0].orbit.e: expected 0 <= e" in r["error"], r["error"]
+        assert "bodies[0] (sat1).orbit.e: expected 0 <= e" in r["error"], r["error"]
         assert f"case {r['case']}:" in r["error"]
     spec = json.loads((serial_run / "sweep.json").read_text())
     assert spec["seed"] == SEED and spec["n"] == N and spec["failed"] == len(failed)

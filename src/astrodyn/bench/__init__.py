@@ -8,7 +8,11 @@ measured in the same process.
 from __future__ import annotations
 
 import importlib
+import inspect
+import json
+import os
 import platform
+import subprocess
 import sys
 
 SUITES = {
@@ -33,6 +37,44 @@ def cpu_model() -> str:
     except OSError:
         pass
     return platform.processor() or "unknown CPU"
+
+
+def env_for_source(src: str | None, **extra: str) -> dict:
+    """Environment of a child process that imports astrodyn from the source tree ``src``
+    (``None``: this one), plus ``extra`` variables."""
+    env = {**os.environ, **extra}
+    if src is not None:
+        env["PYTHONPATH"] = src + os.pathsep + env.get("PYTHONPATH", "")
+    return env
+
+
+def best_seconds_per_call(fn, number: int, repeat: int) -> float:
+    """Seconds per call of ``fn``: the best of ``repeat`` rounds of ``number`` calls, after
+    one warm-up call (the least disturbed round on a shared machine)."""
+    import time
+
+    fn()
+    out = float("inf")
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        for _ in range(number):
+            fn()
+        out = min(out, (time.perf_counter() - t0) / number)
+    return out
+
+
+def call_in_tree(fn, args: tuple, src: str | None, timeout_s: float = 900) -> object:
+    """``fn(*args)`` in a child process importing astrodyn from the source tree ``src``: the
+    before/after benchmarks time the same function against an older tree in one run.
+    ``fn`` must be self-contained (imports inside; it may use :func:`best_seconds_per_call`,
+    whose source goes along) and return something JSON can carry."""
+    code = (inspect.getsource(best_seconds_per_call) + "\n" + inspect.getsource(fn)
+            + f"\nimport json\nprint(json.dumps({fn.__name__}(*{args!r})))\n")
+    done = subprocess.run([sys.executable, "-c", code], env=env_for_source(src), capture_output=True, text=True,
+                          timeout=timeout_s, stdin=subprocess.DEVNULL)
+    if done.returncode != 0:
+        raise RuntimeError(f"{fn.__name__} in {src or 'this tree'}: child failed: {done.stderr.strip().splitlines()[-1:]}")
+    return json.loads(done.stdout.strip().splitlines()[-1])
 
 
 def main(argv: list[str] | None = None) -> int:

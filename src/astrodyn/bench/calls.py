@@ -27,6 +27,8 @@ import time
 
 import numpy as np
 
+from astrodyn.bench import best_seconds_per_call, call_in_tree, env_for_source
+
 DZHANIBEKOV = (np.array([1.0, 2.0, 3.0]), np.array([1e-3, 1.0, 1e-3]))
 
 
@@ -74,7 +76,7 @@ class Load:
         self.procs: list[subprocess.Popen] = []
 
     def __enter__(self) -> Load:
-        env = _env_for(self.src, ASTRODYN_THREADS=str(self.threads))
+        env = env_for_source(self.src, ASTRODYN_THREADS=str(self.threads))
         for _ in range(self.n):
             self.procs.append(subprocess.Popen([sys.executable, "-m", "astrodyn.bench.calls", "--load-worker",
                                                 str(self.seconds)], stdin=subprocess.DEVNULL, env=env))
@@ -91,15 +93,6 @@ class Load:
             except subprocess.TimeoutExpired:
                 os.kill(p.pid, signal.SIGKILL)
                 p.wait(timeout=10)
-
-
-def _env_for(src: str | None, **extra) -> dict:
-    """Environment of a child process that imports astrodyn from the source tree ``src``
-    (``None``: this one)."""
-    env = {**os.environ, **extra}
-    if src is not None:
-        env["PYTHONPATH"] = src + os.pathsep + env.get("PYTHONPATH", "")
-    return env
 
 
 # --------------------------------------------------------------------------- thresholds
@@ -285,7 +278,6 @@ def public_api_cases(repeat: int, threads: int) -> dict[str, float]:
     """Seconds per call of the public calls that exist before and after issue 15, at
     ``threads`` numba threads.  Self-contained (imports inside) so that ``--baseline`` runs
     the same source against an older tree in a child process."""
-    import time
 
     import numba
     import numpy as np
@@ -296,14 +288,7 @@ def public_api_cases(repeat: int, threads: int) -> dict[str, float]:
     numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
 
     def best(fn, number):
-        fn()
-        out = float("inf")
-        for _ in range(repeat):
-            t0 = time.perf_counter()
-            for _ in range(number):
-                fn()
-            out = min(out, (time.perf_counter() - t0) / number)
-        return out
+        return best_seconds_per_call(fn, number, repeat)
 
     inertia, w0 = np.array([1.0, 2.0, 3.0]), np.array([1e-3, 1.0, 1e-3])
     q0 = np.array([1.0, 0.0, 0.0, 0.0])
@@ -327,16 +312,7 @@ def public_api_cases(repeat: int, threads: int) -> dict[str, float]:
 
 def _public_cases_in(src: str | None, repeat: int, threads: int) -> dict[str, float]:
     """:func:`public_api_cases` in a child process importing astrodyn from ``src``."""
-    import inspect
-    import json
-
-    code = inspect.getsource(public_api_cases) + (
-        f"\nimport json\nprint(json.dumps(public_api_cases({int(repeat)}, {int(threads)})))\n")
-    done = subprocess.run([sys.executable, "-c", code], env=_env_for(src), capture_output=True, text=True,
-                          timeout=900, stdin=subprocess.DEVNULL)
-    if done.returncode != 0:
-        raise RuntimeError(f"bench calls --baseline: child failed: {done.stderr.strip().splitlines()[-1:]}")
-    return json.loads(done.stdout.strip().splitlines()[-1])
+    return call_in_tree(public_api_cases, (int(repeat), int(threads)), src)
 
 
 def compare(baseline: str, repeat: int, rounds: int = 3) -> dict:

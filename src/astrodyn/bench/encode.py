@@ -9,7 +9,10 @@
   baseline), :func:`astrodyn.messages.encode_orbit_batch` / ``encode_attitude_batch``
   (list of payloads), the list plus :func:`~astrodyn.messages.encode_batch` framing
   (what the propagator did before), and the framed encoders plus
-  :func:`~astrodyn.messages.batch_envelope` (what it does now).
+  :func:`~astrodyn.messages.batch_envelope` (what it does now);
+* us per single message: ``encode`` + validation, ``decode`` (parse + validation) and
+  ``check_state``; with ``--baseline SRC`` also for the tree in ``SRC`` (before/after in
+  one run, medians of 3 alternated rounds).
 
 Every timing is the best of K repeats (the machine is shared; the best is the least
 disturbed).  The outputs are compared byte for byte before timing.
@@ -19,12 +22,14 @@ from __future__ import annotations
 
 import argparse
 import os
+import statistics
+import sys
 import time
 
 import numpy as np
 
 from astrodyn import messages as m
-from astrodyn.bench import cpu_model
+from astrodyn.bench import best_seconds_per_call, call_in_tree, cpu_model
 from astrodyn.messages import shortest
 
 MU_EARTH = 3.986004418e14
@@ -99,11 +104,46 @@ def message_rows(n: int, repeat: int) -> list[tuple[str, str, float]]:
     return rows
 
 
+def single_message_cases(repeat: int) -> dict[str, float]:
+    """Seconds per message of the single-message calls that exist before and after issue 12
+    (``encode(msg, kind)`` with validation, ``decode(payload, kind)`` = parse + validate,
+    ``check_state`` on a canonical payload), for orbit, attitude and event messages.
+    Self-contained (imports inside) so that ``--baseline`` runs it against an older tree."""
+
+    from astrodyn import messages as m
+
+    def best(fn, number=20000):
+        return best_seconds_per_call(fn, number, repeat)
+
+    msgs = {
+        "orbit": m.orbit_message(1234.5, 12345, "kepler", [6878137.123456789, 1234.567890123, -98765.43210987],
+                                 [-12.3456789, 7612.345678901, 1.234567e-3], 3.986004418e14),
+        "attitude": m.attitude_message(1234.5, 12345, "torque_free",
+                                       [0.9238795325112867, 0.0, 0.3826834323650898, 0.0], [0.1, -0.02, 3e-5]),
+        "event": m.event_message(1234.5, 3, "orbit", "restart", "restarted from step 17 (pid 1234 -> 1240)"),
+    }
+    out = {}
+    for kind, msg in msgs.items():
+        data = m.encode(msg, kind)
+        out[f"{kind}: encode + validate"] = best(lambda msg=msg, kind=kind: m.encode(msg, kind))
+        out[f"{kind}: decode + validate"] = best(lambda data=data, kind=kind: m.decode(data, kind))
+        if kind in ("orbit", "attitude"):
+            out[f"{kind}: check_state (canonical payload)"] = best(lambda data=data, kind=kind: m.check_state(data, kind))
+    return out
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="astrodyn bench encode", description=__doc__.splitlines()[0])
     ap.add_argument("--bodies", type=int, default=1000, help="bodies per batch (default 1000)")
     ap.add_argument("--repeat", type=int, default=7, help="repeats; the best is reported (default 7)")
+    ap.add_argument("--baseline", default=None, metavar="SRC",
+                    help="also time the single-message calls with astrodyn imported from this source tree (before/after "
+                         "in one run, alternated, in child processes)")
     args = ap.parse_args(argv)
+    if args.baseline is not None and not os.path.isfile(os.path.join(args.baseline, "astrodyn", "__init__.py")):
+        print(f"astrodyn bench encode: --baseline: expected a source tree holding astrodyn/, got {args.baseline!r}",
+              file=sys.stderr)
+        return 2
     print(f"# encode benchmark on {cpu_model()}, load average {os.getloadavg()[0]:.1f} (best of {args.repeat})")
     print("\n| values | compiled ns/float | repr ns/float | ratio |\n|---|---|---|---|")
     for name, compiled, python in float_rows(args.repeat):
@@ -111,6 +151,18 @@ def main(argv: list[str] | None = None) -> int:
     print(f"\n| message ({args.bodies} bodies per call) | path | us/message |\n|---|---|---|")
     for kind, label, us in message_rows(args.bodies, args.repeat):
         print(f"| {kind} | {label} | {us:.3f} |")
+    trees = [("before", os.path.abspath(args.baseline)), ("after", None)] if args.baseline else [("now", None)]
+    rounds: dict[str, dict[str, list[float]]] = {label: {} for label, _ in trees}
+    for _ in range(3 if args.baseline else 1):  # alternated: a change of the machine's load hits both alike
+        for label, src in trees:
+            for case, secs in call_in_tree(single_message_cases, (args.repeat,), src).items():
+                rounds[label].setdefault(case, []).append(secs)
+    cases = list(rounds[trees[-1][0]])
+    print(f"\n| single message | {' | '.join(f'{label} us' for label, _ in trees)} |\n|---|{'---|' * len(trees)}")
+    for case in cases:
+        cells = [f"{statistics.median(rounds[label][case]) * 1e6:.2f}" if case in rounds[label] else "-"
+                 for label, _ in trees]
+        print(f"| {case} | {' | '.join(cells)} |")
     return 0
 
 

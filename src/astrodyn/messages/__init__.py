@@ -40,12 +40,19 @@ epoch, ``seq`` counts the messages of one channel from 0 without gaps. SI units:
 v in m/s, mu in m^3/s^2, w in rad/s (body components), q = (e0, e1, e2, e3) scalar first
 (Baruh ch. 7 Euler parameters, ``v_body = C(q) @ v_inertial``).
 
-:func:`decode` checks a payload against its schema with a hand-written validator (a
-few us, a fraction of ``json.loads`` itself; no jsonschema dependency; tested to agree
-with the jsonschema package) plus the one rule a JSON Schema cannot state: ``|q| = 1``
-within :data:`QUAT_NORM_TOL`; :func:`check_state` reaches the same verdict on the batch
-encoders' canonical layout with one precompiled regex (the logger's hot path). Errors are
-:class:`MessageError` whose text names the field and what was expected, e.g.
+Each message type is one msgspec Struct (:data:`MESSAGE_TYPES`: :class:`OrbitState`,
+:class:`AttitudeState`, :class:`CrossCheck`, :class:`Event`, :class:`Status`); its JSON
+Schema (:func:`json_schema`, stored with every MCAP channel), :func:`validate` and
+:func:`decode` (msgspec's typed decoder: about 1 us per state message, docs/benchmarks.md)
+follow from it, plus the one rule a JSON Schema cannot state, ``|q| = 1`` within
+:data:`QUAT_NORM_TOL` (``AttitudeState.__post_init__``).  :func:`encode` writes the fields
+in definition order with Python's float ``repr``, byte for byte what the compiled batch
+encoders write (msgspec's own float text differs from ``repr`` in exponent form, e.g.
+``1e-05`` / ``0.00001``, so it is not used for encoding).  :func:`check_state` reaches
+the same verdict as :func:`decode` on the batch encoders' canonical layout with one
+precompiled regex (the logger's hot path); it and the compiled formatter and ingest are
+tested field by field against the definitions (tests/test_message_definitions.py).
+Errors are :class:`MessageError` whose text names the field and what was expected, e.g.
 ``orbit.r: expected array of 3 finite numbers, got [1.0, "x"]``.
 
 Batch envelope
@@ -74,12 +81,22 @@ import math
 import re
 import struct
 from collections.abc import Iterable, Sequence
-from typing import Any
+from typing import Annotated, Any, Literal
 
+import msgspec
+import msgspec.inspect
 import numpy as np
+from msgspec import Meta
 
 __all__ = [
     "MessageError",
+    "OrbitState",
+    "AttitudeState",
+    "CrossCheck",
+    "Event",
+    "Status",
+    "MESSAGE_TYPES",
+    "json_schema",
     "ORBIT_MODELS",
     "ATTITUDE_MODELS",
     "ORBIT_SCHEMA",
@@ -234,142 +251,138 @@ def kind_of_key(key: str) -> str | None:
 
 
 # ---------------------------------------------------------------------------------------
-# JSON Schemas (draft 2020-12)
+# Message types: each defined once, as a msgspec Struct.  Its JSON Schema (stored in the
+# MCAP files), its validation and decoding all follow from this definition; encoding keeps
+# the field order of the definition and Python's float repr (see :func:`encode`).
+
+_SEQ_DESCRIPTION = "message counter of this channel: 0, 1, 2, ... without gaps"
+_T = Annotated[float, Meta(description="time since the scenario epoch, s")]
+_Seq = Annotated[int, Meta(ge=0, le=MAX_SEQ, description=_SEQ_DESCRIPTION)]
+_NAME_META = dict(pattern=f"^{NAME_PATTERN}$", max_length=128)
+
+
+def _vec(n: int, description: str) -> Any:
+    return Annotated[list[float], Meta(min_length=n, max_length=n, description=description)]
+
+
+def _enum(values: tuple[str, ...], description: str | None = None) -> Any:
+    """One of ``values``; error messages list them in this order (msgspec sorts them)."""
+    return Annotated[Literal[values], Meta(description=description, extra={"values": values})]
+
+
+def _name(description: str, what: str) -> Any:
+    return Annotated[str, Meta(**_NAME_META, description=description, extra={"expected": f"{what} matching {NAME_PATTERN}"})]
+
+
+_NAME_FULL = re.compile(f"^{NAME_PATTERN}$")
+_DETAIL = Annotated[str, Meta(max_length=4096, description="human-readable detail",
+                              extra={"expected": "a string of at most 4096 characters"})]
+
+
+class OrbitState(msgspec.Struct, forbid_unknown_fields=True):
+    """Translational state of one body relative to the central body, SI units."""
+
+    t: _T
+    seq: _Seq
+    model: _enum(ORBIT_MODELS, "model that produced the state")
+    r: _vec(3, "position, m, in `frame`")
+    v: _vec(3, "velocity, m/s, in `frame`")
+    mu: Annotated[float, Meta(gt=0, description="gravitational parameter, m^3/s^2")]
+    frame: _name("inertial frame of r and v, e.g. GCRF", "a frame name")
+
+
+class AttitudeState(msgspec.Struct, forbid_unknown_fields=True):
+    """Rotational state of one body: Euler parameters q = (e0, e1, e2, e3), scalar first, unit norm, v_body = C(q) v_inertial (Baruh ch. 7); w body angular velocity in body axes."""
+
+    t: _T
+    seq: _Seq
+    model: _enum(ATTITUDE_MODELS, "model that produced the state")
+    q: _vec(4, "Euler parameters, scalar first, |q| = 1")
+    w: _vec(3, "angular velocity in body axes, rad/s")
+
+    def __post_init__(self) -> None:
+        q = self.q
+        norm = math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
+        if not abs(norm - 1.0) <= QUAT_NORM_TOL:  # a rule a JSON Schema cannot state
+            raise ValueError(f"attitude.q: expected a unit quaternion (| |q| - 1 | <= {QUAT_NORM_TOL:g}), got |q| = {norm!r}")
+
+
+class CrossCheck(msgspec.Struct, forbid_unknown_fields=True):
+    """astrodyn state minus the reference integrator's state for one body."""
+
+    t: _T
+    seq: _Seq
+    dr: _vec(3, "position difference, m")
+    dv: _vec(3, "velocity difference, m/s")
+    dr_norm: Annotated[float, Meta(ge=0, description="|dr|, m")]
+    dv_norm: Annotated[float, Meta(ge=0, description="|dv|, m/s")]
+    reference: _enum(CROSSCHECK_REFERENCES, "reference integrator")
+
+
+class Event(msgspec.Struct, forbid_unknown_fields=True):
+    """Something that happened to a process of the run (start, restart, stop, error, ...)."""
+
+    t: _T
+    seq: _Seq
+    process: _name("process name, e.g. orbit, attitude, logger, runner", "a process name")
+    kind: Annotated[str, Meta(pattern="^[a-z][a-z_]{0,31}$", max_length=32,
+                              description="start, restart, stop, error, pause, resume, rate, gap, ... (lower case)",
+                              extra={"expected": "a lower-case word matching ^[a-z][a-z_]{0,31}$"})]
+    detail: _DETAIL
+
+
+class Status(msgspec.Struct, forbid_unknown_fields=True, omit_defaults=True):
+    """State of a running `serve` (also the reply of the status queryable)."""
+
+    t: Annotated[float, Meta(description="simulation time reached, s since the scenario epoch")]
+    seq: _Seq
+    state: _enum(STATUS_STATES)
+    real_time_factor: Annotated[float, Meta(ge=0, description="sim seconds per wall second")]
+    rate: Annotated[float, Meta(gt=0, description="output rate, Hz")] | msgspec.UnsetType = msgspec.UNSET
+    messages: Annotated[int, Meta(ge=0, le=MAX_SEQ, description="messages published")] | msgspec.UnsetType = msgspec.UNSET
+    processes: Annotated[
+        dict[Annotated[str, Meta(**_NAME_META)], Annotated[str, Meta(max_length=64)]],
+        Meta(description="process name -> its state (e.g. alive, dead, restarting)",
+             extra={"expected": "an object name -> state string"}),
+    ] | msgspec.UnsetType = msgspec.UNSET
+    detail: _DETAIL | msgspec.UnsetType = msgspec.UNSET
+
+
+#: kind -> message type (the one definition of each; docs/architecture.md, section 5)
+MESSAGE_TYPES: dict[str, type[msgspec.Struct]] = {
+    "orbit": OrbitState,
+    "attitude": AttitudeState,
+    "crosscheck": CrossCheck,
+    "event": Event,
+    "status": Status,
+}
+
+
+def json_schema(message_type: type[msgspec.Struct]) -> dict:
+    """The JSON Schema (draft 2020-12) of a message type, as stored with its MCAP channels:
+    self-contained (no ``$ref``), titled ``astrodyn.<Name>``, described by the docstring."""
+    generated = msgspec.json.schema(message_type)
+    body = dict(generated["$defs"][message_type.__name__])
+    body.pop("title", None)
+    body.pop("description", None)
+    name = message_type.__name__
+    return {"$schema": _DRAFT, "$id": f"https://astrodyn.invalid/schemas/{name}.json", "title": f"astrodyn.{name}",
+            "description": " ".join((message_type.__doc__ or "").split()), **body}
+
 
 _DRAFT = "https://json-schema.org/draft/2020-12/schema"
-_FINITE = {"type": "number"}  # JSON has no NaN/inf; decode() also rejects the Python extensions
-_T = {"type": "number", "description": "time since the scenario epoch, s"}
-_SEQ = {
-    "type": "integer",
-    "minimum": 0,
-    "maximum": MAX_SEQ,
-    "description": "message counter of this channel: 0, 1, 2, ... without gaps",
-}
-
-
-def _vec(n: int, description: str) -> dict:
-    return {"type": "array", "items": _FINITE, "minItems": n, "maxItems": n, "description": description}
-
-
-def _name_string(description: str) -> dict:
-    return {"type": "string", "pattern": f"^{NAME_PATTERN}$", "description": description}
-
-
-ORBIT_SCHEMA: dict = {
-    "$schema": _DRAFT,
-    "$id": "https://astrodyn.invalid/schemas/OrbitState.json",
-    "title": "astrodyn.OrbitState",
-    "description": "Translational state of one body relative to the central body, SI units.",
-    "type": "object",
-    "properties": {
-        "t": _T,
-        "seq": _SEQ,
-        "model": {"enum": list(ORBIT_MODELS), "description": "model that produced the state"},
-        "r": _vec(3, "position, m, in `frame`"),
-        "v": _vec(3, "velocity, m/s, in `frame`"),
-        "mu": {"type": "number", "exclusiveMinimum": 0, "description": "gravitational parameter, m^3/s^2"},
-        "frame": _name_string("inertial frame of r and v, e.g. GCRF"),
-    },
-    "required": ["t", "seq", "model", "r", "v", "mu", "frame"],
-    "additionalProperties": False,
-}
-
-ATTITUDE_SCHEMA: dict = {
-    "$schema": _DRAFT,
-    "$id": "https://astrodyn.invalid/schemas/AttitudeState.json",
-    "title": "astrodyn.AttitudeState",
-    "description": (
-        "Rotational state of one body: Euler parameters q = (e0, e1, e2, e3), scalar first, "
-        "unit norm, v_body = C(q) v_inertial (Baruh ch. 7); w body angular velocity in body axes."
-    ),
-    "type": "object",
-    "properties": {
-        "t": _T,
-        "seq": _SEQ,
-        "model": {"enum": list(ATTITUDE_MODELS), "description": "model that produced the state"},
-        "q": _vec(4, "Euler parameters, scalar first, |q| = 1"),
-        "w": _vec(3, "angular velocity in body axes, rad/s"),
-    },
-    "required": ["t", "seq", "model", "q", "w"],
-    "additionalProperties": False,
-}
-
-CROSSCHECK_SCHEMA: dict = {
-    "$schema": _DRAFT,
-    "$id": "https://astrodyn.invalid/schemas/CrossCheck.json",
-    "title": "astrodyn.CrossCheck",
-    "description": "astrodyn state minus the reference integrator's state for one body.",
-    "type": "object",
-    "properties": {
-        "t": _T,
-        "seq": _SEQ,
-        "dr": _vec(3, "position difference, m"),
-        "dv": _vec(3, "velocity difference, m/s"),
-        "dr_norm": {"type": "number", "minimum": 0, "description": "|dr|, m"},
-        "dv_norm": {"type": "number", "minimum": 0, "description": "|dv|, m/s"},
-        "reference": {"enum": list(CROSSCHECK_REFERENCES), "description": "reference integrator"},
-    },
-    "required": ["t", "seq", "dr", "dv", "dr_norm", "dv_norm", "reference"],
-    "additionalProperties": False,
-}
-
-EVENT_SCHEMA: dict = {
-    "$schema": _DRAFT,
-    "$id": "https://astrodyn.invalid/schemas/Event.json",
-    "title": "astrodyn.Event",
-    "description": "Something that happened to a process of the run (start, restart, stop, error, ...).",
-    "type": "object",
-    "properties": {
-        "t": _T,
-        "seq": _SEQ,
-        "process": _name_string("process name, e.g. orbit, attitude, logger, runner"),
-        "kind": {
-            "type": "string",
-            "pattern": "^[a-z][a-z_]{0,31}$",
-            "description": "start, restart, stop, error, pause, resume, rate, gap, ... (lower case)",
-        },
-        "detail": {"type": "string", "maxLength": 4096, "description": "human-readable detail"},
-    },
-    "required": ["t", "seq", "process", "kind", "detail"],
-    "additionalProperties": False,
-}
-
-STATUS_SCHEMA: dict = {
-    "$schema": _DRAFT,
-    "$id": "https://astrodyn.invalid/schemas/Status.json",
-    "title": "astrodyn.Status",
-    "description": "State of a running `serve` (also the reply of the status queryable).",
-    "type": "object",
-    "properties": {
-        "t": {"type": "number", "description": "simulation time reached, s since the scenario epoch"},
-        "seq": _SEQ,
-        "state": {"enum": list(STATUS_STATES)},
-        "real_time_factor": {"type": "number", "minimum": 0, "description": "sim seconds per wall second"},
-        "rate": {"type": "number", "exclusiveMinimum": 0, "description": "output rate, Hz"},
-        "messages": {"type": "integer", "minimum": 0, "maximum": MAX_SEQ, "description": "messages published"},
-        "processes": {
-            "type": "object",
-            "description": "process name -> its state (e.g. alive, dead, restarting)",
-            "propertyNames": {"pattern": f"^{NAME_PATTERN}$"},
-            "additionalProperties": {"type": "string", "maxLength": 64},
-        },
-        "detail": {"type": "string", "maxLength": 4096},
-    },
-    "required": ["t", "seq", "state", "real_time_factor"],
-    "additionalProperties": False,
-}
+ORBIT_SCHEMA: dict = json_schema(OrbitState)
+ATTITUDE_SCHEMA: dict = json_schema(AttitudeState)
+CROSSCHECK_SCHEMA: dict = json_schema(CrossCheck)
+EVENT_SCHEMA: dict = json_schema(Event)
+STATUS_SCHEMA: dict = json_schema(Status)
 
 #: schema name -> schema; the names are the schema titles.
 SCHEMAS: dict[str, dict] = {
     s["title"]: s for s in (ORBIT_SCHEMA, ATTITUDE_SCHEMA, CROSSCHECK_SCHEMA, EVENT_SCHEMA, STATUS_SCHEMA)
 }
-_SCHEMA_OF_KIND = {
-    "orbit": ORBIT_SCHEMA,
-    "attitude": ATTITUDE_SCHEMA,
-    "crosscheck": CROSSCHECK_SCHEMA,
-    "event": EVENT_SCHEMA,
-    "status": STATUS_SCHEMA,
-}
+_SCHEMA_OF_KIND = {kind: SCHEMAS[f"astrodyn.{t.__name__}"] for kind, t in MESSAGE_TYPES.items()}
+_KIND_OF_TITLE = {f"astrodyn.{t.__name__}": kind for kind, t in MESSAGE_TYPES.items()}
 
 
 def schema_for_key(key: str) -> tuple[str, dict] | None:
@@ -385,7 +398,9 @@ def schema_for_key(key: str) -> tuple[str, dict] | None:
 
 
 # ---------------------------------------------------------------------------------------
-# Validation (hand-written: the same rules as the schemas above, tested against jsonschema)
+# Validation and decoding: msgspec, from the definitions above.  When msgspec refuses a
+# message, :func:`_explain` reads the same definition to say which field is wrong, what it
+# expected and what it got, e.g. ``orbit.r: expected array of 3 finite numbers, got [1.0, "x"]``.
 
 
 def _show(value: Any) -> str:
@@ -401,136 +416,92 @@ def _is_number(x: Any) -> bool:
     return (type(x) is float or type(x) is int) and math.isfinite(x)
 
 
-def _number(msg: dict, kind: str, field: str, lo: float | None = None, lo_strict: bool = False) -> None:
-    x = msg[field]
-    if type(x) is not float and type(x) is not int or not math.isfinite(x):
-        raise MessageError(f"{kind}.{field}: expected a finite number, got {_show(x)}")
-    if lo is not None and (x <= lo if lo_strict else x < lo):
-        raise MessageError(f"{kind}.{field}: expected {'>' if lo_strict else '>='} {lo}, got {_show(x)}")
+@functools.cache
+def _fields(message_type: type[msgspec.Struct]) -> tuple[tuple[str, Any, bool], ...]:
+    """(name, msgspec.inspect type, required) of each field, in definition order."""
+    info = msgspec.inspect.type_info(message_type)
+    out = []
+    for f in info.fields:
+        t = f.type
+        if isinstance(t, msgspec.inspect.UnionType):  # X | UNSET: the optional field's own type
+            t = next(a for a in t.types if not isinstance(a, msgspec.inspect.UnsetType))
+        out.append((f.name, t, f.required))
+    return tuple(out)
 
 
-def _seq(msg: dict, kind: str, field: str = "seq") -> None:
-    x = msg[field]
-    if type(x) is float and x.is_integer():  # JSON Schema's "integer" admits 3.0
-        x = msg[field] = int(x)
-    if type(x) is not int or not 0 <= x <= MAX_SEQ:
-        raise MessageError(f"{kind}.{field}: expected an integer 0 <= {field} <= 2**53-1, got {_show(x)}")
+def _field_problem(kind: str, name: str, t: Any, x: Any) -> str | None:
+    """What is wrong with value ``x`` of field ``name`` of type ``t``, or None."""
+    ins = msgspec.inspect
+    extra = {}
+    if isinstance(t, ins.Metadata):
+        extra, t = t.extra or {}, t.type
+    where = f"{kind}.{name}"
+    if isinstance(t, ins.FloatType):
+        if not _is_number(x):
+            return f"{where}: expected a finite number, got {_show(x)}"
+        if t.gt is not None and not x > t.gt:
+            return f"{where}: expected > {float(t.gt)}, got {_show(x)}"
+        if t.ge is not None and not x >= t.ge:
+            return f"{where}: expected >= {float(t.ge)}, got {_show(x)}"
+        return None
+    if isinstance(t, ins.IntType):
+        if type(x) is not int or (t.ge is not None and x < t.ge) or (t.le is not None and x > t.le):
+            return f"{where}: expected an integer 0 <= {name} <= 2**53-1, got {_show(x)}"
+        return None
+    if isinstance(t, ins.LiteralType):
+        values = extra.get("values", t.values)
+        if type(x) is not str or x not in values:
+            return f"{where}: expected one of {', '.join(values)}, got {_show(x)}"
+        return None
+    if isinstance(t, ins.ListType):
+        n = t.min_length
+        if type(x) is not list or len(x) != n or not all(_is_number(c) for c in x):
+            return f"{where}: expected array of {n} finite numbers, got {_show(x)}"
+        return None
+    if isinstance(t, ins.StrType):
+        if type(x) is not str or (t.max_length is not None and len(x) > t.max_length) or (
+                t.pattern is not None and not re.search(t.pattern, x)):
+            return f"{where}: expected {extra.get('expected', 'a string')}, got {_show(x)}"
+        return None
+    if isinstance(t, ins.DictType):
+        key_t, value_t = t.key_type, t.value_type
+        if type(x) is not dict or not all(
+                _field_problem(kind, name, key_t, k) is None and _field_problem(kind, name, value_t, v) is None
+                for k, v in x.items()):
+            return f"{where}: expected {extra.get('expected', 'an object')}, got {_show(x)}"
+        return None
+    return None  # pragma: no cover - every field type of the definitions is handled above
 
 
-def _vector(msg: dict, kind: str, field: str, n: int) -> None:
-    x = msg[field]
-    if type(x) is not list or len(x) != n:
-        raise MessageError(f"{kind}.{field}: expected array of {n} finite numbers, got {_show(x)}")
-    for c in x:
-        if type(c) is not float and type(c) is not int or not math.isfinite(c):
-            raise MessageError(f"{kind}.{field}: expected array of {n} finite numbers, got {_show(x)}")
-
-
-def _enum(msg: dict, kind: str, field: str, allowed: Sequence[str]) -> None:
-    x = msg[field]
-    if type(x) is not str or x not in allowed:
-        raise MessageError(f"{kind}.{field}: expected one of {', '.join(allowed)}, got {_show(x)}")
-
-
-def _string(msg: dict, kind: str, field: str, pattern: re.Pattern | None, what: str, max_len: int = 4096) -> None:
-    x = msg[field]
-    if type(x) is not str or len(x) > max_len or (pattern is not None and not pattern.search(x)):
-        raise MessageError(f"{kind}.{field}: expected {what}, got {_show(x)}")
-
-
-def _keys(msg: Any, kind: str, required: tuple[str, ...], optional: tuple[str, ...] = ()) -> None:
+def _explain(kind: str, msg: Any, fallback: str) -> MessageError:
+    """The first problem of decoded JSON ``msg`` against message type ``kind``, read off its
+    definition; ``fallback`` (msgspec's own text) if none is found."""
     if type(msg) is not dict:
-        raise MessageError(f"{kind}: expected a JSON object, got {_show(msg)}")
-    for k in required:
-        if k not in msg:
-            raise MessageError(f"{kind}.{k}: expected a value (required field), got nothing")
-    if len(msg) != len(required):
-        extra = sorted(k for k in msg if k not in required and k not in optional)
-        if extra:
-            raise MessageError(f"{kind}: expected only fields {', '.join(required + optional)}, got extra {', '.join(map(str, extra))}")
+        return MessageError(f"{kind}: expected a JSON object, got {_show(msg)}")
+    fields = _fields(MESSAGE_TYPES[kind])
+    for name, _, required in fields:
+        if required and name not in msg:
+            return MessageError(f"{kind}.{name}: expected a value (required field), got nothing")
+    known = [name for name, _, _ in fields]
+    extra = sorted(str(k) for k in msg if k not in known)
+    if extra:
+        return MessageError(f"{kind}: expected only fields {', '.join(known)}, got extra {', '.join(extra)}")
+    for name, t, _ in fields:
+        if name in msg:
+            problem = _field_problem(kind, name, t, msg[name])
+            if problem:
+                return MessageError(problem)
+    fallback = re.sub(r" - at `\$[^`]*`$", "", fallback)
+    return MessageError(fallback if fallback.startswith(f"{kind}.") else f"{kind}: {fallback}")
 
 
-_NAME_FULL = re.compile(f"^{NAME_PATTERN}$")
-_EVENT_KIND = re.compile("^[a-z][a-z_]{0,31}$")
-_ORBIT_FIELDS = ("t", "seq", "model", "r", "v", "mu", "frame")
-_ATTITUDE_FIELDS = ("t", "seq", "model", "q", "w")
-_CROSSCHECK_FIELDS = ("t", "seq", "dr", "dv", "dr_norm", "dv_norm", "reference")
-_EVENT_FIELDS = ("t", "seq", "process", "kind", "detail")
-_STATUS_FIELDS = ("t", "seq", "state", "real_time_factor")
-_STATUS_OPTIONAL = ("rate", "messages", "processes", "detail")
+@functools.cache
+def _decoder(kind: str) -> msgspec.json.Decoder:
+    return msgspec.json.Decoder(MESSAGE_TYPES[kind])
 
 
-def _check_orbit(m: Any) -> None:
-    _keys(m, "orbit", _ORBIT_FIELDS)
-    _number(m, "orbit", "t")
-    _seq(m, "orbit")
-    _enum(m, "orbit", "model", ORBIT_MODELS)
-    _vector(m, "orbit", "r", 3)
-    _vector(m, "orbit", "v", 3)
-    _number(m, "orbit", "mu", 0.0, lo_strict=True)
-    _string(m, "orbit", "frame", _NAME_FULL, f"a frame name matching {NAME_PATTERN}", 128)
-
-
-def _check_attitude(m: Any) -> None:
-    _keys(m, "attitude", _ATTITUDE_FIELDS)
-    _number(m, "attitude", "t")
-    _seq(m, "attitude")
-    _enum(m, "attitude", "model", ATTITUDE_MODELS)
-    _vector(m, "attitude", "q", 4)
-    _vector(m, "attitude", "w", 3)
-    q = m["q"]
-    norm = math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
-    if not abs(norm - 1.0) <= QUAT_NORM_TOL:
-        raise MessageError(f"attitude.q: expected a unit quaternion (| |q| - 1 | <= {QUAT_NORM_TOL:g}), got |q| = {norm!r}")
-
-
-def _check_crosscheck(m: Any) -> None:
-    _keys(m, "crosscheck", _CROSSCHECK_FIELDS)
-    _number(m, "crosscheck", "t")
-    _seq(m, "crosscheck")
-    _vector(m, "crosscheck", "dr", 3)
-    _vector(m, "crosscheck", "dv", 3)
-    _number(m, "crosscheck", "dr_norm", 0.0)
-    _number(m, "crosscheck", "dv_norm", 0.0)
-    _enum(m, "crosscheck", "reference", CROSSCHECK_REFERENCES)
-
-
-def _check_event(m: Any) -> None:
-    _keys(m, "event", _EVENT_FIELDS)
-    _number(m, "event", "t")
-    _seq(m, "event")
-    _string(m, "event", "process", _NAME_FULL, f"a process name matching {NAME_PATTERN}", 128)
-    _string(m, "event", "kind", _EVENT_KIND, "a lower-case word matching ^[a-z][a-z_]{0,31}$", 32)
-    _string(m, "event", "detail", None, "a string of at most 4096 characters")
-
-
-def _check_status(m: Any) -> None:
-    _keys(m, "status", _STATUS_FIELDS, _STATUS_OPTIONAL)
-    _number(m, "status", "t")
-    _seq(m, "status")
-    _enum(m, "status", "state", STATUS_STATES)
-    _number(m, "status", "real_time_factor", 0.0)
-    if "rate" in m:
-        _number(m, "status", "rate", 0.0, lo_strict=True)
-    if "messages" in m:
-        _seq(m, "status", "messages")
-    if "processes" in m:
-        procs = m["processes"]
-        if type(procs) is not dict or not all(
-            _NAME_FULL.search(k) and type(v) is str and len(v) <= 64 for k, v in procs.items()
-        ):
-            raise MessageError(f"status.processes: expected an object name -> state string, got {_show(procs)}")
-    if "detail" in m:
-        _string(m, "status", "detail", None, "a string of at most 4096 characters")
-
-
-_VALIDATORS = {
-    "orbit": _check_orbit,
-    "attitude": _check_attitude,
-    "crosscheck": _check_crosscheck,
-    "event": _check_event,
-    "status": _check_status,
-}
+def _as_dict(obj: msgspec.Struct) -> dict:
+    return msgspec.to_builtins(obj) if type(obj) is Status else msgspec.structs.asdict(obj)
 
 
 def _kind(key_or_kind: str) -> str:
@@ -541,10 +512,10 @@ def _kind(key_or_kind: str) -> str:
 
 @functools.lru_cache(maxsize=65536)
 def _kind_of_str(key_or_kind: str) -> str:
-    if key_or_kind in _VALIDATORS:
+    if key_or_kind in MESSAGE_TYPES:
         return key_or_kind
-    if isinstance(key_or_kind, str) and key_or_kind in SCHEMAS:  # a schema name works too
-        return next(k for k, s in _SCHEMA_OF_KIND.items() if s["title"] == key_or_kind)
+    if key_or_kind in _KIND_OF_TITLE:  # a schema name works too
+        return _KIND_OF_TITLE[key_or_kind]
     kind = kind_of_key(key_or_kind)
     if kind is None:
         raise MessageError(f"key: expected a key that carries messages (orbit, attitude, crosscheck, @event, @status), got {key_or_kind!r}")
@@ -552,12 +523,20 @@ def _kind_of_str(key_or_kind: str) -> str:
 
 
 def validate(msg: Any, key_or_kind: str) -> dict:
-    """Check a decoded message against its type; return it (seq normalized to int) or raise.
+    """Check a decoded message (a dict) against its type; return it or raise MessageError.
 
     ``key_or_kind``: a key (``astrodyn/s/sat1/orbit``), a kind (``"orbit"``, ``"attitude"``,
     ``"crosscheck"``, ``"event"``, ``"status"``) or a schema name (``"astrodyn.OrbitState"``).
     """
-    _VALIDATORS[_kind(key_or_kind)](msg)
+    kind = _kind(key_or_kind)
+    if type(msg) is dict and "seq" in msg and type(msg["seq"]) is float and msg["seq"].is_integer():
+        msg["seq"] = int(msg["seq"])  # JSON Schema's "integer" admits 3.0
+    try:
+        if type(msg) is not dict or _find_nonfinite(msg, "") is not None:  # msgspec.convert admits inf
+            raise msgspec.ValidationError("not a dict of finite values")
+        msgspec.convert(msg, MESSAGE_TYPES[kind], strict=True)
+    except msgspec.ValidationError as exc:
+        raise _explain(kind, msg, str(exc)) from None
     return msg
 
 
@@ -566,20 +545,28 @@ def _reject_constant(name: str) -> Any:
 
 
 def decode(data: bytes | bytearray | memoryview, key_or_kind: str) -> dict:
-    """Parse a payload and validate it (see :func:`validate`); raise MessageError if bad.
+    """Parse a payload and validate it against its message type; return it as a dict (fields
+    in definition order; optional fields of a Status only when present).
 
-    NaN / Infinity literals (a Python json extension) are rejected, as are invalid UTF-8,
-    invalid JSON and anything that is not the message type of ``key_or_kind``.
+    Raises MessageError naming the field for anything that is not the message type of
+    ``key_or_kind``: invalid UTF-8, invalid JSON, NaN / Infinity literals, numbers beyond
+    float64, missing or extra fields, a wrong type or range.
     """
-    validator = _VALIDATORS[_kind(key_or_kind)]
+    kind = _kind(key_or_kind)
     try:
+        return _as_dict(_decoder(kind).decode(data))
+    except (msgspec.DecodeError, ValueError) as exc:  # ValidationError; UnicodeDecodeError in a key
+        fallback = str(exc)
+    try:  # the slow path: say what is wrong, in terms of the definition
         msg = json.loads(bytes(data), parse_constant=_reject_constant)
     except MessageError:
         raise
     except (ValueError, TypeError, RecursionError) as exc:  # JSONDecodeError, UnicodeDecodeError
         raise MessageError(f"payload: expected UTF-8 JSON, got {_show(bytes(data[:40]).decode('utf-8', 'replace'))} ({exc})") from None
-    validator(msg)
-    return msg
+    if type(msg) is dict and type(msg.get("seq")) is float and msg["seq"].is_integer():
+        msg["seq"] = int(msg["seq"])  # JSON Schema's "integer" admits 3.0: valid, normalized
+        return validate(msg, kind)
+    raise _explain(kind, msg, fallback)
 
 
 def is_valid(data: bytes | dict, key_or_kind: str) -> bool:
@@ -653,7 +640,7 @@ def _fast_attitude(data: bytes) -> tuple[float, int] | None:
     t, seq, q0, q1, q2, q3 = m.groups()
     seq = int(seq)
     q0, q1, q2, q3 = float(q0), float(q1), float(q2), float(q3)
-    # the same expression as _check_attitude, so both paths agree to the last bit
+    # the same expression as AttitudeState.__post_init__, so both paths agree to the last bit
     if seq > MAX_SEQ or not abs(_sqrt(q0 * q0 + q1 * q1 + q2 * q2 + q3 * q3) - 1.0) <= QUAT_NORM_TOL:
         return None
     return float(t), seq
@@ -777,7 +764,7 @@ def orbit_message(t: float, seq: int, model: str, r: Any, v: Any, mu: float, fra
         "mu": _float(mu, "orbit", "mu"),
         "frame": frame,
     }
-    _check_orbit(msg)
+    validate(msg, "orbit")
     return msg
 
 
@@ -790,7 +777,7 @@ def attitude_message(t: float, seq: int, model: str, q: Any, w: Any) -> dict:
         "q": _floats(q, 4, "attitude", "q"),
         "w": _floats(w, 3, "attitude", "w"),
     }
-    _check_attitude(msg)
+    validate(msg, "attitude")
     return msg
 
 
@@ -807,14 +794,14 @@ def crosscheck_message(t: float, seq: int, dr: Any, dv: Any, reference: str = "r
         "dv_norm": math.hypot(*dv_list),
         "reference": reference,
     }
-    _check_crosscheck(msg)
+    validate(msg, "crosscheck")
     return msg
 
 
 def event_message(t: float, seq: int, process: str, kind: str, detail: str = "") -> dict:
     """An ``astrodyn.Event`` dict, e.g. ``event_message(12.5, 3, "orbit", "restart", "...")``."""
     msg = {"t": _float(t, "event", "t"), "seq": _int(seq, "event", "seq"), "process": process, "kind": kind, "detail": detail}
-    _check_event(msg)
+    validate(msg, "event")
     return msg
 
 
@@ -827,7 +814,7 @@ def status_message(t: float, seq: int, state: str, real_time_factor: float, **op
         "real_time_factor": _float(real_time_factor, "status", "real_time_factor"),
     }
     msg.update(optional)
-    _check_status(msg)
+    validate(msg, "status")
     return msg
 
 

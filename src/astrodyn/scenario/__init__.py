@@ -958,6 +958,7 @@ def _rotors(ctx: _Ctx, value: Any, path: str) -> tuple[Rotor, ...]:
 def _body(ctx: _Ctx, data: Any, path: str, cb: CentralBody) -> Body:
     tb = _Table(ctx, data, path, ("name", "orbit", "attitude", "cross_check"))
     name = _name(ctx, tb.get("name"), f"{path}.name")
+    path = f"{path} ({name})"  # errors name the body by index and name: bodies[0] (iss).orbit.a
     orbit = _orbit(ctx, tb.get("orbit"), f"{path}.orbit", cb) if tb.has("orbit") else None
     attitude = _attitude(ctx, tb.get("attitude"), f"{path}.attitude") if tb.has("attitude") else None
     if orbit is None and attitude is None:
@@ -1243,7 +1244,7 @@ def plan(scenario: Scenario) -> Plan:
             rp = _periapsis(b.orbit, cb.mu)
             if rp is not None and rp < cb.radius:
                 notes.append(f"periapsis {rp / 1e3:.6g} km is below the surface of {cb.name} (radius {cb.radius / 1e3:.6g} km)")
-                warnings.append(f"body {b.name!r} (bodies[{len(out)}].orbit): periapsis radius {rp / 1e3:.6g} km is below "
+                warnings.append(f"bodies[{len(out)}] ({b.name}).orbit: periapsis radius {rp / 1e3:.6g} km is below "
                                 f"the surface of {cb.name} (radius {cb.radius / 1e3:.6g} km): the orbit meets the central "
                                 f"body; check a / rp / e or r, v")
             if b.cross_check:
