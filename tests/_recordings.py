@@ -73,3 +73,25 @@ def record(path: Path, toml_text: str, chunk_size: int = 1 << 14):
 def leo_recording(path: Path, name: str = "rp", duration: str = "60 s", rate: str = "2 Hz"):
     """Two Earth orbiters (one with a tumbling attitude): ``record`` of LEO_TWO_BODIES."""
     return record(path, LEO_TWO_BODIES.format(name=name, duration=duration, rate=rate))
+
+
+def one_satellite_scene(name: str, duration: str, rate: str, extra: str = "") -> str:
+    """TOML of a scene with one body ``sat`` (Kepler orbit, torque-free attitude), for the
+    process tests; ``extra`` is appended (more bodies)."""
+    return f"""
+[scenario]
+name = "{name}"
+epoch = "2026-03-20T12:00:00 TDB"
+duration = "{duration}"
+rate = "{rate}"
+
+[[bodies]]
+name = "sat"
+[bodies.orbit]
+a = "7000 km"
+e = 0.01
+[bodies.attitude]
+q = [1, 0, 0, 0]
+w = [0.01, 0.2, 0.01]
+inertia = [1.0, 2.0, 3.0]
+{extra}"""

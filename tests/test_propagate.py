@@ -133,13 +133,15 @@ def test_hard_case_against_mpmath(name):
     assert np.linalg.norm(v - v_ref) <= 100 * cv, (name, np.linalg.norm(v - v_ref) / cv)
 
 
+def _all_cases():
+    """Every hard case stacked: names and arrays r0 (n, 3), v0 (n, 3), dt (n,), mu (n,)."""
+    names = list(CASES)
+    return (names, *(np.array([CASES[k][i] for k in names]) for i in range(4)))
+
+
 def test_all_hard_cases_vectorized_match_single_calls():
     # one vectorized call over every case (different conics and branches mixed)
-    names = list(CASES)
-    r0 = np.array([CASES[k][0] for k in names])
-    v0 = np.array([CASES[k][1] for k in names])
-    dt = np.array([CASES[k][2] for k in names])
-    mu = np.array([CASES[k][3] for k in names])
+    names, r0, v0, dt, mu = _all_cases()
     r, v = propagate(r0, v0, dt, mu)
     for i, k in enumerate(names):
         ri, vi = propagate(r0[i], v0[i], dt[i], mu[i])
@@ -191,11 +193,7 @@ def test_stumpff_against_mpmath(z):
 
 
 def test_lagrange_identity_and_consistency():
-    names = list(CASES)
-    r0 = np.array([CASES[k][0] for k in names])
-    v0 = np.array([CASES[k][1] for k in names])
-    dt = np.array([CASES[k][2] for k in names])
-    mu = np.array([CASES[k][3] for k in names])
+    names, r0, v0, dt, mu = _all_cases()
     f, g, fd, gd = lagrange_coefficients(r0, v0, dt, mu)
     # f gdot - fdot g = 1 (conservation of angular momentum).  f = 1 - (a/r0)(1 - cos dE)
     # and gdot = 1 - (a/r)(1 - cos dE) carry absolute errors of a few eps x max(1, |f|)

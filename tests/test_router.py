@@ -34,34 +34,21 @@ from astrodyn.service.router import is_wildcard
 from astrodyn.simulate import simulate
 from test_service import _stop  # stop a child by PID: SIGTERM, then SIGKILL (one helper)
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _recordings import one_satellite_scene
+
 ROOT = Path(__file__).resolve().parents[1]
 SERVICES = ROOT / "services"
 PY = sys.executable
 
 pytestmark = pytest.mark.network
 
-TINY = """
-[scenario]
-name = "router-test"
-epoch = "2026-03-20T12:00:00 TDB"
-duration = "20 s"
-rate = "5 Hz"
-
-[[bodies]]
-name = "sat"
-[bodies.orbit]
-a = "7000 km"
-e = 0.01
-[bodies.attitude]
-q = [1, 0, 0, 0]
-w = [0.01, 0.2, 0.01]
-inertia = [1.0, 2.0, 3.0]
-
+TINY = one_satellite_scene("router-test", "20 s", "5 Hz", extra="""
 [[bodies]]
 name = "probe"
 [bodies.orbit]
 a = "8000 km"
-"""
+""")
 
 
 def _start(argv: list[str], log: Path, env: dict | None = None) -> subprocess.Popen:

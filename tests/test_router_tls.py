@@ -22,7 +22,7 @@ import shutil
 import subprocess
 import sys
 import textwrap
-import time
+from pathlib import Path
 
 import pytest
 
@@ -30,41 +30,9 @@ from astrodyn import bus
 
 pytestmark = pytest.mark.network
 
-CLIENT = textwrap.dedent('''
-    import json, sys, time, zenoh
-    endpoint, ca, cert, key, role = sys.argv[1:6]
-    conf = zenoh.Config()
-    conf.insert_json5("mode", '"client"')
-    conf.insert_json5("connect/endpoints", json.dumps([endpoint]))
-    conf.insert_json5("scouting/multicast/enabled", "false")
-    tls = {"root_ca_certificate": ca}
-    if cert != "-":
-        tls.update(connect_certificate=cert, connect_private_key=key, enable_mtls=True)
-    conf.insert_json5("transport/link/tls", json.dumps(tls))
-    try:
-        s = zenoh.open(conf)
-    except zenoh.ZError as exc:
-        print(json.dumps({"refused": str(exc)}))
-        sys.exit(0)
-    with s:
-        if role == "sub":
-            sub = s.declare_subscriber("astrodyn/demo/**", zenoh.handlers.FifoChannel(1000))
-            print(json.dumps({"ready": True}), flush=True)
-            got, t0 = [], time.monotonic()
-            while time.monotonic() - t0 < float(sys.argv[6]):
-                m = sub.try_recv()
-                if m is not None:
-                    got.append(m.payload.to_bytes().decode())
-                else:
-                    time.sleep(0.01)
-            print(json.dumps({"got": got}))
-        else:
-            for i in range(20):
-                s.put("astrodyn/demo/sat/orbit", f"{role}-{i}")
-                time.sleep(0.05)
-            time.sleep(0.5)
-            print(json.dumps({"sent": 20}))
-''')
+CLIENT = Path(__file__).resolve().parent / "_zenoh_client.py"  # a plain zenoh client (no astrodyn import)
+sys.path.insert(0, str(CLIENT.parent))
+from _zenoh_client import publish_to_one_subscriber, scene_acl  # noqa: E402
 
 
 def _openssl(*args: str, cwd) -> None:
@@ -111,16 +79,7 @@ def _router_config(tmp_path, pki) -> str:
             root_ca_certificate: "{pki / 'ca.pem'}",
             enable_mtls: true,
           }} }} }},
-          access_control: {{
-            enabled: true,
-            default_permission: "deny",
-            rules: [
-              {{ id: "scene", permission: "allow", flows: ["ingress", "egress"],
-                 messages: ["put", "declare_subscriber"], key_exprs: ["astrodyn/demo/**"] }},
-            ],
-            subjects: [ {{ id: "operators", cert_common_names: ["alice.example.org"] }} ],
-            policies: [ {{ rules: ["scene"], subjects: ["operators"] }} ],
-          }},
+          {scene_acl('cert_common_names: ["alice.example.org"]')}
         }}
     '''))
     return str(conf)
@@ -129,8 +88,6 @@ def _router_config(tmp_path, pki) -> str:
 def test_mtls_router_admits_only_certificates_of_its_ca_and_names_in_its_policy(tmp_path, pki, processes):
     port = bus.free_port()
     endpoint = f"tls/localhost:{port}"
-    script = tmp_path / "client.py"
-    script.write_text(CLIENT)
     router = processes([sys.executable, "-m", "astrodyn", "router", "--config", _router_config(tmp_path, pki),
                         "--listen", f"tls/127.0.0.1:{port}"],
                        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
@@ -139,23 +96,15 @@ def test_mtls_router_admits_only_certificates_of_its_ca_and_names_in_its_policy(
     assert json.loads(hello)["listen"] == [f"tls/127.0.0.1:{port}"]
     ca = str(pki / "ca.pem")
 
-    def client(name: str, role: str, *extra: str):
-        cert = ("-", "-") if name == "nobody" else (str(pki / f"{name}.pem"), str(pki / f"{name}-key.pem"))
-        return processes([sys.executable, str(script), endpoint, ca, *cert, role, *extra],
-                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    def settings(name: str) -> str:
+        tls = {"root_ca_certificate": ca}
+        if name != "nobody":  # nobody: no client certificate at all
+            tls.update(connect_certificate=str(pki / f"{name}.pem"), connect_private_key=str(pki / f"{name}-key.pem"),
+                       enable_mtls=True)
+        return json.dumps({"transport/link/tls": tls})
 
-    sub = client("alice", "sub", "10")
-    first = sub.stdout.readline()
-    assert json.loads(first) == {"ready": True}, sub.stderr.read()[-2000:]
-    time.sleep(0.5)
-    pubs = {name: client(name, name) for name in ("alice", "mallory", "eve", "nobody")}
-    results = {}
-    for name, p in pubs.items():
-        out, err = p.communicate(timeout=60)
-        assert p.returncode == 0, err[-2000:]
-        results[name] = json.loads(out.strip().splitlines()[-1])
-    out, err = sub.communicate(timeout=60)
-    got = json.loads(out.strip().splitlines()[-1])["got"]
+    results, got = publish_to_one_subscriber(processes, endpoint, settings, "alice",
+                                             ("alice", "mallory", "eve", "nobody"), seconds=10)
     assert results["alice"] == {"sent": 20}
     assert results["mallory"] == {"sent": 20}  # a session (her CA is right), but the ACL drops her puts
     assert "refused" in results["eve"]  # the allowed name from another CA: no TLS session

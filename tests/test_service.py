@@ -25,6 +25,7 @@ from astrodyn import bus
 from astrodyn.attitude import torque_free
 from astrodyn.orbit import propagate
 from astrodyn.scenario import load
+from astrodyn.service.children import stop_process
 
 ROOT = Path(__file__).resolve().parents[1]
 CONFIGS = ROOT / "configs"
@@ -34,13 +35,7 @@ pytestmark = pytest.mark.network
 
 
 def _stop(proc: subprocess.Popen) -> None:
-    if proc.poll() is None:
-        os.kill(proc.pid, signal.SIGTERM)
-        try:
-            proc.wait(timeout=20)
-        except subprocess.TimeoutExpired:
-            os.kill(proc.pid, signal.SIGKILL)
-            proc.wait(timeout=10)
+    stop_process(proc, timeout=20)
 
 
 def _read_plain(path: Path):

@@ -26,27 +26,14 @@ import pytest
 
 from astrodyn.service.children import SUPERVISOR_ENV
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _recordings import one_satellite_scene
+
 pytestmark = pytest.mark.network
 
 ASTRODYN = [sys.executable, "-m", "astrodyn"]
 
-LONG = """
-[scenario]
-name = "longrun"
-epoch = "2026-03-20T12:00:00 TDB"
-duration = "200000 s"
-rate = "10 Hz"
-
-[[bodies]]
-name = "sat"
-[bodies.orbit]
-a = "7000 km"
-e = 0.01
-[bodies.attitude]
-q = [1, 0, 0, 0]
-w = [0.01, 0.2, 0.01]
-inertia = [1.0, 2.0, 3.0]
-"""
+LONG = one_satellite_scene("longrun", "200000 s", "10 Hz")
 
 
 def started_by(supervisor: int) -> list[int]:
@@ -97,13 +84,9 @@ def _recover_dir(folder: Path) -> list[dict]:
     return [json.loads(line) for line in proc.stdout.splitlines() if line.startswith("{")]
 
 
-@pytest.mark.parametrize("delay_s", [0.05, 0.6, 4.0])
-def test_no_child_outlives_a_killed_run_supervisor(tmp_path, processes, delay_s):
-    cfg = tmp_path / "long.toml"
-    cfg.write_text(LONG)
-    out = tmp_path / "long.mcap"
-    sup = processes([*ASTRODYN, "run", cfg, "--out", out, "--quiet"], stdout=subprocess.DEVNULL,
-                    stderr=subprocess.PIPE)
+def _kill_supervisor_after(sup: subprocess.Popen, delay_s: float) -> set[int]:
+    """SIGKILL the supervisor ``delay_s`` after its start; assert that none of its children
+    is alive 2.5 s later; return the children seen while it lived."""
     seen: set[int] = set()
     t0 = time.monotonic()
     while time.monotonic() - t0 < delay_s:
@@ -114,6 +97,17 @@ def test_no_child_outlives_a_killed_run_supervisor(tmp_path, processes, delay_s)
     seen.update(started_by(sup.pid))
     orphans, took = _orphans_after(sup.pid, 2.5)
     assert orphans == [], f"still alive {took:.2f} s after the supervisor died: {orphans} (seen {sorted(seen)})"
+    return seen
+
+
+@pytest.mark.parametrize("delay_s", [0.05, 0.6, 4.0])
+def test_no_child_outlives_a_killed_run_supervisor(tmp_path, processes, delay_s):
+    cfg = tmp_path / "long.toml"
+    cfg.write_text(LONG)
+    out = tmp_path / "long.mcap"
+    sup = processes([*ASTRODYN, "run", cfg, "--out", out, "--quiet"], stdout=subprocess.DEVNULL,
+                    stderr=subprocess.PIPE)
+    seen = _kill_supervisor_after(sup, delay_s)
     if delay_s >= 4.0:
         assert len(seen) >= 3  # the logger and both propagators had started: the check saw real children
     # what the killed run left beside its recording is found and finished by recover
@@ -134,16 +128,7 @@ def test_no_child_outlives_a_killed_serve_supervisor(tmp_path, processes, delay_
     out = tmp_path / "served.mcap"
     sup = processes([*ASTRODYN, "serve", cfg, "--out", out, "--rate", "1000"], stdout=subprocess.PIPE,
                     stderr=subprocess.PIPE, text=True)
-    seen: set[int] = set()
-    t0 = time.monotonic()
-    while time.monotonic() - t0 < delay_s:
-        seen.update(started_by(sup.pid))
-        time.sleep(0.01)
-    os.kill(sup.pid, signal.SIGKILL)
-    sup.wait(timeout=10)
-    seen.update(started_by(sup.pid))
-    orphans, took = _orphans_after(sup.pid, 2.5)
-    assert orphans == [], f"still alive {took:.2f} s after serve died: {orphans} (seen {sorted(seen)})"
+    seen = _kill_supervisor_after(sup, delay_s)
     if delay_s >= 5.0:
         assert len(seen) >= 3
     _recover_dir(tmp_path)

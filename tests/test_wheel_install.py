@@ -25,25 +25,12 @@ from mcap.reader import make_reader
 
 pytestmark = pytest.mark.network
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _recordings import one_satellite_scene  # noqa: E402
+
 ROOT = Path(__file__).resolve().parents[1]
 
-SCENE = """
-[scenario]
-name = "wheel"
-epoch = "2026-03-20T12:00:00 TDB"
-duration = "3 s"
-rate = "1 Hz"
-
-[[bodies]]
-name = "sat"
-[bodies.orbit]
-a = "7000 km"
-e = 0.01
-[bodies.attitude]
-q = [1, 0, 0, 0]
-w = [0.01, 0.2, 0.01]
-inertia = [1.0, 2.0, 3.0]
-"""
+SCENE = one_satellite_scene("wheel", "3 s", "1 Hz")
 
 
 @pytest.fixture(scope="module")

@@ -337,25 +337,14 @@ class CrossCheckResult:
     model: str
     mu: float
 
-    @property
-    def max_position_error(self) -> float:
-        """Largest |dr| over times and bodies [m]."""
-        return float(np.max(self.position_error))
-
-    @property
-    def max_velocity_error(self) -> float:
-        """Largest |dv| over times and bodies [m/s]."""
-        return float(np.max(self.velocity_error))
-
-    @property
-    def max_relative_position_error(self) -> float:
-        """Largest |dr| / |r| over times and bodies."""
-        return float(np.max(self.relative_position_error))
-
-    @property
-    def max_relative_velocity_error(self) -> float:
-        """Largest |dv| / |v| over times and bodies."""
-        return float(np.max(self.relative_velocity_error))
+    max_position_error = property(lambda self: float(np.max(self.position_error)),
+                                  doc="Largest |dr| over times and bodies [m].")
+    max_velocity_error = property(lambda self: float(np.max(self.velocity_error)),
+                                  doc="Largest |dv| over times and bodies [m/s].")
+    max_relative_position_error = property(lambda self: float(np.max(self.relative_position_error)),
+                                           doc="Largest |dr| / |r| over times and bodies.")
+    max_relative_velocity_error = property(lambda self: float(np.max(self.relative_velocity_error)),
+                                           doc="Largest |dv| / |v| over times and bodies.")
 
     def per_body_max(self) -> dict[str, np.ndarray]:
         """Per-body maxima over time, each shape (N,)."""

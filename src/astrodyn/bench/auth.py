@@ -21,17 +21,12 @@ import time
 import numpy as np
 
 from astrodyn import auth, messages
+from astrodyn.bench import best_seconds_per_call
 
 
 def _best(fn, repeat: int, number: int) -> float:
     """Best of ``repeat`` timings of ``number`` calls, in seconds per call."""
-    best = float("inf")
-    for _ in range(repeat):
-        t0 = time.perf_counter()
-        for _ in range(number):
-            fn()
-        best = min(best, (time.perf_counter() - t0) / number)
-    return best
+    return best_seconds_per_call(fn, number, repeat)
 
 
 def measure(bodies: int = 1000, repeat: int = 5) -> list[dict]:

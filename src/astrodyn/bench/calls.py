@@ -33,14 +33,8 @@ DZHANIBEKOV = (np.array([1.0, 2.0, 3.0]), np.array([1e-3, 1.0, 1e-3]))
 
 
 def _best(fn, repeat: int, number: int) -> float:
-    """Best of ``repeat`` timings of ``number`` calls, seconds per call."""
-    best = float("inf")
-    for _ in range(repeat):
-        t0 = time.perf_counter()
-        for _ in range(number):
-            fn()
-        best = min(best, (time.perf_counter() - t0) / number)
-    return best
+    """Best of ``repeat`` timings of ``number`` calls, in seconds per call."""
+    return best_seconds_per_call(fn, number, repeat)
 
 
 # --------------------------------------------------------------------------- load

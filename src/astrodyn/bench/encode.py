@@ -24,7 +24,6 @@ import argparse
 import os
 import statistics
 import sys
-import time
 
 import numpy as np
 
@@ -36,12 +35,8 @@ MU_EARTH = 3.986004418e14
 
 
 def _best(fn, repeat: int) -> float:
-    best = float("inf")
-    for _ in range(repeat):
-        t0 = time.perf_counter()
-        fn()
-        best = min(best, time.perf_counter() - t0)
-    return best
+    """Best of ``repeat`` single calls, in seconds."""
+    return best_seconds_per_call(fn, 1, repeat)
 
 
 def _fstring_orbit(t, seq, model, r, v, mu, frame="GCRF"):

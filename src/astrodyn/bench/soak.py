@@ -19,7 +19,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import signal
 import subprocess
 import sys
 import time
@@ -27,6 +26,7 @@ from pathlib import Path
 
 from astrodyn import bus
 from astrodyn.scenario.catalogue import config_path
+from astrodyn.service.children import stop_process
 
 _TICK = os.sysconf("SC_CLK_TCK")
 
@@ -99,12 +99,7 @@ def main(argv: list[str] | None = None) -> int:
             final = replies[0] if replies else {}
         serve.wait(timeout=120)
     finally:
-        if serve.poll() is None:
-            os.kill(serve.pid, signal.SIGTERM)
-            try:
-                serve.wait(timeout=60)
-            except subprocess.TimeoutExpired:
-                os.kill(serve.pid, signal.SIGKILL)
+        stop_process(serve, timeout=60)
     report = _report(samples, final, out, args)
     (out / "soak.json").write_text(json.dumps({"samples": samples, "final": final, "report": report}, indent=1, default=str))
     print(report["markdown"])

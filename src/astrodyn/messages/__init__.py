@@ -279,11 +279,17 @@ _DETAIL = Annotated[str, Meta(max_length=4096, description="human-readable detai
                               extra={"expected": "a string of at most 4096 characters"})]
 
 
-class OrbitState(msgspec.Struct, forbid_unknown_fields=True):
-    """Translational state of one body relative to the central body, SI units."""
+class Stamped(msgspec.Struct, forbid_unknown_fields=True):
+    """The fields every message type starts with: ``t`` (s since the scenario epoch) and
+    ``seq`` (the message's number on its channel)."""
 
     t: _T
     seq: _Seq
+
+
+class OrbitState(Stamped, forbid_unknown_fields=True):
+    """Translational state of one body relative to the central body, SI units."""
+
     model: _enum(ORBIT_MODELS, "model that produced the state")
     r: _vec(3, "position, m, in `frame`")
     v: _vec(3, "velocity, m/s, in `frame`")
@@ -291,11 +297,9 @@ class OrbitState(msgspec.Struct, forbid_unknown_fields=True):
     frame: _name("inertial frame of r and v, e.g. GCRF", "a frame name")
 
 
-class AttitudeState(msgspec.Struct, forbid_unknown_fields=True):
+class AttitudeState(Stamped, forbid_unknown_fields=True):
     """Rotational state of one body: Euler parameters q = (e0, e1, e2, e3), scalar first, unit norm, v_body = C(q) v_inertial (Baruh ch. 7); w body angular velocity in body axes."""
 
-    t: _T
-    seq: _Seq
     model: _enum(ATTITUDE_MODELS, "model that produced the state")
     q: _vec(4, "Euler parameters, scalar first, |q| = 1")
     w: _vec(3, "angular velocity in body axes, rad/s")
@@ -307,11 +311,9 @@ class AttitudeState(msgspec.Struct, forbid_unknown_fields=True):
             raise ValueError(f"attitude.q: expected a unit quaternion (| |q| - 1 | <= {QUAT_NORM_TOL:g}), got |q| = {norm!r}")
 
 
-class CrossCheck(msgspec.Struct, forbid_unknown_fields=True):
+class CrossCheck(Stamped, forbid_unknown_fields=True):
     """astrodyn state minus the reference integrator's state for one body."""
 
-    t: _T
-    seq: _Seq
     dr: _vec(3, "position difference, m")
     dv: _vec(3, "velocity difference, m/s")
     dr_norm: Annotated[float, Meta(ge=0, description="|dr|, m")]
@@ -319,11 +321,9 @@ class CrossCheck(msgspec.Struct, forbid_unknown_fields=True):
     reference: _enum(CROSSCHECK_REFERENCES, "reference integrator")
 
 
-class Event(msgspec.Struct, forbid_unknown_fields=True):
+class Event(Stamped, forbid_unknown_fields=True):
     """Something that happened to a process of the run (start, restart, stop, error, ...)."""
 
-    t: _T
-    seq: _Seq
     process: _name("process name, e.g. orbit, attitude, logger, runner", "a process name")
     kind: Annotated[str, Meta(pattern="^[a-z][a-z_]{0,31}$", max_length=32,
                               description="start, restart, stop, error, pause, resume, rate, gap, ... (lower case)",
@@ -331,11 +331,10 @@ class Event(msgspec.Struct, forbid_unknown_fields=True):
     detail: _DETAIL
 
 
-class Status(msgspec.Struct, forbid_unknown_fields=True, omit_defaults=True):
-    """State of a running `serve` (also the reply of the status queryable)."""
+class Status(Stamped, forbid_unknown_fields=True, omit_defaults=True):
+    """State of a running `serve` (also the reply of the status queryable); ``t`` is the
+    simulation time reached."""
 
-    t: Annotated[float, Meta(description="simulation time reached, s since the scenario epoch")]
-    seq: _Seq
     state: _enum(STATUS_STATES)
     real_time_factor: Annotated[float, Meta(ge=0, description="sim seconds per wall second")]
     rate: Annotated[float, Meta(gt=0, description="output rate, Hz")] | msgspec.UnsetType = msgspec.UNSET
@@ -1026,6 +1025,19 @@ def batch_envelope(runs: Iterable[tuple[bytes, int]]) -> bytes:
     return b"".join([BATCH_MAGIC, _U32.pack(sum(c for _, c in runs))] + [r for r, _ in runs])
 
 
+def _prefixed(buf: bytes, pos: int, prefix: struct.Struct, what: str) -> tuple[int, bytes]:
+    """The bytes after the length prefix at ``pos`` (``prefix``: u16 or u32 little-endian)
+    and the position after them; MessageError naming ``what`` if they do not fit."""
+    size = len(buf)
+    if pos + prefix.size > size:
+        raise MessageError(f"{what}_len: expected {prefix.size} bytes, got {size - pos} (truncated)")
+    (n,) = prefix.unpack_from(buf, pos)
+    pos += prefix.size
+    if pos + n > size:
+        raise MessageError(f"{what}: expected {n} bytes, got {size - pos} (truncated)")
+    return pos + n, buf[pos : pos + n]
+
+
 def decode_batch(data: bytes | bytearray | memoryview) -> list[tuple[str, bytes]]:
     """Split an envelope back into ``(key, payload)`` pairs; MessageError on any damage.
 
@@ -1043,27 +1055,14 @@ def decode_batch(data: bytes | bytearray | memoryview) -> list[tuple[str, bytes]
         raise MessageError(f"batch: expected at most {(size - 8) // 6} entries in {size} bytes, header says {count} (truncated or corrupt)")
     out = []
     pos = 8
-    unpack16, unpack32 = _U16.unpack_from, _U32.unpack_from
     for i in range(count):
-        if pos + 2 > size:
-            raise MessageError(f"batch[{i}].key_len: expected 2 bytes, got {size - pos} (truncated)")
-        (klen,) = unpack16(buf, pos)
-        pos += 2
-        if pos + klen > size:
-            raise MessageError(f"batch[{i}].key: expected {klen} bytes, got {size - pos} (truncated)")
+        pos, raw_key = _prefixed(buf, pos, _U16, f"batch[{i}].key")
         try:
-            key = buf[pos : pos + klen].decode("utf-8")
+            key = raw_key.decode("utf-8")
         except UnicodeDecodeError:
-            raise MessageError(f"batch[{i}].key: expected UTF-8, got {buf[pos:pos + klen][:40]!r}") from None
-        pos += klen
-        if pos + 4 > size:
-            raise MessageError(f"batch[{i}].payload_len: expected 4 bytes, got {size - pos} (truncated)")
-        (plen,) = unpack32(buf, pos)
-        pos += 4
-        if pos + plen > size:
-            raise MessageError(f"batch[{i}].payload: expected {plen} bytes, got {size - pos} (truncated)")
-        out.append((key, buf[pos : pos + plen]))
-        pos += plen
+            raise MessageError(f"batch[{i}].key: expected UTF-8, got {raw_key[:40]!r}") from None
+        pos, payload = _prefixed(buf, pos, _U32, f"batch[{i}].payload")
+        out.append((key, payload))
     if pos != size:
         raise MessageError(f"batch: expected {count} entries ending at byte {pos}, got {size - pos} trailing bytes")
     return out

@@ -38,7 +38,7 @@ from collections.abc import Iterator
 from pathlib import Path
 
 __all__ = ["Child", "children_of", "logger_command", "propagator_command", "share_fate_with_supervisor",
-           "work_directory", "SUPERVISOR_ENV", "ORPHAN_GRACE_S", "EXIT_ORPHANED"]
+           "stop_process", "work_directory", "SUPERVISOR_ENV", "ORPHAN_GRACE_S", "EXIT_ORPHANED"]
 
 #: Environment variable that carries the supervisor's PID to each child.
 SUPERVISOR_ENV = "ASTRODYN_SUPERVISOR_PID"
@@ -115,6 +115,21 @@ def children_of(parent: int) -> dict[int, list[str]]:
     return found
 
 
+def stop_process(proc: subprocess.Popen, sig: int = signal.SIGTERM, timeout: float = 10.0) -> int | None:
+    """Stop a process this program started, by its PID: ``sig`` (SIGTERM: it finishes what
+    it holds), wait up to ``timeout`` s, then SIGKILL.  Returns its exit status."""
+    if proc.poll() is None:
+        try:
+            os.kill(proc.pid, sig)
+            proc.wait(timeout=timeout)
+        except subprocess.TimeoutExpired:
+            os.kill(proc.pid, signal.SIGKILL)
+            proc.wait(timeout=5)
+        except ProcessLookupError:
+            pass
+    return proc.returncode
+
+
 def logger_command() -> list[str]:
     """The command line that starts a logger process with this interpreter; arguments follow."""
     return [sys.executable, "-m", "astrodyn.service.logger"]
@@ -152,16 +167,7 @@ class Child:
 
     def stop(self, sig=signal.SIGTERM, timeout: float = 10.0) -> int | None:
         """Signal this child by PID, wait, SIGKILL if it does not go."""
-        if self.proc.poll() is None:
-            try:
-                os.kill(self.proc.pid, sig)
-                self.proc.wait(timeout=timeout)
-            except subprocess.TimeoutExpired:
-                os.kill(self.proc.pid, signal.SIGKILL)
-                self.proc.wait(timeout=5)
-            except ProcessLookupError:
-                pass
-        return self.proc.returncode
+        return stop_process(self.proc, sig, timeout)
 
     def close(self) -> None:
         self._out.close()
