@@ -260,3 +260,30 @@ def test_scene_without_orbits_has_no_lines_but_every_body_frame(tmp_path):
         assert len(tf) == res.t.size and {m["child_frame_id"] for m in tf} == {name}
         assert {(m["translation"]["x"], m["translation"]["y"], m["translation"]["z"]) for m in tf} == {(0.0, 0.0, 0.0)}
         assert ents[f"axes/{name}"]["frame_id"] == name
+
+
+def test_transforms_carry_exactly_the_states_log_times_and_no_made_up_attitude(tmp_path):
+    """Far from the epoch (t > 2**53 ns, 104 days) a log time rebuilt from t in float64 s
+    can be off by tens of ns: the transforms are stamped, in the file and in the message,
+    with exactly the log times of the body's states.  The orbit-only body (geo) gets a
+    position-only frame, ``geo/position``, whose axes are the parent's -- never an
+    attitude it does not have; the body with an attitude (leo) is the frame ``leo``."""
+    path = tmp_path / "far.mcap"
+    record(path, LEO_TWO_BODIES.format(name="far", duration="300 d", rate="0.7e-5 Hz"))
+    run = load(path)
+    (out,) = export(path, "foxglove", tmp_path / "out")
+    back = read_back(out)
+    with open(out, "rb") as f:
+        logged = {}
+        for _, channel, msg in make_reader(f).iter_messages():
+            if channel.topic.endswith("/tf"):
+                logged.setdefault(channel.topic, []).append(msg.log_time)
+    for body in ("leo", "geo"):
+        att = run.bodies[body].attitude
+        states = np.union1d(run.bodies[body].orbit.log_time, att.log_time if att is not None else np.zeros(0, np.int64))
+        assert states.max() - states.min() > 2**53  # the far part is covered
+        assert sorted(logged[f"foxglove/{body}/tf"]) == states.tolist(), body
+        stamps = [m["timestamp"]["sec"] * 10**9 + m["timestamp"]["nsec"] for m in back["tfs"][f"foxglove/{body}/tf"]]
+        assert sorted(stamps) == states.tolist(), body
+    assert {m["child_frame_id"] for m in back["tfs"]["foxglove/geo/tf"]} == {"geo/position"}
+    assert {m["child_frame_id"] for m in back["tfs"]["foxglove/leo/tf"]} == {"leo"}

@@ -179,3 +179,14 @@ def test_crc_of_a_real_chunk_still_checked(tmp_path):
     run = load(path)
     assert run.corrupt_chunks == 1 and "CRC" in run.truncation
 
+
+
+def test_analyze_warning_always_says_why(corpus, tmp_path):
+    """An incomplete file's warning names the reason (it was empty for files whose only
+    fault was invalid messages)."""
+    proc = subprocess.run([*ASTRODYN, "analyze", str(corpus["foreign"]), "--out", str(tmp_path / "r")],
+                          capture_output=True, text=True, timeout=120)
+    warning = [line for line in proc.stderr.splitlines() if "warning" in line]
+    assert warning and "invalid messages skipped" in warning[0] and "astrodyn/demo/sat/orbit" in warning[0], proc.stderr
+    run = load(corpus["foreign"])
+    assert "14 invalid messages skipped" in run.incomplete_reason and "incomplete: 14 invalid" in repr(run)

@@ -74,7 +74,7 @@ def analyze(path: str | os.PathLike, out: str | os.PathLike | None = None, seq: 
     earth = str(central.get("name", "")).lower() == "earth"
     report: dict = {
         "file": run.path, "scenario": run.scenario.get("name", "?"), "epoch": run.scenario.get("epoch", "?"),
-        "messages": run.messages, "complete": run.complete, "file_report": run.truncation,
+        "messages": run.messages, "complete": run.complete, "file_report": run.incomplete_reason,
         "euler_sequence": seq, "bodies": {}, "figures": {},
     }
     for name, body in sorted(run.bodies.items()):

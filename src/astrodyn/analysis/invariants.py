@@ -37,6 +37,8 @@ use ``|H_0|``, the top's energy uses ``T_0 + m g cm`` -- the row's ``scale`` say
 
 from __future__ import annotations
 
+import functools
+import json
 from dataclasses import dataclass
 
 import numpy as np
@@ -155,6 +157,23 @@ def attitude_invariants(model: str, q: np.ndarray, w: np.ndarray, inertia: np.nd
     return rows
 
 
+@functools.lru_cache(maxsize=8)
+def _recorded_constants(text: str) -> tuple[dict, dict[str, dict]]:
+    """(central body, body name -> body) of a recording's config JSON, parsed once per
+    recording (a summary asks for each body, block by block)."""
+    try:
+        meta = json.loads(text)
+    except (TypeError, ValueError, RecursionError):
+        meta = {}
+    meta = meta if isinstance(meta, dict) else {}
+    central = meta.get("central_body") if isinstance(meta.get("central_body"), dict) else {}
+    bodies = {}
+    for b in meta.get("bodies") or []:
+        if isinstance(b, dict) and isinstance(b.get("name"), str):
+            bodies.setdefault(b["name"], b)
+    return central, bodies
+
+
 def recorded_invariants(scenario: dict, body: str, *, orbit: tuple | None = None,
                         attitude: tuple | None = None) -> dict[str, list[Invariant]]:
     """The invariant rows of one recorded body, its models and constants taken from the
@@ -163,15 +182,9 @@ def recorded_invariants(scenario: dict, body: str, *, orbit: tuple | None = None
     ``orbit = (model, r, v)``, ``attitude = (model, q, w)`` (arrays as recorded); returns
     ``{"orbit": [...], "attitude": [...]}`` for the kinds given.  Constants missing from
     the metadata (a recording of another tool) leave only the rows that need none."""
-    import json
-
-    try:
-        meta = json.loads(scenario.get("json") or "{}")
-    except (TypeError, ValueError):
-        meta = {}
-    meta = meta if isinstance(meta, dict) else {}
-    central = meta.get("central_body") if isinstance(meta.get("central_body"), dict) else {}
-    bm = next((b for b in meta.get("bodies") or [] if isinstance(b, dict) and b.get("name") == body), {})
+    text = scenario.get("json") or "{}"
+    central, bodies = _recorded_constants(text if isinstance(text, str) else "{}")
+    bm = bodies.get(body, {})
     out: dict[str, list[Invariant]] = {}
     if orbit is not None:
         model, r, v = orbit

@@ -81,6 +81,21 @@ from pathlib import Path
 import numpy as np
 
 from astrodyn import __version__, messages
+from astrodyn.recording.foxglove_scene import (
+    BODY_COLORS,
+    FRAME_TRANSFORM_SCHEMA,
+    MAX_LINE_POINTS,
+    MAX_SCENE_POINTS,
+    SCENE_TOPIC,
+    SCENE_UPDATE_SCHEMA,
+    XYZ,
+    axes_entity,
+    central_body_entity,
+    frame_transform,
+    line_indices,
+    orbit_line_entity,
+    stamp,
+)
 from astrodyn.recording.reader import Run, Track, load
 from astrodyn.recording.writer import McapRecorder, RecordingError
 from astrodyn.rotation import quat_to_scalar_last
@@ -93,85 +108,7 @@ __all__ = [
 
 FORMATS = ("csv", "parquet", "oem", "aem", "aem1", "foxglove")
 _CCSDS_SCALES = {"utc": "UTC", "tai": "TAI", "tt": "TT", "tdb": "TDB", "tcb": "TCB", "tcg": "TCG", "ut1": "UT1"}
-_XYZ = ("x", "y", "z")
-
-#: foxglove.FrameTransform, JSON Schema as published in foxglove-sdk schemas/jsonschema.
-FRAME_TRANSFORM_SCHEMA = {
-    "title": "foxglove.FrameTransform",
-    "description": "A transform between two reference frames in 3D space",
-    "type": "object",
-    "properties": {
-        "timestamp": {"type": "object", "title": "time", "properties": {
-            "sec": {"type": "integer", "minimum": 0},
-            "nsec": {"type": "integer", "minimum": 0, "maximum": 999999999}}},
-        "parent_frame_id": {"type": "string"},
-        "child_frame_id": {"type": "string"},
-        "translation": {"title": "foxglove.Vector3", "type": "object", "properties": {
-            "x": {"type": "number"}, "y": {"type": "number"}, "z": {"type": "number"}},
-            "required": ["x", "y", "z"]},
-        "rotation": {"title": "foxglove.Quaternion", "type": "object", "properties": {
-            "x": {"type": "number"}, "y": {"type": "number"}, "z": {"type": "number"}, "w": {"type": "number"}},
-            "required": ["x", "y", "z", "w"]},
-    },
-    "required": ["timestamp", "parent_frame_id", "child_frame_id", "translation", "rotation"],
-}
-
-
-def _obj(title: str, props: dict, required: list[str] | None = None) -> dict:
-    """A JSON Schema object with ``title``, ``properties`` and (default: all) ``required``."""
-    return {"title": title, "type": "object", "properties": props,
-            "required": list(props) if required is None else required}
-
-
-_NUM = {"type": "number"}
-_VECTOR3 = _obj("foxglove.Vector3", {c: _NUM for c in _XYZ})
-_POINT3 = _obj("foxglove.Point3", {c: _NUM for c in _XYZ})
-_QUATERNION = _obj("foxglove.Quaternion", {c: _NUM for c in ("x", "y", "z", "w")})
-_POSE = _obj("foxglove.Pose", {"position": _VECTOR3, "orientation": _QUATERNION})
-_COLOR = _obj("foxglove.Color", {c: _NUM for c in "rgba"})
-_TIME = FRAME_TRANSFORM_SCHEMA["properties"]["timestamp"]
-_DURATION = {"type": "object", "title": "duration", "properties": {
-    "sec": {"type": "integer"}, "nsec": {"type": "integer", "minimum": 0, "maximum": 999999999}}}
-
-
-def _array(items: dict | None = None) -> dict:
-    return {"type": "array", "items": items} if items is not None else {"type": "array"}
-
-
-#: foxglove.SceneUpdate, JSON Schema: the part of the published schema (foxglove-sdk
-#: schemas/jsonschema/SceneUpdate.json) that astrodyn writes, with the same field names,
-#: types and ``required`` lists.  The primitives astrodyn never fills (cylinders,
-#: triangles, texts, models) are declared as (always empty) arrays; Foxglove picks the
-#: decoder by the schema *name*, so this subset is read like the full schema.
-SCENE_UPDATE_SCHEMA = _obj("foxglove.SceneUpdate", {
-    "deletions": _array(_obj("foxglove.SceneEntityDeletion", {
-        "timestamp": _TIME, "type": {"title": "foxglove.SceneEntityDeletionType", "enum": [0, 1]},
-        "id": {"type": "string"}})),
-    "entities": _array(_obj("foxglove.SceneEntity", {
-        "timestamp": _TIME,
-        "frame_id": {"type": "string"},
-        "id": {"type": "string"},
-        "lifetime": _DURATION,
-        "frame_locked": {"type": "boolean"},
-        "metadata": _array(_obj("foxglove.KeyValuePair", {"key": {"type": "string"}, "value": {"type": "string"}})),
-        "arrows": _array(_obj("foxglove.ArrowPrimitive", {
-            "pose": _POSE, "shaft_length": _NUM, "shaft_diameter": _NUM, "head_length": _NUM,
-            "head_diameter": _NUM, "color": _COLOR})),
-        "cubes": _array(_obj("foxglove.CubePrimitive", {"pose": _POSE, "size": _VECTOR3, "color": _COLOR})),
-        "spheres": _array(_obj("foxglove.SpherePrimitive", {"pose": _POSE, "size": _VECTOR3, "color": _COLOR})),
-        "cylinders": _array(),
-        "lines": _array(_obj("foxglove.LinePrimitive", {
-            "type": {"title": "foxglove.LineType", "enum": [0, 1, 2],
-                     "description": "0 LINE_STRIP, 1 LINE_LOOP, 2 LINE_LIST"},
-            "pose": _POSE, "thickness": _NUM, "scale_invariant": {"type": "boolean"},
-            "points": _array(_POINT3), "color": _COLOR, "colors": _array(_COLOR),
-            "indices": _array({"type": "integer", "minimum": 0})})),
-        "triangles": _array(),
-        "texts": _array(),
-        "models": _array(),
-    })),
-})
-
+_XYZ = XYZ
 
 class ExportError(RuntimeError):
     """An export cannot be done (missing optional package, nothing to export, bad option)."""
@@ -502,87 +439,40 @@ def write_aem_v1(run: Run, out: Path) -> list[Path]:
 def frame_transforms(run: Run) -> list[tuple[int, str, bytes]]:
     """``(log_time, topic, payload)`` of the ``foxglove.FrameTransform`` messages, time-sorted.
 
-    One per body per instant at which the body has an orbit or an attitude state; a
-    body's missing half is the origin (attitude-only bodies) or the identity rotation.
+    One per body per instant at which the body has an orbit or an attitude state, stamped
+    with exactly that state's log time.  A body with an attitude is the frame ``<body>``:
+    its recorded rotation, at its recorded position (the origin of the parent frame when
+    it has no orbit; between the instants of one kind the last value of the other is
+    held).  A body with an orbit and no attitude is the frame ``<body>/position``: its
+    position only, axes parallel to the parent frame (no attitude is made up for it).
     """
     out = []
     for name, body in run.bodies.items():
         orbit, att = body.orbit, body.attitude
+        orbit = orbit if orbit is not None and len(orbit) else None
+        att = att if att is not None and len(att) else None
         if orbit is None and att is None:
             continue
         parent = _orbit_frame(body)
-        times = np.union1d(orbit.log_time if orbit is not None else [], att.log_time if att is not None else []).astype(np.int64)
+        child = name if att is not None else f"{name}/position"
+        none = np.zeros(0, dtype=np.int64)  # not [] : a float64 union would round ns log times near 1.8e18
+        times = np.union1d(orbit.log_time if orbit is not None else none, att.log_time if att is not None else none)
         pos = np.zeros((times.size, 3))
-        rot = np.tile([0.0, 0.0, 0.0, 1.0], (times.size, 1))
-        for tr, fill in ((orbit, "r"), (att, "q")):
-            if tr is None or len(tr) == 0:
-                continue
-            ix = np.searchsorted(times, tr.log_time)
-            if fill == "r":
-                pos[ix] = tr.r / 1e3
-            else:
-                rot[ix] = quat_to_scalar_last(tr.q)
-        # a body with both channels at different instants: hold the last known value
+        rot = np.tile([0.0, 0.0, 0.0, 1.0], (times.size, 1))  # the parent's axes: only for position-only frames
         for tr, arr in ((orbit, pos), (att, rot)):
-            if tr is not None and 0 < len(tr) < times.size:
+            if tr is None:
+                continue
+            arr[np.searchsorted(times, tr.log_time)] = tr.r / 1e3 if arr is pos else quat_to_scalar_last(tr.q)
+            if len(tr) < times.size:  # both kinds at different instants: hold the last known value
                 have = np.isin(times, tr.log_time)
                 last = np.maximum.accumulate(np.where(have, np.arange(times.size), 0))
                 arr[:] = arr[last]
         topic = f"foxglove/{name}/tf"
         for k, lt in enumerate(times.tolist()):
-            msg = {"timestamp": {"sec": lt // 10**9, "nsec": lt % 10**9}, "parent_frame_id": parent, "child_frame_id": name,
-                   "translation": dict(zip(_XYZ, map(float, pos[k]))),
-                   "rotation": dict(zip(("x", "y", "z", "w"), map(float, rot[k])))}
+            msg = frame_transform(stamp(lt), parent, child, pos[k], rot[k])
             out.append((lt, topic, json.dumps(msg, separators=(",", ":")).encode()))
     out.sort(key=lambda m: m[0])
     return out
-
-
-SCENE_TOPIC = "foxglove/scene"
-#: Most points of one orbit line, and of all orbit lines together (see :func:`scene_updates`).
-MAX_LINE_POINTS = 2000
-MAX_SCENE_POINTS = 200_000
-#: Body colours (r, g, b), cycled in the order of the bodies: matplotlib's "tab10".
-BODY_COLORS = ((0.122, 0.467, 0.706), (1.0, 0.498, 0.055), (0.173, 0.627, 0.173), (0.839, 0.153, 0.157),
-               (0.580, 0.404, 0.741), (0.549, 0.337, 0.294), (0.890, 0.467, 0.761), (0.498, 0.498, 0.498),
-               (0.737, 0.741, 0.133), (0.090, 0.745, 0.812))
-_CENTRAL_COLOR = {"r": 0.20, "g": 0.42, "b": 0.80, "a": 0.55}
-_IDENTITY_POSE = {"position": {"x": 0.0, "y": 0.0, "z": 0.0}, "orientation": {"x": 0.0, "y": 0.0, "z": 0.0, "w": 1.0}}
-# Arrow orientations (x, y, z, w) turning the arrow's +x onto the body's x, y, z axis:
-# identity, +90 deg about z, -90 deg about y.
-_AXIS_ORIENTATIONS = ((0.0, 0.0, 0.0, 1.0), (0.0, 0.0, 0.5 ** 0.5, 0.5 ** 0.5), (0.0, -(0.5 ** 0.5), 0.0, 0.5 ** 0.5))
-_AXIS_COLORS = ((0.9, 0.1, 0.1), (0.1, 0.75, 0.1), (0.15, 0.3, 0.95))
-
-
-def line_indices(n: int, max_points: int = MAX_LINE_POINTS) -> np.ndarray:
-    """Sample indices kept for an orbit line of ``n`` recorded positions.
-
-    All of them when ``n <= max_points``; otherwise exactly ``max_points`` indices spread
-    evenly over ``0 .. n-1`` (``round(linspace(0, n-1, max_points))``), the first and the
-    last sample always kept.
-    """
-    if not (isinstance(max_points, (int, np.integer)) and max_points >= 2):
-        raise ValueError(f"max_points: expected an integer >= 2, got {max_points!r}")
-    if n <= max_points:
-        return np.arange(n)
-    return np.rint(np.linspace(0.0, n - 1.0, int(max_points))).astype(np.int64)
-
-
-def _color(rgb, a: float = 1.0) -> dict:
-    return {"r": float(rgb[0]), "g": float(rgb[1]), "b": float(rgb[2]), "a": float(a)}
-
-
-def _entity(stamp: dict, frame_id: str, entity_id: str, frame_locked: bool = False, metadata: dict | None = None,
-            **primitives) -> dict:
-    """A ``foxglove.SceneEntity`` with every required field; lifetime 0 = never expires."""
-    ent = {"timestamp": stamp, "frame_id": frame_id, "id": entity_id, "lifetime": {"sec": 0, "nsec": 0},
-           "frame_locked": frame_locked,
-           "metadata": [{"key": k, "value": str(v)} for k, v in (metadata or {}).items()]}
-    for kind in ("arrows", "cubes", "spheres", "cylinders", "lines", "triangles", "texts", "models"):
-        ent[kind] = primitives.pop(kind, [])
-    if primitives:  # pragma: no cover - programming error
-        raise TypeError(f"unknown primitives {sorted(primitives)}")
-    return ent
 
 
 def scene_updates(run: Run, max_line_points: int = MAX_LINE_POINTS,
@@ -614,7 +504,7 @@ def scene_updates(run: Run, max_line_points: int = MAX_LINE_POINTS,
     if not bodies:
         return []
     t0 = int(min(int(tr.log_time.min()) for tr in run.channels.values() if len(tr)))
-    stamp = {"sec": t0 // 10**9, "nsec": t0 % 10**9}
+    ts = stamp(t0)
     orbiting = [b for _, b in bodies if b.orbit is not None and len(b.orbit)]
     central = _central_body(run)
     try:
@@ -624,12 +514,8 @@ def scene_updates(run: Run, max_line_points: int = MAX_LINE_POINTS,
     radius_km = radius_km if np.isfinite(radius_km) and radius_km > 0 else 0.0
     updates = []
     if orbiting and radius_km > 0:
-        frame = _orbit_frame(orbiting[0])
-        name = str(central.get("name", "central"))
-        size = {"x": 2 * radius_km, "y": 2 * radius_km, "z": 2 * radius_km}
-        sphere = {"pose": _IDENTITY_POSE, "size": size, "color": _CENTRAL_COLOR}
-        updates.append([_entity(stamp, frame, f"central_body/{name}", metadata={"name": name, "radius_km": repr(radius_km)},
-                                spheres=[sphere])])
+        updates.append([central_body_entity(ts, _orbit_frame(orbiting[0]), str(central.get("name", "central")),
+                                            radius_km)])
     per_body = max(2, min(int(max_line_points), int(max_scene_points) // max(1, len(orbiting))))
     axis_km = 0.1 * radius_km if orbiting and radius_km > 0 else 1.0
     for k, (name, body) in enumerate(bodies):
@@ -637,19 +523,10 @@ def scene_updates(run: Run, max_line_points: int = MAX_LINE_POINTS,
         entities = []
         if body.orbit is not None and len(body.orbit):
             idx = line_indices(len(body.orbit), per_body)
-            points = [dict(zip(_XYZ, map(float, p))) for p in body.orbit.r[idx] / 1e3]
-            line = {"type": 0, "pose": _IDENTITY_POSE, "thickness": 2.0, "scale_invariant": True, "points": points,
-                    "color": _color(rgb), "colors": [], "indices": []}
-            entities.append(_entity(stamp, _orbit_frame(body), f"orbit/{name}",
-                                    metadata={"body": name, "samples": len(body.orbit), "points": len(idx)}, lines=[line]))
+            entities.append(orbit_line_entity(ts, _orbit_frame(body), name, body.orbit.r[idx] / 1e3, rgb,
+                                              len(body.orbit)))
         if body.attitude is not None and len(body.attitude):
-            arrows = [{"pose": {"position": {"x": 0.0, "y": 0.0, "z": 0.0},
-                                "orientation": dict(zip(("x", "y", "z", "w"), orient))},
-                       "shaft_length": 0.8 * axis_km, "shaft_diameter": 0.04 * axis_km,
-                       "head_length": 0.2 * axis_km, "head_diameter": 0.1 * axis_km, "color": _color(c)}
-                      for orient, c in zip(_AXIS_ORIENTATIONS, _AXIS_COLORS)]
-            entities.append(_entity(stamp, name, f"axes/{name}", frame_locked=True,
-                                    metadata={"body": name, "axes": "x red, y green, z blue"}, arrows=arrows))
+            entities.append(axes_entity(ts, name, axis_km))
         updates.append(entities)
     return [(t0, SCENE_TOPIC, json.dumps({"deletions": [], "entities": ents}, separators=(",", ":")).encode())
             for ents in updates]
@@ -684,9 +561,9 @@ def write_foxglove(run: Run, out: Path, max_line_points: int = MAX_LINE_POINTS) 
                 registered.add(topic)
             seq = seqs.get(topic, 0)
             seqs[topic] = seq + 1
-            # t from the log time: McapRecorder recomputes epoch_ns + round(t * 1e9), equal to
-            # lt while |lt - epoch| < 2**53 ns (104 days); beyond, within a few ns
-            rec.write_encoded(topic, data, (lt - epoch_ns) / 1e9, seq, publish_time=raw.publish_time if raw else lt)
+            # the exact log time of each message (t alone is ns-exact only within 104 days of the epoch)
+            rec.write_encoded(topic, data, (lt - epoch_ns) / 1e9, seq, publish_time=raw.publish_time if raw else lt,
+                              log_time=lt)
     return [path]
 
 

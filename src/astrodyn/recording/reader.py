@@ -137,6 +137,19 @@ class Run:
         """True for a finished file with every record intact and every message valid."""
         return not self.truncated and self.corrupt_chunks == 0 and self.invalid == 0
 
+    @property
+    def incomplete_reason(self) -> str:
+        """Why the file is not :attr:`complete`, in one line ("" when it is): the cut or
+        damage (``truncation``) and the invalid messages per channel."""
+        parts = [self.truncation] if self.truncation else []
+        if self.truncated and not self.truncation:
+            parts.append("the file has no footer (its writer did not finish)")
+        if self.invalid:
+            shown = ", ".join(f"{n} on {topic}" for topic, n in sorted(self.invalid_by_channel.items())[:5])
+            parts.append(f"{self.invalid} invalid messages skipped ({shown})" if shown else
+                         f"{self.invalid} invalid messages skipped")
+        return "; ".join(parts)
+
     def __repr__(self) -> str:
         """One line: file, scenario, bodies, channels, span of t, messages, state.  The
         config as run is one attribute away (``run.scenario``), not printed."""
@@ -144,7 +157,7 @@ class Run:
         span = f", t {min(float(t.min()) for t in ts):.6g}..{max(float(t.max()) for t in ts):.6g} s" if ts else ""
         names = list(self.bodies)
         shown = ", ".join(names[:5]) + (f", ... ({len(names)} in all)" if len(names) > 5 else "")
-        state = "complete" if self.complete else f"incomplete: {self.truncation or f'{self.invalid} invalid messages'}"
+        state = "complete" if self.complete else f"incomplete: {self.incomplete_reason}"
         return (f"Run({os.path.basename(self.path)!r}, scenario {self.scenario.get('name', '?')!r}, bodies [{shown}], "
                 f"{len(self.channels)} channels{span}, {self.messages} messages, {state})")
 
@@ -591,12 +604,12 @@ def _scan(path: str | os.PathLike, block_messages: int | None) -> Iterator[Run]:
             invalid_by_channel=dict(invalid_by_channel),
         )
 
-    def reset() -> None:
+    def reset() -> None:  # fresh builders for the next block, in one pass over channels (not channels^2)
+        fresh = {id(b): _Builder(b.topic, b.kind, b.schema_name, b.columns) for b in builders.values()}
         for topic, b in builders.items():
-            builders[topic] = fresh = _Builder(b.topic, b.kind, b.schema_name, b.columns)
-            for cid, (t, k, old) in list(channel_info.items()):
-                if old is b:
-                    channel_info[cid] = (t, k, fresh)
+            builders[topic] = fresh[id(b)]
+        for cid, (t, k, old) in channel_info.items():
+            channel_info[cid] = (t, k, fresh[id(old)])
         events.clear()
         counters.update(messages=0, invalid=0, corrupt=0)
         examples.clear()

@@ -441,17 +441,21 @@ class McapRecorder:
             raise ValueError(f"t: expected epoch + t within 1970 ... 2554 (MCAP log_time is uint64 ns), got t={t!r}")
         return ns
 
-    def write_encoded(self, key: str, payload: bytes, t: float, seq: int, publish_time: int | None = None, track: str | None = None) -> int:
+    def write_encoded(self, key: str, payload: bytes, t: float, seq: int, publish_time: int | None = None,
+                      track: str | None = None, log_time: int | None = None) -> int:
         """Fast path: record a payload already encoded (and validated) as it came off the bus.
 
         ``t`` and ``seq`` are the message's own fields.  Returns the seq status (``OK``,
         ``GAP``, ``LATE`` or ``DUPLICATE``; duplicates are not written).  ``track`` names
         the seq counter when several processes share a channel (events: key + process).
+        ``log_time`` (ns since the Unix epoch) overrides ``epoch + round(t * 1e9)``: a copy
+        of a recorded message keeps its exact log time (t in float64 s is ns-exact only
+        within 104 days of the epoch).
         ValueError if ``t`` gives no valid log_time; RecordingError if the write fails.
         """
         if self._error is not None:
             raise self._error
-        log_time = self.log_time(t)
+        log_time = self.log_time(t) if log_time is None else int(log_time)
         cid = self._channels.get(key)
         if cid is None:
             cid = self._channel_for(key)
