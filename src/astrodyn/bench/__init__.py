@@ -24,6 +24,7 @@ SUITES = {
     "encode": "astrodyn.bench.encode",
     "auth": "astrodyn.bench.auth",
     "calls": "astrodyn.bench.calls",
+    "view": "astrodyn.bench.view",
 }
 
 

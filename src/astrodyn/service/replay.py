@@ -58,6 +58,8 @@ from typing import Any
 from astrodyn import auth, bus, messages
 from astrodyn.recording.stream import McapStream, RawMessage
 from astrodyn.recording.writer import RecordingError
+from astrodyn.service.children import Child
+from astrodyn.service.viewer import viewer_command
 
 __all__ = ["Replayer", "main", "REPLAY_VERBS"]
 
@@ -347,9 +349,14 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--open-control", action="store_true",
                     help="answer control verbs from anyone who reaches the bus (default: only with the control token "
                          "printed at start and stored in a 0600 file; docs/security.md)")
+    ap.add_argument("--foxglove", type=int, default=None, metavar="PORT",
+                    help="live 3D view of the replay: a Foxglove WebSocket server on ws://127.0.0.1:PORT (0: a free "
+                         "port); docs/foxglove.md")
     bus.add_bus_arguments(ap)
     args = ap.parse_args(argv)
     try:
+        if args.foxglove is not None and not 0 <= args.foxglove <= 65535:
+            raise ValueError(f"--foxglove: expected a port 0..65535, got {args.foxglove}")
         rate = parse_rate(args.rate, "--rate")
         if args.wait < 0 or not math.isfinite(args.wait):
             raise ValueError(f"--wait: expected a finite number of seconds >= 0, got {args.wait}")
@@ -388,14 +395,24 @@ def main(argv: list[str] | None = None) -> int:
                 return 2
             if stream.truncated or stream.corrupt_chunks:
                 print(f"astrodyn replay: warning: {stream.path}: {stream.report()}", file=sys.stderr, flush=True)
-            token, token_dir = None, None
+            token, token_dir = None, Path(tempfile.mkdtemp(prefix="astrodyn-replay-"))
             if not args.open_control:
-                token, token_dir = auth.new_token(), Path(tempfile.mkdtemp(prefix="astrodyn-replay-"))
+                token = auth.new_token()
                 auth.write_private_file(token_dir / "control-token", token.encode())
+            viewer, viewer_url = None, None
+            if args.foxglove is not None:  # the live view: a child process that subscribes to what we publish
+                port = args.foxglove or bus.free_port()
+                meta = token_dir / "scenario.json"
+                meta.write_text(json.dumps(stream.metadata.get("scenario", {})))
+                viewer = Child("viewer", [*viewer_command(), "--scenario", scenario, "--port", str(port), "--metadata",
+                                          str(meta), *sum((["--connect", e] for e in (listen or args.connect or [])), [])],
+                               token_dir)
+                viewer_url = f"ws://127.0.0.1:{port}"
             print(json.dumps({"replaying": stream.path, "scenario": scenario, "listen": listen, "connect": args.connect,
+                              "foxglove": viewer_url,
                               "control": f"astrodyn/{scenario}/@control/*", "real_time_factor": args.rate,
                               "control_token": token,
-                              "control_token_file": None if token_dir is None else str(token_dir / "control-token")}),
+                              "control_token_file": None if token is None else str(token_dir / "control-token")}),
                   flush=True)
             stop_requests: list[bus.ControlRequest] = []
             try:
@@ -429,8 +446,10 @@ def main(argv: list[str] | None = None) -> int:
                     time.sleep(0.05)  # let the last puts and replies leave before the session closes
             finally:
                 rep.close()
-                if token_dir is not None:
-                    shutil.rmtree(token_dir, ignore_errors=True)
+                if viewer is not None:
+                    viewer.stop()
+                    viewer.close()
+                shutil.rmtree(token_dir, ignore_errors=True)
     if not args.quiet:
         print(("\r" if tty else "") + _progress_line(rep), file=sys.stderr, flush=True)
         if not summary["complete"]:

@@ -57,6 +57,7 @@ from astrodyn.service.children import Child, logger_command, propagator_command,
 from astrodyn.service.output import check_output_path
 from astrodyn.service.propagator import command_key
 from astrodyn.service.supervision import RestartBudget, contiguous_end, wait_until_gone
+from astrodyn.service.viewer import viewer_command
 
 __all__ = ["main", "Supervisor"]
 
@@ -66,7 +67,7 @@ class Supervisor:
 
     def __init__(self, scenario, config_path: Path, out: Path, session, hub: str, *, rate: float,
                  roll_size: int | None = None, roll_interval: float | None = None, connect=(), tmp: Path,
-                 max_restarts: int = 5, zenoh_config: str | None = None):
+                 max_restarts: int = 5, zenoh_config: str | None = None, foxglove_port: int | None = None):
         self.scenario = scenario
         self.session = session
         self.out = Path(out)
@@ -105,6 +106,13 @@ class Supervisor:
                       for kind in self.propagators}
         for kind in self.propagators:
             self.children[kind] = Child(kind, [*self._argv[kind], "--real-time-factor", str(self.rate)], tmp, env=self.child_env)
+        self.viewer_url = None
+        if foxglove_port is not None:  # the live view: a separate process that only subscribes
+            self._argv["viewer"] = [*viewer_command(), "--scenario", scenario.name, "--port", str(foxglove_port),
+                                    "--metadata", str(meta), *connect_args]
+            self.budgets["viewer"] = RestartBudget("viewer")
+            self.children["viewer"] = Child("viewer", self._argv["viewer"], tmp, env=self.child_env)
+            self.viewer_url = f"ws://127.0.0.1:{foxglove_port}"
         self.commands = session.declare_publisher(command_key(scenario.name))
         self.beats = bus.HeartbeatMonitor(session, scenario.name, verifier=auth.Verifier(secret))
         self.alive = bus.AliveWatcher(session, scenario.name)
@@ -176,6 +184,20 @@ class Supervisor:
             msg = f"process {name} (pid {ch.pid}) {how} at sim t {hb.get('t')}: {ch.stderr_tail(3)}"
             print(f"astrodyn serve: {msg}", file=sys.stderr, flush=True)
             n = sum(1 for r in self.restarts if r["process"] == name)
+            if name == "viewer":  # the view is not the record: restart it, never fail the run for it
+                if self.state in ("running", "paused") and self.budgets["viewer"].allow():
+                    old = self.children["viewer"]
+                    old.close()
+                    self.children["viewer"] = Child(f"viewer-r{n + 1}", self._argv["viewer"], self.tmp, env=self.child_env)
+                    self.children["viewer"].name = "viewer"
+                    self.restarts.append({"process": "viewer", "old_pid": old.pid, "new_pid": self.children["viewer"].pid,
+                                          "why": msg, "from_step": None, "state_from": None, "time": time.time()})
+                    print(f"astrodyn serve: restarted viewer (pid {self.children['viewer'].pid})", file=sys.stderr,
+                          flush=True)
+                else:
+                    print(f"astrodyn serve: warning: the live view is gone ({self.budgets['viewer'].refusal()}); "
+                          f"the simulation and the recording go on", file=sys.stderr, flush=True)
+                continue
             if name == "logger" and self.state in ("running", "paused"):
                 if self.budgets["logger"].allow():
                     try:
@@ -367,8 +389,13 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--open-control", action="store_true",
                     help="answer control verbs from anyone who reaches the bus (default: only with this run's control "
                          "token, printed at start and stored in a 0600 file beside --out; docs/security.md)")
+    ap.add_argument("--foxglove", type=int, default=None, metavar="PORT",
+                    help="live 3D view: a Foxglove WebSocket server on ws://127.0.0.1:PORT (0: a free port); open it "
+                         "in the Foxglove app (docs/foxglove.md)")
     args = ap.parse_args(argv)
     try:
+        if args.foxglove is not None and not 0 <= args.foxglove <= 65535:
+            raise ScenarioError(f"--foxglove: expected a port 0..65535, got {args.foxglove}")
         scenario = load(args.config)
         out = Path(args.out) if args.out else (scenario.output_path or Path("out") / f"{scenario.name}.mcap")
         out.parent.mkdir(parents=True, exist_ok=True)
@@ -389,14 +416,15 @@ def main(argv: list[str] | None = None) -> int:
     with work_directory(out, "serve") as tmp, bus.open_session(listen=[hub], config_file=args.zenoh_config) as session:
         sup = Supervisor(scenario, Path(args.config), out, session, hub, rate=rate, roll_size=args.roll_size,
                          roll_interval=args.roll_interval, connect=args.connect, tmp=Path(tmp),
-                         zenoh_config=args.zenoh_config)
+                         zenoh_config=args.zenoh_config,
+                         foxglove_port=None if args.foxglove is None else (args.foxglove or bus.free_port()))
         token, token_file = None, None
         if not args.open_control:
             token, token_file = auth.new_token(), control_token_path(out)
             token_file.unlink(missing_ok=True)  # a previous run's token: never valid again
             auth.write_private_file(token_file, token.encode())
         print(json.dumps({"serving": scenario.name, "hub": hub, "control": f"astrodyn/{scenario.name}/@control/*",
-                          "out": str(out), "real_time_factor": rate, "control_token": token,
+                          "out": str(out), "real_time_factor": rate, "foxglove": sup.viewer_url, "control_token": token,
                           "control_token_file": None if token_file is None else str(token_file)}), flush=True)
         stop_requests: list[bus.ControlRequest] = []
         try:

@@ -1,0 +1,131 @@
+"""``astrodyn bench view``: what a connected live view costs the simulation.
+
+``constellation-1000`` under ``serve`` as fast as it goes (``--rate inf``) for ``--wall``
+seconds, without and with ``--foxglove`` plus a connected Foxglove WebSocket client that
+subscribes to every channel and reads as fast as it can; ``--rounds`` alternated pairs
+(a change of the machine's load hits both alike).  The real-time factor is the simulated
+time the propagators reached (``status``) over the wall time between the first and the
+last status query.  Prints a Markdown table and the median ratio (goal: the view costs
+under 5 %, docs/benchmarks.md).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+from astrodyn import bus
+from astrodyn.bench import cpu_model
+from astrodyn.scenario.catalogue import config_path
+from astrodyn.service.children import stop_process
+
+# A Foxglove client with no astrodyn import: subscribes to everything advertised, counts.
+_CLIENT = r"""
+import json, sys, time
+from websockets.sync.client import connect
+url = sys.argv[1]
+deadline = time.monotonic() + 60
+while True:
+    try:
+        ws = connect(url, subprotocols=["foxglove.sdk.v1"], max_size=None, open_timeout=5)
+        break
+    except OSError:
+        if time.monotonic() > deadline:
+            raise
+        time.sleep(0.2)
+n = size = 0
+with ws:
+    while True:
+        frame = ws.recv()
+        if isinstance(frame, str):
+            msg = json.loads(frame)
+            if msg["op"] == "advertise":
+                ws.send(json.dumps({"op": "subscribe", "subscriptions": [
+                    {"id": ch["id"], "channelId": ch["id"]} for ch in msg["channels"]]}))
+        else:
+            n += 1
+            size += len(frame)
+            if n % 1000 == 0:
+                print(json.dumps({"messages": n, "bytes": size}), flush=True)
+"""
+
+
+def one_run(config: Path, wall_s: float, viewer: bool, work: Path) -> dict:
+    """Real-time factor of one ``serve --rate inf`` run of ``wall_s`` seconds."""
+    out = work / f"view-{viewer}-{time.monotonic_ns()}.mcap"
+    argv = [sys.executable, "-m", "astrodyn", "serve", str(config), "--out", str(out), "--rate", "inf"]
+    if viewer:
+        argv += ["--foxglove", "0"]
+    serve = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+    client = None
+    try:
+        hello = json.loads(serve.stdout.readline())
+        if viewer:
+            client = subprocess.Popen([sys.executable, "-c", _CLIENT, hello["foxglove"]], stdout=subprocess.PIPE,
+                                      stderr=subprocess.DEVNULL, text=True)
+        with bus.open_session(connect=[hello["hub"]]) as s:
+            def status() -> tuple[float, float]:
+                reply = bus.send_control(s, hello["serving"], "status", token=hello["control_token"], timeout_s=30)[0]
+                return time.monotonic(), float(reply["t"])
+
+            w0, t0 = status()
+            while t0 <= 0 and time.monotonic() - w0 < 120:  # from the first published step
+                time.sleep(0.1)
+                w0, t0 = status()
+            time.sleep(wall_s)
+            w1, t1 = status()
+            bus.send_control(s, hello["serving"], "stop", token=hello["control_token"], timeout_s=120)
+        serve.wait(timeout=120)
+    finally:
+        for p in (client, serve):
+            if p is not None:
+                stop_process(p)
+        for f in work.glob(out.stem + "*"):
+            f.unlink()
+    received = None
+    if client is not None:
+        lines = [ln for ln in client.stdout.read().splitlines() if ln.startswith("{")]
+        received = json.loads(lines[-1]) if lines else {"messages": 0, "bytes": 0}
+    return {"rtf": (t1 - t0) / (w1 - w0), "wall_s": w1 - w0, "viewer": viewer, "received": received,
+            "load": os.getloadavg()[0]}
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog="astrodyn bench view", description=__doc__.splitlines()[0])
+    ap.add_argument("--config", default=None, help="scene (default configs/constellation-1000.toml)")
+    ap.add_argument("--wall", type=float, default=20.0, help="wall seconds measured per run (default 20)")
+    ap.add_argument("--rounds", type=int, default=3, help="alternated pairs (default 3)")
+    args = ap.parse_args(argv)
+    config = Path(args.config) if args.config else config_path("constellation-1000")
+    rows = []
+    with tempfile.TemporaryDirectory(prefix="astrodyn-bench-view-") as work:
+        for k in range(args.rounds):
+            for viewer in (False, True):
+                r = one_run(config, args.wall, viewer, Path(work))
+                rows.append(r)
+                print(f"round {k + 1} {'with' if viewer else 'without'} view: RTF {r['rtf']:.2f} "
+                      f"(load {r['load']:.1f}){'' if r['received'] is None else ', client got ' + str(r['received'])}",
+                      file=sys.stderr, flush=True)
+    without = statistics.median(r["rtf"] for r in rows if not r["viewer"])
+    with_view = statistics.median(r["rtf"] for r in rows if r["viewer"])
+    print(f"# live view cost on {cpu_model()}: {config.name}, serve --rate inf, {args.wall:g} s per run, "
+          f"{args.rounds} alternated pairs\n")
+    print("| round | RTF without view | RTF with view + client | client messages | load |\n|---|---|---|---|---|")
+    for k in range(args.rounds):
+        a, b = rows[2 * k], rows[2 * k + 1]
+        print(f"| {k + 1} | {a['rtf']:.2f} | {b['rtf']:.2f} | {(b['received'] or {}).get('messages', 0)} | "
+              f"{a['load']:.1f} / {b['load']:.1f} |")
+    print(f"\nmedian RTF without {without:.2f}, with {with_view:.2f}: the view costs "
+          f"{100 * (1 - with_view / without):+.1f} % (goal < 5 %)")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,367 @@
+"""Live 3D view of a running scene in Foxglove: ``serve CFG --foxglove PORT``, ``replay REC --foxglove PORT``.
+
+A separate process (``python -m astrodyn.service.viewer``) that only subscribes to the
+scene's keys and serves a Foxglove WebSocket server (foxglove-sdk) on
+``ws://127.0.0.1:PORT``.  Open the Foxglove app, "Open connection", Foxglove WebSocket,
+that URL: the 3D panel shows the scene, the Plot panel the raw states.
+
+It never slows the simulation.  The Zenoh callback keeps only the newest sample of each
+key (a dictionary store, nothing else), so the bus never waits on the viewer; every
+``1 / rate`` s of wall time (30 Hz by default) the viewer takes those samples, checks them
+(the run's HMAC when it runs under a supervisor, then the message definition) and sends
+view frames.  States between two frames are not shown (the recording has them all); a
+slow or vanished browser only loses view frames: foxglove-sdk drops what a client cannot
+take.
+
+Channels (timestamps: the scenario epoch + t, so Foxglove's clock is simulated time;
+the server also broadcasts that time):
+
+``foxglove/tf``       ``foxglove.FrameTransforms``: per body with an attitude the frame
+                      ``<body>`` (rotation from its Euler parameters, at its position, or
+                      at the origin without an orbit); per body with only an orbit the
+                      frame ``<body>/position`` (axes parallel to the orbit frame).  km.
+``foxglove/scene``    ``foxglove.SceneUpdate``, once a second: the central body (sphere of
+                      its equatorial radius), each body's trail (its positions at the view
+                      frames, at most 2000 points per body and 50,000 in all), each body's
+                      axes (x red, y green, z blue).
+``astrodyn/<scenario>/<body>/orbit`` ... the raw state channels as recorded (JSON, the
+                      message schemas), at most ``--raw-rate`` messages per second in all,
+                      shared round-robin between the channels.
+
+The first JSON line on stdout says where it listens:
+``{"foxglove": "ws://127.0.0.1:8765", "scenario": ...}``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import collections
+import json
+import math
+import signal
+import sys
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+
+from astrodyn import auth, bus, messages
+from astrodyn.recording.foxglove_scene import (
+    BODY_COLORS,
+    FRAME_TRANSFORMS_SCHEMA,
+    MAX_LINE_POINTS,
+    SCENE_TOPIC,
+    SCENE_UPDATE_SCHEMA,
+    axes_entity,
+    central_body_entity,
+    frame_transform,
+    orbit_line_entity,
+    stamp,
+)
+from astrodyn.rotation import quat_to_scalar_last
+from astrodyn.service.children import share_fate_with_supervisor
+
+__all__ = ["LatestSamples", "LiveScene", "viewer_command", "main", "TF_TOPIC", "MAX_LIVE_SCENE_POINTS"]
+
+TF_TOPIC = "foxglove/tf"
+#: Most trail points of all bodies together in one scene update (a 1000-body constellation
+#: gets 50 per body); the scene is resent once a second.
+MAX_LIVE_SCENE_POINTS = 50_000
+
+
+def viewer_command() -> list[str]:
+    """argv prefix that starts the viewer process (an installed wheel has it too)."""
+    return [sys.executable, "-m", "astrodyn.service.viewer"]
+
+
+class LatestSamples:
+    """A Zenoh subscriber callback that keeps only the newest sample of each key.
+
+    The callback runs on Zenoh's thread: it stores ``(payload, attachment)`` under the key
+    and returns (O(1), never blocks on the viewer), so a slow viewer never back-pressures
+    the publishers.  :meth:`take` hands over what arrived since the last call."""
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._latest: dict[str, tuple[bytes, bytes | None]] = {}
+        self.received = 0
+
+    def __call__(self, sample) -> None:
+        attachment = sample.attachment
+        item = (sample.payload.to_bytes(), None if attachment is None else attachment.to_bytes())
+        with self._lock:
+            self._latest[str(sample.key_expr)] = item
+            self.received += 1
+
+    def take(self) -> dict[str, tuple[bytes, bytes | None]]:
+        with self._lock:
+            out, self._latest = self._latest, {}
+        return out
+
+
+class _Body:
+    __slots__ = ("name", "index", "frame", "r_km", "r_time", "xyzw", "q_time", "recent_q", "trail", "samples",
+                 "has_orbit")
+
+    def __init__(self, name: str, index: int, has_orbit: bool | None):
+        self.name, self.index = name, index
+        self.frame = "GCRF"
+        self.r_km: np.ndarray | None = None  # newest position, km, and its log time
+        self.r_time = 0
+        self.xyzw: np.ndarray | None = None  # newest attitude (Foxglove order) and its log time
+        self.q_time = 0
+        self.recent_q: collections.OrderedDict[int, np.ndarray] = collections.OrderedDict()  # log time -> xyzw
+        self.trail: collections.deque = collections.deque(maxlen=MAX_LINE_POINTS)
+        self.samples = 0
+        self.has_orbit = has_orbit  # from the config; None: unknown (then: once an orbit state came)
+
+
+class LiveScene:
+    """What the view shows, built from the states taken at each view frame.
+
+    ``epoch_ns``: the scenario epoch (ns since the Unix epoch); ``central``: the config's
+    ``central_body`` table (``name``, ``radius`` in m).  Payloads are checked against their
+    message definitions (:func:`astrodyn.messages.decode`); invalid ones are counted in
+    ``invalid`` and not shown."""
+
+    def __init__(self, epoch_ns: int, central: dict, orbit_bodies: set[str] | None = None):
+        self.epoch_ns = int(epoch_ns)
+        self.orbit_bodies = orbit_bodies  # names of the bodies with an orbit (the config), None: unknown
+        self.central_name = str(central.get("name", "central"))
+        radius = central.get("radius")
+        self.radius_km = float(radius) / 1e3 if isinstance(radius, (int, float)) and math.isfinite(radius) and radius > 0 \
+            else 0.0
+        self.bodies: dict[str, _Body] = {}
+        self.t = 0.0
+        self.invalid = 0
+
+    def log_time(self) -> int:
+        """Log time of the newest state shown (ns since the Unix epoch)."""
+        return self.epoch_ns + int(round(self.t * 1e9))
+
+    def update(self, key: str, payload: bytes) -> int | None:
+        """Take one state message; its log time, or None (counted in ``invalid`` when it is
+        not a valid message) for anything that is not an orbit or attitude state."""
+        try:
+            _, name, kind = messages.parse_key(key)
+            if kind not in ("orbit", "attitude"):
+                return None
+            msg = messages.decode(payload, kind)
+        except messages.MessageError:
+            self.invalid += 1
+            return None
+        body = self.bodies.get(name)
+        if body is None:
+            has_orbit = None if self.orbit_bodies is None else name in self.orbit_bodies
+            body = self.bodies[name] = _Body(name, len(self.bodies), has_orbit)
+        log_time = self.epoch_ns + int(round(float(msg["t"]) * 1e9))
+        if kind == "orbit":
+            if log_time >= body.r_time:
+                body.r_km, body.r_time = np.asarray(msg["r"], dtype=float) / 1e3, log_time
+            body.frame = msg["frame"]
+            body.trail.append(np.asarray(msg["r"], dtype=float) / 1e3)
+            body.samples += 1
+            body.has_orbit = True if body.has_orbit is None else body.has_orbit
+        else:
+            xyzw = quat_to_scalar_last(np.asarray(msg["q"], dtype=float))
+            if log_time >= body.q_time:
+                body.xyzw, body.q_time = xyzw, log_time
+            body.recent_q[log_time] = xyzw
+            while len(body.recent_q) > 64:
+                body.recent_q.popitem(last=False)
+        self.t = max(self.t, float(msg["t"]))
+        return log_time
+
+    def transforms(self) -> dict:
+        """The ``foxglove.FrameTransforms`` message of the newest states.  Each transform is
+        stamped with the log time of the state it shows: for a body with an orbit, its
+        newest position, turned by its attitude at that same instant (or, before that
+        attitude arrived, the newest one); a body with an orbit is not shown before its
+        first position (never at a made-up origin); an attitude-only body sits at the
+        origin of its frame, stamped with its attitude's time."""
+        out = []
+        for b in self.bodies.values():
+            if b.r_km is not None:
+                if b.xyzw is not None:
+                    q = b.recent_q.get(b.r_time, b.xyzw)
+                    out.append(frame_transform(stamp(b.r_time), b.frame, b.name, b.r_km, q))
+                else:
+                    out.append(frame_transform(stamp(b.r_time), b.frame, f"{b.name}/position", b.r_km,
+                                               (0.0, 0.0, 0.0, 1.0)))
+            elif b.xyzw is not None and b.has_orbit is False:
+                out.append(frame_transform(stamp(b.q_time), b.frame, b.name, (0.0, 0.0, 0.0), b.xyzw))
+        return {"transforms": out}
+
+    def scene(self) -> dict:
+        """The ``foxglove.SceneUpdate`` message: central body, trails, axes."""
+        ts = stamp(self.log_time())
+        orbiting = [b for b in self.bodies.values() if b.trail]
+        entities = []
+        if orbiting and self.radius_km > 0:
+            entities.append(central_body_entity(ts, orbiting[0].frame, self.central_name, self.radius_km))
+        per_body = max(2, MAX_LIVE_SCENE_POINTS // max(1, len(orbiting)))
+        axis_km = 0.1 * self.radius_km if orbiting and self.radius_km > 0 else 1.0
+        for b in self.bodies.values():
+            if b.trail:
+                trail = np.asarray(b.trail)
+                keep = np.unique(np.rint(np.linspace(0, len(trail) - 1, min(per_body, len(trail)))).astype(int))
+                entities.append(orbit_line_entity(ts, b.frame, b.name, trail[keep], BODY_COLORS[b.index % len(BODY_COLORS)],
+                                                  b.samples))
+            if b.xyzw is not None:
+                entities.append(axes_entity(ts, b.name, axis_km))
+        return {"deletions": [], "entities": entities}
+
+
+def _schema(name: str, schema: dict):
+    import foxglove
+
+    return foxglove.Schema(name=name, encoding="jsonschema", data=json.dumps(schema).encode())
+
+
+class _View:
+    """The Foxglove server and its channels; raw state channels made on first use."""
+
+    def __init__(self, host: str, port: int, scenario: str, raw_rate: float):
+        import foxglove
+
+        self.foxglove = foxglove
+        self.server = foxglove.start_server(name=f"astrodyn {scenario}", host=host, port=port,
+                                            capabilities=[foxglove.Capability.Time])
+        self.tf = foxglove.Channel(TF_TOPIC, schema=_schema("foxglove.FrameTransforms", FRAME_TRANSFORMS_SCHEMA),
+                                   message_encoding="json")
+        self.scene = foxglove.Channel(SCENE_TOPIC, schema=_schema("foxglove.SceneUpdate", SCENE_UPDATE_SCHEMA),
+                                      message_encoding="json")
+        self.raw: dict[str, object] = {}
+        self.raw_budget = float(raw_rate)
+        self.pending: collections.OrderedDict[str, tuple[bytes, int]] = collections.OrderedDict()
+
+    def raw_channel(self, key: str):
+        ch = self.raw.get(key)
+        if ch is None:
+            found = messages.schema_for_key(key)
+            name, schema = found if found is not None else ("", {})
+            ch = self.raw[key] = self.foxglove.Channel(key, schema=_schema(name, schema), message_encoding="json")
+        return ch
+
+    def forward(self, dt: float) -> int:
+        """Send pending raw states, at most ``raw_rate * dt`` of them, oldest keys first
+        (round-robin: a key sent goes to the back)."""
+        n = int(self.raw_budget * dt) or 1
+        sent = 0
+        while self.pending and sent < n:
+            key, (payload, log_time) = self.pending.popitem(last=False)
+            self.raw_channel(key).log(payload, log_time=log_time)
+            sent += 1
+        return sent
+
+    def close(self) -> None:
+        self.server.stop()
+
+
+def _scenario_metadata(path: str | None) -> tuple[int, dict, set[str] | None]:
+    """(epoch_unix_ns, central_body table, names of the bodies with an orbit or None) from
+    a scenario metadata JSON file (``Scenario.to_metadata``)."""
+    if not path:
+        return 0, {}, None
+    meta = json.loads(Path(path).read_text())
+    try:
+        config = json.loads(meta.get("json") or "{}")
+        central = config.get("central_body") or {}
+        orbiting = {b["name"] for b in config.get("bodies") or [] if isinstance(b, dict) and b.get("orbit")}
+    except (ValueError, AttributeError, KeyError, TypeError):
+        central, orbiting = {}, None
+    return int(meta.get("epoch_unix_ns") or 0), central if isinstance(central, dict) else {}, orbiting
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog="astrodyn.service.viewer", description=__doc__.splitlines()[0])
+    ap.add_argument("--scenario", required=True, help="scenario name (the keys astrodyn/<scenario>/...)")
+    ap.add_argument("--port", type=int, default=8765, help="Foxglove WebSocket port on 127.0.0.1 (0: a free one)")
+    ap.add_argument("--host", default="127.0.0.1", help="address to listen on (default loopback only)")
+    ap.add_argument("--metadata", default=None, help="scenario metadata JSON (epoch, central body)")
+    ap.add_argument("--rate", type=float, default=30.0, help="view frames per second of wall time (default 30)")
+    ap.add_argument("--raw-rate", type=float, default=2000.0,
+                    help="raw state messages per second sent to Foxglove, all channels together (default 2000)")
+    bus.add_bus_arguments(ap)
+    args = ap.parse_args(argv)
+    try:
+        messages.check_name(args.scenario, "--scenario")
+        for name in ("rate", "raw_rate"):
+            value = getattr(args, name)
+            if not (math.isfinite(value) and 0 < value <= 1000 * (100 if name == "raw_rate" else 1)):
+                raise ValueError(f"--{name.replace('_', '-')}: expected a number in (0, "
+                                 f"{1000 * (100 if name == 'raw_rate' else 1)}], got {value}")
+        if not 0 <= args.port <= 65535:
+            raise ValueError(f"--port: expected 0..65535, got {args.port}")
+        epoch_ns, central, orbiting = _scenario_metadata(args.metadata)
+    except (ValueError, OSError, messages.MessageError) as exc:
+        print(f"astrodyn viewer: error: {exc}", file=sys.stderr)
+        return 2
+    share_fate_with_supervisor()
+    stop = {"why": None}
+    for sig in (signal.SIGTERM, signal.SIGINT):
+        signal.signal(sig, lambda s, f: stop.update(why=signal.Signals(s).name))
+    secret = auth.secret_from_environment()
+    verifier = auth.Verifier(secret) if secret is not None else None
+    scene = LiveScene(epoch_ns, central, orbiting)
+    latest = LatestSamples()
+    try:
+        view = _View(args.host, args.port, args.scenario, args.raw_rate)
+    except Exception as exc:  # foxglove-sdk: port taken, bad host
+        print(f"astrodyn viewer: error: cannot start the Foxglove server on {args.host}:{args.port}: {exc}",
+              file=sys.stderr)
+        return 1
+    rejected = 0
+    try:
+        with bus.session_from_args(args) as session:
+            base = f"{messages.PREFIX}/{args.scenario}"
+            subs = [session.declare_subscriber(key, latest) for key in (f"{base}/**", f"{base}/@batch/*")]
+            print(json.dumps({"foxglove": f"ws://{args.host}:{view.server.port}", "scenario": args.scenario,
+                              "authenticated": verifier is not None}), flush=True)
+            period = 1.0 / args.rate
+            next_frame = next_scene = time.monotonic()
+            while stop["why"] is None:
+                now = time.monotonic()
+                if now < next_frame:
+                    time.sleep(min(next_frame - now, 0.05))
+                    continue
+                next_frame = max(next_frame + period, now)
+                for key, (payload, attachment) in latest.take().items():
+                    if verifier is not None:
+                        try:
+                            verifier.verify(key, payload, attachment)
+                        except auth.AuthError:
+                            rejected += 1
+                            continue
+                    try:
+                        pairs = bus.state_samples(key, payload)
+                    except messages.MessageError:
+                        continue
+                    for k, p in pairs:
+                        log_time = scene.update(k, p)
+                        if log_time is not None:
+                            view.pending[k] = (p, log_time)
+                            view.pending.move_to_end(k)
+                if scene.bodies:
+                    lt = scene.log_time()
+                    view.tf.log(scene.transforms(), log_time=lt)
+                    view.server.broadcast_time(lt)
+                    view.forward(period)
+                    if now >= next_scene:
+                        view.scene.log(scene.scene(), log_time=lt)
+                        next_scene = now + 1.0
+            for sub in subs:
+                sub.undeclare()
+    except bus.BusError as exc:
+        print(f"astrodyn viewer: error: {exc}", file=sys.stderr)
+        return 1
+    finally:
+        view.close()
+    print(json.dumps({"viewer": "stopped", "reason": stop["why"], "received": latest.received, "bodies": len(scene.bodies),
+                      "invalid": scene.invalid, "rejected": rejected}), flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,202 @@
+"""The live 3D view (issue 17 section 1): ``serve --foxglove PORT`` and ``replay --foxglove PORT``
+watched by a real WebSocket client process speaking the Foxglove protocol.
+
+The client (``websockets``, no astrodyn import) connects with the ``foxglove.sdk.v1``
+subprotocol, reads ``serverInfo`` and the ``advertise`` list, subscribes to the transforms,
+the scene and one raw state channel, and decodes the binary message frames (opcode 1:
+subscription id u32, timestamp u64 ns, payload), as the Foxglove protocol specification
+(github.com/foxglove/ws-protocol, docs/spec.md) lays them out.  What it receives is
+checked against the physics, not against the viewer: the transforms' translations are
+the recorded positions / 1000 (km) at the same log time, rotations are unit quaternions,
+and the raw channel's payloads are valid astrodyn messages.  Processes are started by the
+tests and stopped by their PIDs.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import textwrap
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from astrodyn import bus, messages
+from astrodyn.recording import load
+from astrodyn.service.children import stop_process
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _recordings import leo_recording, one_satellite_scene
+
+pytestmark = pytest.mark.network
+
+ASTRODYN = [sys.executable, "-m", "astrodyn"]
+
+CLIENT = textwrap.dedent('''
+    import json, struct, sys, time
+    from websockets.sync.client import connect
+    url, want_raw, seconds = sys.argv[1], sys.argv[2], float(sys.argv[3])
+    deadline = time.monotonic() + 60
+    while True:
+        try:
+            ws = connect(url, subprotocols=["foxglove.sdk.v1"], max_size=None, open_timeout=5)
+            break
+        except OSError:
+            if time.monotonic() > deadline:
+                raise
+            time.sleep(0.2)
+    out = {"subprotocol": ws.subprotocol, "channels": {}, "messages": {}}
+    subscribed, sub_topic, t_end = False, {}, None
+    with ws:
+        while True:
+            if t_end is not None and time.monotonic() > t_end:
+                break
+            try:
+                frame = ws.recv(timeout=0.5)
+            except TimeoutError:
+                continue
+            if isinstance(frame, str):
+                msg = json.loads(frame)
+                if msg["op"] == "serverInfo":
+                    out["server"] = msg
+                elif msg["op"] == "advertise":
+                    for ch in msg["channels"]:
+                        out["channels"][ch["topic"]] = {k: ch[k] for k in ("id", "encoding", "schemaName")}
+                    wanted = [ch for ch in msg["channels"]
+                              if ch["topic"] in ("foxglove/tf", "foxglove/scene") or ch["topic"] == want_raw]
+                    subs = [{"id": len(sub_topic) + i, "channelId": ch["id"]} for i, ch in enumerate(wanted)]
+                    for s, ch in zip(subs, wanted):
+                        sub_topic[s["id"]] = ch["topic"]
+                    if subs:
+                        ws.send(json.dumps({"op": "subscribe", "subscriptions": subs}))
+                        t_end = t_end or time.monotonic() + seconds
+                continue
+            if frame[0] == 1:  # message data
+                sub_id, ts = struct.unpack_from("<IQ", frame, 1)
+                out["messages"].setdefault(sub_topic[sub_id], []).append([ts, json.loads(frame[13:])])
+            elif frame[0] == 2:  # time
+                out["time"] = struct.unpack_from("<Q", frame, 1)[0]
+    print(json.dumps(out))
+''')
+
+
+def _client(tmp_path: Path, url: str, raw_topic: str, seconds: float) -> subprocess.Popen:
+    script = tmp_path / "foxglove_client.py"
+    script.write_text(CLIENT)
+    return subprocess.Popen([sys.executable, str(script), url, raw_topic, str(seconds)], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+
+
+def _received(client: subprocess.Popen) -> dict:
+    out, err = client.communicate(timeout=120)
+    assert client.returncode == 0, err[-3000:]
+    return json.loads(out.strip().splitlines()[-1])
+
+
+def _check_view(got: dict, scenario: str, body: str) -> None:
+    assert got["subprotocol"] == "foxglove.sdk.v1"
+    ch = got["channels"]
+    assert ch["foxglove/tf"]["schemaName"] == "foxglove.FrameTransforms" and ch["foxglove/tf"]["encoding"] == "json"
+    assert ch["foxglove/scene"]["schemaName"] == "foxglove.SceneUpdate"
+    raw = messages.orbit_key(scenario, body)
+    assert ch[raw]["schemaName"] == "astrodyn.OrbitState"
+    assert "time" in got["server"]["capabilities"]
+    tfs = got["messages"]["foxglove/tf"]
+    assert len(tfs) >= 5
+    for ts, msg in tfs:
+        for tr in msg["transforms"]:
+            assert tr["timestamp"]["sec"] * 10**9 + tr["timestamp"]["nsec"] <= ts  # the message: the newest
+            q = [tr["rotation"][c] for c in "xyzw"]
+            assert abs(np.linalg.norm(q) - 1.0) < 1e-12
+    for _, payload in got["messages"][raw]:
+        messages.validate(payload, "orbit")
+    scene = got["messages"]["foxglove/scene"][-1][1]
+    ids = {e["id"] for e in scene["entities"]}
+    assert {"central_body/earth", f"orbit/{body}", f"axes/{body}"} <= ids
+
+
+def test_serve_with_a_live_view_and_a_real_client(tmp_path):
+    cfg = tmp_path / "live.toml"
+    cfg.write_text(one_satellite_scene("live", "100000 s", "10 Hz"))
+    out = tmp_path / "live.mcap"
+    serve = subprocess.Popen([*ASTRODYN, "serve", str(cfg), "--out", str(out), "--rate", "50", "--foxglove", "0",
+                              "--max-wall", "120"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        hello = json.loads(serve.stdout.readline())
+        url = hello["foxglove"]
+        assert url.startswith("ws://127.0.0.1:")
+        got = _received(_client(tmp_path, url, messages.orbit_key("live", "sat"), 4.0))
+        with bus.open_session(connect=[hello["hub"]]) as s:
+            bus.send_control(s, "live", "stop", token=hello["control_token"], timeout_s=60)
+        serve.wait(timeout=60)
+    finally:
+        stop_process(serve)
+    _check_view(got, "live", "sat")
+    # the transforms are the recorded states: positions / 1000 at the same log times
+    run = load(out)
+    orbit = run.bodies["sat"].orbit
+    by_time = dict(zip(orbit.log_time.tolist(), orbit.r / 1e3))
+    _check_states(got, by_time, "sat")
+
+
+def _check_states(got: dict, by_time: dict, body: str) -> None:
+    """Every transform of ``body`` shows a recorded state: its own timestamp is the log
+    time of a recorded position and its translation is that position / 1000."""
+    shown = [tr for _, msg in got["messages"]["foxglove/tf"] for tr in msg["transforms"] if tr["child_frame_id"] == body]
+    assert len(shown) >= 5
+    for tr in shown:
+        ts = tr["timestamp"]["sec"] * 10**9 + tr["timestamp"]["nsec"]
+        np.testing.assert_array_equal([tr["translation"][c] for c in "xyz"], by_time[ts])
+
+
+def test_replay_with_a_live_view(tmp_path):
+    rec = tmp_path / "rec.mcap"
+    leo_recording(rec, name="rp", duration="600 s", rate="2 Hz")
+    replay = subprocess.Popen([*ASTRODYN, "replay", str(rec), "--rate", "20", "--foxglove", "0", "--wait", "30",
+                               "--quiet"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        hello = json.loads(replay.stdout.readline())
+        got = _received(_client(tmp_path, hello["foxglove"], messages.orbit_key("rp", "leo"), 4.0))
+    finally:
+        stop_process(replay)
+    _check_view(got, "rp", "leo")
+    run = load(rec)
+    orbit = run.bodies["leo"].orbit
+    by_time = dict(zip(orbit.log_time.tolist(), orbit.r / 1e3))
+    _check_states(got, by_time, "leo")
+
+
+def test_a_vanished_client_changes_nothing(tmp_path):
+    """A client that subscribes and then stops reading (a frozen browser) and one killed
+    mid-stream: the run goes on and its recording is complete, without a gap."""
+    cfg = tmp_path / "quiet.toml"
+    cfg.write_text(one_satellite_scene("quiet", "600 s", "10 Hz"))
+    out = tmp_path / "with.mcap"
+    serve = subprocess.Popen([*ASTRODYN, "serve", str(cfg), "--out", str(out), "--rate", "100", "--foxglove", "0",
+                              "--max-wall", "120"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        hello = json.loads(serve.stdout.readline())
+        frozen = _client(tmp_path, hello["foxglove"], messages.orbit_key("quiet", "sat"), 1000.0)
+        time.sleep(3)
+        frozen.send_signal(19)  # SIGSTOP: connected, subscribed, never reads again
+        killed = _client(tmp_path, hello["foxglove"], messages.orbit_key("quiet", "sat"), 1000.0)
+        time.sleep(2)
+        killed.kill()
+        time.sleep(3)
+        with bus.open_session(connect=[hello["hub"]]) as s:
+            final = bus.send_control(s, "quiet", "stop", token=hello["control_token"], timeout_s=60)[0]
+        serve.wait(timeout=120)
+    finally:
+        for p in (locals().get("frozen"), locals().get("killed")):
+            if p is not None:
+                p.send_signal(18)
+                stop_process(p)
+        stop_process(serve)
+    assert serve.returncode == 0, final
+    run = load(out)
+    assert run.complete and run.gaps[messages.orbit_key("quiet", "sat")]["missing"] == 0
+    seq = run.bodies["sat"].orbit.seq
+    assert len(seq) > 1000 and list(seq) == list(range(len(seq)))  # nothing lost while the clients hung and died
