@@ -118,12 +118,17 @@ def _check_view(got: dict, scenario: str, body: str) -> None:
     assert {"central_body/earth", f"orbit/{body}", f"axes/{body}"} <= ids
 
 
+def _serve_with_view(tmp_path: Path, name: str, duration: str, rate: float) -> tuple[subprocess.Popen, Path]:
+    """``serve`` of a one-satellite scene at 10 Hz with ``--foxglove 0``; (process, its --out)."""
+    cfg = tmp_path / f"{name}.toml"
+    cfg.write_text(one_satellite_scene(name, duration, "10 Hz"))
+    out = tmp_path / f"{name}.mcap"
+    return subprocess.Popen([*ASTRODYN, "serve", str(cfg), "--out", str(out), "--rate", str(rate), "--foxglove", "0",
+                             "--max-wall", "120"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True), out
+
+
 def test_serve_with_a_live_view_and_a_real_client(tmp_path):
-    cfg = tmp_path / "live.toml"
-    cfg.write_text(one_satellite_scene("live", "100000 s", "10 Hz"))
-    out = tmp_path / "live.mcap"
-    serve = subprocess.Popen([*ASTRODYN, "serve", str(cfg), "--out", str(out), "--rate", "50", "--foxglove", "0",
-                              "--max-wall", "120"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    serve, out = _serve_with_view(tmp_path, "live", "100000 s", 50)
     try:
         hello = json.loads(serve.stdout.readline())
         url = hello["foxglove"]
@@ -135,16 +140,14 @@ def test_serve_with_a_live_view_and_a_real_client(tmp_path):
     finally:
         stop_process(serve)
     _check_view(got, "live", "sat")
-    # the transforms are the recorded states: positions / 1000 at the same log times
-    run = load(out)
-    orbit = run.bodies["sat"].orbit
-    by_time = dict(zip(orbit.log_time.tolist(), orbit.r / 1e3))
-    _check_states(got, by_time, "sat")
+    _check_states(got, out, "sat")  # the transforms are the recorded states
 
 
-def _check_states(got: dict, by_time: dict, body: str) -> None:
+def _check_states(got: dict, recording: Path, body: str) -> None:
     """Every transform of ``body`` shows a recorded state: its own timestamp is the log
-    time of a recorded position and its translation is that position / 1000."""
+    time of a position in ``recording`` and its translation is that position / 1000."""
+    orbit = load(recording).bodies[body].orbit
+    by_time = dict(zip(orbit.log_time.tolist(), orbit.r / 1e3))
     shown = [tr for _, msg in got["messages"]["foxglove/tf"] for tr in msg["transforms"] if tr["child_frame_id"] == body]
     assert len(shown) >= 5
     for tr in shown:
@@ -163,20 +166,13 @@ def test_replay_with_a_live_view(tmp_path):
     finally:
         stop_process(replay)
     _check_view(got, "rp", "leo")
-    run = load(rec)
-    orbit = run.bodies["leo"].orbit
-    by_time = dict(zip(orbit.log_time.tolist(), orbit.r / 1e3))
-    _check_states(got, by_time, "leo")
+    _check_states(got, rec, "leo")
 
 
 def test_a_vanished_client_changes_nothing(tmp_path):
     """A client that subscribes and then stops reading (a frozen browser) and one killed
     mid-stream: the run goes on and its recording is complete, without a gap."""
-    cfg = tmp_path / "quiet.toml"
-    cfg.write_text(one_satellite_scene("quiet", "600 s", "10 Hz"))
-    out = tmp_path / "with.mcap"
-    serve = subprocess.Popen([*ASTRODYN, "serve", str(cfg), "--out", str(out), "--rate", "100", "--foxglove", "0",
-                              "--max-wall", "120"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    serve, out = _serve_with_view(tmp_path, "quiet", "600 s", 100)
     try:
         hello = json.loads(serve.stdout.readline())
         frozen = _client(tmp_path, hello["foxglove"], messages.orbit_key("quiet", "sat"), 1000.0)

@@ -30,16 +30,14 @@ from astrodyn.service.children import stop_process
 _CLIENT = r"""
 import json, sys, time
 from websockets.sync.client import connect
-url = sys.argv[1]
-deadline = time.monotonic() + 60
-while True:
+ws = None
+for attempt in range(300):  # the view process may still be starting its server
     try:
-        ws = connect(url, subprotocols=["foxglove.sdk.v1"], max_size=None, open_timeout=5)
-        break
+        ws = connect(sys.argv[1], subprotocols=["foxglove.sdk.v1"], max_size=None, open_timeout=5)
     except OSError:
-        if time.monotonic() > deadline:
-            raise
         time.sleep(0.2)
+    else:
+        break
 n = size = 0
 with ws:
     while True:
