@@ -700,3 +700,19 @@ def test_fuzz_mutated_configs(d):
     except TypeError:
         return
     _load_text_never_fails_otherwise(text)
+
+
+def test_plan_names_state_and_cross_check_messages_apart():
+    """The header of a run counts what the logger will count: states (orbit + attitude)
+    and, separately, the REBOUND cross-checks (per body in the config, or all orbits with
+    ``run --cross-check``).  Independent count: steps x channels of each kind."""
+    d = base()
+    scn = load(d)
+    n = scn.n_steps
+    p = S.plan(scn)
+    orbits = sum(b.orbit is not None for b in scn.bodies)
+    attitudes = sum(b.attitude is not None for b in scn.bodies)
+    assert p.crosscheck_messages == 0 and p.state_messages == p.messages == n * (orbits + attitudes)
+    q = S.plan(scn, cross_check_all=True)
+    assert q.crosscheck_messages == n * orbits and q.state_messages == p.state_messages
+    assert f"{q.state_messages} state messages (orbit + attitude) + {q.crosscheck_messages} cross-check messages" in q.text()

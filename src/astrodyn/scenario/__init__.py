@@ -1163,8 +1163,14 @@ class Plan:
     processes: tuple[str, ...]
     bodies: tuple[BodyPlan, ...]
     n_steps: int
-    messages: int
+    messages: int  #: every message the run records: states plus cross-checks
     warnings: tuple[str, ...] = ()
+    crosscheck_messages: int = 0  #: of ``messages``: the REBOUND cross-check messages
+
+    @property
+    def state_messages(self) -> int:
+        """Orbit and attitude state messages (``messages`` without the cross-checks)."""
+        return self.messages - self.crosscheck_messages
 
     @property
     def estimated_file_bytes(self) -> int:
@@ -1173,7 +1179,9 @@ class Plan:
 
     def text(self, max_bodies: int = 20) -> str:
         size = self.estimated_file_bytes
-        lines = [f"scenario {self.scenario}: {len(self.bodies)} bodies, {self.n_steps} output steps, {self.messages} state messages",
+        xc = f" + {self.crosscheck_messages} cross-check messages" if self.crosscheck_messages else ""
+        lines = [f"scenario {self.scenario}: {len(self.bodies)} bodies, {self.n_steps} output steps, "
+                 f"{self.state_messages} state messages (orbit + attitude){xc}",
                  f"expected recording: about {_human_bytes(size)} ({BYTES_PER_STATE} bytes per state message after zstd)",
                  f"processes: {', '.join(self.processes)}"]
         groups: dict[tuple, list[str]] = {}
@@ -1221,8 +1229,11 @@ _ATTITUDE_METHOD = {
 }
 
 
-def plan(scenario: Scenario) -> Plan:
+def plan(scenario: Scenario, cross_check_all: bool = False) -> Plan:
     """The cheapest exact model per body and the processes a run needs.
+
+    ``cross_check_all``: the run checks every orbit against REBOUND (``run --cross-check``),
+    counted in ``crosscheck_messages`` like the bodies whose config asks for it.
 
     A perturbation that is identically zero for the scene is dropped: j2/zonal with all
     needed J_n = 0 -> kepler; gravity gradient on an inertially spherical body, a heavy
@@ -1276,9 +1287,10 @@ def plan(scenario: Scenario) -> Plan:
         processes.append("attitude")
     processes.append("logger")
     n = scenario.n_steps
-    per_step = sum((bp.orbit_model is not None) + (bp.attitude_model is not None) + bool(b.cross_check) for bp, b in zip(out, scenario.bodies))
-    return Plan(scenario=scenario.name, processes=tuple(processes), bodies=tuple(out), n_steps=n, messages=n * per_step,
-                warnings=tuple(warnings))
+    states = sum((bp.orbit_model is not None) + (bp.attitude_model is not None) for bp in out)
+    checked = sum(bp.orbit_model is not None and (cross_check_all or b.cross_check) for bp, b in zip(out, scenario.bodies))
+    return Plan(scenario=scenario.name, processes=tuple(processes), bodies=tuple(out), n_steps=n,
+                messages=n * (states + checked), warnings=tuple(warnings), crosscheck_messages=n * checked)
 
 
 def _periapsis(orbit: OrbitSpec, mu: float) -> float | None:

@@ -188,6 +188,9 @@ def run_propagator(scenario: Scenario, session, opts: PropagatorOptions, log=pri
         events.emit("start", float(t_reached), json.dumps({"bodies": len(names), "first_step": start,
                                                            "steps": stop_at - start}))
         k = start
+        # until the first block is out the numeric kernels are being compiled (a first run on
+        # this install: tens of seconds; numba caches them) or loaded from numba's cache
+        heartbeat.beat(force=True, t=t_reached, step=k, preparing=True)
         try:
             while k < stop_at:
                 tb = np.arange(k, min(stop_at, k + block), dtype=np.float64) / rate

@@ -278,6 +278,23 @@ def _wait_ready(session, scenario: str, child: Child, timeout_s: float, interrup
                 return f"process {child.name} (pid {child.pid}) not ready after {timeout_s} s: {child.stderr_tail(3)}"
 
 
+def progress_line(last: dict, propagators: list[str], duration: float, dt: float, last_msgs: int) -> str:
+    """The progress line of ``run``: the simulated time every propagator has passed (the
+    slowest one's, from their heartbeats ``last``), the messages the logger holds and its
+    rate over the last ``dt`` s; a propagator that has not sent its first state yet is
+    named as compiling (a first run compiles the numeric kernels; numba caches them)."""
+    preparing = [k for k in propagators if last.get(k, {}).get("preparing") or k not in last]
+    ts = [float(last[k].get("t", 0.0)) for k in propagators if k in last]
+    t_min = min(ts) if ts else 0.0
+    msgs = last.get("logger", {}).get("messages", 0)
+    rate = (msgs - last_msgs) / max(1e-9, dt)
+    line = (f"  sim t {t_min:10.1f} / {duration:.1f} s  ({100 * t_min / max(duration, 1e-300):5.1f} %)"
+            f"  logged {msgs:>9d}  {rate:9.0f} msg/s")
+    if preparing:
+        line += f"  [{', '.join(preparing)}: compiling numeric kernels; first run only, cached afterwards]"
+    return line
+
+
 def _watch(scenario: Scenario, p, children: dict, beats, alive, progress: bool, timeout_s: float | None,
            interrupted: dict | None = None, on_death=None) -> str | None:
     """Wait for the propagators to finish; return a failure description or None.
@@ -319,14 +336,10 @@ def _watch(scenario: Scenario, p, children: dict, beats, alive, progress: bool, 
         if all(children[k].poll() == 0 for k in propagators):
             return None
         if progress and now - last_print >= (0.5 if sys.stderr.isatty() else 5.0):
-            ts = [beats.last.get(k, {}).get("t", 0.0) for k in propagators]
-            msgs = beats.last.get("logger", {}).get("messages", 0)
-            rate = (msgs - last_msgs) / max(1e-9, now - last_time)
-            last_msgs, last_time = msgs, now
-            t_min = min(ts) if ts else 0.0
-            tty = sys.stderr.isatty()
-            print(("\r" if tty else "") + f"  sim t {t_min:10.1f} / {duration:.1f} s  ({100 * t_min / max(duration, 1e-300):5.1f} %)"
-                  f"  logged {msgs:>9d}  {rate:9.0f} msg/s", end="" if tty else "\n", file=sys.stderr, flush=True)
+            print(("\r" if sys.stderr.isatty() else "") + progress_line(beats.last, propagators, duration, now - last_time,
+                                                                       last_msgs),
+                  end="" if sys.stderr.isatty() else "\n", file=sys.stderr, flush=True)
+            last_msgs, last_time = beats.last.get("logger", {}).get("messages", 0), now
             last_print = now
         if interrupted is not None and interrupted["signal"]:
             ts = [beats.last.get(k, {}).get("t", 0.0) for k in propagators]
@@ -369,7 +382,7 @@ def main(argv: list[str] | None = None) -> int:
         except ScenarioError as exc:
             print(f"astrodyn run: {exc}", file=sys.stderr)
             return 2
-        the_plan = make_plan(scenario)
+        the_plan = make_plan(scenario, cross_check_all=args.cross_check)
         for w in the_plan.warnings:
             print(f"astrodyn run: warning: {w}", file=sys.stderr)
         free = shutil.disk_usage(out.resolve().parent).free
