@@ -62,6 +62,7 @@ import zenoh
 from astrodyn import auth, messages
 
 __all__ = [
+    "SchemaServer",
     "DEFAULT_HOST",
     "process_signer",
     "signed_put",
@@ -673,6 +674,25 @@ class ControlServer(_Declared):
     def close(self) -> None:
         for _, _, queryable in self._queryables:
             queryable.undeclare()
+
+
+class SchemaServer(_Declared):
+    """Answers queries on ``astrodyn/<scenario>/@schema/<kind>`` with the JSON Schema of each
+    message kind (:data:`astrodyn.messages.SCHEMAS`), so a client with no astrodyn code can
+    learn the message layout from the bus: ``session.get("astrodyn/demo/@schema/*")`` gets
+    one reply per kind, keyed by its kind.  Answered on Zenoh's thread (a fixed reply, no
+    state), open to anyone on the bus like the states themselves."""
+
+    def __init__(self, session: zenoh.Session, scenario: str):
+        self._replies = [(zenoh.KeyExpr(messages.schema_key(scenario, kind)), json.dumps(messages.json_schema(t)).encode())
+                         for kind, t in messages.MESSAGE_TYPES.items()]
+        base = messages.schema_key(scenario, "orbit").rsplit("/", 1)[0]
+        self._entity = session.declare_queryable(f"{base}/*", self._answer)
+
+    def _answer(self, query) -> None:
+        for key, payload in self._replies:
+            if key.intersects(query.key_expr):
+                query.reply(key, payload, encoding=zenoh.Encoding.APPLICATION_JSON)
 
 
 def _attachment_bytes(obj: Any) -> bytes | None:

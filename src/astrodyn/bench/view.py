@@ -80,7 +80,7 @@ def one_run(config: Path, wall_s: float, viewer: bool, work: Path) -> dict:
             time.sleep(wall_s)
             w1, t1 = status()
             bus.send_control(s, hello["serving"], "stop", token=hello["control_token"], timeout_s=120)
-        serve.wait(timeout=120)
+        serve.communicate(timeout=120)  # read its final summary: a full pipe would block its exit
     finally:
         for p in (client, serve):
             if p is not None:

@@ -15,6 +15,7 @@ Every message lives under ``astrodyn/<scenario>/``::
     astrodyn/<scenario>/@control/<verb>     queryables      (status, pause, resume, rate, stop)
     astrodyn/<scenario>/@alive/<process>    liveliness tokens
     astrodyn/<scenario>/@batch/<process>    batch envelope  (see :func:`encode_batch`)
+    astrodyn/<scenario>/@schema/<kind>      queryable: the JSON Schema of a message kind
 
 Scenario, body, process and verb names match ``[A-Za-z0-9_.-]{1,128}`` and are not
 ``.`` or ``..``: no ``/``, no Zenoh wildcards ``*``, ``**``, ``$*``, and never a leading
@@ -28,6 +29,7 @@ Scenario, body, process and verb names match ``[A-Za-z0-9_.-]{1,128}`` and are n
 ``astrodyn/s/@control/pause``         ``("s", "@control", "pause")``
 ``astrodyn/s/@alive/orbit``           ``("s", "@alive", "orbit")``
 ``astrodyn/s/@batch/orbit``           ``("s", "@batch", "orbit")``
+``astrodyn/s/@schema/orbit``          ``("s", "@schema", "orbit")``
 ====================================  ===============================================
 
 Payloads
@@ -112,6 +114,7 @@ __all__ = [
     "attitude_key",
     "crosscheck_key",
     "control_key",
+    "schema_key",
     "status_key",
     "alive_key",
     "event_key",
@@ -160,7 +163,7 @@ PREFIX = "astrodyn"
 NAME_PATTERN = r"[A-Za-z0-9_.-]{1,128}"
 _NAME_RE = re.compile(NAME_PATTERN)
 _BODY_KINDS = ("orbit", "attitude", "crosscheck")
-_SPECIAL_WITH_NAME = ("@control", "@alive", "@batch")
+_SPECIAL_WITH_NAME = ("@control", "@alive", "@batch", "@schema")
 _SPECIAL_PLAIN = {"@status": "status", "@event": "event"}
 
 #: |q| may differ from 1 by at most this much in a message (integrators keep |q| at
@@ -194,6 +197,14 @@ def attitude_key(scenario: str, body: str) -> str:
 def crosscheck_key(scenario: str, body: str) -> str:
     """``astrodyn/<scenario>/<body>/crosscheck``."""
     return f"{PREFIX}/{check_name(scenario, 'scenario')}/{check_name(body, 'body')}/crosscheck"
+
+
+def schema_key(scenario: str, kind: str) -> str:
+    """``astrodyn/<scenario>/@schema/<kind>``: a queryable answering with the JSON Schema of
+    the messages of ``kind`` (orbit, attitude, crosscheck, event, status)."""
+    if kind not in MESSAGE_TYPES:
+        raise MessageError(f"kind: expected one of {', '.join(MESSAGE_TYPES)}, got {kind!r}")
+    return f"{PREFIX}/{check_name(scenario, 'scenario')}/@schema/{kind}"
 
 
 def control_key(scenario: str, verb: str) -> str:
@@ -323,6 +334,10 @@ class CrossCheck(Stamped, forbid_unknown_fields=True):
 
 class Event(Stamped, forbid_unknown_fields=True):
     """Something that happened to a process of the run (start, restart, stop, error, ...)."""
+
+    seq: Annotated[int, Meta(ge=0, le=MAX_SEQ, description=(
+        "message counter of the sending process on this channel: 0, 1, 2, ... without gaps for each "
+        "process (the event channel carries the events of every process of the run)"))]
 
     process: _name("process name, e.g. orbit, attitude, logger, runner", "a process name")
     kind: Annotated[str, Meta(pattern="^[a-z][a-z_]{0,31}$", max_length=32,

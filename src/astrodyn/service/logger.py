@@ -491,6 +491,7 @@ class Logger:
             control = stack.enter_context(bus.ControlServer(
                 self.session, self.scenario, verbs=("stop",) if self.control else (),
                 extra_keys={messages.status_key(self.scenario): "status"}))
+            stack.enter_context(bus.SchemaServer(self.session, self.scenario))  # the message layouts, for any client
             alive = stack.enter_context(bus.AliveWatcher(self.session, self.scenario))
             heartbeat = stack.enter_context(bus.Heartbeat(self.session, self.scenario, self.name, signer=self.signer))
             ingest.warm_up(INGEST_GRAMMAR)  # compile / load the batch kernels before we say ready

@@ -192,6 +192,9 @@ def run_scenario(scenario: Scenario, config_path: Path, out: Path, *, cross_chec
                 return restart_logger(rc) if name == "logger" else restart_propagator(name, rc)
 
             if failure is None:
+                result["hub"] = hub
+                print(f"  bus {hub}: any Zenoh client can subscribe to astrodyn/{scenario.name}/** there "
+                      f"(docs/clients.md)", file=sys.stderr, flush=True)
                 for kind in propagators:
                     start_propagator(kind, (extra_args or {}).get(kind, {}))
                 if progress:
