@@ -16,6 +16,7 @@ Every message lives under ``astrodyn/<scenario>/``::
     astrodyn/<scenario>/@alive/<process>    liveliness tokens
     astrodyn/<scenario>/@batch/<process>    batch envelope  (see :func:`encode_batch`)
     astrodyn/<scenario>/@schema/<kind>      queryable: the JSON Schema of a message kind
+    astrodyn/<scenario>/@latest             queryable: the newest state samples (envelope)
 
 Scenario, body, process and verb names match ``[A-Za-z0-9_.-]{1,128}`` and are not
 ``.`` or ``..``: no ``/``, no Zenoh wildcards ``*``, ``**``, ``$*``, and never a leading
@@ -115,6 +116,7 @@ __all__ = [
     "crosscheck_key",
     "control_key",
     "schema_key",
+    "latest_key",
     "status_key",
     "alive_key",
     "event_key",
@@ -164,7 +166,7 @@ NAME_PATTERN = r"[A-Za-z0-9_.-]{1,128}"
 _NAME_RE = re.compile(NAME_PATTERN)
 _BODY_KINDS = ("orbit", "attitude", "crosscheck")
 _SPECIAL_WITH_NAME = ("@control", "@alive", "@batch", "@schema")
-_SPECIAL_PLAIN = {"@status": "status", "@event": "event"}
+_SPECIAL_PLAIN = {"@status": "status", "@event": "event", "@latest": "latest"}
 
 #: |q| may differ from 1 by at most this much in a message (integrators keep |q| at
 #: round-off, ~1e-15; JSON repr round-trips floats exactly, so 1e-9 only rejects garbage).
@@ -197,6 +199,14 @@ def attitude_key(scenario: str, body: str) -> str:
 def crosscheck_key(scenario: str, body: str) -> str:
     """``astrodyn/<scenario>/<body>/crosscheck``."""
     return f"{PREFIX}/{check_name(scenario, 'scenario')}/{check_name(body, 'body')}/crosscheck"
+
+
+def latest_key(scenario: str) -> str:
+    """``astrodyn/<scenario>/@latest``: the logger's queryable answering with the newest
+    authenticated state sample of every state key it received (one batch envelope of
+    ``(key, payload)`` pairs, see :func:`encode_batch`), for views that must not take the
+    full-rate streams."""
+    return f"{PREFIX}/{check_name(scenario, 'scenario')}/@latest"
 
 
 def schema_key(scenario: str, kind: str) -> str:
@@ -258,7 +268,7 @@ def parse_key(key: Any) -> tuple[str, str, str]:
 def kind_of_key(key: str) -> str | None:
     """Message kind for a key ("orbit", "attitude", "crosscheck", "event", "status"), else None."""
     _, who, kind = parse_key(key)
-    return None if who in _SPECIAL_WITH_NAME else kind
+    return None if who in _SPECIAL_WITH_NAME or who == "@latest" else kind
 
 
 # ---------------------------------------------------------------------------------------

@@ -168,6 +168,9 @@ class Logger:
         self.malformed = 0
         self.malformed_examples: list[str] = []
         self.heartbeats: dict[str, float] = {}
+        #: newest authenticated sample of each state key (per-body keys and @batch envelopes),
+        #: served on @latest to views that must not take the full-rate streams
+        self.latest: dict[str, bytes] = {}
         self.ended: dict[str, int | None] = {}
         self.died: dict[str, str] = {}
         self.stalled: set[str] = set()
@@ -358,11 +361,26 @@ class Logger:
                 self._reject(key, "wrong-publisher", sender, f"{key} belongs to process {entitled!r}")
                 return
         if rest is not None and rest.startswith("@batch/"):
+            self.latest[key] = payload
             self._record_batch(key, payload, now_ns, sender)
         elif rest is not None and rest.startswith("@heartbeat/"):
             self.heartbeats[rest[len("@heartbeat/"):]] = time.monotonic()
         else:
+            if key.endswith(("/orbit", "/attitude")):
+                self.latest[key] = payload
             self._record(key, payload, now_ns, sender)
+
+    def answer_latest(self, query) -> None:
+        """The ``@latest`` queryable (on Zenoh's thread): one batch envelope of the newest
+        sample of every state key, signed by this logger when it has the run's secret."""
+        try:
+            items = list(self.latest.items())  # one C-level copy under the GIL
+            payload = messages.encode_batch(items)
+            key = messages.latest_key(self.scenario)
+            attachment = self.signer.attachment(key, payload) if self.signer is not None else None
+            query.reply(key, payload, attachment=attachment)
+        except Exception as exc:  # never let a query disturb the logger
+            query.reply_err(json.dumps({"error": f"latest: {exc}"}))
 
     def _own_event(self, kind: str, detail: str) -> None:
         msg = messages.event_message(self.max_t, self._own_event_seq, self.name, kind, detail[:4096])
@@ -492,6 +510,8 @@ class Logger:
                 self.session, self.scenario, verbs=("stop",) if self.control else (),
                 extra_keys={messages.status_key(self.scenario): "status"}))
             stack.enter_context(bus.SchemaServer(self.session, self.scenario))  # the message layouts, for any client
+            latest = self.session.declare_queryable(messages.latest_key(self.scenario), self.answer_latest)
+            stack.callback(latest.undeclare)
             alive = stack.enter_context(bus.AliveWatcher(self.session, self.scenario))
             heartbeat = stack.enter_context(bus.Heartbeat(self.session, self.scenario, self.name, signer=self.signer))
             ingest.warm_up(INGEST_GRAMMAR)  # compile / load the batch kernels before we say ready

@@ -109,7 +109,7 @@ class Supervisor:
         self.viewer_url = None
         if foxglove_port is not None:  # the live view: a separate process that only subscribes
             self._argv["viewer"] = [*viewer_command(), "--scenario", scenario.name, "--port", str(foxglove_port),
-                                    "--metadata", str(meta), *connect_args]
+                                    "--metadata", str(meta), "--from-logger", *connect_args]
             self.budgets["viewer"] = RestartBudget("viewer")
             self.children["viewer"] = Child("viewer", self._argv["viewer"], tmp, env=self.child_env)
             self.viewer_url = f"ws://127.0.0.1:{foxglove_port}"

@@ -5,8 +5,15 @@ scene's keys and serves a Foxglove WebSocket server (foxglove-sdk) on
 ``ws://127.0.0.1:PORT``.  Open the Foxglove app, "Open connection", Foxglove WebSocket,
 that URL: the 3D panel shows the scene, the Plot panel the raw states.
 
-It never slows the simulation.  The Zenoh callback keeps only the newest sample of each
-key (a dictionary store, nothing else), so the bus never waits on the viewer; every
+It never slows the simulation.  Under ``serve`` (``--from-logger``) it does not subscribe
+to the state streams at all: at each view frame it asks the logger's ``@latest`` queryable
+for the newest sample of every state key (one envelope, signed by the logger), so the bus
+carries nothing extra at the simulation's rate (a full-rate subscriber cost
+constellation-1000 13 % of its speed: docs/benchmarks.md).  Under ``replay`` it subscribes,
+and its Zenoh callback keeps only the newest sample of each key (a dictionary store,
+nothing else), so the bus never waits on the viewer.  The viewer
+runs at a lower CPU priority (nice 10), so on a busy machine the simulation goes first;
+its work per second is bounded (transforms, trail points and raw messages per second); every
 ``1 / rate`` s of wall time (30 Hz by default) the viewer takes those samples, checks them
 (the run's HMAC when it runs under a supervisor, then the message definition) and sends
 view frames.  States between two frames are not shown (the recording has them all); a
@@ -16,13 +23,15 @@ take.
 Channels (timestamps: the scenario epoch + t, so Foxglove's clock is simulated time;
 the server also broadcasts that time):
 
-``foxglove/tf``       ``foxglove.FrameTransforms``: per body with an attitude the frame
+``foxglove/tf``       ``foxglove.FrameTransforms`` (at most 2000 body transforms a second:
+                      30 frames a second up to 66 bodies, fewer above): per body with an attitude the frame
                       ``<body>`` (rotation from its Euler parameters, at its position, or
                       at the origin without an orbit); per body with only an orbit the
                       frame ``<body>/position`` (axes parallel to the orbit frame).  km.
-``foxglove/scene``    ``foxglove.SceneUpdate``, once a second: the central body (sphere of
+``foxglove/scene``    ``foxglove.SceneUpdate``, every 5 s, when a client subscribes and when
+                      a body or a body's orbit or attitude appears: the central body (sphere of
                       its equatorial radius), each body's trail (its positions at the view
-                      frames, at most 2000 points per body and 50,000 in all), each body's
+                      frames, at most 2000 points per body and 20,000 in all), each body's
                       axes (x red, y green, z blue).
 ``astrodyn/<scenario>/<body>/orbit`` ... the raw state channels as recorded (JSON, the
                       message schemas), at most ``--raw-rate`` messages per second in all,
@@ -38,6 +47,7 @@ import argparse
 import collections
 import json
 import math
+import os
 import signal
 import sys
 import threading
@@ -59,15 +69,21 @@ from astrodyn.recording.foxglove_scene import (
     orbit_line_entity,
     stamp,
 )
-from astrodyn.rotation import quat_to_scalar_last
 from astrodyn.service.children import share_fate_with_supervisor
 
 __all__ = ["LatestSamples", "LiveScene", "viewer_command", "main", "TF_TOPIC", "MAX_LIVE_SCENE_POINTS"]
 
 TF_TOPIC = "foxglove/tf"
 #: Most trail points of all bodies together in one scene update (a 1000-body constellation
-#: gets 50 per body); the scene is resent once a second.
-MAX_LIVE_SCENE_POINTS = 50_000
+#: gets 20 per body); the scene is resent every 5 s.
+MAX_LIVE_SCENE_POINTS = 20_000
+#: Most body transforms per second: the view frame rate drops below ``--rate`` for scenes of
+#: more than 66 bodies (1000 bodies: 2 frames a second), so the view's work stays bounded
+#: (measured: 6000 a second cost constellation-1000 10 % of its speed on 2 busy cores).
+MAX_TRANSFORMS_PER_S = 2000
+#: The viewer's CPU priority (``nice``): on a busy machine the simulation goes first.
+VIEWER_NICE = 10
+SCENE_PERIOD_S = 5.0
 
 
 def viewer_command() -> list[str]:
@@ -107,11 +123,11 @@ class _Body:
     def __init__(self, name: str, index: int, has_orbit: bool | None):
         self.name, self.index = name, index
         self.frame = "GCRF"
-        self.r_km: np.ndarray | None = None  # newest position, km, and its log time
+        self.r_km: tuple | None = None  # newest position, km, and its log time
         self.r_time = 0
-        self.xyzw: np.ndarray | None = None  # newest attitude (Foxglove order) and its log time
+        self.xyzw: tuple | None = None  # newest attitude (Foxglove order, scalar last) and its log time
         self.q_time = 0
-        self.recent_q: collections.OrderedDict[int, np.ndarray] = collections.OrderedDict()  # log time -> xyzw
+        self.recent_q: collections.OrderedDict[int, tuple] = collections.OrderedDict()  # log time -> xyzw
         self.trail: collections.deque = collections.deque(maxlen=MAX_LINE_POINTS)
         self.samples = 0
         self.has_orbit = has_orbit  # from the config; None: unknown (then: once an orbit state came)
@@ -135,6 +151,7 @@ class LiveScene:
         self.bodies: dict[str, _Body] = {}
         self.t = 0.0
         self.invalid = 0
+        self.changed = False  #: a body, or a body's first orbit or attitude, appeared since the last scene
 
     def log_time(self) -> int:
         """Log time of the newest state shown (ns since the Unix epoch)."""
@@ -155,16 +172,22 @@ class LiveScene:
         if body is None:
             has_orbit = None if self.orbit_bodies is None else name in self.orbit_bodies
             body = self.bodies[name] = _Body(name, len(self.bodies), has_orbit)
+            self.changed = True
         log_time = self.epoch_ns + int(round(float(msg["t"]) * 1e9))
-        if kind == "orbit":
+        if kind == "orbit":  # plain floats: this runs for every body at every view frame
+            r = msg["r"]
+            r_km = (r[0] / 1e3, r[1] / 1e3, r[2] / 1e3)
+            self.changed |= body.r_km is None
             if log_time >= body.r_time:
-                body.r_km, body.r_time = np.asarray(msg["r"], dtype=float) / 1e3, log_time
+                body.r_km, body.r_time = r_km, log_time
             body.frame = msg["frame"]
-            body.trail.append(np.asarray(msg["r"], dtype=float) / 1e3)
+            body.trail.append(r_km)
             body.samples += 1
             body.has_orbit = True if body.has_orbit is None else body.has_orbit
         else:
-            xyzw = quat_to_scalar_last(np.asarray(msg["q"], dtype=float))
+            q = msg["q"]
+            xyzw = (q[1], q[2], q[3], q[0])  # Foxglove order (astrodyn.rotation.quat_to_scalar_last)
+            self.changed |= body.xyzw is None
             if log_time >= body.q_time:
                 body.xyzw, body.q_time = xyzw, log_time
             body.recent_q[log_time] = xyzw
@@ -226,8 +249,16 @@ class _View:
         import foxglove
 
         self.foxglove = foxglove
+        self.scene_wanted = threading.Event()  # a client subscribed to the scene: send it at the next frame
+        view = self
+
+        class Listener(foxglove.ServerListener):
+            def on_subscribe(self, client, channel) -> None:
+                if channel.topic == SCENE_TOPIC:
+                    view.scene_wanted.set()
+
         self.server = foxglove.start_server(name=f"astrodyn {scenario}", host=host, port=port,
-                                            capabilities=[foxglove.Capability.Time])
+                                            capabilities=[foxglove.Capability.Time], server_listener=Listener())
         self.tf = foxglove.Channel(TF_TOPIC, schema=_schema("foxglove.FrameTransforms", FRAME_TRANSFORMS_SCHEMA),
                                    message_encoding="json")
         self.scene = foxglove.Channel(SCENE_TOPIC, schema=_schema("foxglove.SceneUpdate", SCENE_UPDATE_SCHEMA),
@@ -281,8 +312,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--host", default="127.0.0.1", help="address to listen on (default loopback only)")
     ap.add_argument("--metadata", default=None, help="scenario metadata JSON (epoch, central body)")
     ap.add_argument("--rate", type=float, default=30.0, help="view frames per second of wall time (default 30)")
-    ap.add_argument("--raw-rate", type=float, default=2000.0,
-                    help="raw state messages per second sent to Foxglove, all channels together (default 2000)")
+    ap.add_argument("--from-logger", action="store_true",
+                    help="take the newest states from the logger's @latest queryable at each view frame instead of "
+                         "subscribing to the full-rate streams (what serve does: the bus then carries nothing extra)")
+    ap.add_argument("--raw-rate", type=float, default=1000.0,
+                    help="raw state messages per second sent to Foxglove, all channels together (default 1000)")
     bus.add_bus_arguments(ap)
     args = ap.parse_args(argv)
     try:
@@ -299,6 +333,10 @@ def main(argv: list[str] | None = None) -> int:
         print(f"astrodyn viewer: error: {exc}", file=sys.stderr)
         return 2
     share_fate_with_supervisor()
+    try:
+        os.nice(VIEWER_NICE)
+    except OSError:
+        pass
     stop = {"why": None}
     for sig in (signal.SIGTERM, signal.SIGINT):
         signal.signal(sig, lambda s, f: stop.update(why=signal.Signals(s).name))
@@ -316,7 +354,35 @@ def main(argv: list[str] | None = None) -> int:
     try:
         with bus.session_from_args(args) as session:
             base = f"{messages.PREFIX}/{args.scenario}"
-            subs = [session.declare_subscriber(key, latest) for key in (f"{base}/**", f"{base}/@batch/*")]
+            subs = [] if args.from_logger else [session.declare_subscriber(key, latest)
+                                                for key in (f"{base}/**", f"{base}/@batch/*")]
+            latest_key = messages.latest_key(args.scenario)
+
+            def newest() -> dict[str, tuple[bytes, bytes | None]]:
+                """The samples to show: the logger's newest (one query, one envelope, checked
+                against the logger's authenticator) or what the subscription kept."""
+                if not args.from_logger:
+                    return latest.take()
+                nonlocal rejected
+                out: dict[str, tuple[bytes, bytes | None]] = {}
+                for reply in session.get(latest_key, timeout=2.0):
+                    if reply.ok is None:
+                        continue
+                    payload = reply.ok.payload.to_bytes()
+                    attachment = reply.ok.attachment
+                    if verifier is not None:
+                        try:
+                            verifier.verify(latest_key, payload, None if attachment is None else attachment.to_bytes())
+                        except auth.AuthError:
+                            rejected += 1
+                            continue
+                    try:
+                        out.update((k, (p, None)) for k, p in messages.decode_batch(payload))
+                    except messages.MessageError:
+                        continue
+                latest.received += len(out)
+                return out
+
             print(json.dumps({"foxglove": f"ws://{args.host}:{view.server.port}", "scenario": args.scenario,
                               "authenticated": verifier is not None}), flush=True)
             period = 1.0 / args.rate
@@ -326,9 +392,10 @@ def main(argv: list[str] | None = None) -> int:
                 if now < next_frame:
                     time.sleep(min(next_frame - now, 0.05))
                     continue
-                next_frame = max(next_frame + period, now)
-                for key, (payload, attachment) in latest.take().items():
-                    if verifier is not None:
+                frame_period = max(period, len(scene.bodies) / MAX_TRANSFORMS_PER_S)
+                next_frame = max(next_frame + frame_period, now)
+                for key, (payload, attachment) in newest().items():
+                    if verifier is not None and not args.from_logger:  # from the logger: checked as one envelope
                         try:
                             verifier.verify(key, payload, attachment)
                         except auth.AuthError:
@@ -347,10 +414,12 @@ def main(argv: list[str] | None = None) -> int:
                     lt = scene.log_time()
                     view.tf.log(scene.transforms(), log_time=lt)
                     view.server.broadcast_time(lt)
-                    view.forward(period)
-                    if now >= next_scene:
+                    view.forward(frame_period)
+                    if now >= next_scene or view.scene_wanted.is_set() or scene.changed:
+                        view.scene_wanted.clear()
+                        scene.changed = False
                         view.scene.log(scene.scene(), log_time=lt)
-                        next_scene = now + 1.0
+                        next_scene = now + SCENE_PERIOD_S
             for sub in subs:
                 sub.undeclare()
     except bus.BusError as exc:
