@@ -44,9 +44,7 @@ import argparse
 import contextlib
 import json
 import os
-import signal
 import sys
-import threading
 import time
 from collections.abc import Iterable
 from typing import Any
@@ -59,6 +57,7 @@ from astrodyn.jit import service_threads, set_threads
 from astrodyn.recording import ingest
 from astrodyn.recording.writer import DUPLICATE, INGEST_GRAMMAR, BatchLayout, McapRecorder, RecordingError
 from astrodyn.service.children import share_fate_with_supervisor
+from astrodyn.service.signals import catch_stop_signals
 
 __all__ = ["Logger", "main"]
 
@@ -497,9 +496,8 @@ class Logger:
 
     def run(self, max_seconds: float | None = None, install_signal_handlers: bool = True) -> dict:
         """Record until the run ends or a stop; finish the file; return the summary dict."""
-        if install_signal_handlers and threading.current_thread() is threading.main_thread():
-            for sig in (signal.SIGTERM, signal.SIGINT):
-                signal.signal(sig, lambda signum, frame: self.request_stop(signal.Signals(signum).name))
+        if install_signal_handlers:
+            catch_stop_signals(self.request_stop)
         deadline = None if max_seconds is None else time.monotonic() + max_seconds
         with contextlib.ExitStack() as stack:
             subs = [

@@ -28,7 +28,6 @@ from __future__ import annotations
 
 import json
 import math
-import signal
 import sys
 import time
 from dataclasses import dataclass
@@ -39,6 +38,7 @@ from astrodyn import bus, messages
 from astrodyn.jit import service_threads, set_threads
 from astrodyn.scenario import Scenario, plan as make_plan
 from astrodyn.service.children import share_fate_with_supervisor
+from astrodyn.service.signals import catch_stop_signals
 from astrodyn.simulate import AttitudeEngine, OrbitEngine
 
 __all__ = ["Pacer", "PropagatorOptions", "run_propagator", "command_key"]
@@ -159,12 +159,7 @@ def run_propagator(scenario: Scenario, session, opts: PropagatorOptions, log=pri
     pacer = Pacer(opts.real_time_factor)
     stopping = {"why": None}
     conservation = _Conservation(opts.kind, scenario, engine)
-
-    def on_signal(signum, frame):
-        stopping["why"] = signal.Signals(signum).name
-
-    for sig in (signal.SIGTERM, signal.SIGINT):
-        signal.signal(sig, on_signal)
+    catch_stop_signals(lambda why: stopping.update(why=why))
 
     published = 0
     t_reached = start / rate

@@ -48,7 +48,6 @@ import argparse
 import json
 import math
 import shutil
-import signal
 import sys
 import tempfile
 import time
@@ -59,6 +58,8 @@ from astrodyn import auth, bus, messages
 from astrodyn.recording.stream import McapStream, RawMessage
 from astrodyn.recording.writer import RecordingError
 from astrodyn.service.children import Child
+from astrodyn.service.progress import Progress
+from astrodyn.service.signals import StopFlag
 from astrodyn.service.viewer import viewer_command
 
 __all__ = ["Replayer", "main", "REPLAY_VERBS"]
@@ -374,10 +375,8 @@ def main(argv: list[str] | None = None) -> int:
     listen = args.listen
     if listen is None and args.mode != "client":
         listen = [bus.loopback_endpoint(args.port)]
-    stop_signal = {"why": None}
-    for sig in (signal.SIGTERM, signal.SIGINT):
-        signal.signal(sig, lambda s, f: stop_signal.update(why=signal.Signals(s).name))
-    tty = sys.stderr.isatty()
+    stop_signal = StopFlag()
+    printer = Progress(enabled=not args.quiet)
     with stream:
         try:
             scenario = args.control_scenario or scenario_of(stream)
@@ -418,25 +417,20 @@ def main(argv: list[str] | None = None) -> int:
             try:
                 with bus.ControlServer(session, scenario, verbs=REPLAY_VERBS, token=token) as control:
                     rep.wait_for_subscriber(args.wait)
-                    last_print = 0.0
                     while True:
                         for req in control.poll():
                             if rep.handle(req):
                                 stop_requests.append(req)
-                        if rep.state == "stopped" or stop_signal["why"]:
+                        if rep.state == "stopped" or stop_signal.why:
                             break
                         more = rep.step()
                         if not more and rep.state == "finished" and not args.hold:
                             break
                         if rep.state != "running":
                             time.sleep(_POLL_S)
-                        now = time.monotonic()
-                        if not args.quiet and now - last_print >= (0.5 if tty else 5.0):
-                            last_print = now
-                            print(("\r" if tty else "") + _progress_line(rep), end="" if tty else "\n",
-                                  file=sys.stderr, flush=True)
+                        printer.show(lambda: _progress_line(rep))
                     rep._flush_batches()
-                    if stop_signal["why"]:
+                    if stop_signal.why:
                         rep.state = "stopped"
                     summary = rep.status()
                     if not stream.truncated and not stream.corrupt_chunks:
@@ -450,8 +444,8 @@ def main(argv: list[str] | None = None) -> int:
                     viewer.stop()
                     viewer.close()
                 shutil.rmtree(token_dir, ignore_errors=True)
+    printer.done(_progress_line(rep))
     if not args.quiet:
-        print(("\r" if tty else "") + _progress_line(rep), file=sys.stderr, flush=True)
         if not summary["complete"]:
             print(f"astrodyn replay: {stream.path} is incomplete ({summary['file_report']}); "
                   f"replayed the {rep.published} complete messages", file=sys.stderr)

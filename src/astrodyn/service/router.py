@@ -25,7 +25,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import signal
 import sys
 import threading
 import time
@@ -76,6 +75,7 @@ def main(argv: list[str] | None = None) -> int:
                     help="print the connected routers and peers every S seconds (0: never)")
     args = ap.parse_args(argv)
     from astrodyn import bus
+    from astrodyn.service.signals import catch_stop_signals
 
     listen = args.listen or ([] if args.config else [DEFAULT_LISTEN])
     try:
@@ -89,12 +89,7 @@ def main(argv: list[str] | None = None) -> int:
             print(f"astrodyn router: WARNING: {e} listens on every network interface; Zenoh traffic is not encrypted or "
                   "authenticated unless TLS and access control are configured (docs/multihost.md)", file=sys.stderr)
     stop = threading.Event()
-
-    def on_signal(signum, frame):
-        stop.set()
-
-    signal.signal(signal.SIGTERM, on_signal)
-    signal.signal(signal.SIGINT, on_signal)
+    catch_stop_signals(lambda why: stop.set())
     try:
         session = open_router(listen, args.connect, args.config)
     except bus.BusError as exc:

@@ -36,7 +36,6 @@ import signal
 import subprocess
 import sys
 import tempfile
-import threading
 import time
 from pathlib import Path
 
@@ -45,6 +44,8 @@ from astrodyn.recording.writer import partial_path
 from astrodyn.scenario import Scenario, ScenarioError, load, plan as make_plan
 from astrodyn.service.children import Child, logger_command, propagator_command, work_directory
 from astrodyn.service.output import check_output_path
+from astrodyn.service.progress import Progress
+from astrodyn.service.signals import catch_stop_signals
 from astrodyn.service.summary import file_summary, print_summary, propagator_rows
 from astrodyn.service.supervision import RestartBudget, plan_logger_restart, wait_until_gone
 
@@ -81,10 +82,7 @@ def run_scenario(scenario: Scenario, config_path: Path, out: Path, *, cross_chec
     started = time.monotonic()
     result: dict = {"scenario": scenario.name, "out": str(out), "processes": {}, "ok": False}
     interrupted: dict = {"signal": None}
-    previous = {}
-    if threading.current_thread() is threading.main_thread():
-        for sig in (signal.SIGTERM, signal.SIGINT):
-            previous[sig] = signal.signal(sig, lambda s, f: interrupted.update(signal=signal.Signals(s).name))
+    restore_signals = catch_stop_signals(lambda why: interrupted.update(signal=why))
     secret = auth.RunSecret.generate() if authenticate else None
     with work_directory(out, "run") as tmp, \
             bus.open_session(listen=[hub], config_file=zenoh_config) as session, \
@@ -229,8 +227,7 @@ def run_scenario(scenario: Scenario, config_path: Path, out: Path, *, cross_chec
                 if name in children:
                     children[name].stop()
                     children[name].close()
-            for sig, handler in previous.items():
-                signal.signal(sig, handler)
+            restore_signals()
     result["interrupted"] = interrupted["signal"]
     result["wall_s"] = time.monotonic() - started
     log = (result["processes"].get("logger") or {}).get("summary") or {}
@@ -307,7 +304,7 @@ def _watch(scenario: Scenario, p, children: dict, beats, alive, progress: bool, 
     and returns None, or a failure description when it cannot."""
     propagators = [k for k in children if k != "logger"]
     duration = (scenario.n_steps - 1) / scenario.rate if scenario.n_steps else 0.0  # last output instant, no array
-    last_print = 0.0
+    printer = Progress(enabled=progress)
     t0 = time.monotonic()
     last_msgs, last_time = 0, t0
     while True:
@@ -338,12 +335,9 @@ def _watch(scenario: Scenario, p, children: dict, beats, alive, progress: bool, 
                 return f"process {name} (pid {ch.pid}) {sig}{who}{where}: {ch.stderr_tail(3)}"
         if all(children[k].poll() == 0 for k in propagators):
             return None
-        if progress and now - last_print >= (0.5 if sys.stderr.isatty() else 5.0):
-            print(("\r" if sys.stderr.isatty() else "") + progress_line(beats.last, propagators, duration, now - last_time,
-                                                                       last_msgs),
-                  end="" if sys.stderr.isatty() else "\n", file=sys.stderr, flush=True)
+        if printer.show(lambda dt=now - last_time, n=last_msgs: progress_line(beats.last, propagators, duration, dt, n),
+                        now):
             last_msgs, last_time = beats.last.get("logger", {}).get("messages", 0), now
-            last_print = now
         if interrupted is not None and interrupted["signal"]:
             ts = [beats.last.get(k, {}).get("t", 0.0) for k in propagators]
             return f"interrupted by {interrupted['signal']} at sim t {min(ts) if ts else 0.0:.6g} s of {duration:.6g} s"

@@ -56,6 +56,7 @@ from astrodyn.scenario import ScenarioError, load, plan as make_plan
 from astrodyn.service.children import Child, logger_command, propagator_command, work_directory
 from astrodyn.service.output import check_output_path
 from astrodyn.service.propagator import command_key
+from astrodyn.service.signals import StopFlag
 from astrodyn.service.supervision import RestartBudget, contiguous_end, wait_until_gone
 from astrodyn.service.viewer import viewer_command
 
@@ -410,9 +411,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"astrodyn serve: {exc}", file=sys.stderr)
         return 2
     hub = bus.loopback_endpoint(args.port or bus.free_port())
-    stop_signal = {"why": None}
-    for sig in (signal.SIGTERM, signal.SIGINT):
-        signal.signal(sig, lambda s, f: stop_signal.update(why=signal.Signals(s).name))
+    stop_signal = StopFlag()
     with work_directory(out, "serve") as tmp, bus.open_session(listen=[hub], config_file=args.zenoh_config) as session:
         sup = Supervisor(scenario, Path(args.config), out, session, hub, rate=rate, roll_size=args.roll_size,
                          roll_interval=args.roll_interval, connect=args.connect, tmp=Path(tmp),
@@ -437,7 +436,7 @@ def main(argv: list[str] | None = None) -> int:
                             stop_requests.append(req)
                             stopping = True
                     sup.check_children()
-                    if stop_signal["why"] or stopping or (t_end is not None and time.monotonic() > t_end):
+                    if stop_signal.why or stopping or (t_end is not None and time.monotonic() > t_end):
                         break
                     if all(sup.children[k].poll() is not None for k in sup.propagators):
                         break

@@ -48,7 +48,6 @@ import collections
 import json
 import math
 import os
-import signal
 import sys
 import threading
 import time
@@ -70,6 +69,7 @@ from astrodyn.recording.foxglove_scene import (
     stamp,
 )
 from astrodyn.service.children import share_fate_with_supervisor
+from astrodyn.service.signals import StopFlag
 
 __all__ = ["LatestSamples", "LiveScene", "viewer_command", "main", "TF_TOPIC", "MAX_LIVE_SCENE_POINTS"]
 
@@ -337,9 +337,7 @@ def main(argv: list[str] | None = None) -> int:
         os.nice(VIEWER_NICE)
     except OSError:
         pass
-    stop = {"why": None}
-    for sig in (signal.SIGTERM, signal.SIGINT):
-        signal.signal(sig, lambda s, f: stop.update(why=signal.Signals(s).name))
+    stop = StopFlag()
     secret = auth.secret_from_environment()
     verifier = auth.Verifier(secret) if secret is not None else None
     scene = LiveScene(epoch_ns, central, orbiting)
@@ -387,7 +385,7 @@ def main(argv: list[str] | None = None) -> int:
                               "authenticated": verifier is not None}), flush=True)
             period = 1.0 / args.rate
             next_frame = next_scene = time.monotonic()
-            while stop["why"] is None:
+            while stop.why is None:
                 now = time.monotonic()
                 if now < next_frame:
                     time.sleep(min(next_frame - now, 0.05))
@@ -427,7 +425,7 @@ def main(argv: list[str] | None = None) -> int:
         return 1
     finally:
         view.close()
-    print(json.dumps({"viewer": "stopped", "reason": stop["why"], "received": latest.received, "bodies": len(scene.bodies),
+    print(json.dumps({"viewer": "stopped", "reason": stop.why, "received": latest.received, "bodies": len(scene.bodies),
                       "invalid": scene.invalid, "rejected": rejected}), flush=True)
     return 0
 
