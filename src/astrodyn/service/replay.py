@@ -60,7 +60,7 @@ from astrodyn.recording.writer import RecordingError
 from astrodyn.service.children import Child
 from astrodyn.service.progress import Progress
 from astrodyn.service.signals import StopFlag
-from astrodyn.service.viewer import viewer_command
+from astrodyn.service.viewer import add_foxglove_argument, viewer_command
 
 __all__ = ["Replayer", "main", "REPLAY_VERBS"]
 
@@ -350,14 +350,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--open-control", action="store_true",
                     help="answer control verbs from anyone who reaches the bus (default: only with the control token "
                          "printed at start and stored in a 0600 file; docs/security.md)")
-    ap.add_argument("--foxglove", type=int, default=None, metavar="PORT",
-                    help="live 3D view of the replay: a Foxglove WebSocket server on ws://127.0.0.1:PORT (0: a free "
-                         "port); docs/foxglove.md")
+    add_foxglove_argument(ap, "the replay")
     bus.add_bus_arguments(ap)
     args = ap.parse_args(argv)
     try:
-        if args.foxglove is not None and not 0 <= args.foxglove <= 65535:
-            raise ValueError(f"--foxglove: expected a port 0..65535, got {args.foxglove}")
         rate = parse_rate(args.rate, "--rate")
         if args.wait < 0 or not math.isfinite(args.wait):
             raise ValueError(f"--wait: expected a finite number of seconds >= 0, got {args.wait}")

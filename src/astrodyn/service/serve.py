@@ -58,7 +58,7 @@ from astrodyn.service.output import check_output_path
 from astrodyn.service.propagator import command_key
 from astrodyn.service.signals import StopFlag
 from astrodyn.service.supervision import RestartBudget, contiguous_end, wait_until_gone
-from astrodyn.service.viewer import viewer_command
+from astrodyn.service.viewer import add_foxglove_argument, viewer_command
 
 __all__ = ["main", "Supervisor"]
 
@@ -390,13 +390,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--open-control", action="store_true",
                     help="answer control verbs from anyone who reaches the bus (default: only with this run's control "
                          "token, printed at start and stored in a 0600 file beside --out; docs/security.md)")
-    ap.add_argument("--foxglove", type=int, default=None, metavar="PORT",
-                    help="live 3D view: a Foxglove WebSocket server on ws://127.0.0.1:PORT (0: a free port); open it "
-                         "in the Foxglove app (docs/foxglove.md)")
+    add_foxglove_argument(ap, "the running scene")
     args = ap.parse_args(argv)
     try:
-        if args.foxglove is not None and not 0 <= args.foxglove <= 65535:
-            raise ScenarioError(f"--foxglove: expected a port 0..65535, got {args.foxglove}")
         scenario = load(args.config)
         out = Path(args.out) if args.out else (scenario.output_path or Path("out") / f"{scenario.name}.mcap")
         out.parent.mkdir(parents=True, exist_ok=True)

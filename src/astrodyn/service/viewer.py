@@ -71,7 +71,7 @@ from astrodyn.recording.foxglove_scene import (
 from astrodyn.service.children import share_fate_with_supervisor
 from astrodyn.service.signals import StopFlag
 
-__all__ = ["LatestSamples", "LiveScene", "viewer_command", "main", "TF_TOPIC", "MAX_LIVE_SCENE_POINTS"]
+__all__ = ["LatestSamples", "LiveScene", "add_foxglove_argument", "viewer_command", "main", "TF_TOPIC", "MAX_LIVE_SCENE_POINTS"]
 
 TF_TOPIC = "foxglove/tf"
 #: Most trail points of all bodies together in one scene update (a 1000-body constellation
@@ -84,6 +84,22 @@ MAX_TRANSFORMS_PER_S = 2000
 #: The viewer's CPU priority (``nice``): on a busy machine the simulation goes first.
 VIEWER_NICE = 10
 SCENE_PERIOD_S = 5.0
+
+
+def add_foxglove_argument(parser: argparse.ArgumentParser, what: str) -> None:
+    """The ``--foxglove PORT`` option of ``serve`` and ``replay`` (a port 0..65535; 0: a free one)."""
+    def port(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            value = -1
+        if not 0 <= value <= 65535:
+            raise argparse.ArgumentTypeError(f"expected a port 0..65535 (0: a free one), got {text!r}")
+        return value
+
+    parser.add_argument("--foxglove", type=port, default=None, metavar="PORT",
+                        help=f"live 3D view of {what}: a Foxglove WebSocket server on ws://127.0.0.1:PORT (0: a free "
+                             "port); open it in the Foxglove app (docs/foxglove.md)")
 
 
 def viewer_command() -> list[str]:
