@@ -30,6 +30,7 @@ from astrodyn.attitude.euler import (
 from astrodyn.attitude.gyrocompass import Gyrocompass
 from astrodyn.attitude.gyrostat import Gyrostat, spin_stability_product, spin_transverse_rate
 from astrodyn.attitude.integrators import propagate_attitude
+from astrodyn.attitude.rolling_disk import RollingDisk, propagate_rolling_disk
 from astrodyn.attitude.top import HeavyTop
 from astrodyn.attitude.torques import (
     ConstantTorque,
@@ -44,4 +45,5 @@ __all__ += [
     "attitude_state_rates", "body_momentum_rates", "angular_acceleration", "euler_rates", "inertia_tensor", "principal_axes",
     "Gyrocompass", "Gyrostat", "spin_stability_product", "spin_transverse_rate", "propagate_attitude", "HeavyTop",
     "ConstantTorque", "GravityGradientTorque", "TorqueSum", "UniformGravityTorque", "gravity_gradient_torque",
+    "RollingDisk", "propagate_rolling_disk",
 ]  # fmt: skip

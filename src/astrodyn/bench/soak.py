@@ -19,6 +19,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import signal
 import subprocess
 import sys
 import time
@@ -59,6 +60,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--sample", type=float, default=60.0, help="seconds between samples (default 60)")
     ap.add_argument("--satellites", type=int, default=100, help="Walker satellites (10 Hz, orbit + attitude)")
     ap.add_argument("--out", default="soak", help="directory for the config, MCAP files and the report")
+    ap.add_argument("--kill-logger-every", type=float, default=None, metavar="S",
+                    help="SIGKILL the logger every S seconds (issue 13's fault soak): serve must restart it with no "
+                         "state lost; the restart delay of each kill is measured")
     args = ap.parse_args(argv)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -69,6 +73,7 @@ def main(argv: list[str] | None = None) -> int:
                               "--max-wall", str(args.minutes * 60 + 600)],
                              stdout=subprocess.PIPE, stderr=open(out / "serve.err", "wb"), text=True)
     samples: list[dict] = []
+    kills: list[dict] = []
     final: dict = {}
     try:
         hello = json.loads(serve.stdout.readline())
@@ -77,7 +82,12 @@ def main(argv: list[str] | None = None) -> int:
             t_start = time.monotonic()
             end = t_start + args.minutes * 60
             next_sample = t_start
+            next_kill = t_start + (args.kill_logger_every or float("inf"))
             while time.monotonic() < end and serve.poll() is None:
+                if time.monotonic() >= next_kill:
+                    kills.append(_kill_logger(s, hello, t_start))
+                    print(f"[soak] {json.dumps(kills[-1])}", file=sys.stderr, flush=True)
+                    next_kill += args.kill_logger_every
                 if time.monotonic() >= next_sample:
                     q0 = time.perf_counter()
                     replies = bus.send_control(s, "soak", "status", timeout_s=10, token=hello["control_token"])
@@ -100,13 +110,34 @@ def main(argv: list[str] | None = None) -> int:
         serve.wait(timeout=120)
     finally:
         stop_process(serve, timeout=60)
-    report = _report(samples, final, out, args)
-    (out / "soak.json").write_text(json.dumps({"samples": samples, "final": final, "report": report}, indent=1, default=str))
+    report = _report(samples, final, out, args, kills)
+    (out / "soak.json").write_text(json.dumps({"samples": samples, "kills": kills, "final": final, "report": report},
+                                              indent=1, default=str))
     print(report["markdown"])
     return 0 if report["ok"] else 1
 
 
-def _report(samples: list[dict], final: dict, out: Path, args) -> dict:
+def _kill_logger(session, hello: dict, t_start: float) -> dict:
+    """SIGKILL serve's logger; wait until serve reports a new logger running; return the
+    kill's record with the restart delay (kill to a new logger pid in ``status``)."""
+    def logger_pid() -> tuple[int | None, bool]:
+        replies = bus.send_control(session, hello["serving"], "status", timeout_s=10, token=hello["control_token"])
+        proc = (replies[0] if replies else {}).get("processes", {}).get("logger", {})
+        return proc.get("pid"), bool(proc.get("running"))
+
+    pid, _ = logger_pid()
+    killed_at = time.monotonic()
+    os.kill(pid, signal.SIGKILL)
+    while time.monotonic() - killed_at < 120:
+        new, running = logger_pid()
+        if new is not None and new != pid and running:
+            return {"wall_s": round(killed_at - t_start, 1), "killed_pid": pid, "new_pid": new,
+                    "restart_delay_s": round(time.monotonic() - killed_at, 3)}
+        time.sleep(0.05)
+    return {"wall_s": round(killed_at - t_start, 1), "killed_pid": pid, "new_pid": None, "restart_delay_s": None}
+
+
+def _report(samples: list[dict], final: dict, out: Path, args, kills: list[dict] | None = None) -> dict:
     from astrodyn.recording import load
 
     files = sorted(out.glob("soak*.mcap"))
@@ -130,7 +161,10 @@ def _report(samples: list[dict], final: dict, out: Path, args) -> dict:
 
     flat = {p: abs(mean(q4, f"{p}_rss_mb") - mean(q2, f"{p}_rss_mb")) <= 0.10 * mean(q2, f"{p}_rss_mb") for p in procs}
     lag_growth = (mean(q4, "lag_s") - mean(q2, "lag_s")) if n >= 4 else float("nan")
-    ok = all(flat.values()) and gaps == 0 and not (lag_growth > 5.0)
+    kills = kills or []
+    delays = [k["restart_delay_s"] for k in kills if k["restart_delay_s"] is not None]
+    states = sum(len(s) for s in seqs.values())
+    ok = all(flat.values()) and gaps == 0 and not (lag_growth > 5.0) and len(delays) == len(kills)
     lines = [f"# Soak: `astrodyn serve` at real time for {args.minutes:g} min",
              "", f"Scene: {args.satellites}-satellite Walker, orbit + torque-free attitude at 10 Hz "
              f"({2 * 10 * args.satellites} messages/s); samples every {args.sample:g} s; "
@@ -143,7 +177,13 @@ def _report(samples: list[dict], final: dict, out: Path, args) -> dict:
     lines += ["", "Memory flat (last-quarter mean RSS within 10 % of the second quarter's): "
               + ", ".join(f"{p} {'yes' if v else 'NO'}" for p, v in flat.items()),
               f"Lag growth (last quarter minus second quarter): {lag_growth:.2f} s; verdict: {'OK' if ok else 'FAILED'}."]
+    if kills:
+        lines += ["", f"Logger SIGKILLed {len(kills)} times (every {args.kill_logger_every:g} s): restarted "
+                  f"{len(delays)} times; restart delay (kill to the new logger in `status`) median "
+                  f"{sorted(delays)[len(delays) // 2] if delays else float('nan'):.2f} s, worst "
+                  f"{max(delays) if delays else float('nan'):.2f} s; {states} states in {len(seqs)} channels, "
+                  f"channels with a gap or a lost state: {gaps}."]
     md = "\n".join(lines)
     (out / "soak.md").write_text(md + "\n")
-    return {"ok": ok, "gaps": gaps, "messages": messages, "files": [str(f) for f in files], "flat": flat,
+    return {"ok": ok, "gaps": gaps, "messages": messages, "kills": len(kills), "restart_delays_s": delays, "files": [str(f) for f in files], "flat": flat,
             "lag_growth_s": lag_growth, "markdown": md}
