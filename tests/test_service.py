@@ -321,3 +321,18 @@ def test_zenoh_config_file_reaches_every_process(tmp_path):
     bad = subprocess.run([*ASTRODYN, "run", str(CONFIGS / "dzhanibekov.toml"), "--out", str(bad_out), "--quiet",
                           "--zenoh-config", str(tmp_path / "missing.json5")], capture_output=True, text=True, timeout=120)
     assert bad.returncode == 2 and "--zenoh-config" in bad.stderr and not bad_out.exists()
+
+
+def test_a_restarted_propagator_catches_up_with_the_schedule():
+    """Pacer(anchor=...): a process started 2 s late on a 10x schedule publishes at once
+    until it is back on it, then waits as the schedule says (wall clock arithmetic)."""
+    import time as _time
+
+    from astrodyn.service.propagator import Pacer
+
+    now = _time.monotonic()
+    late = Pacer(10.0, anchor=(now - 2.0, 0.0))  # t = 0 was due 2 s ago: t = 20 s is due now
+    assert late.wait_time(5.0) == 0.0 and late.wait_time(19.9) == 0.0
+    assert 0.9 < late.wait_time(30.0) <= 1.0  # 10 s of sim ahead of the schedule: 1 s of wall
+    fresh = Pacer(10.0)  # no anchor: the first instant starts the schedule
+    assert fresh.wait_time(100.0) == 0.0 and 0.09 < fresh.wait_time(101.0) <= 0.1

@@ -63,11 +63,15 @@ class Pacer:
     re-anchor the clock, so a rate change applies from the current instant on.
     """
 
-    def __init__(self, factor: float = math.inf):
+    def __init__(self, factor: float = math.inf, anchor: tuple[float, float] | None = None):
+        """``anchor = (wall, t_sim)``: the schedule to keep, ``t_sim`` due at ``wall``
+        (``time.monotonic()``, which is system-wide on Linux, so a supervisor can hand it to
+        a restarted process: the new process runs as fast as it can until it is back on the
+        schedule, then paces).  Default: anchored at the first instant published."""
         self.factor = float(factor)
         self.paused = False
-        self._anchor_wall = time.monotonic()
-        self._anchor_sim: float | None = None
+        self._anchor_wall = time.monotonic() if anchor is None else float(anchor[0])
+        self._anchor_sim: float | None = None if anchor is None else float(anchor[1])
 
     def _reanchor(self, t_sim: float | None) -> None:
         self._anchor_wall = time.monotonic()
@@ -111,6 +115,7 @@ class PropagatorOptions:
     batch: str = "auto"  # "auto" (envelopes above BATCH_THRESHOLD bodies) | "always" | "never"
     resume_state: tuple[int, float, dict] | None = None  # (step, t, states) the integrated bodies continue from
     first_event_seq: int = 0  # a restarted process continues its predecessor's event numbering
+    pace_anchor: tuple[float, float] | None = None  # (monotonic wall, t_sim) of the run's schedule (serve restarts)
 
 
 class _Stop(Exception):
@@ -156,7 +161,7 @@ def run_propagator(scenario: Scenario, session, opts: PropagatorOptions, log=pri
     if opts.kind == "orbit" and (opts.cross_check or any(scenario.body(n).cross_check for n in names)):
         cross = _CrossCheck(scenario, engine, all_bodies=opts.cross_check)
 
-    pacer = Pacer(opts.real_time_factor)
+    pacer = Pacer(opts.real_time_factor, opts.pace_anchor)
     stopping = {"why": None}
     conservation = _Conservation(opts.kind, scenario, engine)
     catch_stop_signals(lambda why: stopping.update(why=why))
@@ -476,6 +481,9 @@ def service_main(kind: str, argv: list[str] | None = None) -> int:
     ap.add_argument("--resume-state", default=None, metavar="JSON",
                     help="states at step START_STEP-1 for the integrated bodies (astrodyn.service.resume.write_state_file)")
     ap.add_argument("--first-event-seq", type=int, default=0, help="seq of this process's first event (a restart)")
+    ap.add_argument("--pace-anchor", type=float, nargs=2, default=None, metavar=("WALL", "T"),
+                    help="keep the schedule on which sim time T was due at monotonic wall time WALL (a restarted "
+                         "process catches up with the run instead of starting a new schedule)")
     ap.add_argument("--max-steps", type=int, default=None, help="publish at most this many steps")
     ap.add_argument("--batch", choices=("auto", "always", "never"), default="auto",
                     help=f"publish one envelope per step instead of per-body samples (auto: above {BATCH_THRESHOLD} bodies)")
@@ -514,7 +522,8 @@ def service_main(kind: str, argv: list[str] | None = None) -> int:
     opts = PropagatorOptions(kind=kind, real_time_factor=args.real_time_factor, block=args.block,
                              cross_check=args.cross_check, wait_logger_s=args.wait_logger,
                              start_step=args.start_step, max_steps=args.max_steps, endless=args.endless,
-                             resume_state=resume_state, first_event_seq=args.first_event_seq)
+                             resume_state=resume_state, first_event_seq=args.first_event_seq,
+                             pace_anchor=None if args.pace_anchor is None else tuple(args.pace_anchor))
     try:
         with bus.session_from_args(args) as session:
             summary = run_propagator(scenario, session, opts)

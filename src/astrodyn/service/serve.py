@@ -105,6 +105,7 @@ class Supervisor:
         bus.wait_for_process(session, scenario.name, "logger", timeout_s=30.0)
         self._argv = {kind: [*propagator_command(kind), str(config_path), "--endless", *connect_args]
                       for kind in self.propagators}
+        self.schedule: tuple[float, float] | None = None  # (wall, t): sim t due at that monotonic wall time
         for kind in self.propagators:
             self.children[kind] = Child(kind, [*self._argv[kind], "--real-time-factor", str(self.rate)], tmp, env=self.child_env)
         self.viewer_url = None
@@ -147,10 +148,12 @@ class Supervisor:
         elif verb == "pause":
             self.command("pause")
             self.state = "paused"
+            self.schedule = None  # paused: no schedule; resume starts a new one
             request.reply(self.status())
         elif verb == "resume":
             self.command("resume")
             self.state = "running"
+            self.schedule = (time.monotonic(), self.status()["t"])
             request.reply(self.status())
         elif verb == "rate":
             try:
@@ -160,6 +163,7 @@ class Supervisor:
                 return False
             self.rate = factor
             self.command("rate", factor=factor)
+            self.schedule = (time.monotonic(), self.status()["t"])
             request.reply(self.status())
         elif verb == "stop":
             return True
@@ -169,6 +173,11 @@ class Supervisor:
 
     def check_children(self) -> None:
         """Notice dead processes (exit status or lost liveliness token); restart propagators."""
+        if self.schedule is None and self.state == "running":  # the pace the propagators keep, once they do
+            self.beats.poll()
+            ts = [self.beats.last.get(k, {}).get("t") for k in self.propagators]
+            if ts and all(t is not None and t > 0 for t in ts):
+                self.schedule = (time.monotonic(), min(ts))
         lost = {p for p, is_alive in self.alive.poll() if not is_alive}
         for name, ch in list(self.children.items()):
             rc = ch.poll()
@@ -269,7 +278,7 @@ class Supervisor:
             args = propagator_resume_args(run, self.scenario, kind, steps - 1, self.tmp) if steps else {}
             if not steps and part > 0:  # nothing flushed in this part: continue after the finished parts
                 args = self._resume_from_files(kind)
-            argv = [*self._argv[kind], "--real-time-factor", str(self.rate)]
+            argv = [*self._argv[kind], "--real-time-factor", str(self.rate), *self.pace_args()]
             for k, v in args.items():
                 argv += [k, str(v)]
             self.children[kind].close()
@@ -293,6 +302,14 @@ class Supervisor:
                 return propagator_resume_args(run, self.scenario, kind, step, self.tmp)
         return {}
 
+    def pace_args(self) -> list[str]:
+        """``--pace-anchor`` for a restarted propagator: the run's schedule, so the new process
+        catches up with it instead of starting a new one behind (none while paused or at
+        rate inf)."""
+        if self.schedule is None or math.isinf(self.rate):
+            return []
+        return ["--pace-anchor", repr(self.schedule[0]), repr(self.schedule[1])]
+
     def restart(self, kind: str, why: str, n: int) -> None:
         """Start ``kind`` again after the last step every one of its channels has in the file."""
         from astrodyn.recording import load as load_run
@@ -310,7 +327,8 @@ class Supervisor:
                 break
         old = self.children[kind]
         old.close()
-        argv = [*self._argv[kind], "--real-time-factor", str(self.rate), "--first-event-seq", str(n + 1)]
+        argv = [*self._argv[kind], "--real-time-factor", str(self.rate), "--first-event-seq", str(n + 1),
+                *self.pace_args()]
         for k, v in args.items():
             argv += [k, str(v)]
         self.children[kind] = Child(f"{kind}-r{n + 1}", argv, self.tmp, env=self.child_env)
