@@ -188,16 +188,22 @@ def _logger_of(supervisor: int) -> int | None:
     return None
 
 
-def test_a_killed_logger_under_run_is_restarted_and_no_state_is_lost(tmp_path, processes):
-    """SIGKILL of the logger twice during `astrodyn run`: the run restarts it each time,
-    exits 0, and the file holds exactly the states of an uninterrupted run of the same
-    config (same seqs, payloads byte for byte), each once."""
-    cfg = tmp_path / "mid.toml"
-    cfg.write_text(LONG.replace('duration = "200000 s"', 'duration = "6000 s"').replace('rate = "10 Hz"', 'rate = "20 Hz"'))
+def _reference_run(tmp_path: Path, duration: str) -> tuple[Path, Path]:
+    """The one-satellite scene at 20 Hz for ``duration``, and an uninterrupted run of it."""
+    cfg = tmp_path / "scene.toml"
+    cfg.write_text(LONG.replace('duration = "200000 s"', f'duration = "{duration}"').replace('rate = "10 Hz"', 'rate = "20 Hz"'))
     reference = tmp_path / "reference.mcap"
     ref = subprocess.run([*ASTRODYN, "run", cfg, "--out", reference, "--quiet"], capture_output=True, text=True,
                          timeout=600)
     assert ref.returncode == 0, ref.stderr[-2000:]
+    return cfg, reference
+
+
+def test_a_killed_logger_under_run_is_restarted_and_no_state_is_lost(tmp_path, processes):
+    """SIGKILL of the logger twice during `astrodyn run`: the run restarts it each time,
+    exits 0, and the file holds exactly the states of an uninterrupted run of the same
+    config (same seqs, payloads byte for byte), each once."""
+    cfg, reference = _reference_run(tmp_path, "6000 s")
     out = tmp_path / "killed.mcap"
     sup = processes([*ASTRODYN, "run", cfg, "--out", out, "--json", tmp_path / "result.json"],
                     stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
@@ -269,3 +275,74 @@ def test_a_killed_logger_under_serve_is_restarted_and_no_state_is_lost(tmp_path,
     expected = _states(reference)
     for topic, per in served.items():
         assert {s: per[s] for s in range(last + 1)} == {s: expected[topic][s] for s in range(last + 1)}
+
+
+# ----------------------------------------------------------------------------- random faults
+
+def _random_fault_trial(tmp_path: Path, processes, rng, reference_states: dict, cfg: Path, k: int) -> dict:
+    """One trial: `astrodyn run` of ``cfg``; after a random delay SIGKILL a random one of
+    its processes (the supervisor included).  A killed child: the run must end 0 with
+    exactly the reference states.  A killed supervisor: no child alive 2.5 s later, and
+    what `recover` makes of the leftovers is a gap-free prefix of the reference, byte for
+    byte."""
+    out = tmp_path / f"trial{k}.mcap"
+    sup = processes([*ASTRODYN, "run", cfg, "--out", out, "--quiet"], stdout=subprocess.DEVNULL,
+                    stderr=subprocess.PIPE, text=True)
+    victim_kind = rng.choice(["logger", "orbit", "attitude", "supervisor"])
+    delay = rng.uniform(0.3, 4.0)
+    t0 = time.monotonic()
+    victim = None
+    while time.monotonic() - t0 < delay and sup.poll() is None:
+        time.sleep(0.02)
+    if sup.poll() is None:
+        if victim_kind == "supervisor":
+            victim = sup.pid
+        else:
+            from astrodyn.service.children import children_of
+
+            victim = next((pid for pid, argv in children_of(sup.pid).items()
+                           if (victim_kind == "logger" and "astrodyn.service.logger" in argv)
+                           or f"astrodyn.service.propagator {victim_kind}" in " ".join(argv)), None)
+        if victim is not None:
+            os.kill(victim, signal.SIGKILL)
+    record = {"victim": victim_kind, "delay_s": round(delay, 2), "killed": victim is not None}
+    if victim_kind == "supervisor" and victim is not None:
+        sup.wait(timeout=10)
+        orphans, took = _orphans_after(sup.pid, 2.5)
+        assert orphans == [], f"trial {record}: still alive {took:.2f} s after the supervisor died: {orphans}"
+        _recover_dir(tmp_path)
+        assert not [p for p in tmp_path.iterdir() if p.name.startswith(".astrodyn-")], record
+        if out.exists():  # recovered: a prefix of the reference, nothing made up, no hole
+            for topic, per in _states(out).items():
+                assert sorted(per) == list(range(len(per))), (record, topic)
+                assert all(per[s] == reference_states[topic][s] for s in per), (record, topic)
+    else:
+        _, err = sup.communicate(timeout=600)
+        assert sup.returncode == 0, f"trial {record}: {err[-3000:]}"
+        assert _states(out) == reference_states, record
+        assert not list(tmp_path.glob(f"trial{k}.partial*.mcap")), record
+    return record
+
+
+def _random_faults(tmp_path, processes, trials: int, seed: int) -> list[dict]:
+    import random
+
+    cfg, reference = _reference_run(tmp_path, "3000 s")
+    reference_states = _states(reference)
+    rng = random.Random(seed)
+    return [_random_fault_trial(tmp_path, processes, rng, reference_states, cfg, k) for k in range(trials)]
+
+
+def test_random_faults_fast_subset(tmp_path, processes):
+    """Three seeded random trials (the series below has twenty)."""
+    records = _random_faults(tmp_path, processes, trials=3, seed=20261125)
+    assert len(records) == 3 and any(r["killed"] for r in records)  # faults did happen
+
+
+@pytest.mark.slow
+def test_random_faults_series(tmp_path, processes):
+    """Twenty seeded random trials: each process of `run` (supervisor included) SIGKILLed
+    at a random moment; docs/reliability.md reports the series."""
+    records = _random_faults(tmp_path, processes, trials=20, seed=13)
+    print(json.dumps(records))
+    assert sum(r["killed"] for r in records) >= 15  # the run lasts longer than most delays: real faults

@@ -423,6 +423,8 @@ class Logger:
         if channels:
             report = self.recorder.seq.report()
             out["channels"] = {k: r["count"] for k, r in report.items()}
+            # per process on the event channel: the seq a restarted process must continue from
+            out["event_next_seq"] = {k: r["next_seq"] for k, r in report.items() if "#" in k}
             out["gaps"] = {k: r["gaps"] for k, r in report.items() if r["gaps"]}
         return out
 

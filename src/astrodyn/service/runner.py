@@ -47,7 +47,7 @@ from astrodyn.service.output import check_output_path
 from astrodyn.service.progress import Progress
 from astrodyn.service.signals import catch_stop_signals
 from astrodyn.service.summary import file_summary, print_summary, propagator_rows
-from astrodyn.service.supervision import RestartBudget, plan_logger_restart, wait_until_gone
+from astrodyn.service.supervision import RestartBudget, next_event_seq, plan_logger_restart, wait_until_gone
 
 __all__ = ["main", "run_scenario", "EXIT_REJECTED"]
 
@@ -175,7 +175,7 @@ def run_scenario(scenario: Scenario, config_path: Path, out: Path, *, cross_chec
                 except (RecordingError, OSError):
                     pass  # nothing flushed yet: start again from the beginning
                 n = len(restarts_of(kind)) + 1
-                start_propagator(kind, args, n, event_seq=n)
+                start_propagator(kind, args, n, event_seq=next_event_seq(session, scenario.name, kind, n))
                 restarts.append({"process": kind, "old_pid": dead.pid, "new_pid": children[kind].pid, "why": how,
                                  "from_step": args.get("--start-step", 0)})
                 if progress:

@@ -57,7 +57,7 @@ from astrodyn.service.children import Child, logger_command, propagator_command,
 from astrodyn.service.output import check_output_path
 from astrodyn.service.propagator import command_key
 from astrodyn.service.signals import StopFlag
-from astrodyn.service.supervision import RestartBudget, contiguous_end, wait_until_gone
+from astrodyn.service.supervision import RestartBudget, contiguous_end, next_event_seq, wait_until_gone
 from astrodyn.service.viewer import add_foxglove_argument, viewer_command
 
 __all__ = ["main", "Supervisor"]
@@ -327,7 +327,9 @@ class Supervisor:
                 break
         old = self.children[kind]
         old.close()
-        argv = [*self._argv[kind], "--real-time-factor", str(self.rate), "--first-event-seq", str(n + 1),
+        wait_until_gone(self.session, self.scenario.name, kind)
+        event_seq = next_event_seq(self.session, self.scenario.name, kind, n + 1)
+        argv = [*self._argv[kind], "--real-time-factor", str(self.rate), "--first-event-seq", str(event_seq),
                 *self.pace_args()]
         for k, v in args.items():
             argv += [k, str(v)]

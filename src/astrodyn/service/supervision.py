@@ -53,6 +53,22 @@ def wait_until_gone(session, scenario: str, process: str, timeout_s: float = 5.0
     return False
 
 
+def next_event_seq(session, scenario: str, process: str, fallback: int) -> int:
+    """The seq a restarted ``process`` must give its first event: the next one the logger
+    expects on the event channel from that process (it saw all the dead instance sent,
+    which may be none: a process killed before its start event).  ``fallback`` when the
+    logger does not answer (its restart is then recorded with a gap)."""
+    from astrodyn.bus import query_json
+    from astrodyn.messages import event_key, status_key
+
+    for reply in query_json(session, status_key(scenario), {"channels": True}, timeout_s=5.0):
+        table = reply.get("event_next_seq")
+        if isinstance(table, dict):
+            value = table.get(f"{event_key(scenario)}#{process}", 0)
+            return int(value) if isinstance(value, int) and value >= 0 else fallback
+    return fallback
+
+
 @dataclass
 class RestartBudget:
     """Deaths of one process: :meth:`allow` says whether one more restart is within the
