@@ -22,7 +22,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings, strategies as st
 
 from astrodyn import scenario as S
-from astrodyn.scenario import ScenarioError
+from astrodyn.scenario import ScenarioError, fields as F
 
 CONFIGS = sorted((Path(__file__).resolve().parent.parent / "configs").glob("*.toml"))
 REQUIRED = {"demo", "leo-gravity-gradient", "molniya-j2", "hyperbolic-flyby", "near-parabolic-comet",
@@ -180,14 +180,14 @@ def test_constellation_is_a_walker_delta():
     ],
 )
 def test_quantity_parsing(text, kind, si):
-    got = S._quantity(S._Ctx("f"), text, kind, "k")
+    got = F.quantity(F.Ctx("f"), text, kind, "k")
     assert got == pytest.approx(si, rel=1e-15)  # unit factors are exact decimals or one product
 
 
 def test_vector_forms():
-    ctx = S._Ctx("f")
-    np.testing.assert_array_equal(S._vector(ctx, "[7000, 0, -1] km", "length", 3, "r"), [7e6, 0, -1e3])
-    np.testing.assert_array_equal(S._vector(ctx, ["7000 km", 0, "1 m"], "length", 3, "r"), [7e6, 0, 1])
+    ctx = F.Ctx("f")
+    np.testing.assert_array_equal(F.vector(ctx, "[7000, 0, -1] km", "length", 3, "r"), [7e6, 0, -1e3])
+    np.testing.assert_array_equal(F.vector(ctx, ["7000 km", 0, "1 m"], "length", 3, "r"), [7e6, 0, 1])
 
 
 def _unix(y, mo, d, h=0, mi=0, s=0):
@@ -278,7 +278,7 @@ def test_elements_to_state_against_hand_computation(size, e, i, raan, argp, nu):
     d["bodies"] = [{"name": "x", "orbit": dict(size, e=e, i=f"{i} deg", raan=f"{raan} deg", argp=f"{argp} deg", nu=f"{nu} deg")}]
     o = load(d).bodies[0].orbit
     key, value = next(iter(size.items()))
-    x = S._quantity(S._Ctx("f"), value, "length", key)
+    x = F.quantity(F.Ctx("f"), value, "length", key)
     p = {"a": x * (1 - e * e), "p": x, "rp": x * (1 + e)}[key]
     r, v = _perifocal_to_inertial(p, e, *map(math.radians, (i, raan, argp, nu)), MU_E)
     # a handful of roundings in each product chain: 1e-12 relative to the vector norm is ~100x that

@@ -92,8 +92,6 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import datetime as _dt
-import difflib
-import functools
 import json
 import math
 import re
@@ -105,12 +103,31 @@ from typing import Any
 
 import numpy as np
 
-from astrodyn.messages import ATTITUDE_MODELS, NAME_PATTERN, ORBIT_MODELS
+from astrodyn.messages import ATTITUDE_MODELS, ORBIT_MODELS
 from astrodyn.orbit.perturbations import (
     EARTH_EGM2008 as _EARTH,
     MOON as _MOON,
     SUN as _SUN,
     CentralBody as GravityCentralBody,
+)
+from astrodyn.scenario.fields import (
+    MAGNITUDE_MAX,
+    MAGNITUDE_MIN,
+    MAX_STRING,
+    Ctx,
+    ScenarioError,
+    Table,
+    boolean,
+    check,
+    choice,
+    did_you_mean,
+    field_name,
+    integer,
+    jsonable,
+    quantity,
+    show,
+    string,
+    vector,
 )
 
 __all__ = [
@@ -131,6 +148,7 @@ __all__ = [
     "main",
     "MAGNITUDE_MAX",
     "MAGNITUDE_MIN",
+    "MAX_STRING",
     "MAX_CHANNELS",
     "BYTES_PER_STATE",
 ]
@@ -144,30 +162,9 @@ MAX_OUTPUT_STEPS = 10**10  #: duration * rate
 MAX_REAL_TIME_FACTOR = 1e6
 MAX_BODIES = 100_000
 MAX_FILE_BYTES = 16 * 2**20
-MAX_STRING = 256  #: longest accepted quantity / epoch string
 QUAT_TOL = 1e-6  #: a given q must have | |q| - 1 | <= this; it is then normalized
 TRIANGLE_RTOL = 1e-12  #: I3 <= I1 + I2 (1 + rtol): a flat plate (equality) is allowed
 SYMMETRY_RTOL = 1e-12  #: |I - I^T| <= rtol max|I| for a full tensor
-#: Largest magnitude of each kind of config value (SI, after unit conversion): the ranges
-#: where astrodyn's Newtonian models are meant to be used and where the products the
-#: kernels form (r^3, |h|^2, I w^2, ...) stay far from float64 overflow.  A value outside
-#: is refused naming the field, the value and the range (docs/architecture.md, section 6).
-MAGNITUDE_MAX = {
-    "length": 1e16,  # m: about 67,000 au
-    "speed": 299_792_458.0 * 0.1,  # m/s: a tenth of c (Newtonian mechanics)
-    "angular_velocity": 1e5,  # rad/s: about 1 million rpm
-    "gm": 1e22,  # m^3/s^2: 75 solar masses
-    "inertia": 1e20,  # kg m^2
-    "angular_momentum": 1e25,  # kg m^2/s
-    "mass": 1e30,  # kg
-    "acceleration": 1e7,  # m/s^2
-    "torque": 1e15,  # N m
-    "angle": 1e9,  # rad (mean anomalies of many revolutions included)
-    "dimensionless": 1e6,
-}
-#: Smallest non-zero magnitude of some kinds (below: a typo or a unit slip, and the
-#: dynamics lose their meaning in float64, e.g. an inertia of 1e-320 kg m^2 is subnormal).
-MAGNITUDE_MIN = {"inertia": 1e-15, "mass": 1e-15, "gm": 1e-3}
 #: MCAP channel ids are 16-bit: channels of one recording, all bodies and kinds together.
 MAX_CHANNELS = 65_535
 #: Channels a run records besides the bodies' (events, status).
@@ -177,10 +174,6 @@ G0 = 9.80665  #: standard gravity, m/s^2 (default g of a heavy top)
 
 _ORBIT_ANALYTIC = "kepler"
 _ATTITUDE_EXACT = "torque_free"
-
-
-class ScenarioError(ValueError):
-    """A scenario that cannot be loaded; ``str`` is ``<file>: <key path>: expected ..., got ...``."""
 
 
 # --------------------------------------------------------------------------- central bodies
@@ -394,253 +387,17 @@ class Scenario:
         }
 
 
-def _jsonable(x: Any) -> Any:
-    if isinstance(x, np.ndarray):
-        return x.tolist()
-    if isinstance(x, (np.floating, np.integer)):
-        return x.item()
-    if isinstance(x, dict):
-        return {k: _jsonable(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [_jsonable(v) for v in x]
-    if isinstance(x, (_dt.datetime, _dt.date, _dt.time)):
-        return x.isoformat()
-    if isinstance(x, float) and not math.isfinite(x):  # pragma: no cover - validated away
-        return repr(x)
-    return x
-
-
 def _body_dict(b: Body, bp: BodyPlan) -> dict[str, Any]:
     out: dict[str, Any] = {"name": b.name, "cross_check": b.cross_check}
     if b.orbit is not None:
-        out["orbit"] = _jsonable(dataclasses.asdict(b.orbit)) | {"model_used": bp.orbit_model}
+        out["orbit"] = jsonable(dataclasses.asdict(b.orbit)) | {"model_used": bp.orbit_model}
     if b.attitude is not None:
         a = b.attitude
-        out["attitude"] = _jsonable(
+        out["attitude"] = jsonable(
             {f.name: getattr(a, f.name) for f in dataclasses.fields(a) if f.name != "rotors"}
             | {"rotors": [dataclasses.asdict(r) for r in a.rotors], "model_used": bp.attitude_model}
         )
     return out
-
-
-# --------------------------------------------------------------------------- error helpers
-
-
-def _show(value: Any) -> str:
-    """The offending value as the user wrote it (JSON-like, shortened)."""
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    if isinstance(value, float):
-        return repr(value) if math.isfinite(value) else {True: "inf", False: "-inf"}.get(value > 0, "nan") if not math.isnan(value) else "nan"
-    if isinstance(value, int):
-        text = str(value) if abs(value) < 10**30 else f"an integer of {len(str(abs(value)))} digits"
-        return text
-    if isinstance(value, dict):
-        return "a table"
-    if isinstance(value, (_dt.datetime, _dt.date, _dt.time)):
-        return value.isoformat()
-    if isinstance(value, np.ndarray):
-        value = value.tolist()
-    try:
-        text = json.dumps(_jsonable(value), ensure_ascii=False)
-    except (TypeError, ValueError):  # pragma: no cover - TOML values are always JSON-able
-        text = repr(value)
-    return text if len(text) <= 100 else text[:97] + "..."
-
-
-class _Ctx:
-    """Carries the file name for error messages."""
-
-    def __init__(self, source: str):
-        self.source = source
-
-    def error(self, path: str, expected: str, got: Any, raw: bool = False) -> ScenarioError:
-        shown = got if raw else _show(got)
-        return ScenarioError(f"{self.source}: {path}: expected {expected}, got {shown}")
-
-
-_MISSING = object()
-
-
-def _did_you_mean(word: str, options: tuple[str, ...]) -> str:
-    """' (did you mean "x"?)' for the closest option (difflib, or a prefix), else ''."""
-    close = difflib.get_close_matches(word, options, n=1, cutoff=0.6)
-    if not close:
-        close = [o for o in options if word.lower().startswith(o.lower()) or o.lower().startswith(word.lower())][:1] if word else []
-    return f' (did you mean "{close[0]}"?)' if close else ""
-
-
-class _Table:
-    """A TOML table being read: remembers which keys were used, rejects the rest."""
-
-    def __init__(self, ctx: _Ctx, data: Any, path: str, allowed: tuple[str, ...]):
-        if not isinstance(data, dict):
-            raise ctx.error(path, "a table", data)
-        self.ctx, self.data, self.path, self.allowed = ctx, data, path, allowed
-        for key in data:
-            if key not in allowed:
-                hint = _did_you_mean(str(key), allowed)
-                raise ctx.error(self.sub(key), f"one of the keys {', '.join(allowed)}{hint}", f'unknown key "{key}"', raw=True)
-
-    def sub(self, key: str) -> str:
-        return f"{self.path}.{key}" if self.path else str(key)
-
-    def has(self, key: str) -> bool:
-        return key in self.data
-
-    def get(self, key: str, default: Any = _MISSING) -> Any:
-        if key in self.data:
-            return self.data[key]
-        if default is _MISSING:
-            raise self.ctx.error(self.sub(key), "a value (required)", "nothing", raw=True)
-        return default
-
-
-# --------------------------------------------------------------------------- quantities
-
-_RPM = None
-
-
-def _units():
-    """astropy.units with network access off and ``rpm`` defined (imported lazily)."""
-    global _RPM
-    import astropy.units as u
-
-    if _RPM is None:
-        _RPM = u.def_unit("rpm", u.cycle / u.min)
-        u.add_enabled_units([_RPM])
-    return u
-
-
-# kind -> (SI unit string, description for errors)
-_KINDS: dict[str, tuple[str, str]] = {
-    "length": ("m", 'a length, e.g. "7000 km"'),
-    "angle": ("rad", 'an angle, e.g. "51.6 deg"'),
-    "time": ("s", 'a time, e.g. "90 min"'),
-    "frequency": ("Hz", 'a rate, e.g. "10 Hz"'),
-    "speed": ("m / s", 'a speed, e.g. "7.5 km/s"'),
-    "angular_velocity": ("rad / s", 'an angular velocity, e.g. "0.1 rad/s"'),
-    "gm": ("m3 / s2", 'a gravitational parameter, e.g. "3.986004418e14 m3/s2"'),
-    "inertia": ("kg m2", 'a moment of inertia, e.g. "100 kg m2"'),
-    "angular_momentum": ("kg m2 / s", 'an angular momentum, e.g. "10 N m s"'),
-    "mass": ("kg", 'a mass, e.g. "500 kg"'),
-    "acceleration": ("m / s2", 'an acceleration, e.g. "9.81 m/s2"'),
-    "torque": ("N m", 'a torque, e.g. "0.01 N m"'),
-    "bytes": ("byte", 'a size, e.g. "256 MB"'),
-    "dimensionless": ("", "a number"),
-}
-
-
-@functools.lru_cache(maxsize=4096)
-def _parse_quantity_string(text: str, kind: str) -> float | str:
-    """SI value of a quantity string, or an error description (str)."""
-    u = _units()
-    unit = u.Unit(_KINDS[kind][0]) if _KINDS[kind][0] else u.dimensionless_unscaled
-    try:
-        q = u.Quantity(text)
-    except Exception:  # astropy raises ValueError, TypeError, UnitsError... on garbage
-        return "unparsable"
-    try:
-        with np.errstate(over="ignore", invalid="ignore"):  # an overflow is reported as "not finite" by the caller
-            value = q.to_value(unit)
-    except Exception:
-        return f"a quantity in {q.unit.to_string() or 'no unit'}"
-    if np.ndim(value) != 0:
-        return "not a scalar"
-    return float(value)
-
-
-def _quantity(ctx: _Ctx, value: Any, kind: str, path: str) -> float:
-    """A finite SI float from a bare number (already SI) or a quantity string."""
-    desc = _KINDS[kind][1]
-    if isinstance(value, bool):
-        raise ctx.error(path, desc, value)
-    if isinstance(value, (int, float)):
-        try:
-            x = float(value)
-        except OverflowError:
-            raise ctx.error(path, f"{desc} (finite)", value) from None
-    elif isinstance(value, str):
-        if len(value) > MAX_STRING:
-            raise ctx.error(path, f"{desc} (at most {MAX_STRING} characters)", value)
-        parsed = _parse_quantity_string(value.strip(), kind)
-        if isinstance(parsed, str):
-            raise ctx.error(path, desc, value)
-        x = parsed
-    else:
-        raise ctx.error(path, desc, value)
-    if not math.isfinite(x):
-        raise ctx.error(path, f"{desc} (finite)", value)
-    hi, lo = MAGNITUDE_MAX.get(kind), MAGNITUDE_MIN.get(kind)
-    unit = _KINDS[kind][0]
-    if hi is not None and abs(x) > hi:
-        raise ctx.error(path, f"|{path.rsplit('.', 1)[-1]}| <= {hi:g} {unit} (after unit conversion; the range of "
-                        f"astrodyn's models)".replace("  ", " "), value)
-    if lo is not None and x != 0 and abs(x) < lo:
-        raise ctx.error(path, f"|{path.rsplit('.', 1)[-1]}| >= {lo:g} {unit} or 0 (after unit conversion)", value)
-    return x
-
-
-_VECTOR_STRING = re.compile(r"^\s*[\[(]([^\])]*)[\])]\s*(.*?)\s*$")
-
-
-def _vector(ctx: _Ctx, value: Any, kind: str, n: int, path: str) -> np.ndarray:
-    """n SI floats from a list of quantities or one string ``"[a, b, c] unit"``."""
-    desc = f"a list of {n} values, each {_KINDS[kind][1]}"
-    if isinstance(value, str) and len(value) <= MAX_STRING:
-        m = _VECTOR_STRING.match(value)
-        if m:
-            parts = [p.strip() for p in m.group(1).split(",")]
-            if len(parts) == n and all(parts):
-                unit = m.group(2)
-                return np.array([_quantity(ctx, f"{p} {unit}" if unit else _number_or_str(p), kind, f"{path}[{i}]") for i, p in enumerate(parts)])
-        raise ctx.error(path, f'{desc}, or a string like "[7000, 0, 0] km"', value)
-    if not isinstance(value, list) or len(value) != n:
-        raise ctx.error(path, desc, value)
-    return np.array([_quantity(ctx, v, kind, f"{path}[{i}]") for i, v in enumerate(value)], dtype=np.float64)
-
-
-def _number_or_str(text: str) -> float | str:
-    try:
-        return float(text)
-    except ValueError:
-        return text
-
-
-def _check(ctx: _Ctx, ok: bool, path: str, expected: str, got: Any) -> None:
-    if not ok:
-        raise ctx.error(path, expected, got)
-
-
-def _name(ctx: _Ctx, value: Any, path: str) -> str:
-    if not isinstance(value, str) or not re.fullmatch(NAME_PATTERN, value) or value in (".", ".."):
-        raise ctx.error(path, f"a name matching {NAME_PATTERN}", value)
-    return value
-
-
-def _choice(ctx: _Ctx, value: Any, allowed: tuple[str, ...], path: str) -> str:
-    if not isinstance(value, str) or value not in allowed:
-        hint = _did_you_mean(value, allowed) if isinstance(value, str) else ""
-        raise ctx.error(path, f"one of {', '.join(allowed)}{hint}", value)
-    return value
-
-
-def _bool(ctx: _Ctx, value: Any, path: str) -> bool:
-    if not isinstance(value, bool):
-        raise ctx.error(path, "true or false", value)
-    return value
-
-
-def _int(ctx: _Ctx, value: Any, path: str, lo: int, hi: int) -> int:
-    if isinstance(value, bool) or not isinstance(value, int) or not lo <= value <= hi:
-        raise ctx.error(path, f"an integer {lo} <= n <= {hi}", value)
-    return value
-
-
-def _string(ctx: _Ctx, value: Any, path: str, max_len: int = 4096) -> str:
-    if not isinstance(value, str) or len(value) > max_len:
-        raise ctx.error(path, f"a string of at most {max_len} characters", value)
-    return value
 
 
 # --------------------------------------------------------------------------- epoch
@@ -648,7 +405,7 @@ def _string(ctx: _Ctx, value: Any, path: str, max_len: int = 4096) -> str:
 _SCALES = ("utc", "tai", "tt", "tdb", "tcg", "tcb", "ut1")
 
 
-def _epoch(ctx: _Ctx, value: Any, path: str) -> tuple[str, str, int]:
+def _epoch(ctx: Ctx, value: Any, path: str) -> tuple[str, str, int]:
     """(epoch string as given, scale, unix ns) from ``"<ISO> [SCALE]"`` or a TOML datetime."""
     from astropy.time import Time
     from astropy.utils import iers
@@ -683,7 +440,7 @@ def _epoch(ctx: _Ctx, value: Any, path: str) -> tuple[str, str, int]:
         y, mo, d, h, mi = (int(ymdhms[k]) for k in ("year", "month", "day", "hour", "minute"))
         sec = float(ymdhms["second"])
     except Exception as exc:  # astropy: bad dates, UT1 outside the bundled IERS table, ...
-        raise ctx.error(path, f"{expected} that astropy can convert offline", f"{_show(value)} ({type(exc).__name__}: {str(exc)[:120]})", raw=True) from None
+        raise ctx.error(path, f"{expected} that astropy can convert offline", f"{show(value)} ({type(exc).__name__}: {str(exc)[:120]})", raw=True) from None
     if not math.isfinite(sec):  # pragma: no cover - the regex makes it finite
         raise ctx.error(path, expected, value)
     # POSIX time from the UTC calendar fields (ERFA's quasi-JD stretches leap-second days,
@@ -700,8 +457,8 @@ def _epoch(ctx: _Ctx, value: Any, path: str) -> tuple[str, str, int]:
 # --------------------------------------------------------------------------- sections
 
 
-def _central_body(ctx: _Ctx, data: Any) -> CentralBody:
-    tb = _Table(ctx, data, "central_body", ("name", "mu", "radius", "j2", "j3", "j4", "j5", "j6", "frame"))
+def _central_body(ctx: Ctx, data: Any) -> CentralBody:
+    tb = Table(ctx, data, "central_body", ("name", "mu", "radius", "j2", "j3", "j4", "j5", "j6", "frame"))
     name = tb.get("name")
     if not isinstance(name, str):
         raise ctx.error("central_body.name", f"one of {', '.join(CENTRAL_BODIES)} or a name with mu and radius", name)
@@ -711,22 +468,22 @@ def _central_body(ctx: _Ctx, data: Any) -> CentralBody:
         j = list(j)
     else:
         if not (tb.has("mu") and tb.has("radius")):
-            hint = _did_you_mean(key, tuple(CENTRAL_BODIES))
+            hint = did_you_mean(key, tuple(CENTRAL_BODIES))
             raise ctx.error("central_body.name", f"one of {', '.join(CENTRAL_BODIES)}{hint}, or mu and radius given explicitly", name)
-        _name(ctx, name, "central_body.name")
+        field_name(ctx, name, "central_body.name")
         mu, radius, j = 0.0, 0.0, [0.0] * 5
     if tb.has("mu"):
-        mu = _quantity(ctx, tb.get("mu"), "gm", "central_body.mu")
-        _check(ctx, mu > 0, "central_body.mu", "mu > 0", tb.get("mu"))
+        mu = quantity(ctx, tb.get("mu"), "gm", "central_body.mu")
+        check(ctx, mu > 0, "central_body.mu", "mu > 0", tb.get("mu"))
     if tb.has("radius"):
-        radius = _quantity(ctx, tb.get("radius"), "length", "central_body.radius")
-        _check(ctx, radius > 0, "central_body.radius", "radius > 0", tb.get("radius"))
+        radius = quantity(ctx, tb.get("radius"), "length", "central_body.radius")
+        check(ctx, radius > 0, "central_body.radius", "radius > 0", tb.get("radius"))
     for n in range(2, 7):
         if tb.has(f"j{n}"):
-            jn = _quantity(ctx, tb.get(f"j{n}"), "dimensionless", f"central_body.j{n}")
-            _check(ctx, abs(jn) < 1.0, f"central_body.j{n}", f"|j{n}| < 1 (an unnormalized zonal coefficient)", tb.get(f"j{n}"))
+            jn = quantity(ctx, tb.get(f"j{n}"), "dimensionless", f"central_body.j{n}")
+            check(ctx, abs(jn) < 1.0, f"central_body.j{n}", f"|j{n}| < 1 (an unnormalized zonal coefficient)", tb.get(f"j{n}"))
             j[n - 2] = jn
-    frame = _name(ctx, tb.get("frame", "GCRF" if key == "earth" else "ICRF"), "central_body.frame")
+    frame = field_name(ctx, tb.get("frame", "GCRF" if key == "earth" else "ICRF"), "central_body.frame")
     return CentralBody(name=key if key in CENTRAL_BODIES else name, mu=mu, radius=radius, J=tuple(j), frame=frame)
 
 
@@ -734,18 +491,18 @@ _ORBIT_KEYS = ("model", "r", "v", "a", "p", "rp", "e", "i", "raan", "argp", "nu"
 _ELEMENT_KEYS = ("a", "p", "rp", "e", "i", "raan", "argp", "nu", "M")
 
 
-def _orbit(ctx: _Ctx, data: Any, path: str, cb: CentralBody) -> OrbitSpec:
-    tb = _Table(ctx, data, path, _ORBIT_KEYS)
-    model = _choice(ctx, tb.get("model", _ORBIT_ANALYTIC), ORBIT_MODELS, f"{path}.model")
+def _orbit(ctx: Ctx, data: Any, path: str, cb: CentralBody) -> OrbitSpec:
+    tb = Table(ctx, data, path, _ORBIT_KEYS)
+    model = choice(ctx, tb.get("model", _ORBIT_ANALYTIC), ORBIT_MODELS, f"{path}.model")
     has_state = tb.has("r") or tb.has("v")
     has_elements = any(tb.has(k) for k in _ELEMENT_KEYS)
     if has_state and has_elements:
         first = next(k for k in _ELEMENT_KEYS if tb.has(k))
         raise ctx.error(f"{path}.{first}", "either a state vector (r, v) or elements, not both", tb.get(first))
     if has_state:
-        r0 = _vector(ctx, tb.get("r"), "length", 3, f"{path}.r")
-        v0 = _vector(ctx, tb.get("v"), "speed", 3, f"{path}.v")
-        _check(ctx, float(np.linalg.norm(r0)) > 0, f"{path}.r", "|r| > 0 (not at the centre of the central body)", tb.get("r"))
+        r0 = vector(ctx, tb.get("r"), "length", 3, f"{path}.r")
+        v0 = vector(ctx, tb.get("v"), "speed", 3, f"{path}.v")
+        check(ctx, float(np.linalg.norm(r0)) > 0, f"{path}.r", "|r| > 0 (not at the centre of the central body)", tb.get("r"))
         elements = None
     elif has_elements:
         r0, v0, elements = _elements(ctx, tb, path, cb.mu)
@@ -753,57 +510,57 @@ def _orbit(ctx: _Ctx, data: Any, path: str, cb: CentralBody) -> OrbitSpec:
         raise ctx.error(path, "a state vector (r, v) or elements (a | p | rp, e, i, raan, argp, nu | M)", "neither", raw=True)
     degree, perturbers = 0, ()
     if tb.has("degree"):
-        _check(ctx, model == "zonal", f"{path}.degree", 'no degree unless model = "zonal"', tb.get("degree"))
-        degree = _int(ctx, tb.get("degree"), f"{path}.degree", 2, 6)
+        check(ctx, model == "zonal", f"{path}.degree", 'no degree unless model = "zonal"', tb.get("degree"))
+        degree = integer(ctx, tb.get("degree"), f"{path}.degree", 2, 6)
     elif model == "zonal":
         degree = 6
     elif model == "j2":
         degree = 2
     if tb.has("perturbers"):
-        _check(ctx, model == "third_body", f"{path}.perturbers", 'no perturbers unless model = "third_body"', tb.get("perturbers"))
+        check(ctx, model == "third_body", f"{path}.perturbers", 'no perturbers unless model = "third_body"', tb.get("perturbers"))
         raw = tb.get("perturbers")
         if not isinstance(raw, list) or not raw:
             raise ctx.error(f"{path}.perturbers", f"a non-empty list of names from {', '.join(CENTRAL_BODIES)}", raw)
-        perturbers = tuple(_choice(ctx, p, tuple(CENTRAL_BODIES), f"{path}.perturbers[{k}]") for k, p in enumerate(raw))
+        perturbers = tuple(choice(ctx, p, tuple(CENTRAL_BODIES), f"{path}.perturbers[{k}]") for k, p in enumerate(raw))
     elif model == "third_body":
         perturbers = ("moon", "sun") if cb.name == "earth" else ()
         if not perturbers:
             raise ctx.error(f"{path}.perturbers", "a list of third bodies for model third_body (the default moon, sun is for the Earth only)", "nothing", raw=True)
     for k, pb in enumerate(perturbers):
-        _check(ctx, pb != cb.name, f"{path}.perturbers[{k}]", "a body other than the central body", pb)
-        _check(ctx, pb not in perturbers[:k], f"{path}.perturbers[{k}]", "each perturber once", pb)
+        check(ctx, pb != cb.name, f"{path}.perturbers[{k}]", "a body other than the central body", pb)
+        check(ctx, pb not in perturbers[:k], f"{path}.perturbers[{k}]", "each perturber once", pb)
     return OrbitSpec(model=model, r0=r0, v0=v0, elements=elements, degree=degree, perturbers=perturbers)
 
 
-def _elements(ctx: _Ctx, tb: _Table, path: str, mu: float) -> tuple[np.ndarray, np.ndarray, dict[str, float]]:
+def _elements(ctx: Ctx, tb: Table, path: str, mu: float) -> tuple[np.ndarray, np.ndarray, dict[str, float]]:
     """Classical elements -> (r0, v0, elements as SI dict) via astrodyn.orbit.state_from_elements."""
     sizes = [k for k in ("a", "p", "rp") if tb.has(k)]
     if len(sizes) != 1:
         raise ctx.error(path, "exactly one of a, p, rp (the size of the conic)", "none" if not sizes else ", ".join(sizes), raw=True)
     if tb.has("nu") and tb.has("M"):
         raise ctx.error(f"{path}.M", "either nu or M, not both", tb.get("M"))
-    e = _quantity(ctx, tb.get("e", 0.0), "dimensionless", f"{path}.e")
-    _check(ctx, e >= 0, f"{path}.e", "0 <= e", tb.get("e", 0.0))
-    _check(ctx, e <= 1e6, f"{path}.e", "e <= 1e6", tb.get("e", 0.0))
+    e = quantity(ctx, tb.get("e", 0.0), "dimensionless", f"{path}.e")
+    check(ctx, e >= 0, f"{path}.e", "0 <= e", tb.get("e", 0.0))
+    check(ctx, e <= 1e6, f"{path}.e", "e <= 1e6", tb.get("e", 0.0))
     size_key = sizes[0]
-    size = _quantity(ctx, tb.get(size_key), "length", f"{path}.{size_key}")
+    size = quantity(ctx, tb.get(size_key), "length", f"{path}.{size_key}")
     spath = f"{path}.{size_key}"
     if size_key == "a":
-        _check(ctx, e != 1.0, spath, "p or rp for a parabola (e = 1: a is infinite)", tb.get("a"))
+        check(ctx, e != 1.0, spath, "p or rp for a parabola (e = 1: a is infinite)", tb.get("a"))
         if e < 1:
-            _check(ctx, size > 0, spath, "a > 0 for an ellipse (e < 1)", tb.get("a"))
+            check(ctx, size > 0, spath, "a > 0 for an ellipse (e < 1)", tb.get("a"))
         else:
-            _check(ctx, size < 0, spath, "a < 0 for a hyperbola (e > 1)", tb.get("a"))
+            check(ctx, size < 0, spath, "a < 0 for a hyperbola (e > 1)", tb.get("a"))
         p = size * (1.0 - e) * (1.0 + e)
     elif size_key == "p":
-        _check(ctx, size > 0, spath, "p > 0", tb.get("p"))
+        check(ctx, size > 0, spath, "p > 0", tb.get("p"))
         p = size
     else:
-        _check(ctx, size > 0, spath, "rp > 0", tb.get("rp"))
+        check(ctx, size > 0, spath, "rp > 0", tb.get("rp"))
         p = size * (1.0 + e)
-    _check(ctx, math.isfinite(p) and p > 0, spath, "a conic of finite positive size", tb.get(size_key))
+    check(ctx, math.isfinite(p) and p > 0, spath, "a conic of finite positive size", tb.get(size_key))
     i = _angle(ctx, tb, "i", path)
-    _check(ctx, 0.0 <= i <= math.pi, f"{path}.i", "0 <= i <= 180 deg", tb.get("i", 0.0))
+    check(ctx, 0.0 <= i <= math.pi, f"{path}.i", "0 <= i <= 180 deg", tb.get("i", 0.0))
     raan = _angle(ctx, tb, "raan", path)
     argp = _angle(ctx, tb, "argp", path)
     if tb.has("M"):
@@ -813,14 +570,14 @@ def _elements(ctx: _Ctx, tb: _Table, path: str, mu: float) -> tuple[np.ndarray, 
         try:
             nu = float(true_from_mean(M, e))
         except (ValueError, ArithmeticError) as exc:
-            raise ctx.error(f"{path}.M", "a mean anomaly the Kepler solver converts", f"{_show(tb.get('M'))} ({exc})", raw=True) from None
-        _check(ctx, math.isfinite(nu), f"{path}.M", "a mean anomaly the Kepler solver converts", tb.get("M"))
+            raise ctx.error(f"{path}.M", "a mean anomaly the Kepler solver converts", f"{show(tb.get('M'))} ({exc})", raw=True) from None
+        check(ctx, math.isfinite(nu), f"{path}.M", "a mean anomaly the Kepler solver converts", tb.get("M"))
     else:
         nu = _angle(ctx, tb, "nu", path)
     if e > 1:
         limit = math.acos(-1.0 / e)
         nu_red = math.remainder(nu, 2 * math.pi)
-        _check(ctx, 1.0 + e * math.cos(nu) > 0 and abs(nu_red) < limit, f"{path}.nu",
+        check(ctx, 1.0 + e * math.cos(nu) > 0 and abs(nu_red) < limit, f"{path}.nu",
                f"|nu| < {math.degrees(limit):.6g} deg (between the asymptotes of e = {e!r})", tb.get("nu", nu))
     from astrodyn.orbit.elements import state_from_elements
 
@@ -839,9 +596,9 @@ def _elements(ctx: _Ctx, tb: _Table, path: str, mu: float) -> tuple[np.ndarray, 
     return r0, v0, elements
 
 
-def _angle(ctx: _Ctx, tb: _Table, key: str, path: str) -> float:
+def _angle(ctx: Ctx, tb: Table, key: str, path: str) -> float:
     raw = tb.get(key, 0.0)
-    x = _quantity(ctx, raw, "angle", f"{path}.{key}")
+    x = quantity(ctx, raw, "angle", f"{path}.{key}")
     if not isinstance(raw, str) and abs(x) > 2 * math.pi * (1 + 1e-12) and key != "M":
         raise ctx.error(f"{path}.{key}", f'an angle in rad (bare numbers are SI) or with a unit like "{raw} deg"', raw)
     return x
@@ -850,11 +607,11 @@ def _angle(ctx: _Ctx, tb: _Table, key: str, path: str) -> float:
 _ATT_KEYS = ("model", "q", "euler", "seq", "w", "inertia", "rotors", "mass", "cm", "g", "torque")
 
 
-def _attitude(ctx: _Ctx, data: Any, path: str) -> AttitudeSpec:
-    tb = _Table(ctx, data, path, _ATT_KEYS)
+def _attitude(ctx: Ctx, data: Any, path: str) -> AttitudeSpec:
+    tb = Table(ctx, data, path, _ATT_KEYS)
     rotors = _rotors(ctx, tb.get("rotors", []), f"{path}.rotors")
     default_model = "gyrostat" if rotors else _ATTITUDE_EXACT
-    model = _choice(ctx, tb.get("model", default_model), ATTITUDE_MODELS_ALL, f"{path}.model")
+    model = choice(ctx, tb.get("model", default_model), ATTITUDE_MODELS_ALL, f"{path}.model")
     if rotors and model != "gyrostat":
         raise ctx.error(f"{path}.rotors", 'no rotors unless model = "gyrostat"', f'{len(rotors)} rotor(s) with model = "{model}"', raw=True)
     if model == "gyrostat" and not rotors:
@@ -867,23 +624,23 @@ def _attitude(ctx: _Ctx, data: Any, path: str) -> AttitudeSpec:
     if tb.has("euler"):
         from astrodyn.rotation import EULER_SEQUENCES, quat_from_euler
 
-        angles = _vector(ctx, tb.get("euler"), "angle", 3, f"{path}.euler")
+        angles = vector(ctx, tb.get("euler"), "angle", 3, f"{path}.euler")
         seq = tb.get("seq", None)
         if seq is None:
             raise ctx.error(f"{path}.seq", f"a rotation sequence with euler, one of {', '.join(EULER_SEQUENCES)}", "nothing", raw=True)
         if isinstance(seq, int) and not isinstance(seq, bool):
             seq = str(seq)
-        _choice(ctx, seq, EULER_SEQUENCES, f"{path}.seq")
+        choice(ctx, seq, EULER_SEQUENCES, f"{path}.seq")
         q0 = np.asarray(quat_from_euler(angles, seq), dtype=np.float64)
         q0 = q0 / np.linalg.norm(q0)
     elif tb.has("q"):
-        q0 = _vector(ctx, tb.get("q"), "dimensionless", 4, f"{path}.q")
+        q0 = vector(ctx, tb.get("q"), "dimensionless", 4, f"{path}.q")
         norm = float(np.linalg.norm(q0))
-        _check(ctx, abs(norm - 1.0) <= QUAT_TOL, f"{path}.q", f"a unit quaternion, scalar first (| |q| - 1 | <= {QUAT_TOL:g}; |q| = {norm:.9g})", tb.get("q"))
+        check(ctx, abs(norm - 1.0) <= QUAT_TOL, f"{path}.q", f"a unit quaternion, scalar first (| |q| - 1 | <= {QUAT_TOL:g}; |q| = {norm:.9g})", tb.get("q"))
         q0 = q0 / norm
     else:
         q0 = np.array([1.0, 0.0, 0.0, 0.0])
-    w0 = _vector(ctx, tb.get("w", [0.0, 0.0, 0.0]), "angular_velocity", 3, f"{path}.w")
+    w0 = vector(ctx, tb.get("w", [0.0, 0.0, 0.0]), "angular_velocity", 3, f"{path}.w")
     if model != "none" and not tb.has("inertia"):
         raise ctx.error(f"{path}.inertia", f"the inertia (3 principal moments or a 3x3 tensor) for model {model}", "nothing", raw=True)
     inertia, moments, axes = _inertia(ctx, tb.get("inertia", [1.0, 1.0, 1.0]), f"{path}.inertia")
@@ -893,25 +650,25 @@ def _attitude(ctx: _Ctx, data: Any, path: str) -> AttitudeSpec:
         if tb.has(key) and model != needs:
             raise ctx.error(f"{path}.{key}", f'no {key} unless model = "{needs}"', tb.get(key))
     if model == "heavy_top":
-        mass = _quantity(ctx, tb.get("mass"), "mass", f"{path}.mass")
-        _check(ctx, mass > 0, f"{path}.mass", "mass > 0", tb.get("mass"))
-        cm = _quantity(ctx, tb.get("cm"), "length", f"{path}.cm")
-        _check(ctx, cm >= 0, f"{path}.cm", "cm >= 0 (distance from the fixed point along body axis 3)", tb.get("cm"))
-        g = _quantity(ctx, tb.get("g", G0), "acceleration", f"{path}.g")
-        _check(ctx, g >= 0, f"{path}.g", "g >= 0", tb.get("g", G0))
+        mass = quantity(ctx, tb.get("mass"), "mass", f"{path}.mass")
+        check(ctx, mass > 0, f"{path}.mass", "mass > 0", tb.get("mass"))
+        cm = quantity(ctx, tb.get("cm"), "length", f"{path}.cm")
+        check(ctx, cm >= 0, f"{path}.cm", "cm >= 0 (distance from the fixed point along body axis 3)", tb.get("cm"))
+        g = quantity(ctx, tb.get("g", G0), "acceleration", f"{path}.g")
+        check(ctx, g >= 0, f"{path}.g", "g >= 0", tb.get("g", G0))
     if model == "user":
-        torque = _vector(ctx, tb.get("torque"), "torque", 3, f"{path}.torque")
+        torque = vector(ctx, tb.get("torque"), "torque", 3, f"{path}.torque")
     return AttitudeSpec(model=model, q0=q0, w0=w0, inertia=inertia, principal_moments=moments, principal_axes=axes,
                         rotors=rotors, mass=mass, cm=cm, g=g, torque=torque)
 
 
-def _inertia(ctx: _Ctx, value: Any, path: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _inertia(ctx: Ctx, value: Any, path: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     desc = "3 principal moments or a 3x3 symmetric tensor"
     if isinstance(value, list) and len(value) == 3 and all(isinstance(row, list) for row in value):
-        tensor = np.array([_vector(ctx, row, "inertia", 3, f"{path}[{k}]") for k, row in enumerate(value)])
+        tensor = np.array([vector(ctx, row, "inertia", 3, f"{path}[{k}]") for k, row in enumerate(value)])
         scale = float(np.max(np.abs(tensor)))
-        _check(ctx, scale > 0, path, "a non-zero inertia tensor", value)
-        _check(ctx, bool(np.all(np.abs(tensor - tensor.T) <= SYMMETRY_RTOL * scale)), path, "a symmetric tensor (I[i][j] = I[j][i])", value)
+        check(ctx, scale > 0, path, "a non-zero inertia tensor", value)
+        check(ctx, bool(np.all(np.abs(tensor - tensor.T) <= SYMMETRY_RTOL * scale)), path, "a symmetric tensor (I[i][j] = I[j][i])", value)
         tensor = 0.5 * (tensor + tensor.T)
         if np.count_nonzero(tensor - np.diag(np.diag(tensor))) == 0:
             moments, axes = np.diag(tensor).copy(), np.eye(3)
@@ -920,44 +677,44 @@ def _inertia(ctx: _Ctx, value: Any, path: str) -> tuple[np.ndarray, np.ndarray, 
             if np.linalg.det(axes) < 0:
                 axes[:, 2] = -axes[:, 2]
     elif isinstance(value, (list, str)):
-        moments = _vector(ctx, value, "inertia", 3, path)
+        moments = vector(ctx, value, "inertia", 3, path)
         tensor, axes = np.diag(moments), np.eye(3)
     else:
         raise ctx.error(path, desc, value)
     for k in range(3):
-        _check(ctx, moments[k] > 0, path, "positive principal moments (a singular or negative inertia is not a rigid body)", moments.tolist())
+        check(ctx, moments[k] > 0, path, "positive principal moments (a singular or negative inertia is not a rigid body)", moments.tolist())
     total = float(np.sum(moments))
     for k in range(3):
-        _check(ctx, moments[k] <= (total - moments[k]) * (1 + TRIANGLE_RTOL), path,
+        check(ctx, moments[k] <= (total - moments[k]) * (1 + TRIANGLE_RTOL), path,
                "principal moments obeying the triangle inequality (each <= the sum of the other two)", moments.tolist())
     return tensor, moments, axes
 
 
-def _rotors(ctx: _Ctx, value: Any, path: str) -> tuple[Rotor, ...]:
+def _rotors(ctx: Ctx, value: Any, path: str) -> tuple[Rotor, ...]:
     if not isinstance(value, list) or len(value) > 64:
         raise ctx.error(path, "a list of at most 64 rotor tables {axis, h} or {axis, speed, inertia}", value)
     out = []
     for k, item in enumerate(value):
         p = f"{path}[{k}]"
-        tb = _Table(ctx, item, p, ("axis", "h", "speed", "inertia"))
-        axis = _vector(ctx, tb.get("axis"), "dimensionless", 3, f"{p}.axis")
+        tb = Table(ctx, item, p, ("axis", "h", "speed", "inertia"))
+        axis = vector(ctx, tb.get("axis"), "dimensionless", 3, f"{p}.axis")
         n = float(np.linalg.norm(axis))
-        _check(ctx, n > 0, f"{p}.axis", "a non-zero axis (body components; normalized on load)", tb.get("axis"))
+        check(ctx, n > 0, f"{p}.axis", "a non-zero axis (body components; normalized on load)", tb.get("axis"))
         if tb.has("h"):
             if tb.has("speed") or tb.has("inertia"):
                 raise ctx.error(f"{p}.h", "either h or speed + inertia, not both", tb.get("h"))
-            out.append(Rotor(axis=axis / n, h=_quantity(ctx, tb.get("h"), "angular_momentum", f"{p}.h")))
+            out.append(Rotor(axis=axis / n, h=quantity(ctx, tb.get("h"), "angular_momentum", f"{p}.h")))
         else:
-            speed = _quantity(ctx, tb.get("speed"), "angular_velocity", f"{p}.speed")
-            j = _quantity(ctx, tb.get("inertia"), "inertia", f"{p}.inertia")
-            _check(ctx, j > 0, f"{p}.inertia", "inertia > 0 (axial moment of the rotor)", tb.get("inertia"))
+            speed = quantity(ctx, tb.get("speed"), "angular_velocity", f"{p}.speed")
+            j = quantity(ctx, tb.get("inertia"), "inertia", f"{p}.inertia")
+            check(ctx, j > 0, f"{p}.inertia", "inertia > 0 (axial moment of the rotor)", tb.get("inertia"))
             out.append(Rotor(axis=axis / n, h=j * speed, speed=speed, inertia=j))
     return tuple(out)
 
 
-def _body(ctx: _Ctx, data: Any, path: str, cb: CentralBody) -> Body:
-    tb = _Table(ctx, data, path, ("name", "orbit", "attitude", "cross_check"))
-    name = _name(ctx, tb.get("name"), f"{path}.name")
+def _body(ctx: Ctx, data: Any, path: str, cb: CentralBody) -> Body:
+    tb = Table(ctx, data, path, ("name", "orbit", "attitude", "cross_check"))
+    name = field_name(ctx, tb.get("name"), f"{path}.name")
     path = f"{path} ({name})"  # errors name the body by index and name: bodies[0] (iss).orbit.a
     orbit = _orbit(ctx, tb.get("orbit"), f"{path}.orbit", cb) if tb.has("orbit") else None
     attitude = _attitude(ctx, tb.get("attitude"), f"{path}.attitude") if tb.has("attitude") else None
@@ -967,7 +724,7 @@ def _body(ctx: _Ctx, data: Any, path: str, cb: CentralBody) -> Body:
         raise ctx.error(f"{path}.orbit", "no orbit for a heavy_top body (a top spins about a fixed point in uniform gravity)", "an orbit table", raw=True)
     if attitude is not None and attitude.model == "gravity_gradient" and orbit is None:
         raise ctx.error(f"{path}.attitude.model", "an orbit table with gravity_gradient (the torque depends on the position)", '"gravity_gradient" without an orbit', raw=True)
-    cross = _bool(ctx, tb.get("cross_check", False), f"{path}.cross_check")
+    cross = boolean(ctx, tb.get("cross_check", False), f"{path}.cross_check")
     if cross and orbit is None:
         raise ctx.error(f"{path}.cross_check", "an orbit to cross-check", "true without an orbit", raw=True)
     return Body(name=name, orbit=orbit, attitude=attitude, cross_check=cross)
@@ -976,25 +733,25 @@ def _body(ctx: _Ctx, data: Any, path: str, cb: CentralBody) -> Body:
 _WALKER_KEYS = ("prefix", "i", "t", "p", "f", "altitude", "a", "raan0", "model", "cross_check", "attitude")
 
 
-def _walker(ctx: _Ctx, data: Any, cb: CentralBody) -> tuple[list[Body], dict[str, Any]]:
-    tb = _Table(ctx, data, "walker", _WALKER_KEYS)
-    prefix = _name(ctx, tb.get("prefix", "sat"), "walker.prefix")
+def _walker(ctx: Ctx, data: Any, cb: CentralBody) -> tuple[list[Body], dict[str, Any]]:
+    tb = Table(ctx, data, "walker", _WALKER_KEYS)
+    prefix = field_name(ctx, tb.get("prefix", "sat"), "walker.prefix")
     i = _angle(ctx, tb, "i", "walker")
-    _check(ctx, 0.0 <= i <= math.pi, "walker.i", "0 <= i <= 180 deg", tb.get("i"))
-    t = _int(ctx, tb.get("t"), "walker.t", 1, MAX_BODIES)
-    p = _int(ctx, tb.get("p"), "walker.p", 1, t)
-    _check(ctx, t % p == 0, "walker.p", f"a divisor of t = {t} (equal planes)", tb.get("p"))
-    f = _int(ctx, tb.get("f", 0), "walker.f", 0, p - 1)
+    check(ctx, 0.0 <= i <= math.pi, "walker.i", "0 <= i <= 180 deg", tb.get("i"))
+    t = integer(ctx, tb.get("t"), "walker.t", 1, MAX_BODIES)
+    p = integer(ctx, tb.get("p"), "walker.p", 1, t)
+    check(ctx, t % p == 0, "walker.p", f"a divisor of t = {t} (equal planes)", tb.get("p"))
+    f = integer(ctx, tb.get("f", 0), "walker.f", 0, p - 1)
     if tb.has("altitude") == tb.has("a"):
         raise ctx.error("walker", "exactly one of altitude, a", "both" if tb.has("a") else "neither", raw=True)
     if tb.has("a"):
-        a = _quantity(ctx, tb.get("a"), "length", "walker.a")
+        a = quantity(ctx, tb.get("a"), "length", "walker.a")
     else:
-        a = cb.radius + _quantity(ctx, tb.get("altitude"), "length", "walker.altitude")
-    _check(ctx, a > 0, "walker.a" if tb.has("a") else "walker.altitude", "an orbit radius a > 0", tb.get("a", tb.get("altitude", None)))
+        a = cb.radius + quantity(ctx, tb.get("altitude"), "length", "walker.altitude")
+    check(ctx, a > 0, "walker.a" if tb.has("a") else "walker.altitude", "an orbit radius a > 0", tb.get("a", tb.get("altitude", None)))
     raan0 = _angle(ctx, tb, "raan0", "walker")
-    model = _choice(ctx, tb.get("model", _ORBIT_ANALYTIC), ORBIT_MODELS, "walker.model")
-    cross = _bool(ctx, tb.get("cross_check", False), "walker.cross_check")
+    model = choice(ctx, tb.get("model", _ORBIT_ANALYTIC), ORBIT_MODELS, "walker.model")
+    cross = boolean(ctx, tb.get("cross_check", False), "walker.cross_check")
     attitude = _attitude(ctx, tb.get("attitude"), "walker.attitude") if tb.has("attitude") else None
     if attitude is not None and attitude.model == "heavy_top":
         raise ctx.error("walker.attitude.model", "an orbiting model (not heavy_top)", "heavy_top")
@@ -1021,25 +778,25 @@ def _walker(ctx: _Ctx, data: Any, cb: CentralBody) -> tuple[list[Body], dict[str
     return bodies, summary
 
 
-def _output(ctx: _Ctx, data: Any, base: Path | None) -> tuple[Path | None, int | None, float | None]:
-    tb = _Table(ctx, data, "output", ("path", "roll_size", "roll_interval"))
+def _output(ctx: Ctx, data: Any, base: Path | None) -> tuple[Path | None, int | None, float | None]:
+    tb = Table(ctx, data, "output", ("path", "roll_size", "roll_interval"))
     path = None
     if tb.has("path"):
-        raw = _string(ctx, tb.get("path"), "output.path", 1024)
+        raw = string(ctx, tb.get("path"), "output.path", 1024)
         if re.match(r"^[A-Za-z][A-Za-z0-9+.-]*:", raw) and not re.match(r"^[A-Za-z]:[\\/]", raw):
             raise ctx.error("output.path", "a file path (resolved relative to the config file), not a URL", raw)
-        _check(ctx, bool(raw.strip()) and "\x00" not in raw, "output.path", "a non-empty file path", raw)
+        check(ctx, bool(raw.strip()) and "\x00" not in raw, "output.path", "a non-empty file path", raw)
         path = Path(raw)
         if not path.is_absolute() and base is not None:
             path = base / path
     roll_size = roll_interval = None
     if tb.has("roll_size"):
-        size = _quantity(ctx, tb.get("roll_size"), "bytes", "output.roll_size")
-        _check(ctx, 2**20 <= size <= 2**50, "output.roll_size", "1 MiB <= roll_size <= 1 PiB", tb.get("roll_size"))
+        size = quantity(ctx, tb.get("roll_size"), "bytes", "output.roll_size")
+        check(ctx, 2**20 <= size <= 2**50, "output.roll_size", "1 MiB <= roll_size <= 1 PiB", tb.get("roll_size"))
         roll_size = int(size)
     if tb.has("roll_interval"):
-        roll_interval = _quantity(ctx, tb.get("roll_interval"), "time", "output.roll_interval")
-        _check(ctx, 1.0 <= roll_interval <= MAX_DURATION_S, "output.roll_interval", "1 s <= roll_interval", tb.get("roll_interval"))
+        roll_interval = quantity(ctx, tb.get("roll_interval"), "time", "output.roll_interval")
+        check(ctx, 1.0 <= roll_interval <= MAX_DURATION_S, "output.roll_interval", "1 s <= roll_interval", tb.get("roll_interval"))
     return path, roll_size, roll_interval
 
 
@@ -1049,7 +806,7 @@ def _output(ctx: _Ctx, data: Any, base: Path | None) -> tuple[Path | None, int |
 def load(path: str | Path) -> Scenario:
     """Load and validate a scenario file; raise :class:`ScenarioError` on any problem."""
     source = str(path)
-    ctx = _Ctx(source)
+    ctx = Ctx(source)
     try:
         p = Path(path)
         with open(p, "rb") as fh:
@@ -1068,7 +825,7 @@ def load(path: str | Path) -> Scenario:
 def loads(text: str, source: str = "<string>", base_dir: str | Path | None = None) -> Scenario:
     """Load a scenario from TOML text; ``source`` names it in errors, ``base_dir`` anchors
     relative file paths (default: the current directory)."""
-    ctx = _Ctx(source)
+    ctx = Ctx(source)
     if not isinstance(text, str):
         raise ctx.error("file", "TOML text", type(text).__name__, raw=True)
     if len(text) > MAX_FILE_BYTES:
@@ -1084,23 +841,23 @@ def loads(text: str, source: str = "<string>", base_dir: str | Path | None = Non
 
 def load_dict(data: dict[str, Any], source: str = "<dict>", base_dir: str | Path | None = None) -> Scenario:
     """Validate an already parsed config (e.g. the ``config`` of :meth:`Scenario.to_dict`)."""
-    ctx = _Ctx(source)
-    top = _Table(ctx, data, "", ("scenario", "central_body", "bodies", "walker", "output"))
-    sc = _Table(ctx, top.get("scenario"), "scenario", ("name", "description", "epoch", "duration", "rate", "real_time_factor", "frame"))
-    name = _name(ctx, sc.get("name"), "scenario.name")
-    description = _string(ctx, sc.get("description", ""), "scenario.description")
+    ctx = Ctx(source)
+    top = Table(ctx, data, "", ("scenario", "central_body", "bodies", "walker", "output"))
+    sc = Table(ctx, top.get("scenario"), "scenario", ("name", "description", "epoch", "duration", "rate", "real_time_factor", "frame"))
+    name = field_name(ctx, sc.get("name"), "scenario.name")
+    description = string(ctx, sc.get("description", ""), "scenario.description")
     epoch, scale, epoch_ns = _epoch(ctx, sc.get("epoch"), "scenario.epoch")
-    duration = _quantity(ctx, sc.get("duration"), "time", "scenario.duration")
-    _check(ctx, duration > 0, "scenario.duration", "duration > 0", sc.get("duration"))
-    _check(ctx, duration <= MAX_DURATION_S, "scenario.duration", "duration <= 250 years", sc.get("duration"))
-    _check(ctx, epoch_ns + duration * 1e9 < 2.0**64, "scenario.duration", "an end before 2554 (MCAP log_time is uint64 ns since 1970)", sc.get("duration"))
-    rate = _quantity(ctx, sc.get("rate"), "frequency", "scenario.rate")
-    _check(ctx, MIN_RATE_HZ <= rate <= MAX_RATE_HZ, "scenario.rate", f"{MIN_RATE_HZ:g} Hz <= rate <= {MAX_RATE_HZ:g} Hz", sc.get("rate"))
-    _check(ctx, duration * rate <= MAX_OUTPUT_STEPS, "scenario.rate", f"duration x rate <= {MAX_OUTPUT_STEPS:.0e} output steps", sc.get("rate"))
-    rtf = _quantity(ctx, sc.get("real_time_factor", 1.0), "dimensionless", "scenario.real_time_factor")
-    _check(ctx, 0 < rtf <= MAX_REAL_TIME_FACTOR, "scenario.real_time_factor", f"0 < real_time_factor <= {MAX_REAL_TIME_FACTOR:g}", sc.get("real_time_factor", 1.0))
+    duration = quantity(ctx, sc.get("duration"), "time", "scenario.duration")
+    check(ctx, duration > 0, "scenario.duration", "duration > 0", sc.get("duration"))
+    check(ctx, duration <= MAX_DURATION_S, "scenario.duration", "duration <= 250 years", sc.get("duration"))
+    check(ctx, epoch_ns + duration * 1e9 < 2.0**64, "scenario.duration", "an end before 2554 (MCAP log_time is uint64 ns since 1970)", sc.get("duration"))
+    rate = quantity(ctx, sc.get("rate"), "frequency", "scenario.rate")
+    check(ctx, MIN_RATE_HZ <= rate <= MAX_RATE_HZ, "scenario.rate", f"{MIN_RATE_HZ:g} Hz <= rate <= {MAX_RATE_HZ:g} Hz", sc.get("rate"))
+    check(ctx, duration * rate <= MAX_OUTPUT_STEPS, "scenario.rate", f"duration x rate <= {MAX_OUTPUT_STEPS:.0e} output steps", sc.get("rate"))
+    rtf = quantity(ctx, sc.get("real_time_factor", 1.0), "dimensionless", "scenario.real_time_factor")
+    check(ctx, 0 < rtf <= MAX_REAL_TIME_FACTOR, "scenario.real_time_factor", f"0 < real_time_factor <= {MAX_REAL_TIME_FACTOR:g}", sc.get("real_time_factor", 1.0))
     cb = _central_body(ctx, top.get("central_body", {"name": "earth"}))
-    frame = _name(ctx, sc.get("frame", cb.frame), "scenario.frame")
+    frame = field_name(ctx, sc.get("frame", cb.frame), "scenario.frame")
 
     bodies: list[Body] = []
     raw_bodies = top.get("bodies", [])
@@ -1136,7 +893,7 @@ def load_dict(data: dict[str, Any], source: str = "<dict>", base_dir: str | Path
         name=name, epoch=epoch, epoch_scale=scale, epoch_unix_ns=epoch_ns, duration=duration, rate=rate,
         real_time_factor=rtf, frame=frame, central_body=cb, bodies=tuple(bodies), description=description,
         output_path=out_path, roll_size=roll_size, roll_interval=roll_interval, walker=walker,
-        source=source, config=_jsonable(data),
+        source=source, config=jsonable(data),
     )
 
 

@@ -1,0 +1,291 @@
+"""Config fields: the typed readers every scenario section uses, and their error messages.
+
+Each reader takes a :class:`Ctx` (the file name, for errors), the raw TOML value and its
+key path, and returns a plain SI value or raises :class:`ScenarioError` with the text
+``<file>: <key path>: expected <...>, got <...>``.  Quantities are strings with a unit
+parsed by astropy (``"7000 km"``) or bare numbers taken as SI; each kind has a magnitude
+range (:data:`MAGNITUDE_MAX`, :data:`MAGNITUDE_MIN`) so that no product the kernels form
+overflows float64 (docs/architecture.md, section 5).
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import difflib
+import functools
+import json
+import math
+import re
+from typing import Any
+
+import numpy as np
+
+from astrodyn.messages import NAME_PATTERN
+
+__all__ = ["ScenarioError", "Ctx", "Table", "MISSING", "MAX_STRING", "MAGNITUDE_MAX", "MAGNITUDE_MIN", "QUANTITY_KINDS",
+           "jsonable", "show", "did_you_mean", "units", "parse_quantity_string", "quantity", "vector", "check",
+           "field_name", "choice", "boolean", "integer", "string"]
+
+MAX_STRING = 256  #: longest accepted quantity / epoch string
+
+#: Largest magnitude of each kind of config value (SI, after unit conversion): the ranges
+#: where astrodyn's Newtonian models are meant to be used and where the products the
+#: kernels form (r^3, |h|^2, I w^2, ...) stay far from float64 overflow.  A value outside
+#: is refused naming the field, the value and the range (docs/architecture.md, section 6).
+MAGNITUDE_MAX = {
+    "length": 1e16,  # m: about 67,000 au
+    "speed": 299_792_458.0 * 0.1,  # m/s: a tenth of c (Newtonian mechanics)
+    "angular_velocity": 1e5,  # rad/s: about 1 million rpm
+    "gm": 1e22,  # m^3/s^2: 75 solar masses
+    "inertia": 1e20,  # kg m^2
+    "angular_momentum": 1e25,  # kg m^2/s
+    "mass": 1e30,  # kg
+    "acceleration": 1e7,  # m/s^2
+    "torque": 1e15,  # N m
+    "angle": 1e9,  # rad (mean anomalies of many revolutions included)
+    "dimensionless": 1e6,
+}
+#: Smallest non-zero magnitude of some kinds (below: a typo or a unit slip, and the
+#: dynamics lose their meaning in float64, e.g. an inertia of 1e-320 kg m^2 is subnormal).
+MAGNITUDE_MIN = {"inertia": 1e-15, "mass": 1e-15, "gm": 1e-3}
+
+class ScenarioError(ValueError):
+    """A scenario that cannot be loaded; ``str`` is ``<file>: <key path>: expected ..., got ...``."""
+
+
+
+def jsonable(x: Any) -> Any:
+    if isinstance(x, np.ndarray):
+        return x.tolist()
+    if isinstance(x, (np.floating, np.integer)):
+        return x.item()
+    if isinstance(x, dict):
+        return {k: jsonable(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [jsonable(v) for v in x]
+    if isinstance(x, (_dt.datetime, _dt.date, _dt.time)):
+        return x.isoformat()
+    if isinstance(x, float) and not math.isfinite(x):  # pragma: no cover - validated away
+        return repr(x)
+    return x
+
+
+
+# --------------------------------------------------------------------------- error helpers
+
+
+def show(value: Any) -> str:
+    """The offending value as the user wrote it (JSON-like, shortened)."""
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, float):
+        return repr(value) if math.isfinite(value) else {True: "inf", False: "-inf"}.get(value > 0, "nan") if not math.isnan(value) else "nan"
+    if isinstance(value, int):
+        text = str(value) if abs(value) < 10**30 else f"an integer of {len(str(abs(value)))} digits"
+        return text
+    if isinstance(value, dict):
+        return "a table"
+    if isinstance(value, (_dt.datetime, _dt.date, _dt.time)):
+        return value.isoformat()
+    if isinstance(value, np.ndarray):
+        value = value.tolist()
+    try:
+        text = json.dumps(jsonable(value), ensure_ascii=False)
+    except (TypeError, ValueError):  # pragma: no cover - TOML values are always JSON-able
+        text = repr(value)
+    return text if len(text) <= 100 else text[:97] + "..."
+
+
+class Ctx:
+    """Carries the file name for error messages."""
+
+    def __init__(self, source: str):
+        self.source = source
+
+    def error(self, path: str, expected: str, got: Any, raw: bool = False) -> ScenarioError:
+        shown = got if raw else show(got)
+        return ScenarioError(f"{self.source}: {path}: expected {expected}, got {shown}")
+
+
+MISSING = object()
+
+
+def did_you_mean(word: str, options: tuple[str, ...]) -> str:
+    """' (did you mean "x"?)' for the closest option (difflib, or a prefix), else ''."""
+    close = difflib.get_close_matches(word, options, n=1, cutoff=0.6)
+    if not close:
+        close = [o for o in options if word.lower().startswith(o.lower()) or o.lower().startswith(word.lower())][:1] if word else []
+    return f' (did you mean "{close[0]}"?)' if close else ""
+
+
+class Table:
+    """A TOML table being read: remembers which keys were used, rejects the rest."""
+
+    def __init__(self, ctx: Ctx, data: Any, path: str, allowed: tuple[str, ...]):
+        if not isinstance(data, dict):
+            raise ctx.error(path, "a table", data)
+        self.ctx, self.data, self.path, self.allowed = ctx, data, path, allowed
+        for key in data:
+            if key not in allowed:
+                hint = did_you_mean(str(key), allowed)
+                raise ctx.error(self.sub(key), f"one of the keys {', '.join(allowed)}{hint}", f'unknown key "{key}"', raw=True)
+
+    def sub(self, key: str) -> str:
+        return f"{self.path}.{key}" if self.path else str(key)
+
+    def has(self, key: str) -> bool:
+        return key in self.data
+
+    def get(self, key: str, default: Any = MISSING) -> Any:
+        if key in self.data:
+            return self.data[key]
+        if default is MISSING:
+            raise self.ctx.error(self.sub(key), "a value (required)", "nothing", raw=True)
+        return default
+
+
+# --------------------------------------------------------------------------- quantities
+
+_RPM = None
+
+
+def units():
+    """astropy.units with network access off and ``rpm`` defined (imported lazily)."""
+    global _RPM
+    import astropy.units as u
+
+    if _RPM is None:
+        _RPM = u.def_unit("rpm", u.cycle / u.min)
+        u.add_enabled_units([_RPM])
+    return u
+
+
+# kind -> (SI unit string, description for errors)
+QUANTITY_KINDS: dict[str, tuple[str, str]] = {
+    "length": ("m", 'a length, e.g. "7000 km"'),
+    "angle": ("rad", 'an angle, e.g. "51.6 deg"'),
+    "time": ("s", 'a time, e.g. "90 min"'),
+    "frequency": ("Hz", 'a rate, e.g. "10 Hz"'),
+    "speed": ("m / s", 'a speed, e.g. "7.5 km/s"'),
+    "angular_velocity": ("rad / s", 'an angular velocity, e.g. "0.1 rad/s"'),
+    "gm": ("m3 / s2", 'a gravitational parameter, e.g. "3.986004418e14 m3/s2"'),
+    "inertia": ("kg m2", 'a moment of inertia, e.g. "100 kg m2"'),
+    "angular_momentum": ("kg m2 / s", 'an angular momentum, e.g. "10 N m s"'),
+    "mass": ("kg", 'a mass, e.g. "500 kg"'),
+    "acceleration": ("m / s2", 'an acceleration, e.g. "9.81 m/s2"'),
+    "torque": ("N m", 'a torque, e.g. "0.01 N m"'),
+    "bytes": ("byte", 'a size, e.g. "256 MB"'),
+    "dimensionless": ("", "a number"),
+}
+
+
+@functools.lru_cache(maxsize=4096)
+def parse_quantity_string(text: str, kind: str) -> float | str:
+    """SI value of a quantity string, or an error description (str)."""
+    u = units()
+    unit = u.Unit(QUANTITY_KINDS[kind][0]) if QUANTITY_KINDS[kind][0] else u.dimensionless_unscaled
+    try:
+        q = u.Quantity(text)
+    except Exception:  # astropy raises ValueError, TypeError, UnitsError... on garbage
+        return "unparsable"
+    try:
+        with np.errstate(over="ignore", invalid="ignore"):  # an overflow is reported as "not finite" by the caller
+            value = q.to_value(unit)
+    except Exception:
+        return f"a quantity in {q.unit.to_string() or 'no unit'}"
+    if np.ndim(value) != 0:
+        return "not a scalar"
+    return float(value)
+
+
+def quantity(ctx: Ctx, value: Any, kind: str, path: str) -> float:
+    """A finite SI float from a bare number (already SI) or a quantity string."""
+    desc = QUANTITY_KINDS[kind][1]
+    if isinstance(value, bool):
+        raise ctx.error(path, desc, value)
+    if isinstance(value, (int, float)):
+        try:
+            x = float(value)
+        except OverflowError:
+            raise ctx.error(path, f"{desc} (finite)", value) from None
+    elif isinstance(value, str):
+        if len(value) > MAX_STRING:
+            raise ctx.error(path, f"{desc} (at most {MAX_STRING} characters)", value)
+        parsed = parse_quantity_string(value.strip(), kind)
+        if isinstance(parsed, str):
+            raise ctx.error(path, desc, value)
+        x = parsed
+    else:
+        raise ctx.error(path, desc, value)
+    if not math.isfinite(x):
+        raise ctx.error(path, f"{desc} (finite)", value)
+    hi, lo = MAGNITUDE_MAX.get(kind), MAGNITUDE_MIN.get(kind)
+    unit = QUANTITY_KINDS[kind][0]
+    if hi is not None and abs(x) > hi:
+        raise ctx.error(path, f"|{path.rsplit('.', 1)[-1]}| <= {hi:g} {unit} (after unit conversion; the range of "
+                        f"astrodyn's models)".replace("  ", " "), value)
+    if lo is not None and x != 0 and abs(x) < lo:
+        raise ctx.error(path, f"|{path.rsplit('.', 1)[-1]}| >= {lo:g} {unit} or 0 (after unit conversion)", value)
+    return x
+
+
+VECTOR_STRING = re.compile(r"^\s*[\[(]([^\])]*)[\])]\s*(.*?)\s*$")
+
+
+def vector(ctx: Ctx, value: Any, kind: str, n: int, path: str) -> np.ndarray:
+    """n SI floats from a list of quantities or one string ``"[a, b, c] unit"``."""
+    desc = f"a list of {n} values, each {QUANTITY_KINDS[kind][1]}"
+    if isinstance(value, str) and len(value) <= MAX_STRING:
+        m = VECTOR_STRING.match(value)
+        if m:
+            parts = [p.strip() for p in m.group(1).split(",")]
+            if len(parts) == n and all(parts):
+                unit = m.group(2)
+                return np.array([quantity(ctx, f"{p} {unit}" if unit else number_or_str(p), kind, f"{path}[{i}]") for i, p in enumerate(parts)])
+        raise ctx.error(path, f'{desc}, or a string like "[7000, 0, 0] km"', value)
+    if not isinstance(value, list) or len(value) != n:
+        raise ctx.error(path, desc, value)
+    return np.array([quantity(ctx, v, kind, f"{path}[{i}]") for i, v in enumerate(value)], dtype=np.float64)
+
+
+def number_or_str(text: str) -> float | str:
+    try:
+        return float(text)
+    except ValueError:
+        return text
+
+
+def check(ctx: Ctx, ok: bool, path: str, expected: str, got: Any) -> None:
+    if not ok:
+        raise ctx.error(path, expected, got)
+
+
+def field_name(ctx: Ctx, value: Any, path: str) -> str:
+    if not isinstance(value, str) or not re.fullmatch(NAME_PATTERN, value) or value in (".", ".."):
+        raise ctx.error(path, f"a name matching {NAME_PATTERN}", value)
+    return value
+
+
+def choice(ctx: Ctx, value: Any, allowed: tuple[str, ...], path: str) -> str:
+    if not isinstance(value, str) or value not in allowed:
+        hint = did_you_mean(value, allowed) if isinstance(value, str) else ""
+        raise ctx.error(path, f"one of {', '.join(allowed)}{hint}", value)
+    return value
+
+
+def boolean(ctx: Ctx, value: Any, path: str) -> bool:
+    if not isinstance(value, bool):
+        raise ctx.error(path, "true or false", value)
+    return value
+
+
+def integer(ctx: Ctx, value: Any, path: str, lo: int, hi: int) -> int:
+    if isinstance(value, bool) or not isinstance(value, int) or not lo <= value <= hi:
+        raise ctx.error(path, f"an integer {lo} <= n <= {hi}", value)
+    return value
+
+
+def string(ctx: Ctx, value: Any, path: str, max_len: int = 4096) -> str:
+    if not isinstance(value, str) or len(value) > max_len:
+        raise ctx.error(path, f"a string of at most {max_len} characters", value)
+    return value
