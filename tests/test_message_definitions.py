@@ -47,8 +47,13 @@ def _example(kind: str) -> dict:
         elif isinstance(t, ins.LiteralType):
             out[f.name] = extra.get("values", t.values)[0]
         elif isinstance(t, ins.ListType):
-            n = t.min_length
-            out[f.name] = [0.5] * n if n == 4 else [6878137.123456789, -1.25e-3, 7612.5][:n]  # 4: a unit quaternion
+            n = t.min_length or 1
+            if isinstance(t.item_type, ins.StrType):
+                out[f.name] = ["pd#7"]
+            elif isinstance(t.item_type, ins.IntType):
+                out[f.name] = [2]
+            else:
+                out[f.name] = [0.5] * n if n == 4 else [6878137.123456789, -1.25e-3, 7612.5][:n]  # 4: a unit quaternion
         elif isinstance(t, ins.StrType):
             out[f.name] = "GCRF" if t.pattern and "A-Z" in t.pattern else ("restart" if t.pattern else "a detail")
         elif isinstance(t, ins.DictType):

@@ -508,7 +508,7 @@ ERROR_CASES = [
     ("scenario.name", "a b", 'scenario.name: expected a name matching [A-Za-z0-9_.-]{1,128}, got "a b"'),
     ("scenario.nmae", "x", 'scenario.nmae: expected one of the keys name, description, epoch, duration, rate, real_time_factor, frame (did you mean "name"?), got unknown key "nmae"'),
     ("scenario", DELETE, "scenario: expected a value (required), got nothing"),
-    ("bodys", [], 'bodys: expected one of the keys scenario, central_body, bodies, walker, output (did you mean "bodies"?), got unknown key "bodys"'),
+    ("bodys", [], 'bodys: expected one of the keys scenario, central_body, bodies, walker, output, control (did you mean "bodies"?), got unknown key "bodys"'),
     ("central_body.name", "eart", 'central_body.name: expected one of earth, moon, sun, mars, venus, jupiter (did you mean "earth"?), or mu and radius given explicitly, got "eart"'),
     ("central_body.mu", "-1 m3/s2", 'central_body.mu: expected mu > 0, got "-1 m3/s2"'),
     ("central_body.j2", 2.0, "central_body.j2: expected |j2| < 1 (an unnormalized zonal coefficient), got 2.0"),

@@ -36,6 +36,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from astrodyn.messages import ACTUATED_MODEL
 from astrodyn.orbit import propagate
 from astrodyn.orbit.perturbations import KeplerOrbit, ThirdBody, propagate_perturbed
 from astrodyn.rotation import dcm_from_quat, quat_from_dcm
@@ -70,7 +71,7 @@ class OrbitEngine:
     def __init__(self, scenario: Scenario, plan: Plan | None = None, rtol: float = 1e-12, atol: float = 1e-14):
         plan = plan or make_plan(scenario)
         models = {bp.name: bp.orbit_model for bp in plan.bodies}
-        bodies = [b for b in scenario.bodies if b.orbit is not None]
+        bodies = [b for b in scenario.bodies if b.orbit is not None and models[b.name] != ACTUATED_MODEL]
         self.scenario = scenario
         self.names = [b.name for b in bodies]
         self.models = [models[b.name] for b in bodies]
@@ -219,7 +220,7 @@ class AttitudeEngine:
         self.bodies: list[_AttitudeBody] = []
         for b in scenario.bodies:
             model = models.get(b.name)
-            if b.attitude is None or model is None:
+            if b.attitude is None or model is None or model == ACTUATED_MODEL:  # the plant's (astrodyn.plant)
                 continue
             a = b.attitude
             axes = np.asarray(a.principal_axes, dtype=np.float64)

@@ -113,6 +113,21 @@ __all__ = [
     "check_name",
     "orbit_key",
     "attitude_key",
+    "body_key",
+    "tick_key",
+    "done_key",
+    "STATE_KINDS",
+    "CONTROL_KINDS",
+    "SENSOR_KINDS",
+    "ACTUATED_MODEL",
+    "Command",
+    "ActuatorState",
+    "GyroSample",
+    "StarTrackerSample",
+    "GpsSample",
+    "TachometerSample",
+    "Tick",
+    "StepDone",
     "crosscheck_key",
     "control_key",
     "schema_key",
@@ -156,17 +171,25 @@ class MessageError(ValueError):
 
 #: Models a state message may name.  The scenario loader accepts the same names (plus
 #: "none" for attitude, which publishes nothing).
-ORBIT_MODELS: tuple[str, ...] = ("kepler", "j2", "zonal", "third_body")
-ATTITUDE_MODELS: tuple[str, ...] = ("torque_free", "gravity_gradient", "gyrostat", "heavy_top", "user")
+ORBIT_MODELS: tuple[str, ...] = ("kepler", "j2", "zonal", "third_body", "actuated")
+ATTITUDE_MODELS: tuple[str, ...] = ("torque_free", "gravity_gradient", "gyrostat", "heavy_top", "user", "actuated")
+#: The model name of a body moved by a closed loop (its actuators, commanded by controllers;
+#: docs/control.md).  A state message may name it; a config may not (the plan picks it).
+ACTUATED_MODEL = "actuated"
 CROSSCHECK_REFERENCES: tuple[str, ...] = ("rebound-ias15",)
 STATUS_STATES: tuple[str, ...] = ("starting", "running", "paused", "stopping", "stopped", "error")
 
 PREFIX = "astrodyn"
 NAME_PATTERN = r"[A-Za-z0-9_.-]{1,128}"
 _NAME_RE = re.compile(NAME_PATTERN)
-_BODY_KINDS = ("orbit", "attitude", "crosscheck")
-_SPECIAL_WITH_NAME = ("@control", "@alive", "@batch", "@schema")
-_SPECIAL_PLAIN = {"@status": "status", "@event": "event", "@latest": "latest"}
+#: Per-body kinds: states, then the closed loop's (docs/control.md): commands from
+#: controllers, actuator states and sensor samples from the plant.
+STATE_KINDS = ("orbit", "attitude", "crosscheck")
+CONTROL_KINDS = ("command", "actuators")
+SENSOR_KINDS = ("gyro", "star_tracker", "gps", "tachometer")
+_BODY_KINDS = STATE_KINDS + CONTROL_KINDS + SENSOR_KINDS
+_SPECIAL_WITH_NAME = ("@control", "@alive", "@batch", "@schema", "@done")
+_SPECIAL_PLAIN = {"@status": "status", "@event": "event", "@latest": "latest", "@tick": "tick"}
 
 #: |q| may differ from 1 by at most this much in a message (integrators keep |q| at
 #: round-off, ~1e-15; JSON repr round-trips floats exactly, so 1e-9 only rejects garbage).
@@ -266,9 +289,30 @@ def parse_key(key: Any) -> tuple[str, str, str]:
 
 
 def kind_of_key(key: str) -> str | None:
-    """Message kind for a key ("orbit", "attitude", "crosscheck", "event", "status"), else None."""
+    """Message kind for a key ("orbit", "attitude", "crosscheck", "event", "status", the
+    closed loop's "command", "actuators", sensor kinds, "tick", "done"), else None."""
     _, who, kind = parse_key(key)
+    if who == "@done":
+        return "done"
     return None if who in _SPECIAL_WITH_NAME or who == "@latest" else kind
+
+
+def body_key(scenario: str, body: str, kind: str) -> str:
+    """``astrodyn/<scenario>/<body>/<kind>`` for any per-body kind (states, ``command``,
+    ``actuators``, sensors: :data:`STATE_KINDS`, :data:`CONTROL_KINDS`, :data:`SENSOR_KINDS`)."""
+    if kind not in _BODY_KINDS:
+        raise MessageError(f"kind: expected one of {', '.join(_BODY_KINDS)}, got {kind!r}")
+    return f"{PREFIX}/{check_name(scenario, 'scenario')}/{check_name(body, 'body')}/{kind}"
+
+
+def tick_key(scenario: str) -> str:
+    """``astrodyn/<scenario>/@tick``: the plant's "step k is out" (closed loop, docs/control.md)."""
+    return f"{PREFIX}/{check_name(scenario, 'scenario')}/@tick"
+
+
+def done_key(scenario: str, controller: str) -> str:
+    """``astrodyn/<scenario>/@done/<controller>``: a controller's answer to a control step."""
+    return f"{PREFIX}/{check_name(scenario, 'scenario')}/@done/{check_name(controller, 'controller')}"
 
 
 # ---------------------------------------------------------------------------------------
@@ -372,6 +416,83 @@ class Status(Stamped, forbid_unknown_fields=True, omit_defaults=True):
     detail: _DETAIL | msgspec.UnsetType = msgspec.UNSET
 
 
+# -- the closed loop (docs/control.md) --------------------------------------------------
+
+#: Most reaction wheels (or rotors) of one body.
+MAX_WHEELS = 64
+_Wheels = Annotated[list[float], Meta(min_length=1, max_length=MAX_WHEELS)]
+_Sender = _name("name of the controller that sent the command", "a controller name")
+_SENDER_SEQ = Annotated[int, Meta(ge=0, le=MAX_SEQ, description=(
+    "the sender's command counter: 0, 1, 2, ... over all its commands (every body)"))]
+
+
+class Command(Stamped, forbid_unknown_fields=True, omit_defaults=True):
+    """A controller's command to one body's actuators, applying from sim time t (held until
+    the next command: torque, wheel_torque, thrust; applied once at t: dv)."""
+
+    seq: _SENDER_SEQ
+    sender: _Sender
+    torque: _vec(3, "external torque in body axes, N m, held") | msgspec.UnsetType = msgspec.UNSET
+    wheel_torque: Annotated[_Wheels, Meta(description="motor torque of each reaction wheel, N m, held")] | msgspec.UnsetType = msgspec.UNSET
+    dv: _vec(3, "impulsive velocity change, inertial axes, m/s, applied at t") | msgspec.UnsetType = msgspec.UNSET
+    thrust: _vec(3, "thrust force, N, in `frame`, held") | msgspec.UnsetType = msgspec.UNSET
+    frame: _enum(("inertial", "body"), "axes of thrust (default inertial)") | msgspec.UnsetType = msgspec.UNSET
+
+
+class ActuatorState(Stamped, forbid_unknown_fields=True, omit_defaults=True):
+    """What a body's actuators applied over the step that starts at t (after saturation),
+    and the state of its wheels at t."""
+
+    torque: _vec(3, "external torque applied, body axes, N m")
+    wheel_torque: Annotated[_Wheels, Meta(description="motor torques applied, N m")] | msgspec.UnsetType = msgspec.UNSET
+    wheel_speed: Annotated[_Wheels, Meta(description="wheel speeds relative to the body, rad/s")] | msgspec.UnsetType = msgspec.UNSET
+    clipped: Annotated[list[int], Meta(max_length=MAX_WHEELS, description="wheels whose command was clipped")] | msgspec.UnsetType = msgspec.UNSET
+    dv: _vec(3, "impulse applied at t, inertial axes, m/s") | msgspec.UnsetType = msgspec.UNSET
+    thrust: _vec(3, "thrust applied, inertial axes, N") | msgspec.UnsetType = msgspec.UNSET
+    mass: Annotated[float, Meta(gt=0, description="mass at t, kg")] | msgspec.UnsetType = msgspec.UNSET
+    dv_total: Annotated[float, Meta(ge=0, description="delta-v spent since the start, m/s")] | msgspec.UnsetType = msgspec.UNSET
+    applied: Annotated[list[str], Meta(max_length=4096, description=(
+        "commands first applied at this step, as sender#seq"))] | msgspec.UnsetType = msgspec.UNSET
+
+
+class GyroSample(Stamped, forbid_unknown_fields=True):
+    """A rate gyro's measurement: body angular velocity with bias and noise."""
+
+    w: _vec(3, "measured angular velocity, body axes, rad/s")
+
+
+class StarTrackerSample(Stamped, forbid_unknown_fields=True):
+    """A star tracker's measured attitude: Euler parameters, scalar first, e0 >= 0."""
+
+    q: _vec(4, "measured Euler parameters, scalar first")
+
+
+class GpsSample(Stamped, forbid_unknown_fields=True):
+    """A position/velocity receiver's measurement, inertial frame of the scene."""
+
+    r: _vec(3, "measured position, m")
+    v: _vec(3, "measured velocity, m/s")
+
+
+class TachometerSample(Stamped, forbid_unknown_fields=True):
+    """Measured reaction-wheel speeds relative to the body."""
+
+    speeds: Annotated[_Wheels, Meta(description="wheel speeds, rad/s")]
+
+
+class Tick(Stamped, forbid_unknown_fields=True):
+    """The plant's control step k is out: states and sensor samples for t are published."""
+
+    step: Annotated[int, Meta(ge=0, le=MAX_SEQ, description="output step index of t")]
+
+
+class StepDone(Stamped, forbid_unknown_fields=True):
+    """A controller's answer to control step seq (time t): it sent `commands` commands."""
+
+    sender: _Sender
+    commands: Annotated[int, Meta(ge=0, le=1_000_000, description="commands sent for this step")]
+
+
 #: kind -> message type (the one definition of each; docs/architecture.md, section 5)
 MESSAGE_TYPES: dict[str, type[msgspec.Struct]] = {
     "orbit": OrbitState,
@@ -379,6 +500,14 @@ MESSAGE_TYPES: dict[str, type[msgspec.Struct]] = {
     "crosscheck": CrossCheck,
     "event": Event,
     "status": Status,
+    "command": Command,
+    "actuators": ActuatorState,
+    "gyro": GyroSample,
+    "star_tracker": StarTrackerSample,
+    "gps": GpsSample,
+    "tachometer": TachometerSample,
+    "tick": Tick,
+    "done": StepDone,
 }
 
 
@@ -403,7 +532,9 @@ STATUS_SCHEMA: dict = json_schema(Status)
 
 #: schema name -> schema; the names are the schema titles.
 SCHEMAS: dict[str, dict] = {
-    s["title"]: s for s in (ORBIT_SCHEMA, ATTITUDE_SCHEMA, CROSSCHECK_SCHEMA, EVENT_SCHEMA, STATUS_SCHEMA)
+    s["title"]: s for s in (ORBIT_SCHEMA, ATTITUDE_SCHEMA, CROSSCHECK_SCHEMA, EVENT_SCHEMA, STATUS_SCHEMA,
+                            *(json_schema(t) for t in MESSAGE_TYPES.values() if t not in
+                              (OrbitState, AttitudeState, CrossCheck, Event, Status)))
 }
 _SCHEMA_OF_KIND = {kind: SCHEMAS[f"astrodyn.{t.__name__}"] for kind, t in MESSAGE_TYPES.items()}
 _KIND_OF_TITLE = {f"astrodyn.{t.__name__}": kind for kind, t in MESSAGE_TYPES.items()}
@@ -478,8 +609,13 @@ def _field_problem(kind: str, name: str, t: Any, x: Any) -> str | None:
             return f"{where}: expected one of {', '.join(values)}, got {_show(x)}"
         return None
     if isinstance(t, ins.ListType):
-        n = t.min_length
-        if type(x) is not list or len(x) != n or not all(_is_number(c) for c in x):
+        lo, hi = t.min_length or 0, t.max_length
+        n = str(lo) if lo == hi else f"{lo}..{hi}"
+        if isinstance(t.item_type, ins.StrType):
+            if type(x) is not list or not lo <= len(x) <= (hi or len(x)) or not all(type(c) is str for c in x):
+                return f"{where}: expected array of {n} strings, got {_show(x)}"
+            return None
+        if type(x) is not list or not lo <= len(x) <= (hi or len(x)) or not all(_is_number(c) for c in x):
             return f"{where}: expected array of {n} finite numbers, got {_show(x)}"
         return None
     if isinstance(t, ins.StrType):
@@ -524,8 +660,11 @@ def _decoder(kind: str) -> msgspec.json.Decoder:
     return msgspec.json.Decoder(MESSAGE_TYPES[kind])
 
 
+_OPTIONAL_FIELDS = frozenset(t for t in MESSAGE_TYPES.values() if t.__struct_config__.omit_defaults)
+
+
 def _as_dict(obj: msgspec.Struct) -> dict:
-    return msgspec.to_builtins(obj) if type(obj) is Status else msgspec.structs.asdict(obj)
+    return msgspec.to_builtins(obj) if type(obj) in _OPTIONAL_FIELDS else msgspec.structs.asdict(obj)
 
 
 def _kind(key_or_kind: str) -> str:

@@ -103,12 +103,21 @@ from typing import Any
 
 import numpy as np
 
-from astrodyn.messages import ATTITUDE_MODELS, ORBIT_MODELS
+from astrodyn.messages import ACTUATED_MODEL, ATTITUDE_MODELS, ORBIT_MODELS
 from astrodyn.orbit.perturbations import (
     EARTH_EGM2008 as _EARTH,
     MOON as _MOON,
     SUN as _SUN,
     CentralBody as GravityCentralBody,
+)
+from astrodyn.scenario.control import (
+    Actuators,
+    Control,
+    Sensors,
+    parse_actuators,
+    parse_control,
+    parse_sensors,
+    steps_per,
 )
 from astrodyn.scenario.fields import (
     MAGNITUDE_MAX,
@@ -169,7 +178,9 @@ SYMMETRY_RTOL = 1e-12  #: |I - I^T| <= rtol max|I| for a full tensor
 MAX_CHANNELS = 65_535
 #: Channels a run records besides the bodies' (events, status).
 EXTRA_CHANNELS = 2
-ATTITUDE_MODELS_ALL = ("none",) + ATTITUDE_MODELS
+#: Model names a config may choose ("actuated" is the plan's, for closed-loop bodies).
+CONFIG_ORBIT_MODELS = tuple(m for m in ORBIT_MODELS if m != ACTUATED_MODEL)
+ATTITUDE_MODELS_ALL = ("none",) + tuple(m for m in ATTITUDE_MODELS if m != ACTUATED_MODEL)
 G0 = 9.80665  #: standard gravity, m/s^2 (default g of a heavy top)
 
 _ORBIT_ANALYTIC = "kepler"
@@ -288,6 +299,13 @@ class Body:
     orbit: OrbitSpec | None
     attitude: AttitudeSpec | None
     cross_check: bool = False
+    actuators: Actuators | None = None  #: closed loop (astrodyn.scenario.control)
+    sensors: Sensors | None = None
+
+    @property
+    def in_plant(self) -> bool:
+        """Moved by the closed loop's plant process (it has actuators or sensors)."""
+        return self.actuators is not None or self.sensors is not None
 
 
 @dataclass(frozen=True, eq=False)
@@ -316,6 +334,7 @@ class Scenario:
     roll_size: int | None = None
     roll_interval: float | None = None
     walker: dict[str, Any] | None = None
+    control: Control | None = None  #: the closed loop's [control] table (docs/control.md)
     source: str = "<string>"
     config: dict[str, Any] = field(default_factory=dict)
 
@@ -493,7 +512,7 @@ _ELEMENT_KEYS = ("a", "p", "rp", "e", "i", "raan", "argp", "nu", "M")
 
 def _orbit(ctx: Ctx, data: Any, path: str, cb: CentralBody) -> OrbitSpec:
     tb = Table(ctx, data, path, _ORBIT_KEYS)
-    model = choice(ctx, tb.get("model", _ORBIT_ANALYTIC), ORBIT_MODELS, f"{path}.model")
+    model = choice(ctx, tb.get("model", _ORBIT_ANALYTIC), CONFIG_ORBIT_MODELS, f"{path}.model")
     has_state = tb.has("r") or tb.has("v")
     has_elements = any(tb.has(k) for k in _ELEMENT_KEYS)
     if has_state and has_elements:
@@ -712,8 +731,8 @@ def _rotors(ctx: Ctx, value: Any, path: str) -> tuple[Rotor, ...]:
     return tuple(out)
 
 
-def _body(ctx: Ctx, data: Any, path: str, cb: CentralBody) -> Body:
-    tb = Table(ctx, data, path, ("name", "orbit", "attitude", "cross_check"))
+def _body(ctx: Ctx, data: Any, path: str, cb: CentralBody, rate: float = 1.0, control_every: int | None = None) -> Body:
+    tb = Table(ctx, data, path, ("name", "orbit", "attitude", "cross_check", "actuators", "sensors"))
     name = field_name(ctx, tb.get("name"), f"{path}.name")
     path = f"{path} ({name})"  # errors name the body by index and name: bodies[0] (iss).orbit.a
     orbit = _orbit(ctx, tb.get("orbit"), f"{path}.orbit", cb) if tb.has("orbit") else None
@@ -727,7 +746,25 @@ def _body(ctx: Ctx, data: Any, path: str, cb: CentralBody) -> Body:
     cross = boolean(ctx, tb.get("cross_check", False), f"{path}.cross_check")
     if cross and orbit is None:
         raise ctx.error(f"{path}.cross_check", "an orbit to cross-check", "true without an orbit", raw=True)
-    return Body(name=name, orbit=orbit, attitude=attitude, cross_check=cross)
+    actuators = sensors = None
+    if tb.has("actuators") or tb.has("sensors"):
+        which = "actuators" if tb.has("actuators") else "sensors"
+        if control_every is None:
+            raise ctx.error(f"{path}.{which}", "a [control] table in the config (a closed-loop scene; docs/control.md)",
+                            f"{which} without [control]", raw=True)
+        if orbit is not None and orbit.model != "kepler":
+            raise ctx.error(f"{path}.orbit.model", "kepler for a body with actuators or sensors (the closed loop flies "
+                            "two-body orbits with their burns)", orbit.model)
+        if attitude is not None and attitude.model not in ("torque_free", "none"):
+            raise ctx.error(f"{path}.attitude.model", "torque_free for a body with actuators or sensors (torques come "
+                            "from the commands)", attitude.model)
+        has_att = attitude is not None and attitude.model != "none"
+        if tb.has("actuators"):
+            actuators = parse_actuators(ctx, tb.get("actuators"), f"{path}.actuators", orbit is not None, has_att)
+        if tb.has("sensors"):
+            sensors = parse_sensors(ctx, tb.get("sensors"), f"{path}.sensors", rate, control_every, orbit is not None,
+                                    has_att, bool(actuators is not None and actuators.wheels))
+    return Body(name=name, orbit=orbit, attitude=attitude, cross_check=cross, actuators=actuators, sensors=sensors)
 
 
 _WALKER_KEYS = ("prefix", "i", "t", "p", "f", "altitude", "a", "raan0", "model", "cross_check", "attitude")
@@ -750,7 +787,7 @@ def _walker(ctx: Ctx, data: Any, cb: CentralBody) -> tuple[list[Body], dict[str,
         a = cb.radius + quantity(ctx, tb.get("altitude"), "length", "walker.altitude")
     check(ctx, a > 0, "walker.a" if tb.has("a") else "walker.altitude", "an orbit radius a > 0", tb.get("a", tb.get("altitude", None)))
     raan0 = _angle(ctx, tb, "raan0", "walker")
-    model = choice(ctx, tb.get("model", _ORBIT_ANALYTIC), ORBIT_MODELS, "walker.model")
+    model = choice(ctx, tb.get("model", _ORBIT_ANALYTIC), CONFIG_ORBIT_MODELS, "walker.model")
     cross = boolean(ctx, tb.get("cross_check", False), "walker.cross_check")
     attitude = _attitude(ctx, tb.get("attitude"), "walker.attitude") if tb.has("attitude") else None
     if attitude is not None and attitude.model == "heavy_top":
@@ -842,7 +879,7 @@ def loads(text: str, source: str = "<string>", base_dir: str | Path | None = Non
 def load_dict(data: dict[str, Any], source: str = "<dict>", base_dir: str | Path | None = None) -> Scenario:
     """Validate an already parsed config (e.g. the ``config`` of :meth:`Scenario.to_dict`)."""
     ctx = Ctx(source)
-    top = Table(ctx, data, "", ("scenario", "central_body", "bodies", "walker", "output"))
+    top = Table(ctx, data, "", ("scenario", "central_body", "bodies", "walker", "output", "control"))
     sc = Table(ctx, top.get("scenario"), "scenario", ("name", "description", "epoch", "duration", "rate", "real_time_factor", "frame"))
     name = field_name(ctx, sc.get("name"), "scenario.name")
     description = string(ctx, sc.get("description", ""), "scenario.description")
@@ -865,8 +902,16 @@ def load_dict(data: dict[str, Any], source: str = "<dict>", base_dir: str | Path
         raise ctx.error("bodies", "an array of tables [[bodies]]", raw_bodies)
     if len(raw_bodies) > MAX_BODIES:
         raise ctx.error("bodies", f"at most {MAX_BODIES} bodies", f"{len(raw_bodies)} bodies", raw=True)
+    control_every = None
+    if top.has("control"):
+        ct = top.get("control")
+        control_every = 1
+        if isinstance(ct, dict) and "period" in ct:  # the sensors' default rate (validated again below)
+            period = quantity(ctx, ct["period"], "time", "control.period")
+            check(ctx, period > 0, "control.period", "period > 0", ct["period"])
+            control_every = steps_per(ctx, period, rate, "control.period", ct["period"])
     for k, item in enumerate(raw_bodies):
-        bodies.append(_body(ctx, item, f"bodies[{k}]", cb))
+        bodies.append(_body(ctx, item, f"bodies[{k}]", cb, rate, control_every))
     walker = None
     if top.has("walker"):
         generated, walker = _walker(ctx, top.get("walker"), cb)
@@ -886,13 +931,20 @@ def load_dict(data: dict[str, Any], source: str = "<dict>", base_dir: str | Path
         if b.name in seen:
             raise ctx.error(where, f"a unique body name (also bodies[{seen[b.name]}])", b.name)
         seen[b.name] = k
+    control = None
+    if top.has("control"):
+        plant = {b.name: (b.actuators, b.sensors) for b in bodies if b.in_plant}
+        control = parse_control(ctx, top.get("control"), rate, duration, plant)
+        if not plant:
+            raise ctx.error("control", "at least one body with an actuators or sensors table (a closed-loop scene)",
+                            "a [control] table and no such body", raw=True)
     out_path = roll_size = roll_interval = None
     if top.has("output"):
         out_path, roll_size, roll_interval = _output(ctx, top.get("output"), Path(base_dir) if base_dir is not None else Path.cwd())
     return Scenario(
         name=name, epoch=epoch, epoch_scale=scale, epoch_unix_ns=epoch_ns, duration=duration, rate=rate,
         real_time_factor=rtf, frame=frame, central_body=cb, bodies=tuple(bodies), description=description,
-        output_path=out_path, roll_size=roll_size, roll_interval=roll_interval, walker=walker,
+        output_path=out_path, roll_size=roll_size, roll_interval=roll_interval, walker=walker, control=control,
         source=source, config=jsonable(data),
     )
 
@@ -976,6 +1028,7 @@ _ORBIT_METHOD = {
     "j2": "numerical, two-body + J2",
     "zonal": "numerical, two-body + zonal harmonics",
     "third_body": "numerical, two-body + third bodies",
+    ACTUATED_MODEL: "closed loop: analytic two-body between commands, impulses and burns (astrodyn.plant)",
 }
 _ATTITUDE_METHOD = {
     "torque_free": "analytic, Jacobi elliptic functions: exact",
@@ -983,6 +1036,7 @@ _ATTITUDE_METHOD = {
     "gyrostat": "numerical splitting, gyrostat with rotors",
     "heavy_top": "numerical splitting, heavy top in uniform gravity",
     "user": "numerical splitting, constant body torque",
+    ACTUATED_MODEL: "closed loop, step by step with the commands held (astrodyn.plant)",
 }
 
 
@@ -995,8 +1049,9 @@ def plan(scenario: Scenario, cross_check_all: bool = False) -> Plan:
     A perturbation that is identically zero for the scene is dropped: j2/zonal with all
     needed J_n = 0 -> kepler; gravity gradient on an inertially spherical body, a heavy
     top with cm = 0 or g = 0, a user torque of 0, or a gyrostat whose rotors have h = 0
-    -> torque_free. Processes: ``orbit`` if any body has an orbit, ``attitude`` if any
-    attitude is propagated, ``logger`` always.
+    -> torque_free. A body with actuators or sensors is ``actuated`` (moved by the plant).
+    Processes: ``orbit`` if any other body has an orbit, ``attitude`` if any other
+    attitude is propagated, ``plant`` if any body is actuated, ``logger`` always.
     """
     cb = scenario.central_body
     out = []
@@ -1033,15 +1088,21 @@ def plan(scenario: Scenario, cross_check_all: bool = False) -> Plan:
             elif am == "gyrostat" and all(r.h == 0 for r in a.rotors):
                 notes.append("all rotors have h = 0: exact torque_free")
                 am = _ATTITUDE_EXACT
+        if b.in_plant:  # the closed loop moves it (astrodyn.plant): commands make every model moot
+            om = ACTUATED_MODEL if b.orbit is not None else None
+            am = ACTUATED_MODEL if am is not None else None
+            notes = ["closed loop: moved by the plant with its controllers' commands (docs/control.md)"]
         out.append(BodyPlan(
             name=b.name, orbit_model=om, orbit_method=_ORBIT_METHOD.get(om, ""),
             attitude_model=am, attitude_method=_ATTITUDE_METHOD.get(am, ""), notes=tuple(notes),
         ))
     processes = []
-    if any(bp.orbit_model for bp in out):
+    if any(bp.orbit_model not in (None, ACTUATED_MODEL) for bp in out):
         processes.append("orbit")
-    if any(bp.attitude_model for bp in out):
+    if any(bp.attitude_model not in (None, ACTUATED_MODEL) for bp in out):
         processes.append("attitude")
+    if any(ACTUATED_MODEL in (bp.orbit_model, bp.attitude_model) for bp in out):
+        processes.append("plant")
     processes.append("logger")
     n = scenario.n_steps
     states = sum((bp.orbit_model is not None) + (bp.attitude_model is not None) for bp in out)

@@ -42,6 +42,7 @@ MAGNITUDE_MAX = {
     "mass": 1e30,  # kg
     "acceleration": 1e7,  # m/s^2
     "torque": 1e15,  # N m
+    "force": 1e12,  # N
     "angle": 1e9,  # rad (mean anomalies of many revolutions included)
     "dimensionless": 1e6,
 }
@@ -174,6 +175,7 @@ QUANTITY_KINDS: dict[str, tuple[str, str]] = {
     "mass": ("kg", 'a mass, e.g. "500 kg"'),
     "acceleration": ("m / s2", 'an acceleration, e.g. "9.81 m/s2"'),
     "torque": ("N m", 'a torque, e.g. "0.01 N m"'),
+    "force": ("N", 'a force, e.g. "2 N"'),
     "bytes": ("byte", 'a size, e.g. "256 MB"'),
     "dimensionless": ("", "a number"),
 }

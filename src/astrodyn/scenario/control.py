@@ -1,0 +1,304 @@
+"""The closed loop in a config: ``[control]``, a body's ``actuators`` and ``sensors``, faults.
+
+A scene is closed-loop when it has a ``[control]`` table and at least one body with an
+``actuators`` or ``sensors`` table; those bodies are moved by the plant process, step by
+step, with the commands of outside controllers (docs/control.md has the contract and
+examples)::
+
+    [control]
+    mode = "lockstep"            # lockstep (default): every control step waits for the controllers
+                                 # free: real time, commands apply at the first step at or after their t
+    period = "0.1 s"             # control step: a whole number of output steps (default 1 / rate)
+    controllers = ["pd"]         # who answers every control step (lockstep; [] for none)
+    timeout = "10 s"             # wall time one controller may take for one step (lockstep)
+    seed = 7                     # sensor noise: sample k of a sensor draws from (seed, sensor, k)
+
+    [[control.faults]]           # faults on demand, each recorded as an event when it begins
+    t = "60 s"
+    body = "sc"
+    fault = "gyro_bias"          # gyro_bias (value = [3] rad/s) | sensor_dropout (sensor, duration)
+                                 # | wheel_failed (wheel = index: no torque from then on)
+                                 # | thruster_efficiency (value in [0, 1]: dv and thrust scaled)
+
+    [bodies.actuators]
+    torque = "0.05 N m"          # external torque commands, at most this per body axis
+    dv = "100 m/s"               # impulsive burns, at most this |dv| per command
+    thrust = "2 N"               # finite burns up to this |thrust| (needs mass; isp default inf)
+    isp = "220 s"
+    mass = "500 kg"
+    [[bodies.actuators.wheels]]  # reaction wheels (astrodyn.attitude.wheels)
+    axis = [1, 0, 0]             # spin axis, body components (normalized)
+    inertia = "0.05 kg m2"       # rotor's axial moment
+    max_torque = "0.1 N m"
+    max_speed = "6000 rpm"
+    speed = "0 rpm"              # initial speed relative to the body
+
+    [bodies.sensors]             # rate default: the control rate; a whole number of output steps
+    gyro = { sigma = "1e-5 rad/s", bias = [0, 0, 0], rate = "10 Hz" }
+    star_tracker = { sigma = "20 arcsec", rate = "1 Hz" }
+    gps = { sigma_r = "5 m", sigma_v = "0.05 m/s", rate = "1 Hz" }
+    tachometer = { sigma = "0.1 rad/s" }
+
+Units as everywhere in configs (:mod:`astrodyn.scenario.fields`); errors name the field,
+e.g. ``bodies[0] (sc).actuators.wheels[1].max_speed: expected max_speed > 0, got -1``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from astrodyn.scenario.fields import Ctx, Table, check, choice, field_name, integer, quantity, vector
+
+__all__ = ["Wheel", "Actuators", "Sensor", "Sensors", "Fault", "Control", "CONTROL_MODES", "FAULTS",
+           "parse_actuators", "parse_sensors", "parse_control", "steps_per"]
+
+CONTROL_MODES = ("lockstep", "free")
+FAULTS = ("gyro_bias", "sensor_dropout", "wheel_failed", "thruster_efficiency")
+SENSOR_NAMES = ("gyro", "star_tracker", "gps", "tachometer")
+MAX_CONTROLLERS = 64
+MAX_FAULTS = 1000
+MAX_TIMEOUT_S = 3600.0
+_RATIO_TOL = 1e-9
+
+
+@dataclass(frozen=True, eq=False)
+class Wheel:
+    """A reaction wheel: unit ``axis`` (body), rotor ``inertia`` kg m^2, ``max_torque`` N m,
+    ``max_speed`` rad/s, initial ``speed`` rad/s relative to the body."""
+
+    axis: np.ndarray
+    inertia: float
+    max_torque: float
+    max_speed: float
+    speed: float = 0.0
+
+
+@dataclass(frozen=True, eq=False)
+class Actuators:
+    """What a body can be commanded to do; None: that command is refused."""
+
+    torque: float | None = None  #: max |torque| per body axis, N m
+    dv: float | None = None  #: max |dv| per impulsive command, m/s
+    thrust: float | None = None  #: max |thrust|, N
+    isp: float = math.inf  #: specific impulse of the thrusters, s
+    mass: float | None = None  #: initial mass, kg
+    wheels: tuple[Wheel, ...] = ()
+
+
+@dataclass(frozen=True, eq=False)
+class Sensor:
+    """One sensor: its ``kind`` (gyro, star_tracker, gps, tachometer), noise (``sigma`` in
+    the sensor's unit; ``sigma_v`` for gps velocity), ``bias`` (gyro, rad/s) and sampling
+    ``every`` output steps."""
+
+    kind: str
+    sigma: float
+    every: int
+    sigma_v: float = 0.0
+    bias: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+
+@dataclass(frozen=True, eq=False)
+class Sensors:
+    """A body's sensors by kind (absent ones are None)."""
+
+    gyro: Sensor | None = None
+    star_tracker: Sensor | None = None
+    gps: Sensor | None = None
+    tachometer: Sensor | None = None
+
+    def present(self) -> tuple[Sensor, ...]:
+        return tuple(s for s in (self.gyro, self.star_tracker, self.gps, self.tachometer) if s is not None)
+
+
+@dataclass(frozen=True, eq=False)
+class Fault:
+    """A fault from sim time ``t`` (s) on ``body``: see the module docstring."""
+
+    t: float
+    body: str
+    fault: str
+    value: Any = None
+    sensor: str | None = None
+    wheel: int | None = None
+    duration: float = math.inf
+
+
+@dataclass(frozen=True, eq=False)
+class Control:
+    """The ``[control]`` table: ``mode``, control ``period`` s = ``every`` output steps,
+    the ``controllers`` expected each step, their ``timeout`` (wall s), the sensor ``seed``."""
+
+    mode: str
+    period: float
+    every: int
+    controllers: tuple[str, ...]
+    timeout: float
+    seed: int
+    faults: tuple[Fault, ...] = ()
+
+
+def steps_per(ctx: Ctx, seconds: float, rate: float, path: str, raw: Any) -> int:
+    """The whole number of output steps (of ``1 / rate`` s) in ``seconds``; refused otherwise."""
+    n = seconds * rate
+    k = round(n)
+    check(ctx, k >= 1 and abs(n - k) <= _RATIO_TOL * max(1.0, n), path,
+          f"a whole number (>= 1) of output steps of {1.0 / rate:g} s (the scenario rate)", raw)
+    return int(k)
+
+
+def _positive(ctx: Ctx, tb: Table, key: str, kind: str, path: str) -> float:
+    x = quantity(ctx, tb.get(key), kind, f"{path}.{key}")
+    check(ctx, x > 0, f"{path}.{key}", f"{key} > 0", tb.get(key))
+    return x
+
+
+def parse_actuators(ctx: Ctx, data: Any, path: str, has_orbit: bool, has_attitude: bool) -> Actuators:
+    tb = Table(ctx, data, path, ("torque", "dv", "thrust", "isp", "mass", "wheels"))
+    torque = _positive(ctx, tb, "torque", "torque", path) if tb.has("torque") else None
+    dv = _positive(ctx, tb, "dv", "speed", path) if tb.has("dv") else None
+    thrust = _positive(ctx, tb, "thrust", "force", path) if tb.has("thrust") else None
+    isp = _positive(ctx, tb, "isp", "time", path) if tb.has("isp") else math.inf
+    mass = _positive(ctx, tb, "mass", "mass", path) if tb.has("mass") else None
+    if tb.has("isp") and thrust is None:
+        raise ctx.error(f"{path}.isp", "isp only with thrust", tb.get("isp"))
+    if thrust is not None and mass is None:
+        raise ctx.error(f"{path}.mass", "a mass for thrust (acceleration = thrust / mass)", "nothing", raw=True)
+    for key, value, needs, ok in (("torque", torque, "an attitude", has_attitude), ("dv", dv, "an orbit", has_orbit),
+                                  ("thrust", thrust, "an orbit", has_orbit)):
+        if value is not None and not ok:
+            raise ctx.error(f"{path}.{key}", f"{key} commands only for a body with {needs}", tb.get(key))
+    raw = tb.get("wheels", [])
+    if not isinstance(raw, list) or len(raw) > 64:
+        raise ctx.error(f"{path}.wheels", "a list of at most 64 wheel tables [[...wheels]]", raw)
+    if raw and not has_attitude:
+        raise ctx.error(f"{path}.wheels", "reaction wheels only for a body with an attitude", f"{len(raw)} wheel(s)", raw=True)
+    wheels = []
+    for k, item in enumerate(raw):
+        p = f"{path}.wheels[{k}]"
+        w = Table(ctx, item, p, ("axis", "inertia", "max_torque", "max_speed", "speed"))
+        axis = vector(ctx, w.get("axis"), "dimensionless", 3, f"{p}.axis")
+        n = float(np.linalg.norm(axis))
+        check(ctx, n > 0, f"{p}.axis", "a non-zero axis (body components; normalized on load)", w.get("axis"))
+        max_speed = _positive(ctx, w, "max_speed", "angular_velocity", p)
+        speed = quantity(ctx, w.get("speed", 0.0), "angular_velocity", f"{p}.speed")
+        check(ctx, abs(speed) <= max_speed, f"{p}.speed", f"|speed| <= max_speed = {max_speed:g} rad/s", w.get("speed", 0.0))
+        wheels.append(Wheel(axis=axis / n, inertia=_positive(ctx, w, "inertia", "inertia", p),
+                            max_torque=_positive(ctx, w, "max_torque", "torque", p), max_speed=max_speed, speed=speed))
+    if torque is None and dv is None and thrust is None and not wheels:
+        raise ctx.error(path, "at least one of torque, dv, thrust, wheels", "an actuators table with none", raw=True)
+    return Actuators(torque=torque, dv=dv, thrust=thrust, isp=isp, mass=mass, wheels=tuple(wheels))
+
+
+_SENSOR_KEYS = {
+    "gyro": ("sigma", "bias", "rate"),
+    "star_tracker": ("sigma", "rate"),
+    "gps": ("sigma_r", "sigma_v", "rate"),
+    "tachometer": ("sigma", "rate"),
+}
+_SENSOR_NEEDS = {"gyro": "an attitude", "star_tracker": "an attitude", "gps": "an orbit", "tachometer": "reaction wheels"}
+
+
+def parse_sensors(ctx: Ctx, data: Any, path: str, rate: float, control_every: int, has_orbit: bool,
+                  has_attitude: bool, has_wheels: bool) -> Sensors:
+    tb = Table(ctx, data, path, SENSOR_NAMES)
+    found = {}
+    have = {"gyro": has_attitude, "star_tracker": has_attitude, "gps": has_orbit, "tachometer": has_wheels}
+    for kind in SENSOR_NAMES:
+        if not tb.has(kind):
+            continue
+        p = f"{path}.{kind}"
+        if not have[kind]:
+            raise ctx.error(p, f"a {kind} only on a body with {_SENSOR_NEEDS[kind]}", "a sensor table", raw=True)
+        s = Table(ctx, tb.get(kind), p, _SENSOR_KEYS[kind])
+        unit = {"gyro": "angular_velocity", "star_tracker": "angle", "gps": "length", "tachometer": "angular_velocity"}[kind]
+        first = "sigma_r" if kind == "gps" else "sigma"
+        sigma = quantity(ctx, s.get(first), unit, f"{p}.{first}")
+        check(ctx, sigma >= 0, f"{p}.{first}", f"{first} >= 0 (a standard deviation)", s.get(first))
+        sigma_v = 0.0
+        if kind == "gps":
+            sigma_v = quantity(ctx, s.get("sigma_v"), "speed", f"{p}.sigma_v")
+            check(ctx, sigma_v >= 0, f"{p}.sigma_v", "sigma_v >= 0 (a standard deviation)", s.get("sigma_v"))
+        bias = (0.0, 0.0, 0.0)
+        if kind == "gyro" and s.has("bias"):
+            bias = tuple(float(x) for x in vector(ctx, s.get("bias"), "angular_velocity", 3, f"{p}.bias"))
+        if s.has("rate"):
+            hz = quantity(ctx, s.get("rate"), "frequency", f"{p}.rate")
+            check(ctx, hz > 0, f"{p}.rate", "rate > 0", s.get("rate"))
+            every = steps_per(ctx, 1.0 / hz, rate, f"{p}.rate", s.get("rate"))
+        else:
+            every = control_every
+        found[kind] = Sensor(kind=kind, sigma=sigma, every=every, sigma_v=sigma_v, bias=bias)  # type: ignore[arg-type]
+    return Sensors(**found)
+
+
+def _fault(ctx: Ctx, data: Any, path: str, duration: float, plant_bodies: dict[str, tuple[Actuators | None, Sensors | None]]) -> Fault:
+    tb = Table(ctx, data, path, ("t", "body", "fault", "value", "sensor", "wheel", "duration"))
+    t = quantity(ctx, tb.get("t"), "time", f"{path}.t")
+    check(ctx, 0 <= t <= duration, f"{path}.t", f"0 <= t <= the scenario's duration ({duration:g} s)", tb.get("t"))
+    body = field_name(ctx, tb.get("body"), f"{path}.body")
+    if body not in plant_bodies:
+        names = ", ".join(sorted(plant_bodies)) or "none"
+        raise ctx.error(f"{path}.body", f"a body with actuators or sensors ({names})", body)
+    act, sens = plant_bodies[body]
+    fault = choice(ctx, tb.get("fault"), FAULTS, f"{path}.fault")
+    allowed = {"gyro_bias": ("value",), "sensor_dropout": ("sensor", "duration"), "wheel_failed": ("wheel",),
+               "thruster_efficiency": ("value",)}[fault]
+    for key in ("value", "sensor", "wheel", "duration"):
+        if tb.has(key) and key not in allowed:
+            raise ctx.error(f"{path}.{key}", f"no {key} for fault {fault} (its keys: {', '.join(allowed)})", tb.get(key))
+    value = sensor = wheel = None
+    length = math.inf
+    if fault == "gyro_bias":
+        if sens is None or sens.gyro is None:
+            raise ctx.error(f"{path}.fault", f"a gyro on body {body} for gyro_bias", fault)
+        value = tuple(float(x) for x in vector(ctx, tb.get("value"), "angular_velocity", 3, f"{path}.value"))
+    elif fault == "sensor_dropout":
+        present = [s.kind for s in sens.present()] if sens is not None else []
+        sensor = choice(ctx, tb.get("sensor"), tuple(present) or ("(no sensors on this body)",), f"{path}.sensor")
+        if tb.has("duration"):
+            length = quantity(ctx, tb.get("duration"), "time", f"{path}.duration")
+            check(ctx, length > 0, f"{path}.duration", "duration > 0", tb.get("duration"))
+    elif fault == "wheel_failed":
+        n = len(act.wheels) if act is not None else 0
+        if n == 0:
+            raise ctx.error(f"{path}.fault", f"reaction wheels on body {body} for wheel_failed", fault)
+        wheel = integer(ctx, tb.get("wheel"), f"{path}.wheel", 0, n - 1)
+    else:
+        if act is None or (act.dv is None and act.thrust is None):
+            raise ctx.error(f"{path}.fault", f"dv or thrust actuators on body {body} for thruster_efficiency", fault)
+        value = quantity(ctx, tb.get("value"), "dimensionless", f"{path}.value")
+        check(ctx, 0.0 <= value <= 1.0, f"{path}.value", "0 <= value <= 1 (fraction of the commanded dv / thrust)", tb.get("value"))
+    return Fault(t=t, body=body, fault=fault, value=value, sensor=sensor, wheel=wheel, duration=length)
+
+
+def parse_control(ctx: Ctx, data: Any, rate: float, duration: float,
+                  plant_bodies: dict[str, tuple[Actuators | None, Sensors | None]]) -> Control:
+    """The ``[control]`` table; ``plant_bodies`` maps each body with actuators or sensors to them."""
+    tb = Table(ctx, data, "control", ("mode", "period", "controllers", "timeout", "seed", "faults"))
+    mode = choice(ctx, tb.get("mode", "lockstep"), CONTROL_MODES, "control.mode")
+    if tb.has("period"):
+        period = quantity(ctx, tb.get("period"), "time", "control.period")
+        check(ctx, period > 0, "control.period", "period > 0", tb.get("period"))
+        every = steps_per(ctx, period, rate, "control.period", tb.get("period"))
+    else:
+        every = 1
+    raw = tb.get("controllers", [])
+    if not isinstance(raw, list) or len(raw) > MAX_CONTROLLERS:
+        raise ctx.error("control.controllers", f"a list of at most {MAX_CONTROLLERS} controller names", raw)
+    controllers = tuple(field_name(ctx, c, f"control.controllers[{k}]") for k, c in enumerate(raw))
+    check(ctx, len(set(controllers)) == len(controllers), "control.controllers", "unique controller names", raw)
+    timeout = quantity(ctx, tb.get("timeout", 10.0), "time", "control.timeout")
+    check(ctx, 0 < timeout <= MAX_TIMEOUT_S, "control.timeout", f"0 < timeout <= {MAX_TIMEOUT_S:g} s (wall time per step)",
+          tb.get("timeout", 10.0))
+    seed = integer(ctx, tb.get("seed", 0), "control.seed", 0, 2**63 - 1)
+    faults_raw = tb.get("faults", [])
+    if not isinstance(faults_raw, list) or len(faults_raw) > MAX_FAULTS:
+        raise ctx.error("control.faults", f"a list of at most {MAX_FAULTS} fault tables [[control.faults]]", faults_raw)
+    faults = tuple(_fault(ctx, f, f"control.faults[{k}]", duration, plant_bodies) for k, f in enumerate(faults_raw))
+    return Control(mode=mode, period=every / rate, every=every, controllers=controllers, timeout=timeout, seed=seed,
+                   faults=tuple(sorted(faults, key=lambda f: f.t)))
