@@ -66,6 +66,7 @@ __all__ = [
     "token_attachment",
     "token_from_attachment",
     "token_matches",
+    "read_token_file",
 ]
 
 #: Environment variable that holds the path of the run secret file in a run's children.
@@ -251,3 +252,16 @@ def token_from_attachment(attachment: bytes | None) -> str | None:
 def token_matches(expected: str, presented: str | None) -> bool:
     """Constant-time comparison of a presented token with the expected one."""
     return presented is not None and hmac.compare_digest(expected.encode(), presented.encode())
+
+
+def read_token_file(path: str | os.PathLike) -> str:
+    """The control token stored in ``path`` (a 0600 file, as ``serve`` / ``run`` write it);
+    :class:`AuthError` if it is unreadable, not private or not a token."""
+    data = _read_private_file(path, "control token file").strip()
+    try:
+        token = data.decode("ascii")
+    except UnicodeDecodeError:
+        raise AuthError("malformed", f"control token file {path}: not a token") from None
+    if not 16 <= len(token) <= 256:
+        raise AuthError("malformed", f"control token file {path}: expected 16..256 characters, got {len(token)}")
+    return token

@@ -37,7 +37,7 @@ import time
 from collections.abc import Iterator
 from pathlib import Path
 
-__all__ = ["Child", "children_of", "logger_command", "propagator_command", "share_fate_with_supervisor",
+__all__ = ["Child", "children_of", "logger_command", "propagator_command", "plant_command", "share_fate_with_supervisor",
            "stop_process", "work_directory", "SUPERVISOR_ENV", "ORPHAN_GRACE_S", "EXIT_ORPHANED"]
 
 #: Environment variable that carries the supervisor's PID to each child.
@@ -143,19 +143,36 @@ def propagator_command(kind: str) -> list[str]:
     return [sys.executable, "-m", "astrodyn.service.propagator", kind]
 
 
+def plant_command() -> list[str]:
+    """The command line that starts the closed loop's plant process; arguments follow."""
+    return [sys.executable, "-m", "astrodyn.service.plant"]
+
+
+def _die_with_parent() -> None:  # pragma: no cover - runs in the child between fork and exec
+    """``PR_SET_PDEATHSIG``: the kernel sends SIGTERM to the child when the supervisor dies.
+    For programs that are not astrodyn's (controllers), which cannot call
+    :func:`share_fate_with_supervisor` themselves."""
+    try:
+        ctypes.CDLL("libc.so.6", use_errno=True).prctl(_PR_SET_PDEATHSIG, int(signal.SIGTERM), 0, 0, 0)
+    except (OSError, AttributeError):
+        pass
+
+
 class Child:
     """One child process: ``argv`` started in its own session, stdout / stderr to
     ``log_dir/<name>.out|.err``; ``env`` adds variables to the supervisor's environment
-    (e.g. :data:`astrodyn.auth.SECRET_ENV`, the path of the run secret)."""
+    (e.g. :data:`astrodyn.auth.SECRET_ENV`, the path of the run secret).  ``foreign``: a
+    program that is not astrodyn's (a controller): the kernel ends it with the supervisor."""
 
-    def __init__(self, name: str, argv: list[str], log_dir: Path, env: dict[str, str] | None = None):
+    def __init__(self, name: str, argv: list[str], log_dir: Path, env: dict[str, str] | None = None,
+                 foreign: bool = False):
         self.name = name
         self.stdout_path = log_dir / f"{name}.out"
         self.stderr_path = log_dir / f"{name}.err"
         self._out = open(self.stdout_path, "wb")
         self._err = open(self.stderr_path, "wb")
         self.proc = subprocess.Popen(argv, stdout=self._out, stderr=self._err, stdin=subprocess.DEVNULL,
-                                     start_new_session=True,
+                                     start_new_session=True, preexec_fn=_die_with_parent if foreign else None,
                                      env={**os.environ, **(env or {}), SUPERVISOR_ENV: str(os.getpid())})
 
     @property

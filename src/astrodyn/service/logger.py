@@ -61,7 +61,8 @@ from astrodyn.service.signals import catch_stop_signals
 
 __all__ = ["Logger", "main"]
 
-_STATE_KINDS = frozenset(("orbit", "attitude", "crosscheck"))
+_STATE_KINDS = frozenset(messages.STATE_KINDS)
+_SCENE_KINDS = frozenset(messages.STATE_KINDS + messages.CONTROL_KINDS + messages.SENSOR_KINDS)
 _MAX_EXAMPLES = 20
 _MAX_KEY_CACHE = 100_000
 _MAX_LAYOUTS = 64
@@ -85,12 +86,13 @@ def publisher_of(rest: str) -> str | None:
 
 
 def scene_state_keys(scenario) -> set[str]:
-    """Every state key a run of ``scenario`` (an :class:`astrodyn.scenario.Scenario`) may
+    """Every per-body key a run of ``scenario`` (an :class:`astrodyn.scenario.Scenario`) may
     publish: orbit and cross-check keys of the bodies with an orbit model, attitude keys
-    of the bodies with an attitude model."""
+    of the bodies with an attitude model, and for the closed loop's bodies their
+    ``command``, ``actuators`` and sensor keys (:func:`scene_publishers`)."""
     from astrodyn.scenario import plan as make_plan
 
-    keys = set()
+    keys = set(scene_publishers(scenario))
     for bp in make_plan(scenario).bodies:
         if bp.orbit_model:
             keys.add(messages.orbit_key(scenario.name, bp.name))
@@ -98,6 +100,25 @@ def scene_state_keys(scenario) -> set[str]:
         if bp.attitude_model:
             keys.add(messages.attitude_key(scenario.name, bp.name))
     return keys
+
+
+def scene_publishers(scenario) -> dict[str, str]:
+    """The keys of the closed loop's bodies and the process entitled to each: the plant
+    (states, actuator states, sensor samples, and the copies of applied commands it
+    re-publishes on ``<body>/command``; docs/control.md).  Empty for an open-loop scene."""
+    out: dict[str, str] = {}
+    for b in scenario.bodies:
+        if not b.in_plant:
+            continue
+        kinds = ["actuators", "command"] if b.actuators is not None else []
+        if b.orbit is not None:
+            kinds.append("orbit")
+        if b.attitude is not None and b.attitude.model != "none":
+            kinds.append("attitude")
+        kinds += [s.kind for s in (b.sensors.present() if b.sensors is not None else ())]
+        for kind in kinds:
+            out[messages.body_key(scenario.name, b.name, kind)] = "plant"
+    return out
 
 
 def _claimed_process(attachment: bytes | None) -> str:
@@ -127,8 +148,12 @@ class Logger:
         a valid authenticator of the run (docs/security.md) from the process entitled to its
         key (:func:`publisher_of`), anything else is rejected, counted per reason and never
         written.
-    scene_keys : the state keys of the scene (:func:`scene_state_keys`); when given, a state
-        message on any other key is rejected (no channel is created for it).
+    scene_keys : the per-body keys of the scene (:func:`scene_state_keys`); when given, a
+        message of a per-body kind on any other key is rejected (no channel is created for it).
+    publishers : key -> the process entitled to it where :func:`publisher_of`'s rule does not
+        say (the closed loop's bodies: :func:`scene_publishers`).  With a verifier, samples on
+        ``<body>/command`` that the plant did not sign are controllers' inputs to the plant:
+        not recorded, not counted as rejected (the plant judges them; its copy is recorded).
     """
 
     def __init__(
@@ -147,6 +172,7 @@ class Logger:
         verifier: auth.Verifier | None = None,
         scene_keys: Iterable[str] | None = None,
         signer: auth.Signer | None = None,
+        publishers: dict[str, str] | None = None,
     ):
         self.session = session
         self.scenario = messages.check_name(scenario, "scenario")
@@ -190,6 +216,8 @@ class Logger:
         self.verifier = verifier
         self.signer = signer
         self.scene_keys = None if scene_keys is None else frozenset(scene_keys)
+        self.publishers = dict(publishers or {})  # key -> entitled process, beyond publisher_of's rule
+        self.inputs = 0  # controllers' commands seen (recorded through the plant's copies)
         self.rejected: dict[str, int] = {}  # reason -> samples rejected (trust, scene)
         self.rejected_by_sender: dict[str, int] = {}  # claimed process / Zenoh id -> samples
         self.rejected_examples: list[str] = []
@@ -238,7 +266,7 @@ class Logger:
         if kind is None:
             self._bad(key, "not a message key of this scenario")
             return
-        if self.scene_keys is not None and kind in _STATE_KINDS and key not in self.scene_keys:
+        if self.scene_keys is not None and kind in _SCENE_KINDS and key not in self.scene_keys:
             self._reject(key, "not-in-scene", sender or "unauthenticated")
             return
         fast = messages.FAST_CHECKS.get(kind)
@@ -258,6 +286,8 @@ class Logger:
                 self._reject(key, "impersonation", sender, f"event of process {msg['process']!r} signed by {sender!r}")
                 return
             track = f"{key}#{msg['process']}"
+        elif kind == "command":  # seq counts each sender's commands to this body
+            track = f"{key}#{msg['sender']}"
         try:
             status = self.recorder.write_encoded(key, payload, t, seq, now_ns, track)
         except ValueError as exc:  # t outside MCAP's log_time range
@@ -350,12 +380,15 @@ class Logger:
         rest = key[len(self.prefix):] if key.startswith(self.prefix) else None
         sender = None
         if self.verifier is not None:
+            if key.endswith("/command") and _claimed_process(attachment) != "claims plant":
+                self.inputs += 1  # a controller's command, addressed to the plant: it judges and re-publishes it
+                return
             try:
                 sender = self.verifier.verify(key, payload, attachment)
             except auth.AuthError as exc:
                 self._reject(key, exc.reason, _claimed_process(attachment))
                 return
-            entitled = publisher_of(rest) if rest is not None else None
+            entitled = self.publishers.get(key) or (publisher_of(rest) if rest is not None else None)
             if entitled is not None and entitled != sender:
                 self._reject(key, "wrong-publisher", sender, f"{key} belongs to process {entitled!r}")
                 return
@@ -665,6 +698,7 @@ def trust_from_environment(args: argparse.Namespace) -> dict:
         if scenario.name != args.scenario:
             raise ValueError(f"--config: expected scenario {args.scenario!r}, the file names {scenario.name!r}")
         out["scene_keys"] = scene_state_keys(scenario)
+        out["publishers"] = scene_publishers(scenario)
     return out
 
 

@@ -31,6 +31,7 @@ import argparse
 import json
 import math
 import os
+import shlex
 import shutil
 import signal
 import subprocess
@@ -42,7 +43,7 @@ from pathlib import Path
 from astrodyn import auth, bus
 from astrodyn.recording.writer import partial_path
 from astrodyn.scenario import Scenario, ScenarioError, load, plan as make_plan
-from astrodyn.service.children import Child, logger_command, propagator_command, work_directory
+from astrodyn.service.children import Child, logger_command, plant_command, propagator_command, work_directory
 from astrodyn.service.output import check_output_path
 from astrodyn.service.progress import Progress
 from astrodyn.service.signals import catch_stop_signals
@@ -60,10 +61,15 @@ def run_scenario(scenario: Scenario, config_path: Path, out: Path, *, cross_chec
                  real_time_factor: float = math.inf, connect: list[str] | None = None,
                  progress: bool = True, timeout_s: float | None = None, extra_args: dict | None = None,
                  logger_args: list[str] | None = None, zenoh_config: str | None = None,
-                 authenticate: bool = True) -> dict:
+                 authenticate: bool = True, controllers: list[str] | None = None,
+                 commands: Path | None = None) -> dict:
     """Run ``scenario`` with real processes; return the result dict (see :func:`main`).
 
     ``zenoh_config``: a Zenoh JSON5 file (TLS, access control) every process starts from.
+    ``controllers``: command lines of the closed loop's controllers (``--controller``),
+    started once the plant is up, named after ``control.controllers`` in order, with the
+    run's bus and secret in their environment (docs/control.md); ``commands``: a recording
+    whose commands the plant re-applies instead (``--commands``).
     ``authenticate=False`` runs without the run secret (children neither sign nor verify):
     only for measuring what authentication costs (``astrodyn bench service``).
 
@@ -91,6 +97,10 @@ def run_scenario(scenario: Scenario, config_path: Path, out: Path, *, cross_chec
         tmpd = Path(tmp)
         # the run's identity: children sign what they publish (docs/security.md)
         child_env = {auth.SECRET_ENV: str(secret.save(tmpd))} if secret is not None else None
+        token_file = None
+        if "plant" in propagators and secret is not None:  # outside controllers join with this token
+            token_file = auth.write_private_file(tmpd / "control.token", auth.new_token().encode())
+            result["control_token_file"] = str(token_file)
         meta_path = tmpd / "scenario.json"
         meta_path.write_text(json.dumps(scenario.to_metadata()))
         children: dict[str, Child] = {}
@@ -104,6 +114,14 @@ def run_scenario(scenario: Scenario, config_path: Path, out: Path, *, cross_chec
             failure = _wait_ready(session, scenario.name, children["logger"], 60.0, interrupted)
 
             def start_propagator(kind: str, resume_args: dict, n: int = 0, event_seq: int = 0) -> None:
+                if kind == "plant":
+                    argv = [*plant_command(), str(config_path), *connect_args]
+                    if token_file is not None:
+                        argv += ["--control-token-file", str(token_file)]
+                    if commands is not None:
+                        argv += ["--commands", str(commands)]
+                    children[kind] = Child(kind, argv, tmpd, env=child_env)
+                    return
                 argv = [*propagator_command(kind), str(config_path), *connect_args]
                 if event_seq:
                     argv += ["--first-event-seq", str(event_seq)]
@@ -187,7 +205,30 @@ def run_scenario(scenario: Scenario, config_path: Path, out: Path, *, cross_chec
                 return [r for r in restarts if r["process"] == name]
 
             def restart(name: str, rc: int) -> str | None:
+                if "plant" in propagators and name in ("plant", "logger"):
+                    dead = children[name]
+                    how = f"killed by signal {-rc}" if rc < 0 else f"exited with status {rc}"
+                    return (f"{name} (pid {dead.pid}) {how}: a closed-loop run is not restarted (its controllers' "
+                            f"state lives outside astrodyn); the recording holds everything up to here: "
+                            f"{dead.stderr_tail(3)}")
                 return restart_logger(rc) if name == "logger" else restart_propagator(name, rc)
+
+            started_controllers: dict[str, Child] = {}
+
+            def start_controllers() -> str | None:
+                names = scenario.control.controllers if scenario.control is not None else ()
+                for n, cmd in enumerate(controllers or []):
+                    cname = names[n]
+                    env = {**(child_env or {}), "ASTRODYN_SCENARIO": scenario.name, "ASTRODYN_CONTROLLER": cname,
+                           "ASTRODYN_CONNECT": hub}
+                    if token_file is not None:
+                        env[auth.TOKEN_ENV] = str(token_file)
+                    try:
+                        started_controllers[cname] = Child(f"controller-{cname}", controller_argv(cmd), tmpd,
+                                                           env=env, foreign=True)
+                    except OSError as exc:
+                        return f"controller {cname}: cannot start {cmd!r}: {exc}"
+                return None
 
             if failure is None:
                 result["hub"] = hub
@@ -195,10 +236,14 @@ def run_scenario(scenario: Scenario, config_path: Path, out: Path, *, cross_chec
                       f"(docs/clients.md)", file=sys.stderr, flush=True)
                 for kind in propagators:
                     start_propagator(kind, (extra_args or {}).get(kind, {}))
+                failure = start_controllers()
+                if progress and started_controllers:
+                    print("  controllers " + ", ".join(f"{n} (pid {c.pid})" for n, c in started_controllers.items()),
+                          file=sys.stderr, flush=True)
                 if progress:
                     print("  started " + ", ".join(f"{n} (pid {c.pid})" for n, c in children.items()), file=sys.stderr, flush=True)
-                failure = _watch(scenario, p, children, beats, alive, progress, timeout_s, interrupted,
-                                 on_death=restart)
+                failure = failure or _watch(scenario, p, children, beats, alive, progress, timeout_s, interrupted,
+                                            on_death=restart, controllers=started_controllers)
             logger = children["logger"]
             if failure:
                 for kind in propagators:
@@ -216,13 +261,18 @@ def run_scenario(scenario: Scenario, config_path: Path, out: Path, *, cross_chec
                 except subprocess.TimeoutExpired:
                     failure = "logger did not finish within 60 s of the end of the run; stopped it (file finished)"
                     logger.stop(signal.SIGTERM, timeout=30)
-            for name, ch in children.items():
+            for ch in started_controllers.values():  # the run is over: controllers go (by PID)
+                ch.stop(signal.SIGTERM, timeout=5)
+            for name, ch in [*children.items(), *((c.name, c) for c in started_controllers.values())]:
                 result["processes"][name] = {"pid": ch.pid, "exit": ch.poll(), "summary": ch.summary(),
                                              "stderr": ch.stderr_tail()}
             if logger.poll() not in (0, None) and not failure:
                 failure = f"logger exited with status {logger.poll()}: {logger.stderr_tail()}"
             result["failure"] = failure
         finally:
+            for ch in started_controllers.values():
+                ch.stop(signal.SIGTERM, timeout=5)
+                ch.close()
             for name in [*(k for k in children if k != "logger"), "logger"]:  # propagators first
                 if name in children:
                     children[name].stop()
@@ -296,12 +346,15 @@ def progress_line(last: dict, propagators: list[str], duration: float, dt: float
 
 
 def _watch(scenario: Scenario, p, children: dict, beats, alive, progress: bool, timeout_s: float | None,
-           interrupted: dict | None = None, on_death=None) -> str | None:
+           interrupted: dict | None = None, on_death=None, controllers: dict | None = None) -> str | None:
     """Wait for the propagators to finish; return a failure description or None.
 
     ``on_death(name, rc)``: called when a child dies before the end; it restarts it (and
     for the logger the propagators too) in ``children`` (:mod:`astrodyn.service.supervision`)
-    and returns None, or a failure description when it cannot."""
+    and returns None, or a failure description when it cannot.  ``controllers``: the closed
+    loop's controller processes; in lockstep one that exits before the plant is a failure
+    named after it (it would never answer again)."""
+    lockstep = scenario.control is not None and scenario.control.mode == "lockstep"
     propagators = [k for k in children if k != "logger"]
     duration = (scenario.n_steps - 1) / scenario.rate if scenario.n_steps else 0.0  # last output instant, no array
     printer = Progress(enabled=progress)
@@ -335,6 +388,18 @@ def _watch(scenario: Scenario, p, children: dict, beats, alive, progress: bool, 
                 return f"process {name} (pid {ch.pid}) {sig}{who}{where}: {ch.stderr_tail(3)}"
         if all(children[k].poll() == 0 for k in propagators):
             return None
+        for cname, ch in (controllers or {}).items():
+            rc = ch.poll()
+            if rc is not None and lockstep and "plant" in children and children["plant"].poll() is None:
+                deadline = time.monotonic() + 3.0  # the plant may be ending with its own reason (a timeout)
+                while time.monotonic() < deadline and children["plant"].poll() is None:
+                    time.sleep(0.05)
+                if children["plant"].poll() is not None:
+                    break  # look again: the plant's exit says what happened
+                how = f"killed by signal {-rc}" if rc < 0 else f"exited with status {rc}"
+                t = beats.last.get("plant", {}).get("t")
+                return (f"controller {cname} (pid {ch.pid}) {how} before the end of the run"
+                        f"{f' (sim t {t:.6g} s)' if t is not None else ''}: {ch.stderr_tail(3) or 'no output on stderr'}")
         if printer.show(lambda dt=now - last_time, n=last_msgs: progress_line(beats.last, propagators, duration, dt, n),
                         now):
             last_msgs, last_time = beats.last.get("logger", {}).get("messages", 0), now
@@ -361,6 +426,12 @@ def main(argv: list[str] | None = None) -> int:
                     "this file: its states are copied into --out (which must differ) and the run goes on from there")
     ap.add_argument("--force", action="store_true",
                     help="start even when the expected recording does not fit on the output disk")
+    ap.add_argument("--controller", action="append", default=None, metavar="CMD",
+                    help="closed loop: start this controller program (split like a shell command line, run without "
+                         "a shell) under the run, named after control.controllers in order; repeatable; docs/control.md")
+    ap.add_argument("--commands", metavar="REC.mcap", default=None,
+                    help="closed loop: re-simulate from the commands recorded in REC (no controllers): the states "
+                         "come out bit for bit as recorded")
     ap.add_argument("--tolerate-rejected", action="store_true",
                     help="exit 0 even when the logger rejected messages that did not come from this run's own "
                          "processes (default: exit 3, the record was attacked; docs/security.md)")
@@ -369,13 +440,14 @@ def main(argv: list[str] | None = None) -> int:
         try:
             scenario = load(args.config)
             out = Path(args.out) if args.out else (scenario.output_path or Path(f"{scenario.name}.mcap"))
-            check_output_path(out, inputs=(args.config, args.resume, args.zenoh_config, args.json))
+            check_output_path(out, inputs=(args.config, args.resume, args.zenoh_config, args.json, args.commands))
             if args.zenoh_config:
                 try:
                     bus.make_config(mode="peer", config_file=args.zenoh_config)
                 except bus.BusError as exc:
                     raise ScenarioError(str(exc)) from None
             resume = resume_plan(Path(args.resume), scenario, out, Path(work)) if args.resume else {}
+            check_closed_loop_arguments(scenario, args.controller or [], args.commands, out)
         except ScenarioError as exc:
             print(f"astrodyn run: {exc}", file=sys.stderr)
             return 2
@@ -393,7 +465,8 @@ def main(argv: list[str] | None = None) -> int:
             print(f"  resuming from {args.resume} at step {resume['step']} (t = {resume['t']:.6g} s)", file=sys.stderr)
         result = run_scenario(scenario, Path(args.config), out, cross_check=args.cross_check, connect=args.connect,
                               progress=not args.quiet, timeout_s=args.timeout, extra_args=resume.get("extra_args"),
-                              logger_args=resume.get("logger_args"), zenoh_config=args.zenoh_config)
+                              logger_args=resume.get("logger_args"), zenoh_config=args.zenoh_config,
+                              controllers=args.controller, commands=Path(args.commands) if args.commands else None)
     print("", file=sys.stderr)
     rows = None
     recording = result.get("file")
@@ -429,6 +502,43 @@ def main(argv: list[str] | None = None) -> int:
         if not args.tolerate_rejected:
             return EXIT_REJECTED
     return 0
+
+
+def controller_argv(cmd: str) -> list[str]:
+    """The argv of ``--controller CMD``: split like a shell line (``shlex``), run without a
+    shell; a leading ``python`` / ``python3`` is astrodyn's own interpreter (the one with
+    zenoh installed), whatever ``python`` is on the PATH."""
+    argv = shlex.split(cmd)
+    if argv and argv[0] in ("python", "python3"):
+        argv[0] = sys.executable
+    return argv
+
+
+def check_closed_loop_arguments(scenario: Scenario, controllers: list[str], commands: str | None, out: Path) -> None:
+    """``--controller`` / ``--commands`` against the scene; ScenarioError naming the option."""
+    control = scenario.control
+    if (controllers or commands) and control is None:
+        opt = "--controller" if controllers else "--commands"
+        raise ScenarioError(f"{opt}: expected a closed-loop scene (a [control] table; docs/control.md), "
+                            f"{scenario.source} has none")
+    if controllers and commands:
+        raise ScenarioError("--commands: expected either --commands (re-simulate) or --controller, not both")
+    if controllers and len(controllers) > len(control.controllers):
+        raise ScenarioError(f"--controller: expected at most {len(control.controllers)} (one per name in "
+                            f"control.controllers = {list(control.controllers)}), got {len(controllers)}")
+    for cmd in controllers:
+        try:
+            argv = shlex.split(cmd)
+        except ValueError as exc:
+            raise ScenarioError(f"--controller {cmd!r}: {exc}") from None
+        if not argv:
+            raise ScenarioError("--controller: expected a command line, got an empty string")
+    if commands is not None:
+        path = Path(commands)
+        if path.resolve() == out.resolve():
+            raise ScenarioError(f"--commands {commands}: expected a recording other than --out")
+        if not path.is_file():
+            raise ScenarioError(f"--commands {commands}: expected an MCAP recording of this scenario, no such file")
 
 
 def resume_plan(path: Path, scenario: Scenario, out: Path, work: Path) -> dict:

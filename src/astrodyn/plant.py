@@ -1,0 +1,291 @@
+"""The closed loop's plant: the bodies a scene gives actuators or sensors, stepped with the
+commands of outside controllers (docs/control.md).  Pure: states, commands and sensor
+samples in and out, no bus, no files; :mod:`astrodyn.service.plant` wires it to Zenoh
+and ``run --commands`` re-simulates from a recording with the same code.
+
+One output step ``k`` (``t_k = k / rate``, ``dt = 1 / rate``) of a body:
+
+1. faults that begin at ``t_k`` take effect (:meth:`Plant.faults_at`);
+2. its states and due sensor samples at ``t_k`` are read off (:meth:`PlantBody.sensor_samples`);
+3. commands that apply at ``t_k`` are applied (:meth:`PlantBody.apply`): ``torque``,
+   ``wheel_torque`` and ``thrust`` replace the held values (zero-order hold), ``dv`` is
+   added to the velocity at ``t_k``;
+4. the body is advanced to ``t_k + dt`` with the held values (:meth:`PlantBody.advance`):
+   attitude with reaction wheels by :func:`astrodyn.attitude.wheels.step_with_wheels`
+   (momentum of body plus wheels conserved to round-off under internal torques), with only
+   an external torque by :func:`astrodyn.attitude.propagate_attitude` (exact-rotation
+   splitting), without either by the exact torque-free solution; the orbit by the exact
+   two-body propagation, or under thrust by :func:`astrodyn.orbit.propagate_perturbed`
+   with :class:`astrodyn.orbit.maneuvers.ConstantThrust` (mass falls at ``|F| / (isp g0)``).
+
+Limits, applied to each command (after which it is valid): external torque clipped to the
+actuators' ``torque`` per body axis; wheel torques saturated per step by
+:meth:`astrodyn.attitude.wheels.ReactionWheels.saturate` (torque and speed limits; the
+clipped wheels are reported); ``|dv|`` and ``|thrust|`` scaled down to their limits.
+A command for an actuator the body does not have is refused with the reason.
+
+Deterministic: the same initial state and the same commands applied at the same steps
+give the same floats, bit for bit (what ``run --commands REC`` relies on).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from astrodyn.attitude import propagate_attitude, torque_free
+from astrodyn.attitude.torques import ConstantTorque
+from astrodyn.attitude.wheels import ReactionWheels, step_with_wheels
+from astrodyn.orbit import propagate
+from astrodyn.orbit.maneuvers import ConstantThrust
+from astrodyn.orbit.perturbations import propagate_perturbed
+from astrodyn.rotation import dcm_from_quat
+from astrodyn.scenario import Body, Scenario
+from astrodyn.scenario.control import Fault, Sensor
+from astrodyn.sensors import PositionReceiver, RateGyro, StarTracker, WheelTachometer
+
+__all__ = ["CommandRefused", "PlantBody", "Plant", "command_id"]
+
+
+class CommandRefused(ValueError):
+    """A command the plant does not apply; ``str`` says why (counted, never fatal)."""
+
+
+def command_id(sender: str, seq: int) -> str:
+    """``sender#seq``: how an actuator state names the commands applied at its step."""
+    return f"{sender}#{seq}"
+
+
+@dataclass
+class _Faults:
+    gyro_bias: np.ndarray | None = None
+    dropouts: dict = field(default_factory=dict)  # sensor kind -> end time (s)
+    failed_wheels: set = field(default_factory=set)
+    efficiency: float = 1.0
+
+
+class PlantBody:
+    """One actuated body: its state, its held commands and its sensors (module docstring)."""
+
+    def __init__(self, body: Body, mu: float, seed: int):
+        self.name = body.name
+        self.mu = float(mu)
+        self.seed = int(seed)
+        act = body.actuators
+        self.limits = act
+        self.has_orbit = body.orbit is not None
+        a = body.attitude
+        self.has_attitude = a is not None and a.model != "none"
+        self.r = np.array(body.orbit.r0, dtype=np.float64) if self.has_orbit else None
+        self.v = np.array(body.orbit.v0, dtype=np.float64) if self.has_orbit else None
+        self.q = np.array(a.q0, dtype=np.float64) if self.has_attitude else None
+        self.w = np.array(a.w0, dtype=np.float64) if self.has_attitude else None
+        self.inertia = np.array(a.inertia, dtype=np.float64) if self.has_attitude else None
+        self._diagonal = self.has_attitude and not np.any(self.inertia - np.diag(np.diag(self.inertia)))
+        self.wheels = None
+        self.h = None
+        if act is not None and act.wheels:
+            self.wheels = ReactionWheels(np.array([wh.axis for wh in act.wheels]), [wh.inertia for wh in act.wheels],
+                                         [wh.max_torque for wh in act.wheels], [wh.max_speed for wh in act.wheels])
+            self.h = self.wheels.absolute_momentum([wh.speed for wh in act.wheels], self.w)
+        n = 0 if self.wheels is None else self.wheels.n
+        self.torque = np.zeros(3)  # held external torque, body axes, N m (after the limit)
+        self.wheel_command = np.zeros(n)  # held motor torque commands, N m (saturated each step)
+        self.thrust = np.zeros(3)  # held thrust, N
+        self.thrust_frame = "inertial"
+        self.mass = None if act is None else act.mass
+        self.dv_total = 0.0
+        self.sensors: tuple[Sensor, ...] = body.sensors.present() if body.sensors is not None else ()
+        self.sensor_counts = {s.kind: 0 for s in self.sensors}
+        self.faults = _Faults()
+        # what the last advance applied (for the actuator state of the step)
+        self.applied_wheel = np.zeros(n)
+        self.clipped: list[int] = []
+        self.step_dv: np.ndarray | None = None
+        self.step_applied: list[str] = []
+
+    # ------------------------------------------------------------------ commands
+    def apply(self, cmd: dict) -> None:
+        """Apply a decoded :class:`astrodyn.messages.Command` now (raise CommandRefused)."""
+        act = self.limits
+        if act is None:
+            raise CommandRefused(f"body {self.name} has no actuators (only sensors)")
+        if "torque" in cmd and act.torque is None:
+            raise CommandRefused(f"body {self.name} has no torque actuator (actuators.torque)")
+        if "wheel_torque" in cmd:
+            if self.wheels is None:
+                raise CommandRefused(f"body {self.name} has no reaction wheels")
+            if len(cmd["wheel_torque"]) != self.wheels.n:
+                raise CommandRefused(f"wheel_torque: expected {self.wheels.n} values (one per wheel), got {len(cmd['wheel_torque'])}")
+        if "dv" in cmd and act.dv is None:
+            raise CommandRefused(f"body {self.name} has no impulsive dv capability (actuators.dv)")
+        if "thrust" in cmd:
+            if act.thrust is None:
+                raise CommandRefused(f"body {self.name} has no thrusters (actuators.thrust)")
+            if cmd.get("frame", "inertial") == "body" and not self.has_attitude:
+                raise CommandRefused(f"thrust in body axes needs an attitude; body {self.name} has none")
+        if "torque" in cmd:
+            self.torque = np.clip(np.asarray(cmd["torque"], dtype=np.float64), -act.torque, act.torque)
+        if "wheel_torque" in cmd:
+            self.wheel_command = np.asarray(cmd["wheel_torque"], dtype=np.float64)
+        if "thrust" in cmd:
+            f = np.asarray(cmd["thrust"], dtype=np.float64)
+            norm = float(np.linalg.norm(f))
+            self.thrust = f * (act.thrust / norm) if norm > act.thrust else f
+            self.thrust_frame = cmd.get("frame", "inertial")
+        if "dv" in cmd:
+            dv = np.asarray(cmd["dv"], dtype=np.float64)
+            norm = float(np.linalg.norm(dv))
+            if norm > act.dv:
+                dv = dv * (act.dv / norm)
+            dv = dv * self.faults.efficiency
+            self.v = self.v + dv
+            self.dv_total += float(np.linalg.norm(dv))
+            self.step_dv = dv if self.step_dv is None else self.step_dv + dv
+        self.step_applied.append(command_id(cmd["sender"], cmd["seq"]))
+
+    # ------------------------------------------------------------------ motion
+    def _thrust_inertial(self) -> np.ndarray:
+        f = self.thrust * self.faults.efficiency
+        if self.thrust_frame == "body" and self.has_attitude:
+            f = dcm_from_quat(self.q).T @ f  # v_inertial = C^T v_body
+        return f
+
+    def advance(self, dt: float) -> None:
+        """Move the body from t to t + dt with the held commands."""
+        if self.has_attitude:
+            ext = ConstantTorque(self.torque) if np.any(self.torque) else None
+            if self.wheels is not None:
+                cmd = self.wheel_command.copy()
+                for k in self.faults.failed_wheels:
+                    cmd[k] = 0.0
+                s = step_with_wheels(self.inertia, self.wheels, self.w, self.q, self.h, cmd, dt, external_torque=ext)
+                self.w, self.q, self.h = s.w, s.q, s.h
+                self.applied_wheel = s.torque
+                self.clipped = [int(i) for i in np.flatnonzero(s.clipped & (cmd != 0))]
+            elif ext is not None:
+                w1, q1, _ = propagate_attitude(self.inertia, self.w, self.q, float(dt), torque=ext, method="split4",
+                                               error_estimate=False)
+                self.w, self.q = np.asarray(w1), np.asarray(q1)
+            elif self._diagonal:
+                w1, q1 = torque_free(np.diag(self.inertia).copy(), self.w, self.q, float(dt))
+                self.w, self.q = np.asarray(w1), np.asarray(q1)
+            else:
+                w1, q1, _ = propagate_attitude(self.inertia, self.w, self.q, float(dt), method="exact", error_estimate=False)
+                self.w, self.q = np.asarray(w1), np.asarray(q1)
+        if self.has_orbit:
+            f = self._thrust_inertial() if np.any(self.thrust) else None
+            if f is not None and np.any(f):
+                burn = ConstantThrust(f, self.mass, self.limits.isp)
+                out = propagate_perturbed(self.r, self.v, float(dt), self.mu, [burn], rtol=1e-13, atol=1e-15,
+                                          error_estimate=False)
+                r1, v1 = np.asarray(out.r).reshape(3), np.asarray(out.v).reshape(3)
+                self.dv_total += float(np.linalg.norm(f)) / self.mass * dt if math.isinf(self.limits.isp) else \
+                    self.limits.isp * 9.80665 * math.log(self.mass / burn.mass_at(dt))
+                self.mass = burn.mass_at(dt)
+                self.r, self.v = r1, v1
+            else:
+                r1, v1 = propagate(self.r, self.v, float(dt), self.mu)
+                self.r, self.v = np.asarray(r1), np.asarray(v1)
+
+    # ------------------------------------------------------------------ outputs
+    def wheel_speeds(self) -> np.ndarray | None:
+        return None if self.wheels is None else self.wheels.speeds(self.h, self.w)
+
+    def sensor_samples(self, k: int, t: float) -> list[tuple[str, dict]]:
+        """``(kind, fields)`` of each sensor due at output step ``k`` (time ``t``), noise from
+        ``(seed, sensor, k)``; a sensor in a dropout gives nothing."""
+        out = []
+        for s in self.sensors:
+            if k % s.every or t < self.faults.dropouts.get(s.kind, -math.inf):
+                continue
+            if s.kind == "gyro":
+                bias = s.bias if self.faults.gyro_bias is None else self.faults.gyro_bias
+                out.append(("gyro", {"w": RateGyro(s.sigma, bias, self.seed).sample(self.w, k)}))
+            elif s.kind == "star_tracker":
+                out.append(("star_tracker", {"q": StarTracker(s.sigma, self.seed).sample(self.q, k)}))
+            elif s.kind == "gps":
+                r, v = PositionReceiver(s.sigma, s.sigma_v, self.seed).sample(self.r, self.v, k)
+                out.append(("gps", {"r": r, "v": v}))
+            else:
+                out.append(("tachometer", {"speeds": WheelTachometer(s.sigma, self.seed).sample(self.wheel_speeds(), k)}))
+        return out
+
+    def actuator_state(self) -> dict:
+        """The fields of the :class:`astrodyn.messages.ActuatorState` of the step just advanced
+        (call after :meth:`advance`; wheel speeds are those at the step's start, passed in
+        by :meth:`Plant.step`)."""
+        out: dict = {"torque": self.torque}
+        if self.wheels is not None:
+            out["wheel_torque"] = self.applied_wheel
+            out["wheel_speed"] = self._speeds_at_start
+            if self.clipped:
+                out["clipped"] = self.clipped
+        if self.step_dv is not None:
+            out["dv"] = self.step_dv
+        if self.has_orbit and self.limits is not None and self.limits.thrust is not None:
+            out["thrust"] = self._thrust_applied
+        if self.mass is not None:
+            out["mass"] = self._mass_at_start
+        if self.limits is not None and (self.limits.dv is not None or self.limits.thrust is not None):
+            out["dv_total"] = self._dv_total_at_start
+        if self.step_applied:
+            out["applied"] = list(self.step_applied)
+        return out
+
+    def begin_step(self) -> None:
+        """Note what the step's actuator state reports about its start, and clear the step's records."""
+        self._speeds_at_start = self.wheel_speeds()
+        self._mass_at_start = self.mass
+        self.step_dv = None
+        self.step_applied = []
+
+    def finish_commands(self) -> None:
+        """After the step's commands: the thrust and dv budget the step starts with."""
+        self._thrust_applied = self._thrust_inertial() if self.has_orbit else None
+        self._dv_total_at_start = self.dv_total
+
+
+class Plant:
+    """Every actuated body of ``scenario`` (its bodies with actuators or sensors)."""
+
+    def __init__(self, scenario: Scenario):
+        if scenario.control is None:
+            raise ValueError("scenario: expected a [control] table (a closed-loop scene)")
+        self.scenario = scenario
+        self.control = scenario.control
+        self.rate = scenario.rate
+        self.bodies = {b.name: PlantBody(b, scenario.central_body.mu, self.control.seed)
+                       for b in scenario.bodies if b.in_plant}
+        self._faults = list(self.control.faults)
+
+    def faults_at(self, t: float) -> list[Fault]:
+        """Faults that begin at or before ``t`` and have not begun yet: applied, returned."""
+        half = 0.5 / self.rate
+        begun = [f for f in self._faults if f.t <= t + half]
+        self._faults = [f for f in self._faults if f.t > t + half]
+        for f in begun:
+            b = self.bodies[f.body]
+            if f.fault == "gyro_bias":
+                b.faults.gyro_bias = np.asarray(f.value, dtype=np.float64)
+            elif f.fault == "sensor_dropout":
+                b.faults.dropouts[f.sensor] = f.t + f.duration
+            elif f.fault == "wheel_failed":
+                b.faults.failed_wheels.add(int(f.wheel))
+            else:
+                b.faults.efficiency = float(f.value)
+        return begun
+
+    @staticmethod
+    def fault_detail(f: Fault) -> str:
+        """The detail of the ``fault`` event (JSON)."""
+        d = {"body": f.body, "fault": f.fault}
+        for key in ("value", "sensor", "wheel"):
+            if getattr(f, key) is not None:
+                d[key] = getattr(f, key)
+        if math.isfinite(f.duration):
+            d["duration"] = f.duration
+        return json.dumps(d, separators=(",", ":"))

@@ -1,0 +1,409 @@
+"""The plant process: the closed loop's bodies, stepped with the controllers' commands.
+
+``python -m astrodyn.service.plant CONFIG`` (started by ``astrodyn run`` / ``serve`` when
+the scene has a ``[control]`` table; docs/control.md is the contract for controllers).
+
+Every output step ``k`` (``t = k / rate``), for the scene's actuated bodies
+(:class:`astrodyn.plant.Plant`):
+
+1. faults that begin now take effect and are recorded as ``fault`` events;
+2. states (``<body>/orbit``, ``<body>/attitude``, model ``actuated``) and the sensor
+   samples due (``<body>/gyro|star_tracker|gps|tachometer``) are published;
+3. on a control step (every ``control.period``) the plant publishes ``@tick`` and, in
+   lockstep mode, waits until every controller of ``control.controllers`` has answered
+   the tick on ``@done/<controller>`` (with the number of commands it sent) and those
+   commands have arrived; a controller that does not answer within ``control.timeout``
+   ends the run with an error naming it (exit 1; the recording stays valid);
+4. commands due (``t <= t_k`` within half a step) are applied in arrival order and
+   re-published, signed by the plant, on their ``<body>/command`` key (that copy is what
+   the logger records); then ``<body>/actuators`` says what was applied;
+5. the bodies advance to ``t + 1 / rate`` with the held commands.
+
+Trust (docs/security.md): a command or an answer is taken only from a process of the run
+(authenticator of the run secret, signed by the process named in its ``sender``) or from
+an outside controller that presents the run's control token (``--control-token-file``).
+Everything else is counted per reason (``rejected`` in the end event and the summary),
+never applied, never fatal.  Free mode (``control.mode = "free"``): nothing waits; the
+plant paces sim time at the scenario's real-time factor and applies what has arrived;
+commands whose time has passed are applied at once and counted as ``late``.
+
+``--commands REC.mcap``: no controllers; the commands recorded in REC are applied at the
+steps where REC's actuator states say they were, which reproduces REC's states bit for bit.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import queue
+import sys
+import time
+from pathlib import Path
+
+from astrodyn import auth, bus, messages
+from astrodyn.plant import CommandRefused, Plant, command_id
+from astrodyn.service.children import share_fate_with_supervisor
+from astrodyn.service.signals import catch_stop_signals
+
+__all__ = ["main", "run_plant", "recorded_commands", "ControllerTimeout", "PROCESS"]
+
+PROCESS = "plant"
+#: Samples waiting in the plant's intake before it drops new ones (a flood from a hostile
+#: process must not grow memory without bound; a controller sends a few per step).
+INTAKE_CAPACITY = 100_000
+MAX_EXAMPLES = 20
+
+
+class ControllerTimeout(RuntimeError):
+    """A controller did not answer a control step in time (lockstep)."""
+
+
+class Intake:
+    """Commands and step answers off the bus, authenticated, decoded, counted."""
+
+    def __init__(self, scenario: str, bodies, verifier: auth.Verifier | None, token: str | None):
+        self.scenario = scenario
+        self.bodies = set(bodies)
+        self.verifier = verifier
+        self.token = token
+        self.queue: queue.Queue = queue.Queue(INTAKE_CAPACITY)
+        self.rejected: dict[str, int] = {}
+        self.examples: list[str] = []
+        self.dropped = 0
+
+    def callback(self, sample) -> None:  # Zenoh's thread: copy out, never block
+        a = sample.attachment
+        try:
+            self.queue.put_nowait((str(sample.key_expr), sample.payload.to_bytes(), None if a is None else a.to_bytes()))
+        except queue.Full:
+            self.dropped += 1
+
+    def reject(self, reason: str, detail: str) -> None:
+        self.rejected[reason] = self.rejected.get(reason, 0) + 1
+        if len(self.examples) < MAX_EXAMPLES:
+            self.examples.append(f"{reason}: {detail[:200]}")
+
+    def judge(self, key: str, payload: bytes, attachment: bytes | None) -> tuple[str, str, dict] | None:
+        """``(kind, body_or_controller, message)`` of a sample the plant may act on, else None
+        (counted).  The plant's own re-published commands are skipped silently."""
+        try:
+            _, who, kind = messages.parse_key(key)  # ("s", body, "command") or ("s", "@done", controller)
+            if who == "@done":
+                who = kind
+            kind = messages.kind_of_key(key)
+            msg = messages.decode(payload, kind)
+        except messages.MessageError as exc:
+            self.reject("malformed", f"{key}: {exc}")
+            return None
+        signer = None
+        if self.verifier is not None:
+            presented = auth.token_from_attachment(attachment)
+            if self.token is not None and presented is not None:
+                if not auth.token_matches(self.token, presented):
+                    self.reject("bad-token", key)
+                    return None
+            else:
+                try:
+                    signer = self.verifier.verify(key, payload, attachment)
+                except auth.AuthError as exc:
+                    self.reject(exc.reason, key)
+                    return None
+                if signer == PROCESS:
+                    return None  # our own copy of an applied command
+                if signer != msg["sender"]:
+                    self.reject("impersonation", f"{key}: sender {msg['sender']!r} signed by {signer!r}")
+                    return None
+        if kind == "command" and who not in self.bodies:
+            self.reject("not-actuated", f"{key}: body {who!r} is not one of the plant's bodies")
+            return None
+        if kind == "done" and who != msg["sender"]:
+            self.reject("impersonation", f"{key}: answer of {msg['sender']!r} on {who!r}'s key")
+            return None
+        return kind, who, msg
+
+
+def recorded_commands(path: str | Path, scenario: str) -> dict[int, list[dict]]:
+    """The commands of recording ``path``, by the output step at which they were applied:
+    ``{k: [command, ...]}`` in the order the plant applied them (its actuator states'
+    ``applied`` lists)."""
+    from astrodyn.recording.stream import open_stream
+
+    commands: dict[str, dict] = {}
+    applied: list[tuple[int, str, list[str]]] = []
+    with open_stream(path) as s:
+        for m in s.messages():
+            try:
+                _, body, kind = messages.parse_key(m.topic)
+            except messages.MessageError:
+                continue
+            if not m.topic.startswith(f"{messages.PREFIX}/{scenario}/"):
+                continue
+            if kind == "command":
+                msg = messages.decode(m.data, "command")
+                commands[f"{body}/{command_id(msg['sender'], msg['seq'])}"] = msg
+            elif kind == "actuators":
+                msg = messages.decode(m.data, "actuators")
+                if msg.get("applied"):
+                    applied.append((msg["seq"], body, msg["applied"]))
+    out: dict[int, list[dict]] = {}
+    for k, body, ids in sorted(applied, key=lambda x: x[0]):
+        for cid in ids:
+            cmd = commands.get(f"{body}/{cid}")
+            if cmd is None:
+                raise ValueError(f"--commands {path}: actuator state of {body} at step {k} names command {cid}, "
+                                 f"which the recording does not hold")
+            out.setdefault(k, []).append((body, cmd))
+    return out
+
+
+def run_plant(scenario, session, *, token: str | None = None, replay: dict | None = None,
+              max_steps: int | None = None, first_event_seq: int = 0, wait_logger_s: float = 30.0,
+              log=print) -> dict:
+    """Run the closed loop of ``scenario`` (module docstring); returns a summary dict.
+    Raises :class:`ControllerTimeout` when a controller does not answer in time."""
+    plant = Plant(scenario)
+    control = scenario.control
+    name = scenario.name
+    rate = scenario.rate
+    dt = 1.0 / rate
+    half = 0.5 * dt
+    n_steps = scenario.n_steps if max_steps is None else min(scenario.n_steps, int(max_steps))
+    lockstep = control.mode == "lockstep" and replay is None
+    expected = control.controllers if lockstep else ()
+    signer = bus.process_signer(PROCESS)
+    secret = auth.secret_from_environment()
+    intake = Intake(name, plant.bodies, None if secret is None else auth.Verifier(secret), token)
+    stopping = {"why": None}
+    catch_stop_signals(lambda why: stopping.update(why=why))
+
+    pubs: dict[str, object] = {}
+
+    def put(key: str, payload: bytes) -> None:
+        pub = pubs.get(key)
+        if pub is None:
+            pub = pubs[key] = bus.declare_state_publisher(session, key)
+        bus.signed_put(pub, key, payload, signer)
+
+    seqs: dict[str, int] = {}
+    pending: dict[str, list[dict]] = {b: [] for b in plant.bodies}
+    raw_of: dict[int, bytes] = {}
+    received: dict[str, int] = {}  # authenticated commands per sender
+    promised: dict[str, int] = {}  # commands announced by the sender's answers
+    answered: dict[str, int] = {}  # last control step each controller answered
+    late = refused = applied_count = published = 0
+    refusals: list[str] = []
+    frame = scenario.frame
+    mu = scenario.central_body.mu
+    t_reached = 0.0
+    wall0 = time.monotonic()
+    pace_factor = scenario.real_time_factor if control.mode == "free" and replay is None else math.inf
+
+    def drain(block_s: float | None) -> bool:
+        """Take what the intake holds (waiting up to ``block_s`` for the first); False if nothing came."""
+        try:
+            item = intake.queue.get(timeout=block_s) if block_s else intake.queue.get_nowait()
+        except queue.Empty:
+            return False
+        while True:
+            judged = intake.judge(*item)
+            if judged is not None:
+                kind, who, msg = judged
+                if kind == "command":
+                    received[msg["sender"]] = received.get(msg["sender"], 0) + 1
+                    raw_of[id(msg)] = item[1]
+                    pending[who].append(msg)
+                elif kind == "done":
+                    promised[who] = promised.get(who, 0) + int(msg["commands"])
+                    answered[who] = max(answered.get(who, -1), int(msg["seq"]))
+            try:
+                item = intake.queue.get_nowait()
+            except queue.Empty:
+                return True
+
+    with bus.declare_alive(session, name, PROCESS), \
+            bus.Heartbeat(session, name, PROCESS, signer=signer) as heartbeat, \
+            bus.EventPublisher(session, name, PROCESS, signer=signer) as events, \
+            session.declare_subscriber(f"{messages.PREFIX}/{name}/*/command", intake.callback), \
+            session.declare_subscriber(f"{messages.PREFIX}/{name}/@done/*", intake.callback):
+        bus.wait_for_process(session, name, "logger", timeout_s=wait_logger_s)
+        events.next_seq = int(first_event_seq)
+        events.emit("start", 0.0, json.dumps({"bodies": sorted(plant.bodies), "mode": control.mode,
+                                              "controllers": list(expected), "steps": n_steps,
+                                              "replay": replay is not None}))
+        heartbeat.beat(force=True, t=0.0, step=0, preparing=True)
+        failure = None
+        k = 0
+        try:
+            while k < n_steps:
+                t = k * dt
+                for f in plant.faults_at(t):
+                    events.emit("fault", t, Plant.fault_detail(f))
+                for b in plant.bodies.values():
+                    b.begin_step()
+                for bname, b in plant.bodies.items():
+                    if b.has_orbit:
+                        put(messages.orbit_key(name, bname),
+                            messages.encode(messages.orbit_message(t, k, messages.ACTUATED_MODEL, b.r, b.v, mu, frame)))
+                        published += 1
+                    if b.has_attitude:
+                        put(messages.attitude_key(name, bname),
+                            messages.encode(messages.attitude_message(t, k, messages.ACTUATED_MODEL, b.q, b.w)))
+                        published += 1
+                    for kind, fields in b.sensor_samples(k, t):
+                        key = messages.body_key(name, bname, kind)
+                        seq = seqs.get(key, 0)
+                        put(key, messages.encode({"t": t, "seq": seq, **fields}, kind))
+                        seqs[key] = seq + 1
+                control_step = k % control.every == 0
+                if control_step:
+                    j = k // control.every
+                    put(messages.tick_key(name), messages.encode({"t": t, "seq": j, "step": k}, "tick"))
+                    deadline = time.monotonic() + control.timeout
+                    while True:
+                        drain(None)
+                        waiting = [c for c in expected
+                                   if answered.get(c, -1) < j or received.get(c, 0) < promised.get(c, 0)]
+                        if not waiting or stopping["why"]:
+                            break
+                        left = deadline - time.monotonic()
+                        if left <= 0:
+                            raise ControllerTimeout(
+                                f"controller {waiting[0]!r} did not answer control step {j} (t = {t:g} s) within "
+                                f"{control.timeout:g} s" + (f" (also {', '.join(map(repr, waiting[1:]))})" if waiting[1:] else ""))
+                        drain(min(left, 0.5))
+                        heartbeat.beat(t=t, step=k, waiting=waiting)
+                else:
+                    drain(None)
+                if stopping["why"]:
+                    break
+                # commands due now, in arrival order (replay: the recorded ones of this step)
+                due_by_body = {}
+                if replay is not None:
+                    for bname, cmd in replay.get(k, []):
+                        due_by_body.setdefault(bname, []).append((cmd, None))
+                else:
+                    for bname, cmds in pending.items():
+                        now = [c for c in cmds if c["t"] <= t + half]
+                        if now:
+                            pending[bname] = [c for c in cmds if c["t"] > t + half]
+                            due_by_body[bname] = [(c, raw_of.pop(id(c), None)) for c in now]
+                for bname, items in due_by_body.items():
+                    b = plant.bodies[bname]
+                    for cmd, raw in items:
+                        if replay is None and cmd["t"] < t - half:
+                            if lockstep:
+                                refused += 1
+                                if len(refusals) < MAX_EXAMPLES:
+                                    refusals.append(f"{bname} {command_id(cmd['sender'], cmd['seq'])}: t = {cmd['t']:g} s "
+                                                    f"is in the past (now {t:g} s)")
+                                continue
+                            late += 1
+                        try:
+                            b.apply(cmd)
+                        except CommandRefused as exc:
+                            refused += 1
+                            if len(refusals) < MAX_EXAMPLES:
+                                refusals.append(f"{bname} {command_id(cmd['sender'], cmd['seq'])}: {exc}")
+                            continue
+                        applied_count += 1
+                        put(messages.body_key(name, bname, "command"),
+                            raw if raw is not None else messages.encode(cmd, "command"))
+                for b in plant.bodies.values():
+                    b.finish_commands()
+                last = k == n_steps - 1
+                for bname, b in plant.bodies.items():
+                    if not last:
+                        b.advance(dt)
+                    if b.limits is not None:
+                        put(messages.body_key(name, bname, "actuators"),
+                            messages.encode({"t": t, "seq": k, **b.actuator_state()}, "actuators"))
+                t_reached = t
+                k += 1
+                heartbeat.beat(t=t_reached, step=k)
+                if math.isfinite(pace_factor):
+                    wait = wall0 + (k * dt) / pace_factor - time.monotonic()
+                    if wait > 0:
+                        time.sleep(wait)
+        except ControllerTimeout as exc:
+            failure = str(exc)
+            events.emit("error", t_reached, failure)
+        wall = time.monotonic() - wall0
+        reason = failure or stopping["why"] or "end of scenario"
+        extra = {"last_step": k - 1, "t_reached": t_reached, "reason": reason, "applied": applied_count,
+                 "refused": refused, "late": late, "rejected": dict(intake.rejected), "dropped": intake.dropped}
+        events.end(t_reached, published, **extra)
+        heartbeat.beat(force=True, t=t_reached, step=k, done=True)
+        _wait_until_logged(session, name)
+    summary = {"process": PROCESS, "bodies": len(plant.bodies), "steps": k, "messages": published, "t": t_reached,
+               "wall_s": wall, **extra, "refusals": refusals, "rejected_examples": intake.examples}
+    if failure:
+        summary["error"] = failure
+    return summary
+
+
+def _wait_until_logged(session, scenario: str, timeout_s: float = 60.0) -> None:
+    """Keep the session open until the logger has our end-of-run event (see the propagator's)."""
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        replies = bus.query_json(session, messages.status_key(scenario), timeout_s=2.0)
+        if not replies or any(PROCESS in (r.get("ended") or {}) for r in replies):
+            return
+        time.sleep(0.05)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Exit status: 0 done, 1 a controller timed out or a bus error, 2 bad arguments or config."""
+    from astrodyn.scenario import ScenarioError, load
+
+    ap = argparse.ArgumentParser(prog="python -m astrodyn.service.plant",
+                                 description="astrodyn plant: the closed loop's bodies, stepped with controllers' commands")
+    ap.add_argument("config", help="scenario TOML file with a [control] table")
+    ap.add_argument("--control-token-file", default=None, metavar="FILE",
+                    help="the run's control token (0600 file): outside controllers that present it are obeyed")
+    ap.add_argument("--commands", default=None, metavar="REC.mcap",
+                    help="re-simulate: apply the commands recorded in REC where they were applied (no controllers)")
+    ap.add_argument("--max-steps", type=int, default=None, help="stop after this many output steps")
+    ap.add_argument("--first-event-seq", type=int, default=0, help="seq of this process's first event")
+    ap.add_argument("--wait-logger", type=float, default=30.0, help="seconds to wait for the logger")
+    bus.add_bus_arguments(ap)
+    args = ap.parse_args(argv)
+    share_fate_with_supervisor()
+    try:
+        scenario = load(args.config)
+    except ScenarioError as exc:
+        print(f"plant: {exc}", file=sys.stderr)
+        return 2
+    if scenario.control is None:
+        print(f"plant: {args.config}: expected a [control] table (a closed-loop scene; docs/control.md)", file=sys.stderr)
+        return 2
+    token = None
+    if args.control_token_file:
+        try:
+            token = auth.read_token_file(args.control_token_file)
+        except auth.AuthError as exc:
+            print(f"plant: --control-token-file: {exc}", file=sys.stderr)
+            return 2
+    replay = None
+    if args.commands:
+        try:
+            replay = recorded_commands(args.commands, scenario.name)
+        except (OSError, ValueError) as exc:
+            print(f"plant: --commands: {exc}", file=sys.stderr)
+            return 2
+    try:
+        with bus.session_from_args(args) as session:
+            summary = run_plant(scenario, session, token=token, replay=replay, max_steps=args.max_steps,
+                                first_event_seq=args.first_event_seq, wait_logger_s=args.wait_logger)
+    except bus.BusError as exc:
+        print(f"plant: {exc}", file=sys.stderr)
+        return 1
+    print(json.dumps(summary, separators=(",", ":")), flush=True)
+    if "error" in summary:
+        print(f"plant: {summary['error']}", file=sys.stderr)
+        return 1
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
