@@ -14,9 +14,11 @@ Every output step ``k`` (``t = k / rate``), for the scene's actuated bodies
    the tick on ``@done/<controller>`` (with the number of commands it sent) and those
    commands have arrived; a controller that does not answer within ``control.timeout``
    ends the run with an error naming it (exit 1; the recording stays valid);
-4. commands due (``t <= t_k`` within half a step) are applied in arrival order and
-   re-published, signed by the plant, on their ``<body>/command`` key (that copy is what
-   the logger records); then ``<body>/actuators`` says what was applied;
+4. commands with ``t <= t_k`` are applied at ``t_k``, in arrival order; commands with
+   ``t_k < t < t_k+1`` (already received) at their own ``t``, inside the step (the body
+   is advanced to it first): an impulse lands exactly when commanded.  Each applied
+   command is re-published, signed by the plant, on its ``<body>/command`` key (that copy
+   is what the logger records); ``<body>/actuators`` then says what the step applied;
 5. the bodies advance to ``t + 1 / rate`` with the held commands.
 
 Trust (docs/security.md): a command or an answer is taken only from a process of the run
@@ -53,6 +55,8 @@ PROCESS = "plant"
 #: process must not grow memory without bound; a controller sends a few per step).
 INTAKE_CAPACITY = 100_000
 MAX_EXAMPLES = 20
+#: Commands one body may hold for later times (more are refused).
+MAX_PENDING = 10_000
 
 
 class ControllerTimeout(RuntimeError):
@@ -167,7 +171,6 @@ def run_plant(scenario, session, *, token: str | None = None, replay: dict | Non
     name = scenario.name
     rate = scenario.rate
     dt = 1.0 / rate
-    half = 0.5 * dt
     n_steps = scenario.n_steps if max_steps is None else min(scenario.n_steps, int(max_steps))
     lockstep = control.mode == "lockstep" and replay is None
     expected = control.controllers if lockstep else ()
@@ -187,7 +190,6 @@ def run_plant(scenario, session, *, token: str | None = None, replay: dict | Non
 
     seqs: dict[str, int] = {}
     pending: dict[str, list[dict]] = {b: [] for b in plant.bodies}
-    raw_of: dict[int, bytes] = {}
     received: dict[str, int] = {}  # authenticated commands per sender
     promised: dict[str, int] = {}  # commands announced by the sender's answers
     answered: dict[str, int] = {}  # last control step each controller answered
@@ -198,6 +200,25 @@ def run_plant(scenario, session, *, token: str | None = None, replay: dict | Non
     t_reached = 0.0
     wall0 = time.monotonic()
     pace_factor = scenario.real_time_factor if control.mode == "free" and replay is None else math.inf
+
+    eps = 1e-9 * dt  # "at t": within round-off of the step's time
+
+    def refuse(bname: str, cmd: dict, why: str) -> None:
+        nonlocal refused
+        refused += 1
+        if len(refusals) < MAX_EXAMPLES:
+            refusals.append(f"{bname} {command_id(cmd['sender'], cmd['seq'])}: {why}")
+
+    def apply_command(b, bname: str, cmd: dict, raw: bytes | None) -> None:
+        """Apply now; re-publish the command as applied (the copy the logger records)."""
+        nonlocal applied_count
+        try:
+            b.apply(cmd)
+        except CommandRefused as exc:
+            refuse(bname, cmd, str(exc))
+            return
+        applied_count += 1
+        put(messages.body_key(name, bname, "command"), raw if raw is not None else messages.encode(cmd, "command"))
 
     def drain(block_s: float | None) -> bool:
         """Take what the intake holds (waiting up to ``block_s`` for the first); False if nothing came."""
@@ -211,8 +232,10 @@ def run_plant(scenario, session, *, token: str | None = None, replay: dict | Non
                 kind, who, msg = judged
                 if kind == "command":
                     received[msg["sender"]] = received.get(msg["sender"], 0) + 1
-                    raw_of[id(msg)] = item[1]
-                    pending[who].append(msg)
+                    if len(pending[who]) >= MAX_PENDING:
+                        refuse(who, msg, f"more than {MAX_PENDING} commands waiting for their time")
+                    else:
+                        pending[who].append((msg, item[1]))
                 elif kind == "done":
                     promised[who] = promised.get(who, 0) + int(msg["commands"])
                     answered[who] = max(answered.get(who, -1), int(msg["seq"]))
@@ -277,44 +300,36 @@ def run_plant(scenario, session, *, token: str | None = None, replay: dict | Non
                     drain(None)
                 if stopping["why"]:
                     break
-                # commands due now, in arrival order (replay: the recorded ones of this step)
-                due_by_body = {}
-                if replay is not None:
-                    for bname, cmd in replay.get(k, []):
-                        due_by_body.setdefault(bname, []).append((cmd, None))
-                else:
-                    for bname, cmds in pending.items():
-                        now = [c for c in cmds if c["t"] <= t + half]
-                        if now:
-                            pending[bname] = [c for c in cmds if c["t"] > t + half]
-                            due_by_body[bname] = [(c, raw_of.pop(id(c), None)) for c in now]
-                for bname, items in due_by_body.items():
-                    b = plant.bodies[bname]
-                    for cmd, raw in items:
-                        if replay is None and cmd["t"] < t - half:
-                            if lockstep:
-                                refused += 1
-                                if len(refusals) < MAX_EXAMPLES:
-                                    refusals.append(f"{bname} {command_id(cmd['sender'], cmd['seq'])}: t = {cmd['t']:g} s "
-                                                    f"is in the past (now {t:g} s)")
-                                continue
-                            late += 1
-                        try:
-                            b.apply(cmd)
-                        except CommandRefused as exc:
-                            refused += 1
-                            if len(refusals) < MAX_EXAMPLES:
-                                refusals.append(f"{bname} {command_id(cmd['sender'], cmd['seq'])}: {exc}")
-                            continue
-                        applied_count += 1
-                        put(messages.body_key(name, bname, "command"),
-                            raw if raw is not None else messages.encode(cmd, "command"))
-                for b in plant.bodies.values():
-                    b.finish_commands()
+                # commands due in [t, t + dt), in arrival order (replay: those recorded as applied in this step)
                 last = k == n_steps - 1
                 for bname, b in plant.bodies.items():
-                    if not last:
-                        b.advance(dt)
+                    if replay is not None:
+                        mine = [(c, None) for body, c in replay.get(k, []) if body == bname]
+                    else:
+                        due = t + eps if last else t + dt - eps
+                        mine = [e for e in pending[bname] if e[0]["t"] <= due]
+                        if mine:
+                            pending[bname] = [e for e in pending[bname] if e[0]["t"] > due]
+                    inside = []
+                    for cmd, raw in mine:
+                        if cmd["t"] > t + eps:
+                            inside.append((cmd, raw))
+                            continue
+                        if replay is None and cmd["t"] < t - eps:
+                            if lockstep:
+                                refuse(bname, cmd, f"t = {cmd['t']:g} s is in the past (now {t:g} s)")
+                                continue
+                            late += 1
+                        apply_command(b, bname, cmd, raw)
+                    b.finish_commands()
+                    done_s = 0.0  # commands inside the step: advance to their t, apply, go on
+                    for cmd, raw in sorted(inside, key=lambda e: e[0]["t"]):
+                        if cmd["t"] - t > done_s:
+                            b.advance(cmd["t"] - t - done_s)
+                            done_s = cmd["t"] - t
+                        apply_command(b, bname, cmd, raw)
+                    if not last and dt > done_s:
+                        b.advance(dt - done_s)
                     if b.limits is not None:
                         put(messages.body_key(name, bname, "actuators"),
                             messages.encode({"t": t, "seq": k, **b.actuator_state()}, "actuators"))
