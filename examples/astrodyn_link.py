@@ -3,11 +3,11 @@
 No astrodyn import: this is the whole client side of docs/control.md, which the example
 controllers in this directory share.  Use it as a starting point for your own::
 
-    link = Link()                      # from the environment `astrodyn run --controller` sets
-    while (tick := link.wait_tick()) is not None:
-        gyro = link.latest("sc", "gyro")                   # newest sample of a key, a dict
-        link.command("sc", tick["t"], wheel_torque=[0.01, 0.0, 0.0])
-        link.done(tick)                # answer the control step (lockstep)
+    with Link() as link:               # from the environment `astrodyn run --controller` sets
+        while (tick := link.wait_tick()) is not None:
+            gyro = link.latest("sc", "gyro")               # the step's sample of a key, a dict
+            link.command("sc", tick["t"], wheel_torque=[0.01, 0.0, 0.0])
+            link.done(tick)            # answer the control step (lockstep)
 
 Environment (set by ``astrodyn run/serve ... --controller CMD``):
 ``ASTRODYN_CONNECT`` the run's bus endpoint, ``ASTRODYN_SCENARIO``, ``ASTRODYN_CONTROLLER``
@@ -61,11 +61,22 @@ class Link:
         ]
 
     # -- receiving ------------------------------------------------------------------
-    def _on_sample(self, sample) -> None:
-        self._latest[str(sample.key_expr)] = json.loads(sample.payload.to_bytes())
+    def _on_sample(self, sample) -> None:  # free mode: the newest sample of each key
+        message = json.loads(sample.payload.to_bytes())
+        key = str(sample.key_expr)
+        if key not in self._latest or message.get("t", 0) >= self._latest[key].get("t", 0):
+            self._latest[key] = message
 
     def _on_tick(self, sample) -> None:
         self._ticks.put(json.loads(sample.payload.to_bytes()))
+
+    def _take(self, tick: dict | None) -> dict | None:
+        # the tick carries the step's states and sensor samples: read them from it, since
+        # samples on other keys may still be on their way (each subscriber has its thread)
+        if tick is not None:
+            for key, message in tick["samples"].items():
+                self._latest[f"{self.base}/{key}"] = message
+        return tick
 
     def _on_event(self, sample) -> None:
         event = json.loads(sample.payload.to_bytes())
@@ -74,7 +85,7 @@ class Link:
 
     def wait_tick(self, timeout: float | None = None) -> dict | None:
         """The next control step ``{"t", "seq", "step"}``, or None when the run has ended."""
-        return self._ticks.get(timeout=timeout)
+        return self._take(self._ticks.get(timeout=timeout))
 
     def latest(self, body: str, kind: str) -> dict | None:
         """The newest message on ``astrodyn/<scenario>/<body>/<kind>`` (e.g. "attitude",
@@ -115,3 +126,11 @@ class Link:
         for s in self._subs:
             s.undeclare()
         self.session.close()
+
+    # A process whose Zenoh session is still open when it exits waits for ever on Zenoh's
+    # threads: use the link in a `with` block, so an exception or sys.exit closes it.
+    def __enter__(self) -> Link:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()

@@ -15,13 +15,12 @@ from astrodyn_link import Link
 def main():
     gain = float(os.environ.get("DETUMBLE_K", "5.0"))
     body = os.environ.get("DETUMBLE_BODY", "sc")
-    link = Link()
-    while (tick := link.wait_tick()) is not None:
-        gyro = link.latest(body, "gyro")
-        if gyro is not None and gyro["t"] == tick["t"]:  # a fresh sample (none during a dropout)
-            link.command(body, tick["t"], torque=[-gain * x for x in gyro["w"]])
-        link.done(tick)
-    link.close()
+    with Link() as link:
+        while (tick := link.wait_tick()) is not None:
+            gyro = link.latest(body, "gyro")
+            if gyro is not None and gyro["t"] == tick["t"]:  # a fresh sample (none during a dropout)
+                link.command(body, tick["t"], torque=[-gain * x for x in gyro["w"]])
+            link.done(tick)
 
 
 if __name__ == "__main__":

@@ -22,25 +22,24 @@ from astrodyn_link import Link
 def main():
     r2 = float(os.environ.get("HOHMANN_R2", "42159485.57"))
     body = os.environ.get("HOHMANN_BODY", "sat")
-    link = Link()
-    planned = False
-    while (tick := link.wait_tick()) is not None:
-        if not planned:
-            state = link.latest(body, "orbit")
-            r, v, mu = state["r"], state["v"], state["mu"]
-            r1 = math.sqrt(sum(x * x for x in r))
-            speed = math.sqrt(sum(x * x for x in v))
-            along = [x / speed for x in v]
-            dv1 = math.sqrt(mu / r1) * (math.sqrt(2 * r2 / (r1 + r2)) - 1)
-            dv2 = math.sqrt(mu / r2) * (1 - math.sqrt(2 * r1 / (r1 + r2)))
-            tof = math.pi * math.sqrt((0.5 * (r1 + r2)) ** 3 / mu)
-            link.command(body, tick["t"], dv=[dv1 * a for a in along])
-            link.command(body, tick["t"] + tof, dv=[-dv2 * a for a in along])
-            print(f"hohmann: r1 = {r1 / 1e3:.6f} km -> r2 = {r2 / 1e3:.6f} km: dv1 = {dv1:.6f} m/s, "
-                  f"dv2 = {dv2:.6f} m/s at t = {tick['t'] + tof:.3f} s", flush=True)
-            planned = True
-        link.done(tick)
-    link.close()
+    with Link() as link:
+        planned = False
+        while (tick := link.wait_tick()) is not None:
+            if not planned:
+                state = link.latest(body, "orbit")
+                r, v, mu = state["r"], state["v"], state["mu"]
+                r1 = math.sqrt(sum(x * x for x in r))
+                speed = math.sqrt(sum(x * x for x in v))
+                along = [x / speed for x in v]
+                dv1 = math.sqrt(mu / r1) * (math.sqrt(2 * r2 / (r1 + r2)) - 1)
+                dv2 = math.sqrt(mu / r2) * (1 - math.sqrt(2 * r1 / (r1 + r2)))
+                tof = math.pi * math.sqrt((0.5 * (r1 + r2)) ** 3 / mu)
+                link.command(body, tick["t"], dv=[dv1 * a for a in along])
+                link.command(body, tick["t"] + tof, dv=[-dv2 * a for a in along])
+                print(f"hohmann: r1 = {r1 / 1e3:.6f} km -> r2 = {r2 / 1e3:.6f} km: dv1 = {dv1:.6f} m/s, "
+                      f"dv2 = {dv2:.6f} m/s at t = {tick['t'] + tof:.3f} s", flush=True)
+                planned = True
+            link.done(tick)
 
 
 if __name__ == "__main__":

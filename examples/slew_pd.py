@@ -36,18 +36,17 @@ def main():
     body = os.environ.get("SLEW_BODY", "sc")
     half = math.radians(90.0) / 2
     target = [float(x) for x in os.environ.get("SLEW_TARGET", f"{math.cos(half)},0,0,{math.sin(half)}").split(",")]
-    link = Link()
-    while (tick := link.wait_tick()) is not None:
-        tracker, gyro = link.latest(body, "star_tracker"), link.latest(body, "gyro")
-        truth = link.latest(body, "attitude")
-        q = tracker["q"] if tracker else truth["q"]
-        w = gyro["w"] if gyro else truth["w"]
-        err = quat_mul(quat_conj(target), q)
-        sign = 1.0 if err[0] >= 0 else -1.0
-        u = [-k_gain * sign * err[i + 1] - c_gain * w[i] for i in range(3)]
-        link.command(body, tick["t"], wheel_torque=[-x for x in u])
-        link.done(tick)
-    link.close()
+    with Link() as link:
+        while (tick := link.wait_tick()) is not None:
+            tracker, gyro = link.latest(body, "star_tracker"), link.latest(body, "gyro")
+            truth = link.latest(body, "attitude")
+            q = tracker["q"] if tracker else truth["q"]
+            w = gyro["w"] if gyro else truth["w"]
+            err = quat_mul(quat_conj(target), q)
+            sign = 1.0 if err[0] >= 0 else -1.0
+            u = [-k_gain * sign * err[i + 1] - c_gain * w[i] for i in range(3)]
+            link.command(body, tick["t"], wheel_torque=[-x for x in u])
+            link.done(tick)
 
 
 if __name__ == "__main__":

@@ -481,9 +481,13 @@ class TachometerSample(Stamped, forbid_unknown_fields=True):
 
 
 class Tick(Stamped, forbid_unknown_fields=True):
-    """The plant's control step k is out: states and sensor samples for t are published."""
+    """The plant's control step seq at time t: the step's states and sensor samples, each
+    the message published on its own key, by key relative to the scenario (body/kind)."""
 
     step: Annotated[int, Meta(ge=0, le=MAX_SEQ, description="output step index of t")]
+    samples: Annotated[dict[str, dict], Meta(description=(
+        "the messages of this step: key relative to astrodyn/<scenario>/ (e.g. sc/gyro) -> message"),
+        extra={"expected": "an object key -> message object"})]
 
 
 class StepDone(Stamped, forbid_unknown_fields=True):

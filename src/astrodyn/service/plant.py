@@ -9,7 +9,9 @@ Every output step ``k`` (``t = k / rate``), for the scene's actuated bodies
 1. faults that begin now take effect and are recorded as ``fault`` events;
 2. states (``<body>/orbit``, ``<body>/attitude``, model ``actuated``) and the sensor
    samples due (``<body>/gyro|star_tracker|gps|tachometer``) are published;
-3. on a control step (every ``control.period``) the plant publishes ``@tick`` and, in
+3. on a control step (every ``control.period``) the plant publishes ``@tick`` (which
+   carries the step's states and samples too: Zenoh orders samples per subscriber, not
+   across a client's subscribers, so a controller reads one consistent step from it) and, in
    lockstep mode, waits until every controller of ``control.controllers`` has answered
    the tick on ``@done/<controller>`` (with the number of commands it sent) and those
    commands have arrived; a controller that does not answer within ``control.timeout``
@@ -48,7 +50,7 @@ from astrodyn.plant import CommandRefused, Plant, command_id
 from astrodyn.service.children import share_fate_with_supervisor
 from astrodyn.service.signals import catch_stop_signals
 
-__all__ = ["main", "run_plant", "recorded_commands", "ControllerTimeout", "PROCESS"]
+__all__ = ["main", "run_plant", "recorded_commands", "tick_payload", "ControllerTimeout", "PROCESS"]
 
 PROCESS = "plant"
 #: Samples waiting in the plant's intake before it drops new ones (a flood from a hostile
@@ -264,24 +266,29 @@ def run_plant(scenario, session, *, token: str | None = None, replay: dict | Non
                     events.emit("fault", t, Plant.fault_detail(f))
                 for b in plant.bodies.values():
                     b.begin_step()
+                samples: list[tuple[str, bytes]] = []  # (body/kind, payload) of this step, for the tick
                 for bname, b in plant.bodies.items():
                     if b.has_orbit:
-                        put(messages.orbit_key(name, bname),
-                            messages.encode(messages.orbit_message(t, k, messages.ACTUATED_MODEL, b.r, b.v, mu, frame)))
+                        payload = messages.encode(messages.orbit_message(t, k, messages.ACTUATED_MODEL, b.r, b.v, mu, frame))
+                        put(messages.orbit_key(name, bname), payload)
+                        samples.append((f"{bname}/orbit", payload))
                         published += 1
                     if b.has_attitude:
-                        put(messages.attitude_key(name, bname),
-                            messages.encode(messages.attitude_message(t, k, messages.ACTUATED_MODEL, b.q, b.w)))
+                        payload = messages.encode(messages.attitude_message(t, k, messages.ACTUATED_MODEL, b.q, b.w))
+                        put(messages.attitude_key(name, bname), payload)
+                        samples.append((f"{bname}/attitude", payload))
                         published += 1
                     for kind, fields in b.sensor_samples(k, t):
                         key = messages.body_key(name, bname, kind)
                         seq = seqs.get(key, 0)
-                        put(key, messages.encode({"t": t, "seq": seq, **fields}, kind))
+                        payload = messages.encode({"t": t, "seq": seq, **fields}, kind)
+                        put(key, payload)
+                        samples.append((f"{bname}/{kind}", payload))
                         seqs[key] = seq + 1
                 control_step = k % control.every == 0
                 if control_step:
                     j = k // control.every
-                    put(messages.tick_key(name), messages.encode({"t": t, "seq": j, "step": k}, "tick"))
+                    put(messages.tick_key(name), tick_payload(t, j, k, samples))
                     deadline = time.monotonic() + control.timeout
                     while True:
                         drain(None)
@@ -355,6 +362,15 @@ def run_plant(scenario, session, *, token: str | None = None, replay: dict | Non
     if failure:
         summary["error"] = failure
     return summary
+
+
+def tick_payload(t: float, seq: int, step: int, samples: list[tuple[str, bytes]]) -> bytes:
+    """The :class:`astrodyn.messages.Tick` of a control step, with the step's messages
+    spliced in as published (no re-encoding: the bytes a controller reads in the tick are
+    those on the keys and in the recording)."""
+    head = messages.encode({"t": t, "seq": seq, "step": step, "samples": {}}, "tick")[:-3]  # ...,"samples":
+    body = b",".join(json.dumps(key).encode() + b":" + payload for key, payload in samples)
+    return head + b"{" + body + b"}}"
 
 
 def _wait_until_logged(session, scenario: str, timeout_s: float = 60.0) -> None:

@@ -234,6 +234,9 @@ def run_scenario(scenario: Scenario, config_path: Path, out: Path, *, cross_chec
                 result["hub"] = hub
                 print(f"  bus {hub}: any Zenoh client can subscribe to astrodyn/{scenario.name}/** there "
                       f"(docs/clients.md)", file=sys.stderr, flush=True)
+                if token_file is not None:
+                    print(f"  control token {token_file}: outside controllers present it (docs/control.md)",
+                          file=sys.stderr, flush=True)
                 for kind in propagators:
                     start_propagator(kind, (extra_args or {}).get(kind, {}))
                 failure = start_controllers()
@@ -380,6 +383,10 @@ def _watch(scenario: Scenario, p, children: dict, beats, alive, progress: bool, 
                         time.sleep(0.05)
                     if all(children[k].poll() == 0 for k in propagators):
                         return None if rc == 0 else f"logger exited with status {rc}: {ch.stderr_tail()}"
+                    failed = [k for k in propagators if children[k].poll() not in (0, None)]
+                    if failed:  # the logger finished the file after a process failed: report that one
+                        name, ch = failed[0], children[failed[0]]
+                        rc = ch.poll()
                 how_far = beats.last.get(name, {}).get("t")
                 where = f", sim t reached {how_far:.6g} s of {duration:.6g} s" if how_far is not None else ""
                 bodies = [b.name for b in p.bodies if (b.orbit_model if name == "orbit" else b.attitude_model)]
@@ -491,12 +498,19 @@ def main(argv: list[str] | None = None) -> int:
         if result.get("interrupted"):  # shell convention: 128 + signal number
             return 128 + int(signal.Signals[result["interrupted"]])
         return 1
-    rejected = (result.get("logger") or {}).get("rejected") or {}
+    rejected = dict((result.get("logger") or {}).get("rejected") or {})
+    plant = (result.get("processes", {}).get("plant") or {}).get("summary") or {}
+    for reason, n in (plant.get("rejected") or {}).items():  # forged commands and answers, dropped by the plant
+        rejected[f"command {reason}"] = rejected.get(f"command {reason}", 0) + n
+    if plant:
+        print(f"astrodyn run: closed loop: {plant.get('applied', 0)} commands applied, {plant.get('refused', 0)} "
+              f"refused, {plant.get('late', 0)} late" + "".join(f"\n  refused: {r}" for r in plant.get("refusals", [])[:5]),
+              file=sys.stderr)
     if rejected:
         total = sum(rejected.values())
         why = ", ".join(f"{n} {reason}" for reason, n in sorted(rejected.items()))
         senders = (result.get("logger") or {}).get("rejected_by_sender") or {}
-        print(f"astrodyn run: ATTACKED: the logger rejected {total} messages that were not this run's own ({why}; "
+        print(f"astrodyn run: ATTACKED: the logger and the plant rejected {total} messages that were not this run's own ({why}; "
               f"senders: {', '.join(f'{s} x{n}' for s, n in senders.items())}); the recording holds only the run's "
               f"authenticated states (counts in its 'rejected' metadata record)", file=sys.stderr)
         if not args.tolerate_rejected:
