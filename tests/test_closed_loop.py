@@ -190,7 +190,13 @@ def test_an_outside_controller_joins_with_the_token_and_forgers_are_rejected(tmp
     conf.insert_json5("scouting/multicast/enabled", "false")
     forged = {"t": 1.0, "seq": 0, "sender": "detumble", "torque": [1.0, 1.0, 1.0]}
     with zenoh.open(conf) as session:
-        time.sleep(1.0)
+        ticks = session.declare_subscriber("astrodyn/detumble/@tick", zenoh.handlers.FifoChannel(1024))
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline:  # forge while the loop runs (not before it, not after it)
+            tick = ticks.try_recv()
+            if tick is not None and json.loads(tick.payload.to_bytes())["seq"] >= 5:
+                break
+            time.sleep(0.001)
         session.put("astrodyn/detumble/sc/command", json.dumps(forged))  # no authenticator
         session.put("astrodyn/detumble/sc/command", json.dumps(forged), attachment=b"ADT1" + b"x" * 43)  # wrong token
         session.put("astrodyn/detumble/ghost/command", json.dumps(forged), attachment=b"ADT1" + b"y" * 43)
