@@ -25,6 +25,7 @@ import zenoh
 from astrodyn.recording import load
 from astrodyn.recording.stream import open_stream
 
+pytestmark = pytest.mark.network
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLES = ROOT / "examples"
 RUN = [sys.executable, "-m", "astrodyn", "run"]
