@@ -13,8 +13,9 @@ One output step ``k`` (``t_k = k / rate``, ``dt = 1 / rate``) of a body:
 4. the body is advanced to ``t_k + dt`` with the held values (:meth:`PlantBody.advance`):
    attitude with reaction wheels by :func:`astrodyn.attitude.wheels.step_with_wheels`
    (momentum of body plus wheels conserved to round-off under internal torques), with only
-   an external torque by :func:`astrodyn.attitude.propagate_attitude` (exact-rotation
-   splitting), without either by the exact torque-free solution; the orbit by the exact
+   an external torque by the same compiled exact-rotation splitting
+   (:class:`astrodyn.attitude.integrators.HeldInputsBody`), without either by the exact
+   torque-free solution; the orbit by the exact
    two-body propagation, or under thrust by :func:`astrodyn.orbit.propagate_perturbed`
    with :class:`astrodyn.orbit.maneuvers.ConstantThrust` (mass falls at ``|F| / (isp g0)``).
 
@@ -37,6 +38,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from astrodyn.attitude import propagate_attitude, torque_free
+from astrodyn.attitude.integrators import HeldInputsBody
 from astrodyn.attitude.torques import ConstantTorque
 from astrodyn.attitude.wheels import ReactionWheels, step_with_wheels
 from astrodyn.orbit import propagate
@@ -91,6 +93,9 @@ class PlantBody:
             self.wheels = ReactionWheels(np.array([wh.axis for wh in act.wheels]), [wh.inertia for wh in act.wheels],
                                          [wh.max_torque for wh in act.wheels], [wh.max_speed for wh in act.wheels])
             self.h = self.wheels.absolute_momentum([wh.speed for wh in act.wheels], self.w)
+        self._held = None
+        if self.has_attitude:  # the compiled held-input step, its principal frame set up once
+            self._held = HeldInputsBody(self.inertia if self.wheels is None else self.wheels.kinematic_inertia(self.inertia))
         n = 0 if self.wheels is None else self.wheels.n
         self.torque = np.zeros(3)  # held external torque, body axes, N m (after the limit)
         self.wheel_command = np.zeros(n)  # held motor torque commands, N m (saturated each step)
@@ -157,19 +162,18 @@ class PlantBody:
     def advance(self, dt: float) -> None:
         """Move the body from t to t + dt with the held commands."""
         if self.has_attitude:
-            ext = ConstantTorque(self.torque) if np.any(self.torque) else None
+            torqued = bool(np.any(self.torque))
             if self.wheels is not None:
                 cmd = self.wheel_command.copy()
                 for k in self.faults.failed_wheels:
                     cmd[k] = 0.0
-                s = step_with_wheels(self.inertia, self.wheels, self.w, self.q, self.h, cmd, dt, external_torque=ext)
+                s = step_with_wheels(self.inertia, self.wheels, self.w, self.q, self.h, cmd, dt,
+                                     external_torque=ConstantTorque(self.torque) if torqued else None, body=self._held)
                 self.w, self.q, self.h = s.w, s.q, s.h
                 self.applied_wheel = s.torque
                 self.clipped = [int(i) for i in np.flatnonzero(s.clipped & (cmd != 0))]
-            elif ext is not None:
-                w1, q1, _ = propagate_attitude(self.inertia, self.w, self.q, float(dt), torque=ext, method="split4",
-                                               error_estimate=False)
-                self.w, self.q = np.asarray(w1), np.asarray(q1)
+            elif torqued:
+                self.w, self.q = self._held.step_held(self.w, self.q, float(dt), tau=self.torque)
             elif self._diagonal:
                 w1, q1 = torque_free(np.diag(self.inertia).copy(), self.w, self.q, float(dt))
                 self.w, self.q = np.asarray(w1), np.asarray(q1)

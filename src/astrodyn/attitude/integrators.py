@@ -95,7 +95,8 @@ from astrodyn.jit import jit
 from astrodyn.orbit.universal import lagrange_coefficients_scalar
 from astrodyn.rotation import attitude_difference, quat_from_dcm, quat_multiply
 
-__all__ = ["propagate_attitude", "SPLIT2_WEIGHTS", "SPLIT4_WEIGHTS", "YOSHIDA4_WEIGHTS", "free_rigid_body_step"]
+__all__ = ["propagate_attitude", "SPLIT2_WEIGHTS", "SPLIT4_WEIGHTS", "YOSHIDA4_WEIGHTS", "free_rigid_body_step",
+           "held_torque_step", "HeldInputsBody"]
 
 SPLIT2_WEIGHTS = np.array([1.0])
 """Stage weights of the 2nd-order Strang step (one stage)."""
@@ -588,6 +589,76 @@ def _split_kernel(
         m0, m1, m2, e0, e1, e2, e3 = _turned(0, pend, m0, m1, m2, e0, e1, e2, e3)
     M[0], M[1], M[2] = m0, m1, m2
     q[0], q[1], q[2], q[3] = e0, e1, e2, e3
+
+
+@jit
+def held_torque_step(M, q, moments, weights, dt, n_sub, tau, h0, hdot):
+    """One step of ``dt`` s of a gyrostat under held inputs, in place, compiled: ``n_sub``
+    equal steps of the composed splitting of :func:`propagate_attitude` (``weights``, e.g.
+    :data:`SPLIT4_WEIGHTS`) with a constant body torque ``tau`` (3,) N m and rotor momentum
+    ``h(t) = h0 + hdot t`` (3,) N m s relative to the body (``t`` from the step's start).
+
+    Everything in the principal axes of ``moments`` (3,) kg m^2: ``M`` (3,) total angular
+    momentum N m s, ``q`` (4,) Euler parameters of those axes.  The same kernel, stages and
+    stage-midpoint rotor values as ``propagate_attitude(method="split4", torque=
+    ConstantTorque(tau), rotor_momentum=h)`` over one output interval, without its Python
+    set-up (about 1.5 us per substep instead of 160 us per call): the closed loop's per-body step.
+    """
+    ns = weights.shape[0]
+    mids = _stage_midpoints(weights)
+    h = dt / n_sub
+    step_t = np.empty(n_sub)
+    step_dt = np.full(n_sub, h)
+    record = np.full(n_sub, -1, dtype=np.int64)
+    h_table = np.empty((n_sub, ns, 3))
+    for k in range(n_sub):
+        step_t[k] = k * h
+        for st in range(ns):
+            tm = step_t[k] + mids[st] * h
+            for i in range(3):
+                h_table[k, st, i] = h0[i] + hdot[i] * tm
+    parts = KICK_CONSTANT if (tau[0] != 0.0 or tau[1] != 0.0 or tau[2] != 0.0) else 0
+    zero3 = np.zeros(3)
+    out_M = np.empty((1, 3))
+    out_q = np.empty((1, 4))
+    # the groups of _split_kernel's parameters, one a line (fmt: skip)
+    _split_kernel(
+        M, q, moments, weights, step_t, step_dt, record, out_M, out_q,
+        parts, tau, zero3, zero3, zero3,
+        0.0, np.zeros((3, 3)), 0, np.zeros((1, 1, 3)), np.zeros((3, 3)), np.zeros((9, 9)), 2, h_table,
+    )  # fmt: skip
+
+
+class HeldInputsBody:
+    """A rigid body (or gyrostat) stepped under held inputs with :func:`held_torque_step`,
+    in body axes outside: ``inertia`` (3,) or (3, 3) kg m^2 (for a gyrostat the ``I`` of
+    ``H = I w + h``).  The principal frame is set up once (``step_held`` is the per-step call).
+    """
+
+    def __init__(self, inertia):
+        self.frame = _Frame(inertia)
+
+    def step_held(self, w, q, dt, tau=None, h0=None, hdot=None, step=None):
+        """``(w, q)`` after ``dt`` s from body rates ``w`` (3,) rad/s and ``q`` (4,) (scalar
+        first) with the body torque ``tau`` (3,) N m and the rotor momentum
+        ``h0 + hdot t`` (3,) N m s held (body axes; None: zero).  ``step``: the splitting
+        step (default as :func:`propagate_attitude`'s: 1/60 of the fastest natural period)."""
+        f = self.frame
+        z = np.zeros(3)
+        h0p = z if h0 is None else f.vec_to_p(np.asarray(h0, dtype=np.float64))
+        hdp = z if hdot is None else f.vec_to_p(np.asarray(hdot, dtype=np.float64))
+        taup = z if tau is None else f.vec_to_p(np.asarray(tau, dtype=np.float64))
+        wp = f.vec_to_p(np.asarray(w, dtype=np.float64))
+        M = f.moments * wp + h0p
+        qp = np.array(f.quat_to_p(np.asarray(q, dtype=np.float64)), dtype=np.float64)
+        if step is None:
+            rate = max(float(np.max(np.abs(wp))), float(np.linalg.norm(M - h0p)) / float(np.min(f.moments)))
+            step = 0.1 if not rate > 0 else 2.0 * math.pi / (60.0 * rate)
+        n = max(1, int(math.ceil(abs(dt) / step)))
+        held_torque_step(M, qp, f.moments, SPLIT4_WEIGHTS, float(dt), n, np.ascontiguousarray(taup),
+                         np.ascontiguousarray(h0p), np.ascontiguousarray(hdp))
+        w1 = f.vec_from_p((M - (h0p + hdp * dt)) / f.moments)
+        return w1, np.asarray(f.quat_from_p(qp))
 
 
 def free_rigid_body_step(inertia, M, q, dt, rotor_momentum=(0.0, 0.0, 0.0)):

@@ -118,7 +118,7 @@ class WheelStep:
 
 
 def step_with_wheels(inertia, wheels: ReactionWheels, w, q, h, wheel_torque, dt: float, *,
-                     external_torque=None, step: float | None = None) -> WheelStep:
+                     external_torque=None, step: float | None = None, body=None) -> WheelStep:
     """Advance body and wheels by one control step of ``dt`` s with the motor torques
     ``wheel_torque`` (n,) N m held (after :meth:`ReactionWheels.saturate`).
 
@@ -126,15 +126,26 @@ def step_with_wheels(inertia, wheels: ReactionWheels, w, q, h, wheel_torque, dt:
     (4,) scalar first, ``h`` (n,) absolute wheel momenta N m s; ``external_torque`` a
     torque model ``torque(t, q, w) -> (3,)`` N m in body axes (e.g.
     :class:`~astrodyn.attitude.torques.ConstantTorque`), with ``t`` from 0 at the start of
-    the step; ``step`` the splitting step (default: the integrator's).
+    the step; ``step`` the splitting step (default: the integrator's).  ``body``: a
+    :class:`astrodyn.attitude.integrators.HeldInputsBody` of the kinematic inertia, set up
+    once by a caller that steps the same body many times.  No torque or a constant body
+    torque run the compiled held-input step (about 10 us per call instead of 200 us);
+    other torque models the general :func:`astrodyn.attitude.propagate_attitude`.
     """
-    from astrodyn.attitude.integrators import propagate_attitude
+    from astrodyn.attitude.integrators import HeldInputsBody, propagate_attitude
+    from astrodyn.attitude.torques import ConstantTorque
 
     if not dt > 0 or not np.isfinite(dt):
         raise ValueError(f"dt: expected a finite control step > 0 s, got {dt!r}")
     h0 = np.asarray(h, dtype=np.float64).reshape(wheels.n)
     g, clipped = wheels.saturate(wheel_torque, h0, w, dt)
     axes = wheels.axes
+    if external_torque is None or (type(external_torque) is ConstantTorque and external_torque.frame == "body"):
+        # held inputs: the compiled step (same splitting, stages and rotor values as below)
+        body = body or HeldInputsBody(wheels.kinematic_inertia(inertia))
+        tau = None if external_torque is None else external_torque.torque
+        w1, q1 = body.step_held(w, q, float(dt), tau=tau, h0=h0 @ axes, hdot=g @ axes, step=step)
+        return WheelStep(w1, q1, h0 + g * dt, g, clipped)
 
     def rotor(t):
         t = np.asarray(t, dtype=np.float64)

@@ -25,6 +25,7 @@ SUITES = {
     "auth": "astrodyn.bench.auth",
     "calls": "astrodyn.bench.calls",
     "view": "astrodyn.bench.view",
+    "control": "astrodyn.bench.control",
 }
 
 

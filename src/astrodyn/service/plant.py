@@ -59,6 +59,8 @@ INTAKE_CAPACITY = 100_000
 MAX_EXAMPLES = 20
 #: Commands one body may hold for later times (more are refused).
 MAX_PENDING = 10_000
+#: Lockstep round trips kept for the summary's percentiles.
+MAX_ROUND_TRIPS = 1_000_000
 
 
 class ControllerTimeout(RuntimeError):
@@ -196,6 +198,7 @@ def run_plant(scenario, session, *, token: str | None = None, replay: dict | Non
     promised: dict[str, int] = {}  # commands announced by the sender's answers
     answered: dict[str, int] = {}  # last control step each controller answered
     late = refused = applied_count = published = 0
+    round_trips: list[float] = []  # lockstep: wall s from a tick to the last answer (the first MAX_ROUND_TRIPS)
     refusals: list[str] = []
     frame = scenario.frame
     mu = scenario.central_body.mu
@@ -253,7 +256,7 @@ def run_plant(scenario, session, *, token: str | None = None, replay: dict | Non
             session.declare_subscriber(f"{messages.PREFIX}/{name}/@done/*", intake.callback):
         bus.wait_for_process(session, name, "logger", timeout_s=wait_logger_s)
         events.next_seq = int(first_event_seq)
-        events.emit("start", 0.0, json.dumps({"bodies": sorted(plant.bodies), "mode": control.mode,
+        events.emit("start", 0.0, json.dumps({"bodies": len(plant.bodies), "mode": control.mode,
                                               "controllers": list(expected), "steps": n_steps,
                                               "replay": replay is not None}))
         heartbeat.beat(force=True, t=0.0, step=0, preparing=True)
@@ -289,12 +292,15 @@ def run_plant(scenario, session, *, token: str | None = None, replay: dict | Non
                 if control_step:
                     j = k // control.every
                     put(messages.tick_key(name), tick_payload(t, j, k, samples))
-                    deadline = time.monotonic() + control.timeout
+                    sent_at = time.monotonic()
+                    deadline = sent_at + control.timeout
                     while True:
                         drain(None)
                         waiting = [c for c in expected
                                    if answered.get(c, -1) < j or received.get(c, 0) < promised.get(c, 0)]
                         if not waiting or stopping["why"]:
+                            if expected and len(round_trips) < MAX_ROUND_TRIPS:
+                                round_trips.append(time.monotonic() - sent_at)
                             break
                         left = deadline - time.monotonic()
                         if left <= 0:
@@ -359,6 +365,10 @@ def run_plant(scenario, session, *, token: str | None = None, replay: dict | Non
         _wait_until_logged(session, name)
     summary = {"process": PROCESS, "bodies": len(plant.bodies), "steps": k, "messages": published, "t": t_reached,
                "wall_s": wall, **extra, "refusals": refusals, "rejected_examples": intake.examples}
+    if round_trips:
+        rt = sorted(round_trips)
+        summary["round_trip_us"] = {"n": len(rt), "p50": 1e6 * rt[len(rt) // 2], "p99": 1e6 * rt[int(0.99 * (len(rt) - 1))],
+                                    "max": 1e6 * rt[-1]}
     if failure:
         summary["error"] = failure
     return summary

@@ -1,0 +1,63 @@
+"""The benchmark's controller (``python -m astrodyn.bench.controller``): at every tick,
+``u = -K w_gyro`` for every body of the tick, one command each, then the answer.  Signs
+with the run secret through :mod:`astrodyn.auth` (the protocol of docs/control.md)."""
+
+from __future__ import annotations
+
+import json
+import os
+import queue
+
+import zenoh
+
+from astrodyn import auth
+
+GAIN = 2.0
+
+
+def main() -> int:
+    scenario, name = os.environ["ASTRODYN_SCENARIO"], os.environ["ASTRODYN_CONTROLLER"]
+    signer = auth.Signer(auth.secret_from_environment(), name)
+    base = f"astrodyn/{scenario}"
+    ticks: queue.Queue = queue.Queue()
+    conf = zenoh.Config()
+    conf.insert_json5("mode", '"client"')
+    conf.insert_json5("connect/endpoints", json.dumps([os.environ["ASTRODYN_CONNECT"]]))
+    conf.insert_json5("scouting/multicast/enabled", "false")
+
+    def on_event(sample) -> None:
+        event = json.loads(sample.payload.to_bytes())
+        if event["process"] == "plant" and event["kind"] == "stop":
+            ticks.put(None)
+
+    with zenoh.open(conf) as session:
+        session.declare_subscriber(f"{base}/@tick", lambda s: ticks.put(s.payload.to_bytes()))
+        session.declare_subscriber(f"{base}/@event", on_event)
+        done_key = f"{base}/@done/{name}"
+        seqs: dict[str, int] = {}
+        pubs: dict[str, zenoh.Publisher] = {}
+
+        def put(key: str, payload: bytes) -> None:
+            pub = pubs.get(key)
+            if pub is None:
+                pub = pubs[key] = session.declare_publisher(key, congestion_control=zenoh.CongestionControl.BLOCK)
+            pub.put(payload, attachment=signer.attachment(key, payload))
+
+        while (raw := ticks.get()) is not None:
+            tick = json.loads(raw)
+            sent = 0
+            for key, msg in tick["samples"].items():
+                body, kind = key.split("/")
+                if kind != "gyro":
+                    continue
+                seq = seqs.get(body, 0)
+                seqs[body] = seq + 1
+                cmd = {"t": tick["t"], "seq": seq, "sender": name, "torque": [-GAIN * x for x in msg["w"]]}
+                put(f"{base}/{body}/command", json.dumps(cmd, separators=(",", ":")).encode())
+                sent += 1
+            put(done_key, json.dumps({"t": tick["t"], "seq": tick["seq"], "sender": name, "commands": sent}).encode())
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
