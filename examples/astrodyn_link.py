@@ -50,7 +50,9 @@ class Link:
         self._latest: dict[str, dict] = {}
         self._ticks: queue.Queue = queue.Queue()
         conf = zenoh.Config()
-        conf.insert_json5("mode", '"client"')
+        conf.insert_json5("mode", '"peer"')  # a peer on loopback: the plant's samples come straight, not via the hub
+        conf.insert_json5("listen/endpoints", '["tcp/127.0.0.1:0"]')
+        conf.insert_json5("scouting/gossip/enabled", "true")
         conf.insert_json5("connect/endpoints", json.dumps([endpoint]))
         conf.insert_json5("scouting/multicast/enabled", "false")
         self.session = zenoh.open(conf)

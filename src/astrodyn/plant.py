@@ -72,10 +72,10 @@ class _Faults:
 class PlantBody:
     """One actuated body: its state, its held commands and its sensors (module docstring)."""
 
-    def __init__(self, body: Body, mu: float, seed: int):
+    def __init__(self, body: Body, mu: float, seed: tuple[int, ...]):
         self.name = body.name
         self.mu = float(mu)
-        self.seed = int(seed)
+        self.seed = tuple(int(x) for x in seed)  # (scene seed, body index): independent noise per body
         act = body.actuators
         self.limits = act
         self.has_orbit = body.orbit is not None
@@ -201,7 +201,7 @@ class PlantBody:
 
     def sensor_samples(self, k: int, t: float) -> list[tuple[str, dict]]:
         """``(kind, fields)`` of each sensor due at output step ``k`` (time ``t``), noise from
-        ``(seed, sensor, k)``; a sensor in a dropout gives nothing."""
+        ``(scene seed, body index, sensor, k)``; a sensor in a dropout gives nothing."""
         out = []
         for s in self.sensors:
             if k % s.every or t < self.faults.dropouts.get(s.kind, -math.inf):
@@ -262,8 +262,8 @@ class Plant:
         self.scenario = scenario
         self.control = scenario.control
         self.rate = scenario.rate
-        self.bodies = {b.name: PlantBody(b, scenario.central_body.mu, self.control.seed)
-                       for b in scenario.bodies if b.in_plant}
+        self.bodies = {b.name: PlantBody(b, scenario.central_body.mu, (self.control.seed, index))
+                       for index, b in enumerate(scenario.bodies) if b.in_plant}
         self._faults = list(self.control.faults)
 
     def faults_at(self, t: float) -> list[Fault]:

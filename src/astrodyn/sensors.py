@@ -3,7 +3,8 @@ wheel tachometer (closed-loop groundwork; truth stays on the state keys).
 
 Every model is a pure function of the true state and of ``(seed, step)``: sample ``k`` of
 a sensor draws from ``numpy.random.default_rng([seed, stream, k])`` (``stream`` fixed per
-model), so a run is reproducible whatever the order or the number of samples taken, and a
+model; ``seed`` an int or a tuple of ints, e.g. ``(scene seed, body index)`` so that two
+bodies' sensors have independent noise), so a run is reproducible whatever the order or the number of samples taken, and a
 re-simulation from recorded commands gives the same measurements bit for bit.
 
 Conventions (docs/architecture.md, section 2): SI units; body rates in body axes (rad/s);
@@ -36,10 +37,11 @@ __all__ = ["RateGyro", "StarTracker", "PositionReceiver", "WheelTachometer"]
 _STREAMS = {"gyro": 1, "star_tracker": 2, "position": 3, "tachometer": 4}
 
 
-def _rng(seed: int, stream: str, step: int) -> np.random.Generator:
+def _rng(seed: int | tuple[int, ...], stream: str, step: int) -> np.random.Generator:
     if not (isinstance(step, (int, np.integer)) and step >= 0):
         raise ValueError(f"step: expected an integer sample index >= 0, got {step!r}")
-    return np.random.default_rng([int(seed), _STREAMS[stream], int(step)])
+    entropy = [int(x) for x in seed] if isinstance(seed, tuple) else [int(seed)]
+    return np.random.default_rng([*entropy, _STREAMS[stream], int(step)])
 
 
 def _sigma(value, name: str) -> float:

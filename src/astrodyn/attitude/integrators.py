@@ -637,6 +637,9 @@ class HeldInputsBody:
 
     def __init__(self, inertia):
         self.frame = _Frame(inertia)
+        self.frame.moments = np.ascontiguousarray(self.frame.moments, dtype=np.float64)
+        self._min_moment = float(np.min(self.frame.moments))
+        self._zero = np.zeros(3)
 
     def step_held(self, w, q, dt, tau=None, h0=None, hdot=None, step=None):
         """``(w, q)`` after ``dt`` s from body rates ``w`` (3,) rad/s and ``q`` (4,) (scalar
@@ -644,21 +647,23 @@ class HeldInputsBody:
         ``h0 + hdot t`` (3,) N m s held (body axes; None: zero).  ``step``: the splitting
         step (default as :func:`propagate_attitude`'s: 1/60 of the fastest natural period)."""
         f = self.frame
-        z = np.zeros(3)
+        z = self._zero
         h0p = z if h0 is None else f.vec_to_p(np.asarray(h0, dtype=np.float64))
         hdp = z if hdot is None else f.vec_to_p(np.asarray(hdot, dtype=np.float64))
         taup = z if tau is None else f.vec_to_p(np.asarray(tau, dtype=np.float64))
         wp = f.vec_to_p(np.asarray(w, dtype=np.float64))
         M = f.moments * wp + h0p
-        qp = np.array(f.quat_to_p(np.asarray(q, dtype=np.float64)), dtype=np.float64)
-        if step is None:
-            rate = max(float(np.max(np.abs(wp))), float(np.linalg.norm(M - h0p)) / float(np.min(f.moments)))
+        qp = np.array(q if f.identity else f.quat_to_p(np.asarray(q, dtype=np.float64)), dtype=np.float64)
+        if step is None:  # as propagate_attitude's default: 1/60 of the fastest natural period
+            w0, w1_, w2 = wp
+            d0, d1, d2 = M - h0p
+            rate = max(abs(w0), abs(w1_), abs(w2), math.sqrt(d0 * d0 + d1 * d1 + d2 * d2) / self._min_moment)
             step = 0.1 if not rate > 0 else 2.0 * math.pi / (60.0 * rate)
         n = max(1, int(math.ceil(abs(dt) / step)))
-        held_torque_step(M, qp, f.moments, SPLIT4_WEIGHTS, float(dt), n, np.ascontiguousarray(taup),
-                         np.ascontiguousarray(h0p), np.ascontiguousarray(hdp))
+        held_torque_step(M, qp, f.moments, SPLIT4_WEIGHTS, float(dt), n, np.ascontiguousarray(taup, dtype=np.float64),
+                         np.ascontiguousarray(h0p, dtype=np.float64), np.ascontiguousarray(hdp, dtype=np.float64))
         w1 = f.vec_from_p((M - (h0p + hdp * dt)) / f.moments)
-        return w1, np.asarray(f.quat_from_p(qp))
+        return w1, (qp if f.identity else np.asarray(f.quat_from_p(qp)))
 
 
 def free_rigid_body_step(inertia, M, q, dt, rotor_momentum=(0.0, 0.0, 0.0)):

@@ -57,6 +57,58 @@ def one(n_bodies: int, steps: int, work: Path, wheels: bool) -> dict:
             "rtf": sim / plant["wall_s"], "applied": plant["applied"]}
 
 
+_PONG = """
+import json, sys, zenoh
+conf = zenoh.Config()
+conf.insert_json5("mode", '"peer"')
+conf.insert_json5("listen/endpoints", json.dumps([sys.argv[1]]))
+conf.insert_json5("scouting/multicast/enabled", "false")
+with zenoh.open(conf) as s:
+    pub = s.declare_publisher("bench/pong")
+    sub = s.declare_subscriber("bench/ping", zenoh.handlers.FifoChannel(16))  # held: a dropped one is undeclared
+    for sample in sub:
+        pub.put(sample.payload.to_bytes())
+"""
+
+
+def zenoh_floor(n: int = 2000) -> dict:
+    """The bare round trip of zenoh-python on this machine: a 200-byte sample to another
+    Python process (a peer on loopback) and back, no astrodyn code on either side; the
+    floor under any lockstep step of a controller in Python."""
+    import subprocess
+    import time
+
+    import zenoh
+
+    from astrodyn import bus
+
+    endpoint = bus.loopback_endpoint(bus.free_port())
+    pong = subprocess.Popen([sys.executable, "-c", _PONG, endpoint])
+    try:
+        with bus.open_session(connect=endpoint) as s:
+            sub = s.declare_subscriber("bench/pong", zenoh.handlers.FifoChannel(16))
+            pub = s.declare_publisher("bench/ping")
+            times = []
+            deadline = time.monotonic() + 30
+            while sub.try_recv() is None:  # until the route is up
+                if time.monotonic() > deadline:
+                    raise RuntimeError("bench control: the ping-pong peer did not answer within 30 s")
+                pub.put(b"x")
+                time.sleep(0.05)
+            while sub.try_recv() is not None:
+                pass
+            for _ in range(n):
+                t0 = time.perf_counter()
+                pub.put(b"x" * 200)
+                sub.recv()
+                times.append(time.perf_counter() - t0)
+    finally:
+        pong.terminate()
+        pong.wait(timeout=10)
+    times.sort()
+    return {"p50_us": 1e6 * times[n // 2], "p99_us": 1e6 * times[int(0.99 * (n - 1))]}
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="astrodyn bench control", description=__doc__.splitlines()[0])
     ap.add_argument("--bodies", default="1,100,1000", help="comma-separated scene sizes (default 1,100,1000)")
@@ -73,12 +125,15 @@ def main(argv: list[str] | None = None) -> int:
                 rows.append(r)
                 print(f"{n} bodies{' + wheels' if wheels else ''}: {r['steps_per_s']:.0f} steps/s, round trip p50 "
                       f"{r['p50_us']:.0f} us", file=sys.stderr, flush=True)
+    floor = zenoh_floor()
     print(f"# closed-loop lockstep on {cpu_model()}: one controller commanding every body each step, 10 Hz\n")
-    print("| bodies | wheels | steps | control steps/s | round trip p50 (us) | p99 (us) | real-time factor |")
-    print("|---|---|---|---|---|---|---|")
+    print(f"floor: bare zenoh-python round trip between two processes (peers, loopback), same run: p50 "
+          f"{floor['p50_us']:.0f} us, p99 {floor['p99_us']:.0f} us\n")
+    print("| bodies | wheels | steps | control steps/s | round trip p50 (us) | p99 (us) | p50 / zenoh floor | real-time factor |")
+    print("|---|---|---|---|---|---|---|---|")
     for r in rows:
         print(f"| {r['bodies']} | {'3' if r['wheels'] else '-'} | {r['steps']} | {r['steps_per_s']:.0f} | "
-              f"{r['p50_us']:.0f} | {r['p99_us']:.0f} | {r['rtf']:.1f} |")
+              f"{r['p50_us']:.0f} | {r['p99_us']:.0f} | {r['p50_us'] / floor['p50_us']:.1f}x | {r['rtf']:.1f} |")
     return 0
 
 

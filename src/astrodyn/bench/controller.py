@@ -10,7 +10,7 @@ import queue
 
 import zenoh
 
-from astrodyn import auth
+from astrodyn import auth, messages
 
 GAIN = 2.0
 
@@ -21,7 +21,9 @@ def main() -> int:
     base = f"astrodyn/{scenario}"
     ticks: queue.Queue = queue.Queue()
     conf = zenoh.Config()
-    conf.insert_json5("mode", '"client"')
+    conf.insert_json5("mode", '"peer"')  # a peer on loopback: the plant's samples come straight, not via the hub
+    conf.insert_json5("listen/endpoints", '["tcp/127.0.0.1:0"]')
+    conf.insert_json5("scouting/gossip/enabled", "true")
     conf.insert_json5("connect/endpoints", json.dumps([os.environ["ASTRODYN_CONNECT"]]))
     conf.insert_json5("scouting/multicast/enabled", "false")
 
@@ -31,8 +33,8 @@ def main() -> int:
             ticks.put(None)
 
     with zenoh.open(conf) as session:
-        session.declare_subscriber(f"{base}/@tick", lambda s: ticks.put(s.payload.to_bytes()))
-        session.declare_subscriber(f"{base}/@event", on_event)
+        subscribers = [session.declare_subscriber(f"{base}/@tick", lambda s: ticks.put(s.payload.to_bytes())),
+                       session.declare_subscriber(f"{base}/@event", on_event)]  # held for the session's life
         done_key = f"{base}/@done/{name}"
         seqs: dict[str, int] = {}
         pubs: dict[str, zenoh.Publisher] = {}
@@ -43,9 +45,10 @@ def main() -> int:
                 pub = pubs[key] = session.declare_publisher(key, congestion_control=zenoh.CongestionControl.BLOCK)
             pub.put(payload, attachment=signer.attachment(key, payload))
 
+        batch_key = f"{base}/@batch/{name}"
         while (raw := ticks.get()) is not None:
             tick = json.loads(raw)
-            sent = 0
+            commands = []
             for key, msg in tick["samples"].items():
                 body, kind = key.split("/")
                 if kind != "gyro":
@@ -53,9 +56,13 @@ def main() -> int:
                 seq = seqs.get(body, 0)
                 seqs[body] = seq + 1
                 cmd = {"t": tick["t"], "seq": seq, "sender": name, "torque": [-GAIN * x for x in msg["w"]]}
-                put(f"{base}/{body}/command", json.dumps(cmd, separators=(",", ":")).encode())
-                sent += 1
-            put(done_key, json.dumps({"t": tick["t"], "seq": tick["seq"], "sender": name, "commands": sent}).encode())
+                commands.append((f"{base}/{body}/command", json.dumps(cmd, separators=(",", ":")).encode()))
+            done = json.dumps({"t": tick["t"], "seq": tick["seq"], "sender": name, "commands": len(commands)}).encode()
+            if commands:  # one envelope: the commands and the answer (docs/control.md)
+                put(batch_key, messages.encode_batch([*commands, (done_key, done)]))
+            else:
+                put(done_key, done)
+        del subscribers
     return 0
 
 

@@ -45,9 +45,12 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
+
 from astrodyn import auth, bus, messages
 from astrodyn.plant import CommandRefused, Plant, command_id
 from astrodyn.service.children import share_fate_with_supervisor
+from astrodyn.service.propagator import BATCH_THRESHOLD
 from astrodyn.service.signals import catch_stop_signals
 
 __all__ = ["main", "run_plant", "recorded_commands", "tick_payload", "ControllerTimeout", "PROCESS"]
@@ -57,6 +60,8 @@ PROCESS = "plant"
 #: process must not grow memory without bound; a controller sends a few per step).
 INTAKE_CAPACITY = 100_000
 MAX_EXAMPLES = 20
+#: Processes of a run whose @batch envelopes carry states, never commands.
+RUN_PROCESSES = frozenset(("plant", "orbit", "attitude", "logger", "serve", "run"))
 #: Commands one body may hold for later times (more are refused).
 MAX_PENDING = 10_000
 #: Lockstep round trips kept for the summary's percentiles.
@@ -92,36 +97,69 @@ class Intake:
         if len(self.examples) < MAX_EXAMPLES:
             self.examples.append(f"{reason}: {detail[:200]}")
 
+    def judge_batch(self, key: str, payload: bytes, attachment: bytes | None) -> list[tuple[str, str, dict]]:
+        """The commands of a controller's envelope on ``@batch/<controller>`` (one
+        authenticator for all; each entry a ``<body>/command`` of that controller)."""
+        controller = key.rsplit("/", 1)[-1]
+        if controller in RUN_PROCESSES:
+            return []  # the run's own state envelopes: not for the plant
+        signer = self._authenticate(key, payload, attachment)
+        if signer is None:
+            return []
+        try:
+            items = messages.decode_batch(payload)
+        except messages.MessageError as exc:
+            self.reject("malformed", f"{key}: {exc}")
+            return []
+        out = []
+        for entry_key, entry in items:
+            judged = self._judge_entry(entry_key, entry, signer if signer is not True else None)
+            if judged is not None:
+                if judged[2]["sender"] != controller:
+                    self.reject("impersonation", f"{key}: entry {entry_key[:100]} is not {controller!r}'s")
+                    continue
+                out.append(judged)  # commands, and the answer to the tick, which may close the envelope
+        return out
+
+    def _authenticate(self, key: str, payload: bytes, attachment: bytes | None):
+        """The verified signer's name, True for a valid control token (or no verifier), None (counted) otherwise."""
+        if self.verifier is None:
+            return True
+        presented = auth.token_from_attachment(attachment)
+        if self.token is not None and presented is not None:
+            if not auth.token_matches(self.token, presented):
+                self.reject("bad-token", key)
+                return None
+            return True
+        try:
+            return self.verifier.verify(key, payload, attachment)
+        except auth.AuthError as exc:
+            self.reject(exc.reason, key)
+            return None
+
     def judge(self, key: str, payload: bytes, attachment: bytes | None) -> tuple[str, str, dict] | None:
         """``(kind, body_or_controller, message)`` of a sample the plant may act on, else None
         (counted).  The plant's own re-published commands are skipped silently."""
+        signer = self._authenticate(key, payload, attachment)
+        if signer is None or signer == PROCESS:
+            return None  # refused (counted), or our own copy of an applied command
+        return self._judge_entry(key, payload, signer if signer is not True else None)
+
+    def _judge_entry(self, key: str, payload: bytes, signer: str | None) -> tuple[str, str, dict] | None:
         try:
             _, who, kind = messages.parse_key(key)  # ("s", body, "command") or ("s", "@done", controller)
             if who == "@done":
                 who = kind
             kind = messages.kind_of_key(key)
+            if kind not in ("command", "done") or not key.startswith(f"{messages.PREFIX}/{self.scenario}/"):
+                raise messages.MessageError(f"key: expected a command or an answer of scenario {self.scenario!r}")
             msg = messages.decode(payload, kind)
         except messages.MessageError as exc:
             self.reject("malformed", f"{key}: {exc}")
             return None
-        signer = None
-        if self.verifier is not None:
-            presented = auth.token_from_attachment(attachment)
-            if self.token is not None and presented is not None:
-                if not auth.token_matches(self.token, presented):
-                    self.reject("bad-token", key)
-                    return None
-            else:
-                try:
-                    signer = self.verifier.verify(key, payload, attachment)
-                except auth.AuthError as exc:
-                    self.reject(exc.reason, key)
-                    return None
-                if signer == PROCESS:
-                    return None  # our own copy of an applied command
-                if signer != msg["sender"]:
-                    self.reject("impersonation", f"{key}: sender {msg['sender']!r} signed by {signer!r}")
-                    return None
+        if signer is not None and signer != msg["sender"]:
+            self.reject("impersonation", f"{key}: sender {msg['sender']!r} signed by {signer!r}")
+            return None
         if kind == "command" and who not in self.bodies:
             self.reject("not-actuated", f"{key}: body {who!r} is not one of the plant's bodies")
             return None
@@ -192,6 +230,24 @@ def run_plant(scenario, session, *, token: str | None = None, replay: dict | Non
             pub = pubs[key] = bus.declare_state_publisher(session, key)
         bus.signed_put(pub, key, payload, signer)
 
+    # the step's messages go out together: per key for small scenes, one envelope on
+    # @batch/plant above BATCH_THRESHOLD bodies (as the propagators do; docs/clients.md)
+    outbox: list[tuple[str, bytes]] = []
+    batched = len(plant.bodies) > BATCH_THRESHOLD
+
+    def flush(batch) -> None:
+        if outbox and batched:
+            batch.publish(outbox)
+        elif outbox:
+            for key, payload in outbox:
+                put(key, payload)
+        outbox.clear()
+
+    att_bodies = [(bname, b) for bname, b in plant.bodies.items() if b.has_attitude]
+    orb_bodies = [(bname, b) for bname, b in plant.bodies.items() if b.has_orbit]
+    att_keys = [messages.attitude_key(name, bname) for bname, _ in att_bodies]
+    orb_keys = [messages.orbit_key(name, bname) for bname, _ in orb_bodies]
+
     seqs: dict[str, int] = {}
     pending: dict[str, list[dict]] = {b: [] for b in plant.bodies}
     received: dict[str, int] = {}  # authenticated commands per sender
@@ -223,7 +279,7 @@ def run_plant(scenario, session, *, token: str | None = None, replay: dict | Non
             refuse(bname, cmd, str(exc))
             return
         applied_count += 1
-        put(messages.body_key(name, bname, "command"), raw if raw is not None else messages.encode(cmd, "command"))
+        outbox.append((messages.body_key(name, bname, "command"), raw if raw is not None else messages.encode(cmd, "command")))
 
     def drain(block_s: float | None) -> bool:
         """Take what the intake holds (waiting up to ``block_s`` for the first); False if nothing came."""
@@ -232,15 +288,14 @@ def run_plant(scenario, session, *, token: str | None = None, replay: dict | Non
         except queue.Empty:
             return False
         while True:
-            judged = intake.judge(*item)
-            if judged is not None:
-                kind, who, msg = judged
+            for kind, who, msg in (intake.judge_batch(*item) if "/@batch/" in item[0] else
+                                   [j for j in (intake.judge(*item),) if j is not None]):
                 if kind == "command":
                     received[msg["sender"]] = received.get(msg["sender"], 0) + 1
                     if len(pending[who]) >= MAX_PENDING:
                         refuse(who, msg, f"more than {MAX_PENDING} commands waiting for their time")
                     else:
-                        pending[who].append((msg, item[1]))
+                        pending[who].append((msg, None))  # applied: re-encoded (the same bytes for a canonical one)
                 elif kind == "done":
                     promised[who] = promised.get(who, 0) + int(msg["commands"])
                     answered[who] = max(answered.get(who, -1), int(msg["seq"]))
@@ -253,7 +308,9 @@ def run_plant(scenario, session, *, token: str | None = None, replay: dict | Non
             bus.Heartbeat(session, name, PROCESS, signer=signer) as heartbeat, \
             bus.EventPublisher(session, name, PROCESS, signer=signer) as events, \
             session.declare_subscriber(f"{messages.PREFIX}/{name}/*/command", intake.callback), \
-            session.declare_subscriber(f"{messages.PREFIX}/{name}/@done/*", intake.callback):
+            session.declare_subscriber(f"{messages.PREFIX}/{name}/@done/*", intake.callback), \
+            session.declare_subscriber(f"{messages.PREFIX}/{name}/@batch/*", intake.callback), \
+            bus.BatchPublisher(session, name, PROCESS, signer=signer) as batch:
         bus.wait_for_process(session, name, "logger", timeout_s=wait_logger_s)
         events.next_seq = int(first_event_seq)
         events.emit("start", 0.0, json.dumps({"bodies": len(plant.bodies), "mode": control.mode,
@@ -270,24 +327,26 @@ def run_plant(scenario, session, *, token: str | None = None, replay: dict | Non
                 for b in plant.bodies.values():
                     b.begin_step()
                 samples: list[tuple[str, bytes]] = []  # (body/kind, payload) of this step, for the tick
+                if orb_bodies:  # states: the compiled encoders (canonical layout, validated there)
+                    payloads = messages.encode_orbit_batch(t, k, messages.ACTUATED_MODEL, np.array([b.r for _, b in orb_bodies]),
+                                                           np.array([b.v for _, b in orb_bodies]), mu, frame)
+                    outbox.extend(zip(orb_keys, payloads))
+                    samples.extend((f"{bname}/orbit", p) for (bname, _), p in zip(orb_bodies, payloads))
+                if att_bodies:
+                    payloads = messages.encode_attitude_batch(t, k, messages.ACTUATED_MODEL, np.array([b.q for _, b in att_bodies]),
+                                                              np.array([b.w for _, b in att_bodies]))
+                    outbox.extend(zip(att_keys, payloads))
+                    samples.extend((f"{bname}/attitude", p) for (bname, _), p in zip(att_bodies, payloads))
+                published += len(orb_bodies) + len(att_bodies)
                 for bname, b in plant.bodies.items():
-                    if b.has_orbit:
-                        payload = messages.encode(messages.orbit_message(t, k, messages.ACTUATED_MODEL, b.r, b.v, mu, frame))
-                        put(messages.orbit_key(name, bname), payload)
-                        samples.append((f"{bname}/orbit", payload))
-                        published += 1
-                    if b.has_attitude:
-                        payload = messages.encode(messages.attitude_message(t, k, messages.ACTUATED_MODEL, b.q, b.w))
-                        put(messages.attitude_key(name, bname), payload)
-                        samples.append((f"{bname}/attitude", payload))
-                        published += 1
                     for kind, fields in b.sensor_samples(k, t):
                         key = messages.body_key(name, bname, kind)
                         seq = seqs.get(key, 0)
-                        payload = messages.encode({"t": t, "seq": seq, **fields}, kind)
-                        put(key, payload)
+                        payload = messages.encode({"t": t, "seq": seq, **fields})  # NaN refused; fields are the plant's
+                        outbox.append((key, payload))
                         samples.append((f"{bname}/{kind}", payload))
                         seqs[key] = seq + 1
+                flush(batch)
                 control_step = k % control.every == 0
                 if control_step:
                     j = k // control.every
@@ -344,8 +403,9 @@ def run_plant(scenario, session, *, token: str | None = None, replay: dict | Non
                     if not last and dt > done_s:
                         b.advance(dt - done_s)
                     if b.limits is not None:
-                        put(messages.body_key(name, bname, "actuators"),
-                            messages.encode({"t": t, "seq": k, **b.actuator_state()}, "actuators"))
+                        outbox.append((messages.body_key(name, bname, "actuators"),
+                                       messages.encode({"t": t, "seq": k, **b.actuator_state()})))
+                flush(batch)
                 t_reached = t
                 k += 1
                 heartbeat.beat(t=t_reached, step=k)
