@@ -49,7 +49,9 @@ def test_the_documented_plain_zenoh_client_works(tmp_path):
     lines = tap.stdout.splitlines()
     titles = {line.split()[1] for line in lines if "/@schema/" in line}
     assert titles == {"astrodyn.OrbitState", "astrodyn.AttitudeState", "astrodyn.CrossCheck", "astrodyn.Event",
-                      "astrodyn.Status"}
+                      "astrodyn.Status",  # and the closed loop's (docs/control.md):
+                      "astrodyn.Command", "astrodyn.ActuatorState", "astrodyn.GyroSample", "astrodyn.StarTrackerSample",
+                      "astrodyn.GpsSample", "astrodyn.TachometerSample", "astrodyn.Tick", "astrodyn.StepDone"}
     states = [line for line in lines if line.startswith("astrodyn/tap/sat/orbit")]
     assert len(states) == 10
     for line in states:

@@ -5,6 +5,7 @@ moves 2.4 million messages and is marked slow: `make test-all`, and `astrodyn be
 """
 
 import json
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -25,8 +26,13 @@ pytestmark = pytest.mark.network
 )
 def test_config_runs_with_nothing_lost(config, tmp_path):
     out, res = tmp_path / "run.mcap", tmp_path / "result.json"
+    # a closed-loop scene runs with the controller its header comment names (docs/control.md)
+    found = re.search(r'--controller "python (examples/[\w.]+\.py)"', config.read_text())
+    controller = ["--controller", f"python {ROOT / found.group(1)}"] if found else []
+    assert bool(found) == ("[control]" in config.read_text()), "a closed-loop config names its controller"
     proc = subprocess.run([sys.executable, "-m", "astrodyn", "run", str(config), "--out", str(out), "--quiet",
-                           "--json", str(res), "--timeout", "600"], capture_output=True, text=True, timeout=900)
+                           "--json", str(res), "--timeout", "600", *controller], capture_output=True, text=True,
+                          timeout=900)
     assert proc.returncode == 0, proc.stderr[-2000:]
     result = json.loads(res.read_text())
     scn = load(config)

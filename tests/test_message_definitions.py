@@ -57,7 +57,8 @@ def _example(kind: str) -> dict:
         elif isinstance(t, ins.StrType):
             out[f.name] = "GCRF" if t.pattern and "A-Z" in t.pattern else ("restart" if t.pattern else "a detail")
         elif isinstance(t, ins.DictType):
-            out[f.name] = {"orbit": "alive"}
+            out[f.name] = {"sc/gyro": {"t": 0.5, "w": [0.0, 1.0, 2.0]}} if isinstance(t.value_type, ins.DictType) \
+                else {"orbit": "alive"}
         else:  # pragma: no cover - a new field type needs a value here
             raise AssertionError(f"{kind}.{f.name}: no example for {t}")
     return out

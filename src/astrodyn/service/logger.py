@@ -379,7 +379,7 @@ class Logger:
         now_ns = time.time_ns()
         rest = key[len(self.prefix):] if key.startswith(self.prefix) else None
         sender = None
-        if rest is not None and rest.startswith("@batch/") and self.expect and rest[7:] not in self.expect:
+        if rest is not None and rest.startswith("@batch/") and "plant" in self.expect and rest[7:] not in self.expect:
             self.inputs += 1  # a controller's envelope of commands, addressed to the plant (docs/control.md)
             return
         if self.verifier is not None:
