@@ -224,3 +224,45 @@ def test_commands_on_a_scene_without_control_and_bad_closed_loop_arguments_are_r
     proc = _run([cfg, "--out", tmp_path / "x.mcap", "--commands", tmp_path / "none.mcap"])
     assert proc.returncode == 2 and "no such file" in proc.stderr, proc.stderr
     assert not (tmp_path / "x.mcap").exists()
+
+
+def test_serve_runs_a_free_closed_loop_with_its_controller_and_stops_cleanly(tmp_path):
+    """``serve --controller`` in free mode: real-time pacing (x20), the controller's commands
+    applied as they come (late ones counted), and the stop verb ends plant, controller and
+    logger with everything recorded."""
+    from astrodyn import bus
+
+    cfg = _config("detumble", tmp_path, **{'period = "0.1 s"': 'period = "0.1 s"\nmode = "free"'})
+    out = tmp_path / "serve.mcap"
+    serve = subprocess.Popen([*RUN[:-1], "serve", str(cfg), "--out", str(out), "--rate", "20", "--max-wall", "120",
+                              "--controller", f"python {EXAMPLES / 'detumble.py'}"],
+                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=ROOT)
+    try:
+        hello = json.loads(serve.stdout.readline())
+        with bus.open_session(connect=[hello["hub"]]) as s:
+            deadline = time.monotonic() + 90
+            status = {}
+            while time.monotonic() < deadline:  # until the loop has run 40 sim seconds
+                replies = bus.send_control(s, "detumble", "status", token=hello["control_token"], timeout_s=10)
+                status = replies[0] if replies else {}
+                if (status.get("processes", {}).get("plant", {}).get("t") or 0) > 40:
+                    break
+                time.sleep(0.5)
+            assert status["processes"]["plant"]["running"] and status["state"] == "running", status
+            bus.send_control(s, "detumble", "stop", token=hello["control_token"], timeout_s=60)
+        stdout, stderr = serve.communicate(timeout=90)
+    finally:
+        if serve.poll() is None:
+            os.kill(serve.pid, signal.SIGKILL)
+    assert serve.returncode == 0, stderr[-2000:]
+    summary = json.loads(stdout.strip().splitlines()[-1])
+    assert summary["failures"] == [] and Path(summary["file"]).exists()
+    run = load(summary["file"])
+    commands = run.channels["astrodyn/detumble/sc/command"]
+    att = run.channels["astrodyn/detumble/sc/attitude"]
+    assert len(commands) > 100 and set(att.model) == {"actuated"}
+    assert np.array_equal(att.seq, np.arange(len(att)))  # no gap
+    energy = 0.5 * np.sum(np.array([100.0, 120.0, 80.0]) * att.w * att.w, axis=1)
+    assert energy[-1] < energy[0]  # the commands acted
+    stop = [e for e in run.events if e["process"] == "plant" and e["kind"] == "stop"]
+    assert stop and json.loads(stop[0]["detail"])["reason"] == "stop requested"

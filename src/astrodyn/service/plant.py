@@ -46,11 +46,12 @@ import time
 from pathlib import Path
 
 import numpy as np
+import zenoh
 
 from astrodyn import auth, bus, messages
 from astrodyn.plant import CommandRefused, Plant, command_id
 from astrodyn.service.children import share_fate_with_supervisor
-from astrodyn.service.propagator import BATCH_THRESHOLD
+from astrodyn.service.propagator import BATCH_THRESHOLD, CommandVerifier, Pacer, command_key, obey_commands
 from astrodyn.service.signals import catch_stop_signals
 
 __all__ = ["main", "run_plant", "recorded_commands", "tick_payload", "ControllerTimeout", "PROCESS"]
@@ -205,15 +206,20 @@ def recorded_commands(path: str | Path, scenario: str) -> dict[int, list[dict]]:
 
 def run_plant(scenario, session, *, token: str | None = None, replay: dict | None = None,
               max_steps: int | None = None, first_event_seq: int = 0, wait_logger_s: float = 30.0,
-              log=print) -> dict:
+              real_time_factor: float | None = None, endless: bool = False, log=print) -> dict:
     """Run the closed loop of ``scenario`` (module docstring); returns a summary dict.
-    Raises :class:`ControllerTimeout` when a controller does not answer in time."""
+
+    ``real_time_factor``: pace sim time at this many sim seconds per wall second (``serve``
+    passes its rate); default: the scenario's for free mode, none (as fast as the
+    controllers answer) for lockstep and re-simulation.  ``endless``: keep going past the
+    scenario's duration until stopped (``serve``).  Supervisor commands on ``@command``
+    (pause, resume, rate, stop) are obeyed, as by the propagators."""
     plant = Plant(scenario)
     control = scenario.control
     name = scenario.name
     rate = scenario.rate
     dt = 1.0 / rate
-    n_steps = scenario.n_steps if max_steps is None else min(scenario.n_steps, int(max_steps))
+    n_steps = (2**53 if endless else scenario.n_steps) if max_steps is None else min(scenario.n_steps, int(max_steps))
     lockstep = control.mode == "lockstep" and replay is None
     expected = control.controllers if lockstep else ()
     signer = bus.process_signer(PROCESS)
@@ -260,7 +266,10 @@ def run_plant(scenario, session, *, token: str | None = None, replay: dict | Non
     mu = scenario.central_body.mu
     t_reached = 0.0
     wall0 = time.monotonic()
-    pace_factor = scenario.real_time_factor if control.mode == "free" and replay is None else math.inf
+    if real_time_factor is None:
+        real_time_factor = scenario.real_time_factor if control.mode == "free" and replay is None else math.inf
+    pacer = Pacer(real_time_factor)
+    commands_from = CommandVerifier()
 
     eps = 1e-9 * dt  # "at t": within round-off of the step's time
 
@@ -310,7 +319,8 @@ def run_plant(scenario, session, *, token: str | None = None, replay: dict | Non
             session.declare_subscriber(f"{messages.PREFIX}/{name}/*/command", intake.callback), \
             session.declare_subscriber(f"{messages.PREFIX}/{name}/@done/*", intake.callback), \
             session.declare_subscriber(f"{messages.PREFIX}/{name}/@batch/*", intake.callback), \
-            bus.BatchPublisher(session, name, PROCESS, signer=signer) as batch:
+            bus.BatchPublisher(session, name, PROCESS, signer=signer) as batch, \
+            session.declare_subscriber(command_key(name), zenoh.handlers.FifoChannel(256)) as supervisor:
         bus.wait_for_process(session, name, "logger", timeout_s=wait_logger_s)
         events.next_seq = int(first_event_seq)
         events.emit("start", 0.0, json.dumps({"bodies": len(plant.bodies), "mode": control.mode,
@@ -322,6 +332,16 @@ def run_plant(scenario, session, *, token: str | None = None, replay: dict | Non
         try:
             while k < n_steps:
                 t = k * dt
+                obey_commands(supervisor, pacer, t, stopping, heartbeat, commands_from)  # serve's pause, rate, stop
+                wait = pacer.wait_time(t)
+                while (wait > 0 or pacer.paused) and not stopping["why"]:
+                    time.sleep(min(wait, 0.05) if wait > 0 else 0.05)
+                    drain(None)  # free mode: commands keep arriving while we wait
+                    heartbeat.beat(t=t_reached, paused=pacer.paused)
+                    obey_commands(supervisor, pacer, t, stopping, heartbeat, commands_from)
+                    wait = pacer.wait_time(t)
+                if stopping["why"]:
+                    break
                 for f in plant.faults_at(t):
                     events.emit("fault", t, Plant.fault_detail(f))
                 for b in plant.bodies.values():
@@ -368,6 +388,7 @@ def run_plant(scenario, session, *, token: str | None = None, replay: dict | Non
                                 f"{control.timeout:g} s" + (f" (also {', '.join(map(repr, waiting[1:]))})" if waiting[1:] else ""))
                         drain(min(left, 0.5))
                         heartbeat.beat(t=t, step=k, waiting=waiting)
+                        obey_commands(supervisor, pacer, t, stopping, heartbeat, commands_from)
                 else:
                     drain(None)
                 if stopping["why"]:
@@ -409,10 +430,6 @@ def run_plant(scenario, session, *, token: str | None = None, replay: dict | Non
                 t_reached = t
                 k += 1
                 heartbeat.beat(t=t_reached, step=k)
-                if math.isfinite(pace_factor):
-                    wait = wall0 + (k * dt) / pace_factor - time.monotonic()
-                    if wait > 0:
-                        time.sleep(wait)
         except ControllerTimeout as exc:
             failure = str(exc)
             events.emit("error", t_reached, failure)
@@ -465,6 +482,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--commands", default=None, metavar="REC.mcap",
                     help="re-simulate: apply the commands recorded in REC where they were applied (no controllers)")
     ap.add_argument("--max-steps", type=int, default=None, help="stop after this many output steps")
+    ap.add_argument("--real-time-factor", type=float, default=None,
+                    help="sim seconds per wall second (default: the scenario's in free mode, inf in lockstep)")
+    ap.add_argument("--endless", action="store_true", help="keep going past the scenario's duration until stopped (serve)")
     ap.add_argument("--first-event-seq", type=int, default=0, help="seq of this process's first event")
     ap.add_argument("--wait-logger", type=float, default=30.0, help="seconds to wait for the logger")
     bus.add_bus_arguments(ap)
@@ -495,7 +515,8 @@ def main(argv: list[str] | None = None) -> int:
     try:
         with bus.session_from_args(args) as session:
             summary = run_plant(scenario, session, token=token, replay=replay, max_steps=args.max_steps,
-                                first_event_seq=args.first_event_seq, wait_logger_s=args.wait_logger)
+                                first_event_seq=args.first_event_seq, wait_logger_s=args.wait_logger,
+                                real_time_factor=args.real_time_factor, endless=args.endless)
     except bus.BusError as exc:
         print(f"plant: {exc}", file=sys.stderr)
         return 1

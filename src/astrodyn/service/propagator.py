@@ -41,7 +41,7 @@ from astrodyn.service.children import share_fate_with_supervisor
 from astrodyn.service.signals import catch_stop_signals
 from astrodyn.simulate import AttitudeEngine, OrbitEngine
 
-__all__ = ["Pacer", "PropagatorOptions", "run_propagator", "command_key"]
+__all__ = ["Pacer", "PropagatorOptions", "run_propagator", "command_key", "CommandVerifier", "obey_commands"]
 
 KINDS = ("orbit", "attitude")
 
@@ -199,12 +199,12 @@ def run_propagator(scenario: Scenario, session, opts: PropagatorOptions, log=pri
                 rows_done = 0
                 for j in range(tb.shape[0]):
                     t = float(tb[j])
-                    _obey(commands, pacer, t, stopping, heartbeat, commands_from)
+                    obey_commands(commands, pacer, t, stopping, heartbeat, commands_from)
                     wait = pacer.wait_time(t)
                     while wait > 0 or pacer.paused:
                         time.sleep(min(wait, 0.05) if wait > 0 else 0.05)
                         heartbeat.beat(t=t_reached, paused=pacer.paused)
-                        _obey(commands, pacer, t, stopping, heartbeat, commands_from)
+                        obey_commands(commands, pacer, t, stopping, heartbeat, commands_from)
                         wait = pacer.wait_time(t)
                     if stopping["why"]:
                         raise _Stop
@@ -384,7 +384,7 @@ class CommandVerifier:
         return False
 
 
-def _obey(commands, pacer: Pacer, t: float, stopping: dict, heartbeat, commands_from: CommandVerifier) -> None:
+def obey_commands(commands, pacer: Pacer, t: float, stopping: dict, heartbeat, commands_from: CommandVerifier) -> None:
     """Apply pending supervisor commands (malformed ones are ignored with a note on stderr,
     unauthenticated ones refused, see :class:`CommandVerifier`)."""
     while (sample := commands.try_recv()) is not None:

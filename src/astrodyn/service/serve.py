@@ -53,9 +53,10 @@ from pathlib import Path
 
 from astrodyn import auth, bus
 from astrodyn.scenario import ScenarioError, load, plan as make_plan
-from astrodyn.service.children import Child, logger_command, propagator_command, work_directory
+from astrodyn.service.children import Child, logger_command, plant_command, propagator_command, work_directory
 from astrodyn.service.output import check_output_path
 from astrodyn.service.propagator import command_key
+from astrodyn.service.runner import check_closed_loop_arguments, controller_argv
 from astrodyn.service.signals import StopFlag
 from astrodyn.service.supervision import RestartBudget, contiguous_end, next_event_seq, wait_until_gone
 from astrodyn.service.viewer import add_foxglove_argument, viewer_command
@@ -68,7 +69,8 @@ class Supervisor:
 
     def __init__(self, scenario, config_path: Path, out: Path, session, hub: str, *, rate: float,
                  roll_size: int | None = None, roll_interval: float | None = None, connect=(), tmp: Path,
-                 max_restarts: int = 5, zenoh_config: str | None = None, foxglove_port: int | None = None):
+                 max_restarts: int = 5, zenoh_config: str | None = None, foxglove_port: int | None = None,
+                 controllers: list[str] | None = None, token_file: Path | None = None):
         self.scenario = scenario
         self.session = session
         self.out = Path(out)
@@ -103,8 +105,10 @@ class Supervisor:
         self.logger_attempt = 0
         self.children: dict[str, Child] = {"logger": Child("logger", logger_argv, tmp, env=self.child_env)}
         bus.wait_for_process(session, scenario.name, "logger", timeout_s=30.0)
-        self._argv = {kind: [*propagator_command(kind), str(config_path), "--endless", *connect_args]
-                      for kind in self.propagators}
+        self._argv = {kind: [*(plant_command() if kind == "plant" else propagator_command(kind)), str(config_path),
+                             "--endless", *connect_args] for kind in self.propagators}
+        if "plant" in self._argv and token_file is not None:  # outside controllers present serve's token
+            self._argv["plant"] += ["--control-token-file", str(token_file)]
         self.schedule: tuple[float, float] | None = None  # (wall, t): sim t due at that monotonic wall time
         for kind in self.propagators:
             self.children[kind] = Child(kind, [*self._argv[kind], "--real-time-factor", str(self.rate)], tmp, env=self.child_env)
@@ -115,6 +119,14 @@ class Supervisor:
             self.budgets["viewer"] = RestartBudget("viewer")
             self.children["viewer"] = Child("viewer", self._argv["viewer"], tmp, env=self.child_env)
             self.viewer_url = f"ws://127.0.0.1:{foxglove_port}"
+        self.controllers: dict[str, Child] = {}
+        names = scenario.control.controllers if scenario.control is not None else ()
+        for n, cmd in enumerate(controllers or []):  # closed loop: the user's programs, ended with us
+            env = {**self.child_env, "ASTRODYN_SCENARIO": scenario.name, "ASTRODYN_CONTROLLER": names[n],
+                   "ASTRODYN_CONNECT": hub}
+            if token_file is not None:
+                env[auth.TOKEN_ENV] = str(token_file)
+            self.controllers[names[n]] = Child(f"controller-{names[n]}", controller_argv(cmd), tmp, env=env, foreign=True)
         self.commands = session.declare_publisher(command_key(scenario.name))
         self.beats = bus.HeartbeatMonitor(session, scenario.name, verifier=auth.Verifier(secret))
         self.alive = bus.AliveWatcher(session, scenario.name)
@@ -218,6 +230,10 @@ class Supervisor:
                 else:
                     msg = f"{self.budgets['logger'].refusal()}; last: {msg}"
                 self.failures.append(msg)
+                self.state = "failed"
+                continue
+            if name == "plant":  # a closed loop is not restarted: its controllers' state lives outside astrodyn
+                self.failures.append(msg + " (a closed-loop plant is not restarted; docs/control.md)")
                 self.state = "failed"
                 continue
             if name in self.propagators and self.state in ("running", "paused") and n < self.max_restarts \
@@ -380,6 +396,9 @@ class Supervisor:
         return final
 
     def close(self) -> None:
+        for ch in self.controllers.values():
+            ch.stop(signal.SIGTERM, timeout=5)
+            ch.close()
         for ch in self.children.values():
             ch.stop()
             ch.close()
@@ -411,12 +430,15 @@ def main(argv: list[str] | None = None) -> int:
                     help="answer control verbs from anyone who reaches the bus (default: only with this run's control "
                          "token, printed at start and stored in a 0600 file beside --out; docs/security.md)")
     add_foxglove_argument(ap, "the running scene")
+    ap.add_argument("--controller", action="append", default=None, metavar="CMD",
+                    help="closed loop: start this controller program under serve (as with run; docs/control.md)")
     args = ap.parse_args(argv)
     try:
         scenario = load(args.config)
         out = Path(args.out) if args.out else (scenario.output_path or Path("out") / f"{scenario.name}.mcap")
         out.parent.mkdir(parents=True, exist_ok=True)
         check_output_path(out, inputs=(args.config, args.zenoh_config))
+        check_closed_loop_arguments(scenario, args.controller or [], None, out)
         rate = args.rate if args.rate is not None else scenario.real_time_factor
         try:
             rate = bus.parse_rate_factor(rate)
@@ -429,15 +451,16 @@ def main(argv: list[str] | None = None) -> int:
     hub = bus.loopback_endpoint(args.port or bus.free_port())
     stop_signal = StopFlag()
     with work_directory(out, "serve") as tmp, bus.open_session(listen=[hub], config_file=args.zenoh_config) as session:
-        sup = Supervisor(scenario, Path(args.config), out, session, hub, rate=rate, roll_size=args.roll_size,
-                         roll_interval=args.roll_interval, connect=args.connect, tmp=Path(tmp),
-                         zenoh_config=args.zenoh_config,
-                         foxglove_port=None if args.foxglove is None else (args.foxglove or bus.free_port()))
         token, token_file = None, None
         if not args.open_control:
             token, token_file = auth.new_token(), control_token_path(out)
             token_file.unlink(missing_ok=True)  # a previous run's token: never valid again
             auth.write_private_file(token_file, token.encode())
+        sup = Supervisor(scenario, Path(args.config), out, session, hub, rate=rate, roll_size=args.roll_size,
+                         roll_interval=args.roll_interval, connect=args.connect, tmp=Path(tmp),
+                         zenoh_config=args.zenoh_config,
+                         foxglove_port=None if args.foxglove is None else (args.foxglove or bus.free_port()),
+                         controllers=args.controller, token_file=token_file)
         print(json.dumps({"serving": scenario.name, "hub": hub, "control": f"astrodyn/{scenario.name}/@control/*",
                           "out": str(out), "real_time_factor": rate, "foxglove": sup.viewer_url, "control_token": token,
                           "control_token_file": None if token_file is None else str(token_file)}), flush=True)
