@@ -249,6 +249,14 @@ def test_serve_runs_a_free_closed_loop_with_its_controller_and_stops_cleanly(tmp
                     break
                 time.sleep(0.5)
             assert status["processes"]["plant"]["running"] and status["state"] == "running", status
+            # a fault on demand through the control verb; a bad one is refused naming the field
+            bad = bus.send_control(s, "detumble", "fault", {"body": "ghost", "fault": "gyro_bias", "value": [1, 0, 0]},
+                                   token=hello["control_token"], timeout_s=10)
+            assert "body: expected a body with actuators or sensors (sc), got \"ghost\"" in bad[0]["error"], bad
+            ok = bus.send_control(s, "detumble", "fault", {"body": "sc", "fault": "gyro_bias", "value": [1e-3, 0, 0]},
+                                  token=hello["control_token"], timeout_s=10)
+            assert "error" not in ok[0], ok
+            time.sleep(0.5)
             bus.send_control(s, "detumble", "stop", token=hello["control_token"], timeout_s=60)
         stdout, stderr = serve.communicate(timeout=90)
     finally:
@@ -264,5 +272,12 @@ def test_serve_runs_a_free_closed_loop_with_its_controller_and_stops_cleanly(tmp
     assert np.array_equal(att.seq, np.arange(len(att)))  # no gap
     energy = 0.5 * np.sum(np.array([100.0, 120.0, 80.0]) * att.w * att.w, axis=1)
     assert energy[-1] < energy[0]  # the commands acted
+    injected = [e for e in run.events if e["process"] == "plant" and e["kind"] == "fault"
+                and json.loads(e["detail"]) == {"body": "sc", "fault": "gyro_bias", "value": [1e-3, 0.0, 0.0]}]
+    assert len(injected) == 1, run.events
+    gyro = run.channels["astrodyn/detumble/sc/gyro"]
+    after = gyro.t >= injected[0]["t"]  # from the step the fault began: gyro - truth has the new bias
+    w_true = att.w[np.searchsorted(att.t, gyro.t[after])]
+    assert abs(np.mean(gyro.w[after, 0] - w_true[:, 0]) - 1e-3) < 5 * 1e-5 / np.sqrt(after.sum())  # the new bias
     stop = [e for e in run.events if e["process"] == "plant" and e["kind"] == "stop"]
     assert stop and json.loads(stop[0]["detail"])["reason"] == "stop requested"

@@ -283,6 +283,11 @@ class Plant:
                 b.faults.efficiency = float(f.value)
         return begun
 
+    def inject(self, fault: Fault) -> None:
+        """A fault from outside (the ``fault`` control verb), beginning at the next step."""
+        self._faults.append(fault)
+        self._faults.sort(key=lambda f: f.t)
+
     @staticmethod
     def fault_detail(f: Fault) -> str:
         """The detail of the ``fault`` event (JSON)."""

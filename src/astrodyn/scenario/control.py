@@ -54,7 +54,7 @@ import numpy as np
 from astrodyn.scenario.fields import Ctx, Table, check, choice, field_name, integer, quantity, vector
 
 __all__ = ["Wheel", "Actuators", "Sensor", "Sensors", "Fault", "Control", "CONTROL_MODES", "FAULTS",
-           "parse_actuators", "parse_sensors", "parse_control", "steps_per"]
+           "parse_actuators", "parse_sensors", "parse_control", "parse_fault", "plant_bodies", "steps_per"]
 
 CONTROL_MODES = ("lockstep", "free")
 FAULTS = ("gyro_bias", "sensor_dropout", "wheel_failed", "thruster_efficiency")
@@ -236,10 +236,15 @@ def parse_sensors(ctx: Ctx, data: Any, path: str, rate: float, control_every: in
     return Sensors(**found)
 
 
-def _fault(ctx: Ctx, data: Any, path: str, duration: float, plant_bodies: dict[str, tuple[Actuators | None, Sensors | None]]) -> Fault:
-    tb = Table(ctx, data, path, ("t", "body", "fault", "value", "sensor", "wheel", "duration"))
-    t = quantity(ctx, tb.get("t"), "time", f"{path}.t")
-    check(ctx, 0 <= t <= duration, f"{path}.t", f"0 <= t <= the scenario's duration ({duration:g} s)", tb.get("t"))
+def parse_fault(ctx: Ctx, data: Any, path: str, duration: float,
+                plant_bodies: dict[str, tuple[Actuators | None, Sensors | None]], t: float | None = None) -> Fault:
+    """One fault table (``[[control.faults]]``, or the ``fault`` control verb's arguments,
+    which carry no ``t``: pass the time it begins as ``t``)."""
+    tb = Table(ctx, data, path, ("body", "fault", "value", "sensor", "wheel", "duration") if t is not None else
+               ("t", "body", "fault", "value", "sensor", "wheel", "duration"))
+    if t is None:
+        t = quantity(ctx, tb.get("t"), "time", f"{path}.t")
+        check(ctx, 0 <= t <= duration, f"{path}.t", f"0 <= t <= the scenario's duration ({duration:g} s)", tb.get("t"))
     body = field_name(ctx, tb.get("body"), f"{path}.body")
     if body not in plant_bodies:
         names = ", ".join(sorted(plant_bodies)) or "none"
@@ -299,6 +304,11 @@ def parse_control(ctx: Ctx, data: Any, rate: float, duration: float,
     faults_raw = tb.get("faults", [])
     if not isinstance(faults_raw, list) or len(faults_raw) > MAX_FAULTS:
         raise ctx.error("control.faults", f"a list of at most {MAX_FAULTS} fault tables [[control.faults]]", faults_raw)
-    faults = tuple(_fault(ctx, f, f"control.faults[{k}]", duration, plant_bodies) for k, f in enumerate(faults_raw))
+    faults = tuple(parse_fault(ctx, f, f"control.faults[{k}]", duration, plant_bodies) for k, f in enumerate(faults_raw))
     return Control(mode=mode, period=every / rate, every=every, controllers=controllers, timeout=timeout, seed=seed,
                    faults=tuple(sorted(faults, key=lambda f: f.t)))
+
+
+def plant_bodies(scenario) -> dict[str, tuple[Actuators | None, Sensors | None]]:
+    """The scene's bodies with actuators or sensors, and those (what faults may name)."""
+    return {b.name: (b.actuators, b.sensors) for b in scenario.bodies if b.in_plant}

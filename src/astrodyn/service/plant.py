@@ -271,6 +271,16 @@ def run_plant(scenario, session, *, token: str | None = None, replay: dict | Non
     pacer = Pacer(real_time_factor)
     commands_from = CommandVerifier()
 
+    def inject_fault(cmd: dict) -> None:
+        """serve's ``fault`` verb (validated by serve): begins at the next step."""
+        from astrodyn.scenario.control import parse_fault, plant_bodies
+        from astrodyn.scenario.fields import Ctx
+
+        plant.inject(parse_fault(Ctx("fault"), cmd["fault"], "fault", math.inf, plant_bodies(scenario),
+                                 t=t_reached + dt))
+
+    verbs = {"fault": inject_fault}
+
     eps = 1e-9 * dt  # "at t": within round-off of the step's time
 
     def refuse(bname: str, cmd: dict, why: str) -> None:
@@ -332,13 +342,13 @@ def run_plant(scenario, session, *, token: str | None = None, replay: dict | Non
         try:
             while k < n_steps:
                 t = k * dt
-                obey_commands(supervisor, pacer, t, stopping, heartbeat, commands_from)  # serve's pause, rate, stop
+                obey_commands(supervisor, pacer, t, stopping, heartbeat, commands_from, verbs)  # serve's pause, rate, stop
                 wait = pacer.wait_time(t)
                 while (wait > 0 or pacer.paused) and not stopping["why"]:
                     time.sleep(min(wait, 0.05) if wait > 0 else 0.05)
                     drain(None)  # free mode: commands keep arriving while we wait
                     heartbeat.beat(t=t_reached, paused=pacer.paused)
-                    obey_commands(supervisor, pacer, t, stopping, heartbeat, commands_from)
+                    obey_commands(supervisor, pacer, t, stopping, heartbeat, commands_from, verbs)
                     wait = pacer.wait_time(t)
                 if stopping["why"]:
                     break
@@ -388,7 +398,7 @@ def run_plant(scenario, session, *, token: str | None = None, replay: dict | Non
                                 f"{control.timeout:g} s" + (f" (also {', '.join(map(repr, waiting[1:]))})" if waiting[1:] else ""))
                         drain(min(left, 0.5))
                         heartbeat.beat(t=t, step=k, waiting=waiting)
-                        obey_commands(supervisor, pacer, t, stopping, heartbeat, commands_from)
+                        obey_commands(supervisor, pacer, t, stopping, heartbeat, commands_from, verbs)
                 else:
                     drain(None)
                 if stopping["why"]:

@@ -384,9 +384,11 @@ class CommandVerifier:
         return False
 
 
-def obey_commands(commands, pacer: Pacer, t: float, stopping: dict, heartbeat, commands_from: CommandVerifier) -> None:
+def obey_commands(commands, pacer: Pacer, t: float, stopping: dict, heartbeat, commands_from: CommandVerifier,
+                  more_verbs: dict | None = None) -> None:
     """Apply pending supervisor commands (malformed ones are ignored with a note on stderr,
-    unauthenticated ones refused, see :class:`CommandVerifier`)."""
+    unauthenticated ones refused, see :class:`CommandVerifier`); ``more_verbs``: verb ->
+    handler of the command dict, for a process's own verbs (the plant's ``fault``)."""
     while (sample := commands.try_recv()) is not None:
         if not commands_from.accepts(sample):
             continue
@@ -402,6 +404,8 @@ def obey_commands(commands, pacer: Pacer, t: float, stopping: dict, heartbeat, c
             elif verb == "stop":
                 stopping["why"] = "stop requested"
                 pacer.resume(t)
+            elif more_verbs and verb in more_verbs:
+                more_verbs[verb](cmd)
             else:
                 raise ValueError(f"verb: expected pause | resume | rate | stop, got {verb!r}")
         except (ValueError, KeyError, TypeError) as exc:

@@ -13,6 +13,9 @@ pause      --                                  the new status (propagators hold 
 resume     --                                  the new status (pacing re-anchored at the current t)
 rate       ``{"factor": x}`` (1e-3..1e6, "inf")  the new status
 stop       --                                  the final summary once the file is finished
+fault      ``{"body", "fault", ...}``          closed loop only: a fault from the plant's next step
+                                               (the keys of ``[[control.faults]]`` without ``t``;
+                                               docs/control.md); recorded as an event
 =========  ==================================  =============================================
 
 From Python::
@@ -127,6 +130,7 @@ class Supervisor:
             if token_file is not None:
                 env[auth.TOKEN_ENV] = str(token_file)
             self.controllers[names[n]] = Child(f"controller-{names[n]}", controller_argv(cmd), tmp, env=env, foreign=True)
+        self.verbs = (*bus.CONTROL_VERBS, "fault") if "plant" in self.propagators else bus.CONTROL_VERBS
         self.commands = session.declare_publisher(command_key(scenario.name))
         self.beats = bus.HeartbeatMonitor(session, scenario.name, verifier=auth.Verifier(secret))
         self.alive = bus.AliveWatcher(session, scenario.name)
@@ -177,10 +181,23 @@ class Supervisor:
             self.command("rate", factor=factor)
             self.schedule = (time.monotonic(), self.status()["t"])
             request.reply(self.status())
+        elif verb == "fault" and "plant" in self.propagators:
+            from astrodyn.scenario.control import parse_fault, plant_bodies
+            from astrodyn.scenario.fields import Ctx
+
+            try:  # checked here, so the caller learns what is wrong; the plant applies it at its next step
+                f = parse_fault(Ctx("fault"), request.args, "fault", math.inf, plant_bodies(self.scenario), t=0.0)
+            except ScenarioError as exc:
+                request.error(str(exc).removeprefix("fault: "))
+                return False
+            self.command("fault", fault=request.args)
+            self.events.emit("fault_requested", self.status()["t"], json.dumps(
+                {"body": f.body, "fault": f.fault}, separators=(",", ":")))
+            request.reply(self.status())
         elif verb == "stop":
             return True
         else:
-            request.error(f"{verb}: expected one of {', '.join(bus.CONTROL_VERBS)}")
+            request.error(f"{verb}: expected one of {', '.join(self.verbs)}")
         return False
 
     def check_children(self) -> None:
@@ -466,7 +483,7 @@ def main(argv: list[str] | None = None) -> int:
                           "control_token_file": None if token_file is None else str(token_file)}), flush=True)
         stop_requests: list[bus.ControlRequest] = []
         try:
-            with bus.ControlServer(session, scenario.name, token=token) as control:
+            with bus.ControlServer(session, scenario.name, sup.verbs, token=token) as control:
                 t_end = None if args.max_wall is None else time.monotonic() + args.max_wall
                 while True:
                     stopping = False
