@@ -42,7 +42,7 @@ from astrodyn.attitude.integrators import HeldInputsBody
 from astrodyn.attitude.torques import ConstantTorque
 from astrodyn.attitude.wheels import ReactionWheels, step_with_wheels
 from astrodyn.orbit import propagate
-from astrodyn.orbit.maneuvers import ConstantThrust
+from astrodyn.orbit.maneuvers import G0, ConstantThrust
 from astrodyn.orbit.perturbations import propagate_perturbed
 from astrodyn.rotation import dcm_from_quat
 from astrodyn.scenario import Body, Scenario
@@ -187,8 +187,10 @@ class PlantBody:
                 out = propagate_perturbed(self.r, self.v, float(dt), self.mu, [burn], rtol=1e-13, atol=1e-15,
                                           error_estimate=False)
                 r1, v1 = np.asarray(out.r).reshape(3), np.asarray(out.v).reshape(3)
+                # the rocket equation per step, ln(m0 / m1) = -log1p(-mdot dt / m0): accurate to
+                # round-off where log(m0 / m1) of a ratio near 1 would lose digits
                 self.dv_total += float(np.linalg.norm(f)) / self.mass * dt if math.isinf(self.limits.isp) else \
-                    self.limits.isp * 9.80665 * math.log(self.mass / burn.mass_at(dt))
+                    -self.limits.isp * G0 * math.log1p(-burn.mdot * dt / self.mass)
                 self.mass = burn.mass_at(dt)
                 self.r, self.v = r1, v1
             else:
