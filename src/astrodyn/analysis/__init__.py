@@ -29,6 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
+from astrodyn.analysis.closed_loop import CLOSED_LOOP_FIGURES, closed_loop_section
 from astrodyn.recording import RecordingError, load
 
 __all__ = ["analyze", "main", "FIGURES"]
@@ -46,6 +47,7 @@ FIGURES = {
     "polhode": "polhode on the momentum sphere",
     "attitude-drift": "kinetic energy and inertial angular momentum drift",
     "top-angles": "precession and nutation",
+    **CLOSED_LOOP_FIGURES,
 }
 
 _SEQS = ("121", "123", "131", "132", "212", "213", "231", "232", "312", "313", "321", "323")
@@ -105,13 +107,16 @@ def analyze(path: str | os.PathLike, out: str | os.PathLike | None = None, seq: 
             figs.append(("euler", fg.euler_angles(name, tr.t, am["euler"], seq, Path(f"{stem}-euler.png"))))
             figs.append(("quaternion", fg.quaternion(name, tr.t, tr.q, Path(f"{stem}-quaternion.png"))))
             figs.append(("rates", fg.body_rates(name, tr.t, tr.w, Path(f"{stem}-rates.png"))))
-            if inertia is not None:
+            if inertia is not None and "actuated" not in set(tr.model):  # commanded torques: no polhode, no drift
                 figs.append(("polhode", fg.polhode(name, am["h_body"], inertia.inertia, Path(f"{stem}-polhode.png"))))
                 figs.append(("attitude-drift", fg.attitude_drift(name, tr.t, am["energy_drift"], am["h_inertial_drift"],
                                                                  Path(f"{stem}-attitude-drift.png"))))
                 if inertia.is_top:
                     figs.append(("top-angles", fg.top_angles(name, tr.t, am["precession"], am["nutation"], Path(f"{stem}-top-angles.png"))))
         numbers.update(_conserved(run.scenario, name, body))
+        section, more = closed_loop_section(run, name, stem)  # commands, actuators, momentum, pointing, dv
+        numbers.update(section)
+        figs += more
         report["bodies"][name] = numbers
         report["figures"][name] = {kind: p.name for kind, p in figs}
     _write_markdown(report, out / "report.md")
@@ -154,7 +159,8 @@ _LABELS = {
 
 
 def _rows(section: dict) -> list[tuple[str, str]]:
-    return [(_LABELS.get(k, k), ", ".join(v) if isinstance(v, list) else _fmt(v)) for k, v in section.items()]
+    return [(_LABELS.get(k, k), ", ".join(_fmt(x) for x in v) if isinstance(v, list) else _fmt(v))
+            for k, v in section.items()]
 
 
 def at_a_glance(report: dict) -> list[str]:

@@ -59,6 +59,26 @@ def _stacked(t, series, labels, title, path, dots=(), log=False):
     return _save(fig, path)
 
 
+def stacked_pairs(t, a, b, label_a: str, label_b: str, ylabel: str, title: str, path: Path) -> Path:
+    """One panel per column of ``a`` (m, n) against ``t`` (m,), with the same column of ``b``
+    (or None) dashed in the same panel: commanded vs applied, speed vs limit."""
+    a = np.asarray(a, dtype=np.float64)
+    ts, tl = time_axis(np.asarray(t, dtype=np.float64))
+    n = a.shape[1]
+    fig, axes = plt.subplots(n, 1, figsize=(7.5, 1.6 + 1.45 * n), sharex=True, constrained_layout=True)
+    axes = np.atleast_1d(axes)
+    for k, ax in enumerate(axes):
+        ax.plot(ts, a[:, k], lw=1.0, label=label_a)
+        if b is not None:
+            ax.plot(ts, np.asarray(b, dtype=np.float64)[:, k], "--", lw=1.0, label=label_b)
+        ax.set_ylabel(f"{ylabel} [{k}]" if n > 1 else ylabel)
+    if b is not None:
+        axes[0].legend(loc="best", fontsize=7)
+    axes[-1].set_xlabel(tl)
+    fig.suptitle(title)
+    return _save(fig, path)
+
+
 def orbit_3d(name: str, r: np.ndarray, radius: float | None, path: Path) -> Path:
     """Trajectory in the inertial frame (km) with the central body as a wire sphere."""
     fig = plt.figure(figsize=(6.5, 6.0), constrained_layout=True)
