@@ -66,6 +66,7 @@ class _Faults:
     gyro_bias: np.ndarray | None = None
     dropouts: dict = field(default_factory=dict)  # sensor kind -> end time (s)
     failed_wheels: set = field(default_factory=set)
+    stuck_wheels: set = field(default_factory=set)
     efficiency: float = 1.0
 
 
@@ -152,6 +153,24 @@ class PlantBody:
             self.step_dv = dv if self.step_dv is None else self.step_dv + dv
         self.step_applied.append(command_id(cmd["sender"], cmd["seq"]))
 
+    def seize_wheel(self, k: int) -> None:
+        """Wheel ``k``'s rotor seizes: from now on it turns with the body (relative speed 0).
+        Internal, so the total angular momentum is kept: ``(I_kin + J_k a_k a_k^T) w' =
+        I_kin w + h_k a_k`` (body axes), then ``h_k = J_k a_k . w'``; the body becomes a
+        rigid body of inertia ``I_kin`` plus the locked rotors'."""
+        if self.wheels is None or k in self.faults.stuck_wheels:
+            return
+        a, J = self.wheels.axes, self.wheels.rotor_inertia
+        locked = sorted(self.faults.stuck_wheels | {k})
+        free = [j for j in range(self.wheels.n) if j not in locked]
+        i_eff = self.wheels.kinematic_inertia(self.inertia) + np.einsum("k,ki,kj->ij", J[locked], a[locked], a[locked])
+        H = self.wheels.kinematic_inertia(self.inertia) @ self.w + self.h @ a  # body axes, before
+        self.w = np.linalg.solve(i_eff, H - self.h[free] @ a[free])
+        self.h = self.h.copy()
+        self.h[locked] = J[locked] * (a[locked] @ self.w)
+        self.faults.stuck_wheels.add(k)
+        self._held_locked = HeldInputsBody(i_eff)
+
     # ------------------------------------------------------------------ motion
     def _thrust_inertial(self) -> np.ndarray:
         f = self.thrust * self.faults.efficiency
@@ -163,7 +182,9 @@ class PlantBody:
         """Move the body from t to t + dt with the held commands."""
         if self.has_attitude:
             torqued = bool(np.any(self.torque))
-            if self.wheels is not None:
+            if self.wheels is not None and self.faults.stuck_wheels:
+                self._advance_with_locked_wheels(dt, torqued)
+            elif self.wheels is not None:
                 cmd = self.wheel_command.copy()
                 for k in self.faults.failed_wheels:
                     cmd[k] = 0.0
@@ -196,6 +217,23 @@ class PlantBody:
             else:
                 r1, v1 = propagate(self.r, self.v, float(dt), self.mu)
                 self.r, self.v = np.asarray(r1), np.asarray(v1)
+
+    def _advance_with_locked_wheels(self, dt: float, torqued: bool) -> None:
+        """:meth:`advance`'s attitude with seized wheels: the free wheels as in
+        :func:`astrodyn.attitude.wheels.step_with_wheels`, the seized ones part of the body."""
+        a, J = self.wheels.axes, self.wheels.rotor_inertia
+        free = np.ones(self.wheels.n, dtype=bool)
+        free[sorted(self.faults.stuck_wheels)] = False
+        cmd = self.wheel_command.copy()
+        for k in self.faults.failed_wheels | self.faults.stuck_wheels:
+            cmd[k] = 0.0
+        g, clipped = self.wheels.saturate(cmd, self.h, self.w, dt)
+        g = np.where(free, g, 0.0)
+        self.w, self.q = self._held_locked.step_held(self.w, self.q, float(dt), tau=self.torque if torqued else None,
+                                                      h0=(self.h * free) @ a, hdot=g @ a)
+        self.h = np.where(free, self.h + g * dt, J * (a @ self.w))
+        self.applied_wheel = g
+        self.clipped = [int(i) for i in np.flatnonzero(clipped & (cmd != 0))]
 
     # ------------------------------------------------------------------ outputs
     def wheel_speeds(self) -> np.ndarray | None:
@@ -281,6 +319,8 @@ class Plant:
                 b.faults.dropouts[f.sensor] = f.t + f.duration
             elif f.fault == "wheel_failed":
                 b.faults.failed_wheels.add(int(f.wheel))
+            elif f.fault == "wheel_stuck":
+                b.seize_wheel(int(f.wheel))
             else:
                 b.faults.efficiency = float(f.value)
         return begun

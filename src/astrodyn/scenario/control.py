@@ -18,6 +18,7 @@ examples)::
     body = "sc"
     fault = "gyro_bias"          # gyro_bias (value = [3] rad/s) | sensor_dropout (sensor, duration)
                                  # | wheel_failed (wheel = index: no torque from then on)
+                                 # | wheel_stuck (wheel = index: the rotor seizes, locked to the body)
                                  # | thruster_efficiency (value in [0, 1]: dv and thrust scaled)
 
     [bodies.actuators]
@@ -57,7 +58,7 @@ __all__ = ["Wheel", "Actuators", "Sensor", "Sensors", "Fault", "Control", "CONTR
            "parse_actuators", "parse_sensors", "parse_control", "parse_fault", "plant_bodies", "steps_per"]
 
 CONTROL_MODES = ("lockstep", "free")
-FAULTS = ("gyro_bias", "sensor_dropout", "wheel_failed", "thruster_efficiency")
+FAULTS = ("gyro_bias", "sensor_dropout", "wheel_failed", "wheel_stuck", "thruster_efficiency")
 SENSOR_NAMES = ("gyro", "star_tracker", "gps", "tachometer")
 MAX_CONTROLLERS = 64
 MAX_FAULTS = 1000
@@ -252,7 +253,7 @@ def parse_fault(ctx: Ctx, data: Any, path: str, duration: float,
     act, sens = plant_bodies[body]
     fault = choice(ctx, tb.get("fault"), FAULTS, f"{path}.fault")
     allowed = {"gyro_bias": ("value",), "sensor_dropout": ("sensor", "duration"), "wheel_failed": ("wheel",),
-               "thruster_efficiency": ("value",)}[fault]
+               "wheel_stuck": ("wheel",), "thruster_efficiency": ("value",)}[fault]
     for key in ("value", "sensor", "wheel", "duration"):
         if tb.has(key) and key not in allowed:
             raise ctx.error(f"{path}.{key}", f"no {key} for fault {fault} (its keys: {', '.join(allowed)})", tb.get(key))
@@ -268,10 +269,10 @@ def parse_fault(ctx: Ctx, data: Any, path: str, duration: float,
         if tb.has("duration"):
             length = quantity(ctx, tb.get("duration"), "time", f"{path}.duration")
             check(ctx, length > 0, f"{path}.duration", "duration > 0", tb.get("duration"))
-    elif fault == "wheel_failed":
+    elif fault in ("wheel_failed", "wheel_stuck"):
         n = len(act.wheels) if act is not None else 0
         if n == 0:
-            raise ctx.error(f"{path}.fault", f"reaction wheels on body {body} for wheel_failed", fault)
+            raise ctx.error(f"{path}.fault", f"reaction wheels on body {body} for {fault}", fault)
         wheel = integer(ctx, tb.get("wheel"), f"{path}.wheel", 0, n - 1)
     else:
         if act is None or (act.dv is None and act.thrust is None):
