@@ -142,3 +142,19 @@ def test_a_seized_wheel_hands_its_momentum_to_the_body_and_the_total_is_kept():
     assert abs(b.wheel_speeds()[1]) < 1e-12 * 2000 * 2 * math.pi / 60  # locked: no relative speed
     assert np.linalg.norm(b.w - w_before) > 1e-3  # the seizure moved the wheel's momentum into the body
     assert b.applied_wheel[1] == 0.0 and b.applied_wheel[0] != 0.0
+
+
+def test_commands_for_actuators_a_body_lacks_are_refused_with_the_reason():
+    from astrodyn.plant import CommandRefused
+
+    plant, b = _plant()  # thrust and dv, no torque, no wheels
+    with pytest.raises(CommandRefused, match="has no torque actuator"):
+        b.apply({"t": 0.0, "seq": 0, "sender": "c", "torque": [0.1, 0.0, 0.0]})
+    with pytest.raises(CommandRefused, match="has no reaction wheels"):
+        b.apply({"t": 0.0, "seq": 1, "sender": "c", "wheel_torque": [0.1]})
+    wheeled = Plant(loads(WHEELED)).bodies["sc"]
+    with pytest.raises(CommandRefused, match=r"wheel_torque: expected 2 values \(one per wheel\), got 3"):
+        wheeled.apply({"t": 0.0, "seq": 0, "sender": "c", "wheel_torque": [0.1, 0.0, 0.0]})
+    with pytest.raises(CommandRefused, match="no impulsive dv capability"):
+        wheeled.apply({"t": 0.0, "seq": 1, "sender": "c", "dv": [1.0, 0.0, 0.0]})
+    assert np.all(wheeled.wheel_command == 0.0)  # nothing of a refused command was applied
