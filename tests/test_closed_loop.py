@@ -77,6 +77,15 @@ def test_hohmann_example_reaches_the_circular_target_orbit_with_vallados_delta_v
     assert np.linalg.norm(dv[1]) == pytest.approx(1478.187, abs=5e-4)  # printed: 1.478187 km/s
     assert act.dv_total[-1] == pytest.approx(3935.225, abs=1e-3)
     assert "2 commands applied, 0 refused, 0 late" in proc.stderr
+    # the CCSDS OEM export cuts its segments at the burns, read by an independent reader
+    ndm = pytest.importorskip("ccsds_ndm.ndm_io")
+    from astrodyn.recording.export import export
+
+    (oem_path,) = export(out, "oem", tmp_path / "oem")
+    segments = ndm.NdmIo().from_path(oem_path).body.segment
+    assert len(segments) == 3 and sum(len(s.data.state_vector) for s in segments) == len(orbit)
+    burn_steps = np.flatnonzero(~np.isnan(act.dv[:, 0]))
+    assert [len(s.data.state_vector) for s in segments[:2]] == [burn_steps[0] + 1, burn_steps[1] - burn_steps[0]]
 
 
 def test_lockstep_is_deterministic_and_commands_resimulate_bit_for_bit(tmp_path):

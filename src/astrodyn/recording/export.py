@@ -154,6 +154,9 @@ FIELD_UNITS = {
     "t": "s", "seq": "1", "log_time_ns": "ns", "r": "m", "v": "m/s", "mu": "m^3/s^2", "q": "1", "w": "rad/s",
     "dr": "m", "dv": "m/s", "dr_norm": "m", "dv_norm": "m/s", "model": "", "frame": "", "reference": "",
     "process": "", "event": "", "detail": "", "json": "",
+    # the closed loop's (docs/control.md): commands, actuator states, sensor samples
+    "torque": "N m", "wheel_torque": "N m", "wheel_speed": "rad/s", "clipped": "", "thrust": "N", "mass": "kg",
+    "dv_total": "m/s", "applied": "", "sender": "", "speeds": "rad/s", "step": "1", "commands": "1",
 }
 
 
@@ -340,8 +343,22 @@ def _message_head(version_key: str, version: str, run: Run, tr: Track, comments:
     ]
 
 
+def _impulse_steps(run: Run, name: str) -> dict[float, float]:
+    """``{t_k: |dv| m/s}`` of the closed loop's impulsive burns of body ``name``: applied
+    in the step that starts at ``t_k`` (its actuator state's ``dv``; docs/control.md)."""
+    act = run.channels.get(f"astrodyn/{run.scenario.get('name', '')}/{name}/actuators")
+    dv = None if act is None else act.fields.get("dv")
+    if dv is None or np.ndim(dv) != 2 or np.shape(dv)[1:] != (3,):
+        return {}
+    hit = np.isfinite(dv[:, 0])
+    return {float(t): float(np.linalg.norm(d)) for t, d in zip(np.asarray(act.t)[hit], dv[hit])}
+
+
 def write_oem(run: Run, out: Path) -> list[Path]:
-    """``<body>.oem`` per body with an orbit channel (CCSDS 502.0-B-3 KVN)."""
+    """``<body>.oem`` per body with an orbit channel (CCSDS 502.0-B-3 KVN).  An impulsive
+    burn of the closed loop ends a segment: the ephemeris is cut between the step it was
+    applied in and the next (a new META block), so that no reader interpolates across the
+    velocity jump."""
     written = []
     for name, body in run.bodies.items():
         tr = body.orbit
@@ -351,15 +368,27 @@ def write_oem(run: Run, out: Path) -> list[Path]:
         frames = sorted(set(tr.frame))
         comment = (f"scenario {run.scenario.get('name', '?')}, epoch {run.scenario.get('epoch', '?')}; "
                    f"models {', '.join(sorted(set(tr.model)))}")
-        lines = _message_head("CCSDS_OEM_VERS", "3.0", run, tr, [comment], name,
-                              [("REF_FRAME", frames[0] if len(frames) == 1 else "GCRF")], system, epochs) + [
-            "META_STOP",
-            "",
-            "COMMENT position km, velocity km/s",
-        ]
+        impulses = _impulse_steps(run, name)
+        cuts = [k + 1 for k, t in enumerate(np.asarray(tr.t)) if float(t) in impulses and k + 1 < len(tr)]
+        bounds = [0, *cuts, len(tr)]
+        frame = frames[0] if len(frames) == 1 else "GCRF"
         r, v = tr.r / 1e3, tr.v / 1e3
-        for k, ep in enumerate(epochs):
-            lines.append(" ".join([ep, *map(_f, r[k]), *map(_f, v[k])]))
+        lines = []
+        for j in range(len(bounds) - 1):
+            a, b = bounds[j], bounds[j + 1]
+            head = _message_head("CCSDS_OEM_VERS", "3.0", run, tr, [comment], name, [("REF_FRAME", frame)], system,
+                                 epochs[a:b])
+            if j > 0:  # later segments: only the metadata block (the header is the file's)
+                head = head[head.index("META_START"):]
+                lines.append("")
+            lines += head + ["META_STOP", ""]
+            if j > 0:
+                dt = float(tr.t[a - 1])
+                lines.append(f"COMMENT after an impulsive burn of {impulses[dt]!r} m/s applied between "
+                             f"{epochs[a - 1]} and {epochs[a]} (a new segment: do not interpolate across it)")
+            lines.append("COMMENT position km, velocity km/s")
+            for k in range(a, b):
+                lines.append(" ".join([epochs[k], *map(_f, r[k]), *map(_f, v[k])]))
         path = out / f"{name}.oem"
         path.write_text("\n".join(lines) + "\n")
         written.append(path)
