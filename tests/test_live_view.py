@@ -196,3 +196,30 @@ def test_a_vanished_client_changes_nothing(tmp_path):
     assert run.complete and run.gaps[messages.orbit_key("quiet", "sat")]["missing"] == 0
     seq = run.bodies["sat"].orbit.seq
     assert len(seq) > 1000 and list(seq) == list(range(len(seq)))  # nothing lost while the clients hung and died
+
+
+def test_the_closed_loops_channels_reach_the_view(tmp_path):
+    """serve of a closed loop with a controller and a live view: the actuator states (and
+    the other closed-loop channels) are advertised with their schemas and reach a client,
+    each a valid message of its definition (docs/control.md)."""
+    root = Path(__file__).resolve().parents[1]
+    cfg = tmp_path / "detumble.toml"
+    cfg.write_text((root / "configs" / "detumble.toml").read_text())
+    out = tmp_path / "d.mcap"
+    serve = subprocess.Popen([*ASTRODYN, "serve", str(cfg), "--out", str(out), "--rate", "20", "--foxglove", "0",
+                              "--max-wall", "120", "--controller", f"python {root / 'examples' / 'detumble.py'}"],
+                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        hello = json.loads(serve.stdout.readline())
+        key = messages.body_key("detumble", "sc", "actuators")
+        got = _received(_client(tmp_path, hello["foxglove"], key, 4.0))
+        with bus.open_session(connect=[hello["hub"]]) as s:
+            bus.send_control(s, "detumble", "stop", token=hello["control_token"], timeout_s=60)
+        serve.wait(timeout=60)
+    finally:
+        stop_process(serve)
+    assert got["channels"][key]["schemaName"] == "astrodyn.ActuatorState"
+    assert got["channels"][messages.body_key("detumble", "sc", "gyro")]["schemaName"] == "astrodyn.GyroSample"
+    assert len(got["messages"][key]) >= 3
+    for _, payload in got["messages"][key]:
+        messages.validate(payload, "actuators")

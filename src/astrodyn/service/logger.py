@@ -63,6 +63,8 @@ __all__ = ["Logger", "main"]
 
 _STATE_KINDS = frozenset(messages.STATE_KINDS)
 _SCENE_KINDS = frozenset(messages.STATE_KINDS + messages.CONTROL_KINDS + messages.SENSOR_KINDS)
+#: keys whose newest sample @latest serves (the live view): states and the closed loop's
+_LATEST_SUFFIXES = tuple(f"/{k}" for k in ("orbit", "attitude", *messages.CONTROL_KINDS, *messages.SENSOR_KINDS))
 _MAX_EXAMPLES = 20
 _MAX_KEY_CACHE = 100_000
 _MAX_LAYOUTS = 64
@@ -401,7 +403,7 @@ class Logger:
         elif rest is not None and rest.startswith("@heartbeat/"):
             self.heartbeats[rest[len("@heartbeat/"):]] = time.monotonic()
         else:
-            if key.endswith(("/orbit", "/attitude")):
+            if key.endswith(_LATEST_SUFFIXES):
                 self.latest[key] = payload
             self._record(key, payload, now_ns, sender)
 

@@ -306,6 +306,21 @@ class _View:
         self.server.stop()
 
 
+_CLOSED_LOOP_KINDS = frozenset(messages.CONTROL_KINDS + messages.SENSOR_KINDS)
+
+
+def closed_loop_log_time(key: str, payload: bytes, epoch_ns: int) -> int | None:
+    """Log time (ns since the Unix epoch) of a valid command, actuator state or sensor
+    sample (docs/control.md), forwarded as a raw channel; None for anything else."""
+    try:
+        kind = messages.kind_of_key(key)
+        if kind not in _CLOSED_LOOP_KINDS:
+            return None
+        return epoch_ns + int(round(float(messages.decode(payload, kind)["t"]) * 1e9))
+    except (messages.MessageError, ValueError, OverflowError):
+        return None
+
+
 def _scenario_metadata(path: str | None) -> tuple[int, dict, set[str] | None]:
     """(epoch_unix_ns, central_body table, names of the bodies with an orbit or None) from
     a scenario metadata JSON file (``Scenario.to_metadata``)."""
@@ -421,6 +436,8 @@ def main(argv: list[str] | None = None) -> int:
                         continue
                     for k, p in pairs:
                         log_time = scene.update(k, p)
+                        if log_time is None:  # the closed loop's channels: for the Plot panel only
+                            log_time = closed_loop_log_time(k, p, scene.epoch_ns)
                         if log_time is not None:
                             view.pending[k] = (p, log_time)
                             view.pending.move_to_end(k)
