@@ -270,6 +270,10 @@ def run_plant(scenario, session, *, token: str | None = None, replay: dict | Non
         real_time_factor = scenario.real_time_factor if control.mode == "free" and replay is None else math.inf
     pacer = Pacer(real_time_factor)
     commands_from = CommandVerifier()
+    replay_by_body: dict[int, dict[str, list[dict]]] = {}  # --commands: step -> body -> commands, in order
+    for k_step, items in (replay or {}).items():
+        for body_name, cmd in items:
+            replay_by_body.setdefault(k_step, {}).setdefault(body_name, []).append(cmd)
 
     def inject_fault(cmd: dict) -> None:
         """serve's ``fault`` verb (validated by serve): begins at the next step."""
@@ -407,7 +411,7 @@ def run_plant(scenario, session, *, token: str | None = None, replay: dict | Non
                 last = k == n_steps - 1
                 for bname, b in plant.bodies.items():
                     if replay is not None:
-                        mine = [(c, None) for body, c in replay.get(k, []) if body == bname]
+                        mine = [(c, None) for c in replay_by_body.get(k, {}).get(bname, ())]
                     else:
                         due = t + eps if last else t + dt - eps
                         mine = [e for e in pending[bname] if e[0]["t"] <= due]
