@@ -290,3 +290,12 @@ def test_serve_runs_a_free_closed_loop_with_its_controller_and_stops_cleanly(tmp
     assert abs(np.mean(gyro.w[after, 0] - w_true[:, 0]) - 1e-3) < 5 * 1e-5 / np.sqrt(after.sum())  # the new bias
     stop = [e for e in run.events if e["process"] == "plant" and e["kind"] == "stop"]
     assert stop and json.loads(stop[0]["detail"])["reason"] == "stop requested"
+    # re-simulated from the served recording: late commands at the steps they were applied,
+    # the injected fault when it began: states and sensor samples bit for bit
+    again = tmp_path / "again.mcap"
+    proc = _run([cfg, "--out", again, "--commands", summary["file"]])
+    assert proc.returncode == 0, proc.stderr
+    kinds = ("/attitude", "/gyro", "/actuators", "/command")
+    first, second = _payloads(Path(summary["file"]), kinds), _payloads(again, kinds)
+    for key, payloads in first.items():
+        assert second[key][:len(payloads)] == payloads, key

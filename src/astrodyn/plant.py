@@ -325,6 +325,10 @@ class Plant:
                 b.faults.efficiency = float(f.value)
         return begun
 
+    def set_faults(self, faults) -> None:
+        """Replace the config's faults (a re-simulation takes the recorded ones)."""
+        self._faults = sorted(faults, key=lambda f: f.t)
+
     def inject(self, fault: Fault) -> None:
         """A fault from outside (the ``fault`` control verb), beginning at the next step."""
         self._faults.append(fault)

@@ -32,7 +32,9 @@ plant paces sim time at the scenario's real-time factor and applies what has arr
 commands whose time has passed are applied at once and counted as ``late``.
 
 ``--commands REC.mcap``: no controllers; the commands recorded in REC are applied at the
-steps where REC's actuator states say they were, which reproduces REC's states bit for bit.
+steps where REC's actuator states say they were, and the faults at the times REC's
+``fault`` events say they began (the config's and those of serve's ``fault`` verb), which
+reproduces REC's states and sensor samples bit for bit.
 """
 
 from __future__ import annotations
@@ -54,7 +56,7 @@ from astrodyn.service.children import share_fate_with_supervisor
 from astrodyn.service.propagator import BATCH_THRESHOLD, CommandVerifier, Pacer, command_key, obey_commands
 from astrodyn.service.signals import catch_stop_signals
 
-__all__ = ["main", "run_plant", "recorded_commands", "tick_payload", "ControllerTimeout", "PROCESS"]
+__all__ = ["main", "run_plant", "recorded_commands", "recorded_faults", "tick_payload", "ControllerTimeout", "PROCESS"]
 
 PROCESS = "plant"
 #: Samples waiting in the plant's intake before it drops new ones (a flood from a hostile
@@ -204,9 +206,30 @@ def recorded_commands(path: str | Path, scenario: str) -> dict[int, list[dict]]:
     return out
 
 
+def recorded_faults(path: str | Path, scenario) -> list:
+    """The faults that began in recording ``path`` (the plant's ``fault`` events: those of
+    the config and those injected by serve's ``fault`` verb), each at the time it began."""
+    from astrodyn.recording.stream import open_stream
+    from astrodyn.scenario.control import parse_fault, plant_bodies
+    from astrodyn.scenario.fields import Ctx
+
+    out = []
+    key = messages.event_key(scenario.name)
+    with open_stream(path) as s:
+        for m in s.messages():
+            if m.topic != key:
+                continue
+            event = messages.decode(m.data, "event")
+            if event["process"] == PROCESS and event["kind"] == "fault":
+                out.append(parse_fault(Ctx(f"--commands {path}"), json.loads(event["detail"]), "fault event",
+                                       math.inf, plant_bodies(scenario), t=event["t"]))
+    return out
+
+
 def run_plant(scenario, session, *, token: str | None = None, replay: dict | None = None,
               max_steps: int | None = None, first_event_seq: int = 0, wait_logger_s: float = 30.0,
-              real_time_factor: float | None = None, endless: bool = False, log=print) -> dict:
+              real_time_factor: float | None = None, endless: bool = False, replay_faults: list | None = None,
+              log=print) -> dict:
     """Run the closed loop of ``scenario`` (module docstring); returns a summary dict.
 
     ``real_time_factor``: pace sim time at this many sim seconds per wall second (``serve``
@@ -215,6 +238,8 @@ def run_plant(scenario, session, *, token: str | None = None, replay: dict | Non
     scenario's duration until stopped (``serve``).  Supervisor commands on ``@command``
     (pause, resume, rate, stop) are obeyed, as by the propagators."""
     plant = Plant(scenario)
+    if replay_faults is not None:  # re-simulation: the faults as they happened (config and control verb alike)
+        plant.set_faults(replay_faults)
     control = scenario.control
     name = scenario.name
     rate = scenario.rate
@@ -519,10 +544,11 @@ def main(argv: list[str] | None = None) -> int:
         except auth.AuthError as exc:
             print(f"plant: --control-token-file: {exc}", file=sys.stderr)
             return 2
-    replay = None
+    replay = faults = None
     if args.commands:
         try:
             replay = recorded_commands(args.commands, scenario.name)
+            faults = recorded_faults(args.commands, scenario)
         except (OSError, ValueError) as exc:
             print(f"plant: --commands: {exc}", file=sys.stderr)
             return 2
@@ -530,7 +556,7 @@ def main(argv: list[str] | None = None) -> int:
         with bus.session_from_args(args) as session:
             summary = run_plant(scenario, session, token=token, replay=replay, max_steps=args.max_steps,
                                 first_event_seq=args.first_event_seq, wait_logger_s=args.wait_logger,
-                                real_time_factor=args.real_time_factor, endless=args.endless)
+                                real_time_factor=args.real_time_factor, endless=args.endless, replay_faults=faults)
     except bus.BusError as exc:
         print(f"plant: {exc}", file=sys.stderr)
         return 1
