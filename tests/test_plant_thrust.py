@@ -158,3 +158,26 @@ def test_commands_for_actuators_a_body_lacks_are_refused_with_the_reason():
     with pytest.raises(CommandRefused, match="no impulsive dv capability"):
         wheeled.apply({"t": 0.0, "seq": 1, "sender": "c", "dv": [1.0, 0.0, 0.0]})
     assert np.all(wheeled.wheel_command == 0.0)  # nothing of a refused command was applied
+
+
+def test_overflowing_command_values_leave_a_finite_state():
+    """A controller of the run may still send nonsense: values near the float64 limit are
+    clipped or scaled to the actuators' limits, and nothing becomes inf or NaN."""
+    plant, b = _plant()
+    big = 1.7e308
+    b.apply({"t": 0.0, "seq": 0, "sender": "c", "dv": [big, big, -big]})  # |dv| overflows to inf
+    b.apply({"t": 0.0, "seq": 1, "sender": "c", "thrust": [big, 0.0, big], "frame": "body"})
+    for _ in range(3):
+        b.begin_step()
+        b.finish_commands()
+        b.advance(1.0)
+    assert np.all(np.isfinite(b.v)) and np.all(np.isfinite(b.r)) and np.isfinite(b.mass)
+    assert np.linalg.norm(b.thrust) == pytest.approx(20.0, rel=1e-15)
+    # the impulse was scaled to the 10 m/s limit along its own direction, not to nothing
+    assert b.dv_total >= 10.0 * (1 - 1e-15)
+    wheeled = Plant(loads(WHEELED)).bodies["sc"]
+    wheeled.apply({"t": 0.0, "seq": 0, "sender": "c", "wheel_torque": [big, -big]})
+    wheeled.begin_step()
+    wheeled.finish_commands()
+    wheeled.advance(0.1)
+    assert np.all(np.abs(wheeled.applied_wheel) <= 0.2) and np.all(np.isfinite(wheeled.w))

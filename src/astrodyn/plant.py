@@ -49,7 +49,7 @@ from astrodyn.scenario import Body, Scenario
 from astrodyn.scenario.control import Fault, Sensor
 from astrodyn.sensors import PositionReceiver, RateGyro, StarTracker, WheelTachometer
 
-__all__ = ["CommandRefused", "PlantBody", "Plant", "command_id"]
+__all__ = ["CommandRefused", "PlantBody", "Plant", "command_id", "limited"]
 
 
 class CommandRefused(ValueError):
@@ -59,6 +59,18 @@ class CommandRefused(ValueError):
 def command_id(sender: str, seq: int) -> str:
     """``sender#seq``: how an actuator state names the commands applied at its step."""
     return f"{sender}#{seq}"
+
+
+def limited(vector, limit: float) -> np.ndarray:
+    """``vector`` (3,) scaled down to magnitude ``limit`` if longer, direction kept; the
+    norm taken without overflow (components up to the float64 maximum)."""
+    v = np.asarray(vector, dtype=np.float64)
+    big = float(np.max(np.abs(v)))
+    if big == 0.0:
+        return v.copy()
+    unit = v / big
+    n = float(np.linalg.norm(unit))  # |v| = big n, which may overflow: compare, never form v / |v| from it
+    return unit * (limit / n) if big * n > limit else v.copy()
 
 
 @dataclass
@@ -138,16 +150,10 @@ class PlantBody:
         if "wheel_torque" in cmd:
             self.wheel_command = np.asarray(cmd["wheel_torque"], dtype=np.float64)
         if "thrust" in cmd:
-            f = np.asarray(cmd["thrust"], dtype=np.float64)
-            norm = float(np.linalg.norm(f))
-            self.thrust = f * (act.thrust / norm) if norm > act.thrust else f
+            self.thrust = limited(cmd["thrust"], act.thrust)
             self.thrust_frame = cmd.get("frame", "inertial")
         if "dv" in cmd:
-            dv = np.asarray(cmd["dv"], dtype=np.float64)
-            norm = float(np.linalg.norm(dv))
-            if norm > act.dv:
-                dv = dv * (act.dv / norm)
-            dv = dv * self.faults.efficiency
+            dv = limited(cmd["dv"], act.dv) * self.faults.efficiency
             self.v = self.v + dv
             self.dv_total += float(np.linalg.norm(dv))
             self.step_dv = dv if self.step_dv is None else self.step_dv + dv
