@@ -299,3 +299,35 @@ def test_serve_runs_a_free_closed_loop_with_its_controller_and_stops_cleanly(tmp
     first, second = _payloads(Path(summary["file"]), kinds), _payloads(again, kinds)
     for key, payloads in first.items():
         assert second[key][:len(payloads)] == payloads, key
+
+
+def test_no_controller_outlives_a_killed_run_supervisor(tmp_path):
+    """A controller is the user's program: it cannot call astrodyn's fate-sharing itself.
+    ``--controller`` children get PR_SET_PDEATHSIG before exec, so when the supervisor is
+    SIGKILLed the kernel ends them; checked by PID, with a controller that would run on."""
+    from astrodyn.service.children import children_of
+
+    cfg = _config("slew", tmp_path, **{'duration = "180 s"': 'duration = "100000 s"'})
+    deaf = tmp_path / "deaf_slew_pd.py"  # hears nothing, not even the plant's end: only the kernel ends it
+    deaf.write_text("import time\ntime.sleep(600)\n")
+    sup = subprocess.Popen([*RUN, str(cfg), "--out", str(tmp_path / "k.mcap"), "--quiet", "--controller",
+                            f"python {deaf}"], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, cwd=ROOT)
+    try:
+        deadline = time.monotonic() + 120
+        controller = None
+        while controller is None and time.monotonic() < deadline:
+            controller = next((pid for pid, argv in children_of(sup.pid).items()
+                               if any(a.endswith("deaf_slew_pd.py") for a in argv)), None)
+            time.sleep(0.1)
+        assert controller is not None, "the controller never started"
+        time.sleep(1.0)  # the plant is waiting for its answer
+        os.kill(sup.pid, signal.SIGKILL)
+        sup.wait(timeout=10)
+        deadline = time.monotonic() + 5.0
+        while time.monotonic() < deadline and Path(f"/proc/{controller}").exists():
+            time.sleep(0.05)
+        state = Path(f"/proc/{controller}/stat").read_text().split()[2] if Path(f"/proc/{controller}").exists() else "gone"
+        assert state in ("gone", "Z"), f"controller {controller} still running ({state})"
+    finally:
+        if sup.poll() is None:
+            os.kill(sup.pid, signal.SIGKILL)

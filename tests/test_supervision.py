@@ -346,3 +346,38 @@ def test_random_faults_series(tmp_path, processes):
     records = _random_faults(tmp_path, processes, trials=20, seed=13)
     print(json.dumps(records))
     assert sum(r["killed"] for r in records) >= 15  # the run lasts longer than most delays: real faults
+
+
+def test_a_logger_killed_while_starting_is_replaced_and_nothing_is_lost(tmp_path):
+    """SIGKILL of the logger within milliseconds of its start (before it is ready: the
+    moment a random fault can hit): the run starts another one, completes with exit 0,
+    and the file holds every state of the scene (the plan's count), no gap."""
+    from astrodyn.recording import load
+    from astrodyn.scenario import load as load_scenario, plan
+    from astrodyn.service.children import children_of
+
+    cfg = tmp_path / "short.toml"
+    cfg.write_text(LONG.replace('duration = "200000 s"', 'duration = "60 s"'))
+    out = tmp_path / "short.mcap"
+    sup = subprocess.Popen([*ASTRODYN, "run", str(cfg), "--out", str(out), "--quiet"], stdout=subprocess.DEVNULL,
+                           stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.monotonic() + 60
+        killed = None
+        while killed is None and time.monotonic() < deadline:
+            for pid, argv in children_of(sup.pid).items():
+                if "astrodyn.service.logger" in argv:
+                    os.kill(pid, signal.SIGKILL)
+                    killed = pid
+            time.sleep(0.002)
+        assert killed is not None
+        _, err = sup.communicate(timeout=300)
+    finally:
+        if sup.poll() is None:
+            sup.kill()
+    assert sup.returncode == 0, err[-2000:]
+    run = load(out)
+    assert run.complete
+    states = sum(len(t) for topic, t in run.channels.items() if topic.endswith(("/orbit", "/attitude")))
+    assert states == plan(load_scenario(cfg)).state_messages
+    assert not list(tmp_path.glob("*.partial*.mcap"))  # the dead logger's partial is gone

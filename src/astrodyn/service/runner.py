@@ -230,6 +230,27 @@ def run_scenario(scenario: Scenario, config_path: Path, out: Path, *, cross_chec
                         return f"controller {cname}: cannot start {cmd!r}: {exc}"
                 return None
 
+            while failure is not None and children["logger"].poll() not in (None, 0) and not interrupted["signal"]:
+                # the logger died while starting (a kill at a random moment can land there): nothing
+                # is recorded yet, so a new one starts afresh (its predecessor's partial is removed
+                # at the end like every dead logger's), within the restart budget
+                dead, rc = children["logger"], children["logger"].poll()
+                if not budget.allow():
+                    failure = f"{budget.refusal()}; last: {failure}"
+                    break
+                dead.close()
+                wait_until_gone(session, scenario.name, "logger")
+                attempt = len(restarts_of("logger")) + 1
+                children["logger"] = Child(f"logger-r{attempt}", [*logger_argv, "--attempt", str(attempt),
+                                                                  *(logger_args or [])], tmpd, env=child_env)
+                children["logger"].name = "logger"
+                how = f"killed by signal {-rc}" if rc < 0 else f"exited with status {rc}"
+                restarts.append({"process": "logger", "old_pid": dead.pid, "new_pid": children["logger"].pid,
+                                 "why": f"{how} while starting", "from_step": 0, "state_from": None})
+                if progress:
+                    print(f"  logger (pid {dead.pid}) {how} while starting: restarted (pid {children['logger'].pid})",
+                          file=sys.stderr, flush=True)
+                failure = _wait_ready(session, scenario.name, children["logger"], 60.0, interrupted)
             if failure is None:
                 result["hub"] = hub
                 print(f"  bus {hub}: any Zenoh client can subscribe to astrodyn/{scenario.name}/** there "
