@@ -10,7 +10,7 @@ import queue
 
 import zenoh
 
-from astrodyn import auth, messages
+from astrodyn import auth, bus, messages
 
 GAIN = 2.0
 
@@ -20,19 +20,13 @@ def main() -> int:
     signer = auth.Signer(auth.secret_from_environment(), name)
     base = f"astrodyn/{scenario}"
     ticks: queue.Queue = queue.Queue()
-    conf = zenoh.Config()
-    conf.insert_json5("mode", '"peer"')  # a peer on loopback: the plant's samples come straight, not via the hub
-    conf.insert_json5("listen/endpoints", '["tcp/127.0.0.1:0"]')
-    conf.insert_json5("scouting/gossip/enabled", "true")
-    conf.insert_json5("connect/endpoints", json.dumps([os.environ["ASTRODYN_CONNECT"]]))
-    conf.insert_json5("scouting/multicast/enabled", "false")
-
     def on_event(sample) -> None:
         event = json.loads(sample.payload.to_bytes())
         if event["process"] == "plant" and event["kind"] == "stop":
             ticks.put(None)
 
-    with zenoh.open(conf) as session:
+    # a loopback peer with gossip (astrodyn.bus defaults): straight to the plant, not via the hub
+    with bus.open_session(connect=os.environ["ASTRODYN_CONNECT"]) as session:
         subscribers = [session.declare_subscriber(f"{base}/@tick", lambda s: ticks.put(s.payload.to_bytes())),
                        session.declare_subscriber(f"{base}/@event", on_event)]  # held for the session's life
         done_key = f"{base}/@done/{name}"

@@ -27,6 +27,7 @@ import contextlib
 import ctypes
 import json
 import os
+import shlex
 import shutil
 import signal
 import subprocess
@@ -37,7 +38,9 @@ import time
 from collections.abc import Iterator
 from pathlib import Path
 
-__all__ = ["Child", "children_of", "logger_command", "propagator_command", "plant_command", "share_fate_with_supervisor",
+from astrodyn import auth
+
+__all__ = ["Child", "children_of", "logger_command", "propagator_command", "plant_command", "controller_argv", "start_controller", "share_fate_with_supervisor",
            "stop_process", "work_directory", "SUPERVISOR_ENV", "ORPHAN_GRACE_S", "EXIT_ORPHANED"]
 
 #: Environment variable that carries the supervisor's PID to each child.
@@ -156,6 +159,27 @@ def _die_with_parent() -> None:  # pragma: no cover - runs in the child between 
         ctypes.CDLL("libc.so.6", use_errno=True).prctl(_PR_SET_PDEATHSIG, int(signal.SIGTERM), 0, 0, 0)
     except (OSError, AttributeError):
         pass
+
+
+def controller_argv(cmd: str) -> list[str]:
+    """The argv of ``--controller CMD``: split like a shell line (``shlex``), run without a
+    shell; a leading ``python`` / ``python3`` is astrodyn's own interpreter (the one with
+    zenoh installed), whatever ``python`` is on the PATH."""
+    argv = shlex.split(cmd)
+    if argv and argv[0] in ("python", "python3"):
+        argv[0] = sys.executable
+    return argv
+
+
+def start_controller(name: str, cmd: str, scenario: str, hub: str, log_dir: Path, child_env: dict | None,
+                     token_file: Path | None) -> Child:
+    """A closed-loop controller (``run`` / ``serve`` ``--controller CMD``; docs/control.md):
+    the user's program, with the run's bus, name and credentials in its environment and
+    the kernel's promise to end it with the supervisor."""
+    env = {**(child_env or {}), "ASTRODYN_SCENARIO": scenario, "ASTRODYN_CONTROLLER": name, "ASTRODYN_CONNECT": hub}
+    if token_file is not None:
+        env[auth.TOKEN_ENV] = str(token_file)
+    return Child(f"controller-{name}", controller_argv(cmd), log_dir, env=env, foreign=True)
 
 
 class Child:

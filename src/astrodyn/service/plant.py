@@ -53,7 +53,14 @@ import zenoh
 from astrodyn import auth, bus, messages
 from astrodyn.plant import CommandRefused, Plant, command_id
 from astrodyn.service.children import share_fate_with_supervisor
-from astrodyn.service.propagator import BATCH_THRESHOLD, CommandVerifier, Pacer, command_key, obey_commands
+from astrodyn.service.propagator import (
+    BATCH_THRESHOLD,
+    CommandVerifier,
+    Pacer,
+    command_key,
+    obey_commands,
+    wait_until_logged,
+)
 from astrodyn.service.signals import catch_stop_signals
 
 __all__ = ["main", "run_plant", "recorded_commands", "recorded_faults", "tick_payload", "ControllerTimeout", "PROCESS"]
@@ -327,7 +334,8 @@ def run_plant(scenario, session, *, token: str | None = None, replay: dict | Non
             refuse(bname, cmd, str(exc))
             return
         applied_count += 1
-        outbox.append((messages.body_key(name, bname, "command"), raw if raw is not None else messages.encode(cmd, "command")))
+        # decoded and validated on arrival: encoded again without a second validation
+        outbox.append((messages.body_key(name, bname, "command"), raw if raw is not None else messages.encode(cmd)))
 
     def drain(block_s: float | None) -> bool:
         """Take what the intake holds (waiting up to ``block_s`` for the first); False if nothing came."""
@@ -478,7 +486,7 @@ def run_plant(scenario, session, *, token: str | None = None, replay: dict | Non
                  "refused": refused, "late": late, "rejected": dict(intake.rejected), "dropped": intake.dropped}
         events.end(t_reached, published, **extra)
         heartbeat.beat(force=True, t=t_reached, step=k, done=True)
-        _wait_until_logged(session, name)
+        wait_until_logged(session, name, PROCESS)
     summary = {"process": PROCESS, "bodies": len(plant.bodies), "steps": k, "messages": published, "t": t_reached,
                "wall_s": wall, **extra, "refusals": refusals, "rejected_examples": intake.examples}
     if round_trips:
@@ -497,16 +505,6 @@ def tick_payload(t: float, seq: int, step: int, samples: list[tuple[str, bytes]]
     head = messages.encode({"t": t, "seq": seq, "step": step, "samples": {}}, "tick")[:-3]  # ...,"samples":
     body = b",".join(json.dumps(key).encode() + b":" + payload for key, payload in samples)
     return head + b"{" + body + b"}}"
-
-
-def _wait_until_logged(session, scenario: str, timeout_s: float = 60.0) -> None:
-    """Keep the session open until the logger has our end-of-run event (see the propagator's)."""
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        replies = bus.query_json(session, messages.status_key(scenario), timeout_s=2.0)
-        if not replies or any(PROCESS in (r.get("ended") or {}) for r in replies):
-            return
-        time.sleep(0.05)
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -41,7 +41,7 @@ from astrodyn.service.children import share_fate_with_supervisor
 from astrodyn.service.signals import catch_stop_signals
 from astrodyn.simulate import AttitudeEngine, OrbitEngine
 
-__all__ = ["Pacer", "PropagatorOptions", "run_propagator", "command_key", "CommandVerifier", "obey_commands"]
+__all__ = ["Pacer", "PropagatorOptions", "run_propagator", "command_key", "CommandVerifier", "obey_commands", "wait_until_logged"]
 
 KINDS = ("orbit", "attitude")
 
@@ -239,7 +239,7 @@ def run_propagator(scenario: Scenario, session, opts: PropagatorOptions, log=pri
             extra["crosscheck_max_dr"] = cross.max_dr
         events.end(float(t_reached), published, **extra)
         heartbeat.beat(force=True, t=t_reached, step=k, done=True)
-        _wait_until_logged(session, scenario.name, opts.kind)
+        wait_until_logged(session, scenario.name, opts.kind)
     summary = {"process": opts.kind, "bodies": len(names), "steps": k - start, "messages": published,
                "t": float(t_reached), "wall_s": wall, "reason": extra["reason"]}
     per_body = conservation.report()
@@ -327,7 +327,7 @@ class _Conservation:
         return out
 
 
-def _wait_until_logged(session, scenario: str, kind: str, timeout_s: float = 60.0) -> None:
+def wait_until_logged(session, scenario: str, kind: str, timeout_s: float = 60.0) -> None:
     """Keep the session open until the logger has our end-of-run event (so every sample
     before it too: puts return once queued locally, and closing the session drops what is
     still queued -- measured: 7000 of 600k samples lost without this wait).  Gives up when

@@ -43,7 +43,14 @@ from pathlib import Path
 from astrodyn import auth, bus
 from astrodyn.recording.writer import partial_path
 from astrodyn.scenario import Scenario, ScenarioError, load, plan as make_plan
-from astrodyn.service.children import Child, logger_command, plant_command, propagator_command, work_directory
+from astrodyn.service.children import (
+    Child,
+    logger_command,
+    plant_command,
+    propagator_command,
+    start_controller,
+    work_directory,
+)
 from astrodyn.service.output import check_output_path
 from astrodyn.service.progress import Progress
 from astrodyn.service.signals import catch_stop_signals
@@ -219,13 +226,9 @@ def run_scenario(scenario: Scenario, config_path: Path, out: Path, *, cross_chec
                 names = scenario.control.controllers if scenario.control is not None else ()
                 for n, cmd in enumerate(controllers or []):
                     cname = names[n]
-                    env = {**(child_env or {}), "ASTRODYN_SCENARIO": scenario.name, "ASTRODYN_CONTROLLER": cname,
-                           "ASTRODYN_CONNECT": hub}
-                    if token_file is not None:
-                        env[auth.TOKEN_ENV] = str(token_file)
                     try:
-                        started_controllers[cname] = Child(f"controller-{cname}", controller_argv(cmd), tmpd,
-                                                           env=env, foreign=True)
+                        started_controllers[cname] = start_controller(cname, cmd, scenario.name, hub, tmpd, child_env,
+                                                                      token_file)
                     except OSError as exc:
                         return f"controller {cname}: cannot start {cmd!r}: {exc}"
                 return None
@@ -537,16 +540,6 @@ def main(argv: list[str] | None = None) -> int:
         if not args.tolerate_rejected:
             return EXIT_REJECTED
     return 0
-
-
-def controller_argv(cmd: str) -> list[str]:
-    """The argv of ``--controller CMD``: split like a shell line (``shlex``), run without a
-    shell; a leading ``python`` / ``python3`` is astrodyn's own interpreter (the one with
-    zenoh installed), whatever ``python`` is on the PATH."""
-    argv = shlex.split(cmd)
-    if argv and argv[0] in ("python", "python3"):
-        argv[0] = sys.executable
-    return argv
 
 
 def check_closed_loop_arguments(scenario: Scenario, controllers: list[str], commands: str | None, out: Path) -> None:

@@ -56,10 +56,17 @@ from pathlib import Path
 
 from astrodyn import auth, bus
 from astrodyn.scenario import ScenarioError, load, plan as make_plan
-from astrodyn.service.children import Child, logger_command, plant_command, propagator_command, work_directory
+from astrodyn.service.children import (
+    Child,
+    logger_command,
+    plant_command,
+    propagator_command,
+    start_controller,
+    work_directory,
+)
 from astrodyn.service.output import check_output_path
 from astrodyn.service.propagator import command_key
-from astrodyn.service.runner import check_closed_loop_arguments, controller_argv
+from astrodyn.service.runner import check_closed_loop_arguments
 from astrodyn.service.signals import StopFlag
 from astrodyn.service.supervision import RestartBudget, contiguous_end, next_event_seq, wait_until_gone
 from astrodyn.service.viewer import add_foxglove_argument, viewer_command
@@ -125,11 +132,8 @@ class Supervisor:
         self.controllers: dict[str, Child] = {}
         names = scenario.control.controllers if scenario.control is not None else ()
         for n, cmd in enumerate(controllers or []):  # closed loop: the user's programs, ended with us
-            env = {**self.child_env, "ASTRODYN_SCENARIO": scenario.name, "ASTRODYN_CONTROLLER": names[n],
-                   "ASTRODYN_CONNECT": hub}
-            if token_file is not None:
-                env[auth.TOKEN_ENV] = str(token_file)
-            self.controllers[names[n]] = Child(f"controller-{names[n]}", controller_argv(cmd), tmp, env=env, foreign=True)
+            self.controllers[names[n]] = start_controller(names[n], cmd, scenario.name, hub, tmp, self.child_env,
+                                                          token_file)
         self.verbs = (*bus.CONTROL_VERBS, "fault") if "plant" in self.propagators else bus.CONTROL_VERBS
         self.commands = session.declare_publisher(command_key(scenario.name))
         self.beats = bus.HeartbeatMonitor(session, scenario.name, verifier=auth.Verifier(secret))
