@@ -232,6 +232,16 @@ def test_commands_on_a_scene_without_control_and_bad_closed_loop_arguments_are_r
     assert proc.returncode == 2 and "--controller: expected at most 1" in proc.stderr, proc.stderr
     proc = _run([cfg, "--out", tmp_path / "x.mcap", "--commands", tmp_path / "none.mcap"])
     assert proc.returncode == 2 and "no such file" in proc.stderr, proc.stderr
+    # hostile recordings for --commands: foreign bytes, and a recording cut before its first command
+    (tmp_path / "foreign.mcap").write_bytes(b"not an mcap at all" * 100)
+    proc = _run([cfg, "--out", tmp_path / "x.mcap", "--commands", tmp_path / "foreign.mcap"])
+    assert proc.returncode == 2 and "not an MCAP file" in proc.stderr and "Traceback" not in proc.stderr, proc.stderr
+    short = _config("slew", tmp_path, **{'duration = "180 s"': 'duration = "5 s"'})
+    rec = tmp_path / "rec.mcap"
+    assert _run([short, "--out", rec, "--controller", f"python {EXAMPLES / 'slew_pd.py'}"]).returncode == 0
+    (tmp_path / "cut.mcap").write_bytes(rec.read_bytes()[:3000])
+    proc = _run([cfg, "--out", tmp_path / "x.mcap", "--commands", tmp_path / "cut.mcap"])
+    assert proc.returncode == 2 and "found none: nothing to re-simulate" in proc.stderr, proc.stderr
     assert not (tmp_path / "x.mcap").exists()
 
 

@@ -52,6 +52,7 @@ import zenoh
 
 from astrodyn import auth, bus, messages
 from astrodyn.plant import CommandRefused, Plant, command_id
+from astrodyn.recording import RecordingError
 from astrodyn.service.children import share_fate_with_supervisor
 from astrodyn.service.propagator import (
     BATCH_THRESHOLD,
@@ -547,7 +548,7 @@ def main(argv: list[str] | None = None) -> int:
         try:
             replay = recorded_commands(args.commands, scenario.name)
             faults = recorded_faults(args.commands, scenario)
-        except (OSError, ValueError) as exc:
+        except (OSError, ValueError, RecordingError) as exc:
             print(f"plant: --commands: {exc}", file=sys.stderr)
             return 2
     try:

@@ -562,11 +562,23 @@ def check_closed_loop_arguments(scenario: Scenario, controllers: list[str], comm
         if not argv:
             raise ScenarioError("--controller: expected a command line, got an empty string")
     if commands is not None:
+        from astrodyn.recording import RecordingError
+        from astrodyn.service.plant import recorded_commands, recorded_faults
+
         path = Path(commands)
         if path.resolve() == out.resolve():
             raise ScenarioError(f"--commands {commands}: expected a recording other than --out")
         if not path.is_file():
             raise ScenarioError(f"--commands {commands}: expected an MCAP recording of this scenario, no such file")
+        try:  # read here, so a foreign, damaged or empty file is refused before anything starts
+            found = recorded_commands(path, scenario.name)
+            recorded_faults(path, scenario)
+        except (RecordingError, ValueError, OSError) as exc:
+            raise ScenarioError(f"--commands {commands}: expected an MCAP recording of scenario {scenario.name!r}: "
+                                f"{exc}") from None
+        if not found:
+            raise ScenarioError(f"--commands {commands}: expected applied commands of scenario {scenario.name!r} "
+                                f"(actuator states naming them), found none: nothing to re-simulate")
 
 
 def resume_plan(path: Path, scenario: Scenario, out: Path, work: Path) -> dict:
