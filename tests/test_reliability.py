@@ -339,6 +339,42 @@ def test_serve_restarts_a_killed_propagator_from_the_last_state(tmp_path):
             np.testing.assert_array_equal(track.r, propagate_one(engine, i, track.t))
 
 
+def test_logger_waits_for_the_last_steps_of_a_restarted_process(tmp_path):
+    """After a restart the file holds states of the killed process that no end event
+    counts, so the end event's count is reached while the new process's last states may
+    still be on their way (they and the end event arrive on different subscribers).  The
+    logger must finish only once every channel holds the announced ``last_step``: this
+    is the case that once cut 35 steps off a served run's file."""
+    from astrodyn.recording.writer import McapRecorder
+    from astrodyn.service.logger import Logger
+
+    rec = McapRecorder(str(tmp_path / "x.mcap"), {"name": "c"}, epoch_ns=0, chunk_size=4096)
+    logger = Logger(None, "c", rec, expect=("orbit",))
+    keys = [messages.orbit_key("c", n) for n in ("a", "b")]
+    r, v = np.array([[7e6, 0.0, 0.0], [0.0, 7e6, 0.0]]), np.array([[0.0, 7.5e3, 0.0], [-7.5e3, 0.0, 0.0]])
+
+    def step(k):
+        payloads = messages.encode_orbit_batch(float(k), k, "kepler", r, v, 3.986004418e14)
+        logger.handle(messages.batch_key("c", "orbit"), messages.encode_batch(list(zip(keys, payloads))))
+
+    def event(seq, kind, detail):
+        msg = messages.event_message(float(seq), seq, "orbit", kind, json.dumps(detail))
+        logger.handle(messages.event_key("c"), messages.encode(msg, "event"))
+
+    for k in range(10):  # the first process: steps 0..9, then killed (no end event)
+        step(k)
+    event(0, "start", {"first_step": 10})  # its replacement continues at step 10
+    for k in range(10, 12):
+        step(k)
+    event(1, bus.END_EVENT, {"messages": 2 * 5, "last_step": 14})  # 5 steps x 2 bodies; 12..14 still on the way
+    assert logger.states >= 10 and rec.seq.totals()["missing"] == 0  # what the count alone looks at
+    assert not logger.is_complete()
+    for k in range(12, 15):
+        step(k)
+    assert logger.is_complete()
+    rec.close()
+
+
 def propagate_one(engine: OrbitEngine, i: int, t: np.ndarray) -> np.ndarray:
     from astrodyn.orbit import propagate
 

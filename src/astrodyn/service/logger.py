@@ -199,6 +199,9 @@ class Logger:
         #: served on @latest to views that must not take the full-rate streams
         self.latest: dict[str, bytes] = {}
         self.ended: dict[str, int | None] = {}
+        #: the last output step each ended process announced (its end event's ``last_step``)
+        self.last_step: dict[str, int] = {}
+        self._channel_process: dict[str, str | None] = {}  # state channel -> its publisher (cache)
         self.died: dict[str, str] = {}
         self.stalled: set[str] = set()
         self.max_t = 0.0
@@ -368,10 +371,14 @@ class Logger:
             count = None
             try:
                 detail = json.loads(msg["detail"]) if msg["detail"] else {}
-                if isinstance(detail, dict) and isinstance(detail.get("messages"), int):
-                    count = detail["messages"]
             except ValueError:
-                pass
+                detail = None
+            if isinstance(detail, dict):
+                if isinstance(detail.get("messages"), int):
+                    count = detail["messages"]
+                last = detail.get("last_step")
+                if isinstance(last, int) and not isinstance(last, bool) and 0 <= last <= messages.MAX_SEQ:
+                    self.last_step[process] = last
             self.ended[process] = count
 
     def handle(self, key: str, payload: bytes, attachment: bytes | None = None) -> None:
@@ -473,9 +480,43 @@ class Logger:
         return sum(self.ended[p] for p in self.expect)  # type: ignore[misc]
 
     def is_complete(self) -> bool:
-        """Every expected process ended and every state it announced is recorded, no gaps."""
+        """Every expected process ended and every state it announced is recorded, no gaps.
+
+        Two tests, both needed.  The count: at least the sum of the end events' counts.  And
+        the steps: every state channel of an ended process that announced its ``last_step``
+        holds that step (``seq`` is the output step, docs/architecture.md section 5).  The
+        count alone is not enough after a restart: the states of the killed process are
+        recorded but counted in no end event, so the new process's last states could still
+        be on their way when the count was already reached (an end event and the states
+        before it arrive on different subscribers, in any order)."""
         expected = self.expected_messages()
-        return expected is not None and self.states >= expected and self.recorder.seq.totals()["missing"] == 0
+        if expected is None or self.states < expected or self.recorder.seq.totals()["missing"] != 0:
+            return False
+        return self.steps_recorded()
+
+    def steps_recorded(self) -> bool:
+        """Every orbit / attitude / crosscheck channel seen holds the ``last_step`` its
+        publishing process announced in its end event (True for processes that did not)."""
+        if not self.last_step:
+            return True
+        seq = self.recorder.seq
+        for channel, c in seq.channels.items():
+            process = self._channel_process.get(channel, "")
+            if process == "":
+                process = self._channel_process[channel] = self._publisher_of_state(channel)
+            last = self.last_step.get(process) if process is not None else None
+            if last is not None and seq.next_seq[c.slot] <= last:
+                return False
+        return True
+
+    def _publisher_of_state(self, channel: str) -> str | None:
+        """The process publishing the state channel (seq = output step), else None."""
+        if not channel.startswith(self.prefix):
+            return None
+        rest = channel[len(self.prefix):]
+        if rest.rpartition("/")[2] not in ("orbit", "attitude", "crosscheck"):
+            return None
+        return self.publishers.get(channel) or publisher_of(rest)
 
     # ------------------------------------------------------------------ housekeeping
 
