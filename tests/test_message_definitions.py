@@ -129,3 +129,13 @@ def test_a_recording_made_before_the_refactor_reads_and_reencodes_bit_for_bit():
 def test_invalid_utf8_anywhere_is_a_message_error(data):
     with pytest.raises(m.MessageError, match=r"^payload: expected UTF-8 JSON"):
         m.decode(data, "attitude")
+
+
+def test_every_message_kind_has_its_one_definition():
+    """The key rules (astrodyn.messages.keys) list the message kinds without importing the
+    definitions; the two lists are the same, in the same order."""
+    from astrodyn.messages import definitions, keys
+
+    assert tuple(definitions.MESSAGE_TYPES) == keys.MESSAGE_KINDS
+    for kind in keys.MESSAGE_KINDS:
+        assert keys.schema_key("s", kind).endswith(f"/@schema/{kind}")

@@ -10,9 +10,9 @@ same work compiled, and hands every other entry back to the Python path, one at 
 in arrival order.  So the file is byte for byte what the Python path writes, and the
 verdict on every payload is the Python path's:
 
-* The grammar recognised here is the one of :data:`astrodyn.messages._FAST_ORBIT` /
-  ``_FAST_ATTITUDE`` (numbers as ``_FAST_NUM``, seq as ``_FAST_SEQ``, the model enums, the
-  frame name).  Anything else returns :data:`SLOW`.
+* The grammar recognised here is the one of the regexes behind
+  :data:`astrodyn.messages.FAST_CHECKS` (in :mod:`astrodyn.messages.codec`: numbers,
+  seq, the model enums, the frame name).  Anything else returns :data:`SLOW`.
 * The numeric rules are decided with an approximate parse (relative error < 1e-13,
   :func:`_approx_number`) and a margin: ``mu > 1e-300`` (then ``float(mu) > 0`` for sure)
   and ``| |q| - 1 | <= 0.999 * QUAT_NORM_TOL`` (then the exact check passes for sure).
