@@ -64,7 +64,7 @@ from astrodyn.service.propagator import (
 )
 from astrodyn.service.signals import catch_stop_signals
 
-__all__ = ["main", "run_plant", "recorded_commands", "recorded_faults", "tick_payload", "ControllerTimeout", "PROCESS"]
+__all__ = ["main", "run_plant", "PlantLoop", "recorded_commands", "recorded_faults", "tick_payload", "ControllerTimeout", "PROCESS"]
 
 PROCESS = "plant"
 #: Samples waiting in the plant's intake before it drops new ones (a flood from a hostile
@@ -245,101 +245,108 @@ def run_plant(scenario, session, *, token: str | None = None, replay: dict | Non
     controllers answer) for lockstep and re-simulation.  ``endless``: keep going past the
     scenario's duration until stopped (``serve``).  Supervisor commands on ``@command``
     (pause, resume, rate, stop) are obeyed, as by the propagators."""
-    plant = Plant(scenario)
-    if replay_faults is not None:  # re-simulation: the faults as they happened (config and control verb alike)
-        plant.set_faults(replay_faults)
-    control = scenario.control
-    name = scenario.name
-    rate = scenario.rate
-    dt = 1.0 / rate
-    n_steps = (2**53 if endless else scenario.n_steps) if max_steps is None else min(scenario.n_steps, int(max_steps))
-    lockstep = control.mode == "lockstep" and replay is None
-    expected = control.controllers if lockstep else ()
-    signer = bus.process_signer(PROCESS)
-    secret = auth.secret_from_environment()
-    intake = Intake(name, plant.bodies, None if secret is None else auth.Verifier(secret), token)
-    stopping = {"why": None}
-    catch_stop_signals(lambda why: stopping.update(why=why))
+    loop = PlantLoop(scenario, session, token=token, replay=replay, max_steps=max_steps, endless=endless,
+                     real_time_factor=real_time_factor, replay_faults=replay_faults)
+    return loop.run(first_event_seq=first_event_seq, wait_logger_s=wait_logger_s)
 
-    pubs: dict[str, object] = {}
 
-    def put(key: str, payload: bytes) -> None:
-        pub = pubs.get(key)
+class PlantLoop:
+    """One run of the plant process: the steps of the module docstring, one method each
+    (:meth:`publish_step` 1-2, :meth:`exchange` 3, :meth:`apply_commands` 4-5)."""
+
+    def __init__(self, scenario, session, *, token: str | None, replay: dict | None, max_steps: int | None,
+                 endless: bool, real_time_factor: float | None, replay_faults: list | None):
+        self.scenario = scenario
+        self.session = session
+        self.plant = plant = Plant(scenario)
+        if replay_faults is not None:  # re-simulation: the faults as they happened (config and control verb alike)
+            plant.set_faults(replay_faults)
+        self.control = control = scenario.control
+        self.name = scenario.name
+        self.dt = 1.0 / scenario.rate
+        self.n_steps = (2**53 if endless else scenario.n_steps) if max_steps is None else min(scenario.n_steps, int(max_steps))
+        self.replay = replay
+        self.lockstep = control.mode == "lockstep" and replay is None
+        self.expected = control.controllers if self.lockstep else ()
+        self.signer = bus.process_signer(PROCESS)
+        secret = auth.secret_from_environment()
+        self.intake = Intake(self.name, plant.bodies, None if secret is None else auth.Verifier(secret), token)
+        self.stopping: dict = {"why": None}
+        catch_stop_signals(lambda why: self.stopping.update(why=why))
+        self.pubs: dict[str, object] = {}
+        # the step's messages go out together: per key for small scenes, one envelope on
+        # @batch/plant above BATCH_THRESHOLD bodies (as the propagators do; docs/clients.md)
+        self.outbox: list[tuple[str, bytes]] = []
+        self.batched = len(plant.bodies) > BATCH_THRESHOLD
+        self.att_bodies = [(bname, b) for bname, b in plant.bodies.items() if b.has_attitude]
+        self.orb_bodies = [(bname, b) for bname, b in plant.bodies.items() if b.has_orbit]
+        self.att_keys = [messages.attitude_key(self.name, bname) for bname, _ in self.att_bodies]
+        self.orb_keys = [messages.orbit_key(self.name, bname) for bname, _ in self.orb_bodies]
+        self.seqs: dict[str, int] = {}  # sensor key -> next seq
+        self.pending: dict[str, list[tuple[dict, bytes | None]]] = {b: [] for b in plant.bodies}
+        self.received: dict[str, int] = {}  # authenticated commands per sender
+        self.promised: dict[str, int] = {}  # commands announced by the sender's answers
+        self.answered: dict[str, int] = {}  # last control step each controller answered
+        self.late = self.refused = self.applied = self.published = 0
+        self.round_trips: list[float] = []  # lockstep: wall s from a tick to the last answer (the first MAX_ROUND_TRIPS)
+        self.refusals: list[str] = []
+        self.t_reached = 0.0
+        if real_time_factor is None:
+            real_time_factor = scenario.real_time_factor if control.mode == "free" and replay is None else math.inf
+        self.pacer = Pacer(real_time_factor)
+        self.commands_from = CommandVerifier()
+        self.replay_by_body: dict[int, dict[str, list[dict]]] = {}  # --commands: step -> body -> commands, in order
+        for k_step, items in (replay or {}).items():
+            for body_name, cmd in items:
+                self.replay_by_body.setdefault(k_step, {}).setdefault(body_name, []).append(cmd)
+        self.verbs = {"fault": self.inject_fault}
+        self.eps = 1e-9 * self.dt  # "at t": within round-off of the step's time
+
+    # ------------------------------------------------------------------ output
+
+    def put(self, key: str, payload: bytes) -> None:
+        pub = self.pubs.get(key)
         if pub is None:
-            pub = pubs[key] = bus.declare_state_publisher(session, key)
-        bus.signed_put(pub, key, payload, signer)
+            pub = self.pubs[key] = bus.declare_state_publisher(self.session, key)
+        bus.signed_put(pub, key, payload, self.signer)
 
-    # the step's messages go out together: per key for small scenes, one envelope on
-    # @batch/plant above BATCH_THRESHOLD bodies (as the propagators do; docs/clients.md)
-    outbox: list[tuple[str, bytes]] = []
-    batched = len(plant.bodies) > BATCH_THRESHOLD
+    def flush(self, batch) -> None:
+        if self.outbox and self.batched:
+            batch.publish(self.outbox)
+        elif self.outbox:
+            for key, payload in self.outbox:
+                self.put(key, payload)
+        self.outbox.clear()
 
-    def flush(batch) -> None:
-        if outbox and batched:
-            batch.publish(outbox)
-        elif outbox:
-            for key, payload in outbox:
-                put(key, payload)
-        outbox.clear()
+    # ------------------------------------------------------------------ input
 
-    att_bodies = [(bname, b) for bname, b in plant.bodies.items() if b.has_attitude]
-    orb_bodies = [(bname, b) for bname, b in plant.bodies.items() if b.has_orbit]
-    att_keys = [messages.attitude_key(name, bname) for bname, _ in att_bodies]
-    orb_keys = [messages.orbit_key(name, bname) for bname, _ in orb_bodies]
-
-    seqs: dict[str, int] = {}
-    pending: dict[str, list[dict]] = {b: [] for b in plant.bodies}
-    received: dict[str, int] = {}  # authenticated commands per sender
-    promised: dict[str, int] = {}  # commands announced by the sender's answers
-    answered: dict[str, int] = {}  # last control step each controller answered
-    late = refused = applied_count = published = 0
-    round_trips: list[float] = []  # lockstep: wall s from a tick to the last answer (the first MAX_ROUND_TRIPS)
-    refusals: list[str] = []
-    frame = scenario.frame
-    mu = scenario.central_body.mu
-    t_reached = 0.0
-    wall0 = time.monotonic()
-    if real_time_factor is None:
-        real_time_factor = scenario.real_time_factor if control.mode == "free" and replay is None else math.inf
-    pacer = Pacer(real_time_factor)
-    commands_from = CommandVerifier()
-    replay_by_body: dict[int, dict[str, list[dict]]] = {}  # --commands: step -> body -> commands, in order
-    for k_step, items in (replay or {}).items():
-        for body_name, cmd in items:
-            replay_by_body.setdefault(k_step, {}).setdefault(body_name, []).append(cmd)
-
-    def inject_fault(cmd: dict) -> None:
+    def inject_fault(self, cmd: dict) -> None:
         """serve's ``fault`` verb (validated by serve): begins at the next step."""
         from astrodyn.scenario.control import parse_fault, plant_bodies
         from astrodyn.scenario.fields import Ctx
 
-        plant.inject(parse_fault(Ctx("fault"), cmd["fault"], "fault", math.inf, plant_bodies(scenario),
-                                 t=t_reached + dt))
+        self.plant.inject(parse_fault(Ctx("fault"), cmd["fault"], "fault", math.inf, plant_bodies(self.scenario),
+                                      t=self.t_reached + self.dt))
 
-    verbs = {"fault": inject_fault}
+    def refuse(self, bname: str, cmd: dict, why: str) -> None:
+        self.refused += 1
+        if len(self.refusals) < MAX_EXAMPLES:
+            self.refusals.append(f"{bname} {command_id(cmd['sender'], cmd['seq'])}: {why}")
 
-    eps = 1e-9 * dt  # "at t": within round-off of the step's time
-
-    def refuse(bname: str, cmd: dict, why: str) -> None:
-        nonlocal refused
-        refused += 1
-        if len(refusals) < MAX_EXAMPLES:
-            refusals.append(f"{bname} {command_id(cmd['sender'], cmd['seq'])}: {why}")
-
-    def apply_command(b, bname: str, cmd: dict, raw: bytes | None) -> None:
+    def apply_command(self, b, bname: str, cmd: dict, raw: bytes | None) -> None:
         """Apply now; re-publish the command as applied (the copy the logger records)."""
-        nonlocal applied_count
         try:
             b.apply(cmd)
         except CommandRefused as exc:
-            refuse(bname, cmd, str(exc))
+            self.refuse(bname, cmd, str(exc))
             return
-        applied_count += 1
+        self.applied += 1
         # decoded and validated on arrival: encoded again without a second validation
-        outbox.append((messages.body_key(name, bname, "command"), raw if raw is not None else messages.encode(cmd)))
+        self.outbox.append((messages.body_key(self.name, bname, "command"), raw if raw is not None else messages.encode(cmd)))
 
-    def drain(block_s: float | None) -> bool:
+    def drain(self, block_s: float | None) -> bool:
         """Take what the intake holds (waiting up to ``block_s`` for the first); False if nothing came."""
+        intake = self.intake
         try:
             item = intake.queue.get(timeout=block_s) if block_s else intake.queue.get_nowait()
         except queue.Empty:
@@ -348,155 +355,194 @@ def run_plant(scenario, session, *, token: str | None = None, replay: dict | Non
             for kind, who, msg in (intake.judge_batch(*item) if "/@batch/" in item[0] else
                                    [j for j in (intake.judge(*item),) if j is not None]):
                 if kind == "command":
-                    received[msg["sender"]] = received.get(msg["sender"], 0) + 1
-                    if len(pending[who]) >= MAX_PENDING:
-                        refuse(who, msg, f"more than {MAX_PENDING} commands waiting for their time")
+                    self.received[msg["sender"]] = self.received.get(msg["sender"], 0) + 1
+                    if len(self.pending[who]) >= MAX_PENDING:
+                        self.refuse(who, msg, f"more than {MAX_PENDING} commands waiting for their time")
                     else:
-                        pending[who].append((msg, None))  # applied: re-encoded (the same bytes for a canonical one)
+                        self.pending[who].append((msg, None))  # applied: re-encoded (the same bytes for a canonical one)
                 elif kind == "done":
-                    promised[who] = promised.get(who, 0) + int(msg["commands"])
-                    answered[who] = max(answered.get(who, -1), int(msg["seq"]))
+                    self.promised[who] = self.promised.get(who, 0) + int(msg["commands"])
+                    self.answered[who] = max(self.answered.get(who, -1), int(msg["seq"]))
             try:
                 item = intake.queue.get_nowait()
             except queue.Empty:
                 return True
 
-    with bus.declare_alive(session, name, PROCESS), \
-            bus.Heartbeat(session, name, PROCESS, signer=signer) as heartbeat, \
-            bus.EventPublisher(session, name, PROCESS, signer=signer) as events, \
-            session.declare_subscriber(f"{messages.PREFIX}/{name}/*/command", intake.callback), \
-            session.declare_subscriber(f"{messages.PREFIX}/{name}/@done/*", intake.callback), \
-            session.declare_subscriber(f"{messages.PREFIX}/{name}/@batch/*", intake.callback), \
-            bus.BatchPublisher(session, name, PROCESS, signer=signer) as batch, \
-            session.declare_subscriber(command_key(name), zenoh.handlers.FifoChannel(256)) as supervisor:
-        bus.wait_for_process(session, name, "logger", timeout_s=wait_logger_s)
-        events.next_seq = int(first_event_seq)
-        events.emit("start", 0.0, json.dumps({"bodies": len(plant.bodies), "mode": control.mode,
-                                              "controllers": list(expected), "steps": n_steps,
-                                              "replay": replay is not None}))
-        heartbeat.beat(force=True, t=0.0, step=0, preparing=True)
-        failure = None
-        k = 0
-        try:
-            while k < n_steps:
-                t = k * dt
-                obey_commands(supervisor, pacer, t, stopping, heartbeat, commands_from, verbs)  # serve's pause, rate, stop
-                wait = pacer.wait_time(t)
-                while (wait > 0 or pacer.paused) and not stopping["why"]:
-                    time.sleep(min(wait, 0.05) if wait > 0 else 0.05)
-                    drain(None)  # free mode: commands keep arriving while we wait
-                    heartbeat.beat(t=t_reached, paused=pacer.paused)
-                    obey_commands(supervisor, pacer, t, stopping, heartbeat, commands_from, verbs)
-                    wait = pacer.wait_time(t)
-                if stopping["why"]:
-                    break
-                for f in plant.faults_at(t):
-                    events.emit("fault", t, Plant.fault_detail(f))
-                for b in plant.bodies.values():
-                    b.begin_step()
-                samples: list[tuple[str, bytes]] = []  # (body/kind, payload) of this step, for the tick
-                if orb_bodies:  # states: the compiled encoders (canonical layout, validated there)
-                    payloads = messages.encode_orbit_batch(t, k, messages.ACTUATED_MODEL, np.array([b.r for _, b in orb_bodies]),
-                                                           np.array([b.v for _, b in orb_bodies]), mu, frame)
-                    outbox.extend(zip(orb_keys, payloads))
-                    samples.extend((f"{bname}/orbit", p) for (bname, _), p in zip(orb_bodies, payloads))
-                if att_bodies:
-                    payloads = messages.encode_attitude_batch(t, k, messages.ACTUATED_MODEL, np.array([b.q for _, b in att_bodies]),
-                                                              np.array([b.w for _, b in att_bodies]))
-                    outbox.extend(zip(att_keys, payloads))
-                    samples.extend((f"{bname}/attitude", p) for (bname, _), p in zip(att_bodies, payloads))
-                published += len(orb_bodies) + len(att_bodies)
-                for bname, b in plant.bodies.items():
-                    for kind, fields in b.sensor_samples(k, t):
-                        key = messages.body_key(name, bname, kind)
-                        seq = seqs.get(key, 0)
-                        payload = messages.encode({"t": t, "seq": seq, **fields})  # NaN refused; fields are the plant's
-                        outbox.append((key, payload))
-                        samples.append((f"{bname}/{kind}", payload))
-                        seqs[key] = seq + 1
-                flush(batch)
-                control_step = k % control.every == 0
-                if control_step:
-                    j = k // control.every
-                    put(messages.tick_key(name), tick_payload(t, j, k, samples))
-                    sent_at = time.monotonic()
-                    deadline = sent_at + control.timeout
-                    while True:
-                        drain(None)
-                        waiting = [c for c in expected
-                                   if answered.get(c, -1) < j or received.get(c, 0) < promised.get(c, 0)]
-                        if not waiting or stopping["why"]:
-                            if expected and len(round_trips) < MAX_ROUND_TRIPS:
-                                round_trips.append(time.monotonic() - sent_at)
-                            break
-                        left = deadline - time.monotonic()
-                        if left <= 0:
-                            raise ControllerTimeout(
-                                f"controller {waiting[0]!r} did not answer control step {j} (t = {t:g} s) within "
-                                f"{control.timeout:g} s" + (f" (also {', '.join(map(repr, waiting[1:]))})" if waiting[1:] else ""))
-                        drain(min(left, 0.5))
-                        heartbeat.beat(t=t, step=k, waiting=waiting)
-                        obey_commands(supervisor, pacer, t, stopping, heartbeat, commands_from, verbs)
-                else:
-                    drain(None)
-                if stopping["why"]:
-                    break
-                # commands due in [t, t + dt), in arrival order (replay: those recorded as applied in this step)
-                last = k == n_steps - 1
-                for bname, b in plant.bodies.items():
-                    if replay is not None:
-                        mine = [(c, None) for c in replay_by_body.get(k, {}).get(bname, ())]
+    # ------------------------------------------------------------------ one step
+
+    def wait_for_time(self, t: float, supervisor, heartbeat) -> None:
+        """Obey the supervisor (pause, rate, stop, fault) and pace to ``t``; free mode takes
+        commands while it waits."""
+        pacer = self.pacer
+        obey_commands(supervisor, pacer, t, self.stopping, heartbeat, self.commands_from, self.verbs)
+        wait = pacer.wait_time(t)
+        while (wait > 0 or pacer.paused) and not self.stopping["why"]:
+            time.sleep(min(wait, 0.05) if wait > 0 else 0.05)
+            self.drain(None)
+            heartbeat.beat(t=self.t_reached, paused=pacer.paused)
+            obey_commands(supervisor, pacer, t, self.stopping, heartbeat, self.commands_from, self.verbs)
+            wait = pacer.wait_time(t)
+
+    def publish_step(self, k: int, t: float, events) -> list[tuple[str, bytes]]:
+        """Faults that begin now, then the step's states and sensor samples into the outbox;
+        returns them as ``(body/kind, payload)`` for the tick."""
+        name, plant = self.name, self.plant
+        for f in plant.faults_at(t):
+            events.emit("fault", t, Plant.fault_detail(f))
+        for b in plant.bodies.values():
+            b.begin_step()
+        samples: list[tuple[str, bytes]] = []
+        if self.orb_bodies:  # states: the compiled encoders (canonical layout, validated there)
+            payloads = messages.encode_orbit_batch(
+                t, k, messages.ACTUATED_MODEL, np.array([b.r for _, b in self.orb_bodies]),
+                np.array([b.v for _, b in self.orb_bodies]), self.scenario.central_body.mu, self.scenario.frame)
+            self.outbox.extend(zip(self.orb_keys, payloads))
+            samples.extend((f"{bname}/orbit", p) for (bname, _), p in zip(self.orb_bodies, payloads))
+        if self.att_bodies:
+            payloads = messages.encode_attitude_batch(t, k, messages.ACTUATED_MODEL, np.array([b.q for _, b in self.att_bodies]),
+                                                      np.array([b.w for _, b in self.att_bodies]))
+            self.outbox.extend(zip(self.att_keys, payloads))
+            samples.extend((f"{bname}/attitude", p) for (bname, _), p in zip(self.att_bodies, payloads))
+        self.published += len(self.orb_bodies) + len(self.att_bodies)
+        for bname, b in plant.bodies.items():
+            for kind, fields in b.sensor_samples(k, t):
+                key = messages.body_key(name, bname, kind)
+                seq = self.seqs.get(key, 0)
+                payload = messages.encode({"t": t, "seq": seq, **fields})  # NaN refused; fields are the plant's
+                self.outbox.append((key, payload))
+                samples.append((f"{bname}/{kind}", payload))
+                self.seqs[key] = seq + 1
+        return samples
+
+    def exchange(self, k: int, t: float, samples, supervisor, heartbeat) -> None:
+        """A control step: publish the tick; in lockstep, wait for every controller's answer
+        and the commands it announced (ControllerTimeout after ``control.timeout``)."""
+        j = k // self.control.every
+        self.put(messages.tick_key(self.name), tick_payload(t, j, k, samples))
+        sent_at = time.monotonic()
+        deadline = sent_at + self.control.timeout
+        while True:
+            self.drain(None)
+            waiting = [c for c in self.expected
+                       if self.answered.get(c, -1) < j or self.received.get(c, 0) < self.promised.get(c, 0)]
+            if not waiting or self.stopping["why"]:
+                if self.expected and len(self.round_trips) < MAX_ROUND_TRIPS:
+                    self.round_trips.append(time.monotonic() - sent_at)
+                return
+            left = deadline - time.monotonic()
+            if left <= 0:
+                raise ControllerTimeout(
+                    f"controller {waiting[0]!r} did not answer control step {j} (t = {t:g} s) within "
+                    f"{self.control.timeout:g} s" + (f" (also {', '.join(map(repr, waiting[1:]))})" if waiting[1:] else ""))
+            self.drain(min(left, 0.5))
+            heartbeat.beat(t=t, step=k, waiting=waiting)
+            obey_commands(supervisor, self.pacer, t, self.stopping, heartbeat, self.commands_from, self.verbs)
+
+    def commands_due(self, k: int, t: float, bname: str) -> list[tuple[dict, bytes | None]]:
+        """The commands ``bname`` applies in step ``k``: due in [t, t + dt) in arrival order
+        (re-simulation: those recorded as applied in this step)."""
+        if self.replay is not None:
+            return [(c, None) for c in self.replay_by_body.get(k, {}).get(bname, ())]
+        due = t + self.eps if k == self.n_steps - 1 else t + self.dt - self.eps
+        pending = self.pending[bname]
+        mine = [e for e in pending if e[0]["t"] <= due]
+        if mine:
+            self.pending[bname] = [e for e in pending if e[0]["t"] > due]
+        return mine
+
+    def apply_commands(self, k: int, t: float) -> None:
+        """Apply each body's due commands (those inside the step at their own time), advance
+        it to the next step, and put its actuator state in the outbox."""
+        last = k == self.n_steps - 1
+        eps, dt = self.eps, self.dt
+        for bname, b in self.plant.bodies.items():
+            inside = []
+            for cmd, raw in self.commands_due(k, t, bname):
+                if cmd["t"] > t + eps:
+                    inside.append((cmd, raw))
+                    continue
+                if self.replay is None and cmd["t"] < t - eps:
+                    if self.lockstep:
+                        self.refuse(bname, cmd, f"t = {cmd['t']:g} s is in the past (now {t:g} s)")
+                        continue
+                    self.late += 1
+                self.apply_command(b, bname, cmd, raw)
+            b.finish_commands()
+            done_s = 0.0  # commands inside the step: advance to their t, apply, go on
+            for cmd, raw in sorted(inside, key=lambda e: e[0]["t"]):
+                if cmd["t"] - t > done_s:
+                    b.advance(cmd["t"] - t - done_s)
+                    done_s = cmd["t"] - t
+                self.apply_command(b, bname, cmd, raw)
+            if not last and dt > done_s:
+                b.advance(dt - done_s)
+            if b.limits is not None:
+                self.outbox.append((messages.body_key(self.name, bname, "actuators"),
+                                    messages.encode({"t": t, "seq": k, **b.actuator_state()})))
+
+    # ------------------------------------------------------------------ the run
+
+    def run(self, first_event_seq: int = 0, wait_logger_s: float = 30.0) -> dict:
+        name, session = self.name, self.session
+        wall0 = time.monotonic()
+        with bus.declare_alive(session, name, PROCESS), \
+                bus.Heartbeat(session, name, PROCESS, signer=self.signer) as heartbeat, \
+                bus.EventPublisher(session, name, PROCESS, signer=self.signer) as events, \
+                session.declare_subscriber(f"{messages.PREFIX}/{name}/*/command", self.intake.callback), \
+                session.declare_subscriber(f"{messages.PREFIX}/{name}/@done/*", self.intake.callback), \
+                session.declare_subscriber(f"{messages.PREFIX}/{name}/@batch/*", self.intake.callback), \
+                bus.BatchPublisher(session, name, PROCESS, signer=self.signer) as batch, \
+                session.declare_subscriber(command_key(name), zenoh.handlers.FifoChannel(256)) as supervisor:
+            bus.wait_for_process(session, name, "logger", timeout_s=wait_logger_s)
+            events.next_seq = int(first_event_seq)
+            events.emit("start", 0.0, json.dumps({"bodies": len(self.plant.bodies), "mode": self.control.mode,
+                                                  "controllers": list(self.expected), "steps": self.n_steps,
+                                                  "replay": self.replay is not None}))
+            heartbeat.beat(force=True, t=0.0, step=0, preparing=True)
+            failure = None
+            k = 0
+            try:
+                while k < self.n_steps:
+                    t = k * self.dt
+                    self.wait_for_time(t, supervisor, heartbeat)
+                    if self.stopping["why"]:
+                        break
+                    samples = self.publish_step(k, t, events)
+                    self.flush(batch)
+                    if k % self.control.every == 0:
+                        self.exchange(k, t, samples, supervisor, heartbeat)
                     else:
-                        due = t + eps if last else t + dt - eps
-                        mine = [e for e in pending[bname] if e[0]["t"] <= due]
-                        if mine:
-                            pending[bname] = [e for e in pending[bname] if e[0]["t"] > due]
-                    inside = []
-                    for cmd, raw in mine:
-                        if cmd["t"] > t + eps:
-                            inside.append((cmd, raw))
-                            continue
-                        if replay is None and cmd["t"] < t - eps:
-                            if lockstep:
-                                refuse(bname, cmd, f"t = {cmd['t']:g} s is in the past (now {t:g} s)")
-                                continue
-                            late += 1
-                        apply_command(b, bname, cmd, raw)
-                    b.finish_commands()
-                    done_s = 0.0  # commands inside the step: advance to their t, apply, go on
-                    for cmd, raw in sorted(inside, key=lambda e: e[0]["t"]):
-                        if cmd["t"] - t > done_s:
-                            b.advance(cmd["t"] - t - done_s)
-                            done_s = cmd["t"] - t
-                        apply_command(b, bname, cmd, raw)
-                    if not last and dt > done_s:
-                        b.advance(dt - done_s)
-                    if b.limits is not None:
-                        outbox.append((messages.body_key(name, bname, "actuators"),
-                                       messages.encode({"t": t, "seq": k, **b.actuator_state()})))
-                flush(batch)
-                t_reached = t
-                k += 1
-                heartbeat.beat(t=t_reached, step=k)
-        except ControllerTimeout as exc:
-            failure = str(exc)
-            events.emit("error", t_reached, failure)
-        wall = time.monotonic() - wall0
-        reason = failure or stopping["why"] or "end of scenario"
-        extra = {"last_step": k - 1, "t_reached": t_reached, "reason": reason, "applied": applied_count,
-                 "refused": refused, "late": late, "rejected": dict(intake.rejected), "dropped": intake.dropped}
-        events.end(t_reached, published, **extra)
-        heartbeat.beat(force=True, t=t_reached, step=k, done=True)
-        wait_until_logged(session, name, PROCESS)
-    summary = {"process": PROCESS, "bodies": len(plant.bodies), "steps": k, "messages": published, "t": t_reached,
-               "wall_s": wall, **extra, "refusals": refusals, "rejected_examples": intake.examples}
-    if round_trips:
-        rt = sorted(round_trips)
-        summary["round_trip_us"] = {"n": len(rt), "p50": 1e6 * rt[len(rt) // 2], "p99": 1e6 * rt[int(0.99 * (len(rt) - 1))],
-                                    "max": 1e6 * rt[-1]}
-    if failure:
-        summary["error"] = failure
-    return summary
+                        self.drain(None)
+                    if self.stopping["why"]:
+                        break
+                    self.apply_commands(k, t)
+                    self.flush(batch)
+                    self.t_reached = t
+                    k += 1
+                    heartbeat.beat(t=t, step=k)
+            except ControllerTimeout as exc:
+                failure = str(exc)
+                events.emit("error", self.t_reached, failure)
+            wall = time.monotonic() - wall0
+            extra = {"last_step": k - 1, "t_reached": self.t_reached, "reason": failure or self.stopping["why"] or "end of scenario",
+                     "applied": self.applied, "refused": self.refused, "late": self.late,
+                     "rejected": dict(self.intake.rejected), "dropped": self.intake.dropped}
+            events.end(self.t_reached, self.published, **extra)
+            heartbeat.beat(force=True, t=self.t_reached, step=k, done=True)
+            wait_until_logged(session, name, PROCESS)
+        return self.summary(k, wall, extra, failure)
+
+    def summary(self, k: int, wall: float, extra: dict, failure: str | None) -> dict:
+        summary = {"process": PROCESS, "bodies": len(self.plant.bodies), "steps": k, "messages": self.published,
+                   "t": self.t_reached, "wall_s": wall, **extra, "refusals": self.refusals,
+                   "rejected_examples": self.intake.examples}
+        if self.round_trips:
+            rt = sorted(self.round_trips)
+            summary["round_trip_us"] = {"n": len(rt), "p50": 1e6 * rt[len(rt) // 2],
+                                        "p99": 1e6 * rt[int(0.99 * (len(rt) - 1))], "max": 1e6 * rt[-1]}
+        if failure:
+            summary["error"] = failure
+        return summary
 
 
 def tick_payload(t: float, seq: int, step: int, samples: list[tuple[str, bytes]]) -> bytes:
