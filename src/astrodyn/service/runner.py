@@ -57,7 +57,7 @@ from astrodyn.service.signals import catch_stop_signals
 from astrodyn.service.summary import file_summary, print_summary, propagator_rows
 from astrodyn.service.supervision import RestartBudget, next_event_seq, plan_logger_restart, wait_until_gone
 
-__all__ = ["main", "run_scenario", "EXIT_REJECTED"]
+__all__ = ["main", "run_scenario", "ScenarioRun", "EXIT_REJECTED"]
 
 #: Exit status of ``astrodyn run`` when the run completed but the logger rejected messages
 #: that were not the run's own (forged, replayed, ghost bodies): the record was attacked.
@@ -85,236 +85,281 @@ def run_scenario(scenario: Scenario, config_path: Path, out: Path, *, cross_chec
     (summary, indexes, footer, and an "end" metadata record with the sim time reached);
     ``result["interrupted"]`` names the signal.
     """
-    p = make_plan(scenario)
-    propagators = [k for k in p.processes if k != "logger"]
-    port = bus.free_port()
-    hub = bus.loopback_endpoint(port)
-    connect_args = sum((["--connect", e] for e in [hub, *(connect or [])]), [])
-    if zenoh_config:
-        connect_args += ["--zenoh-config", str(zenoh_config)]
-    started = time.monotonic()
-    result: dict = {"scenario": scenario.name, "out": str(out), "processes": {}, "ok": False}
-    interrupted: dict = {"signal": None}
-    restore_signals = catch_stop_signals(lambda why: interrupted.update(signal=why))
-    secret = auth.RunSecret.generate() if authenticate else None
-    with work_directory(out, "run") as tmp, \
-            bus.open_session(listen=[hub], config_file=zenoh_config) as session, \
-            bus.HeartbeatMonitor(session, scenario.name, verifier=secret and auth.Verifier(secret)) as beats, \
-            bus.AliveWatcher(session, scenario.name) as alive:
-        tmpd = Path(tmp)
-        # the run's identity: children sign what they publish (docs/security.md)
-        child_env = {auth.SECRET_ENV: str(secret.save(tmpd))} if secret is not None else None
-        token_file = None
-        if "plant" in propagators and secret is not None:  # outside controllers join with this token
-            token_file = auth.write_private_file(tmpd / "control.token", auth.new_token().encode())
-            result["control_token_file"] = str(token_file)
-        meta_path = tmpd / "scenario.json"
-        meta_path.write_text(json.dumps(scenario.to_metadata()))
-        children: dict[str, Child] = {}
+    return ScenarioRun(scenario, config_path, out, cross_check=cross_check, real_time_factor=real_time_factor,
+                       connect=connect, progress=progress, timeout_s=timeout_s, extra_args=extra_args,
+                       logger_args=logger_args, zenoh_config=zenoh_config, authenticate=authenticate,
+                       controllers=controllers, commands=commands).run()
+
+
+class ScenarioRun:
+    """One ``astrodyn run``: the module docstring's steps, one method each (start the
+    logger, the propagators and the controllers, watch, restart what dies, finish)."""
+
+    def __init__(self, scenario: Scenario, config_path: Path, out: Path, *, cross_check: bool,
+                 real_time_factor: float, connect: list[str] | None, progress: bool, timeout_s: float | None,
+                 extra_args: dict | None, logger_args: list[str] | None, zenoh_config: str | None,
+                 authenticate: bool, controllers: list[str] | None, commands: Path | None):
+        self.scenario, self.config_path, self.out = scenario, config_path, out
+        self.cross_check, self.real_time_factor = cross_check, real_time_factor
+        self.progress, self.timeout_s = progress, timeout_s
+        self.extra_args, self.logger_args = extra_args or {}, logger_args or []
+        self.zenoh_config, self.authenticate = zenoh_config, authenticate
+        self.controller_commands, self.commands = controllers or [], commands
+        self.plan = make_plan(scenario)
+        self.propagators = [k for k in self.plan.processes if k != "logger"]
+        self.hub = bus.loopback_endpoint(bus.free_port())
+        self.connect_args = sum((["--connect", e] for e in [self.hub, *(connect or [])]), [])
+        if zenoh_config:
+            self.connect_args += ["--zenoh-config", str(zenoh_config)]
+        self.result: dict = {"scenario": scenario.name, "out": str(out), "processes": {}, "ok": False}
+        self.restarts: list[dict] = self.result.setdefault("restarts", [])
+        self.interrupted: dict = {"signal": None}
+        self.children: dict[str, Child] = {}
+        self.controllers: dict[str, Child] = {}
+        self.logger_budget = RestartBudget("logger")
+        self.budgets = {kind: RestartBudget(kind) for kind in self.propagators}
+        self.token_file: Path | None = None
+
+    def say(self, text: str) -> None:
+        if self.progress:
+            print(text, file=sys.stderr, flush=True)
+
+    def run(self) -> dict:
+        scenario, result = self.scenario, self.result
+        started = time.monotonic()
+        restore_signals = catch_stop_signals(lambda why: self.interrupted.update(signal=why))
+        secret = auth.RunSecret.generate() if self.authenticate else None
+        with work_directory(self.out, "run") as tmp, \
+                bus.open_session(listen=[self.hub], config_file=self.zenoh_config) as session, \
+                bus.HeartbeatMonitor(session, scenario.name, verifier=secret and auth.Verifier(secret)) as beats, \
+                bus.AliveWatcher(session, scenario.name) as alive:
+            self.session, self.tmpd = session, Path(tmp)
+            # the run's identity: children sign what they publish (docs/security.md)
+            self.child_env = {auth.SECRET_ENV: str(secret.save(self.tmpd))} if secret is not None else None
+            if "plant" in self.propagators and secret is not None:  # outside controllers join with this token
+                self.token_file = auth.write_private_file(self.tmpd / "control.token", auth.new_token().encode())
+                result["control_token_file"] = str(self.token_file)
+            meta_path = self.tmpd / "scenario.json"
+            meta_path.write_text(json.dumps(scenario.to_metadata()))
+            try:
+                self.logger_argv = [*logger_command(), "--scenario", scenario.name, "--out", str(self.out),
+                                    "--epoch-ns", str(scenario.epoch_unix_ns), "--metadata", str(meta_path),
+                                    "--config", str(self.config_path), "--leave-partial", "--no-control",
+                                    *sum((["--expect", k] for k in self.propagators), []), *self.connect_args]
+                self.children["logger"] = Child("logger", [*self.logger_argv, *self.logger_args], self.tmpd,
+                                                 env=self.child_env)
+                failure = _wait_ready(session, scenario.name, self.children["logger"], 60.0, self.interrupted)
+                failure = self.replace_logger_dead_while_starting(failure)
+                if failure is None:
+                    failure = self.start_and_watch(beats, alive)
+                result["failure"] = self.finish(failure)
+            finally:
+                for ch in self.controllers.values():
+                    ch.stop(signal.SIGTERM, timeout=5)
+                    ch.close()
+                for name in [*(k for k in self.children if k != "logger"), "logger"]:  # propagators first
+                    if name in self.children:
+                        self.children[name].stop()
+                        self.children[name].close()
+                restore_signals()
+        result["interrupted"] = self.interrupted["signal"]
+        result["wall_s"] = time.monotonic() - started
+        log = (result["processes"].get("logger") or {}).get("summary") or {}
+        result["logger"] = log
+        lost = log.get("missing", 0) if isinstance(log, dict) else 0
+        result["ok"] = not result.get("failure") and bool(log) and not lost
+        if not result.get("failure") and lost:
+            result["failure"] = f"{lost} messages missing in the recording"
+        result["file"] = _name_the_recording(log.get("file") if isinstance(log, dict) else None, self.out, result)
+        return result
+
+    # ------------------------------------------------------------------ starting
+
+    def start_propagator(self, kind: str, resume_args: dict, n: int = 0, event_seq: int = 0) -> None:
+        children = self.children
+        if kind == "plant":
+            argv = [*plant_command(), str(self.config_path), *self.connect_args]
+            if self.token_file is not None:
+                argv += ["--control-token-file", str(self.token_file)]
+            if self.commands is not None:
+                argv += ["--commands", str(self.commands)]
+            children[kind] = Child(kind, argv, self.tmpd, env=self.child_env)
+            return
+        argv = [*propagator_command(kind), str(self.config_path), *self.connect_args]
+        if event_seq:
+            argv += ["--first-event-seq", str(event_seq)]
+        if not math.isinf(self.real_time_factor):
+            argv += ["--real-time-factor", str(self.real_time_factor)]
+        if self.cross_check and kind == "orbit":
+            argv.append("--cross-check")
+        for k, v in resume_args.items():
+            argv += [k, str(v)]
+        children[kind] = Child(kind if not n else f"{kind}-r{n}", argv, self.tmpd, env=self.child_env)
+        children[kind].name = kind
+
+    def start_controllers(self) -> str | None:
+        scenario = self.scenario
+        names = scenario.control.controllers if scenario.control is not None else ()
+        for n, cmd in enumerate(self.controller_commands):
+            cname = names[n]
+            try:
+                self.controllers[cname] = start_controller(cname, cmd, scenario.name, self.hub, self.tmpd,
+                                                           self.child_env, self.token_file)
+            except OSError as exc:
+                return f"controller {cname}: cannot start {cmd!r}: {exc}"
+        return None
+
+    def replace_logger_dead_while_starting(self, failure: str | None) -> str | None:
+        """The logger died while starting (a kill at a random moment can land there): nothing
+        is recorded yet, so a new one starts afresh (its predecessor's partial is removed at
+        the end like every dead logger's), within the restart budget."""
+        children, scenario = self.children, self.scenario
+        while failure is not None and children["logger"].poll() not in (None, 0) and not self.interrupted["signal"]:
+            dead, rc = children["logger"], children["logger"].poll()
+            if not self.logger_budget.allow():
+                return f"{self.logger_budget.refusal()}; last: {failure}"
+            dead.close()
+            wait_until_gone(self.session, scenario.name, "logger")
+            attempt = len(self.restarts_of("logger")) + 1
+            children["logger"] = Child(f"logger-r{attempt}", [*self.logger_argv, "--attempt", str(attempt),
+                                                              *self.logger_args], self.tmpd, env=self.child_env)
+            children["logger"].name = "logger"
+            how = _how(rc)
+            self.restarts.append({"process": "logger", "old_pid": dead.pid, "new_pid": children["logger"].pid,
+                                  "why": f"{how} while starting", "from_step": 0, "state_from": None})
+            self.say(f"  logger (pid {dead.pid}) {how} while starting: restarted (pid {children['logger'].pid})")
+            failure = _wait_ready(self.session, scenario.name, children["logger"], 60.0, self.interrupted)
+        return failure
+
+    def start_and_watch(self, beats, alive) -> str | None:
+        """Start the propagators and the controllers; watch them until the run ends."""
+        scenario = self.scenario
+        self.result["hub"] = self.hub
+        print(f"  bus {self.hub}: any Zenoh client can subscribe to astrodyn/{scenario.name}/** there "
+              f"(docs/clients.md)", file=sys.stderr, flush=True)
+        if self.token_file is not None:
+            print(f"  control token {self.token_file}: outside controllers present it (docs/control.md)",
+                  file=sys.stderr, flush=True)
+        for kind in self.propagators:
+            self.start_propagator(kind, self.extra_args.get(kind, {}))
+        failure = self.start_controllers()
+        if self.controllers:
+            self.say("  controllers " + ", ".join(f"{n} (pid {c.pid})" for n, c in self.controllers.items()))
+        self.say("  started " + ", ".join(f"{n} (pid {c.pid})" for n, c in self.children.items()))
+        return failure or _watch(scenario, self.plan, self.children, beats, alive, self.progress, self.timeout_s,
+                                 self.interrupted, on_death=self.restart, controllers=self.controllers)
+
+    # ------------------------------------------------------------------ restarts
+
+    def restarts_of(self, name: str) -> list[dict]:
+        return [r for r in self.restarts if r["process"] == name]
+
+    def restart(self, name: str, rc: int) -> str | None:
+        if "plant" in self.propagators and name in ("plant", "logger"):
+            dead = self.children[name]
+            return (f"{name} (pid {dead.pid}) {_how(rc)}: a closed-loop run is not restarted (its controllers' "
+                    f"state lives outside astrodyn); the recording holds everything up to here: "
+                    f"{dead.stderr_tail(3)}")
+        return self.restart_logger(rc) if name == "logger" else self.restart_propagator(name, rc)
+
+    def restart_logger(self, rc: int) -> str | None:
+        """The logger died mid-run: a new one continues the file (astrodyn.service.supervision).
+        A new logger that dies while starting is replaced again, within the restart budget."""
+        children, scenario, budget = self.children, self.scenario, self.logger_budget
+        for kind in self.propagators:
+            children[kind].stop(signal.SIGKILL, timeout=5)
+            children[kind].close()
+        while True:
+            dead = children["logger"]
+            how = _how(rc)
+            if not budget.allow():
+                return f"{budget.refusal()}; last: logger (pid {dead.pid}) {how}: {dead.stderr_tail(3)}"
+            dead.close()
+            wait_until_gone(self.session, scenario.name, "logger")
+            attempt = len(self.restarts_of("logger")) + 1
+            plan = plan_logger_restart(scenario, self.out, attempt, self.propagators, self.tmpd, self.logger_args,
+                                       self.extra_args)
+            children["logger"] = Child(f"logger-r{attempt}", [*self.logger_argv, "--attempt", str(attempt),
+                                                              *plan.logger_args], self.tmpd, env=self.child_env)
+            children["logger"].name = "logger"
+            self.restarts.append({"process": "logger", "old_pid": dead.pid, "new_pid": children["logger"].pid,
+                                  "why": how, "from_step": plan.steps, "state_from": plan.source})
+            self.say(f"\n  logger (pid {dead.pid}) {how}: restarted (pid {children['logger'].pid}), "
+                     f"{plan.steps} steps copied from {plan.source or '-'}")
+            why = _wait_ready(self.session, scenario.name, children["logger"], 60.0, self.interrupted)
+            if why is None:
+                break
+            rc = children["logger"].poll()
+            if rc is None or self.interrupted["signal"]:
+                return f"logger (pid {dead.pid}) {how}; its restart failed: {why}"
+        for kind in self.propagators:  # a new file: their events number from 0 again
+            self.start_propagator(kind, plan.propagator_args.get(kind, {}), attempt)
+        return None
+
+    def restart_propagator(self, kind: str, rc: int) -> str | None:
+        """A propagator died: start it again after the last step of its own that the
+        logger's file holds; steps it publishes twice are recorded once (first copy)."""
+        from astrodyn.recording import RecordingError, load as load_run
+        from astrodyn.service.resume import last_common_step, propagator_resume_args, state_topics
+
+        scenario = self.scenario
+        dead = self.children[kind]
+        how = _how(rc)
+        if not self.budgets[kind].allow():
+            return f"{self.budgets[kind].refusal()}; last: {kind} (pid {dead.pid}) {how}: {dead.stderr_tail(3)}"
+        dead.close()
+        wait_until_gone(self.session, scenario.name, kind)
+        args, step = dict(self.extra_args.get(kind, {})), None
         try:
-            logger_argv = [*logger_command(), "--scenario", scenario.name, "--out", str(out),
-                           "--epoch-ns", str(scenario.epoch_unix_ns), "--metadata", str(meta_path),
-                           "--config", str(config_path), "--leave-partial", "--no-control",
-                           *sum((["--expect", k] for k in propagators), []),
-                           *connect_args]
-            children["logger"] = Child("logger", [*logger_argv, *(logger_args or [])], tmpd, env=child_env)
-            failure = _wait_ready(session, scenario.name, children["logger"], 60.0, interrupted)
+            run = load_run(partial_path(self.out, len(self.restarts_of("logger"))))  # up to its last flushed chunk
+            step = last_common_step(run, list(state_topics(scenario, kind).values()))
+            if step is not None:
+                args = propagator_resume_args(run, scenario, kind, step, self.tmpd)
+        except (RecordingError, OSError):
+            pass  # nothing flushed yet: start again from the beginning
+        n = len(self.restarts_of(kind)) + 1
+        self.start_propagator(kind, args, n, event_seq=next_event_seq(self.session, scenario.name, kind, n))
+        self.restarts.append({"process": kind, "old_pid": dead.pid, "new_pid": self.children[kind].pid, "why": how,
+                              "from_step": args.get("--start-step", 0)})
+        self.say(f"\n  {kind} (pid {dead.pid}) {how}: restarted (pid {self.children[kind].pid}) at step "
+                 f"{args.get('--start-step', 0)}")
+        return None
 
-            def start_propagator(kind: str, resume_args: dict, n: int = 0, event_seq: int = 0) -> None:
-                if kind == "plant":
-                    argv = [*plant_command(), str(config_path), *connect_args]
-                    if token_file is not None:
-                        argv += ["--control-token-file", str(token_file)]
-                    if commands is not None:
-                        argv += ["--commands", str(commands)]
-                    children[kind] = Child(kind, argv, tmpd, env=child_env)
-                    return
-                argv = [*propagator_command(kind), str(config_path), *connect_args]
-                if event_seq:
-                    argv += ["--first-event-seq", str(event_seq)]
-                if not math.isinf(real_time_factor):
-                    argv += ["--real-time-factor", str(real_time_factor)]
-                if cross_check and kind == "orbit":
-                    argv.append("--cross-check")
-                for k, v in resume_args.items():
-                    argv += [k, str(v)]
-                children[kind] = Child(kind if not n else f"{kind}-r{n}", argv, tmpd, env=child_env)
-                children[kind].name = kind
+    # ------------------------------------------------------------------ the end
 
-            budget = RestartBudget("logger")
-            restarts = result.setdefault("restarts", [])
-
-            def restart_logger(rc: int) -> str | None:
-                """The logger died mid-run: a new one continues the file (astrodyn.service.supervision).
-                A new logger that dies while starting is replaced again, within the restart budget."""
-                for kind in propagators:
-                    children[kind].stop(signal.SIGKILL, timeout=5)
-                    children[kind].close()
-                while True:
-                    dead = children["logger"]
-                    how = f"killed by signal {-rc}" if rc < 0 else f"exited with status {rc}"
-                    if not budget.allow():
-                        return f"{budget.refusal()}; last: logger (pid {dead.pid}) {how}: {dead.stderr_tail(3)}"
-                    dead.close()
-                    wait_until_gone(session, scenario.name, "logger")
-                    attempt = len(restarts_of("logger")) + 1
-                    plan = plan_logger_restart(scenario, out, attempt, propagators, tmpd, logger_args, extra_args)
-                    children["logger"] = Child(f"logger-r{attempt}", [*logger_argv, "--attempt", str(attempt),
-                                                                      *plan.logger_args], tmpd, env=child_env)
-                    children["logger"].name = "logger"
-                    restarts.append({"process": "logger", "old_pid": dead.pid, "new_pid": children["logger"].pid,
-                                     "why": how, "from_step": plan.steps, "state_from": plan.source})
-                    if progress:
-                        print(f"\n  logger (pid {dead.pid}) {how}: restarted (pid {children['logger'].pid}), "
-                              f"{plan.steps} steps copied from {plan.source or '-'}", file=sys.stderr, flush=True)
-                    why = _wait_ready(session, scenario.name, children["logger"], 60.0, interrupted)
-                    if why is None:
-                        break
-                    rc = children["logger"].poll()
-                    if rc is None or interrupted["signal"]:
-                        return f"logger (pid {dead.pid}) {how}; its restart failed: {why}"
-                for kind in propagators:  # a new file: their events number from 0 again
-                    start_propagator(kind, plan.propagator_args.get(kind, {}), attempt)
-                return None
-
-            budgets = {kind: RestartBudget(kind) for kind in propagators}
-
-            def restart_propagator(kind: str, rc: int) -> str | None:
-                """A propagator died: start it again after the last step of its own that the
-                logger's file holds; steps it publishes twice are recorded once (first copy)."""
-                from astrodyn.recording import RecordingError, load as load_run
-                from astrodyn.service.resume import last_common_step, propagator_resume_args, state_topics
-
-                dead = children[kind]
-                how = f"killed by signal {-rc}" if rc < 0 else f"exited with status {rc}"
-                if not budgets[kind].allow():
-                    return f"{budgets[kind].refusal()}; last: {kind} (pid {dead.pid}) {how}: {dead.stderr_tail(3)}"
-                dead.close()
-                wait_until_gone(session, scenario.name, kind)
-                args, step = dict((extra_args or {}).get(kind, {})), None
+    def finish(self, failure: str | None) -> str | None:
+        """Let the logger finish the file (stop it when the run failed); collect every
+        process's exit and summary into the result; returns the run's failure, if any."""
+        children = self.children
+        logger = children["logger"]
+        if failure:
+            for kind in self.propagators:
+                if kind in children:
+                    children[kind].stop()
+            if self.interrupted["signal"]:  # clean stops: the logger ends once it holds their last states
                 try:
-                    run = load_run(partial_path(out, len(restarts_of("logger"))))  # up to its last flushed chunk
-                    step = last_common_step(run, list(state_topics(scenario, kind).values()))
-                    if step is not None:
-                        args = propagator_resume_args(run, scenario, kind, step, tmpd)
-                except (RecordingError, OSError):
-                    pass  # nothing flushed yet: start again from the beginning
-                n = len(restarts_of(kind)) + 1
-                start_propagator(kind, args, n, event_seq=next_event_seq(session, scenario.name, kind, n))
-                restarts.append({"process": kind, "old_pid": dead.pid, "new_pid": children[kind].pid, "why": how,
-                                 "from_step": args.get("--start-step", 0)})
-                if progress:
-                    print(f"\n  {kind} (pid {dead.pid}) {how}: restarted (pid {children[kind].pid}) at step "
-                          f"{args.get('--start-step', 0)}", file=sys.stderr, flush=True)
-                return None
-
-            def restarts_of(name: str) -> list[dict]:
-                return [r for r in restarts if r["process"] == name]
-
-            def restart(name: str, rc: int) -> str | None:
-                if "plant" in propagators and name in ("plant", "logger"):
-                    dead = children[name]
-                    how = f"killed by signal {-rc}" if rc < 0 else f"exited with status {rc}"
-                    return (f"{name} (pid {dead.pid}) {how}: a closed-loop run is not restarted (its controllers' "
-                            f"state lives outside astrodyn); the recording holds everything up to here: "
-                            f"{dead.stderr_tail(3)}")
-                return restart_logger(rc) if name == "logger" else restart_propagator(name, rc)
-
-            started_controllers: dict[str, Child] = {}
-
-            def start_controllers() -> str | None:
-                names = scenario.control.controllers if scenario.control is not None else ()
-                for n, cmd in enumerate(controllers or []):
-                    cname = names[n]
-                    try:
-                        started_controllers[cname] = start_controller(cname, cmd, scenario.name, hub, tmpd, child_env,
-                                                                      token_file)
-                    except OSError as exc:
-                        return f"controller {cname}: cannot start {cmd!r}: {exc}"
-                return None
-
-            while failure is not None and children["logger"].poll() not in (None, 0) and not interrupted["signal"]:
-                # the logger died while starting (a kill at a random moment can land there): nothing
-                # is recorded yet, so a new one starts afresh (its predecessor's partial is removed
-                # at the end like every dead logger's), within the restart budget
-                dead, rc = children["logger"], children["logger"].poll()
-                if not budget.allow():
-                    failure = f"{budget.refusal()}; last: {failure}"
-                    break
-                dead.close()
-                wait_until_gone(session, scenario.name, "logger")
-                attempt = len(restarts_of("logger")) + 1
-                children["logger"] = Child(f"logger-r{attempt}", [*logger_argv, "--attempt", str(attempt),
-                                                                  *(logger_args or [])], tmpd, env=child_env)
-                children["logger"].name = "logger"
-                how = f"killed by signal {-rc}" if rc < 0 else f"exited with status {rc}"
-                restarts.append({"process": "logger", "old_pid": dead.pid, "new_pid": children["logger"].pid,
-                                 "why": f"{how} while starting", "from_step": 0, "state_from": None})
-                if progress:
-                    print(f"  logger (pid {dead.pid}) {how} while starting: restarted (pid {children['logger'].pid})",
-                          file=sys.stderr, flush=True)
-                failure = _wait_ready(session, scenario.name, children["logger"], 60.0, interrupted)
-            if failure is None:
-                result["hub"] = hub
-                print(f"  bus {hub}: any Zenoh client can subscribe to astrodyn/{scenario.name}/** there "
-                      f"(docs/clients.md)", file=sys.stderr, flush=True)
-                if token_file is not None:
-                    print(f"  control token {token_file}: outside controllers present it (docs/control.md)",
-                          file=sys.stderr, flush=True)
-                for kind in propagators:
-                    start_propagator(kind, (extra_args or {}).get(kind, {}))
-                failure = start_controllers()
-                if progress and started_controllers:
-                    print("  controllers " + ", ".join(f"{n} (pid {c.pid})" for n, c in started_controllers.items()),
-                          file=sys.stderr, flush=True)
-                if progress:
-                    print("  started " + ", ".join(f"{n} (pid {c.pid})" for n, c in children.items()), file=sys.stderr, flush=True)
-                failure = failure or _watch(scenario, p, children, beats, alive, progress, timeout_s, interrupted,
-                                            on_death=restart, controllers=started_controllers)
-            logger = children["logger"]
-            if failure:
-                for kind in propagators:
-                    if kind in children:
-                        children[kind].stop()
-                if interrupted["signal"]:  # clean stops: the logger ends once it holds their last states
-                    try:
-                        logger.proc.wait(timeout=10)
-                    except subprocess.TimeoutExpired:
-                        pass
-                logger.stop(signal.SIGTERM, timeout=30)
-            else:
-                try:
-                    logger.proc.wait(timeout=60)
+                    logger.proc.wait(timeout=10)
                 except subprocess.TimeoutExpired:
-                    failure = "logger did not finish within 60 s of the end of the run; stopped it (file finished)"
-                    logger.stop(signal.SIGTERM, timeout=30)
-            for ch in started_controllers.values():  # the run is over: controllers go (by PID)
-                ch.stop(signal.SIGTERM, timeout=5)
-            for name, ch in [*children.items(), *((c.name, c) for c in started_controllers.values())]:
-                result["processes"][name] = {"pid": ch.pid, "exit": ch.poll(), "summary": ch.summary(),
-                                             "stderr": ch.stderr_tail()}
-            if logger.poll() not in (0, None) and not failure:
-                failure = f"logger exited with status {logger.poll()}: {logger.stderr_tail()}"
-            result["failure"] = failure
-        finally:
-            for ch in started_controllers.values():
-                ch.stop(signal.SIGTERM, timeout=5)
-                ch.close()
-            for name in [*(k for k in children if k != "logger"), "logger"]:  # propagators first
-                if name in children:
-                    children[name].stop()
-                    children[name].close()
-            restore_signals()
-    result["interrupted"] = interrupted["signal"]
-    result["wall_s"] = time.monotonic() - started
-    log = (result["processes"].get("logger") or {}).get("summary") or {}
-    result["logger"] = log
-    lost = log.get("missing", 0) if isinstance(log, dict) else 0
-    result["ok"] = not result.get("failure") and bool(log) and not lost
-    if not result.get("failure") and lost:
-        result["failure"] = f"{lost} messages missing in the recording"
-    result["file"] = _name_the_recording(log.get("file") if isinstance(log, dict) else None, out, result)
-    return result
+                    pass
+            logger.stop(signal.SIGTERM, timeout=30)
+        else:
+            try:
+                logger.proc.wait(timeout=60)
+            except subprocess.TimeoutExpired:
+                failure = "logger did not finish within 60 s of the end of the run; stopped it (file finished)"
+                logger.stop(signal.SIGTERM, timeout=30)
+        for ch in self.controllers.values():  # the run is over: controllers go (by PID)
+            ch.stop(signal.SIGTERM, timeout=5)
+        for name, ch in [*children.items(), *((c.name, c) for c in self.controllers.values())]:
+            self.result["processes"][name] = {"pid": ch.pid, "exit": ch.poll(), "summary": ch.summary(),
+                                              "stderr": ch.stderr_tail()}
+        if logger.poll() not in (0, None) and not failure:
+            failure = f"logger exited with status {logger.poll()}: {logger.stderr_tail()}"
+        return failure
+
+
+def _how(rc: int) -> str:
+    return f"killed by signal {-rc}" if rc < 0 else f"exited with status {rc}"
 
 
 def _name_the_recording(written: str | None, out: Path, result: dict) -> str | None:
