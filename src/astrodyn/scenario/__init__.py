@@ -83,6 +83,11 @@ cheapest exact model (analytic Kepler unless a perturbation is listed and non-ze
 exact torque-free unless a torque model is listed and the torque is not identically
 zero) and which processes to start. ``astrodyn validate CONFIG`` prints it.
 
+Modules: this one reads the scene's sections into the :class:`Scenario` dataclasses;
+:mod:`~astrodyn.scenario.fields` reads single values (quantities with units, vectors,
+choices; errors naming the field), :mod:`~astrodyn.scenario.control` the closed loop's
+tables, :mod:`~astrodyn.scenario.planning` the plan; each re-exported here.
+
 The built-in central-body table takes the Earth, Moon and Sun from
 ``astrodyn.orbit.perturbations`` and adds Mars, Venus and Jupiter.
 """
@@ -138,6 +143,7 @@ from astrodyn.scenario.fields import (
     string,
     vector,
 )
+from astrodyn.scenario.planning import BYTES_PER_STATE, BodyPlan, Plan, plan
 
 __all__ = [
     "ScenarioError",
@@ -947,183 +953,6 @@ def load_dict(data: dict[str, Any], source: str = "<dict>", base_dir: str | Path
         output_path=out_path, roll_size=roll_size, roll_interval=roll_interval, walker=walker, control=control,
         source=source, config=jsonable(data),
     )
-
-
-# --------------------------------------------------------------------------- plan
-
-
-@dataclass(frozen=True)
-class BodyPlan:
-    """What runs for one body: orbit/attitude model used (None if absent), the method, notes."""
-
-    name: str
-    orbit_model: str | None
-    orbit_method: str
-    attitude_model: str | None
-    attitude_method: str
-    notes: tuple[str, ...] = ()
-
-
-@dataclass(frozen=True)
-class Plan:
-    """Processes to start and per-body models; :meth:`text` is the human-readable form."""
-
-    scenario: str
-    processes: tuple[str, ...]
-    bodies: tuple[BodyPlan, ...]
-    n_steps: int
-    messages: int  #: every message the run records: states plus cross-checks
-    warnings: tuple[str, ...] = ()
-    crosscheck_messages: int = 0  #: of ``messages``: the REBOUND cross-check messages
-
-    @property
-    def state_messages(self) -> int:
-        """Orbit and attitude state messages (``messages`` without the cross-checks)."""
-        return self.messages - self.crosscheck_messages
-
-    @property
-    def estimated_file_bytes(self) -> int:
-        """Expected size of the recording: :data:`BYTES_PER_STATE` per state message."""
-        return int(self.messages * BYTES_PER_STATE)
-
-    def text(self, max_bodies: int = 20) -> str:
-        size = self.estimated_file_bytes
-        xc = f" + {self.crosscheck_messages} cross-check messages" if self.crosscheck_messages else ""
-        lines = [f"scenario {self.scenario}: {len(self.bodies)} bodies, {self.n_steps} output steps, "
-                 f"{self.state_messages} state messages (orbit + attitude){xc}",
-                 f"expected recording: about {_human_bytes(size)} ({BYTES_PER_STATE} bytes per state message after zstd)",
-                 f"processes: {', '.join(self.processes)}"]
-        groups: dict[tuple, list[str]] = {}
-        for bp in self.bodies:
-            groups.setdefault((bp.orbit_model, bp.orbit_method, bp.attitude_model, bp.attitude_method, bp.notes), []).append(bp.name)
-        shown = 0
-        for (om, ometh, am, ameth, notes), names in groups.items():
-            if shown >= max_bodies:
-                lines.append(f"  ... {len(self.bodies) - shown} more bodies")
-                break
-            who = ", ".join(names) if len(names) <= 3 else f"{names[0]}, {names[1]}, ..., {names[-1]} ({len(names)} bodies)"
-            lines.append(f"  {who}:")
-            lines.append(f"    orbit:    {om or '-'}{' (' + ometh + ')' if om else ''}")
-            lines.append(f"    attitude: {am or '-'}{' (' + ameth + ')' if am else ''}")
-            lines += [f"    note: {n}" for n in notes]
-            shown += len(names)
-        return "\n".join(lines)
-
-
-#: Bytes per state message in a recording after zstd: 87 measured on a Kepler + torque-free
-#: scene of 240,002 states (20.9 MB; payloads 175-200 B), rounded up.
-BYTES_PER_STATE = 90
-
-
-def _human_bytes(n: float) -> str:
-    for unit in ("B", "kB", "MB", "GB", "TB"):
-        if n < 1000 or unit == "TB":
-            return f"{n:.3g} {unit}"
-        n /= 1000.0
-    return f"{n:.3g} TB"  # pragma: no cover
-
-
-_ORBIT_METHOD = {
-    "kepler": "analytic two-body, universal variables: exact",
-    "j2": "numerical, two-body + J2",
-    "zonal": "numerical, two-body + zonal harmonics",
-    "third_body": "numerical, two-body + third bodies",
-    ACTUATED_MODEL: "closed loop: analytic two-body between commands, impulses and burns (astrodyn.plant)",
-}
-_ATTITUDE_METHOD = {
-    "torque_free": "analytic, Jacobi elliptic functions: exact",
-    "gravity_gradient": "numerical splitting, gravity-gradient torque from the published orbit",
-    "gyrostat": "numerical splitting, gyrostat with rotors",
-    "heavy_top": "numerical splitting, heavy top in uniform gravity",
-    "user": "numerical splitting, constant body torque",
-    ACTUATED_MODEL: "closed loop, step by step with the commands held (astrodyn.plant)",
-}
-
-
-def plan(scenario: Scenario, cross_check_all: bool = False) -> Plan:
-    """The cheapest exact model per body and the processes a run needs.
-
-    ``cross_check_all``: the run checks every orbit against REBOUND (``run --cross-check``),
-    counted in ``crosscheck_messages`` like the bodies whose config asks for it.
-
-    A perturbation that is identically zero for the scene is dropped: j2/zonal with all
-    needed J_n = 0 -> kepler; gravity gradient on an inertially spherical body, a heavy
-    top with cm = 0 or g = 0, a user torque of 0, or a gyrostat whose rotors have h = 0
-    -> torque_free. A body with actuators or sensors is ``actuated`` (moved by the plant).
-    Processes: ``orbit`` if any other body has an orbit, ``attitude`` if any other
-    attitude is propagated, ``plant`` if any body is actuated, ``logger`` always.
-    """
-    cb = scenario.central_body
-    out = []
-    warnings: list[str] = []
-    for b in scenario.bodies:
-        notes: list[str] = []
-        om = am = None
-        if b.orbit is not None:
-            om = b.orbit.model
-            if om in ("j2", "zonal") and not any(cb.J[: b.orbit.degree - 1]):
-                notes.append(f"{om} requested but J2..J{b.orbit.degree} of {cb.name} are 0: analytic kepler is exact")
-                om = "kepler"
-            rp = _periapsis(b.orbit, cb.mu)
-            if rp is not None and rp < cb.radius:
-                notes.append(f"periapsis {rp / 1e3:.6g} km is below the surface of {cb.name} (radius {cb.radius / 1e3:.6g} km)")
-                warnings.append(f"bodies[{len(out)}] ({b.name}).orbit: periapsis radius {rp / 1e3:.6g} km is below "
-                                f"the surface of {cb.name} (radius {cb.radius / 1e3:.6g} km): the orbit meets the central "
-                                f"body; check a / rp / e or r, v")
-            if b.cross_check:
-                notes.append("cross-checked against REBOUND IAS15")
-        if b.attitude is not None and b.attitude.model != "none":
-            a = b.attitude
-            am = a.model
-            pm = a.principal_moments
-            if am == "gravity_gradient" and np.ptp(pm) <= 1e-15 * np.max(pm):
-                notes.append("gravity gradient on a spherical inertia is zero: exact torque_free")
-                am = _ATTITUDE_EXACT
-            elif am == "heavy_top" and (a.cm == 0 or a.g == 0):
-                notes.append("heavy top with cm = 0 or g = 0 has no torque: exact torque_free")
-                am = _ATTITUDE_EXACT
-            elif am == "user" and a.torque is not None and not np.any(a.torque):
-                notes.append("user torque is zero: exact torque_free")
-                am = _ATTITUDE_EXACT
-            elif am == "gyrostat" and all(r.h == 0 for r in a.rotors):
-                notes.append("all rotors have h = 0: exact torque_free")
-                am = _ATTITUDE_EXACT
-        if b.in_plant:  # the closed loop moves it (astrodyn.plant): commands make every model moot
-            om = ACTUATED_MODEL if b.orbit is not None else None
-            am = ACTUATED_MODEL if am is not None else None
-            notes = ["closed loop: moved by the plant with its controllers' commands (docs/control.md)"]
-        out.append(BodyPlan(
-            name=b.name, orbit_model=om, orbit_method=_ORBIT_METHOD.get(om, ""),
-            attitude_model=am, attitude_method=_ATTITUDE_METHOD.get(am, ""), notes=tuple(notes),
-        ))
-    processes = []
-    if any(bp.orbit_model not in (None, ACTUATED_MODEL) for bp in out):
-        processes.append("orbit")
-    if any(bp.attitude_model not in (None, ACTUATED_MODEL) for bp in out):
-        processes.append("attitude")
-    if any(ACTUATED_MODEL in (bp.orbit_model, bp.attitude_model) for bp in out):
-        processes.append("plant")
-    processes.append("logger")
-    n = scenario.n_steps
-    states = sum((bp.orbit_model is not None) + (bp.attitude_model is not None) for bp in out)
-    checked = sum(bp.orbit_model is not None and (cross_check_all or b.cross_check) for bp, b in zip(out, scenario.bodies))
-    return Plan(scenario=scenario.name, processes=tuple(processes), bodies=tuple(out), n_steps=n,
-                messages=n * (states + checked), warnings=tuple(warnings), crosscheck_messages=n * checked)
-
-
-def _periapsis(orbit: OrbitSpec, mu: float) -> float | None:
-    """Periapsis radius p / (1 + e) of the initial osculating conic (m), from r0, v0
-    (h = r x v, p = h^2 / mu, e from the eccentricity vector; Vallado sec. 2.5)."""
-    r, v = orbit.r0, orbit.v0
-    h = np.cross(r, v)
-    h2 = float(h @ h)
-    rn = float(np.linalg.norm(r))
-    if rn == 0:
-        return None
-    e_vec = np.cross(v, h) / mu - r / rn
-    e = float(np.linalg.norm(e_vec))
-    p = h2 / mu
-    return p / (1.0 + e)
 
 
 # --------------------------------------------------------------------------- CLI
