@@ -49,7 +49,7 @@ from astrodyn.recording.chunked_writer import ChunkedWriter
 from astrodyn.recording.reader import chunk_records, parse_record, read_records
 from astrodyn.recording.writer import RecordingError
 
-__all__ = ["recover", "main", "finished_name", "find_partials", "stale_work_dirs"]
+__all__ = ["recover", "write_atomically", "main", "finished_name", "find_partials", "stale_work_dirs"]
 
 
 class _Copier:
@@ -118,69 +118,33 @@ def recover(path: str | os.PathLike, out: str | os.PathLike | None = None, *, ch
         size = os.fstat(f.fileno()).st_size
     except OSError as exc:
         raise RecordingError(f"{src}: cannot open: {exc.strerror or exc}") from None
-    if os.path.exists(dst) and not os.path.isfile(dst):  # never rename over a device, fifo or directory
-        f.close()
-        raise RecordingError(f"{dst}: expected a regular file to write, got a special file or directory")
+    with f:
+        if os.path.exists(dst) and not os.path.isfile(dst):  # never rename over a device, fifo or directory
+            raise RecordingError(f"{dst}: expected a regular file to write, got a special file or directory")
+        summary = write_atomically(dst, lambda stream: _rewrite(f, size, src, dst, stream, chunk_size))
+    summary["input_bytes"] = size
+    summary["output_bytes"] = os.path.getsize(dst)
+    summary["seconds"] = round(time.monotonic() - t0, 3)
+    return summary
+
+
+def write_atomically(dst: str, write):
+    """Call ``write(stream)`` on ``dst + ".recover-tmp"``, make it durable (fsync) and
+    rename it over ``dst``; returns what ``write`` returned.  On any failure the temporary
+    file is removed and ``dst`` is untouched (RecordingError for an OSError)."""
     tmp = dst + ".recover-tmp"
-    state: dict = {}
-    notes: list[str] = []
-    corrupt = 0
-    metadata: list[Metadata] = []
     try:
-        with f:
-            try:
-                stream = open(tmp, "wb")
-            except OSError as exc:
-                raise RecordingError(f"{dst}: cannot write: {exc.strerror or exc}") from None
-            try:
-                with stream:
-                    writer = ChunkedWriter(stream, chunk_size=chunk_size, library=f"astrodyn {__version__} (recover)")
-                    copier = _Copier(writer)
-                    for opcode, body, offset in read_records(f, size, src, state):
-                        try:
-                            rec = parse_record(opcode, body)
-                        except Exception as exc:  # framing intact, content damaged
-                            corrupt += 1
-                            notes.append(f"damaged record at byte {offset} skipped: {exc}")
-                            continue
-                        if isinstance(rec, Chunk):
-                            try:
-                                inner = chunk_records(rec)
-                            except Exception as exc:  # a bomb, zstd error, CRC mismatch, cut inner record
-                                corrupt += 1
-                                notes.append(f"corrupt chunk at byte {offset} skipped: {type(exc).__name__}: {exc}")
-                                continue
-                            for r in inner:
-                                copier.record(r)
-                        elif isinstance(rec, Metadata):
-                            if rec.name != "recovery":
-                                metadata.append(rec)
-                        elif rec is not None:
-                            copier.record(rec)
-                    for m in metadata:
-                        writer.add_metadata(m.name, dict(m.metadata))
-                    summary = {
-                        "source": src,
-                        "out": dst,
-                        "source_complete": bool(state.get("complete")),
-                        "source_end": state.get("truncation", "footer found (the file was already complete)"),
-                        "messages": copier.messages,
-                        "channels": len(copier.new_channel),
-                        "orphans": copier.orphans,
-                        "corrupt_chunks": corrupt,
-                        "first_log_time": copier.first_log_time,
-                        "last_log_time": copier.last_log_time,
-                        "notes": notes[:20],
-                    }
-                    writer.add_metadata("recovery", {
-                        **{k: v if isinstance(v, str) else json.dumps(v) for k, v in summary.items() if k != "out"},
-                        "astrodyn_version": __version__,
-                    })
-                    writer.finish()
-                    stream.flush()
-                    os.fsync(stream.fileno())
-            except OSError as exc:
-                raise RecordingError(f"{dst}: write failed: {exc.strerror or exc}; nothing was replaced") from None
+        try:
+            stream = open(tmp, "wb")
+        except OSError as exc:
+            raise RecordingError(f"{dst}: cannot write: {exc.strerror or exc}") from None
+        try:
+            with stream:
+                result = write(stream)
+                stream.flush()
+                os.fsync(stream.fileno())
+        except OSError as exc:
+            raise RecordingError(f"{dst}: write failed: {exc.strerror or exc}; nothing was replaced") from None
         os.replace(tmp, dst)
     except BaseException:
         try:
@@ -188,9 +152,58 @@ def recover(path: str | os.PathLike, out: str | os.PathLike | None = None, *, ch
         except OSError:
             pass
         raise
-    summary["input_bytes"] = size
-    summary["output_bytes"] = os.path.getsize(dst)
-    summary["seconds"] = round(time.monotonic() - t0, 3)
+    return result
+
+
+def _rewrite(f, size: int, src: str, dst: str, stream, chunk_size: int) -> dict:
+    """Copy every readable record of ``f`` into a new file on ``stream``; the summary."""
+    state: dict = {}
+    notes: list[str] = []
+    corrupt = 0
+    metadata: list[Metadata] = []
+    writer = ChunkedWriter(stream, chunk_size=chunk_size, library=f"astrodyn {__version__} (recover)")
+    copier = _Copier(writer)
+    for opcode, body, offset in read_records(f, size, src, state):
+        try:
+            rec = parse_record(opcode, body)
+        except Exception as exc:  # framing intact, content damaged
+            corrupt += 1
+            notes.append(f"damaged record at byte {offset} skipped: {exc}")
+            continue
+        if isinstance(rec, Chunk):
+            try:
+                inner = chunk_records(rec)
+            except Exception as exc:  # a bomb, zstd error, CRC mismatch, cut inner record
+                corrupt += 1
+                notes.append(f"corrupt chunk at byte {offset} skipped: {type(exc).__name__}: {exc}")
+                continue
+            for r in inner:
+                copier.record(r)
+        elif isinstance(rec, Metadata):
+            if rec.name != "recovery":
+                metadata.append(rec)
+        elif rec is not None:
+            copier.record(rec)
+    for m in metadata:
+        writer.add_metadata(m.name, dict(m.metadata))
+    summary = {
+        "source": src,
+        "out": dst,
+        "source_complete": bool(state.get("complete")),
+        "source_end": state.get("truncation", "footer found (the file was already complete)"),
+        "messages": copier.messages,
+        "channels": len(copier.new_channel),
+        "orphans": copier.orphans,
+        "corrupt_chunks": corrupt,
+        "first_log_time": copier.first_log_time,
+        "last_log_time": copier.last_log_time,
+        "notes": notes[:20],
+    }
+    writer.add_metadata("recovery", {
+        **{k: v if isinstance(v, str) else json.dumps(v) for k, v in summary.items() if k != "out"},
+        "astrodyn_version": __version__,
+    })
+    writer.finish()
     return summary
 
 
