@@ -62,7 +62,7 @@ from astrodyn.service.progress import Progress
 from astrodyn.service.signals import StopFlag
 from astrodyn.service.viewer import add_foxglove_argument, viewer_command
 
-__all__ = ["Replayer", "main", "REPLAY_VERBS"]
+__all__ = ["Replayer", "main", "build_parser", "open_recording", "start_viewer", "play", "REPLAY_VERBS"]
 
 REPLAY_VERBS = (*bus.CONTROL_VERBS, "seek")
 _BATCH_PROCESS = {"orbit": "orbit", "crosscheck": "orbit", "attitude": "attitude"}
@@ -334,7 +334,7 @@ def _progress_line(rep: Replayer) -> str:
             f"{s['messages']} messages  {s['state']}  x{s['real_time_factor']}")
 
 
-def main(argv: list[str] | None = None) -> int:
+def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog="astrodyn replay", description="Republish a recorded MCAP file on Zenoh.")
     ap.add_argument("file", help="MCAP file recorded by astrodyn (or any MCAP whose topics are Zenoh keys)")
     ap.add_argument("--rate", default="1", help='real-time factor (default 1; "inf" = as fast as possible)')
@@ -352,19 +352,30 @@ def main(argv: list[str] | None = None) -> int:
                          "printed at start and stored in a 0600 file; docs/security.md)")
     add_foxglove_argument(ap, "the replay")
     bus.add_bus_arguments(ap)
-    args = ap.parse_args(argv)
+    return ap
+
+
+def open_recording(args: argparse.Namespace) -> tuple[float, McapStream]:
+    """The replay rate and the stream of ``args.file``; ValueError for a bad flag,
+    RecordingError for a file with nothing to replay."""
+    rate = parse_rate(args.rate, "--rate")
+    if args.wait < 0 or not math.isfinite(args.wait):
+        raise ValueError(f"--wait: expected a finite number of seconds >= 0, got {args.wait}")
+    for name in ("start", "end"):
+        value = getattr(args, name)
+        if value is not None and not math.isfinite(value):
+            raise ValueError(f"--{name}: expected a finite number of seconds, got {value}")
+    stream = McapStream(args.file)
+    if not stream.chunks:
+        stream.close()
+        raise RecordingError(f"{stream.path}: nothing to replay ({stream.truncation if stream.truncated else 'no messages'})")
+    return rate, stream
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
     try:
-        rate = parse_rate(args.rate, "--rate")
-        if args.wait < 0 or not math.isfinite(args.wait):
-            raise ValueError(f"--wait: expected a finite number of seconds >= 0, got {args.wait}")
-        for name in ("start", "end"):
-            value = getattr(args, name)
-            if value is not None and not math.isfinite(value):
-                raise ValueError(f"--{name}: expected a finite number of seconds, got {value}")
-        stream = McapStream(args.file)
-        if not stream.chunks:
-            stream.close()
-            raise RecordingError(f"{stream.path}: nothing to replay ({stream.truncation if stream.truncated else 'no messages'})")
+        rate, stream = open_recording(args)
     except (ValueError, RecordingError) as exc:
         print(f"astrodyn replay: error: {exc}", file=sys.stderr)
         return 1 if isinstance(exc, RecordingError) else 2
@@ -390,50 +401,24 @@ def main(argv: list[str] | None = None) -> int:
                 return 2
             if stream.truncated or stream.corrupt_chunks:
                 print(f"astrodyn replay: warning: {stream.path}: {stream.report()}", file=sys.stderr, flush=True)
-            token, token_dir = None, Path(tempfile.mkdtemp(prefix="astrodyn-replay-"))
-            if not args.open_control:
-                token = auth.new_token()
-                auth.write_private_file(token_dir / "control-token", token.encode())
-            viewer, viewer_url = None, None
-            if args.foxglove is not None:  # the live view: a child process that subscribes to what we publish
-                port = args.foxglove or bus.free_port()
-                meta = token_dir / "scenario.json"
-                meta.write_text(json.dumps(stream.metadata.get("scenario", {})))
-                viewer = Child("viewer", [*viewer_command(), "--scenario", scenario, "--port", str(port), "--metadata",
-                                          str(meta), *sum((["--connect", e] for e in (listen or args.connect or [])), [])],
-                               token_dir)
-                viewer_url = f"ws://127.0.0.1:{port}"
-            print(json.dumps({"replaying": stream.path, "scenario": scenario, "listen": listen, "connect": args.connect,
-                              "foxglove": viewer_url,
-                              "control": f"astrodyn/{scenario}/@control/*", "real_time_factor": args.rate,
-                              "control_token": token,
-                              "control_token_file": None if token is None else str(token_dir / "control-token")}),
-                  flush=True)
-            stop_requests: list[bus.ControlRequest] = []
+            token_dir = Path(tempfile.mkdtemp(prefix="astrodyn-replay-"))
+            token, viewer = None, None
             try:
-                with bus.ControlServer(session, scenario, verbs=REPLAY_VERBS, token=token) as control:
-                    rep.wait_for_subscriber(args.wait)
-                    while True:
-                        for req in control.poll():
-                            if rep.handle(req):
-                                stop_requests.append(req)
-                        if rep.state == "stopped" or stop_signal.why:
-                            break
-                        more = rep.step()
-                        if not more and rep.state == "finished" and not args.hold:
-                            break
-                        if rep.state != "running":
-                            time.sleep(_POLL_S)
-                        printer.show(lambda: _progress_line(rep))
-                    rep._flush_batches()
-                    if stop_signal.why:
-                        rep.state = "stopped"
-                    summary = rep.status()
-                    if not stream.truncated and not stream.corrupt_chunks:
-                        summary["file_report"] = "complete"
-                    for req in stop_requests:
-                        req.reply(summary)
-                    time.sleep(0.05)  # let the last puts and replies leave before the session closes
+                if not args.open_control:
+                    token = auth.new_token()
+                    auth.write_private_file(token_dir / "control-token", token.encode())
+                viewer_url = None
+                if args.foxglove is not None:  # the live view: a child process that subscribes to what we publish
+                    port = args.foxglove or bus.free_port()
+                    viewer = start_viewer(stream, scenario, port, listen or args.connect or [], token_dir)
+                    viewer_url = f"ws://127.0.0.1:{port}"
+                print(json.dumps({"replaying": stream.path, "scenario": scenario, "listen": listen,
+                                  "connect": args.connect, "foxglove": viewer_url,
+                                  "control": f"astrodyn/{scenario}/@control/*", "real_time_factor": args.rate,
+                                  "control_token": token,
+                                  "control_token_file": None if token is None else str(token_dir / "control-token")}),
+                      flush=True)
+                summary = play(rep, session, scenario, token, args, printer, stop_signal)
             finally:
                 rep.close()
                 if viewer is not None:
@@ -441,9 +426,47 @@ def main(argv: list[str] | None = None) -> int:
                     viewer.close()
                 shutil.rmtree(token_dir, ignore_errors=True)
     printer.done(_progress_line(rep))
-    if not args.quiet:
-        if not summary["complete"]:
-            print(f"astrodyn replay: {stream.path} is incomplete ({summary['file_report']}); "
-                  f"replayed the {rep.published} complete messages", file=sys.stderr)
+    if not args.quiet and not summary["complete"]:
+        print(f"astrodyn replay: {stream.path} is incomplete ({summary['file_report']}); "
+              f"replayed the {rep.published} complete messages", file=sys.stderr)
     print(json.dumps(summary), flush=True)
     return 0
+
+
+def start_viewer(stream: McapStream, scenario: str, port: int, endpoints: list[str], work: Path) -> Child:
+    """The live view (``--foxglove``): a child process subscribing to what the replay publishes."""
+    meta = work / "scenario.json"
+    meta.write_text(json.dumps(stream.metadata.get("scenario", {})))
+    return Child("viewer", [*viewer_command(), "--scenario", scenario, "--port", str(port), "--metadata", str(meta),
+                            *sum((["--connect", e] for e in endpoints), [])], work)
+
+
+def play(rep: Replayer, session, scenario: str, token: str | None, args: argparse.Namespace,
+         printer: Progress, stop_signal: StopFlag) -> dict:
+    """Publish until the end (or ``stop``, or a signal), answering control verbs on the
+    way; the final status, also the reply to each ``stop``."""
+    stop_requests: list[bus.ControlRequest] = []
+    with bus.ControlServer(session, scenario, verbs=REPLAY_VERBS, token=token) as control:
+        rep.wait_for_subscriber(args.wait)
+        while True:
+            for req in control.poll():
+                if rep.handle(req):
+                    stop_requests.append(req)
+            if rep.state == "stopped" or stop_signal.why:
+                break
+            more = rep.step()
+            if not more and rep.state == "finished" and not args.hold:
+                break
+            if rep.state != "running":
+                time.sleep(_POLL_S)
+            printer.show(lambda: _progress_line(rep))
+        rep._flush_batches()
+        if stop_signal.why:
+            rep.state = "stopped"
+        summary = rep.status()
+        if not rep.stream.truncated and not rep.stream.corrupt_chunks:
+            summary["file_report"] = "complete"
+        for req in stop_requests:
+            req.reply(summary)
+        time.sleep(0.05)  # let the last puts and replies leave before the session closes
+    return summary
