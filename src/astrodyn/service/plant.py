@@ -60,6 +60,7 @@ from astrodyn.service.propagator import (
     Pacer,
     command_key,
     obey_commands,
+    pace_to,
     wait_until_logged,
 )
 from astrodyn.service.signals import catch_stop_signals
@@ -373,15 +374,8 @@ class PlantLoop:
     def wait_for_time(self, t: float, supervisor, heartbeat) -> None:
         """Obey the supervisor (pause, rate, stop, fault) and pace to ``t``; free mode takes
         commands while it waits."""
-        pacer = self.pacer
-        obey_commands(supervisor, pacer, t, self.stopping, heartbeat, self.commands_from, self.verbs)
-        wait = pacer.wait_time(t)
-        while (wait > 0 or pacer.paused) and not self.stopping["why"]:
-            time.sleep(min(wait, 0.05) if wait > 0 else 0.05)
-            self.drain(None)
-            heartbeat.beat(t=self.t_reached, paused=pacer.paused)
-            obey_commands(supervisor, pacer, t, self.stopping, heartbeat, self.commands_from, self.verbs)
-            wait = pacer.wait_time(t)
+        pace_to(t, self.pacer, supervisor, self.stopping, heartbeat, self.commands_from, self.t_reached,
+                self.verbs, while_waiting=lambda: self.drain(None))
 
     def publish_step(self, k: int, t: float, events) -> list[tuple[str, bytes]]:
         """Faults that begin now, then the step's states and sensor samples into the outbox;

@@ -41,7 +41,8 @@ from astrodyn.service.children import share_fate_with_supervisor
 from astrodyn.service.signals import catch_stop_signals
 from astrodyn.simulate import AttitudeEngine, OrbitEngine
 
-__all__ = ["Pacer", "PropagatorOptions", "run_propagator", "command_key", "CommandVerifier", "obey_commands", "wait_until_logged"]
+__all__ = ["Pacer", "PropagatorOptions", "run_propagator", "command_key", "CommandVerifier", "obey_commands", "pace_to",
+           "wait_until_logged"]
 
 KINDS = ("orbit", "attitude")
 
@@ -150,7 +151,6 @@ def run_propagator(scenario: Scenario, session, opts: PropagatorOptions, log=pri
     for i, m in enumerate(models):
         groups.setdefault(m, []).append(i)  # type: ignore[arg-type]
     groups = {m: np.asarray(ix) for m, ix in groups.items()}
-    group_keys = {m: messages.BatchKeys([keys[i] for i in ix]) for m, ix in groups.items()}
     n_total = scenario.n_steps if not opts.endless else 2**53
     start = int(opts.start_step)
     stop_at = n_total if opts.max_steps is None else min(n_total, start + int(opts.max_steps))
@@ -177,12 +177,8 @@ def run_propagator(scenario: Scenario, session, opts: PropagatorOptions, log=pri
             bus.EventPublisher(session, scenario.name, opts.kind, signer=signer) as events, \
             session.declare_subscriber(command_key(scenario.name), _fifo()) as commands:
         batched = opts.batch == "always" or (opts.batch == "auto" and len(names) > BATCH_THRESHOLD)
-        per_body = None
-        if not batched:
-            per_body = {key: bus.declare_state_publisher(session, key) for key in keys}
-            if cross is not None:
-                per_body.update({key: bus.declare_state_publisher(session, key)
-                                 for _, xkeys, _ in cross.scenes for key in xkeys})
+        out = _StepOutput(opts.kind, engine, keys, groups, session, batch, signer, batched,
+                          [key for _, xkeys, _ in cross.scenes for key in xkeys] if cross is not None else [])
         bus.wait_for_process(session, scenario.name, "logger", timeout_s=opts.wait_logger_s)
         events.next_seq = int(opts.first_event_seq)
         events.emit("start", float(t_reached), json.dumps({"bodies": len(names), "first_step": start,
@@ -199,33 +195,10 @@ def run_propagator(scenario: Scenario, session, opts: PropagatorOptions, log=pri
                 rows_done = 0
                 for j in range(tb.shape[0]):
                     t = float(tb[j])
-                    obey_commands(commands, pacer, t, stopping, heartbeat, commands_from)
-                    wait = pacer.wait_time(t)
-                    while wait > 0 or pacer.paused:
-                        time.sleep(min(wait, 0.05) if wait > 0 else 0.05)
-                        heartbeat.beat(t=t_reached, paused=pacer.paused)
-                        obey_commands(commands, pacer, t, stopping, heartbeat, commands_from)
-                        wait = pacer.wait_time(t)
+                    pace_to(t, pacer, commands, stopping, heartbeat, commands_from, t_reached)
                     if stopping["why"]:
                         raise _Stop
-                    if per_body is None:
-                        # payloads written as envelope entries in the same compiled pass
-                        runs = [(_encode_group(opts.kind, engine, t, k, model, a[j, ix], b[j, ix], group_keys[model]),
-                                 len(ix)) for model, ix in groups.items()]
-                        if xc is not None:
-                            runs.append(messages.frame_entries(xc(j, k, t)))
-                        batch.publish_envelope(messages.batch_envelope(runs))
-                        published += sum(count for _, count in runs)
-                    else:
-                        items = []
-                        for model, ix in groups.items():
-                            payloads = _encode_group(opts.kind, engine, t, k, model, a[j, ix], b[j, ix])
-                            items.extend(zip((keys[i] for i in ix), payloads))
-                        if xc is not None:
-                            items.extend(xc(j, k, t))
-                        for key, payload in items:
-                            bus.signed_put(per_body[key], key, payload, signer)
-                        published += len(items)
+                    published += out.publish(t, k, a[j], b[j], None if xc is None else xc(j, k, t))
                     rows_done = j + 1
                     t_reached = t
                     k += 1
@@ -249,6 +222,38 @@ def run_propagator(scenario: Scenario, session, opts: PropagatorOptions, log=pri
             per_body[name]["crosscheck_max_dr"] = dr
     summary["per_body"] = per_body
     return summary
+
+
+class _StepOutput:
+    """Publishes one output step: every body's payload (and the cross-check's), as one
+    batch envelope (``batched``) or one signed put per key."""
+
+    def __init__(self, kind: str, engine, keys: list[str], groups: dict[str, np.ndarray], session, batch,
+                 signer, batched: bool, crosscheck_keys: list[str]):
+        self.kind, self.engine, self.keys, self.groups = kind, engine, keys, groups
+        self.batch, self.signer = batch, signer
+        self.group_keys = {m: messages.BatchKeys([keys[i] for i in ix]) for m, ix in groups.items()} if batched else None
+        self.per_body = None if batched else {key: bus.declare_state_publisher(session, key)
+                                              for key in [*keys, *crosscheck_keys]}
+
+    def publish(self, t: float, k: int, a: np.ndarray, b: np.ndarray, crosscheck: list | None) -> int:
+        """Step ``k`` at ``t`` with states ``a, b`` (rows per body); returns the messages sent."""
+        if self.per_body is None:  # payloads written as envelope entries in the same compiled pass
+            runs = [(_encode_group(self.kind, self.engine, t, k, model, a[ix], b[ix], self.group_keys[model]), len(ix))
+                    for model, ix in self.groups.items()]
+            if crosscheck is not None:
+                runs.append(messages.frame_entries(crosscheck))
+            self.batch.publish_envelope(messages.batch_envelope(runs))
+            return sum(count for _, count in runs)
+        items = []
+        for model, ix in self.groups.items():
+            payloads = _encode_group(self.kind, self.engine, t, k, model, a[ix], b[ix])
+            items.extend(zip((self.keys[i] for i in ix), payloads))
+        if crosscheck is not None:
+            items.extend(crosscheck)
+        for key, payload in items:
+            bus.signed_put(self.per_body[key], key, payload, self.signer)
+        return len(items)
 
 
 def _encode_group(kind: str, engine, t: float, k: int, model: str, a, b, keys=None):
@@ -410,6 +415,22 @@ def obey_commands(commands, pacer: Pacer, t: float, stopping: dict, heartbeat, c
                 raise ValueError(f"verb: expected pause | resume | rate | stop, got {verb!r}")
         except (ValueError, KeyError, TypeError) as exc:
             print(f"propagator: ignored a malformed command: {exc}", file=sys.stderr)
+
+
+def pace_to(t: float, pacer: Pacer, supervisor, stopping: dict, heartbeat, commands_from: CommandVerifier,
+            t_reached: float, more_verbs: dict | None = None, while_waiting=None) -> None:
+    """Obey the supervisor's commands, then wait until sim time ``t`` is due at the pacer's
+    rate (or while paused), beating and obeying every 50 ms; ``while_waiting()`` is called
+    on each of those turns (the plant takes commands then).  Returns at once on a stop."""
+    obey_commands(supervisor, pacer, t, stopping, heartbeat, commands_from, more_verbs)
+    wait = pacer.wait_time(t)
+    while (wait > 0 or pacer.paused) and not stopping["why"]:
+        time.sleep(min(wait, 0.05) if wait > 0 else 0.05)
+        if while_waiting is not None:
+            while_waiting()
+        heartbeat.beat(t=t_reached, paused=pacer.paused)
+        obey_commands(supervisor, pacer, t, stopping, heartbeat, commands_from, more_verbs)
+        wait = pacer.wait_time(t)
 
 
 class _CrossCheck:
