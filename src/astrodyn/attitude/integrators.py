@@ -938,6 +938,36 @@ def _default_step(frame, M0, h0, ktorque, torque, w0):
 
 
 # the initial state and times on the first line, the options on the second (fmt: skip)
+def _checked_inputs(w0, q0, t, torque, rotor_momentum, method):
+    """:func:`propagate_attitude`'s arguments checked (ValueError naming the argument):
+    ``w0 (3,)``, ``q0 (4,)`` normalised, ``t`` as a 1-D array, and ``auto`` resolved."""
+    w0 = np.asarray(w0, dtype=np.float64)
+    if w0.shape != (3,):
+        raise ValueError(f"w0: expected body rates of shape (3,) in rad/s, got shape {w0.shape}")
+    q0 = np.asarray(q0, dtype=np.float64)
+    if q0.shape != (4,):
+        raise ValueError(f"q0: expected Euler parameters of shape (4,), scalar first, got shape {q0.shape}")
+    nq = np.linalg.norm(q0)
+    if not abs(nq - 1.0) <= 1e-6:
+        raise ValueError(f"q0: expected unit Euler parameters (|q0| = 1 within 1e-6), got |q0| = {nq}")
+    t_out = np.atleast_1d(np.asarray(t, dtype=np.float64))
+    if t_out.ndim != 1:
+        raise ValueError(f"t: expected a scalar or 1-D array of times in s, got shape {t_out.shape}")
+    if not np.all(np.isfinite(t_out)):
+        raise ValueError("t: times must be finite")
+    sgn = 1.0 if np.all(t_out >= 0) else -1.0
+    if np.any(sgn * t_out < 0) or np.any(np.diff(sgn * t_out) < 0):
+        raise ValueError("t: expected times monotone away from 0 (all >= 0 ascending, or all <= 0 descending)")
+    if torque is not None and not callable(torque):
+        raise ValueError(f"torque: expected None or a callable torque(t, q, w) -> (3,) N m, got {torque!r}")
+    methods = ("auto", "exact", "split2", "split4", "split4-yoshida", "dop853")
+    if method not in methods:
+        raise ValueError(f"method: expected one of {methods}, got {method!r}")
+    if method == "auto":
+        method = "exact" if torque is None and rotor_momentum is None else "split4"
+    return w0, q0 / nq, t_out, method
+
+
 def propagate_attitude(
     inertia, w0, q0, t, torque=None, rotor_momentum=None, method="auto", step=None,
     rtol=1e-12, atol=1e-14, error_estimate=True,
@@ -988,32 +1018,8 @@ def propagate_attitude(
     """
     tick = _time.perf_counter()
     frame = _Frame(inertia)
-    w0 = np.asarray(w0, dtype=np.float64)
-    if w0.shape != (3,):
-        raise ValueError(f"w0: expected body rates of shape (3,) in rad/s, got shape {w0.shape}")
-    q0 = np.asarray(q0, dtype=np.float64)
-    if q0.shape != (4,):
-        raise ValueError(f"q0: expected Euler parameters of shape (4,), scalar first, got shape {q0.shape}")
-    nq = np.linalg.norm(q0)
-    if not abs(nq - 1.0) <= 1e-6:
-        raise ValueError(f"q0: expected unit Euler parameters (|q0| = 1 within 1e-6), got |q0| = {nq}")
-    q0 = q0 / nq
+    w0, q0, t_out, method = _checked_inputs(w0, q0, t, torque, rotor_momentum, method)
     scalar_t = np.ndim(t) == 0
-    t_out = np.atleast_1d(np.asarray(t, dtype=np.float64))
-    if t_out.ndim != 1:
-        raise ValueError(f"t: expected a scalar or 1-D array of times in s, got shape {t_out.shape}")
-    if not np.all(np.isfinite(t_out)):
-        raise ValueError("t: times must be finite")
-    sgn = 1.0 if np.all(t_out >= 0) else -1.0
-    if np.any(sgn * t_out < 0) or np.any(np.diff(sgn * t_out) < 0):
-        raise ValueError("t: expected times monotone away from 0 (all >= 0 ascending, or all <= 0 descending)")
-    if torque is not None and not callable(torque):
-        raise ValueError(f"torque: expected None or a callable torque(t, q, w) -> (3,) N m, got {torque!r}")
-    methods = ("auto", "exact", "split2", "split4", "split4-yoshida", "dop853")
-    if method not in methods:
-        raise ValueError(f"method: expected one of {methods}, got {method!r}")
-    if method == "auto":
-        method = "exact" if torque is None and rotor_momentum is None else "split4"
 
     def finish(w, q, info):
         info["seconds"] = _time.perf_counter() - tick
