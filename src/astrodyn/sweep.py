@@ -847,32 +847,35 @@ def run_cases(spec: SweepSpec, cases: Iterable[int], workers: int = 2, scheduler
             cluster.close()
 
 
-class Progress:
-    """A one-line progress report on stderr (rewritten in place on a terminal, every 5 s otherwise)."""
+class CaseProgress:
+    """The sweep's progress on stderr through the one progress printer
+    (:class:`astrodyn.service.progress.Progress`: in place on a terminal, every 5 s into a
+    log): cases done and failed, rate, elapsed and remaining time, and a bar."""
 
     def __init__(self, total: int, enabled: bool = True, stream=None):
-        self.total, self.enabled = total, enabled
-        self.stream = stream or sys.stderr
+        from astrodyn.service.progress import Progress
+
+        self.total = total
         self.done = self.failed = 0
         self.started = time.monotonic()
-        self._last = 0.0
-        self._tty = bool(getattr(self.stream, "isatty", lambda: False)())
+        self.printer = Progress(stream=stream, enabled=enabled)
+
+    def line(self) -> str:
+        elapsed = time.monotonic() - self.started
+        rate = self.done / max(elapsed, 1e-9)
+        eta = (self.total - self.done) / rate if rate > 0 else math.inf
+        width = 30
+        fill = int(width * self.done / max(self.total, 1))
+        return (f"  [{'#' * fill}{'.' * (width - fill)}] {self.done}/{self.total} cases, {self.failed} failed, "
+                f"{rate:.2f} cases/s, {elapsed:.0f} s elapsed, eta {eta:.0f} s")
 
     def update(self, row: dict) -> None:
         self.done += 1
         self.failed += row.get("status") != "ok"
-        now = time.monotonic()
-        if self.enabled and (self.done == self.total or now - self._last >= (0.2 if self._tty else 5.0)):
-            self._last = now
-            elapsed = now - self.started
-            rate = self.done / max(elapsed, 1e-9)
-            eta = (self.total - self.done) / rate if rate > 0 else math.inf
-            width = 30
-            fill = int(width * self.done / max(self.total, 1))
-            line = (f"  [{'#' * fill}{'.' * (width - fill)}] {self.done}/{self.total} cases, {self.failed} failed, "
-                    f"{rate:.2f} cases/s, {elapsed:.0f} s elapsed, eta {eta:.0f} s")
-            print(("\r" + line) if self._tty else line, end="" if self._tty and self.done < self.total else "\n",
-                  file=self.stream, flush=True)
+        if self.done == self.total:
+            self.printer.done(self.line())
+        else:
+            self.printer.show(self.line)
 
 
 # --------------------------------------------------------------------------- tables
@@ -1047,7 +1050,7 @@ def main(argv: list[str] | None = None) -> int:
         f"on the Dask scheduler {scheduler}" if scheduler else f"on a Dask LocalCluster of {workers} worker processes")
     if not args.quiet:
         print(f"astrodyn sweep: {len(cases)} case(s) of {spec.source} {where}, seed {spec.seed}", file=sys.stderr)
-    progress = Progress(len(cases), enabled=not args.quiet)
+    progress = CaseProgress(len(cases), enabled=not args.quiet)
     rows: list[dict] = []
     started = time.monotonic()
     interrupted = False

@@ -37,12 +37,13 @@ from mcap.opcode import Opcode
 from mcap.records import Channel, Chunk, Message, Metadata, Schema
 
 from astrodyn import messages
+from astrodyn.recording.chunked_writer import MAGIC
 from astrodyn.recording.writer import RecordingError
 
 __all__ = ["load", "load_blocks", "chunk_records", "chunk_limits", "parse_chunk_data", "ChunkError",
-           "MAX_CHUNK_BYTES", "MAX_CHUNK_RATIO", "Run", "BodyTracks", "Body", "Track", "gap_report", "MCAP_MAGIC"]
+           "MAX_CHUNK_BYTES", "MAX_CHUNK_RATIO", "Run", "BodyTracks", "Body", "Track", "gap_report", "MCAP_MAGIC", "read_records", "scan_records"]
 
-MCAP_MAGIC = b"\x89MCAP0\r\n"
+MCAP_MAGIC = MAGIC  #: the 8 bytes that open (and end) every MCAP file
 _HEADER = struct.Struct("<BQ")
 _MAX_EXAMPLES = 20
 
@@ -170,7 +171,23 @@ class _Truncated(Exception):
 
 
 def read_records(f: BinaryIO, size: int, path: str, state: dict) -> Iterator[tuple[int, bytes, int]]:
-    """Yield (opcode, body, offset) of each complete top-level record up to the footer."""
+    """Yield (opcode, body, offset) of each complete top-level record up to the footer
+    (:func:`scan_records` with whole bodies)."""
+    for opcode, body, pos, _ in scan_records(f, size, path, state):
+        yield opcode, body, pos
+
+
+def scan_records(f: BinaryIO, size: int, path: str, state: dict,
+                 heads: dict[int, int] | None = None) -> Iterator[tuple[int, bytes, int, int]]:
+    """The one crash-tolerant walk over an MCAP file's top-level records: yield
+    ``(opcode, body, offset, length)`` of each complete record up to the footer.
+
+    ``heads``: opcode -> bytes; records of those opcodes yield only the first bytes of
+    their body (the rest is skipped with a seek: an index pass reads a chunk's header,
+    not its data).  Where the file ends early, ``state["truncation"]`` says how; a file
+    whose footer is followed by the closing magic sets ``state["complete"]``.
+    RecordingError for a file that is not MCAP at all."""
+    f.seek(0)
     head = f.read(8)
     if head != MCAP_MAGIC:
         if size == 0:
@@ -179,6 +196,7 @@ def read_records(f: BinaryIO, size: int, path: str, state: dict) -> Iterator[tup
             state["truncation"] = f"file ends inside the opening magic ({size} bytes)"
             return
         raise RecordingError(f"{path}: not an MCAP file (bad magic)")
+    heads = heads or {}
     pos = 8
     while True:
         if pos == size:
@@ -187,6 +205,7 @@ def read_records(f: BinaryIO, size: int, path: str, state: dict) -> Iterator[tup
         if size - pos < 9:
             state["truncation"] = f"file ends inside a record header at byte {pos}"
             return
+        f.seek(pos)
         opcode, length = _HEADER.unpack(f.read(9))
         if length > size - pos - 9:
             name = Opcode(opcode).name if opcode in Opcode._value2member_map_ else f"opcode {opcode:#x}"
@@ -194,10 +213,11 @@ def read_records(f: BinaryIO, size: int, path: str, state: dict) -> Iterator[tup
                 f"{name} record at byte {pos} needs {length} bytes, only {size - pos - 9} left (cut or corrupt)"
             )
             return
-        body = f.read(length)
-        yield opcode, body, pos
+        body = f.read(min(length, heads[opcode]) if opcode in heads else length)
+        yield opcode, body, pos, length
         pos += 9 + length
         if opcode == Opcode.FOOTER:
+            f.seek(pos)
             if f.read(8) != MCAP_MAGIC:
                 state["truncation"] = "footer not followed by the closing magic"
             else:

@@ -45,7 +45,7 @@ from mcap.data_stream import ReadDataStream
 from mcap.opcode import Opcode
 from mcap.records import Channel, Chunk, Message, Metadata, Schema
 
-from astrodyn.recording.reader import MCAP_MAGIC, chunk_limits, chunk_records
+from astrodyn.recording.reader import chunk_limits, chunk_records, scan_records
 from astrodyn.recording.writer import RecordingError
 
 __all__ = ["RawMessage", "McapStream", "open_stream", "topic_matcher"]
@@ -117,50 +117,25 @@ class McapStream:
     # ------------------------------------------------------------------ index pass
 
     def _index(self) -> None:
-        f, size, path = self._f, self.size, self.path
-        head = f.read(8)
-        if head != MCAP_MAGIC:
-            if size == 0:
-                raise RecordingError(f"{path}: not an MCAP file (empty file)")
-            if len(head) < 8 and MCAP_MAGIC.startswith(head):
-                self.truncation = f"file ends inside the opening magic ({size} bytes)"
-                return
-            raise RecordingError(f"{path}: not an MCAP file (bad magic)")
-        pos = 8
-        while True:
-            if pos == size:
-                self.truncation = f"file ends at byte {pos} without data end and footer (writer did not finish)"
-                return
-            if size - pos < 9:
-                self.truncation = f"file ends inside a record header at byte {pos}"
-                return
-            f.seek(pos)
-            opcode, length = _HEADER.unpack(f.read(9))
-            if length > size - pos - 9:
-                name = Opcode(opcode).name if opcode in Opcode._value2member_map_ else f"opcode {opcode:#x}"
-                self.truncation = f"{name} record at byte {pos} needs {length} bytes, only {size - pos - 9} left (cut or corrupt)"
-                return
+        """One pass over the top-level records (:func:`astrodyn.recording.reader.scan_records`,
+        reading only each chunk's header): schemas, channels, metadata and where each chunk is."""
+        state: dict = {}
+        for opcode, body, pos, length in scan_records(self._f, self.size, self.path, state,
+                                                      heads={Opcode.CHUNK: _CHUNK_HEAD.size}):
             if opcode == Opcode.CHUNK:
                 if length < _CHUNK_HEAD.size:
                     self.notes.append(f"chunk record at byte {pos} too short ({length} bytes), skipped")
                     self.corrupt_chunks += 1
                 else:
-                    start, end = _CHUNK_HEAD.unpack(f.read(_CHUNK_HEAD.size))
+                    start, end = _CHUNK_HEAD.unpack(body)
                     self.chunks.append(_ChunkRef(start, end, pos, length))
             elif opcode in (Opcode.SCHEMA, Opcode.CHANNEL, Opcode.METADATA, Opcode.MESSAGE):
-                body = f.read(length)
                 try:
                     self._top_level(opcode, body, pos, length)
                 except Exception as exc:  # damaged record whose framing is intact
                     self.notes.append(f"damaged {Opcode(opcode).name} record at byte {pos}: {exc}")
-            elif opcode == Opcode.FOOTER:
-                f.seek(pos + 9 + length)
-                if f.read(8) == MCAP_MAGIC:
-                    self.truncated = False
-                else:
-                    self.truncation = "footer not followed by the closing magic"
-                return
-            pos += 9 + length
+        self.truncated = not state.get("complete")
+        self.truncation = state.get("truncation", "")
 
     def _top_level(self, opcode: int, body: bytes, pos: int, length: int) -> None:
         stream = ReadDataStream(io.BytesIO(body))

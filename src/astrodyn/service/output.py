@@ -12,13 +12,13 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
+from astrodyn.recording.reader import MCAP_MAGIC
 from astrodyn.recording.writer import partial_path
 from astrodyn.scenario import ScenarioError
 
 __all__ = ["check_output_path", "MCAP_MAGIC"]
 
 #: The first 8 bytes of every MCAP file.
-MCAP_MAGIC = b"\x89MCAP0\r\n"
 
 
 def _same_file(a: Path, b: Path) -> bool:
