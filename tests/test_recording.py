@@ -292,7 +292,8 @@ def test_seq_tracker_against_set_model():
         for s in arrivals:
             tr.add("k", s)
         ref = _model_accounting(arrivals)
-        got = tr.totals() if arrivals else {"count": 0, "duplicates": 0, "out_of_order": 0, "missing": 0}
+        got = tr.totals() if arrivals else {"count": 0, "duplicates": 0, "out_of_order": 0, "missing": 0, "already_recorded": 0}
+        assert got.pop("already_recorded") == 0  # nothing seeded
         assert got == ref, (arrivals, got, ref)
         if arrivals:
             gaps = tr.report()["k"]["gaps"]
@@ -328,3 +329,42 @@ def test_load_blocks_is_load_in_pieces_and_the_run_summary_does_not_depend_on_th
     assert file_summary(path, scenario, block_messages=1) == file_summary(path, scenario, block_messages=10**9)
     with pytest.raises(ValueError, match="block_messages"):
         next(load_blocks(path, 0))
+
+
+def test_channel_tails_are_the_last_messages_the_plain_reader_sees_also_in_a_cut_file(recorded, tmp_path):
+    """channel_tails against the plain mcap reader (complete file) and against what load
+    reads of each cut prefix: per channel the last ``keep`` payloads in file order."""
+    from astrodyn.recording.tail import channel_tails
+
+    expected: dict[str, list[bytes]] = {}
+    with open(recorded, "rb") as f:
+        for _, channel, message in make_reader(f).iter_messages(log_time_order=False):
+            expected.setdefault(channel.topic, []).append(bytes(message.data))
+    wanted = [t for t in expected if t.endswith("/orbit") or t.endswith("/attitude")]
+    tails = channel_tails(recorded, lambda topic: topic in wanted, keep=3)
+    assert tails == {t: expected[t][-3:] for t in wanted}
+    data = recorded.read_bytes()
+    rng = random.Random(11)
+    for cut in sorted(rng.randrange(8, len(data)) for _ in range(12)):
+        (tmp_path / "cut.mcap").write_bytes(data[:cut])
+        run = load(tmp_path / "cut.mcap")
+        tails = channel_tails(tmp_path / "cut.mcap", lambda topic: topic in wanted, keep=2)
+        for topic in wanted:
+            track = run.channels.get(topic)
+            got = [json.loads(p)["seq"] for p in tails.get(topic, [])]
+            assert got == ([] if track is None else [int(s) for s in track.seq[-2:]]), (cut, topic)
+    with pytest.raises(RecordingError, match="not an MCAP file"):
+        (tmp_path / "text.mcap").write_text("hello")
+        channel_tails(tmp_path / "text.mcap", lambda topic: True)
+
+
+def test_a_seeded_channel_drops_what_an_earlier_part_holds_and_counts_no_gap():
+    tr = SeqTracker()
+    tr.seed("k", 10)
+    assert [tr.add("k", s) for s in [8, 9, 10, 11, 13, 12, 12]] == [DUPLICATE, DUPLICATE, OK, OK, GAP, LATE, DUPLICATE]
+    totals = tr.totals()
+    assert (totals["count"], totals["missing"], totals["already_recorded"], totals["duplicates"]) == (4, 0, 2, 1)
+    with pytest.raises(ValueError, match="seed before recording"):
+        tr.seed("k", 20)
+    with pytest.raises(ValueError, match="expected a seq >= 0"):
+        SeqTracker().seed("k", -1)

@@ -226,10 +226,24 @@ def test_a_killed_logger_under_run_is_restarted_and_no_state_is_lost(tmp_path, p
     assert not list(tmp_path.glob("*.partial*.mcap"))  # the dead loggers' files were copied, then removed
 
 
+def _states_of_parts(paths: list[Path]) -> dict[str, dict[int, bytes]]:
+    """:func:`_states` over the parts of one run: a seq in two parts fails."""
+    out: dict[str, dict[int, bytes]] = {}
+    for path in paths:
+        for topic, per in _states(path).items():
+            seen = out.setdefault(topic, {})
+            assert not set(per) & set(seen), f"{topic}: seqs {sorted(set(per) & set(seen))[:5]} in two parts"
+            seen.update(per)
+    return out
+
+
 def test_a_killed_logger_under_serve_is_restarted_and_no_state_is_lost(tmp_path, processes):
-    """SIGKILL of serve's logger: serve restarts it (no 'running' lie with states lost), the
-    stop then finishes NAME.mcap, and every state channel holds 0 .. N-1 once each, byte for
-    byte the states an uninterrupted `astrodyn run` of the same scene records."""
+    """SIGKILL of serve's logger, twice: serve restarts it each time without copying the
+    dead one's file (that file is finished as its own part: NAME.mcap, NAME-0001.mcap, then
+    the new logger's NAME-0002.mcap); the parts together hold every state channel's 0 .. N-1
+    once each, byte for byte the states an uninterrupted `astrodyn run` of the same scene
+    records, and the second restart is no slower than the first although its part is
+    larger (nothing is copied)."""
     import threading
 
     cfg = tmp_path / "serve.toml"
@@ -242,30 +256,36 @@ def test_a_killed_logger_under_serve_is_restarted_and_no_state_is_lost(tmp_path,
     reader.start()
     hello = json.loads(sup.stdout.readline())
     assert hello["serving"] == "longrun"
-    partial = tmp_path / "served.partial.mcap"
-    t0 = time.monotonic()
-    while not (partial.exists() and partial.stat().st_size > 100_000) and time.monotonic() - t0 < 120:
-        time.sleep(0.05)
-    victim = _logger_of(sup.pid)
-    assert victim is not None
-    os.kill(victim, signal.SIGKILL)
-    t0 = time.monotonic()
-    while not any("restarted logger" in line for line in err_lines) and time.monotonic() - t0 < 60:
-        time.sleep(0.05)
-    assert any("restarted logger" in line for line in err_lines), "".join(err_lines[-20:])
-    assert _logger_of(sup.pid) not in (None, victim)
+    victims = []
+    for k, (partial, size) in enumerate([(tmp_path / "served.partial.mcap", 100_000),
+                                         (tmp_path / "served-0001.partial-1.mcap", 400_000)]):
+        t0 = time.monotonic()
+        while not (partial.exists() and partial.stat().st_size > size) and time.monotonic() - t0 < 120:
+            time.sleep(0.05)
+        assert partial.exists(), sorted(p.name for p in tmp_path.iterdir())
+        victim = _logger_of(sup.pid)
+        assert victim is not None and victim not in victims
+        os.kill(victim, signal.SIGKILL)
+        victims.append(victim)
+        t0 = time.monotonic()
+        while sum("restarted logger" in line for line in err_lines) <= k and time.monotonic() - t0 < 60:
+            time.sleep(0.05)
+        assert sum("restarted logger" in line for line in err_lines) == k + 1, "".join(err_lines[-20:])
+        assert _logger_of(sup.pid) not in (None, victim)
     time.sleep(3.0)  # the new logger records past the point of the kill
     os.kill(sup.pid, signal.SIGTERM)  # = stop
     out_text, _ = sup.communicate(timeout=120)
     reader.join(timeout=10)
     summary = json.loads(out_text.strip().splitlines()[-1])
     assert sup.returncode == 0, "".join(err_lines[-30:])
-    assert [r["old_pid"] for r in summary["restarts"]] == [victim]
-    assert summary["file"] == str(out) and out.exists() and not list(tmp_path.glob("*.partial*.mcap"))
-    served = _states(out)
-    last = min(max(per) for per in served.values())
+    assert [r["old_pid"] for r in summary["restarts"]] == victims
+    parts = [out, tmp_path / "served-0001.mcap", tmp_path / "served-0002.mcap"]
+    assert summary["file"] == str(parts[-1])
+    assert all(p.exists() for p in parts) and not list(tmp_path.glob("*.partial*.mcap")), sorted(tmp_path.iterdir())
+    served = _states_of_parts(parts)
     for per in served.values():
         assert sorted(per) == list(range(len(per)))  # no hole, no duplicate
+    last = min(max(per) for per in served.values())
     ref_cfg = tmp_path / "ref.toml"
     ref_cfg.write_text(LONG.replace('duration = "200000 s"', f'duration = "{(last + 1) / 10} s"'))
     reference = tmp_path / "reference.mcap"

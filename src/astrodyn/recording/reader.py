@@ -41,7 +41,7 @@ from astrodyn.recording.chunked_writer import MAGIC
 from astrodyn.recording.writer import RecordingError
 
 __all__ = ["load", "load_blocks", "chunk_records", "chunk_limits", "parse_chunk_data", "ChunkError",
-           "MAX_CHUNK_BYTES", "MAX_CHUNK_RATIO", "Run", "BodyTracks", "Body", "Track", "gap_report", "MCAP_MAGIC", "read_records", "scan_records"]
+           "MAX_CHUNK_BYTES", "MAX_CHUNK_RATIO", "Run", "BodyTracks", "Body", "Track", "gap_report", "MCAP_MAGIC", "read_records", "scan_records", "open_recording"]
 
 MCAP_MAGIC = MAGIC  #: the 8 bytes that open (and end) every MCAP file
 _HEADER = struct.Struct("<BQ")
@@ -168,6 +168,16 @@ class Run:
 
 class _Truncated(Exception):
     pass
+
+
+def open_recording(path: str) -> tuple[BinaryIO, int]:
+    """``(file, size)`` of the recording ``path`` opened for reading;
+    :class:`RecordingError` ``<path>: cannot open: ...`` when it cannot be."""
+    try:
+        f = open(path, "rb")
+        return f, os.fstat(f.fileno()).st_size
+    except OSError as exc:
+        raise RecordingError(f"{path}: cannot open: {exc.strerror or exc}") from None
 
 
 def read_records(f: BinaryIO, size: int, path: str, state: dict) -> Iterator[tuple[int, bytes, int]]:
@@ -512,11 +522,7 @@ def _scan(path: str | os.PathLike, block_messages: int | None) -> Iterator[Run]:
     ``block_messages`` messages)."""
 
     path = os.fspath(path)
-    try:
-        f = open(path, "rb")
-        size = os.fstat(f.fileno()).st_size
-    except OSError as exc:
-        raise RecordingError(f"{path}: cannot open: {exc.strerror or exc}") from None
+    f, size = open_recording(path)
     state: dict[str, Any] = {}
     schemas: dict[int, tuple[str, dict | None]] = {}
     channel_info: dict[int, tuple[str, str | None, _Builder]] = {}

@@ -46,7 +46,7 @@ from mcap.records import Channel, Chunk, Message, Metadata, Schema
 
 from astrodyn import __version__
 from astrodyn.recording.chunked_writer import ChunkedWriter
-from astrodyn.recording.reader import chunk_records, parse_record, read_records
+from astrodyn.recording.reader import chunk_records, open_recording, parse_record, read_records
 from astrodyn.recording.writer import RecordingError
 
 __all__ = ["recover", "write_atomically", "main", "finished_name", "find_partials", "stale_work_dirs"]
@@ -113,11 +113,7 @@ def recover(path: str | os.PathLike, out: str | os.PathLike | None = None, *, ch
     src = os.fspath(path)
     dst = os.fspath(out) if out is not None else src
     t0 = time.monotonic()
-    try:
-        f = open(src, "rb")
-        size = os.fstat(f.fileno()).st_size
-    except OSError as exc:
-        raise RecordingError(f"{src}: cannot open: {exc.strerror or exc}") from None
+    f, size = open_recording(src)
     with f:
         if os.path.exists(dst) and not os.path.isfile(dst):  # never rename over a device, fifo or directory
             raise RecordingError(f"{dst}: expected a regular file to write, got a special file or directory")

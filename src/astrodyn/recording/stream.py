@@ -39,13 +39,12 @@ import os
 import struct
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
-from typing import BinaryIO
 
 from mcap.data_stream import ReadDataStream
 from mcap.opcode import Opcode
 from mcap.records import Channel, Chunk, Message, Metadata, Schema
 
-from astrodyn.recording.reader import chunk_limits, chunk_records, scan_records
+from astrodyn.recording.reader import chunk_limits, chunk_records, open_recording, scan_records
 from astrodyn.recording.writer import RecordingError
 
 __all__ = ["RawMessage", "McapStream", "open_stream", "topic_matcher"]
@@ -93,11 +92,7 @@ class McapStream:
 
     def __init__(self, path: str | os.PathLike):
         self.path = os.fspath(path)
-        try:
-            self._f: BinaryIO = open(self.path, "rb")
-            self.size = os.fstat(self._f.fileno()).st_size
-        except OSError as exc:
-            raise RecordingError(f"{self.path}: cannot open: {exc.strerror or exc}") from None
+        self._f, self.size = open_recording(self.path)
         self.schemas: dict[int, Schema] = {}
         self.channels: dict[int, Channel] = {}
         self.metadata: dict[str, dict[str, str]] = {}

@@ -67,7 +67,8 @@ class _ChannelSeq:
     (slot ``slot``) so the compiled batch ingest (:mod:`astrodyn.recording.ingest`) can
     advance them for in-order messages."""
 
-    __slots__ = ("tracker", "slot", "missing", "duplicates", "out_of_order", "gaps", "gaps_truncated")
+    __slots__ = ("tracker", "slot", "missing", "duplicates", "out_of_order", "gaps", "gaps_truncated", "seeded_below",
+                 "already_recorded")
 
     def __init__(self, tracker: SeqTracker, slot: int) -> None:
         self.tracker = tracker
@@ -77,6 +78,8 @@ class _ChannelSeq:
         self.out_of_order = 0
         self.gaps: list[list[int]] = []  # sorted, disjoint inclusive [first, last] missing ranges
         self.gaps_truncated = False
+        self.seeded_below = 0  # seqs below this are in an earlier part (seed)
+        self.already_recorded = 0  # arrivals below seeded_below: dropped, not duplicates
 
     @property
     def next(self) -> int:
@@ -129,6 +132,18 @@ class SeqTracker:
         """The channel's index into ``next_seq`` / ``counts`` (created on first use)."""
         return self._channel(channel).slot
 
+    def seed(self, channel: str, next_seq: int) -> None:
+        """Start ``channel`` at ``next_seq``: its seqs below are already recorded elsewhere
+        (a restarted logger's earlier part).  Arrivals below it are dropped as ``DUPLICATE``
+        and counted as ``already_recorded``, not as duplicates; no gap is counted before it."""
+        if not (isinstance(next_seq, int) and next_seq >= 0):
+            raise ValueError(f"{channel}: expected a seq >= 0 to start from, got {next_seq!r}")
+        c = self._channel(channel)
+        if c.count or c.missing:
+            raise ValueError(f"{channel}: already has messages; seed before recording")
+        self._next_view[c.slot] = next_seq
+        c.seeded_below = next_seq
+
     def add(self, channel: str, seq: int) -> int:
         c = self.channels.get(channel)
         if c is None:
@@ -164,13 +179,17 @@ class SeqTracker:
                 return LATE
             if first > seq:
                 break
-        c.duplicates += 1
+        if seq < c.seeded_below:
+            c.already_recorded += 1
+        else:
+            c.duplicates += 1
         return DUPLICATE
 
     def totals(self) -> dict[str, int]:
-        """Sums over channels: count, missing, duplicates, out_of_order."""
-        out = {"count": 0, "missing": 0, "duplicates": 0, "out_of_order": 0}
+        """Sums over channels: count, missing, duplicates, out_of_order, already_recorded."""
+        out = {"count": 0, "missing": 0, "duplicates": 0, "out_of_order": 0, "already_recorded": 0}
         for c in self.channels.values():
+            out["already_recorded"] += c.already_recorded
             out["count"] += c.count
             out["missing"] += c.missing
             out["duplicates"] += c.duplicates

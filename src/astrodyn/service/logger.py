@@ -450,6 +450,7 @@ class Logger:
             "states": self.states,
             "missing": totals["missing"],
             "duplicates": totals["duplicates"],
+            "already_recorded": totals["already_recorded"],
             "out_of_order": totals["out_of_order"],
             "malformed": self.malformed,
             "malformed_examples": list(self.malformed_examples),
@@ -490,7 +491,9 @@ class Logger:
         be on their way when the count was already reached (an end event and the states
         before it arrive on different subscribers, in any order)."""
         expected = self.expected_messages()
-        if expected is None or self.states < expected or self.recorder.seq.totals()["missing"] != 0:
+        totals = self.recorder.seq.totals()
+        # states a restarted process published again and an earlier part holds count too
+        if expected is None or self.states + totals["already_recorded"] < expected or totals["missing"] != 0:
             return False
         return self.steps_recorded()
 
@@ -676,6 +679,9 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument("--leave-partial", action="store_true",
                    help="finish the last file under its partial name; the supervisor renames it once the run succeeded")
     p.add_argument("--first-part", type=int, default=0, help="number of the first rolled part (a restarted logger)")
+    p.add_argument("--resume-seqs", default=None, metavar="JSON",
+                   help="a JSON file {key: next seq}: each channel starts there, lower seqs are in an earlier part "
+                        "(serve's logger restart) and are dropped as already recorded")
     p.add_argument("--attempt", type=int, default=0,
                    help="restart count of this logger in its run: its partial files are NAME.partial-<attempt>.mcap")
     bus.add_bus_arguments(p)
@@ -725,6 +731,22 @@ def prefill(recorder: McapRecorder, path: str, scenario: str, steps: int) -> int
     return n
 
 
+def seed_seqs(recorder: McapRecorder, path: str) -> int:
+    """Start each channel of the JSON file ``path`` (``{key: next seq}``, written by serve
+    when it restarts a dead logger: :mod:`astrodyn.service.supervision`) at its seq; returns
+    the number of channels.  ValueError naming the entry for anything else."""
+    with open(path, encoding="utf-8") as f:
+        table = json.load(f)
+    if not isinstance(table, dict):
+        raise ValueError(f"--resume-seqs {path}: expected a JSON object key -> next seq")
+    for key, next_seq in table.items():
+        if not (isinstance(next_seq, int) and not isinstance(next_seq, bool) and 0 <= next_seq <= messages.MAX_SEQ):
+            raise ValueError(f"--resume-seqs {path}: {key}: expected an integer seq 0 ... 2**53-1, got {next_seq!r}")
+        messages.kind_of_key(key)  # a key astrodyn records, else MessageError naming it
+        recorder.seq.seed(key, next_seq)
+    return len(table)
+
+
 def trust_from_environment(args: argparse.Namespace) -> dict:
     """The Logger's trust arguments for this process: a verifier and a signer from the run
     secret a supervisor handed down (:data:`astrodyn.auth.SECRET_ENV`; none for a logger
@@ -769,6 +791,13 @@ def main(argv: list[str] | None = None) -> int:
                                     roll_size=args.roll_size, roll_interval_s=args.roll_interval,
                                     atomic=not args.in_place, first_part=args.first_part, attempt=args.attempt)
             copied = prefill(recorder, args.prefill, args.scenario, args.prefill_steps) if args.prefill else 0
+            if args.resume_seqs:
+                try:
+                    seed_seqs(recorder, args.resume_seqs)
+                except (OSError, ValueError) as exc:
+                    recorder.close()
+                    print(f"logger: {exc}", file=sys.stderr)
+                    return 2
             logger = Logger(session, args.scenario, recorder, expect=args.expect, queue_capacity=args.queue,
                             control=not args.no_control, **trust)
             logger.rename_at_end = not args.leave_partial

@@ -26,6 +26,7 @@ from __future__ import annotations
 import json
 import math
 import os
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -34,7 +35,7 @@ from astrodyn import messages
 from astrodyn.scenario import Scenario, plan as make_plan
 
 __all__ = ["state_topics", "contiguous_steps", "last_common_step", "states_at", "write_state_file",
-           "read_state_file", "propagator_resume_args", "ResumeError"]
+           "read_state_file", "propagator_resume_args", "resume_args", "tail_resume_point", "ResumeError"]
 
 
 class ResumeError(ValueError):
@@ -133,12 +134,49 @@ def propagator_resume_args(run, scenario: Scenario, kind: str, step: int, work: 
     """The arguments that make a ``kind`` propagator continue after output step ``step``
     of the recording ``run``: ``--start-step step+1`` and, when the process has integrated
     bodies, ``--resume-state`` (a JSON file written in ``work`` with their states at ``step``)."""
+    return resume_args(scenario, kind, step, lambda: states_at(run, scenario, kind, step), work)
+
+
+def resume_args(scenario: Scenario, kind: str, step: int, states: Callable[[], tuple[float, dict]],
+                work: str | os.PathLike) -> dict:
+    """``--start-step step+1`` and, when the ``kind`` process has integrated bodies,
+    ``--resume-state`` with their states at ``step``; ``states()`` gives ``(t, {body:
+    state})`` as :func:`states_at` does (called only when some body is integrated)."""
     args: dict = {"--start-step": step + 1}
     p = make_plan(scenario)
     exact = "kepler" if kind == "orbit" else "torque_free"
     integrated = {b.name for b in p.bodies if (b.orbit_model if kind == "orbit" else b.attitude_model) not in (None, exact)}
     if integrated:
-        t, states = states_at(run, scenario, kind, step)
-        states = {b: st for b, st in states.items() if b in integrated}
-        args["--resume-state"] = write_state_file(Path(work) / f"{kind}-state-{step}.json", kind, step, t, states)
+        t, all_states = states()
+        chosen = {b: st for b, st in all_states.items() if b in integrated}
+        args["--resume-state"] = write_state_file(Path(work) / f"{kind}-state-{step}.json", kind, step, t, chosen)
     return args
+
+
+def tail_resume_point(tails: dict[str, list[bytes]], scenario: Scenario, kind: str) -> tuple[int, float, dict] | None:
+    """``(step, t, {body: state})``: the latest step that every ``kind`` state channel
+    holds among its last payloads (:func:`astrodyn.recording.tail.channel_tails`), with
+    the states at it (as :func:`states_at`); None when a channel has no valid payload
+    there or the channels share no step.  Payloads are validated (a hostile file's bytes
+    are never a state to continue from)."""
+    fields = ("r", "v") if kind == "orbit" else ("q", "w")
+    decoded: dict[str, dict[int, dict]] = {}
+    for body, topic in state_topics(scenario, kind).items():
+        by_seq: dict[int, dict] = {}
+        for data in tails.get(topic, ()):
+            try:
+                msg = messages.decode(data, kind)
+            except messages.MessageError:
+                continue
+            by_seq[msg["seq"]] = msg
+        if not by_seq:
+            return None
+        decoded[body] = by_seq
+    if not decoded:
+        return None
+    common = set.intersection(*(set(s) for s in decoded.values()))
+    if not common:
+        return None
+    step = max(common)
+    t = next(iter(decoded.values()))[step]["t"]
+    return step, t, {body: {f: list(s[step][f]) for f in fields} for body, s in decoded.items()}

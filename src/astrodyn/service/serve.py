@@ -48,7 +48,6 @@ import glob
 import json
 import math
 import os
-import re
 import signal
 import sys
 import time
@@ -68,7 +67,13 @@ from astrodyn.service.output import check_output_path
 from astrodyn.service.propagator import command_key
 from astrodyn.service.runner import check_closed_loop_arguments
 from astrodyn.service.signals import StopFlag
-from astrodyn.service.supervision import RestartBudget, contiguous_end, next_event_seq, wait_until_gone
+from astrodyn.service.supervision import (
+    RestartBudget,
+    next_event_seq,
+    plan_part_restart,
+    resume_from_parts,
+    wait_until_gone,
+)
 from astrodyn.service.viewer import add_foxglove_argument, viewer_command
 
 __all__ = ["main", "Supervisor"]
@@ -87,6 +92,7 @@ class Supervisor:
         self.tmp = tmp
         self.max_restarts = int(max_restarts)
         self.restarts: list[dict] = []
+        self.finishing: list = []  # threads finishing dead loggers' parts (restart_logger)
         self.rate = float(rate)
         self.state = "starting"
         self.started = time.monotonic()
@@ -276,12 +282,12 @@ class Supervisor:
         return [p for p in [*reversed(partial), *reversed(rolled), str(self.out)] if os.path.exists(p)]
 
     def restart_logger(self, why: str) -> None:
-        """The logger died: a new one copies the dead one's flushed states of its current
-        part (``--prefill``) and records on; the propagators restart after the last step it
-        copied (:mod:`astrodyn.service.supervision`).  A restart costs wall time, not states."""
-        from astrodyn.recording import RecordingError, load as load_run
+        """The logger died: a new one records the next part while the dead one's file is
+        finished as its own part, and the propagators continue after the last step that
+        file holds (:func:`astrodyn.service.supervision.plan_part_restart`).  Nothing is
+        copied, so the restart costs about a second whatever the size of the part: wall
+        time, not states."""
         from astrodyn.recording.recover import finished_name
-        from astrodyn.service.resume import propagator_resume_args, state_topics
 
         for kind in self.propagators:
             self.children[kind].reported = True  # stopped here, not a death to restart
@@ -291,53 +297,28 @@ class Supervisor:
         wait_until_gone(self.session, self.scenario.name, "logger")
         self.logger_attempt += 1
         partials = [p for p in self._parts() if finished_name(p)]
-        dead_file = partials[0] if partials else None
-        part, steps, run = 0, None, None
-        if dead_file is not None:
-            final = finished_name(dead_file)
-            m = re.search(r"-(\d{4})\.[^.]+$", final) if final != str(self.out) else None
-            part = int(m.group(1)) if m else 0
-            try:
-                run = load_run(dead_file)
-                topics = [t for kind in self.propagators for t in state_topics(self.scenario, kind).values()]
-                steps = contiguous_end(run, topics)
-            except (RecordingError, OSError):
-                steps = None
-        argv = [*self._logger_argv, "--attempt", str(self.logger_attempt), "--first-part", str(part)]
-        if steps:
-            argv += ["--prefill", dead_file, "--prefill-steps", str(steps)]
+        plan = plan_part_restart(self.scenario, self.out, partials[0] if partials else None,
+                                 [p for p in self._parts() if not finished_name(p)], self.propagators,
+                                 self.logger_attempt, self.tmp)
+        argv = [*self._logger_argv, "--attempt", str(self.logger_attempt), *plan.logger_args]
         self.children["logger"] = Child(f"logger-r{self.logger_attempt}", argv, self.tmp, env=self.child_env)
         self.children["logger"].name = "logger"
         bus.wait_for_process(self.session, self.scenario.name, "logger", timeout_s=30.0)
-        if steps and dead_file is not None:
-            os.unlink(dead_file)  # copied into the new logger's file before it declared itself ready
         for kind in self.propagators:
-            args = propagator_resume_args(run, self.scenario, kind, steps - 1, self.tmp) if steps else {}
-            if not steps and part > 0:  # nothing flushed in this part: continue after the finished parts
-                args = self._resume_from_files(kind)
             argv = [*self._argv[kind], "--real-time-factor", str(self.rate), *self.pace_args()]
-            for k, v in args.items():
+            for k, v in plan.propagator_args[kind].items():
                 argv += [k, str(v)]
             self.children[kind].close()
             self.children[kind] = Child(f"{kind}-l{self.logger_attempt}", argv, self.tmp, env=self.child_env)
             self.children[kind].name = kind
+        self.finishing.append(plan.finish_in_background())
+        steps = {kind: args.get("--start-step", 0) for kind, args in plan.propagator_args.items()}
         record = {"process": "logger", "old_pid": dead.pid, "new_pid": self.children["logger"].pid, "why": why,
-                  "from_step": steps or 0, "state_from": dead_file, "time": time.time()}
+                  "from_step": min(steps.values(), default=0), "state_from": plan.source, "time": time.time()}
         self.restarts.append(record)
-        print(f"astrodyn serve: restarted logger (pid {record['new_pid']}); {steps or 0} steps copied from "
-              f"{dead_file or '-'}, propagators continue at step {steps or 0}", file=sys.stderr, flush=True)
-
-    def _resume_from_files(self, kind: str) -> dict:
-        from astrodyn.recording import load as load_run
-        from astrodyn.service.resume import last_common_step, propagator_resume_args, state_topics
-
-        topics = list(state_topics(self.scenario, kind).values())
-        for part in self._parts():
-            run = load_run(part)
-            step = last_common_step(run, topics)
-            if step is not None:
-                return propagator_resume_args(run, self.scenario, kind, step, self.tmp)
-        return {}
+        print(f"astrodyn serve: restarted logger (pid {record['new_pid']}) on part {plan.part}; the dead logger's "
+              f"{plan.source or 'file'} is finished as part {plan.part - 1}; propagators continue at "
+              + ", ".join(f"{k} step {v}" for k, v in steps.items()), file=sys.stderr, flush=True)
 
     def pace_args(self) -> list[str]:
         """``--pace-anchor`` for a restarted propagator: the run's schedule, so the new process
@@ -348,20 +329,10 @@ class Supervisor:
         return ["--pace-anchor", repr(self.schedule[0]), repr(self.schedule[1])]
 
     def restart(self, kind: str, why: str, n: int) -> None:
-        """Start ``kind`` again after the last step every one of its channels has in the file."""
-        from astrodyn.recording import load as load_run
-        from astrodyn.service.resume import last_common_step, propagator_resume_args, state_topics
-
-        topics = list(state_topics(self.scenario, kind).values())
-        args: dict = {"--start-step": 0}
-        source, step = None, None
-        for part in self._parts():
-            run = load_run(part)  # reads a file still being written, up to its last flushed chunk
-            step = last_common_step(run, topics)
-            if step is not None:
-                args = propagator_resume_args(run, self.scenario, kind, step, self.tmp)
-                source = part
-                break
+        """Start ``kind`` again after the last step every one of its channels has in the
+        newest part that holds one (read from the parts' tails: a cost independent of their size)."""
+        args, source = resume_from_parts(self.scenario, kind, self._parts(), self.tmp)
+        step = args["--start-step"] - 1 if source is not None else None
         old = self.children[kind]
         old.close()
         wait_until_gone(self.session, self.scenario.name, kind)
@@ -396,6 +367,8 @@ class Supervisor:
             logger.proc.wait(timeout=max(1.0, deadline - time.monotonic()))
         except Exception:
             logger.stop(signal.SIGTERM, timeout=30)
+        for th in self.finishing:  # dead loggers' parts: finished before we say we are done
+            th.join(timeout=max(1.0, deadline - time.monotonic()))
         self.state = "stopped"
         summary = self.status()
         summary["logger"] = log = logger.summary()

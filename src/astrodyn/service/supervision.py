@@ -20,18 +20,38 @@ every state exactly once: a logger restart costs wall-clock time, not states.  T
 logger's partial file is removed once the new one has copied it.  A logger that dies
 :data:`RESTART_LIMIT` times within :data:`RESTART_WINDOW_S` ends the run with an error
 naming it (the file so far stays valid and recoverable).
+
+That is ``astrodyn run``'s restart (one output file).  ``astrodyn serve``, which records
+in parts anyway (``--roll-interval``), restarts without copying anything, so the restart
+costs the same after a minute or a day (:func:`plan_part_restart`):
+
+1. reads only where each state channel of the dead logger's file ends
+   (:func:`astrodyn.recording.tail.channel_tails`: a header walk, about 1 us per message,
+   no JSON, memory per channel) and, per propagator, the latest step all its channels
+   hold there with the states at it (:func:`astrodyn.service.resume.tail_resume_point`);
+2. starts a new logger on the next part (``--first-part p+1``) with every channel's
+   next seq (``--resume-seqs``): a step published again is dropped as already recorded,
+   no gap is counted before it;
+3. restarts each propagator after its step, and finishes the dead file as part ``p`` in
+   the background (:func:`astrodyn.recording.recover.recover`), so the parts hold every
+   state exactly once.
 """
 
 from __future__ import annotations
 
+import json
 import os
+import re
+import sys
+import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from astrodyn.recording.writer import partial_path
 
-__all__ = ["wait_until_gone", "contiguous_end", "RESTART_LIMIT", "RESTART_WINDOW_S", "RestartBudget", "LoggerRestart", "plan_logger_restart"]
+__all__ = ["wait_until_gone", "contiguous_end", "RESTART_LIMIT", "RESTART_WINDOW_S", "RestartBudget", "LoggerRestart", "plan_logger_restart",
+           "PartRestart", "plan_part_restart", "part_number", "resume_from_parts"]
 
 #: A process that dies this many times ...
 RESTART_LIMIT = 5
@@ -142,3 +162,120 @@ def contiguous_end(run, topics) -> int | None:
         e = int(seq[0]) + n
         end = e if end is None else min(end, e)
     return end
+
+
+def part_number(path: str, out: str | os.PathLike) -> int:
+    """The part a (finished or partial) file of the recording ``out`` is: 0 for ``out``
+    itself, k for ``NAME-000k.mcap`` (:func:`astrodyn.recording.writer.part_path`)."""
+    from astrodyn.recording.recover import finished_name
+
+    final = finished_name(path) or path
+    if final == os.fspath(out):
+        return 0
+    m = re.search(r"-(\d{4,})\.[^.]+$", final)
+    return int(m.group(1)) if m else 0
+
+
+def _state_channel_of(scenario_name: str):
+    from astrodyn.messages import PREFIX, MessageError, kind_of_key
+
+    prefix = f"{PREFIX}/{scenario_name}/"
+
+    def wanted(topic: str) -> bool:
+        if not topic.startswith(prefix):
+            return False
+        try:
+            return kind_of_key(topic) in ("orbit", "attitude", "crosscheck")
+        except MessageError:
+            return False
+    return wanted
+
+
+def resume_from_parts(scenario, kind: str, parts: list[str], work: Path,
+                      tails_of: dict[str, dict[str, list[bytes]]] | None = None) -> tuple[dict, str | None]:
+    """The resume arguments of the ``kind`` propagator from the newest of ``parts`` (files,
+    newest first) whose last messages hold a step common to all its channels, and that
+    file; ``({"--start-step": 0}, None)`` when none does.  ``tails_of`` caches each file's
+    :func:`~astrodyn.recording.tail.channel_tails`."""
+    from astrodyn.recording.reader import RecordingError
+    from astrodyn.recording.tail import channel_tails
+    from astrodyn.service.resume import resume_args, tail_resume_point
+
+    tails_of = {} if tails_of is None else tails_of
+    for part in parts:
+        if part not in tails_of:
+            try:
+                tails_of[part] = channel_tails(part, _state_channel_of(scenario.name))
+            except (RecordingError, OSError):
+                tails_of[part] = {}
+        point = tail_resume_point(tails_of[part], scenario, kind)
+        if point is not None:
+            step, t, states = point
+            return resume_args(scenario, kind, step, lambda t=t, states=states: (t, states), work), part
+    return {"--start-step": 0}, None
+
+
+@dataclass
+class PartRestart:
+    """What ``serve`` starts after a logger death (:func:`plan_part_restart`)."""
+
+    part: int                       # the new logger's first part
+    source: str | None              # the dead logger's partial file
+    final: str | None               # the name it is finished under
+    logger_args: list[str]
+    propagator_args: dict[str, dict]
+    error: str | None = None        # set if finishing the dead file failed
+
+    def finish(self) -> None:
+        """Finish the dead logger's file as its part (``recover``), then remove it; a
+        failure leaves it for ``astrodyn recover`` and is kept in :attr:`error`."""
+        if self.source is None or self.final is None:
+            return
+        from astrodyn.recording.reader import RecordingError
+        from astrodyn.recording.recover import recover
+
+        try:
+            recover(self.source, self.final)
+            os.unlink(self.source)
+        except (RecordingError, OSError) as exc:
+            self.error = f"{self.source}: not finished ({exc}); finish it with `astrodyn recover {self.source}`"
+            print(f"astrodyn serve: {self.error}", file=sys.stderr, flush=True)
+
+    def finish_in_background(self) -> threading.Thread:
+        th = threading.Thread(target=self.finish, name="finish-dead-part", daemon=True)
+        th.start()
+        return th
+
+
+def plan_part_restart(scenario, out: Path, dead: str | None, finished: list[str], kinds: list[str],
+                      attempt: int, work: Path) -> PartRestart:
+    """How ``serve`` restarts its logger number ``attempt`` after a death (module
+    docstring): ``dead`` is the dead logger's partial file (None if it left none),
+    ``finished`` the run's finished parts, newest first."""
+    from astrodyn.messages import decode, kind_of_key
+    from astrodyn.recording.recover import finished_name
+
+    numbers = [part_number(p, out) for p in ([dead] if dead else []) + finished]
+    part = max(numbers) + 1 if numbers else 0
+    files = ([dead] if dead else []) + finished
+    tails_of: dict[str, dict[str, list[bytes]]] = {}
+    props = {}
+    for kind in kinds:
+        props[kind], _ = resume_from_parts(scenario, kind, files, work, tails_of) if kind != "plant" else ({}, None)
+    seeds: dict[str, int] = {}
+    for file in files:  # newest first: a channel's next seq is one past its last recorded one
+        for topic, payloads in tails_of.get(file, {}).items():
+            if topic in seeds:
+                continue
+            seqs = []
+            for data in payloads:
+                try:
+                    seqs.append(decode(data, kind_of_key(topic))["seq"])
+                except ValueError:
+                    continue
+            if seqs:
+                seeds[topic] = max(seqs) + 1
+    seeds_file = Path(work) / f"resume-seqs-{attempt}.json"
+    seeds_file.write_text(json.dumps(seeds))
+    logger_args = ["--first-part", str(part), "--resume-seqs", str(seeds_file)]
+    return PartRestart(part, dead, finished_name(dead) if dead else None, logger_args, props)

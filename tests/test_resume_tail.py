@@ -1,0 +1,93 @@
+"""serve's logger restart reads only the tail of the dead logger's file
+(:func:`astrodyn.recording.tail.channel_tails`, :func:`astrodyn.service.resume.tail_resume_point`).
+
+Reference: the full reader's answer on the same bytes -- :func:`astrodyn.recording.load`
+with :func:`astrodyn.service.resume.last_common_step` and :func:`states_at`, the path
+``run --resume`` uses -- for the complete file and for prefixes cut at random offsets
+(what a SIGKILLed logger leaves)."""
+
+from __future__ import annotations
+
+import random
+import sys
+from pathlib import Path
+
+import pytest
+
+from astrodyn.recording import load
+from astrodyn.recording.tail import channel_tails
+from astrodyn.service.resume import last_common_step, state_topics, states_at, tail_resume_point
+from astrodyn.service.supervision import part_number, plan_part_restart
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _recordings import leo_recording
+
+
+@pytest.fixture(scope="module")
+def recording(tmp_path_factory):
+    path = tmp_path_factory.mktemp("tail") / "rp.mcap"
+    sc, _ = leo_recording(path, duration="120 s", rate="4 Hz")
+    return path, sc
+
+
+def _state_topic(topic: str) -> bool:
+    return topic.endswith(("/orbit", "/attitude", "/crosscheck"))
+
+
+def test_the_tail_resume_point_is_the_full_readers(recording, tmp_path):
+    path, sc = recording
+    data = path.read_bytes()
+    rng = random.Random(5)
+    cuts = [len(data), *sorted(rng.randrange(200, len(data)) for _ in range(25))]
+    checked = 0
+    for cut in cuts:
+        cut_path = tmp_path / "cut.mcap"
+        cut_path.write_bytes(data[:cut])
+        run = load(cut_path)
+        tails = channel_tails(cut_path, _state_topic)
+        for kind in ("orbit", "attitude"):
+            topics = list(state_topics(sc, kind).values())
+            step = last_common_step(run, topics)
+            point = tail_resume_point(tails, sc, kind)
+            if step is None:
+                assert point is None, (cut, kind)
+                continue
+            assert point is not None and point[0] == step, (cut, kind, point and point[0], step)
+            t, states = states_at(run, sc, kind, step)
+            assert (point[1], point[2]) == (t, states), (cut, kind)
+            checked += 1
+    assert checked > 20
+
+
+def test_a_hostile_tail_is_never_a_state_to_continue_from(recording, tmp_path):
+    """Payloads that are not valid states of their channel (NaN text, a wrong type) are
+    skipped: the resume point is the last step with valid states, or none."""
+    path, sc = recording
+    tails = channel_tails(path, _state_topic)
+    topic = next(iter(state_topics(sc, "orbit").values()))
+    good = tail_resume_point(tails, sc, "orbit")
+    assert good is not None
+    tails[topic] = [b'{"t":NaN}', b"\xff\xfe", b"[]"] + tails[topic][:-1]
+    point = tail_resume_point(tails, sc, "orbit")
+    assert point is not None and point[0] == good[0] - 1
+    tails[topic] = [b"{}"]
+    assert tail_resume_point(tails, sc, "orbit") is None
+
+
+def test_a_part_restart_plans_the_next_part_and_seeds_every_state_channel(recording, tmp_path):
+    import json
+
+    path, sc = recording
+    dead = tmp_path / "served.partial.mcap"
+    dead.write_bytes(path.read_bytes()[: path.stat().st_size * 2 // 3])
+    run = load(dead)
+    plan = plan_part_restart(sc, tmp_path / "served.mcap", str(dead), [], ["orbit", "attitude"], 1, tmp_path)
+    assert plan.part == 1 and plan.final == str(tmp_path / "served.mcap")
+    seeds = json.loads(Path(plan.logger_args[plan.logger_args.index("--resume-seqs") + 1]).read_text())
+    assert seeds == {topic: int(track.seq.max()) + 1 for topic, track in run.channels.items() if _state_topic(topic)}
+    for kind in ("orbit", "attitude"):
+        step = last_common_step(run, list(state_topics(sc, kind).values()))
+        assert plan.propagator_args[kind]["--start-step"] == step + 1
+    assert part_number(str(tmp_path / "served-0007.partial-3.mcap"), tmp_path / "served.mcap") == 7
+    plan.finish()
+    assert not dead.exists() and load(tmp_path / "served.mcap").messages == run.messages
