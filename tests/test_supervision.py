@@ -297,6 +297,38 @@ def test_a_killed_logger_under_serve_is_restarted_and_no_state_is_lost(tmp_path,
         assert {s: per[s] for s in range(last + 1)} == {s: expected[topic][s] for s in range(last + 1)}
 
 
+def test_a_logger_killed_while_serve_starts_is_replaced(tmp_path, processes):
+    """SIGKILL of serve's logger before it is ready, twice (nothing is recorded yet): serve
+    starts another each time instead of failing, serves, and its stop leaves one finished
+    NAME.mcap whose channels hold 0 .. N-1 once each, and no partial file."""
+    cfg = tmp_path / "serve.toml"
+    cfg.write_text(LONG)
+    out = tmp_path / "early.mcap"
+    sup = processes([*ASTRODYN, "serve", cfg, "--out", out, "--rate", "400"], stdout=subprocess.PIPE,
+                    stderr=subprocess.PIPE, text=True)
+    killed: list[int] = []
+    t0 = time.monotonic()
+    while len(killed) < 2 and time.monotonic() - t0 < 60 and sup.poll() is None:
+        pid = _logger_of(sup.pid)
+        if pid is not None and pid not in killed:
+            os.kill(pid, signal.SIGKILL)  # within milliseconds of its start: before it is ready
+            killed.append(pid)
+        time.sleep(0.002)
+    assert len(killed) == 2
+    hello = json.loads(sup.stdout.readline() or "{}")
+    assert hello.get("serving") == "longrun", sup.stderr.read()[-2000:] if sup.poll() is not None else hello
+    time.sleep(2.0)
+    os.kill(sup.pid, signal.SIGTERM)
+    out_text, err = sup.communicate(timeout=120)
+    assert sup.returncode == 0, err[-3000:]
+    summary = json.loads(out_text.strip().splitlines()[-1])
+    assert [r["old_pid"] for r in summary["restarts"]] == killed
+    assert all("while starting" in r["why"] for r in summary["restarts"])
+    assert summary["file"] == str(out) and not list(tmp_path.glob("*.partial*.mcap"))
+    states = _states(out)
+    assert states and all(sorted(per) == list(range(len(per))) and len(per) > 10 for per in states.values())
+
+
 # ----------------------------------------------------------------------------- random faults
 
 def _random_fault_trial(tmp_path: Path, processes, rng, reference_states: dict, cfg: Path, k: int) -> dict:

@@ -38,9 +38,9 @@ import time
 from collections.abc import Iterator
 from pathlib import Path
 
-from astrodyn import auth
+from astrodyn import auth, bus
 
-__all__ = ["Child", "children_of", "logger_command", "propagator_command", "plant_command", "controller_argv", "start_controller", "share_fate_with_supervisor",
+__all__ = ["Child", "wait_ready", "children_of", "logger_command", "propagator_command", "plant_command", "controller_argv", "start_controller", "share_fate_with_supervisor",
            "stop_process", "work_directory", "SUPERVISOR_ENV", "ORPHAN_GRACE_S", "EXIT_ORPHANED"]
 
 #: Environment variable that carries the supervisor's PID to each child.
@@ -236,3 +236,20 @@ class Child:
             return ""
 
 
+def wait_ready(session, scenario: str, child: Child, timeout_s: float, interrupted: dict) -> str | None:
+    """Wait for ``child``'s liveliness token; a failure description if it exits first (e.g.
+    the logger cannot write its file), is interrupted, or is not ready within ``timeout_s``."""
+    deadline = time.monotonic() + timeout_s
+    while True:
+        rc = child.poll()
+        if rc is not None:
+            time.sleep(0.1)  # let its last words reach the stderr file
+            return f"process {child.name} (pid {child.pid}) exited with status {rc} during start-up: {child.stderr_tail(3)}"
+        if interrupted["signal"]:
+            return f"interrupted by {interrupted['signal']} during start-up"
+        try:
+            bus.wait_for_process(session, scenario, child.name, timeout_s=0.5)
+            return None
+        except bus.BusError:
+            if time.monotonic() > deadline:
+                return f"process {child.name} (pid {child.pid}) not ready after {timeout_s} s: {child.stderr_tail(3)}"

@@ -49,6 +49,7 @@ from astrodyn.service.children import (
     plant_command,
     propagator_command,
     start_controller,
+    wait_ready,
     work_directory,
 )
 from astrodyn.service.output import check_output_path
@@ -148,7 +149,7 @@ class ScenarioRun:
                                     *sum((["--expect", k] for k in self.propagators), []), *self.connect_args]
                 self.children["logger"] = Child("logger", [*self.logger_argv, *self.logger_args], self.tmpd,
                                                  env=self.child_env)
-                failure = _wait_ready(session, scenario.name, self.children["logger"], 60.0, self.interrupted)
+                failure = wait_ready(session, scenario.name, self.children["logger"], 60.0, self.interrupted)
                 failure = self.replace_logger_dead_while_starting(failure)
                 if failure is None:
                     failure = self.start_and_watch(beats, alive)
@@ -228,7 +229,7 @@ class ScenarioRun:
             self.restarts.append({"process": "logger", "old_pid": dead.pid, "new_pid": children["logger"].pid,
                                   "why": f"{how} while starting", "from_step": 0, "state_from": None})
             self.say(f"  logger (pid {dead.pid}) {how} while starting: restarted (pid {children['logger'].pid})")
-            failure = _wait_ready(self.session, scenario.name, children["logger"], 60.0, self.interrupted)
+            failure = wait_ready(self.session, scenario.name, children["logger"], 60.0, self.interrupted)
         return failure
 
     def start_and_watch(self, beats, alive) -> str | None:
@@ -286,7 +287,7 @@ class ScenarioRun:
                                   "why": how, "from_step": plan.steps, "state_from": plan.source})
             self.say(f"\n  logger (pid {dead.pid}) {how}: restarted (pid {children['logger'].pid}), "
                      f"{plan.steps} steps copied from {plan.source or '-'}")
-            why = _wait_ready(self.session, scenario.name, children["logger"], 60.0, self.interrupted)
+            why = wait_ready(self.session, scenario.name, children["logger"], 60.0, self.interrupted)
             if why is None:
                 break
             rc = children["logger"].poll()
@@ -379,25 +380,6 @@ def _name_the_recording(written: str | None, out: Path, result: dict) -> str | N
     for n in range(sum(r["process"] == "logger" for r in result.get("restarts", []))):  # dead loggers' files: copied
         Path(partial_path(out, n)).unlink(missing_ok=True)
     return str(out)
-
-
-def _wait_ready(session, scenario: str, child: Child, timeout_s: float, interrupted: dict) -> str | None:
-    """Wait for ``child``'s liveliness token; a failure description if it exits first (e.g.
-    the logger cannot write its file), is interrupted, or is not ready within ``timeout_s``."""
-    deadline = time.monotonic() + timeout_s
-    while True:
-        rc = child.poll()
-        if rc is not None:
-            time.sleep(0.1)  # let its last words reach the stderr file
-            return f"process {child.name} (pid {child.pid}) exited with status {rc} during start-up: {child.stderr_tail(3)}"
-        if interrupted["signal"]:
-            return f"interrupted by {interrupted['signal']} during start-up"
-        try:
-            bus.wait_for_process(session, scenario, child.name, timeout_s=0.5)
-            return None
-        except bus.BusError:
-            if time.monotonic() > deadline:
-                return f"process {child.name} (pid {child.pid}) not ready after {timeout_s} s: {child.stderr_tail(3)}"
 
 
 def progress_line(last: dict, propagators: list[str], duration: float, dt: float, last_msgs: int) -> str:

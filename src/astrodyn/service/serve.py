@@ -61,6 +61,7 @@ from astrodyn.service.children import (
     plant_command,
     propagator_command,
     start_controller,
+    wait_ready,
     work_directory,
 )
 from astrodyn.service.output import check_output_path
@@ -119,8 +120,8 @@ class Supervisor:
             logger_argv += ["--roll-interval", str(roll_interval)]
         self._logger_argv = logger_argv
         self.logger_attempt = 0
-        self.children: dict[str, Child] = {"logger": Child("logger", logger_argv, tmp, env=self.child_env)}
-        bus.wait_for_process(session, scenario.name, "logger", timeout_s=30.0)
+        self.children: dict[str, Child] = {}
+        self.start_first_logger()
         self._argv = {kind: [*(plant_command() if kind == "plant" else propagator_command(kind)), str(config_path),
                              "--endless", *connect_args] for kind in self.propagators}
         if "plant" in self._argv and token_file is not None:  # outside controllers present serve's token
@@ -271,6 +272,40 @@ class Supervisor:
                 except Exception as exc:  # keep serving the others; the failure is final for this one
                     msg += f"; restart failed: {exc}"
             self.failures.append(msg)
+
+    def start_first_logger(self, timeout_s: float = 30.0) -> None:
+        """Start the logger and wait until it is ready.  One killed by a signal before it is
+        ready (nothing is recorded yet: no propagator has started) is replaced, within its
+        restart budget, and the file it had opened (headers only) removed; one that exits on
+        its own (it cannot write its file, a partial recording is in the way, ...) ends serve
+        with its words (:class:`astrodyn.bus.BusError`)."""
+        from astrodyn.recording.writer import partial_path
+
+        while True:
+            attempt = self.logger_attempt
+            own_file = Path(partial_path(self.out, attempt))
+            existed = own_file.exists()
+            argv = [*self._logger_argv, *(["--attempt", str(attempt)] if attempt else [])]
+            child = self.children["logger"] = Child("logger" if attempt == 0 else f"logger-r{attempt}", argv,
+                                                    self.tmp, env=self.child_env)
+            child.name = "logger"
+            failure = wait_ready(self.session, self.scenario.name, child, timeout_s, {"signal": None})
+            if failure is None:
+                return
+            rc = child.poll()
+            if rc is None or rc >= 0 or not self.budgets["logger"].allow():
+                child.stop(signal.SIGKILL, timeout=5)
+                child.close()
+                raise bus.BusError(failure if rc is None or rc >= 0 else f"{self.budgets['logger'].refusal()}; last: {failure}")
+            child.close()
+            wait_until_gone(self.session, self.scenario.name, "logger")
+            if not existed:
+                own_file.unlink(missing_ok=True)
+            self.logger_attempt += 1
+            self.restarts.append({"process": "logger", "old_pid": child.pid, "new_pid": None, "why": f"killed by signal {-rc} while starting",
+                                  "from_step": 0, "state_from": None, "time": time.time()})
+            print(f"astrodyn serve: logger (pid {child.pid}) killed by signal {-rc} while starting: starting another",
+                  file=sys.stderr, flush=True)
 
     def _parts(self) -> list[str]:
         """The files the logger has written so far, newest first: the part being written
@@ -450,11 +485,15 @@ def main(argv: list[str] | None = None) -> int:
             token, token_file = auth.new_token(), control_token_path(out)
             token_file.unlink(missing_ok=True)  # a previous run's token: never valid again
             auth.write_private_file(token_file, token.encode())
-        sup = Supervisor(scenario, Path(args.config), out, session, hub, rate=rate, roll_size=args.roll_size,
-                         roll_interval=args.roll_interval, connect=args.connect, tmp=Path(tmp),
-                         zenoh_config=args.zenoh_config,
-                         foxglove_port=None if args.foxglove is None else (args.foxglove or bus.free_port()),
-                         controllers=args.controller, token_file=token_file)
+        try:
+            sup = Supervisor(scenario, Path(args.config), out, session, hub, rate=rate, roll_size=args.roll_size,
+                             roll_interval=args.roll_interval, connect=args.connect, tmp=Path(tmp),
+                             zenoh_config=args.zenoh_config,
+                             foxglove_port=None if args.foxglove is None else (args.foxglove or bus.free_port()),
+                             controllers=args.controller, token_file=token_file)
+        except bus.BusError as exc:  # the logger could not start: nothing else was started
+            print(f"astrodyn serve: {exc}", file=sys.stderr)
+            return 1
         print(json.dumps({"serving": scenario.name, "hub": hub, "control": f"astrodyn/{scenario.name}/@control/*",
                           "out": str(out), "real_time_factor": rate, "foxglove": sup.viewer_url, "control_token": token,
                           "control_token_file": None if token_file is None else str(token_file)}), flush=True)
