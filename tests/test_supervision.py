@@ -179,12 +179,15 @@ def _states(path: Path) -> dict[str, dict[int, bytes]]:
     return out
 
 
-def _logger_of(supervisor: int) -> int | None:
+def _logger_of(supervisor: int, name: str = "logger") -> int | None:
+    """PID of the supervisor's logger child ``name`` (standbys run with ``--name logger-k``)."""
     from astrodyn.service.children import children_of
 
     for pid, argv in children_of(supervisor).items():
         if "astrodyn.service.logger" in argv:
-            return pid
+            own = argv[argv.index("--name") + 1] if "--name" in argv else "logger"
+            if own == name:
+                return pid
     return None
 
 
@@ -224,6 +227,71 @@ def test_a_killed_logger_under_run_is_restarted_and_no_state_is_lost(tmp_path, p
     assert [r["old_pid"] for r in result["restarts"]] == kills
     assert _states(out) == _states(reference)
     assert not list(tmp_path.glob("*.partial*.mcap"))  # the dead loggers' files were copied, then removed
+
+
+def _run_killing(tmp_path: Path, processes, cfg: Path, out: Path, victim: str, watch: Path, size: int) -> tuple:
+    """`astrodyn run cfg --loggers 2`; SIGKILL its logger ``victim`` once ``watch`` holds
+    ``size`` bytes; returns (returncode, stderr, result json, killed pid)."""
+    sup = processes([*ASTRODYN, "run", cfg, "--out", out, "--loggers", "2", "--json", tmp_path / "result.json"],
+                    stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    killed = None
+    t0 = time.monotonic()
+    while killed is None and time.monotonic() - t0 < 300 and sup.poll() is None:
+        pid = _logger_of(sup.pid, victim)
+        if pid is not None and watch.exists() and watch.stat().st_size > size:
+            os.kill(pid, signal.SIGKILL)
+            killed = pid
+        time.sleep(0.05)
+    _, err = sup.communicate(timeout=600)
+    result = json.loads((tmp_path / "result.json").read_text()) if (tmp_path / "result.json").exists() else {}
+    return sup.returncode, err, result, killed
+
+
+def _merged_states(tmp_path: Path, inputs: list[Path]) -> dict:
+    merged = tmp_path / "merged.mcap"
+    done = subprocess.run([*ASTRODYN, "merge", *inputs, "--out", merged], capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr[-2000:]
+    return _states(merged)
+
+
+def test_a_standby_logger_records_the_whole_run_when_the_main_one_is_killed(tmp_path, processes):
+    """`run --loggers 2` with the main logger SIGKILLed: both files hold exactly the states
+    of an uninterrupted run (byte for byte, each once): the standby's on its own, without
+    the restart's help; `astrodyn merge` of the two is the same again."""
+    cfg, reference = _reference_run(tmp_path, "6000 s")
+    out = tmp_path / "main.mcap"
+    rc, err, result, killed = _run_killing(tmp_path, processes, cfg, out, "logger", tmp_path / "main.partial.mcap",
+                                           300_000)
+    assert killed is not None and rc == 0, err[-3000:]
+    assert [r["old_pid"] for r in result["restarts"]] == [killed]
+    standby = tmp_path / "main.logger-2.mcap"
+    assert result["standbys"]["logger-2"]["exit"] == 0 and result["standbys"]["logger-2"]["file"] == str(standby)
+    expected = _states(reference)
+    assert _states(out) == expected
+    assert _states(standby) == expected
+    assert _merged_states(tmp_path, [out, standby]) == expected
+    assert not list(tmp_path.glob("*.partial*.mcap"))
+
+
+def test_a_killed_standby_logger_is_a_warning_and_its_partial_file_is_kept(tmp_path, processes):
+    """SIGKILL of the standby: the run still ends 0 with the main file complete, warns
+    naming the standby and where its partial file stays; merging that partial file with
+    the main one adds nothing and loses nothing; `recover` finishes it as a gap-free prefix
+    of the run."""
+    cfg, reference = _reference_run(tmp_path, "6000 s")
+    out = tmp_path / "main.mcap"
+    rc, err, result, killed = _run_killing(tmp_path, processes, cfg, out, "logger-2",
+                                           tmp_path / "main.logger-2.partial.mcap", 300_000)
+    assert killed is not None and rc == 0, err[-3000:]
+    partial = tmp_path / "main.logger-2.partial.mcap"
+    assert "standby logger-2" in err and str(partial) in err
+    expected = _states(reference)
+    assert _states(out) == expected
+    assert _merged_states(tmp_path, [out, partial]) == expected
+    recovered = subprocess.run([*ASTRODYN, "recover", partial], capture_output=True, text=True, timeout=300)
+    assert recovered.returncode == 0, recovered.stderr[-2000:]
+    kept = _states(tmp_path / "main.logger-2.mcap")  # what the standby had flushed: a prefix, as recorded
+    assert kept and all(per == {s: expected[topic][s] for s in range(len(per))} for topic, per in kept.items())
 
 
 def _states_of_parts(paths: list[Path]) -> dict[str, dict[int, bytes]]:

@@ -47,7 +47,7 @@ from astrodyn import __version__, messages
 from astrodyn.recording import ingest
 from astrodyn.recording.chunked_writer import ChunkedWriter
 
-__all__ = ["RecordingError", "McapRecorder", "partial_path", "part_path", "fsync_directory", "BatchLayout", "SeqTracker", "OK", "GAP", "LATE", "DUPLICATE"]
+__all__ = ["RecordingError", "McapRecorder", "partial_path", "part_path", "standby_path", "fsync_directory", "BatchLayout", "SeqTracker", "OK", "GAP", "LATE", "DUPLICATE"]
 
 OK, GAP, LATE, DUPLICATE = 0, 1, 2, 3
 _STATUS_NAMES = ("ok", "gap", "late", "duplicate")
@@ -227,6 +227,15 @@ def part_path(path: str | os.PathLike, part: int) -> str:
         return os.fspath(path)
     root, ext = os.path.splitext(os.fspath(path))
     return f"{root}-{part:04d}{ext or '.mcap'}"
+
+
+def standby_path(path: str | os.PathLike, k: int) -> str:
+    """The recording of standby logger ``k`` (2, 3, ...) of the run recorded at ``path``:
+    ``NAME.logger-k.mcap`` beside ``NAME.mcap`` (``--loggers N``)."""
+    if not (isinstance(k, int) and k >= 2):
+        raise ValueError(f"k: expected a standby number >= 2, got {k!r}")
+    root, ext = os.path.splitext(os.fspath(path))
+    return f"{root}.logger-{k}{ext or '.mcap'}"
 
 
 def fsync_directory(path: str | os.PathLike) -> None:

@@ -678,6 +678,8 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                    help="write --out directly (default: write NAME.partial.mcap and rename it to --out once finished)")
     p.add_argument("--leave-partial", action="store_true",
                    help="finish the last file under its partial name; the supervisor renames it once the run succeeded")
+    p.add_argument("--name", default="logger",
+                   help="process name on the bus (default logger; a standby beside it: logger-2, ...); it signs as this name")
     p.add_argument("--first-part", type=int, default=0, help="number of the first rolled part (a restarted logger)")
     p.add_argument("--resume-seqs", default=None, metavar="JSON",
                    help="a JSON file {key: next seq}: each channel starts there, lower seqs are in an earlier part "
@@ -752,7 +754,7 @@ def trust_from_environment(args: argparse.Namespace) -> dict:
     secret a supervisor handed down (:data:`astrodyn.auth.SECRET_ENV`; none for a logger
     started by hand), and the scene's state keys from ``--config`` (scene-only recording)."""
     out: dict = {}
-    signer = bus.process_signer("logger")
+    signer = bus.process_signer(args.name)
     if signer is not None:
         out["signer"] = signer
         out["verifier"] = auth.Verifier(auth.secret_from_environment())
@@ -775,6 +777,7 @@ def main(argv: list[str] | None = None) -> int:
     share_fate_with_supervisor()  # never outlive the run / serve that started us
     try:
         set_threads(service_threads())  # thread policy (astrodyn.jit): 1 numba thread unless $ASTRODYN_THREADS
+        messages.check_name(args.name, "--name")
         meta = scenario_metadata(args)
     except (OSError, ValueError) as exc:
         print(f"logger: {exc}", file=sys.stderr)
@@ -798,7 +801,7 @@ def main(argv: list[str] | None = None) -> int:
                     recorder.close()
                     print(f"logger: {exc}", file=sys.stderr)
                     return 2
-            logger = Logger(session, args.scenario, recorder, expect=args.expect, queue_capacity=args.queue,
+            logger = Logger(session, args.scenario, recorder, name=args.name, expect=args.expect, queue_capacity=args.queue,
                             control=not args.no_control, **trust)
             logger.rename_at_end = not args.leave_partial
             summary = logger.run(max_seconds=args.max_seconds)

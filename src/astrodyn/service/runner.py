@@ -41,7 +41,7 @@ import time
 from pathlib import Path
 
 from astrodyn import auth, bus
-from astrodyn.recording.writer import partial_path
+from astrodyn.recording.writer import partial_path, standby_path
 from astrodyn.scenario import Scenario, ScenarioError, load, plan as make_plan
 from astrodyn.service.children import (
     Child,
@@ -60,6 +60,9 @@ from astrodyn.service.supervision import RestartBudget, next_event_seq, plan_log
 
 __all__ = ["main", "run_scenario", "ScenarioRun", "EXIT_REJECTED"]
 
+#: Most loggers of one run (``--loggers``): the main one and its hot standbys.
+MAX_LOGGERS = 8
+
 #: Exit status of ``astrodyn run`` when the run completed but the logger rejected messages
 #: that were not the run's own (forged, replayed, ghost bodies): the record was attacked.
 EXIT_REJECTED = 3
@@ -70,7 +73,7 @@ def run_scenario(scenario: Scenario, config_path: Path, out: Path, *, cross_chec
                  progress: bool = True, timeout_s: float | None = None, extra_args: dict | None = None,
                  logger_args: list[str] | None = None, zenoh_config: str | None = None,
                  authenticate: bool = True, controllers: list[str] | None = None,
-                 commands: Path | None = None) -> dict:
+                 commands: Path | None = None, loggers: int = 1) -> dict:
     """Run ``scenario`` with real processes; return the result dict (see :func:`main`).
 
     ``zenoh_config``: a Zenoh JSON5 file (TLS, access control) every process starts from.
@@ -78,6 +81,8 @@ def run_scenario(scenario: Scenario, config_path: Path, out: Path, *, cross_chec
     started once the plant is up, named after ``control.controllers`` in order, with the
     run's bus and secret in their environment (docs/control.md); ``commands``: a recording
     whose commands the plant re-applies instead (``--commands``).
+    ``loggers``: how many loggers record the run; the second and later are hot standbys,
+    each recording a complete file of its own (:func:`astrodyn.recording.writer.standby_path`).
     ``authenticate=False`` runs without the run secret (children neither sign nor verify):
     only for measuring what authentication costs (``astrodyn bench service``).
 
@@ -89,7 +94,7 @@ def run_scenario(scenario: Scenario, config_path: Path, out: Path, *, cross_chec
     return ScenarioRun(scenario, config_path, out, cross_check=cross_check, real_time_factor=real_time_factor,
                        connect=connect, progress=progress, timeout_s=timeout_s, extra_args=extra_args,
                        logger_args=logger_args, zenoh_config=zenoh_config, authenticate=authenticate,
-                       controllers=controllers, commands=commands).run()
+                       controllers=controllers, commands=commands, loggers=loggers).run()
 
 
 class ScenarioRun:
@@ -99,7 +104,7 @@ class ScenarioRun:
     def __init__(self, scenario: Scenario, config_path: Path, out: Path, *, cross_check: bool,
                  real_time_factor: float, connect: list[str] | None, progress: bool, timeout_s: float | None,
                  extra_args: dict | None, logger_args: list[str] | None, zenoh_config: str | None,
-                 authenticate: bool, controllers: list[str] | None, commands: Path | None):
+                 authenticate: bool, controllers: list[str] | None, commands: Path | None, loggers: int = 1):
         self.scenario, self.config_path, self.out = scenario, config_path, out
         self.cross_check, self.real_time_factor = cross_check, real_time_factor
         self.progress, self.timeout_s = progress, timeout_s
@@ -120,6 +125,8 @@ class ScenarioRun:
         self.logger_budget = RestartBudget("logger")
         self.budgets = {kind: RestartBudget(kind) for kind in self.propagators}
         self.token_file: Path | None = None
+        self.loggers = int(loggers)
+        self.standbys: dict[str, Child] = {}  # hot standby loggers: logger-2, ... (not restarted)
 
     def say(self, text: str) -> None:
         if self.progress:
@@ -143,14 +150,16 @@ class ScenarioRun:
             meta_path = self.tmpd / "scenario.json"
             meta_path.write_text(json.dumps(scenario.to_metadata()))
             try:
-                self.logger_argv = [*logger_command(), "--scenario", scenario.name, "--out", str(self.out),
-                                    "--epoch-ns", str(scenario.epoch_unix_ns), "--metadata", str(meta_path),
-                                    "--config", str(self.config_path), "--leave-partial", "--no-control",
-                                    *sum((["--expect", k] for k in self.propagators), []), *self.connect_args]
+                common = [*logger_command(), "--scenario", scenario.name, "--epoch-ns", str(scenario.epoch_unix_ns),
+                          "--metadata", str(meta_path), "--config", str(self.config_path), "--no-control",
+                          *sum((["--expect", k] for k in self.propagators), []), *self.connect_args]
+                self.logger_argv = [*common, "--out", str(self.out), "--leave-partial"]
                 self.children["logger"] = Child("logger", [*self.logger_argv, *self.logger_args], self.tmpd,
                                                  env=self.child_env)
                 failure = wait_ready(session, scenario.name, self.children["logger"], 60.0, self.interrupted)
                 failure = self.replace_logger_dead_while_starting(failure)
+                if failure is None:
+                    failure = self.start_standbys(common)
                 if failure is None:
                     failure = self.start_and_watch(beats, alive)
                 result["failure"] = self.finish(failure)
@@ -162,6 +171,9 @@ class ScenarioRun:
                     if name in self.children:
                         self.children[name].stop()
                         self.children[name].close()
+                for standby in self.standbys.values():
+                    standby.stop()
+                    standby.close()
                 restore_signals()
         result["interrupted"] = self.interrupted["signal"]
         result["wall_s"] = time.monotonic() - started
@@ -231,6 +243,44 @@ class ScenarioRun:
             self.say(f"  logger (pid {dead.pid}) {how} while starting: restarted (pid {children['logger'].pid})")
             failure = wait_ready(self.session, scenario.name, children["logger"], 60.0, self.interrupted)
         return failure
+
+    def start_standbys(self, common: list[str]) -> str | None:
+        """Start the hot standby loggers (``--loggers N``): ``logger-2`` ... ``logger-N``, each
+        recording everything into its own file (:func:`standby_path`) and naming it itself
+        when the run ends.  A standby is not restarted: one that dies leaves its partial file
+        (for ``recover`` or ``merge``) and a warning; the run goes on with the others."""
+        for k in range(2, self.loggers + 1):
+            name = f"logger-{k}"
+            child = self.standbys[name] = Child(name, [*common, "--name", name, "--out", standby_path(self.out, k)],
+                                                self.tmpd, env=self.child_env)
+            failure = wait_ready(self.session, self.scenario.name, child, 60.0, self.interrupted)
+            if failure is not None:
+                return failure
+        if self.standbys:
+            self.say("  standby loggers " + ", ".join(f"{n} (pid {c.pid})" for n, c in self.standbys.items()))
+        return None
+
+    def finish_standbys(self, failure: str | None) -> None:
+        """Let each standby finish its file (they end, as the logger does, once every state
+        is recorded); ``result["standbys"]`` says how each ended and where its file is."""
+        out = self.result.setdefault("standbys", {})
+        for k, (name, child) in enumerate(self.standbys.items(), start=2):
+            if failure:
+                child.stop(signal.SIGTERM, timeout=30)
+            else:
+                try:
+                    child.proc.wait(timeout=60)
+                except subprocess.TimeoutExpired:
+                    child.stop(signal.SIGTERM, timeout=30)
+            summary = child.summary()
+            final = standby_path(self.out, k)
+            file = (summary or {}).get("file") or partial_path(final)
+            out[name] = {"pid": child.pid, "exit": child.poll(), "file": file, "summary": summary,
+                         "stderr": child.stderr_tail()}
+            if child.poll() != 0 or file != final:
+                self.result.setdefault("warnings", []).append(
+                    f"standby {name} (pid {child.pid}) {_how(child.poll() or 0) if child.poll() else 'did not finish'}: "
+                    f"its recording stays at {file} (`astrodyn recover`, or `astrodyn merge` with the main file)")
 
     def start_and_watch(self, beats, alive) -> str | None:
         """Start the propagators and the controllers; watch them until the run ends."""
@@ -349,6 +399,7 @@ class ScenarioRun:
             except subprocess.TimeoutExpired:
                 failure = "logger did not finish within 60 s of the end of the run; stopped it (file finished)"
                 logger.stop(signal.SIGTERM, timeout=30)
+        self.finish_standbys(failure)
         for ch in self.controllers.values():  # the run is over: controllers go (by PID)
             ch.stop(signal.SIGTERM, timeout=5)
         for name, ch in [*children.items(), *((c.name, c) for c in self.controllers.values())]:
@@ -490,6 +541,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--commands", metavar="REC.mcap", default=None,
                     help="closed loop: re-simulate from the commands recorded in REC (no controllers): the states "
                          "come out bit for bit as recorded")
+    ap.add_argument("--loggers", type=int, default=1, metavar="N",
+                    help="loggers recording the run (default 1, at most 8): the 2nd ... Nth are hot standbys, each "
+                         "writing a complete file of its own, NAME.logger-2.mcap, ... (docs/reliability.md)")
     ap.add_argument("--tolerate-rejected", action="store_true",
                     help="exit 0 even when the logger rejected messages that did not come from this run's own "
                          "processes (default: exit 3, the record was attacked; docs/security.md)")
@@ -498,7 +552,11 @@ def main(argv: list[str] | None = None) -> int:
         try:
             scenario = load(args.config)
             out = Path(args.out) if args.out else (scenario.output_path or Path(f"{scenario.name}.mcap"))
-            check_output_path(out, inputs=(args.config, args.resume, args.zenoh_config, args.json, args.commands))
+            if not 1 <= args.loggers <= MAX_LOGGERS:
+                raise ScenarioError(f"--loggers: expected 1 <= N <= {MAX_LOGGERS}, got {args.loggers}")
+            inputs = (args.config, args.resume, args.zenoh_config, args.json, args.commands)
+            for path in [out, *(Path(standby_path(out, k)) for k in range(2, args.loggers + 1))]:
+                check_output_path(path, inputs=inputs)
             if args.zenoh_config:
                 try:
                     bus.make_config(mode="peer", config_file=args.zenoh_config)
@@ -524,7 +582,8 @@ def main(argv: list[str] | None = None) -> int:
         result = run_scenario(scenario, Path(args.config), out, cross_check=args.cross_check, connect=args.connect,
                               progress=not args.quiet, timeout_s=args.timeout, extra_args=resume.get("extra_args"),
                               logger_args=resume.get("logger_args"), zenoh_config=args.zenoh_config,
-                              controllers=args.controller, commands=Path(args.commands) if args.commands else None)
+                              controllers=args.controller, commands=Path(args.commands) if args.commands else None,
+                              loggers=args.loggers)
     print("", file=sys.stderr)
     rows = None
     recording = result.get("file")
@@ -542,6 +601,11 @@ def main(argv: list[str] | None = None) -> int:
     result["bodies"] = rows
     result["propagator_bodies"] = propagator_rows(result, scenario)
     print_summary(result, rows, scenario)
+    for warning in result.get("warnings", []):
+        print(f"astrodyn run: warning: {warning}", file=sys.stderr)
+    for name, standby in (result.get("standbys") or {}).items():
+        if standby.get("exit") == 0:
+            print(f"  standby {name}: {standby['file']}", file=sys.stderr)
     if args.json:
         Path(args.json).write_text(json.dumps(result, indent=1, default=str))
     if result.get("failure"):
