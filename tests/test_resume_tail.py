@@ -89,5 +89,7 @@ def test_a_part_restart_plans_the_next_part_and_seeds_every_state_channel(record
         step = last_common_step(run, list(state_topics(sc, kind).values()))
         assert plan.propagator_args[kind]["--start-step"] == step + 1
     assert part_number(str(tmp_path / "served-0007.partial-3.mcap"), tmp_path / "served.mcap") == 7
-    plan.finish()
+    child = plan.finish_in_background(tmp_path)
+    assert child.proc.wait(timeout=120) == 0, child.stderr_tail()
+    child.close()
     assert not dead.exists() and load(tmp_path / "served.mcap").messages == run.messages

@@ -49,6 +49,7 @@ import json
 import math
 import os
 import signal
+import subprocess
 import sys
 import time
 from pathlib import Path
@@ -93,7 +94,7 @@ class Supervisor:
         self.tmp = tmp
         self.max_restarts = int(max_restarts)
         self.restarts: list[dict] = []
-        self.finishing: list = []  # threads finishing dead loggers' parts (restart_logger)
+        self.finishing: list[Child] = []  # `recover` of dead loggers' parts (restart_logger)
         self.rate = float(rate)
         self.state = "starting"
         self.started = time.monotonic()
@@ -346,7 +347,9 @@ class Supervisor:
             self.children[kind].close()
             self.children[kind] = Child(f"{kind}-l{self.logger_attempt}", argv, self.tmp, env=self.child_env)
             self.children[kind].name = kind
-        self.finishing.append(plan.finish_in_background())
+        finishing = plan.finish_in_background(self.tmp)
+        if finishing is not None:
+            self.finishing.append(finishing)
         steps = {kind: args.get("--start-step", 0) for kind, args in plan.propagator_args.items()}
         record = {"process": "logger", "old_pid": dead.pid, "new_pid": self.children["logger"].pid, "why": why,
                   "from_step": min(steps.values(), default=0), "state_from": plan.source, "time": time.time()}
@@ -402,8 +405,15 @@ class Supervisor:
             logger.proc.wait(timeout=max(1.0, deadline - time.monotonic()))
         except Exception:
             logger.stop(signal.SIGTERM, timeout=30)
-        for th in self.finishing:  # dead loggers' parts: finished before we say we are done
-            th.join(timeout=max(1.0, deadline - time.monotonic()))
+        for child in self.finishing:  # dead loggers' parts: finished before we say we are done
+            try:
+                child.proc.wait(timeout=max(1.0, deadline - time.monotonic()))
+            except subprocess.TimeoutExpired:
+                child.stop()
+            if child.poll() != 0:
+                self.failures.append(f"{child.name} (pid {child.pid}) {child.stderr_tail(2) or 'did not finish'}: "
+                                     f"finish the dead logger's file with `astrodyn recover`")
+            child.close()
         self.state = "stopped"
         summary = self.status()
         summary["logger"] = log = logger.summary()

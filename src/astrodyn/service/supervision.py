@@ -43,7 +43,6 @@ import json
 import os
 import re
 import sys
-import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -224,27 +223,19 @@ class PartRestart:
     final: str | None               # the name it is finished under
     logger_args: list[str]
     propagator_args: dict[str, dict]
-    error: str | None = None        # set if finishing the dead file failed
 
-    def finish(self) -> None:
-        """Finish the dead logger's file as its part (``recover``), then remove it; a
-        failure leaves it for ``astrodyn recover`` and is kept in :attr:`error`."""
-        if self.source is None or self.final is None:
-            return
-        from astrodyn.recording.reader import RecordingError
-        from astrodyn.recording.recover import recover
+    def finish_in_background(self, log_dir: Path):
+        """Finish the dead logger's file as its part in a separate process (``astrodyn
+        recover``: the finished file, then the partial one removed), so serve's own loop
+        and its heartbeats are not slowed by it; the :class:`~astrodyn.service.children.Child`
+        (ended with serve: ``PR_SET_PDEATHSIG``), or None when there is no file.  A failure
+        leaves the partial file for ``astrodyn recover`` (serve's summary says so)."""
+        if self.source is None:
+            return None
+        from astrodyn.service.children import Child
 
-        try:
-            recover(self.source, self.final)
-            os.unlink(self.source)
-        except (RecordingError, OSError) as exc:
-            self.error = f"{self.source}: not finished ({exc}); finish it with `astrodyn recover {self.source}`"
-            print(f"astrodyn serve: {self.error}", file=sys.stderr, flush=True)
-
-    def finish_in_background(self) -> threading.Thread:
-        th = threading.Thread(target=self.finish, name="finish-dead-part", daemon=True)
-        th.start()
-        return th
+        name = f"finish-part-{self.part - 1}"
+        return Child(name, [sys.executable, "-m", "astrodyn", "recover", self.source], Path(log_dir), foreign=True)
 
 
 def plan_part_restart(scenario, out: Path, dead: str | None, finished: list[str], kinds: list[str],
