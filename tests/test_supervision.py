@@ -365,6 +365,37 @@ def test_a_killed_logger_under_serve_is_restarted_and_no_state_is_lost(tmp_path,
         assert {s: per[s] for s in range(last + 1)} == {s: expected[topic][s] for s in range(last + 1)}
 
 
+def test_serve_with_a_standby_logger_records_everything_twice_across_a_main_logger_kill(tmp_path, processes):
+    """`serve --loggers 2`, main logger SIGKILLed: the standby's one file holds every state
+    channel 0 .. N-1 once, byte for byte what the main logger's parts hold together."""
+    cfg = tmp_path / "serve.toml"
+    cfg.write_text(LONG)
+    out = tmp_path / "served.mcap"
+    sup = processes([*ASTRODYN, "serve", cfg, "--out", out, "--rate", "400", "--loggers", "2"],
+                    stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    assert json.loads(sup.stdout.readline())["serving"] == "longrun"
+    partial = tmp_path / "served.partial.mcap"
+    t0 = time.monotonic()
+    while not (partial.exists() and partial.stat().st_size > 100_000) and time.monotonic() - t0 < 120:
+        time.sleep(0.05)
+    victim = _logger_of(sup.pid)
+    assert victim is not None and _logger_of(sup.pid, "logger-2") is not None
+    os.kill(victim, signal.SIGKILL)
+    t0 = time.monotonic()
+    while _logger_of(sup.pid) in (None, victim) and time.monotonic() - t0 < 60:
+        time.sleep(0.05)
+    time.sleep(3.0)
+    os.kill(sup.pid, signal.SIGTERM)
+    out_text, err = sup.communicate(timeout=120)
+    assert sup.returncode == 0, err[-3000:]
+    summary = json.loads(out_text.strip().splitlines()[-1])
+    standby = tmp_path / "served.logger-2.mcap"
+    assert summary["standbys"]["logger-2"]["exit"] == 0 and summary["standbys"]["logger-2"]["file"] == str(standby)
+    main = _states_of_parts([out, tmp_path / "served-0001.mcap"])
+    assert _states(standby) == main
+    assert all(sorted(per) == list(range(len(per))) and len(per) > 100 for per in main.values())
+
+
 def test_a_logger_killed_while_serve_starts_is_replaced(tmp_path, processes):
     """SIGKILL of serve's logger before it is ready, twice (nothing is recorded yet): serve
     starts another each time instead of failing, serves, and its stop leaves one finished

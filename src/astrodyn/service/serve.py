@@ -55,6 +55,7 @@ import time
 from pathlib import Path
 
 from astrodyn import auth, bus
+from astrodyn.recording.writer import standby_path
 from astrodyn.scenario import ScenarioError, load, plan as make_plan
 from astrodyn.service.children import (
     Child,
@@ -67,7 +68,7 @@ from astrodyn.service.children import (
 )
 from astrodyn.service.output import check_output_path
 from astrodyn.service.propagator import command_key
-from astrodyn.service.runner import check_closed_loop_arguments
+from astrodyn.service.runner import MAX_LOGGERS, check_closed_loop_arguments
 from astrodyn.service.signals import StopFlag
 from astrodyn.service.supervision import (
     RestartBudget,
@@ -87,7 +88,7 @@ class Supervisor:
     def __init__(self, scenario, config_path: Path, out: Path, session, hub: str, *, rate: float,
                  roll_size: int | None = None, roll_interval: float | None = None, connect=(), tmp: Path,
                  max_restarts: int = 5, zenoh_config: str | None = None, foxglove_port: int | None = None,
-                 controllers: list[str] | None = None, token_file: Path | None = None):
+                 controllers: list[str] | None = None, token_file: Path | None = None, loggers: int = 1):
         self.scenario = scenario
         self.session = session
         self.out = Path(out)
@@ -111,18 +112,28 @@ class Supervisor:
         secret = auth.RunSecret.generate()
         self.child_env = {auth.SECRET_ENV: str(secret.save(tmp))}
         self.signer = auth.Signer(secret, "serve")
-        logger_argv = [*logger_command(), "--scenario", scenario.name, "--out", str(out),
-                       "--epoch-ns", str(scenario.epoch_unix_ns), "--metadata", str(meta), "--config", str(config_path),
-                       "--no-control", "--leave-partial", *sum((["--expect", k] for k in self.propagators), []),
-                       *connect_args]
+        common = [*logger_command(), "--scenario", scenario.name, "--epoch-ns", str(scenario.epoch_unix_ns),
+                  "--metadata", str(meta), "--config", str(config_path), "--no-control",
+                  *sum((["--expect", k] for k in self.propagators), []), *connect_args]
         if roll_size:
-            logger_argv += ["--roll-size", str(roll_size)]
+            common += ["--roll-size", str(roll_size)]
         if roll_interval:
-            logger_argv += ["--roll-interval", str(roll_interval)]
-        self._logger_argv = logger_argv
+            common += ["--roll-interval", str(roll_interval)]
+        self._logger_argv = [*common, "--out", str(out), "--leave-partial"]
         self.logger_attempt = 0
         self.children: dict[str, Child] = {}
         self.start_first_logger()
+        self.standbys: dict[str, Child] = {}  # hot standby loggers (--loggers N): not restarted
+        for k in range(2, int(loggers) + 1):
+            name = f"logger-{k}"
+            child = self.standbys[name] = Child(name, [*common, "--name", name, "--out", standby_path(out, k)], tmp,
+                                                env=self.child_env)
+            failure = wait_ready(session, scenario.name, child, 30.0, {"signal": None})
+            if failure is not None:  # nothing else has started: stop the loggers, say why
+                for ch in [*self.standbys.values(), self.children["logger"]]:
+                    ch.stop()
+                    ch.close()
+                raise bus.BusError(failure)
         self._argv = {kind: [*(plant_command() if kind == "plant" else propagator_command(kind)), str(config_path),
                              "--endless", *connect_args] for kind in self.propagators}
         if "plant" in self._argv and token_file is not None:  # outside controllers present serve's token
@@ -414,8 +425,20 @@ class Supervisor:
                 self.failures.append(f"{child.name} (pid {child.pid}) {child.stderr_tail(2) or 'did not finish'}: "
                                      f"finish the dead logger's file with `astrodyn recover`")
             child.close()
+        standbys = {}
+        for name, child in self.standbys.items():  # they end by themselves once every state is recorded
+            try:
+                child.proc.wait(timeout=max(1.0, deadline - time.monotonic()))
+            except subprocess.TimeoutExpired:
+                child.stop(signal.SIGTERM, timeout=30)
+            log = child.summary() or {}
+            standbys[name] = {"pid": child.pid, "exit": child.poll(), "file": log.get("file"), "summary": log}
+            if child.poll() != 0:
+                self.failures.append(f"standby {name} (pid {child.pid}) exited with status {child.poll()}: its "
+                                     f"recording stays partial (`astrodyn recover`, or `astrodyn merge` with the main one)")
         self.state = "stopped"
         summary = self.status()
+        summary["standbys"] = standbys
         summary["logger"] = log = logger.summary()
         summary["file"] = self.name_the_recording((log or {}).get("file"), bool(self.failures))
         return summary
@@ -438,7 +461,7 @@ class Supervisor:
         for ch in self.controllers.values():
             ch.stop(signal.SIGTERM, timeout=5)
             ch.close()
-        for ch in self.children.values():
+        for ch in [*self.children.values(), *self.standbys.values()]:
             ch.stop()
             ch.close()
         self.beats.close()
@@ -469,6 +492,9 @@ def main(argv: list[str] | None = None) -> int:
                     help="answer control verbs from anyone who reaches the bus (default: only with this run's control "
                          "token, printed at start and stored in a 0600 file beside --out; docs/security.md)")
     add_foxglove_argument(ap, "the running scene")
+    ap.add_argument("--loggers", type=int, default=1, metavar="N",
+                    help="loggers recording the run (default 1, at most 8): the 2nd ... Nth are hot standbys, each "
+                         "writing a complete file of its own, NAME.logger-2.mcap, ... (docs/reliability.md)")
     ap.add_argument("--controller", action="append", default=None, metavar="CMD",
                     help="closed loop: start this controller program under serve (as with run; docs/control.md)")
     args = ap.parse_args(argv)
@@ -476,7 +502,10 @@ def main(argv: list[str] | None = None) -> int:
         scenario = load(args.config)
         out = Path(args.out) if args.out else (scenario.output_path or Path("out") / f"{scenario.name}.mcap")
         out.parent.mkdir(parents=True, exist_ok=True)
-        check_output_path(out, inputs=(args.config, args.zenoh_config))
+        if not 1 <= args.loggers <= MAX_LOGGERS:
+            raise ScenarioError(f"--loggers: expected 1 <= N <= {MAX_LOGGERS}, got {args.loggers}")
+        for path in [out, *(Path(standby_path(out, k)) for k in range(2, args.loggers + 1))]:
+            check_output_path(path, inputs=(args.config, args.zenoh_config))
         check_closed_loop_arguments(scenario, args.controller or [], None, out)
         rate = args.rate if args.rate is not None else scenario.real_time_factor
         try:
@@ -500,7 +529,7 @@ def main(argv: list[str] | None = None) -> int:
                              roll_interval=args.roll_interval, connect=args.connect, tmp=Path(tmp),
                              zenoh_config=args.zenoh_config,
                              foxglove_port=None if args.foxglove is None else (args.foxglove or bus.free_port()),
-                             controllers=args.controller, token_file=token_file)
+                             controllers=args.controller, token_file=token_file, loggers=args.loggers)
         except bus.BusError as exc:  # the logger could not start: nothing else was started
             print(f"astrodyn serve: {exc}", file=sys.stderr)
             return 1
