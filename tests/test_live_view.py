@@ -35,10 +35,11 @@ pytestmark = pytest.mark.network
 
 ASTRODYN = [sys.executable, "-m", "astrodyn"]
 
-CLIENT = textwrap.dedent('''
+#: The start of both client scripts: connect to the server (retrying while it starts).
+CONNECT = textwrap.dedent('''
     import json, struct, sys, time
     from websockets.sync.client import connect
-    url, want_raw, seconds = sys.argv[1], sys.argv[2], float(sys.argv[3])
+    url = sys.argv[1]
     deadline = time.monotonic() + 60
     while True:
         try:
@@ -48,6 +49,10 @@ CLIENT = textwrap.dedent('''
             if time.monotonic() > deadline:
                 raise
             time.sleep(0.2)
+''')
+
+CLIENT = CONNECT + textwrap.dedent('''
+    want_raw, seconds = sys.argv[2], float(sys.argv[3])
     out = {"subprotocol": ws.subprotocol, "channels": {}, "messages": {}}
     subscribed, sub_topic, t_end = False, {}, None
     with ws:
@@ -223,3 +228,74 @@ def test_the_closed_loops_channels_reach_the_view(tmp_path):
     assert len(got["messages"][key]) >= 3
     for _, payload in got["messages"][key]:
         messages.validate(payload, "actuators")
+
+
+SERVICE_CLIENT = CONNECT + textwrap.dedent('''
+    calls = json.loads(sys.argv[2])
+    out = {"services": {}, "answers": []}
+    with ws:
+        while not out["services"] and time.monotonic() < deadline:
+            frame = ws.recv(timeout=10)
+            if isinstance(frame, str):
+                msg = json.loads(frame)
+                if msg["op"] == "serverInfo":
+                    out["server"] = msg
+                elif msg["op"] == "advertiseServices":
+                    out["services"] = {s["name"]: s for s in msg["services"]}
+        for call_id, (name, payload) in enumerate(calls):
+            service = out["services"][name]
+            enc = b"json"
+            body = payload.encode() if isinstance(payload, str) else json.dumps(payload).encode()
+            ws.send(struct.pack("<BIII", 2, service["id"], call_id, len(enc)) + enc + body)
+            while True:
+                frame = ws.recv(timeout=30)
+                if isinstance(frame, str):
+                    msg = json.loads(frame)
+                    if msg["op"] == "serviceCallFailure" and msg["callId"] == call_id:
+                        out["answers"].append({"failure": msg["message"]})
+                        break
+                    continue
+                if frame[0] == 3:  # service call response
+                    sid, cid, n = struct.unpack_from("<III", frame, 1)
+                    if cid == call_id:
+                        out["answers"].append({"reply": json.loads(frame[13 + n:])})
+                        break
+    print(json.dumps(out))
+''')
+
+
+def test_the_control_verbs_are_foxglove_services_with_the_token_rules(tmp_path):
+    """serve's verbs (status, pause, resume, rate, stop) are advertised as Foxglove services
+    with JSON request schemas; a call without the control token is refused by serve, with
+    it the run obeys (paused, rate changed, resumed: read back through the bus, not the
+    view); a request that is not a JSON object is a service-call failure naming the verb."""
+    serve, _ = _serve_with_view(tmp_path, "svc", "100000 s", 20)
+    try:
+        hello = json.loads(serve.stdout.readline())
+        token = hello["control_token"]
+        calls = [["status", {}], ["pause", {"token": "forged"}], ["pause", {"token": token}],
+                 ["status", {"token": token}], ["rate", {"token": token, "factor": 5}],
+                 ["resume", {"token": token}], ["rate", "[1, 2"], ["rate", [1, 2]]]
+        script = tmp_path / "service_client.py"
+        script.write_text(SERVICE_CLIENT)
+        client = subprocess.run([sys.executable, str(script), hello["foxglove"], json.dumps(calls)],
+                                capture_output=True, text=True, timeout=120)
+        assert client.returncode == 0, client.stderr[-3000:]
+        got = json.loads(client.stdout.strip().splitlines()[-1])
+        with bus.open_session(connect=[hello["hub"]]) as s:
+            status = bus.send_control(s, "svc", "status", token=token)[0]
+            bus.send_control(s, "svc", "stop", token=token, timeout_s=60)
+        serve.wait(timeout=60)
+    finally:
+        stop_process(serve)
+    assert "services" in got["server"]["capabilities"] and "json" in got["server"]["supportedEncodings"]
+    assert set(got["services"]) == set(bus.CONTROL_VERBS)
+    rate_schema = json.loads(got["services"]["rate"]["request"]["schema"])
+    assert set(rate_schema["properties"]) == {"token", "factor"}
+    answers = got["answers"]
+    assert "unauthorised" in answers[0]["reply"][0]["error"] and "unauthorised" in answers[1]["reply"][0]["error"]
+    assert "error" not in answers[2]["reply"][0]
+    assert answers[3]["reply"][0]["state"] == "paused"
+    assert "error" not in answers[4]["reply"][0] and "error" not in answers[5]["reply"][0]
+    assert status["state"] == "running" and status["real_time_factor"] == 5
+    assert "rate: expected a JSON object" in answers[6]["failure"] and "rate: expected a JSON object" in answers[7]["failure"]

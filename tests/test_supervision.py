@@ -475,13 +475,15 @@ def _random_fault_trial(tmp_path: Path, processes, rng, reference_states: dict, 
     return record
 
 
-def _random_faults(tmp_path, processes, trials: int, seed: int) -> list[dict]:
+def _random_faults(tmp_path, processes, trials: int, seed: int, trial=None) -> list[dict]:
+    """``trials`` seeded trials of ``trial`` (default :func:`_random_fault_trial`, `run`)."""
     import random
 
     cfg, reference = _reference_run(tmp_path, "3000 s")
     reference_states = _states(reference)
     rng = random.Random(seed)
-    return [_random_fault_trial(tmp_path, processes, rng, reference_states, cfg, k) for k in range(trials)]
+    trial = trial or _random_fault_trial
+    return [trial(tmp_path, processes, rng, reference_states, cfg, k) for k in range(trials)]
 
 
 def test_random_faults_fast_subset(tmp_path, processes):
@@ -497,6 +499,70 @@ def test_random_faults_series(tmp_path, processes):
     records = _random_faults(tmp_path, processes, trials=20, seed=13)
     print(json.dumps(records))
     assert sum(r["killed"] for r in records) >= 15  # the run lasts longer than most delays: real faults
+
+
+def _serve_fault_trial(tmp_path: Path, processes, rng, reference_states: dict, cfg: Path, k: int) -> dict:
+    """One trial of `astrodyn serve` (x50 real time): after a random delay SIGKILL a random
+    one of its processes (serve itself included).  A killed child: serve restarts it, the
+    stop ends 0, and the run's parts together hold every channel 0 .. N-1 once, byte for
+    byte the reference.  A killed serve: no child alive 2.5 s later, and what `recover`
+    makes of the leftovers is a gap-free prefix of the reference."""
+    out = tmp_path / f"serve{k}.mcap"
+    sup = processes([*ASTRODYN, "serve", cfg, "--out", out, "--rate", "50"], stdout=subprocess.PIPE,
+                    stderr=subprocess.PIPE, text=True)
+    victim_kind = rng.choice(["logger", "orbit", "attitude", "supervisor"])
+    delay = rng.uniform(0.2, 3.0)
+    assert json.loads(sup.stdout.readline() or "{}").get("serving") == "longrun", sup.stderr.read()[-2000:]
+    time.sleep(delay)
+    from astrodyn.service.children import children_of
+
+    victim = sup.pid if victim_kind == "supervisor" else next(
+        (pid for pid, argv in children_of(sup.pid).items()
+         if (victim_kind == "logger" and "astrodyn.service.logger" in argv)
+         or f"astrodyn.service.propagator {victim_kind}" in " ".join(argv)), None)
+    record = {"victim": victim_kind, "delay_s": round(delay, 2), "killed": victim is not None}
+    if victim is not None:
+        os.kill(victim, signal.SIGKILL)
+
+    def parts() -> list[Path]:
+        return sorted(tmp_path.glob(f"serve{k}.mcap")) + sorted(tmp_path.glob(f"serve{k}-[0-9][0-9][0-9][0-9].mcap"))
+
+    if victim_kind == "supervisor" and victim is not None:
+        sup.wait(timeout=10)
+        orphans, took = _orphans_after(sup.pid, 2.5)
+        assert orphans == [], f"trial {record}: still alive {took:.2f} s after serve died: {orphans}"
+        _recover_dir(tmp_path)
+        for topic, per in _states_of_parts(parts()).items():
+            assert sorted(per) == list(range(len(per))), (record, topic)
+            assert all(per[s] == reference_states[topic][s] for s in per if s in reference_states[topic]), (record, topic)
+    else:
+        time.sleep(2.5)  # the restart, and some steps after it
+        sup.send_signal(signal.SIGTERM)
+        _, err = sup.communicate(timeout=180)
+        assert sup.returncode == 0, f"trial {record}: {err[-3000:]}"
+        states = _states_of_parts(parts())
+        assert states, record
+        for topic, per in states.items():
+            assert sorted(per) == list(range(len(per))) and len(per) > 50, (record, topic, len(per))
+            ref = reference_states[topic]  # a loaded machine may take serve past the reference's end: the rest is gap-free
+            assert all(per[s] == ref[s] for s in per if s in ref) and min(len(per), len(ref)) > 50, (record, topic)
+        assert not list(tmp_path.glob(f"serve{k}*.partial*.mcap")), record
+    return record
+
+
+def test_serve_random_faults_fast_subset(tmp_path, processes):
+    """Four seeded random trials against `serve` (the series below has twenty)."""
+    records = _random_faults(tmp_path, processes, trials=4, seed=20261126, trial=_serve_fault_trial)
+    assert len(records) == 4 and sum(r["killed"] for r in records) >= 3
+
+
+@pytest.mark.slow
+def test_serve_random_faults_series(tmp_path, processes):
+    """Twenty seeded random trials: each process of `serve` (serve included) SIGKILLed at a
+    random moment; docs/reliability.md reports the series."""
+    records = _random_faults(tmp_path, processes, trials=20, seed=7, trial=_serve_fault_trial)
+    print(json.dumps(records))
+    assert sum(r["killed"] for r in records) >= 18
 
 
 def test_a_logger_killed_while_starting_is_replaced_and_nothing_is_lost(tmp_path):

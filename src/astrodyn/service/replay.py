@@ -438,7 +438,7 @@ def start_viewer(stream: McapStream, scenario: str, port: int, endpoints: list[s
     meta = work / "scenario.json"
     meta.write_text(json.dumps(stream.metadata.get("scenario", {})))
     return Child("viewer", [*viewer_command(), "--scenario", scenario, "--port", str(port), "--metadata", str(meta),
-                            *sum((["--connect", e] for e in endpoints), [])], work)
+                            "--services", ",".join(REPLAY_VERBS), *sum((["--connect", e] for e in endpoints), [])], work)
 
 
 def play(rep: Replayer, session, scenario: str, token: str | None, args: argparse.Namespace,

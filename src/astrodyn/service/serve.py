@@ -141,10 +141,12 @@ class Supervisor:
         self.schedule: tuple[float, float] | None = None  # (wall, t): sim t due at that monotonic wall time
         for kind in self.propagators:
             self.children[kind] = Child(kind, [*self._argv[kind], "--real-time-factor", str(self.rate)], tmp, env=self.child_env)
+        self.verbs = (*bus.CONTROL_VERBS, "fault") if "plant" in self.propagators else bus.CONTROL_VERBS
         self.viewer_url = None
         if foxglove_port is not None:  # the live view: a separate process that only subscribes
             self._argv["viewer"] = [*viewer_command(), "--scenario", scenario.name, "--port", str(foxglove_port),
-                                    "--metadata", str(meta), "--from-logger", *connect_args]
+                                    "--metadata", str(meta), "--from-logger", "--services", ",".join(self.verbs),
+                                    *connect_args]
             self.budgets["viewer"] = RestartBudget("viewer")
             self.children["viewer"] = Child("viewer", self._argv["viewer"], tmp, env=self.child_env)
             self.viewer_url = f"ws://127.0.0.1:{foxglove_port}"
@@ -153,7 +155,6 @@ class Supervisor:
         for n, cmd in enumerate(controllers or []):  # closed loop: the user's programs, ended with us
             self.controllers[names[n]] = start_controller(names[n], cmd, scenario.name, hub, tmp, self.child_env,
                                                           token_file)
-        self.verbs = (*bus.CONTROL_VERBS, "fault") if "plant" in self.propagators else bus.CONTROL_VERBS
         self.commands = session.declare_publisher(command_key(scenario.name))
         self.beats = bus.HeartbeatMonitor(session, scenario.name, verifier=auth.Verifier(secret))
         self.alive = bus.AliveWatcher(session, scenario.name)

@@ -37,6 +37,15 @@ the server also broadcasts that time):
                       message schemas), at most ``--raw-rate`` messages per second in all,
                       shared round-robin between the channels.
 
+Control from the view (``--services VERBS``, given by ``serve`` and ``replay``): each control
+verb of the run (``status``, ``pause``, ``resume``, ``rate``, ``stop``; ``seek`` under replay,
+``fault`` under a closed-loop serve) is a Foxglove service of that name ("Call Service"
+panel, JSON request).  The request carries the run's control token like every other client
+(docs/security.md): ``{"token": "...", "factor": 2}`` for ``rate``, ``{"token": "...", "t":
+120}`` for ``seek``; the viewer forwards it to the run's ``@control/<verb>`` key with that
+token and answers with the run's replies (a JSON list).  The viewer holds no token: a
+request without the right one is refused by the run, as on the bus.
+
 The first JSON line on stdout says where it listens:
 ``{"foxglove": "ws://127.0.0.1:8765", "scenario": ...}``.
 """
@@ -261,7 +270,7 @@ def _schema(name: str, schema: dict):
 class _View:
     """The Foxglove server and its channels; raw state channels made on first use."""
 
-    def __init__(self, host: str, port: int, scenario: str, raw_rate: float):
+    def __init__(self, host: str, port: int, scenario: str, raw_rate: float, services: bool = False):
         import foxglove
 
         self.foxglove = foxglove
@@ -273,8 +282,10 @@ class _View:
                 if channel.topic == SCENE_TOPIC:
                     view.scene_wanted.set()
 
+        capabilities = [foxglove.Capability.Time, *([foxglove.Capability.Services] if services else [])]
         self.server = foxglove.start_server(name=f"astrodyn {scenario}", host=host, port=port,
-                                            capabilities=[foxglove.Capability.Time], server_listener=Listener())
+                                            capabilities=capabilities, server_listener=Listener(),
+                                            supported_encodings=["json"] if services else None)
         self.tf = foxglove.Channel(TF_TOPIC, schema=_schema("foxglove.FrameTransforms", FRAME_TRANSFORMS_SCHEMA),
                                    message_encoding="json")
         self.scene = foxglove.Channel(SCENE_TOPIC, schema=_schema("foxglove.SceneUpdate", SCENE_UPDATE_SCHEMA),
@@ -302,8 +313,62 @@ class _View:
             sent += 1
         return sent
 
+    def add_control_services(self, session, scenario: str, verbs: list[str]) -> None:
+        """One Foxglove service per control verb, forwarding to ``@control/<verb>`` (module docstring)."""
+        from foxglove.websocket import MessageSchema, Service, ServiceSchema
+
+        def schema(name: str, body: dict):
+            return MessageSchema(encoding="json", schema=_schema(name, body))
+
+        services = []
+        for verb in verbs:
+            request = schema(f"astrodyn.control.{verb}.Request", control_request_schema(verb))
+            response = schema(f"astrodyn.control.{verb}.Response", {"type": "array", "items": {"type": "object"}})
+            services.append(Service(name=verb, schema=ServiceSchema(name=f"astrodyn.control.{verb}", request=request,
+                                                                    response=response),
+                                    handler=lambda req, verb=verb: forward_control(session, scenario, verb, req.payload)))
+        self.server.add_services(services)
+
     def close(self) -> None:
         self.server.stop()
+
+
+#: The arguments each control verb takes besides the token (docs/clients.md).
+_CONTROL_ARGS = {
+    "rate": {"factor": {"type": "number", "description": "real-time factor (inf: as fast as possible)"}},
+    "seek": {"t": {"type": "number", "description": "simulated time to continue from, s since the scenario epoch"}},
+}
+
+#: Largest service request accepted, bytes (a control request is a few dozen).
+MAX_SERVICE_REQUEST = 65536
+
+
+def control_request_schema(verb: str) -> dict:
+    """JSON Schema of the Foxglove service request for ``verb``: the token and the verb's arguments."""
+    props = {"token": {"type": "string", "description": "the run's control token (docs/security.md)"},
+             **_CONTROL_ARGS.get(verb, {})}
+    return {"type": "object", "properties": props, "additionalProperties": verb == "fault"}
+
+
+def forward_control(session, scenario: str, verb: str, payload: bytes) -> bytes:
+    """Answer a Foxglove service call: ``payload`` (a JSON object, the token in ``"token"``)
+    goes to ``@control/<verb>`` with that token; the run's replies come back as a JSON list.
+    ValueError (the client sees its text) for a request that is not a JSON object."""
+    if len(payload) > MAX_SERVICE_REQUEST:
+        raise ValueError(f"{verb}: expected a request of at most {MAX_SERVICE_REQUEST} bytes, got {len(payload)}")
+    try:
+        args = json.loads(bytes(payload) or b"{}")
+    except (ValueError, RecursionError):
+        raise ValueError(f'{verb}: expected a JSON object, e.g. {{"token": "...", "factor": 2}}') from None
+    if not isinstance(args, dict):
+        raise ValueError(f"{verb}: expected a JSON object, got {type(args).__name__}")
+    token = args.pop("token", None)
+    if token is not None and not isinstance(token, str):
+        raise ValueError(f"{verb}.token: expected a string, got {type(token).__name__}")
+    replies = bus.send_control(session, scenario, verb, args or None, timeout_s=5.0, token=token)
+    if not replies:
+        raise ValueError(f"{verb}: no answer from the run within 5 s")
+    return json.dumps(replies).encode()
 
 
 _CLOSED_LOOP_KINDS = frozenset(messages.CONTROL_KINDS + messages.SENSOR_KINDS)
@@ -346,6 +411,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--from-logger", action="store_true",
                     help="take the newest states from the logger's @latest queryable at each view frame instead of "
                          "subscribing to the full-rate streams (what serve does: the bus then carries nothing extra)")
+    ap.add_argument("--services", default="", metavar="VERBS",
+                    help="comma-separated control verbs to offer as Foxglove services (serve and replay pass theirs)")
     ap.add_argument("--raw-rate", type=float, default=1000.0,
                     help="raw state messages per second sent to Foxglove, all channels together (default 1000)")
     bus.add_bus_arguments(ap)
@@ -360,6 +427,11 @@ def main(argv: list[str] | None = None) -> int:
         if not 0 <= args.port <= 65535:
             raise ValueError(f"--port: expected 0..65535, got {args.port}")
         epoch_ns, central, orbiting = _scenario_metadata(args.metadata)
+        verbs = [v for v in args.services.split(",") if v]
+        for verb in verbs:
+            if verb not in (*bus.CONTROL_VERBS, "seek", "fault"):
+                raise ValueError(f"--services: expected verbs from {', '.join((*bus.CONTROL_VERBS, 'seek', 'fault'))}, "
+                                 f"got {verb!r}")
     except (ValueError, OSError, messages.MessageError) as exc:
         print(f"astrodyn viewer: error: {exc}", file=sys.stderr)
         return 2
@@ -374,7 +446,7 @@ def main(argv: list[str] | None = None) -> int:
     scene = LiveScene(epoch_ns, central, orbiting)
     latest = LatestSamples()
     try:
-        view = _View(args.host, args.port, args.scenario, args.raw_rate)
+        view = _View(args.host, args.port, args.scenario, args.raw_rate, services=bool(verbs))
     except Exception as exc:  # foxglove-sdk: port taken, bad host
         print(f"astrodyn viewer: error: cannot start the Foxglove server on {args.host}:{args.port}: {exc}",
               file=sys.stderr)
@@ -386,6 +458,8 @@ def main(argv: list[str] | None = None) -> int:
             subs = [] if args.from_logger else [session.declare_subscriber(key, latest)
                                                 for key in (f"{base}/**", f"{base}/@batch/*")]
             latest_key = messages.latest_key(args.scenario)
+            if verbs:
+                view.add_control_services(session, args.scenario, verbs)
 
             def newest() -> dict[str, tuple[bytes, bytes | None]]:
                 """The samples to show: the logger's newest (one query, one envelope, checked
