@@ -123,11 +123,13 @@ class PlantBody:
         self.applied_wheel = np.zeros(n)
         self.clipped: list[int] = []
         self.step_dv: np.ndarray | None = None
+        self.step_dv_t = 0.0  # when the step's impulse was applied, s
         self.step_applied: list[str] = []
 
     # ------------------------------------------------------------------ commands
-    def apply(self, cmd: dict) -> None:
-        """Apply a decoded :class:`astrodyn.messages.Command` now (raise CommandRefused)."""
+    def apply(self, cmd: dict, at: float | None = None) -> None:
+        """Apply a decoded :class:`astrodyn.messages.Command` now, at simulated time ``at``
+        (s; the command's own ``t`` when None), recorded as the impulse's time (raise CommandRefused)."""
         act = self.limits
         if act is None:
             raise CommandRefused(f"body {self.name} has no actuators (only sensors)")
@@ -157,6 +159,7 @@ class PlantBody:
             self.v = self.v + dv
             self.dv_total += float(np.linalg.norm(dv))
             self.step_dv = dv if self.step_dv is None else self.step_dv + dv
+            self.step_dv_t = float(cmd["t"] if at is None else at)
         self.step_applied.append(command_id(cmd["sender"], cmd["seq"]))
 
     def seize_wheel(self, k: int) -> None:
@@ -276,6 +279,7 @@ class PlantBody:
                 out["clipped"] = self.clipped
         if self.step_dv is not None:
             out["dv"] = self.step_dv
+            out["dv_t"] = self.step_dv_t
         if self.has_orbit and self.limits is not None and self.limits.thrust is not None:
             out["thrust"] = self._thrust_applied
         if self.mass is not None:

@@ -169,8 +169,10 @@ def closed_loop_section(run, name: str, stem: Path) -> tuple[dict, list[tuple[st
         impulses = np.asarray(act.dv, dtype=np.float64) if "dv" in act.fields else np.empty((0, 3))
         if impulses.ndim == 2 and impulses.shape[1] == 3:
             hit = ~np.isnan(impulses[:, 0])
-            numbers["impulses"] = [{"step t (s)": float(tt), "dv (m/s)": float(np.linalg.norm(d))} for tt, d in
-                                   zip(t[hit], impulses[hit])][:100]
+            applied = np.asarray(act.dv_t, dtype=np.float64) if "dv_t" in act.fields else np.full(len(t), np.nan)
+            numbers["impulses"] = [{"step t (s)": float(tt), "applied at t (s)": None if np.isnan(at) else float(at),
+                                    "dv (m/s)": float(np.linalg.norm(d))}
+                                   for tt, at, d in zip(t[hit], applied[hit], impulses[hit])][:100]
         figs.append(("delta-v", fg.stacked_pairs(t, dvt[:, None], None, "dv spent", "", "m/s", f"{name}: delta-v",
                                                  Path(f"{stem}-delta-v.png"))))
     return {"closed loop": numbers}, figs

@@ -152,7 +152,10 @@ class ActuatorState(Stamped, forbid_unknown_fields=True, omit_defaults=True):
     wheel_torque: Annotated[_Wheels, Meta(description="motor torques applied, N m")] | msgspec.UnsetType = msgspec.UNSET
     wheel_speed: Annotated[_Wheels, Meta(description="wheel speeds relative to the body, rad/s")] | msgspec.UnsetType = msgspec.UNSET
     clipped: Annotated[list[int], Meta(max_length=MAX_WHEELS, description="wheels whose command was clipped")] | msgspec.UnsetType = msgspec.UNSET
-    dv: _vec(3, "impulse applied at t, inertial axes, m/s") | msgspec.UnsetType = msgspec.UNSET
+    dv: _vec(3, "impulse applied in the step, inertial axes, m/s") | msgspec.UnsetType = msgspec.UNSET
+    dv_t: Annotated[float, Meta(description=(
+        "simulated time the step's impulse was applied (a command due inside the step applies at its own t; "
+        "the last one if several), s"))] | msgspec.UnsetType = msgspec.UNSET
     thrust: _vec(3, "thrust applied, inertial axes, N") | msgspec.UnsetType = msgspec.UNSET
     mass: Annotated[float, Meta(gt=0, description="mass at t, kg")] | msgspec.UnsetType = msgspec.UNSET
     dv_total: Annotated[float, Meta(ge=0, description="delta-v spent since the start, m/s")] | msgspec.UnsetType = msgspec.UNSET

@@ -334,10 +334,10 @@ class PlantLoop:
         if len(self.refusals) < MAX_EXAMPLES:
             self.refusals.append(f"{bname} {command_id(cmd['sender'], cmd['seq'])}: {why}")
 
-    def apply_command(self, b, bname: str, cmd: dict, raw: bytes | None) -> None:
-        """Apply now; re-publish the command as applied (the copy the logger records)."""
+    def apply_command(self, b, bname: str, cmd: dict, raw: bytes | None, at: float) -> None:
+        """Apply now (simulated time ``at``, s); re-publish the command as applied (the copy the logger records)."""
         try:
-            b.apply(cmd)
+            b.apply(cmd, at)
         except CommandRefused as exc:
             self.refuse(bname, cmd, str(exc))
             return
@@ -460,14 +460,14 @@ class PlantLoop:
                         self.refuse(bname, cmd, f"t = {cmd['t']:g} s is in the past (now {t:g} s)")
                         continue
                     self.late += 1
-                self.apply_command(b, bname, cmd, raw)
+                self.apply_command(b, bname, cmd, raw, t)
             b.finish_commands()
             done_s = 0.0  # commands inside the step: advance to their t, apply, go on
             for cmd, raw in sorted(inside, key=lambda e: e[0]["t"]):
                 if cmd["t"] - t > done_s:
                     b.advance(cmd["t"] - t - done_s)
                     done_s = cmd["t"] - t
-                self.apply_command(b, bname, cmd, raw)
+                self.apply_command(b, bname, cmd, raw, cmd["t"])
             if not last and dt > done_s:
                 b.advance(dt - done_s)
             if b.limits is not None:
