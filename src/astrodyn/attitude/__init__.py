@@ -27,7 +27,9 @@ from astrodyn.attitude.euler import (
     inertia_tensor,
     principal_axes,
 )
+from astrodyn.attitude.flexible import Appendage, BeamModes, FlexibleSpacecraft, beam_matrices, propagate_spacecraft
 from astrodyn.attitude.gyrocompass import Gyrocompass
+from astrodyn.attitude.gyroscopes import FreeGyroscope, SingleAxisGyro, propagate_free_gyro, propagate_single_axis
 from astrodyn.attitude.gyrostat import Gyrostat, spin_stability_product, spin_transverse_rate
 from astrodyn.attitude.integrators import propagate_attitude
 from astrodyn.attitude.rolling_disk import RollingDisk, propagate_rolling_disk
@@ -46,4 +48,6 @@ __all__ += [
     "Gyrocompass", "Gyrostat", "spin_stability_product", "spin_transverse_rate", "propagate_attitude", "HeavyTop",
     "ConstantTorque", "GravityGradientTorque", "TorqueSum", "UniformGravityTorque", "gravity_gradient_torque",
     "RollingDisk", "propagate_rolling_disk",
+    "Appendage", "BeamModes", "FlexibleSpacecraft", "beam_matrices", "propagate_spacecraft",
+    "FreeGyroscope", "SingleAxisGyro", "propagate_free_gyro", "propagate_single_axis",
 ]  # fmt: skip

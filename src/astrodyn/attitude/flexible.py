@@ -138,6 +138,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.polynomial import legendre as _leg
 
+from astrodyn.attitude.output_times import check_output_times, integrate_dop853
+
 __all__ = [
     "BeamModes", "beam_matrices", "shape_functions", "natural_frequencies",
     "krb_spinup", "tip_deflection",
@@ -381,24 +383,6 @@ def planar_prescribed_rates(beam: BeamModes, t: float, state, hub_motion: Callab
     return np.concatenate([qd, np.linalg.solve(beam.M, f)])
 
 
-def _check_times(t):
-    t = np.asarray(t, dtype=np.float64).reshape(-1)
-    if t.size == 0 or t[0] != 0.0 or np.any(np.diff(t) < 0) or not np.all(np.isfinite(t)):
-        raise ValueError("t: expected finite, non-decreasing times starting at 0")
-    return t
-
-
-def _integrate(rhs, y0, t, rtol, atol, what):
-    from scipy.integrate import solve_ivp
-
-    if t[-1] == 0.0:
-        return np.tile(y0, (t.size, 1)), 0
-    sol = solve_ivp(rhs, (0.0, float(t[-1])), y0, method="DOP853", t_eval=t, rtol=rtol, atol=atol)
-    if not sol.success:
-        raise RuntimeError(f"{what}: DOP853 failed: {sol.message}")
-    return sol.y.T, sol.nfev
-
-
 def propagate_planar_prescribed(beam: BeamModes, hub_motion: Callable, state0, t, stiffening: bool = True,
                                 rtol: float = 1e-10, atol: float = 1e-12):
     """States ``(len(t), 2 n)`` = ``(q, q')`` (m, m/s) at the times ``t`` (s, from 0) of a
@@ -406,7 +390,7 @@ def propagate_planar_prescribed(beam: BeamModes, hub_motion: Callable, state0, t
     :func:`krb_spinup`); DOP853.  Returns ``(states, info)``."""
     n = beam.n_modes
     y0 = _state_vector("state0", state0, 2 * n)
-    t = _check_times(t)
+    t = check_output_times(t)
     _, b = _planar_J_b(beam)
     D = _planar_D(beam, stiffening)
     Minv = np.linalg.inv(beam.M)
@@ -417,7 +401,7 @@ def propagate_planar_prescribed(beam: BeamModes, hub_motion: Callable, state0, t
         _, thd, thdd = hub_motion(time)
         return np.concatenate([qd, Minv @ (-b * thdd - C @ qd - (K - thd * thd * D) @ q)])
 
-    states, nfev = _integrate(rhs, y0, t, rtol, atol, "planar beam")
+    states, nfev = integrate_dop853(rhs, y0, t, rtol, atol, "planar beam")
     return states, {"method": "dop853", "rtol": rtol, "atol": atol, "nfev": nfev}
 
 
@@ -450,12 +434,12 @@ def propagate_planar_free(beam: BeamModes, hub_inertia: float, state0, t, torque
     n = beam.n_modes
     J = _positive("hub_inertia", hub_inertia)
     y0 = _state_vector("state0", state0, 2 + 2 * n)
-    t = _check_times(t)
+    t = check_output_times(t)
 
     def rhs(time, y):
         return planar_free_rates(beam, J, y, 0.0 if torque is None else float(torque(time, y)), stiffening)
 
-    states, nfev = _integrate(rhs, y0, t, rtol, atol, "planar hub")
+    states, nfev = integrate_dop853(rhs, y0, t, rtol, atol, "planar hub")
     e = planar_energy(beam, J, states, stiffening)
     h = planar_angular_momentum(beam, J, states, stiffening)
     return states, {"method": "dop853", "rtol": rtol, "atol": atol, "nfev": nfev,
@@ -841,12 +825,12 @@ def propagate_spacecraft(sc: FlexibleSpacecraft, state0, t, torque: Callable | N
     y0 = np.asarray(state0, dtype=np.float64).reshape(-1)
     if y0.size != lay["size"] or not np.all(np.isfinite(y0)):
         raise ValueError(f"state0: expected {lay['size']} finite numbers (state_layout), got shape {y0.shape}")
-    t = _check_times(t)
+    t = check_output_times(t)
 
     def rhs(time, y):
         return spacecraft_rates(sc, time, y, torque)
 
-    states, nfev = _integrate(rhs, y0, t, rtol, atol, "flexible spacecraft")
+    states, nfev = integrate_dop853(rhs, y0, t, rtol, atol, "flexible spacecraft")
     states[:, 0:4] /= np.linalg.norm(states[:, 0:4], axis=1, keepdims=True)
     info = {"method": "dop853", "rtol": rtol, "atol": atol, "nfev": nfev}
     if torque is None:

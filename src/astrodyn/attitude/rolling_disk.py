@@ -55,6 +55,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from astrodyn.attitude.output_times import check_output_times, integrate_dop853
+
 __all__ = ["RollingDisk", "rolling_disk_rates", "propagate_rolling_disk", "energy", "upright_critical_spin",
            "steady_spin", "disk_quaternion", "center_position", "STATE_FIELDS"]
 
@@ -149,14 +151,10 @@ def propagate_rolling_disk(disk: RollingDisk, state0, t, rtol: float = 1e-12, at
     """States (len(t), 8) at the times ``t`` (s, increasing from 0) from ``state0`` (8,),
     integrated with DOP853 (scipy) on Kane's equations; returns ``(states, info)`` with the
     number of right-hand-side evaluations and the largest relative energy drift."""
-    from scipy.integrate import solve_ivp
-
     y0 = np.asarray(state0, dtype=np.float64).reshape(8)
-    t = np.asarray(t, dtype=np.float64).reshape(-1)
+    t = check_output_times(t)
     if not np.all(np.isfinite(y0)):
         raise ValueError(f"state0: expected 8 finite numbers {STATE_FIELDS}, got {y0.tolist()}")
-    if t.size == 0 or t[0] != 0.0 or np.any(np.diff(t) < 0) or not np.all(np.isfinite(t)):
-        raise ValueError("t: expected finite, non-decreasing times starting at 0")
     if abs(math.cos(y0[3])) < 1e-9:
         raise ValueError(f"state0: theta = {y0[3]!r} rad: the disk lies flat (cos theta = 0), where the "
                          "equations are singular")
@@ -175,13 +173,7 @@ def propagate_rolling_disk(disk: RollingDisk, state0, t, rtol: float = 1e-12, at
                 -mR2 * u1 * u3 * k2,
                 (-C * u1 * u2 + A * u1 * u3 * tan) / A]
 
-    if t[-1] == 0.0:
-        states, nfev = np.tile(y0, (t.size, 1)), 0
-    else:
-        sol = solve_ivp(rhs, (0.0, float(t[-1])), y0, method="DOP853", t_eval=t, rtol=rtol, atol=atol)
-        if not sol.success:
-            raise RuntimeError(f"rolling disk: DOP853 failed: {sol.message}")
-        states, nfev = sol.y.T, sol.nfev
+    states, nfev = integrate_dop853(rhs, y0, t, rtol, atol, "rolling disk")
     e = energy(disk, states)
     drift = float(np.max(np.abs(e - e[0])) / abs(e[0])) if e[0] else float(np.max(np.abs(e - e[0])))
     return states, {"method": "dop853", "rtol": rtol, "atol": atol, "nfev": nfev, "energy_drift": drift}
