@@ -43,8 +43,22 @@ def test_the_report_of_a_slew_shows_momentum_conserved_and_the_wheels(tmp_path):
     assert all(p <= lim for p, lim in zip(section["peak wheel speed (rad/s)"], section["wheel speed limit (rad/s)"]))
     assert section["steps clipped per wheel"][2] > 0  # the 90 deg slew about z saturates wheel 3 at first
     assert 0 < section["pointing knowledge error, median (deg)"] < 1e-2  # 5 arcsec per axis
-    for kind in ("wheel-torque", "wheel-speed", "momentum", "pointing"):
+    for kind in ("wheel-torque", "wheel-speed", "momentum", "pointing", "pointing-error"):
         assert (tmp_path / "report" / report["figures"]["sc"][kind]).stat().st_size > 1000
+    # the config's target: 90 deg about z from the initial identity attitude (exact), and
+    # the final error is the rotation angle scipy finds between the recorded q and it
+    from scipy.spatial.transform import Rotation
+
+    from astrodyn.recording import load
+
+    pointing = report["bodies"]["sc"]["pointing"]
+    assert pointing["error at start (deg)"] == pytest.approx(90.0, abs=1e-9)
+    q_end = load(out).bodies["sc"].attitude.q[-1]
+    target = np.array(pointing["target (e0, e1, e2, e3)"])
+    as_scipy = [1, 2, 3, 0]  # scipy's quaternions are scalar last
+    angle = (Rotation.from_quat(target[as_scipy]).inv() * Rotation.from_quat(q_end[as_scipy])).magnitude()
+    assert pointing["error at end (deg)"] == pytest.approx(np.degrees(angle), abs=1e-9)
+    assert pointing["error at end (deg)"] < pointing["error at start (deg)"]
 
 
 class _Run:
@@ -68,3 +82,25 @@ def test_hostile_closed_loop_channels_give_a_partial_section_not_a_traceback(tmp
     assert section["closed loop"]["commands"] == 2
     assert section["closed loop"]["steps clipped per wheel"] == [1, 0]  # 2 wheels (widest row); only index 0 is valid
     assert all(path.exists() for _, path in figs)
+
+
+def test_pointing_error_is_the_rotation_angle_and_settling_is_the_last_entry_into_the_tolerance():
+    """pointing_errors against scipy's rotation magnitude on random attitudes (q and -q alike);
+    settling_time on a series built to enter, leave and re-enter the tolerance."""
+    from scipy.spatial.transform import Rotation
+
+    from astrodyn.analysis.pointing import pointing_errors, settling_time
+
+    rng = np.random.default_rng(3)
+    q = rng.normal(size=(200, 4))
+    q /= np.linalg.norm(q, axis=1, keepdims=True)
+    q[::2] *= -1.0
+    target = q[7].copy()
+    expected = (Rotation.from_quat(target[[1, 2, 3, 0]]).inv() * Rotation.from_quat(q[:, [1, 2, 3, 0]])).magnitude()
+    # acos near 1 loses half the digits: sqrt(eps) ~ 1.5e-8 rad is the conditioning at small angles
+    np.testing.assert_allclose(pointing_errors(q, target), expected, atol=3e-8)
+    t = np.arange(10.0)
+    err = np.array([5, 4, 0.5, 0.2, 2, 0.9, 0.5, 0.1, 0.3, 0.2])
+    assert settling_time(t, err, 1.0) == 5.0
+    assert settling_time(t, err, 10.0) == 0.0
+    assert settling_time(t, np.append(err[:-1], 3.0), 1.0) is None

@@ -30,6 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from astrodyn.analysis.closed_loop import CLOSED_LOOP_FIGURES, closed_loop_section
+from astrodyn.analysis.pointing import POINTING_FIGURES, pointing_section
 from astrodyn.recording import RecordingError, load
 
 __all__ = ["analyze", "main", "FIGURES"]
@@ -48,6 +49,7 @@ FIGURES = {
     "attitude-drift": "kinetic energy and inertial angular momentum drift",
     "top-angles": "precession and nutation",
     **CLOSED_LOOP_FIGURES,
+    **POINTING_FIGURES,
 }
 
 _SEQS = ("121", "123", "131", "132", "212", "213", "231", "232", "312", "313", "321", "323")
@@ -115,6 +117,9 @@ def analyze(path: str | os.PathLike, out: str | os.PathLike | None = None, seq: 
                     figs.append(("top-angles", fg.top_angles(name, tr.t, am["precession"], am["nutation"], Path(f"{stem}-top-angles.png"))))
         numbers.update(_conserved(run.scenario, name, body))
         section, more = closed_loop_section(run, name, stem)  # commands, actuators, momentum, pointing, dv
+        numbers.update(section)
+        figs += more
+        section, more = pointing_section(run, name, stem)  # against the config's target, if it names one
         numbers.update(section)
         figs += more
         report["bodies"][name] = numbers

@@ -118,9 +118,11 @@ from astrodyn.orbit.perturbations import (
 from astrodyn.scenario.control import (
     Actuators,
     Control,
+    Pointing,
     Sensors,
     parse_actuators,
     parse_control,
+    parse_pointing,
     parse_sensors,
     steps_per,
 )
@@ -141,6 +143,7 @@ from astrodyn.scenario.fields import (
     quantity,
     show,
     string,
+    unit_quaternion,
     vector,
 )
 from astrodyn.scenario.planning import BYTES_PER_STATE, BodyPlan, Plan, plan
@@ -177,7 +180,6 @@ MAX_OUTPUT_STEPS = 10**10  #: duration * rate
 MAX_REAL_TIME_FACTOR = 1e6
 MAX_BODIES = 100_000
 MAX_FILE_BYTES = 16 * 2**20
-QUAT_TOL = 1e-6  #: a given q must have | |q| - 1 | <= this; it is then normalized
 TRIANGLE_RTOL = 1e-12  #: I3 <= I1 + I2 (1 + rtol): a flat plate (equality) is allowed
 SYMMETRY_RTOL = 1e-12  #: |I - I^T| <= rtol max|I| for a full tensor
 #: MCAP channel ids are 16-bit: channels of one recording, all bodies and kinds together.
@@ -307,6 +309,7 @@ class Body:
     cross_check: bool = False
     actuators: Actuators | None = None  #: closed loop (astrodyn.scenario.control)
     sensors: Sensors | None = None
+    pointing: Pointing | None = None  #: the attitude it should hold (analyze reports the error)
 
     @property
     def in_plant(self) -> bool:
@@ -659,10 +662,7 @@ def _attitude(ctx: Ctx, data: Any, path: str) -> AttitudeSpec:
         q0 = np.asarray(quat_from_euler(angles, seq), dtype=np.float64)
         q0 = q0 / np.linalg.norm(q0)
     elif tb.has("q"):
-        q0 = vector(ctx, tb.get("q"), "dimensionless", 4, f"{path}.q")
-        norm = float(np.linalg.norm(q0))
-        check(ctx, abs(norm - 1.0) <= QUAT_TOL, f"{path}.q", f"a unit quaternion, scalar first (| |q| - 1 | <= {QUAT_TOL:g}; |q| = {norm:.9g})", tb.get("q"))
-        q0 = q0 / norm
+        q0 = unit_quaternion(ctx, tb.get("q"), f"{path}.q")
     else:
         q0 = np.array([1.0, 0.0, 0.0, 0.0])
     w0 = vector(ctx, tb.get("w", [0.0, 0.0, 0.0]), "angular_velocity", 3, f"{path}.w")
@@ -738,7 +738,7 @@ def _rotors(ctx: Ctx, value: Any, path: str) -> tuple[Rotor, ...]:
 
 
 def _body(ctx: Ctx, data: Any, path: str, cb: CentralBody, rate: float = 1.0, control_every: int | None = None) -> Body:
-    tb = Table(ctx, data, path, ("name", "orbit", "attitude", "cross_check", "actuators", "sensors"))
+    tb = Table(ctx, data, path, ("name", "orbit", "attitude", "cross_check", "actuators", "sensors", "pointing"))
     name = field_name(ctx, tb.get("name"), f"{path}.name")
     path = f"{path} ({name})"  # errors name the body by index and name: bodies[0] (iss).orbit.a
     orbit = _orbit(ctx, tb.get("orbit"), f"{path}.orbit", cb) if tb.has("orbit") else None
@@ -770,7 +770,9 @@ def _body(ctx: Ctx, data: Any, path: str, cb: CentralBody, rate: float = 1.0, co
         if tb.has("sensors"):
             sensors = parse_sensors(ctx, tb.get("sensors"), f"{path}.sensors", rate, control_every, orbit is not None,
                                     has_att, bool(actuators is not None and actuators.wheels))
-    return Body(name=name, orbit=orbit, attitude=attitude, cross_check=cross, actuators=actuators, sensors=sensors)
+    pointing = parse_pointing(ctx, tb.get("pointing"), f"{path}.pointing", attitude is not None) if tb.has("pointing") else None
+    return Body(name=name, orbit=orbit, attitude=attitude, cross_check=cross, actuators=actuators, sensors=sensors,
+                pointing=pointing)
 
 
 _WALKER_KEYS = ("prefix", "i", "t", "p", "f", "altitude", "a", "raan0", "model", "cross_check", "attitude")

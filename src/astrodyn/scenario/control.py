@@ -52,9 +52,9 @@ from typing import Any
 
 import numpy as np
 
-from astrodyn.scenario.fields import Ctx, Table, check, choice, field_name, integer, quantity, vector
+from astrodyn.scenario.fields import Ctx, Table, check, choice, field_name, integer, quantity, unit_quaternion, vector
 
-__all__ = ["Wheel", "Actuators", "Sensor", "Sensors", "Fault", "Control", "CONTROL_MODES", "FAULTS",
+__all__ = ["Pointing", "parse_pointing", "Wheel", "Actuators", "Sensor", "Sensors", "Fault", "Control", "CONTROL_MODES", "FAULTS",
            "parse_actuators", "parse_sensors", "parse_control", "parse_fault", "plant_bodies", "steps_per"]
 
 CONTROL_MODES = ("lockstep", "free")
@@ -141,6 +141,38 @@ class Control:
     timeout: float
     seed: int
     faults: tuple[Fault, ...] = ()
+
+
+@dataclass(frozen=True, eq=False)
+class Pointing:
+    """The attitude a body should hold (``[bodies.pointing]``): ``target`` Euler parameters,
+    scalar first, ``v_body = C(target) v_inertial``; ``tolerance`` rad, the error within
+    which it counts as settled.  ``astrodyn analyze`` reports the pointing error
+    ``2 acos |target . q|`` over the run, when it settled and the error after."""
+
+    target: np.ndarray
+    tolerance: float
+
+
+#: Default settling tolerance of a pointing target, rad (0.1 deg).
+POINTING_TOLERANCE = math.radians(0.1)
+
+
+def parse_pointing(ctx: Ctx, data: Any, path: str, has_attitude: bool) -> Pointing:
+    """``[bodies.pointing]``: ``target = [e0, e1, e2, e3]`` and an optional ``tolerance``
+    (an angle, default 0.1 deg)."""
+    tb = Table(ctx, data, path, ("target", "tolerance"))
+    if not has_attitude:
+        raise ctx.error(path, "a pointing target only for a body with an attitude", "a body without one", raw=True)
+    if not tb.has("target"):
+        raise ctx.error(f"{path}.target", "the attitude to hold: Euler parameters [e0, e1, e2, e3], scalar first",
+                        "nothing", raw=True)
+    target = unit_quaternion(ctx, tb.get("target"), f"{path}.target")
+    tolerance = POINTING_TOLERANCE
+    if tb.has("tolerance"):
+        tolerance = quantity(ctx, tb.get("tolerance"), "angle", f"{path}.tolerance")
+        check(ctx, 0 < tolerance <= math.pi, f"{path}.tolerance", "an angle in (0, 180 deg]", tb.get("tolerance"))
+    return Pointing(target=target, tolerance=tolerance)
 
 
 def steps_per(ctx: Ctx, seconds: float, rate: float, path: str, raw: Any) -> int:

@@ -22,7 +22,7 @@ import numpy as np
 
 from astrodyn.messages import NAME_PATTERN
 
-__all__ = ["ScenarioError", "Ctx", "Table", "MISSING", "MAX_STRING", "MAGNITUDE_MAX", "MAGNITUDE_MIN", "QUANTITY_KINDS",
+__all__ = ["QUAT_TOL", "unit_quaternion", "ScenarioError", "Ctx", "Table", "MISSING", "MAX_STRING", "MAGNITUDE_MAX", "MAGNITUDE_MIN", "QUANTITY_KINDS",
            "jsonable", "show", "did_you_mean", "units", "parse_quantity_string", "quantity", "vector", "check",
            "field_name", "choice", "boolean", "integer", "string"]
 
@@ -291,3 +291,16 @@ def string(ctx: Ctx, value: Any, path: str, max_len: int = 4096) -> str:
     if not isinstance(value, str) or len(value) > max_len:
         raise ctx.error(path, f"a string of at most {max_len} characters", value)
     return value
+
+
+QUAT_TOL = 1e-6  #: a given q must have | |q| - 1 | <= this; it is then normalized
+
+
+def unit_quaternion(ctx: Ctx, value: Any, path: str) -> np.ndarray:
+    """Euler parameters ``(e0, e1, e2, e3)``, scalar first, with ``| |q| - 1 | <=``
+    :data:`QUAT_TOL`, returned normalized; the error names ``path`` and the norm."""
+    q = vector(ctx, value, "dimensionless", 4, path)
+    norm = float(np.linalg.norm(q))
+    check(ctx, abs(norm - 1.0) <= QUAT_TOL, path,
+          f"a unit quaternion, scalar first (| |q| - 1 | <= {QUAT_TOL:g}; |q| = {norm:.9g})", value)
+    return q / norm
