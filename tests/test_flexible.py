@@ -19,7 +19,9 @@
 """
 
 import math
+import sys
 import time
+from pathlib import Path
 
 import mpmath as mp
 import numpy as np
@@ -29,6 +31,9 @@ from scipy.linalg import eigh
 from scipy.optimize import brentq
 
 from astrodyn.attitude import flexible as fx, torque_free
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _integration_bounds import dop853_drift_bound
 
 EPS = np.finfo(float).eps
 # the KRB (1987) beam: L = 10 m, A = 4e-4 m^2, density 3000 kg/m^3, E = 7e10 Pa, I = 2e-7 m^4
@@ -119,27 +124,6 @@ def _quasi_static_tip(EI, rho, L, spin, accel):
     A = np.array([[y[6], y[10]], [y[7], y[11]]])
     c = np.linalg.solve(A, -y[2:4])
     return y[0] + c[0] * y[4] + c[1] * y[8]
-
-
-def _drift_bound(invariant, states, nfev, rtol, atol):
-    """First-order bound on how far an invariant of the exact flow can drift in a DOP853
-    run: every step leaves the exact flow by a local error with
-    RMS_i(err_i / (atol + rtol |y_i|)) <= 1, so |err_i| <= sqrt(N) (atol + rtol |y_i|), and the
-    exact flow conserves the invariant from wherever the step landed, so the drift is at
-    most the sum over steps of sum_i |d invariant / d y_i| |err_i|.  Steps <= nfev / 12
-    (12 evaluations per DOP853 step).  Gradients by central differences at a few states."""
-    n_steps = nfev / 12.0
-    worst = 0.0
-    for y in states[:: max(1, len(states) // 6)]:
-        g = []
-        for i in range(y.size):
-            h = 1e-6 * max(1.0, abs(y[i]))
-            yp, ym = y.copy(), y.copy()
-            yp[i] += h
-            ym[i] -= h
-            g.append(np.linalg.norm(np.atleast_1d(invariant(yp) - invariant(ym))) / (2 * h))
-        worst = max(worst, math.sqrt(y.size) * float(np.sum(np.array(g) * (atol + rtol * np.abs(y)))))
-    return n_steps * worst
 
 
 # --------------------------------------------------------------------------- 1. non-spinning cantilever
@@ -388,8 +372,8 @@ def test_planar_free_conserves_energy_and_momentum(stiffening):
     y, info = fx.propagate_planar_free(beam, J, y0, t, stiffening=stiffening, rtol=rtol, atol=atol)
     E = fx.planar_energy(beam, J, y, stiffening)
     H = fx.planar_angular_momentum(beam, J, y, stiffening)
-    bE = _drift_bound(lambda s: fx.planar_energy(beam, J, s, stiffening), y, info["nfev"], rtol, atol)
-    bH = _drift_bound(lambda s: fx.planar_angular_momentum(beam, J, s, stiffening), y, info["nfev"], rtol, atol)
+    bE = dop853_drift_bound(lambda s: fx.planar_energy(beam, J, s, stiffening), y, info["nfev"], rtol, atol)
+    bH = dop853_drift_bound(lambda s: fx.planar_angular_momentum(beam, J, s, stiffening), y, info["nfev"], rtol, atol)
     assert np.abs(E - E[0]).max() <= bE
     assert np.abs(H - H[0]).max() <= bH
     assert info["energy_drift"] * abs(E[0]) <= bE and info["momentum_drift"] * abs(H[0]) <= bH
@@ -412,11 +396,11 @@ def test_planar_free_damped_dissipation():
     y, info = fx.propagate_planar_free(beam, J, y0, t, stiffening=st, rtol=rtol, atol=atol)
     E = fx.planar_energy(beam, J, y, st)
     H = fx.planar_angular_momentum(beam, J, y, st)
-    bH = _drift_bound(lambda s: fx.planar_angular_momentum(beam, J, s, st), y[::50], info["nfev"], rtol, atol)
+    bH = dop853_drift_bound(lambda s: fx.planar_angular_momentum(beam, J, s, st), y[::50], info["nfev"], rtol, atol)
     assert np.abs(H - H[0]).max() <= bH
     qd = y[:, 5:]
     p = np.einsum("ki,ij,kj->k", qd, beam.C, qd)
-    bE = _drift_bound(lambda s: fx.planar_energy(beam, J, s, st), y[::50], info["nfev"], rtol, atol)
+    bE = dop853_drift_bound(lambda s: fx.planar_energy(beam, J, s, st), y[::50], info["nfev"], rtol, atol)
     assert np.all(np.diff(E) <= bE)  # monotone (to the integration's error)
     h = t[1] - t[0]
     dissipated = h / 3 * (p[0] + p[-1] + 4 * p[1:-1:2].sum() + 2 * p[2:-1:2].sum())
@@ -692,13 +676,13 @@ def test_3d_conservation(zeta):
         p, h = fx.spacecraft_momentum(sc, s)
         return np.concatenate([p, h])
 
-    bE = _drift_bound(lambda s: fx.spacecraft_energy(sc, s), y, info["nfev"], rtol, atol)
-    bM = _drift_bound(mom, y, info["nfev"], rtol, atol)
+    bE = dop853_drift_bound(lambda s: fx.spacecraft_energy(sc, s), y, info["nfev"], rtol, atol)
+    bM = dop853_drift_bound(mom, y, info["nfev"], rtol, atol)
     assert np.linalg.norm(np.hstack([P - P[0], H - H[0]]), axis=1).max() <= bM
     assert np.linalg.norm(P[0]) > 0.1  # moving
     m, T_end = sc.mass, t[-1]
     cm = np.array([_mass_centre(sc, s) for s in y])
-    bC = _drift_bound(
+    bC = dop853_drift_bound(
         lambda s: _mass_centre(sc, s) - fx.spacecraft_momentum(sc, s)[0] * T_end / m, y, info["nfev"], rtol, atol
     )
     assert np.linalg.norm(cm - cm[0] - np.outer(t, P[0] / m), axis=1).max() <= bC
@@ -725,8 +709,8 @@ def test_planar_hub_torque():
     y, info = fx.propagate_planar_free(beam, J, y0, t, torque=lambda time, s: tau, rtol=rtol, atol=atol)
     H = fx.planar_angular_momentum(beam, J, y, st)
     E = fx.planar_energy(beam, J, y, st)
-    bH = _drift_bound(lambda s: fx.planar_angular_momentum(beam, J, s, st), y, info["nfev"], rtol, atol)
-    bE = _drift_bound(lambda s: fx.planar_energy(beam, J, s, st) - tau * s[0], y, info["nfev"], rtol, atol)
+    bH = dop853_drift_bound(lambda s: fx.planar_angular_momentum(beam, J, s, st), y, info["nfev"], rtol, atol)
+    bE = dop853_drift_bound(lambda s: fx.planar_energy(beam, J, s, st) - tau * s[0], y, info["nfev"], rtol, atol)
     assert np.abs(H - H[0] - tau * t).max() <= bH
     assert np.abs(E - E[0] - tau * (y[:, 0] - y[0, 0])).max() <= bE
     assert H[-1] - H[0] == pytest.approx(tau * t[-1], rel=1e-6)
@@ -757,7 +741,7 @@ def test_3d_hub_torque():
         p, h = fx.spacecraft_momentum(sc, s)
         return np.concatenate([p, h])
 
-    bM = _drift_bound(mom, y, info["nfev"], rtol, atol)
+    bM = dop853_drift_bound(mom, y, info["nfev"], rtol, atol)
     assert np.linalg.norm(np.hstack([P - P[0], H - H[0] - np.outer(t, tau_in)]), axis=1).max() <= bM
     assert "energy_drift" not in info
 

@@ -13,7 +13,7 @@ import sys
 # sub-command -> (module, one-line help)
 COMMANDS: dict[str, tuple[str, str]] = {
     "demo": ("astrodyn.demo", "run the demo scene (the README's main job)"),
-    "bench": ("astrodyn.bench", "speed-against-error benchmarks: orbit | attitude | service | all"),
+    "bench": ("astrodyn.bench", "speed-against-error benchmarks: orbit | attitude | service | sweep | encode | auth | calls | view | control | flexible | soak | all"),
     "run": ("astrodyn.service.runner", "run a scenario headless into an MCAP file"),
     "serve": ("astrodyn.service.serve", "long-running real-time service controlled over Zenoh"),
     "replay": ("astrodyn.service.replay", "republish a recorded MCAP on Zenoh"),

@@ -1,4 +1,4 @@
-"""Speed-against-error benchmarks: ``astrodyn bench orbit|attitude|service|all``.
+"""Speed-against-error benchmarks: ``astrodyn bench SUITE`` (:data:`SUITES`; ``all`` runs every one but the soak).
 
 Each benchmark module exposes ``main(argv) -> int``, prints a table of ns per
 state (or step) and max error, and reports ratios against REBOUND / scipy
@@ -26,6 +26,7 @@ SUITES = {
     "calls": "astrodyn.bench.calls",
     "view": "astrodyn.bench.view",
     "control": "astrodyn.bench.control",
+    "flexible": "astrodyn.bench.flexible",
 }
 
 
