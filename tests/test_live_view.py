@@ -54,10 +54,11 @@ CONNECT = textwrap.dedent('''
 CLIENT = CONNECT + textwrap.dedent('''
     want_raw, seconds = sys.argv[2], float(sys.argv[3])
     out = {"subprotocol": ws.subprotocol, "channels": {}, "messages": {}}
-    subscribed, sub_topic, t_end = False, {}, None
+    sub_topic, t_end = {}, None
+    give_up = time.monotonic() + 60  # the raw channel appears with the first state the view forwards
     with ws:
         while True:
-            if t_end is not None and time.monotonic() > t_end:
+            if (t_end is not None and time.monotonic() > t_end) or time.monotonic() > give_up:
                 break
             try:
                 frame = ws.recv(timeout=0.5)
@@ -77,7 +78,8 @@ CLIENT = CONNECT + textwrap.dedent('''
                         sub_topic[s["id"]] = ch["topic"]
                     if subs:
                         ws.send(json.dumps({"op": "subscribe", "subscriptions": subs}))
-                        t_end = t_end or time.monotonic() + seconds
+                    if t_end is None and {"foxglove/tf", "foxglove/scene", want_raw} <= set(sub_topic.values()):
+                        t_end = time.monotonic() + seconds  # the window starts once all three are subscribed
                 continue
             if frame[0] == 1:  # message data
                 sub_id, ts = struct.unpack_from("<IQ", frame, 1)
@@ -121,6 +123,19 @@ def _check_view(got: dict, scenario: str, body: str) -> None:
     scene = got["messages"]["foxglove/scene"][-1][1]
     ids = {e["id"] for e in scene["entities"]}
     assert {"central_body/earth", f"orbit/{body}", f"axes/{body}"} <= ids
+
+
+def _wait_until_running(hello: dict, scenario: str, timeout_s: float = 60.0) -> None:
+    """Until serve reports simulated time past 0 (its propagators are up: on a loaded
+    machine their start can take seconds), bounded."""
+    deadline = time.monotonic() + timeout_s
+    with bus.open_session(connect=[hello["hub"]]) as s:
+        while time.monotonic() < deadline:
+            replies = bus.send_control(s, scenario, "status", token=hello["control_token"], timeout_s=5)
+            if replies and (replies[0].get("t") or 0) > 0:
+                return
+            time.sleep(0.1)
+    raise AssertionError(f"serve of {scenario} did not start its propagators within {timeout_s} s")
 
 
 def _serve_with_view(tmp_path: Path, name: str, duration: str, rate: float) -> tuple[subprocess.Popen, Path]:
@@ -180,6 +195,7 @@ def test_a_vanished_client_changes_nothing(tmp_path):
     serve, out = _serve_with_view(tmp_path, "quiet", "600 s", 100)
     try:
         hello = json.loads(serve.stdout.readline())
+        _wait_until_running(hello, "quiet")
         frozen = _client(tmp_path, hello["foxglove"], messages.orbit_key("quiet", "sat"), 1000.0)
         time.sleep(3)
         frozen.send_signal(19)  # SIGSTOP: connected, subscribed, never reads again
