@@ -158,6 +158,10 @@ class _Body:
         self.has_orbit = has_orbit  # from the config; None: unknown (then: once an orbit state came)
 
 
+#: Most state keys whose parse the view keeps (a frame of 10,000 bodies is 20,000 keys).
+MAX_KEYS_CACHED = 100_000
+
+
 class LiveScene:
     """What the view shows, built from the states taken at each view frame.
 
@@ -177,6 +181,7 @@ class LiveScene:
         self.t = 0.0
         self.invalid = 0
         self.changed = False  #: a body, or a body's first orbit or attitude, appeared since the last scene
+        self._keys: dict[str, tuple[str, str]] = {}  # key -> (body, kind): parsed once per key
 
     def log_time(self) -> int:
         """Log time of the newest state shown (ns since the Unix epoch)."""
@@ -185,10 +190,20 @@ class LiveScene:
     def update(self, key: str, payload: bytes) -> int | None:
         """Take one state message; its log time, or None (counted in ``invalid`` when it is
         not a valid message) for anything that is not an orbit or attitude state."""
-        try:
-            _, name, kind = messages.parse_key(key)
-            if kind not in ("orbit", "attitude"):
+        parsed = self._keys.get(key)
+        if parsed is None:
+            try:
+                _, name, kind = messages.parse_key(key)
+            except messages.MessageError:
+                self.invalid += 1
                 return None
+            if len(self._keys) >= MAX_KEYS_CACHED:  # a flood of made-up keys: start over
+                self._keys.clear()
+            parsed = self._keys[key] = (name, kind)
+        name, kind = parsed
+        if kind not in ("orbit", "attitude"):
+            return None
+        try:
             msg = messages.decode(payload, kind)
         except messages.MessageError:
             self.invalid += 1
@@ -309,7 +324,9 @@ class _View:
         sent = 0
         while self.pending and sent < n:
             key, (payload, log_time) = self.pending.popitem(last=False)
-            self.raw_channel(key).log(payload, log_time=log_time)
+            channel = self.raw_channel(key)  # made (advertised) even before anyone subscribes
+            if channel.has_sinks():
+                channel.log(payload, log_time=log_time)
             sent += 1
         return sent
 
@@ -515,12 +532,13 @@ def main(argv: list[str] | None = None) -> int:
                         if log_time is not None:
                             view.pending[k] = (p, log_time)
                             view.pending.move_to_end(k)
-                if scene.bodies:
+                if scene.bodies:  # what no client subscribes to is not built (has_sinks)
                     lt = scene.log_time()
-                    view.tf.log(scene.transforms(), log_time=lt)
+                    if view.tf.has_sinks():
+                        view.tf.log(scene.transforms(), log_time=lt)
                     view.server.broadcast_time(lt)
                     view.forward(frame_period)
-                    if now >= next_scene or view.scene_wanted.is_set() or scene.changed:
+                    if view.scene.has_sinks() and (now >= next_scene or view.scene_wanted.is_set() or scene.changed):
                         view.scene_wanted.clear()
                         scene.changed = False
                         view.scene.log(scene.scene(), log_time=lt)
