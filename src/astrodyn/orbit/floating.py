@@ -8,6 +8,10 @@ one is tested against mpmath in ``tests/test_kepler.py`` (directly or through th
 
 * **Error-free transformations.**  :func:`two_sum` (Knuth) and :func:`two_prod` (Dekker
   with Veltkamp splitting, no FMA needed): ``s + t`` equals the exact sum / product.
+  :func:`fma` is LLVM's fused multiply-add (one rounding; exact either in hardware or
+  in the C library, never fast-math), :func:`two_prod_fma` the exact product by it in
+  two operations, :func:`fast_two_sum` Dekker's sum for ordered operands and
+  :func:`dot3_dd` a three-term dot product in double-double (Ogita-Rump-Oishi Dot2).
 * **Range reduction.**  :func:`reduce_2pi` reduces a double-double angle to ``[-pi, pi]``
   by Cody-Waite reduction with ``2 pi = TWO_PI_1 + TWO_PI_2 + TWO_PI_3`` (about 160 bits)
   and exact products, so the remainder carries a low word; it adds no error beyond one
@@ -32,6 +36,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from numba import types
+from numba.extending import intrinsic
 
 from astrodyn.jit import jit
 
@@ -91,6 +97,56 @@ def two_sum(a, b):
     bb = s - a
     t = (a - (s - bb)) + (b - bb)
     return s, t
+
+
+@intrinsic
+def _fma_intrinsic(typingctx, a, b, c):
+    """LLVM's ``llvm.fma.f64``: ``a * b + c`` with one rounding (a hardware FMA where the CPU has one,
+    else the C library's correctly rounded ``fma``).  Not fast-math: the result is the exactly
+    rounded value either way, so vectorized and scalar code give the same bits."""
+    if not (a == types.float64 and b == types.float64 and c == types.float64):
+        return None
+    sig = types.float64(types.float64, types.float64, types.float64)
+
+    def codegen(context, builder, signature, args):
+        return builder.fma(*args)
+
+    return sig, codegen
+
+
+@jit(inline="always")
+def fma(a, b, c):
+    """``a * b + c`` rounded once (float64 arguments)."""
+    return _fma_intrinsic(a, b, c)
+
+
+@jit(inline="always")
+def two_prod_fma(a, b):
+    """``p + t == a * b`` exactly by one multiplication and one :func:`fma` (same result as
+    :func:`two_prod` while ``a * b`` neither overflows nor underflows)."""
+    p = a * b
+    return p, fma(a, b, -p)
+
+
+@jit(inline="always")
+def fast_two_sum(a, b):
+    """``s + t == a + b`` exactly, for ``|a| >= |b|`` (or ``a = 0``) (Dekker)."""
+    s = a + b
+    return s, b - (s - a)
+
+
+@jit(inline="always")
+def dot3_dd(ax, ay, az, bx, by, bz):
+    """``ax bx + ay by + az bz`` as an unnormalized double-double ``hi + lo`` (Ogita-Rump-Oishi
+    Dot2: as accurate as the sum in twice the working precision; ``hi`` is the float64 sum of
+    the rounded products, ``lo`` the sum of all the rounding errors, so ``|lo| <= ~2 eps |hi|``
+    unless the sum cancels)."""
+    p1, e1 = two_prod_fma(ax, bx)
+    p2, e2 = two_prod_fma(ay, by)
+    p3, e3 = two_prod_fma(az, bz)
+    s, t1 = two_sum(p1, p2)
+    s, t2 = two_sum(s, p3)
+    return s, (e1 + e2 + e3) + (t1 + t2)
 
 
 @jit(inline="always")

@@ -35,11 +35,20 @@ with ``alpha = 1 / a = 2 / r0 - v0^2 / mu``):
   parabolic (``z = 0``) cubic by a cancellation-free Cardano form, one
   Laguerre-Conway step (Conway 1986, Celest. Mech. 39, 199), one fifth-order
   step from the inverted Taylor series (the derivatives of the time equation
-  are ``r``, ``dr/dchi``, ``1 - alpha r``, ``-alpha dr/dchi``), the residual
-  check and a first-order Newton polish.  Where the check fails (none of the
-  benchmark's 118k window states; e.g. ``|dt| ~ 1e-100 s``, or ``|tau| > 1e154``
-  on a parabola) the safeguarded loop takes over: Laguerre-Conway kept in a
-  bracket, general Stumpff functions.  ``alpha = 0`` exactly is a parabola.
+  are ``r``, ``dr/dchi``, ``1 - alpha r``, ``-alpha dr/dchi``) and the residual
+  check, all in float64; then one Newton step and f, g with the time equation in
+  double-double (:func:`_uni_fg_dd`: the invariants ``r0.v0``, ``v0^2``, ``|r0|`` and
+  the energy from the state's components with exact products, the Sundman variable
+  ``s = chi / sqrt(mu)`` so that ``sqrt(mu)`` is not rounded into the result).  Near
+  the parabola the float64 invariants and time equation alone lose up to ~10x the
+  one-ulp floor of the state (an inbound arc through periapsis: the terms of the time
+  equation are several times their sum, and ``h^2 = r0^2 v0^2 - (r0.v0)^2`` a small
+  difference); with them the position is within ~1x the floor, the rounding of
+  f, g and of ``f r0 + g v0`` (tests/test_propagate_universal.py, issue 15).  Where
+  the check fails (none of the benchmark's 118k window states; e.g.
+  ``|dt| ~ 1e-100 s``, or ``|tau| > 1e154`` on a parabola) the safeguarded loop
+  takes over, in float64: Laguerre-Conway kept in a bracket, general Stumpff
+  functions.  ``alpha = 0`` exactly is a parabola.
 
 Speed (``astrodyn bench orbit``, docs/bench-orbit.md): large batches are cut
 into blocks of 512 states; in each block the ellipses are gathered and solved
@@ -47,11 +56,11 @@ in passes over all of them (setup, own ``atan2`` and starter; own ``sin/cos``,
 one fifth-order step, residual check and polish; the safeguarded solver for the
 few that fail the check; f, g), straight-line code that LLVM vectorizes four
 states wide; the hyperbolas likewise (the straight-line solve with an own
-``exp`` vectorized, setup and f, g scalar); the near-parabolic states in four
-vectorized loops (starter; Laguerre step; series step; check, polish, f, g: short
-loop bodies, because each state's chain of divisions and square roots is too
-long for the core to overlap two states of one long body), then the safeguarded
-loop for the rare failures.  Each state goes through exactly the
+``exp`` vectorized, setup and f, g scalar); the near-parabolic states in five
+vectorized loops (starter; Laguerre step; series step; check; double-double polish,
+f, g and ``r, v``: short loop bodies, because each state's chain of divisions and
+square roots is too long for the core to overlap two states of one long body),
+then the safeguarded loop for the rare failures and the scatter.  Each state goes through exactly the
 operations of a single call, so a batch gives the same bits as one call per
 state, serial or parallel (``prange`` over chunks of eight blocks).
 
@@ -64,6 +73,7 @@ or ``mu <= 0`` inside the kernel give NaN (the Python wrappers raise
 from __future__ import annotations
 
 import math
+from fractions import Fraction
 
 import numpy as np
 
@@ -80,6 +90,9 @@ from astrodyn.orbit.floating import (
     TWO_PI_1,
     atan2_vec,
     cbrt_start,
+    dot3_dd,
+    fast_two_sum,
+    fma,
     one_minus_cos,
     reduce_2pi,
     reduce_2pi_core,
@@ -87,6 +100,8 @@ from astrodyn.orbit.floating import (
     sincos_vec,
     sinh_parts,
     two_prod,
+    two_prod_fma,
+    two_sum,
     x_minus_sin,
 )
 from astrodyn.orbit.kepler import (
@@ -386,6 +401,14 @@ _Z_WINDOW = 6.0
 _N_STUMPFF = 13
 _C2_TAYLOR = tuple(1 / math.factorial(2 * k + 2) for k in range(_N_STUMPFF))
 _C3_TAYLOR = tuple(1 / math.factorial(2 * k + 3) for k in range(_N_STUMPFF))
+# c4 = (1/2 - c2) / z and c5 = (1/6 - c3) / z (Stumpff's recursion c_k = 1/k! - z c_(k+2)):
+# the same series shifted by one term, 12 terms for |z| <= 6 (first omitted terms
+# z^12 / 28! = 7e-21 against c4(6) = 0.034, z^12 / 29! = 2.4e-22 against c5(6) = 0.0073).
+# The final evaluation (_uni_fg_dd) needs c2 = 1/2 - z c4, c3 = 1/6 - z c5 with the
+# constant exact and only the small remainder rounded.
+_C4_TAYLOR = _C2_TAYLOR[1:]
+_C5_TAYLOR = _C3_TAYLOR[1:]
+INV6_LO = float(Fraction(1, 6) - Fraction(INV6))  # 1/6 = INV6 + INV6_LO to 106 bits
 
 
 @jit(inline="always")
@@ -403,6 +426,16 @@ def _estrin13(a, y):
     d0 = (b0 + b1 * y2) + (b2 + b3 * y2) * y4
     d1 = (b4 + b5 * y2) + a[12] * y4
     return d0 + d1 * y8
+
+
+@jit(inline="always")
+def _estrin12(a, y):
+    """``sum_{k=0}^{11} a[k] y^k`` by Estrin's scheme."""
+    y2 = y * y
+    y4 = y2 * y2
+    d0 = ((a[0] + a[1] * y) + (a[2] + a[3] * y) * y2) + ((a[4] + a[5] * y) + (a[6] + a[7] * y) * y2) * y4
+    d1 = (a[8] + a[9] * y) + (a[10] + a[11] * y) * y2
+    return d0 + d1 * (y4 * y4)
 
 
 @jit(inline="always")
@@ -510,13 +543,11 @@ def _uni_fast(r0, sg, q, alpha, tau):
 
     Parabolic-cubic starter (:func:`_uni_start`; relative error up to ~5 % where
     ``|z| ~ 3``), one Laguerre-Conway step (robust from a poor start; ~1e-4 left),
-    one fifth-order series step (:func:`_uni_series_step`), the
-    residual check ``|T| <= 4 noise`` of the safeguarded loop and its Newton polish
-    ``d = -T / r``.  The polish is at the rounding level (``|d| <= 4 noise / r``), so
-    the universal functions ``U1 = chi (1 - z c3)``, ``U2 = chi^2 c2``, ``U3 = chi^3 c3``
-    and ``r`` are carried through it to first order (``U_k' = U_(k-1)``; the
-    neglected ``d^2`` terms are ~eps^2 relative) instead of a fifth evaluation.
-    Returns ``(ok, U1, U2, U3, r)``; ``ok`` is False (the caller then runs
+    one fifth-order series step (:func:`_uni_series_step`) and the residual check
+    ``|T| <= 4 noise`` of the safeguarded loop (:func:`_uni_check`).  The root is then
+    within the rounding noise of the float64 time equation; :func:`_uni_fg_dd` polishes
+    it against the time equation in double-double and forms f, g.
+    Returns ``(ok, chi)``; ``ok`` is False (the caller then runs
     :func:`_uni_solve_safe`) when the check fails or ``|z| > _Z_WINDOW`` or
     anything is NaN.
     """
@@ -524,21 +555,130 @@ def _uni_fast(r0, sg, q, alpha, tau):
     chi = _uni_start(r0, sg, omq, tau)
     chi = _uni_laguerre(chi, r0, sg, omq, alpha, tau)
     chi = _uni_series_step(chi, r0, sg, omq, alpha, tau)
-    return _uni_check_polish(chi, r0, sg, omq, alpha, tau)
+    ok, z, c4, c5 = _uni_check(chi, r0, sg, omq, alpha, tau)
+    return ok, chi, z, c4, c5
 
 
 @jit(inline="always")
-def _uni_check_polish(chi, r0, sg, omq, alpha, tau):
-    """The end of :func:`_uni_fast`: residual check and first-order polish at ``chi``."""
+def _uni_check(chi, r0, sg, omq, alpha, tau):
+    """The end of :func:`_uni_fast`: is ``chi`` a root to the noise of the float64 time equation
+    (and inside the window of the series, with a positive radius)?  Returns ``(ok, z, c4, c5)``:
+    the Stumpff functions come from ``c4, c5`` (``c2 = 1/2 - z c4``, ``c3 = 1/6 - z c5``),
+    which :func:`_uni_fg_dd` reuses."""
     z = alpha * (chi * chi)
-    c2, c3 = _stumpff_window(z)
-    T, rr, noise = _uni_time(chi, z, c2, c3, r0, sg, omq, tau)
-    ok = (abs(T) <= 4.0 * noise) & (abs(z) <= _Z_WINDOW) & (rr > 0.0)
-    U0 = 1.0 - z * c2
-    U1, U2, U3 = _uni_functions(chi, z, c2, c3)
-    drr = sg * U0 + omq * U1  # dr/dchi
+    c4 = _estrin12(_C4_TAYLOR, -z)
+    c5 = _estrin12(_C5_TAYLOR, -z)
+    T, rr, noise = _uni_time(chi, z, 0.5 - z * c4, INV6 - z * c5, r0, sg, omq, tau)
+    return (abs(T) <= 4.0 * noise) & (abs(z) <= _Z_WINDOW) & (rr > 0.0), z, c4, c5
+
+
+@jit(inline="always")
+def _uni_invariants_dd(rx, ry, rz, vx, vy, vz, r0, mu):
+    """The invariants the final evaluation needs beyond float64, from the state's components.
+
+    Near the parabola the orbit is a small difference of large numbers: the energy
+    ``q = r0 / a = 2 - r0 v0^2 / mu`` (``|q|`` down to 1e-4 and below) and the angular
+    momentum ``h^2 = r0^2 v0^2 - (r0.v0)^2 ~ (r_p / r0) r0^2 v0^2`` (a fortieth of its
+    terms from ``r0 = 40 r_p``).  One rounding of ``r0.v0`` or ``v0^2`` (or of ``|r0|``
+    inside ``q``) moves the propagated position by up to several times what a one-ulp
+    change of an input does (measured: 2.4x, 1.4x and 0.7x the floor alone), so they
+    are formed in double-double (:func:`dot3_dd`, exact products by
+    :func:`two_prod_fma`) and ``q`` is rounded once at the end.
+    Returns ``(r0_lo, 1 / r0, sig_hi, sig_lo, q)`` with ``|r0| = r0 + r0_lo`` (``r0`` the
+    float64 norm :func:`_classify` formed), ``sig_hi + sig_lo = r0.v0``.
+    """
+    r2h, r2l = dot3_dd(rx, ry, rz, rx, ry, rz)
+    inv_r0 = 1.0 / r0
+    r0l = (fma(-r0, r0, r2h) + r2l) * (0.5 * inv_r0)  # sqrt(r2) = r0 + (r2 - r0^2) / (2 r0)
+    v2h, v2l = dot3_dd(vx, vy, vz, vx, vy, vz)
+    sigh, sigl = dot3_dd(rx, ry, rz, vx, vy, vz)
+    ph, pl = two_prod_fma(r0, v2h)  # r0 v0^2 (double-double)
+    pl += r0 * v2l + r0l * v2h
+    inv_mu = 1.0 / mu
+    wh = ph * inv_mu  # r0 v0^2 / mu ~ 2: its remainder exactly by fma
+    wl = (fma(-wh, mu, ph) + pl) * inv_mu
+    q = (2.0 - wh) - wl  # 2 - wh exact (Sterbenz: wh in [1, 4] in the window)
+    return r0l, inv_r0, sigh, sigl, q
+
+
+@jit(inline="always")
+def _uni_fg_dd(rx, ry, rz, vx, vy, vz, r0, chi, z0, c4, c5, dt, mu, sqmu):
+    """Lagrange coefficients at the root near ``chi`` with the time equation in double-double.
+
+    In the Sundman variable ``s = chi / sqrt(mu)`` with ``G_k = s^k c_k(beta s^2)``,
+    ``beta = mu alpha`` (Goodyear 1965; Battin 1999 sec. 4.5), so the rounding of
+    ``sqrt(mu)`` (outside the one-ulp floor: mu is not perturbed; it was the larger part
+    of the median error) never enters:
+
+        T = r0 G1 + sig G2 + mu G3 - dt,   r = r0 G0 + sig G1 + mu G2,
+        f = 1 - mu G2 / r0,  g = r0 G1 + sig G2,  fdot = -mu G1 / (r r0),  gdot = 1 - mu G2 / r.
+
+    On an inbound arc through periapsis the terms of ``T`` and ``g`` are several times
+    their sum, so each is formed to about eps^2: ``s^2``, ``s^3`` and the products with
+    ``r0, sig, mu`` exactly (:func:`two_prod_fma`), ``c2 = 1/2 - z c4``, ``c3 = 1/6 - z c5``
+    with only the ``z`` remainders rounded, and the invariants of
+    :func:`_uni_invariants_dd`.  One Newton step ``d = -T / r`` from ``chi`` (a root to
+    the float64 noise, :func:`_uni_check`) polishes ``s``; ``G1, G2`` and ``g`` follow to
+    first order (``G_k' = G_(k-1)``; the neglected ``d^2`` terms are ~eps^2 relative).
+    ``c4, c5`` are those of the check at ``z0 = alpha chi^2`` (float64 ``alpha``), moved to
+    first order to this ``z`` (``c4' = -1/720``, ``c5' = -1/5040`` up to O(z); ``z - z0`` is
+    a few ulp of ``q`` times ``chi^2 / r0``, so the neglected terms are ~eps^2).
+
+    The time unit is scaled by the power of two ``p <= sqrt(mu) < 2 p`` (exactly: ``v0 / p``,
+    ``mu / p^2`` in ``[1, 4)``, ``dt p``; then ``g / p``, ``fdot p``), so ``s`` is within a
+    factor 2 of ``chi`` and every intermediate has the range of the chi-form of the check
+    for any ``mu`` (unscaled, ``s^3 = chi^3 / mu^1.5`` overflows for ``mu`` ~ 1e-200).
+    """
+    p = np.int64(np.float64(sqmu).view(np.int64) & 0x7FF0000000000000).view(np.float64)
+    ip = 1.0 / p  # exact: sqmu >= sqrt(5e-324) is normal
+    vx, vy, vz = vx * ip, vy * ip, vz * ip
+    mu = (mu * ip) * ip
+    dt = dt * p
+    r0l, inv_r0, sigh, sigl, q = _uni_invariants_dd(rx, ry, rz, vx, vy, vz, r0, mu)
+    beta = mu * (q * inv_r0)  # 2 mu / r0 - v0^2
+    s = chi * (p / sqmu)  # chi / sqrt(mu) to an ulp (the polish below takes any error)
+    z = beta * (s * s)
+    dz = z - z0
+    c4 = c4 - dz * _C4_TAYLOR[1]
+    c5 = c5 - dz * _C5_TAYLOR[1]
+    s2h, s2l = two_prod_fma(s, s)
+    s3h, s3l = two_prod_fma(s2h, s)
+    s3l += s2l * s
+    g2h, g2l = fast_two_sum(0.5 * s2h, 0.5 * s2l - s2h * (z * c4))  # G2 = s^2 c2 (|z c4| < 1/2)
+    g3 = s3h * (INV6 - z * c5)  # G3 = s^3 c3, float: a z/6 part of G1 below
+    g1h, g1l = fast_two_sum(s, -beta * g3)  # G1 = s c1 = s - beta G3 (|beta G3| < |s| in the window)
+    g0 = 1.0 - beta * g2h
+    # T = (r0 G1 + sig G2) + mu G3 - dt, each product exact plus its low-order terms;
+    # mu G3 = (mu / 6) s^3 + mu s^3 (c3 - 1/6) with mu / 6 in double-double
+    ah, al = two_prod_fma(r0, g1h)
+    al += r0 * g1l + r0l * g1h
+    bh, bl = two_prod_fma(sigh, g2h)
+    bl += sigh * g2l + sigl * g2h
+    m6h, m6l = two_prod_fma(mu, INV6)
+    m6l += mu * INV6_LO
+    ch, cl = two_prod_fma(m6h, s3h)
+    cl += (m6h * s3l + m6l * s3h) - (mu * s3h) * (z * c5)
+    gh, gl = two_sum(ah, bh)
+    gl += al + bl
+    th, tl = two_sum(gh, ch)
+    T = (th - dt) + (tl + (gl + cl))  # at the root |th - dt| ~ |T| << |dt|: its rounding is eps |T|
+    mg2 = mu * g2h
+    rr = (r0 * g0 + sigh * g1h) + mg2
     d = -T / rr
-    return ok, U1 + U0 * d, U2 + U1 * d, U3 + U2 * d, rr + drr * d
+    # one Newton step on s, carried to first order
+    g = gh + (gl + (rr - mg2) * d)  # d(r0 G1 + sig G2)/ds = r - mu G2
+    g2l += g1h * d
+    mh, ml = two_prod_fma(mu, g2h)
+    ml += mu * g2l
+    fq = mh * inv_r0  # mu G2 / r0 (double-double): its remainder exactly by fma
+    fql = (fma(-fq, r0, mh) + (ml - fq * r0l)) * inv_r0
+    fh, fl = two_sum(1.0, -fq)
+    f = fh + (fl - fql)
+    g1 = g1h + (g1l + g0 * d)
+    rr += (sigh * g0 + (mu - beta * r0) * g1h) * d  # r(s + d): dr/ds = sig G0 + mu (1 - q) G1
+    fdot = -mu * g1 * inv_r0 / rr
+    gdot = 1.0 - (mh + ml) / rr
+    return f, g * ip, fdot * p, gdot
 
 
 @jit
@@ -621,18 +761,19 @@ def _uni_fg(r0, sg, dt, sqmu, tau, U1, U2, U3, rr):
 
 
 @jit
-def _fg_universal(r0, sg, q, alpha, dt, sqmu):
+def _fg_universal(rx, ry, rz, vx, vy, vz, r0, sg, q, alpha, dt, mu, sqmu):
     """Lagrange coefficients from the universal variable chi (near-parabolic, parabolic).
 
     Solves ``sqrt(mu) dt = r0 chi + sg chi^2 c2 + (1 - q) chi^3 c3`` (Vallado eq.
     2-50 / Curtis eq. 3.49) with ``sg = r0.v0 / sqrt(mu)``, ``z = alpha chi^2``:
-    the straight-line :func:`_uni_fast`, or :func:`_uni_solve_safe` where its check fails.
+    the straight-line :func:`_uni_fast` and :func:`_uni_fg_dd`, or
+    :func:`_uni_solve_safe` where its check fails.
     """
     tau = sqmu * dt
-    ok, U1, U2, U3, rr = _uni_fast(r0, sg, q, alpha, tau)
+    ok, chi, z0, c4, c5 = _uni_fast(r0, sg, q, alpha, tau)
     if not ok:
         return _fg_universal_safe(r0, sg, q, alpha, dt, sqmu)
-    return _uni_fg(r0, sg, dt, sqmu, tau, U1, U2, U3, rr)
+    return _uni_fg_dd(rx, ry, rz, vx, vy, vz, r0, chi, z0, c4, c5, dt, mu, sqmu)
 
 
 @jit
@@ -697,7 +838,7 @@ def _dispatch(kind, r0, sig, q, alpha, n, rx, ry, rz, vx, vy, vz, dt, mu):
         return _fg_hyperbolic(r0, sig, q, -alpha, n, dt, mu, hx * hx + hy * hy + hz * hz)
     if kind == 4:
         sqmu = math.sqrt(mu)
-        return _fg_universal(r0, sig / sqmu, q, alpha, dt, sqmu)
+        return _fg_universal(rx, ry, rz, vx, vy, vz, r0, sig / sqmu, q, alpha, dt, mu, sqmu)
     if kind == 1:
         return 1.0, 0.0, 0.0, 1.0
     nan = math.nan
@@ -738,7 +879,13 @@ _NWH = 21
 # near-parabolic states: their own work array WU (rows _RN, _SIG, _Q, _ALPHA as in W), then
 _UDT, _UMU, _UOK, _UF, _UG, _UFD, _UGD = 4, 5, 6, 7, 8, 9, 10
 _USQMU, _USG, _UTAU, _UCHI = 11, 12, 13, 14
-_NWU = 15
+_URX, _URY, _URZ, _UVX, _UVY, _UVZ = 15, 16, 17, 18, 19, 20  # the state's components (finish pass)
+_UZ, _UC4, _UC5 = 21, 22, 23  # z and the Stumpff c4, c5 of the check
+_NWU = 24
+# WU's rows are _BLOCK + _WU_PAD long: with exactly 512 doubles (4 KiB) every row of a column
+# falls in the same L1 cache set, and the 24 rows a column touches evict each other
+# (measured: the gather and the passes 2-3 ns/state slower than with padded rows)
+_WU_PAD = 32
 
 
 @jit
@@ -787,11 +934,12 @@ def _ell_passes(W, m, idx, r0, v0, r, v):
 
 @jit
 def _uni_fast_pass(W, nu):
-    """Pass 1 of :func:`_uni_passes`: :func:`_uni_fast` and f, g of every column, as
-    straight-line loops that LLVM vectorizes.  Cut into four loops (starter; Laguerre
-    step; series step; check, polish, f, g): each state's chain of dependent divisions
-    and square roots is long, and shorter loop bodies let the core overlap more
-    states (measured 43 -> 30 ns/state).  The same operations as :func:`_uni_fast`."""
+    """Pass 1 of :func:`_uni_passes`: :func:`_uni_fast` of every column (the root ``chi``,
+    the check and its ``z, c4, c5`` into ``W``), as straight-line loops that LLVM
+    vectorizes.  Cut into four loops (starter; Laguerre step; series step; check): each
+    state's chain of dependent divisions and square roots is long, and shorter loop
+    bodies let the core overlap more states (measured 43 -> 30 ns/state).  The same
+    operations as :func:`_uni_fast`."""
     for k in range(nu):
         sqmu = math.sqrt(W[_UMU, k])
         sg = W[_SIG, k] / sqmu
@@ -805,41 +953,66 @@ def _uni_fast_pass(W, nu):
     for k in range(nu):
         W[_UCHI, k] = _uni_series_step(W[_UCHI, k], W[_RN, k], W[_USG, k], 1.0 - W[_Q, k], W[_ALPHA, k], W[_UTAU, k])
     for k in range(nu):
-        rn = W[_RN, k]
-        sg = W[_USG, k]
-        tau = W[_UTAU, k]
-        ok, U1, U2, U3, rr = _uni_check_polish(W[_UCHI, k], rn, sg, 1.0 - W[_Q, k], W[_ALPHA, k], tau)
-        f, g, fd, gd = _uni_fg(rn, sg, W[_UDT, k], W[_USQMU, k], tau, U1, U2, U3, rr)
+        ok, z, c4, c5 = _uni_check(W[_UCHI, k], W[_RN, k], W[_USG, k], 1.0 - W[_Q, k], W[_ALPHA, k], W[_UTAU, k])
         W[_UOK, k] = 1.0 if ok else 0.0
-        W[_UF, k] = f
-        W[_UG, k] = g
-        W[_UFD, k] = fd
-        W[_UGD, k] = gd
+        W[_UZ, k] = z
+        W[_UC4, k] = c4
+        W[_UC5, k] = c5
 
 
 @jit
 def _uni_passes(W, nu, idx, r0, v0, r, v):
     """The near-parabolic states of a block (columns ``0:nu`` of their work array ``W``).
 
-    Pass 1 (:func:`_uni_fast_pass`): starter, Laguerre-Conway and series steps, check,
-    polish and f, g as straight-line code over all columns (vectorized); pass 2:
-    the safeguarded loop (:func:`_fg_universal`) for the columns whose check
-    failed, and the store.  Bit-identical to :func:`_fg_universal` on each state.
+    Pass 1 (:func:`_uni_fast_pass`): starter, Laguerre-Conway and series steps and
+    check as straight-line code over all columns (vectorized); pass 2
+    (:func:`_uni_finish`): the double-double polish and f, g (:func:`_uni_fg_dd`, from
+    the components the gather stored) and ``r, v``, vectorized, then the safeguarded
+    loop (:func:`_fg_universal_safe`) for the columns whose check failed, and the
+    scatter.  Bit-identical to :func:`_fg_universal` on each state.
     """
     _uni_fast_pass(W, nu)
-    _uni_finish_pass(W, nu, idx, r0, v0, r, v)
+    _uni_finish(W, nu, idx, r0, v0, r, v)
 
 
 @jit
 def _uni_finish_pass(W, nu, idx, r0, v0, r, v):
-    """Pass 2 of :func:`_uni_passes`: the safeguarded loop (:func:`_fg_universal_safe`) for
-    the columns with ``W[_UOK] == 0``, then the store of every column."""
+    """Pass 2 of :func:`_uni_passes` for a work array whose gather did not store the
+    components: gathers them into rows ``_URX.._UVZ``, then :func:`_uni_finish`."""
     for k in range(nu):
+        i = idx[k]
+        W[_URX, k], W[_URY, k], W[_URZ, k] = r0[i, 0], r0[i, 1], r0[i, 2]
+        W[_UVX, k], W[_UVY, k], W[_UVZ, k] = v0[i, 0], v0[i, 1], v0[i, 2]
+    _uni_finish(W, nu, idx, r0, v0, r, v)
+
+
+@jit
+def _uni_finish(W, nu, idx, r0, v0, r, v):
+    """Pass 2 of :func:`_uni_passes` (the components in rows ``_URX.._UVZ``, stored by the
+    gather of :func:`_propagate_block`): :func:`_uni_fg_dd` at every column's root and
+    ``r = f r0 + g v0``, ``v = fdot r0 + gdot v0`` (straight-line: vectorized; the result
+    overwrites the components), then the scatter of every column, through the
+    safeguarded loop (:func:`_fg_universal_safe`) for the columns with ``W[_UOK] == 0``."""
+    for k in range(nu):
+        rx, ry, rz, vx, vy, vz = W[_URX, k], W[_URY, k], W[_URZ, k], W[_UVX, k], W[_UVY, k], W[_UVZ, k]
+        f, g, fd, gd = _uni_fg_dd(
+            rx, ry, rz, vx, vy, vz,
+            W[_RN, k], W[_UCHI, k], W[_UZ, k], W[_UC4, k], W[_UC5, k], W[_UDT, k], W[_UMU, k], W[_USQMU, k],
+        )
+        W[_URX, k] = f * rx + g * vx  # the arithmetic of _store
+        W[_URY, k] = f * ry + g * vy
+        W[_URZ, k] = f * rz + g * vz
+        W[_UVX, k] = fd * rx + gd * vx
+        W[_UVY, k] = fd * ry + gd * vy
+        W[_UVZ, k] = fd * rz + gd * vz
+    for k in range(nu):
+        i = idx[k]
         if W[_UOK, k] == 0.0:
             f, g, fd, gd = _fg_universal_safe(W[_RN, k], W[_USG, k], W[_Q, k], W[_ALPHA, k], W[_UDT, k], W[_USQMU, k])
+            _store(r0, v0, r, v, i, f, g, fd, gd)
         else:
-            f, g, fd, gd = W[_UF, k], W[_UG, k], W[_UFD, k], W[_UGD, k]
-        _store(r0, v0, r, v, idx[k], f, g, fd, gd)
+            r[i, 0], r[i, 1], r[i, 2] = W[_URX, k], W[_URY, k], W[_URZ, k]
+            v[i, 0], v[i, 1], v[i, 2] = W[_UVX, k], W[_UVY, k], W[_UVZ, k]
 
 
 @jit(inline="always")
@@ -872,6 +1045,8 @@ def _propagate_block(r0, v0, dt, mu, r, v, lo, hi, idx, W, idxh, WH, idxu, WU):
             idxu[mu_] = i
             WU[_RN, mu_], WU[_SIG, mu_], WU[_Q, mu_], WU[_ALPHA, mu_] = rn, sig, q, alpha
             WU[_UDT, mu_], WU[_UMU, mu_] = dt[i], mu[i]
+            WU[_URX, mu_], WU[_URY, mu_], WU[_URZ, mu_] = rx, ry, rz
+            WU[_UVX, mu_], WU[_UVY, mu_], WU[_UVZ, mu_] = vx, vy, vz
             mu_ += 1
         else:
             f, g, fd, gd = _dispatch(kind, rn, sig, q, alpha, n, rx, ry, rz, vx, vy, vz, dt[i], mu[i])
@@ -930,7 +1105,7 @@ def _propagate_range(r0, v0, dt, mu, r, v, lo, hi, idx, W, idxh, WH, idxu, WU):
 def _block_workspace():
     """Scratch arrays of one block: ellipse, hyperbola and universal-variable gathers and work rows."""
     return (np.empty(_BLOCK, dtype=np.int64), np.empty((_NW, _BLOCK)), np.empty(_BLOCK, dtype=np.int64),
-            np.empty((_NWH, _BLOCK)), np.empty(_BLOCK, dtype=np.int64), np.empty((_NWU, _BLOCK)))
+            np.empty((_NWH, _BLOCK)), np.empty(_BLOCK, dtype=np.int64), np.empty((_NWU, _BLOCK + _WU_PAD)))
 
 
 @jit
