@@ -532,6 +532,8 @@ def _serve_fault_trial(tmp_path: Path, processes, rng, reference_states: dict, c
         orphans, took = _orphans_after(sup.pid, 2.5)
         assert orphans == [], f"trial {record}: still alive {took:.2f} s after serve died: {orphans}"
         _recover_dir(tmp_path)
+        assert not [p for p in tmp_path.iterdir() if p.name.startswith(".astrodyn-")], record  # work dirs cleaned
+        assert not list(tmp_path.glob(f"serve{k}*.partial*.mcap")), record  # every partial part finished
         for topic, per in _states_of_parts(parts()).items():
             assert sorted(per) == list(range(len(per))), (record, topic)
             assert all(per[s] == reference_states[topic][s] for s in per if s in reference_states[topic]), (record, topic)
