@@ -93,3 +93,41 @@ def test_a_part_restart_plans_the_next_part_and_seeds_every_state_channel(record
     assert child.proc.wait(timeout=120) == 0, child.stderr_tail()
     child.close()
     assert not dead.exists() and load(tmp_path / "served.mcap").messages == run.messages
+
+
+@pytest.mark.parametrize("content, says", [
+    (None, "FileNotFoundError"), ("{{{", "JSONDecodeError"), ("[1, 2]", "expected a JSON object"),
+    ('{"astrodyn/x/sat/orbit": -1}', "expected an integer seq"), ('{"astrodyn/x/sat/orbit": true}', "expected an integer seq"),
+    ('{"astrodyn/x/sat/nokind": 3}', "key: expected"), ("[" * 100000, "RecursionError"),
+])
+def test_a_hostile_resume_seqs_file_is_refused_before_anything_is_written(tmp_path, content, says):
+    import subprocess
+
+    seeds = tmp_path / "seeds.json"
+    if content is not None:
+        seeds.write_text(content)
+    out = tmp_path / "z.mcap"
+    proc = subprocess.run([sys.executable, "-m", "astrodyn.service.logger", "--scenario", "x", "--out", str(out),
+                           "--epoch-ns", "0", "--resume-seqs", str(seeds)], capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 2 and "--resume-seqs" in proc.stderr and says in proc.stderr, proc.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == (["seeds.json"] if content is not None else [])
+
+
+def test_serve_finds_only_its_own_logger_parts(tmp_path):
+    """The files serve restarts from: the main logger's partial parts (newest first), then its
+    finished parts; never a standby logger's file (``NAME.logger-2...``, the newest here,
+    which a restart once took for the dead logger's) nor another recording sharing the prefix."""
+    import os
+    import time
+
+    from astrodyn.service.serve import Supervisor
+
+    names = ["served.mcap", "served-0001.mcap", "served-0002.partial-2.mcap", "served.logger-2.partial.mcap",
+             "served.logger-2-0001.mcap", "served-extra.mcap", "served.partial-1.mcap", "served-0003.mcap.recover-tmp"]
+    now = time.time()
+    for i, name in enumerate(names):
+        (tmp_path / name).write_text("x")
+        os.utime(tmp_path / name, (now + i, now + i))
+    holder = type("S", (), {"out": tmp_path / "served.mcap"})()
+    found = [os.path.basename(p) for p in Supervisor._parts(holder)]
+    assert found == ["served.partial-1.mcap", "served-0002.partial-2.mcap", "served-0001.mcap", "served.mcap"]

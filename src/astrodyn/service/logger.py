@@ -733,20 +733,26 @@ def prefill(recorder: McapRecorder, path: str, scenario: str, steps: int) -> int
     return n
 
 
-def seed_seqs(recorder: McapRecorder, path: str) -> int:
-    """Start each channel of the JSON file ``path`` (``{key: next seq}``, written by serve
-    when it restarts a dead logger: :mod:`astrodyn.service.supervision`) at its seq; returns
-    the number of channels.  ValueError naming the entry for anything else."""
-    with open(path, encoding="utf-8") as f:
-        table = json.load(f)
+def read_seed_table(path: str) -> dict[str, int]:
+    """The ``--resume-seqs`` file: ``{key: next seq}`` (written by serve when it restarts a
+    dead logger: :mod:`astrodyn.service.supervision`), each key one astrodyn records;
+    ValueError naming the file and the entry for anything else.  Read before the recording
+    is opened, so a bad file leaves nothing behind."""
+    try:
+        with open(path, encoding="utf-8") as f:
+            table = json.load(f)
+    except (OSError, ValueError, RecursionError) as exc:
+        raise ValueError(f"--resume-seqs {path}: expected a readable JSON file, got {type(exc).__name__}: {exc}") from None
     if not isinstance(table, dict):
         raise ValueError(f"--resume-seqs {path}: expected a JSON object key -> next seq")
     for key, next_seq in table.items():
         if not (isinstance(next_seq, int) and not isinstance(next_seq, bool) and 0 <= next_seq <= messages.MAX_SEQ):
             raise ValueError(f"--resume-seqs {path}: {key}: expected an integer seq 0 ... 2**53-1, got {next_seq!r}")
-        messages.kind_of_key(key)  # a key astrodyn records, else MessageError naming it
-        recorder.seq.seed(key, next_seq)
-    return len(table)
+        try:
+            messages.kind_of_key(key)
+        except messages.MessageError as exc:
+            raise ValueError(f"--resume-seqs {path}: {exc}") from None
+    return table
 
 
 def trust_from_environment(args: argparse.Namespace) -> dict:
@@ -778,6 +784,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         set_threads(service_threads())  # thread policy (astrodyn.jit): 1 numba thread unless $ASTRODYN_THREADS
         messages.check_name(args.name, "--name")
+        seeds = read_seed_table(args.resume_seqs) if args.resume_seqs else {}
         meta = scenario_metadata(args)
     except (OSError, ValueError) as exc:
         print(f"logger: {exc}", file=sys.stderr)
@@ -794,13 +801,8 @@ def main(argv: list[str] | None = None) -> int:
                                     roll_size=args.roll_size, roll_interval_s=args.roll_interval,
                                     atomic=not args.in_place, first_part=args.first_part, attempt=args.attempt)
             copied = prefill(recorder, args.prefill, args.scenario, args.prefill_steps) if args.prefill else 0
-            if args.resume_seqs:
-                try:
-                    seed_seqs(recorder, args.resume_seqs)
-                except (OSError, ValueError) as exc:
-                    recorder.close()
-                    print(f"logger: {exc}", file=sys.stderr)
-                    return 2
+            for key, next_seq in seeds.items():  # each channel starts where an earlier part ended
+                recorder.seq.seed(key, next_seq)
             logger = Logger(session, args.scenario, recorder, name=args.name, expect=args.expect, queue_capacity=args.queue,
                             control=not args.no_control, **trust)
             logger.rename_at_end = not args.leave_partial

@@ -48,6 +48,7 @@ import glob
 import json
 import math
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -321,12 +322,15 @@ class Supervisor:
                   file=sys.stderr, flush=True)
 
     def _parts(self) -> list[str]:
-        """The files the logger has written so far, newest first: the part being written
-        (``*.partial*.mcap``), then the finished rolled parts."""
+        """The files the (main) logger has written so far, newest first: the part being
+        written (``NAME[-000k].partial[-n].mcap``), then the finished rolled parts; never a
+        standby logger's (``NAME.logger-2...``) or another recording's that shares the prefix."""
         root, ext = os.path.splitext(str(self.out))
         ext = ext or ".mcap"
-        rolled = sorted(glob.glob(glob.escape(root) + "-[0-9][0-9][0-9][0-9]" + ext))
-        partial = sorted(glob.glob(glob.escape(root) + "*.partial*" + ext), key=os.path.getmtime)
+        mine = re.compile(re.escape(root) + r"(-\d{4,})?(\.partial(-\d+)?)?" + re.escape(ext) + "$")
+        found = [p for p in glob.glob(glob.escape(root) + "*" + ext) if mine.match(p)]
+        partial = sorted((p for p in found if ".partial" in p[len(root):]), key=os.path.getmtime)
+        rolled = sorted(p for p in found if ".partial" not in p[len(root):] and p != str(self.out))
         return [p for p in [*reversed(partial), *reversed(rolled), str(self.out)] if os.path.exists(p)]
 
     def restart_logger(self, why: str) -> None:
