@@ -755,28 +755,31 @@ def test_rigid_limit_matches_torque_free():
     vanishing with the beams' compliance: the quasi-static deflection and the attitude
     error scale as 1/EI, and the rate error (through the relative angular momentum of the
     residual vibration, eta' ~ omega eta) as 1/sqrt(EI).  Composite inertia by hand: two
-    thin rods along +-x from r to r + L."""
+    thin rods along +-x from r to r + L.  The errors are RMS over 801 samples (the max of a
+    sampled vibration depends on where the samples fall); the scaling laws are the leading
+    terms of an expansion in |w| / omega_1 (2.3 % at the softer beam), so the ratios of
+    the two runs must be 4 and 2 to within that: 3 %."""
     rho, L, r = 0.5, 4.0, 0.5
     Jh = np.array([30.0, 45.0, 60.0])
     Irod = rho * ((r + L) ** 3 - r**3) / 3.0
     inertia = Jh + np.array([0.0, 2 * Irod, 2 * Irod])
     w0, q0 = np.array([0.25, 0.1, 0.3]), _unit([0.9, 0.1, -0.3, 0.2])
-    t = np.linspace(0.0, 10.0, 41)
+    t = np.linspace(0.0, 10.0, 801)
     w_ref, q_ref = torque_free(inertia, w0, q0, t)
     errs = []
-    for EI in (1e3, 4e3):
+    for EI in (2e3, 8e3):
         beam = fx.beam_matrices(1, EI, rho, L, r=r)
         sc = fx.FlexibleSpacecraft(50.0, Jh, (fx.Appendage(beam, [1, 0, 0], [0, 1, 0]),
                                               fx.Appendage(beam, [-1, 0, 0], [0, 1, 0])))  # fmt: skip
         y, _ = fx.propagate_spacecraft(sc, fx.make_state(sc, q=q0, w=w0), t, rtol=1e-10, atol=1e-12)
-        ang = 2 * np.arccos(np.clip(np.abs(np.sum(y[:, :4] * q_ref, axis=1)), 0, 1)).max()
-        dw = np.abs(y[:, 4:7] - w_ref).max()
-        ratio = (np.linalg.norm(w0) / beam.omega0[0]) ** 2  # (|w| / omega_1)^2: 1e-3 and 2.5e-4
-        assert ang < ratio and dw < np.linalg.norm(w0) * math.sqrt(ratio)
+        angle = 2 * np.arccos(np.clip(np.abs(np.sum(y[:, :4] * q_ref, axis=1)), 0, 1))
+        dw = np.linalg.norm(y[:, 4:7] - w_ref, axis=1)
+        ratio = (np.linalg.norm(w0) / beam.omega0[0]) ** 2  # (|w| / omega_1)^2: 5e-4 and 1.3e-4
+        assert angle.max() < ratio and dw.max() < np.linalg.norm(w0) * math.sqrt(ratio)
         assert np.abs(y[:, 7:10]).max() < 1e-12  # mass centre (= O by symmetry) at rest
-        errs.append((ang, dw))
-    assert 3.0 < errs[0][0] / errs[1][0] < 5.3  # ~4: 1/EI
-    assert 1.5 < errs[0][1] / errs[1][1] < 2.7  # ~2: 1/sqrt(EI)
+        errs.append((np.sqrt(np.mean(angle**2)), np.sqrt(np.mean(dw**2))))
+    assert errs[0][0] / errs[1][0] == pytest.approx(4.0, rel=0.03)  # 1/EI
+    assert errs[0][1] / errs[1][1] == pytest.approx(2.0, rel=0.03)  # 1/sqrt(EI)
 
 
 # --------------------------------------------------------------------------- 6. hostile input
