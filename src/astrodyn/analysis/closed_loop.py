@@ -18,11 +18,11 @@ fields leaves its part of the section out, never a traceback.
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
 
+from astrodyn.analysis.recorded_scenario import recorded_body
 from astrodyn.rotation import dcm_from_quat
 
 __all__ = ["closed_loop_section", "CLOSED_LOOP_FIGURES"]
@@ -39,18 +39,12 @@ CLOSED_LOOP_FIGURES = {
 def _wheels(scenario_meta: dict, name: str):
     """The body's wheels from the recorded config: (axes (n, 3), J (n,), max_speed (n,),
     inertia (3, 3)) or None."""
-    try:
-        from astrodyn.scenario import load_dict
-
-        config = json.loads(scenario_meta["json"])["config"]
-        body = load_dict(config, source="recording").body(name)
-        wheels = body.actuators.wheels if body.actuators is not None else ()
-        if not wheels or body.attitude is None:
-            return None
-        return (np.array([w.axis for w in wheels]), np.array([w.inertia for w in wheels]),
-                np.array([w.max_speed for w in wheels]), np.asarray(body.attitude.inertia, dtype=np.float64))
-    except Exception:  # a foreign or damaged scenario record: no wheel geometry
+    body = recorded_body(scenario_meta, name)  # None for a foreign or damaged scenario record
+    wheels = body.actuators.wheels if body is not None and body.actuators is not None else ()
+    if not wheels or body.attitude is None:
         return None
+    return (np.array([w.axis for w in wheels]), np.array([w.inertia for w in wheels]),
+            np.array([w.max_speed for w in wheels]), np.asarray(body.attitude.inertia, dtype=np.float64))
 
 
 def _rows(track, field: str, n: int | None = None) -> np.ndarray | None:

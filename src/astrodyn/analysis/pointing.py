@@ -10,10 +10,11 @@ the start and at the end, when it settled, and the largest error after that.
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
+
+from astrodyn.analysis.recorded_scenario import recorded_body
 
 __all__ = ["pointing_errors", "settling_time", "pointing_section", "POINTING_FIGURES"]
 
@@ -37,20 +38,11 @@ def settling_time(t: np.ndarray, error: np.ndarray, tolerance: float) -> float |
     return float(t[k]) if k < len(t) else None
 
 
-def _pointing_of(scenario_meta: dict, name: str):
-    try:
-        from astrodyn.scenario import load_dict
-
-        config = json.loads(scenario_meta["json"])["config"]
-        return load_dict(config, source="recording").body(name).pointing
-    except Exception:  # a foreign or damaged scenario record: no target
-        return None
-
-
 def pointing_section(run, name: str, stem: Path) -> tuple[dict, list[tuple[str, Path]]]:
     """``({"pointing": numbers}, figures)`` for body ``name`` of ``run`` when its config
     names a pointing target and it has attitude states; ``({}, [])`` otherwise."""
-    pointing = _pointing_of(run.scenario, name)
+    config = recorded_body(run.scenario, name)
+    pointing = None if config is None else config.pointing
     body = run.bodies.get(name)
     track = None if body is None else body.attitude
     if pointing is None or track is None or len(track) == 0:
