@@ -104,3 +104,33 @@ def test_pointing_error_is_the_rotation_angle_and_settling_is_the_last_entry_int
     assert settling_time(t, err, 1.0) == 5.0
     assert settling_time(t, err, 10.0) == 0.0
     assert settling_time(t, np.append(err[:-1], 3.0), 1.0) is None
+
+
+@pytest.mark.parametrize("table, says", [
+    ("target = [nan, 0, 0, 1]", "pointing.target[0]"), ("target = [1e308, 1e308, 0, 0]", "pointing.target[0]"),
+    ("target = [1, 1, 0, 0]", "a unit quaternion"), ('target = "x"', "pointing.target"),
+    ('target = [1, 0, 0, 0]\ntolerance = "1e400 deg"', "pointing.tolerance"),
+    ('target = [1, 0, 0, 0]\ntolerance = "-1 deg"', "(0, 180 deg]"), ("tolerance = \"1 deg\"", "pointing.target"),
+    ("target = [1, 0, 0, 0]\nextra = 1", "pointing.extra"),
+])
+def test_a_hostile_pointing_table_is_a_config_error_naming_the_field(table, says):
+    from astrodyn.scenario import ScenarioError, loads
+
+    text = (ROOT / "configs" / "slew.toml").read_text().split("[bodies.pointing]")[0]
+    with pytest.raises(ScenarioError) as err:
+        loads(text + "[bodies.pointing]\n" + table + "\n")
+    assert "bodies[0] (sc).pointing" in str(err.value) and says in str(err.value)
+
+
+def test_a_hostile_foxglove_service_request_is_refused_before_the_bus():
+    """What a WebSocket client sends a control service: oversized, not JSON, nested past the
+    parser, not an object, a token that is not a string; each refused naming the verb, and
+    the bus is never asked (the session here is not a session)."""
+    from astrodyn.service.viewer import MAX_SERVICE_REQUEST, forward_control
+
+    for payload, says in [(b"{" + b" " * MAX_SERVICE_REQUEST + b"}", "at most"), (b"\xff\xfe", "JSON object"),
+                          (b"[" * 30_000, "JSON object"), (b"[1, 2]", "JSON object, got list"),
+                          (b'{"token": 5}', "rate.token: expected a string")]:
+        with pytest.raises(ValueError, match="rate") as err:
+            forward_control(object(), "x", "rate", payload)
+        assert says in str(err.value), (payload[:20], str(err.value))

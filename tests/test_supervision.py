@@ -294,6 +294,15 @@ def test_a_killed_standby_logger_is_a_warning_and_its_partial_file_is_kept(tmp_p
     assert kept and all(per == {s: expected[topic][s] for s in range(len(per))} for topic, per in kept.items())
 
 
+def _serve_long(tmp_path: Path, processes, name: str, *extra: str) -> tuple[subprocess.Popen, Path]:
+    """`astrodyn serve` of the long one-satellite scene at x400 into ``name``.mcap; (process, out)."""
+    cfg = tmp_path / "serve.toml"
+    cfg.write_text(LONG)
+    out = tmp_path / f"{name}.mcap"
+    return processes([*ASTRODYN, "serve", cfg, "--out", out, "--rate", "400", *extra], stdout=subprocess.PIPE,
+                     stderr=subprocess.PIPE, text=True), out
+
+
 def _states_of_parts(paths: list[Path]) -> dict[str, dict[int, bytes]]:
     """:func:`_states` over the parts of one run: a seq in two parts fails."""
     out: dict[str, dict[int, bytes]] = {}
@@ -310,15 +319,11 @@ def test_a_killed_logger_under_serve_is_restarted_and_no_state_is_lost(tmp_path,
     dead one's file (that file is finished as its own part: NAME.mcap, NAME-0001.mcap, then
     the new logger's NAME-0002.mcap); the parts together hold every state channel's 0 .. N-1
     once each, byte for byte the states an uninterrupted `astrodyn run` of the same scene
-    records, and the second restart is no slower than the first although its part is
-    larger (nothing is copied)."""
+    records (the restart's delay, which no longer grows with the part: the soak in
+    docs/reliability.md)."""
     import threading
 
-    cfg = tmp_path / "serve.toml"
-    cfg.write_text(LONG)
-    out = tmp_path / "served.mcap"
-    sup = processes([*ASTRODYN, "serve", cfg, "--out", out, "--rate", "400"], stdout=subprocess.PIPE,
-                    stderr=subprocess.PIPE, text=True)
+    sup, out = _serve_long(tmp_path, processes, "served")
     err_lines: list[str] = []
     reader = threading.Thread(target=lambda: err_lines.extend(iter(sup.stderr.readline, "")), daemon=True)
     reader.start()
@@ -368,11 +373,7 @@ def test_a_killed_logger_under_serve_is_restarted_and_no_state_is_lost(tmp_path,
 def test_serve_with_a_standby_logger_records_everything_twice_across_a_main_logger_kill(tmp_path, processes):
     """`serve --loggers 2`, main logger SIGKILLed: the standby's one file holds every state
     channel 0 .. N-1 once, byte for byte what the main logger's parts hold together."""
-    cfg = tmp_path / "serve.toml"
-    cfg.write_text(LONG)
-    out = tmp_path / "served.mcap"
-    sup = processes([*ASTRODYN, "serve", cfg, "--out", out, "--rate", "400", "--loggers", "2"],
-                    stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    sup, out = _serve_long(tmp_path, processes, "served", "--loggers", "2")
     assert json.loads(sup.stdout.readline())["serving"] == "longrun"
     partial = tmp_path / "served.partial.mcap"
     t0 = time.monotonic()
@@ -404,11 +405,7 @@ def test_a_logger_killed_while_serve_starts_is_replaced(tmp_path, processes):
     """SIGKILL of serve's logger before it is ready, twice (nothing is recorded yet): serve
     starts another each time instead of failing, serves, and its stop leaves one finished
     NAME.mcap whose channels hold 0 .. N-1 once each, and no partial file."""
-    cfg = tmp_path / "serve.toml"
-    cfg.write_text(LONG)
-    out = tmp_path / "early.mcap"
-    sup = processes([*ASTRODYN, "serve", cfg, "--out", out, "--rate", "400"], stdout=subprocess.PIPE,
-                    stderr=subprocess.PIPE, text=True)
+    sup, out = _serve_long(tmp_path, processes, "early")
     killed: list[int] = []
     t0 = time.monotonic()
     while len(killed) < 2 and time.monotonic() - t0 < 60 and sup.poll() is None:
