@@ -52,6 +52,10 @@ def _example(kind: str) -> dict:
                 out[f.name] = ["pd#7"]
             elif isinstance(t.item_type, ins.IntType):
                 out[f.name] = [2]
+            elif isinstance(t.item_type, (ins.ListType, ins.Metadata)):  # per item a list of numbers
+                inner = t.item_type.type if isinstance(t.item_type, ins.Metadata) else t.item_type
+                k = inner.min_length or 1
+                out[f.name] = [[6878137.123456789, -1.25e-3, 7612.5, 0.25][:k] for _ in range(n)]
             else:
                 out[f.name] = [0.5] * n if n == 4 else [6878137.123456789, -1.25e-3, 7612.5][:n]  # 4: a unit quaternion
         elif isinstance(t, ins.StrType):

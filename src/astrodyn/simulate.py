@@ -19,7 +19,10 @@ exactly what :func:`simulate` returns for the same scenario.
   splitting) block after block.  Gravity-gradient torque takes the body's position from
   the same :class:`OrbitEngine` code the orbit process publishes from, evaluated at the
   integrator's own kick times (between output instants too), so the attitude sees exactly
-  the published orbit.
+  the published orbit.  ``flexible`` bodies (a hub with assumed-mode beams,
+  :mod:`astrodyn.attitude.flexible`) are integrated with DOP853 block after block
+  (:class:`FlexibleBody`); their appendages' elastic state of the last block is
+  :meth:`AttitudeEngine.appendage_states`.
 
 Third bodies (``model = "third_body"``) move on the two-body conic fitted to their
 geocentric (central-body-centric) state at the epoch, taken from astropy's built-in
@@ -43,7 +46,8 @@ from astrodyn.rotation import dcm_from_quat, quat_from_dcm
 from astrodyn.scenario import CENTRAL_BODIES, Plan, Scenario, plan as make_plan
 from astrodyn.scenario.ephemeris import third_body_state
 
-__all__ = ["OrbitEngine", "AttitudeEngine", "SimulationResult", "simulate", "third_body_state"]
+__all__ = ["OrbitEngine", "AttitudeEngine", "FlexibleBody", "AppendageStates", "SimulationResult", "simulate",
+           "third_body_state"]
 
 
 # --------------------------------------------------------------------------- orbits
@@ -187,6 +191,73 @@ class OrbitEngine:
 
 
 @dataclass
+class AppendageStates:
+    """The appendages' elastic state of one flexible body at a block of output times:
+    ``eta`` and ``eta_dot`` ``(T, n_elastic)`` (m, m/s; the layout of
+    :func:`astrodyn.attitude.flexible.state_layout`), ``tip`` ``(T, N, 3)`` (m, body axes),
+    ``slices`` the columns of each appendage."""
+
+    eta: np.ndarray
+    eta_dot: np.ndarray
+    tip: np.ndarray
+    slices: list[slice]
+
+    def message(self, j: int, t: float, seq: int) -> dict:
+        """The ``AppendageState`` message of row ``j`` (docs/architecture.md, section 5)."""
+        eta, eta_dot = self.eta[j].tolist(), self.eta_dot[j].tolist()
+        rel = [slice(s.start - self.slices[0].start, s.stop - self.slices[0].start) for s in self.slices]
+        return {"t": t, "seq": seq, "eta": [eta[s] for s in rel], "eta_dot": [eta_dot[s] for s in rel],
+                "tip": self.tip[j].tolist()}
+
+
+class FlexibleBody:
+    """A flexible spacecraft of the scene (``model = "flexible"``), integrated block after
+    block from its full state (:func:`astrodyn.attitude.flexible.propagate_spacecraft`,
+    DOP853 at the config's ``tolerance``, absolute tolerance 1e-3 of it).  The linear
+    momentum is zero (the system's mass centre at rest, :func:`make_state`); the hub's
+    attitude and rates are in the config's body axes."""
+
+    def __init__(self, spacecraft, q0: np.ndarray, w0: np.ndarray, rtol: float):
+        from astrodyn.attitude import flexible as fx
+
+        self.sc, self.rtol = spacecraft, float(rtol)
+        self.layout = fx.state_layout(spacecraft)
+        self.t0 = 0.0
+        self.y = fx.make_state(spacecraft, q=q0, w=w0)
+        self.first = True  # the first block includes t0 itself
+        self.last: AppendageStates | None = None
+        self.nfev = 0
+
+    def resume(self, t: float, q, w, eta, eta_dot) -> None:
+        """Continue from a recorded state at ``t`` (s): hub ``q``, ``w`` and the appendages'
+        ``eta``, ``eta_dot`` (flat, :func:`state_layout` order); v from zero momentum."""
+        from astrodyn.attitude import flexible as fx
+
+        self.y = fx.make_state(self.sc, q=q, w=w, eta=eta, eta_dot=eta_dot)
+        self.t0, self.first = float(t), False
+
+    def states(self, times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Hub ``(q, w)`` at ``times`` (increasing, from the last block's end); the elastic
+        state goes to :attr:`last`."""
+        from astrodyn.attitude import flexible as fx
+
+        rel = np.asarray(times, dtype=np.float64) - self.t0
+        if rel[0] < 0 or (rel[0] == 0 and not self.first):
+            raise ValueError(f"times: a flexible body continues forward only, after t = {self.t0} s; got {times[0]} s")
+        prepend = rel[0] > 0  # the integration starts at the state's own time
+        grid = np.concatenate([[0.0], rel]) if prepend else rel
+        y, info = fx.propagate_spacecraft(self.sc, self.y, grid, rtol=self.rtol, atol=1e-3 * self.rtol)
+        if prepend:
+            y = y[1:]
+        self.nfev += int(info["nfev"])
+        self.first, self.t0, self.y = False, float(times[-1]), y[-1].copy()
+        lay = self.layout
+        self.last = AppendageStates(y[:, lay["eta"]], y[:, lay["eta_dot"]], fx.tip_deflections(self.sc, y),
+                                    list(lay["eta_k"]))
+        return y[:, lay["q"]], y[:, lay["w"]]
+
+
+@dataclass
 class _AttitudeBody:
     name: str
     model: str
@@ -198,6 +269,7 @@ class _AttitudeBody:
     torque: object = None
     top: object = None  # HeavyTop for a symmetric heavy top (its own exact-free-flow splitting)
     rotor_momentum: np.ndarray | None = None
+    flexible: FlexibleBody | None = None
     error: float = 0.0
     steps: int = 0
 
@@ -259,25 +331,44 @@ class AttitudeEngine:
             elif model == "gyrostat":
                 h = sum((r.h * np.asarray(r.axis, dtype=np.float64) for r in a.rotors), np.zeros(3))
                 body.rotor_momentum = c_pb @ h
+            elif model == "flexible":  # the hub's full inertia tensor, in the config's body axes
+                from astrodyn.scenario.appendages import flexible_spacecraft
+
+                sc = flexible_spacecraft(a.mass, a.inertia, a.appendages, a.stiffening)
+                body.axes, body.q0, body.w0 = np.eye(3), np.asarray(a.q0, dtype=np.float64), np.asarray(a.w0, dtype=np.float64)
+                body.flexible = FlexibleBody(sc, body.q0, body.w0, a.tolerance)
             self.bodies.append(body)
         self.names = [b.name for b in self.bodies]
         self.models = [b.model for b in self.bodies]
+
+    def appendage_states(self) -> dict[int, AppendageStates]:
+        """Body index -> the elastic state of its appendages at the times of the last
+        :meth:`states` call, for the flexible bodies."""
+        return {k: b.flexible.last for k, b in enumerate(self.bodies) if b.flexible is not None and b.flexible.last}
 
     def resume(self, t: float, states: dict[str, dict]) -> list[str]:
         """Continue the torqued (integrated) bodies from recorded states at time ``t`` (s).
 
         ``states`` maps body name -> ``{"q": (4,), "w": (3,)}`` in the config's body axes
-        (as published).  Torque-free bodies need nothing (exact from the initial state);
-        every integrated body must be given (ValueError naming the missing ones).
-        Returns the names of the bodies that took a state.
+        (as published; a flexible body also ``"eta"``, ``"eta_dot"``: one list per
+        appendage, as on its appendages key).  Torque-free bodies need nothing (exact from
+        the initial state); every integrated body must be given (ValueError naming the
+        missing ones).  Returns the names of the bodies that took a state.
         """
         integrated = [b for b in self.bodies if b.model != "torque_free"]
-        missing = [b.name for b in integrated if b.name not in states]
+        missing = [b.name for b in integrated if b.name not in states
+                   or (b.flexible is not None and not {"eta", "eta_dot"} <= set(states[b.name]))]
         if missing:
-            raise ValueError(f"resume state: expected q and w of the integrated bodies {missing} at t = {t} s")
+            raise ValueError(f"resume state: expected q and w (and eta, eta_dot of flexible bodies) of the integrated "
+                             f"bodies {missing} at t = {t} s")
         for b in integrated:
             q = np.asarray(states[b.name]["q"], dtype=np.float64)
             w = np.asarray(states[b.name]["w"], dtype=np.float64)
+            if b.flexible is not None:
+                st = states[b.name]
+                b.flexible.resume(t, q, w, np.concatenate([np.asarray(x, dtype=np.float64) for x in st["eta"]]),
+                                  np.concatenate([np.asarray(x, dtype=np.float64) for x in st["eta_dot"]]))
+                continue
             c_pb = b.axes.T  # body -> principal components
             b.t0 = float(t)
             b.q0 = q.copy() if np.array_equal(b.axes, np.eye(3)) else quat_from_dcm(c_pb @ dcm_from_quat(q))
@@ -313,6 +404,9 @@ class AttitudeEngine:
             else:
                 if times[0] < b.t0:
                     raise ValueError(f"times: torqued attitudes continue forward only; got {times[0]} s before {b.t0} s")
+                if b.flexible is not None:
+                    q[:, k], w[:, k] = b.flexible.states(times)
+                    continue
                 if b.top is not None:
                     wp, qp, info = b.top.simulate(b.w0, b.q0, times - b.t0, method="top4", step=self.step,
                                                   error_estimate=False)

@@ -12,7 +12,8 @@ Writes into ``DIR`` (default ``<file>-report``):
 * ``<body>-<figure>.png`` -- per body with an orbit: ``orbit3d``, ``groundtrack``
   (Earth-centred runs), ``elements``, ``orbit-drift``, ``crosscheck`` (if recorded);
   with an attitude: ``euler``, ``quaternion``, ``rates``, and when the inertia is in the
-  scenario metadata ``polhode`` and ``attitude-drift``; for heavy tops ``top-angles``.
+  scenario metadata ``polhode`` and ``attitude-drift``; for heavy tops ``top-angles``;
+  for flexible spacecraft ``appendages`` and ``flexible-drift`` instead of the rigid two.
 
 Definitions of every number: :mod:`astrodyn.analysis.metrics`.  A cut or damaged file is
 analysed up to what is complete and the report says so at the top.
@@ -48,6 +49,8 @@ FIGURES = {
     "polhode": "polhode on the momentum sphere",
     "attitude-drift": "kinetic energy and inertial angular momentum drift",
     "top-angles": "precession and nutation",
+    "appendages": "tip displacement of each flexible appendage",
+    "flexible-drift": "energy, angular momentum drift and nutation of a flexible spacecraft",
     **CLOSED_LOOP_FIGURES,
     **POINTING_FIGURES,
 }
@@ -103,13 +106,18 @@ def analyze(path: str | os.PathLike, out: str | os.PathLike | None = None, seq: 
             figs.append(("crosscheck", fg.crosscheck(name, cc.t, cc.dr_norm, cc.dv_norm, Path(f"{stem}-crosscheck.png"))))
         if body.attitude is not None and len(body.attitude) > 0:
             tr = body.attitude
-            inertia = inertias.get(name)
+            # a flexible body's hub alone conserves neither T nor H: its rows are the system's (below)
+            inertia = inertias.get(name) if set(tr.model) != {"flexible"} else None
             am = mt.attitude_metrics(tr.t, tr.q, tr.w, seq, inertia)
             numbers["attitude"] = {**am["summary"], "models": sorted(set(tr.model))}
             figs.append(("euler", fg.euler_angles(name, tr.t, am["euler"], seq, Path(f"{stem}-euler.png"))))
             figs.append(("quaternion", fg.quaternion(name, tr.t, tr.q, Path(f"{stem}-quaternion.png"))))
             figs.append(("rates", fg.body_rates(name, tr.t, tr.w, Path(f"{stem}-rates.png"))))
-            if inertia is not None and "actuated" not in set(tr.model):  # commanded torques: no polhode, no drift
+            if set(tr.model) == {"flexible"}:  # the hub's rigid invariants mean nothing: the whole system's
+                section, more = _flexible_section(run, name, body, stem)
+                numbers.update(section)
+                figs += more
+            elif inertia is not None and "actuated" not in set(tr.model):  # commanded torques: no polhode, no drift
                 figs.append(("polhode", fg.polhode(name, am["h_body"], inertia.inertia, Path(f"{stem}-polhode.png"))))
                 figs.append(("attitude-drift", fg.attitude_drift(name, tr.t, am["energy_drift"], am["h_inertial_drift"],
                                                                  Path(f"{stem}-attitude-drift.png"))))
@@ -130,16 +138,61 @@ def analyze(path: str | os.PathLike, out: str | os.PathLike | None = None, seq: 
     return report
 
 
+def _flexible_section(run, name: str, body, stem: Path) -> tuple[dict, list[tuple[str, Path]]]:
+    """A flexible spacecraft (hub attitude plus the appendages key): the tip displacements,
+    the system's energy and inertial angular momentum, the nutation angle of H from body
+    axis 3 (:mod:`astrodyn.analysis.invariants`)."""
+    from astrodyn.analysis import figures as fg
+    from astrodyn.analysis.invariants import appendage_arrays, flexible_states, recorded_spacecraft
+    from astrodyn.attitude import flexible as fx
+    from astrodyn.rotation import dcm_from_quat
+
+    tr, app = body.attitude, body.appendages
+    arrays = appendage_arrays(app) if app is not None and len(app) else None
+    text = run.scenario.get("json")
+    sc = recorded_spacecraft(text, name) if isinstance(text, str) else None
+    if arrays is None or sc is None:
+        return {"appendages": {"note": "no appendages channel or no spacecraft in the metadata: hub attitude only"}}, []
+    eta, eta_dot, tip = arrays
+    _, ia, ie = np.intersect1d(tr.seq, app.seq, return_indices=True)
+    if eta.shape[1] != sc.n_elastic or not ia.size:
+        return {"appendages": {"note": "appendage states do not match the recorded spacecraft"}}, []
+    t, q, w = tr.t[ia], tr.q[ia], tr.w[ia]
+    states = flexible_states(sc, q, w, eta[ie], eta_dot[ie])
+    energy = fx.spacecraft_energy(sc, states)
+    _, h = fx.spacecraft_momentum(sc, states)
+    axis3 = dcm_from_quat(q)[:, 2, :]  # body axis 3 in inertial components: row 3 of C
+    hn = np.linalg.norm(h, axis=1)
+    nutation = np.degrees(np.arccos(np.clip(np.einsum("ij,ij->i", axis3, h) / np.where(hn > 0, hn, 1.0), -1.0, 1.0)))
+    h_drift = np.linalg.norm(h - h[0], axis=1) / (hn[0] or 1.0)
+    section = {"appendages": {
+        "appendages": int(tip.shape[1]),
+        "tip_max_m": [float(x) for x in np.max(np.linalg.norm(tip, axis=-1), axis=0)],
+        "energy_first_J": float(energy[0]), "energy_last_J": float(energy[-1]),
+        "nutation_first_deg": float(nutation[0]), "nutation_last_deg": float(nutation[-1]),
+        "damped": bool(sc.damped),
+    }}
+    figs = [("appendages", fg.appendage_tips(name, app.t, tip, Path(f"{stem}-appendages.png"))),
+            ("flexible-drift", fg.flexible_drift(name, t, energy / energy[0] if energy[0] else energy, h_drift, nutation,
+                                                 sc.damped, Path(f"{stem}-flexible-drift.png")))]
+    return section, figs
+
+
 def _conserved(scenario: dict, name: str, body) -> dict:
     """The section "conserved quantities": each invariant of the body's model
     (:mod:`astrodyn.analysis.invariants`), the same rows as ``astrodyn run``'s summary."""
-    from astrodyn.analysis.invariants import recorded_invariants
+    from astrodyn.analysis.invariants import appendage_arrays, recorded_invariants
 
     kinds = {}
     if body.orbit is not None and len(body.orbit) > 0:
         kinds["orbit"] = (body.orbit.model[-1], body.orbit.r, body.orbit.v)
     if body.attitude is not None and len(body.attitude) > 0:
         kinds["attitude"] = (body.attitude.model[-1], body.attitude.q, body.attitude.w)
+        arrays = appendage_arrays(body.appendages) if body.appendages is not None and len(body.appendages) else None
+        if arrays is not None:  # a flexible body: its states on both channels, step by step
+            _, ia, ie = np.intersect1d(body.attitude.seq, body.appendages.seq, return_indices=True)
+            kinds["attitude"] = (body.attitude.model[-1], body.attitude.q[ia], body.attitude.w[ia])
+            kinds["appendages"] = (arrays[0][ie], arrays[1][ie])
     if not kinds:
         return {}
     rows = recorded_invariants(scenario, name, **kinds)

@@ -16,7 +16,8 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 __all__ = ["time_axis", "orbit_3d", "ground_track", "elements", "orbit_drift", "crosscheck",
-           "euler_angles", "quaternion", "body_rates", "polhode", "attitude_drift", "top_angles"]
+           "euler_angles", "quaternion", "body_rates", "polhode", "attitude_drift", "top_angles", "appendage_tips",
+           "flexible_drift"]
 
 _DPI = 110
 plt.rcParams.update({"font.size": 9, "axes.grid": True, "grid.alpha": 0.3, "axes.formatter.useoffset": False})
@@ -215,3 +216,38 @@ def attitude_drift(name: str, t: np.ndarray, energy_drift, h_drift, path: Path) 
 def top_angles(name: str, t: np.ndarray, precession, nutation, path: Path) -> Path:
     return _stacked(t, [np.degrees(precession), np.degrees(nutation)], ["precession phi (deg)", "nutation theta (deg)"],
                     f"{name}: precession and nutation (3-1-3 angles, gravity along -Z)", path)
+
+
+def appendage_tips(name: str, t: np.ndarray, tip: np.ndarray, path: Path) -> Path:
+    """Each appendage's tip displacement from its undeformed position, |tip| in m (``tip``
+    ``(T, N, 3)``, body axes), one line per appendage in config order."""
+    ts, tl = time_axis(t)
+    fig, ax = plt.subplots(figsize=(7.5, 3.2), constrained_layout=True)
+    mags = np.linalg.norm(tip, axis=-1)
+    for k in range(mags.shape[1]):
+        ax.plot(ts, mags[:, k], lw=1.0, label=f"appendage {k}")
+    ax.set_ylabel("|tip displacement| (m)")
+    ax.set_xlabel(tl)
+    if mags.shape[1] <= 12:
+        ax.legend(fontsize=7, ncol=min(4, mags.shape[1]))
+    fig.suptitle(f"{name}: appendage tip displacements (body axes)")
+    return _save(fig, path)
+
+
+def flexible_drift(name: str, t: np.ndarray, energy_ratio, h_drift, nutation_deg, damped: bool, path: Path) -> Path:
+    """A flexible spacecraft's energy ``E / E0`` (falls when damped), its inertial angular
+    momentum drift ``|Hi - Hi0| / |Hi0|`` (log scale) and the angle between H and body axis
+    3 (deg: an energy sink turns a minor-axis spinner towards 90 deg, a flat spin)."""
+    ts, tl = time_axis(t)
+    fig, axes = plt.subplots(3, 1, figsize=(7.5, 6.0), sharex=True, constrained_layout=True)
+    axes[0].plot(ts, energy_ratio, lw=1.0)
+    axes[0].set_ylabel("E / E0, E = T + V (-)")
+    axes[1].plot(ts, h_drift, lw=1.0)
+    if np.any(np.asarray(h_drift) > 0):
+        axes[1].set_yscale("log", nonpositive="mask")
+    axes[1].set_ylabel("|Hi - Hi0| / |Hi0| (-)")
+    axes[2].plot(ts, nutation_deg, lw=1.0)
+    axes[2].set_ylabel("angle H to body axis 3 (deg)")
+    axes[-1].set_xlabel(tl)
+    fig.suptitle(f"{name}: energy ({'damped appendages' if damped else 'undamped: conserved'}), momentum, nutation")
+    return _save(fig, path)

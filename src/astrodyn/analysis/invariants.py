@@ -27,6 +27,12 @@ Attitude (H. Baruh, *Analytical Dynamics*, ch. 8-10; ``C(q)`` with ``v_body = C 
   ``L_z = (C^T I w)_z`` and, for a symmetric top (I1 = I2), the spin momentum
   ``H_3 = (I w)_3`` (N m s; Baruh sec. 10.3).
 * ``gravity_gradient``, ``user`` -- none beyond the unit norm of ``q``.
+* ``flexible`` (a hub with assumed-mode beams, :mod:`astrodyn.attitude.flexible`; the
+  state rebuilt from the attitude and appendages channels, the linear momentum zero) --
+  the inertial angular momentum of hub plus beams ``H_i`` (N m s) and, with undamped
+  beams, the energy ``T + V`` (J, kinetic plus strain); with damped beams the energy may
+  only fall, and the row is its largest rise above ``E_0`` (0 when it fell monotonically
+  from the first state).
 
 Every attitude row list ends with ``|q| - 1`` (absolute).  Drifts are
 ``max_k |x_k - x_0| / scale`` with ``scale = |x_0|`` (vectors: Euclidean norms), except
@@ -46,7 +52,8 @@ import numpy as np
 from astrodyn.orbit import zonal_potential
 from astrodyn.rotation import dcm_from_quat
 
-__all__ = ["Invariant", "orbit_invariants", "attitude_invariants", "recorded_invariants"]
+__all__ = ["Invariant", "orbit_invariants", "attitude_invariants", "flexible_invariants", "recorded_invariants",
+           "appendage_arrays", "recorded_spacecraft", "flexible_states"]
 
 
 @dataclass(frozen=True)
@@ -157,6 +164,43 @@ def attitude_invariants(model: str, q: np.ndarray, w: np.ndarray, inertia: np.nd
     return rows
 
 
+def flexible_states(spacecraft, q, w, eta, eta_dot) -> np.ndarray:
+    """Full state vectors ``(n, 13 + 2 n_elastic)`` of a flexible spacecraft from recorded
+    hub states and appendage coordinates (the linear momentum zero, as the service runs it;
+    the position of the hub's centre, which no invariant needs, at the origin)."""
+    from astrodyn.attitude import flexible as fx
+
+    return np.stack([fx.make_state(spacecraft, q=q[k], w=w[k], eta=eta[k], eta_dot=eta_dot[k]) for k in range(len(q))])
+
+
+def flexible_invariants(spacecraft, q: np.ndarray, w: np.ndarray, eta: np.ndarray, eta_dot: np.ndarray) -> list[Invariant]:
+    """The invariants of a flexible spacecraft (:class:`astrodyn.attitude.flexible.
+    FlexibleSpacecraft`) over hub states ``q`` (n, 4), ``w`` (n, 3, rad/s, body) and the
+    appendages' ``eta``, ``eta_dot`` (n, n_elastic; m, m/s): ``H_i``, and ``T + V`` (its
+    largest rise above the first value when any beam is damped)."""
+    from astrodyn.attitude import flexible as fx
+
+    q, w = np.asarray(q, dtype=np.float64), np.asarray(w, dtype=np.float64)
+    eta, eta_dot = np.asarray(eta, dtype=np.float64), np.asarray(eta_dot, dtype=np.float64)
+    n = q.shape[0]
+    if n == 0 or w.shape != (n, 3) or eta.shape != (n, spacecraft.n_elastic) or eta_dot.shape != eta.shape:
+        raise ValueError(f"q, w, eta, eta_dot: expected (n, 4), (n, 3), (n, {spacecraft.n_elastic}) x 2 with n >= 1, "
+                         f"got {q.shape}, {w.shape}, {eta.shape}, {eta_dot.shape}")
+    states = flexible_states(spacecraft, q, w, eta, eta_dot)
+    energy = fx.spacecraft_energy(spacecraft, states)
+    _, hi = fx.spacecraft_momentum(spacecraft, states)
+    e0, h0 = float(energy[0]), _norm0(hi)
+    rows = [Invariant("H_i (hub + appendages)", "N m s", h0, _drift(hi, h0), "|H0|")]
+    if spacecraft.damped:
+        rise = float(np.max(energy - e0)) / abs(e0) if e0 else 0.0
+        rows.append(Invariant("E = T + V: rise (damped)", "J", e0, max(rise, 0.0), "|E0|"))
+    else:
+        rows.append(Invariant("E = T + V", "J", e0, _drift(energy, abs(e0)), "|E0|"))
+    qn = np.linalg.norm(q, axis=-1)
+    rows.append(Invariant("|q| - 1", "-", float(qn[0] - 1.0), float(np.max(np.abs(qn - 1.0))), "absolute"))
+    return rows
+
+
 @functools.lru_cache(maxsize=8)
 def _recorded_constants(text: str) -> tuple[dict, dict[str, dict]]:
     """(central body, body name -> body) of a recording's config JSON, parsed once per
@@ -175,13 +219,14 @@ def _recorded_constants(text: str) -> tuple[dict, dict[str, dict]]:
 
 
 def recorded_invariants(scenario: dict, body: str, *, orbit: tuple | None = None,
-                        attitude: tuple | None = None) -> dict[str, list[Invariant]]:
+                        attitude: tuple | None = None, appendages: tuple | None = None) -> dict[str, list[Invariant]]:
     """The invariant rows of one recorded body, its models and constants taken from the
     recording's ``scenario`` metadata (``load(path).scenario``: the config as run).
 
-    ``orbit = (model, r, v)``, ``attitude = (model, q, w)`` (arrays as recorded); returns
-    ``{"orbit": [...], "attitude": [...]}`` for the kinds given.  Constants missing from
-    the metadata (a recording of another tool) leave only the rows that need none."""
+    ``orbit = (model, r, v)``, ``attitude = (model, q, w)`` (arrays as recorded), for a
+    flexible body ``appendages = (eta, eta_dot)`` (n, n_elastic) at the same samples;
+    returns ``{"orbit": [...], "attitude": [...]}`` for the kinds given.  Constants missing
+    from the metadata (a recording of another tool) leave only the rows that need none."""
     text = scenario.get("json") or "{}"
     central, bodies = _recorded_constants(text if isinstance(text, str) else "{}")
     bm = bodies.get(body, {})
@@ -212,6 +257,48 @@ def recorded_invariants(scenario: dict, body: str, *, orbit: tuple | None = None
                 h = sum((np.asarray(rt["axis"], dtype=np.float64).reshape(3) * float(rt["h"]) for rt in rotors), np.zeros(3))
         except (KeyError, TypeError, ValueError):
             h = None
-        out["attitude"] = attitude_invariants(model, q, w, inertia, rotor_momentum=h, mass=am.get("mass"),
-                                              cm=am.get("cm"), g=am.get("g"))
+        sc = recorded_spacecraft(text, body) if model == "flexible" and appendages is not None else None
+        if sc is not None and appendages[0].shape[-1] == sc.n_elastic:
+            out["attitude"] = flexible_invariants(sc, q, w, *appendages)
+        else:
+            out["attitude"] = attitude_invariants(model, q, w, inertia, rotor_momentum=h, mass=am.get("mass"),
+                                                  cm=am.get("cm"), g=am.get("g"))
     return out
+
+
+def appendage_arrays(track) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """``(eta, eta_dot, tip)`` of a recorded appendages track (``load(path).bodies[b].
+    appendages``): ``(n, n_elastic)`` each appendage's coordinates side by side (m, m/s)
+    and ``(n, N, 3)`` tip displacements (m); None when the rows do not share one layout."""
+    try:
+        eta = np.array([np.concatenate(row) for row in track.eta], dtype=np.float64)
+        eta_dot = np.array([np.concatenate(row) for row in track.eta_dot], dtype=np.float64)
+        tip = np.array([row for row in track.tip], dtype=np.float64)
+    except (TypeError, ValueError):
+        return None
+    if eta.ndim != 2 or eta_dot.shape != eta.shape or tip.ndim != 3 or tip.shape[0] != eta.shape[0]:
+        return None
+    return eta, eta_dot, tip
+
+
+@functools.lru_cache(maxsize=8)
+def recorded_spacecraft(text: str, body: str):
+    """The flexible spacecraft of ``body`` from a recording's config JSON (``load(path).
+    scenario["json"]``), or None when the metadata does not describe one (a recording of
+    another tool, a hostile file)."""
+    from astrodyn.scenario.appendages import Appendage, flexible_spacecraft
+
+    am = _recorded_constants(text)[1].get(body, {}).get("attitude")
+    try:
+        if len(am["appendages"]) > 32:  # astrodyn.scenario.appendages.MAX_APPENDAGES
+            return None
+        apps = tuple(Appendage(root=np.asarray(a["root"], dtype=np.float64).reshape(3),
+                               axis=np.asarray(a["axis"], dtype=np.float64).reshape(3),
+                               normal=np.asarray(a["normal"], dtype=np.float64).reshape(3),
+                               length=float(a["length"]), mass_per_length=float(a["mass_per_length"]),
+                               bending_stiffness=float(a["bending_stiffness"]), modes=int(a["modes"]),
+                               damping_ratio=float(a["damping_ratio"])) for a in am["appendages"])
+        return flexible_spacecraft(float(am["mass"]), np.asarray(am["inertia"], dtype=np.float64).reshape(3, 3), apps,
+                                   bool(am.get("stiffening", True)))
+    except (KeyError, TypeError, ValueError, IndexError, OverflowError):
+        return None

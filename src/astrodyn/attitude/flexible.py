@@ -594,6 +594,11 @@ class FlexibleSpacecraft:
         """Total mass (kg)."""
         return self.hub_mass + sum(d.m for d in self._data)
 
+    @property
+    def damped(self) -> bool:
+        """Any appendage has structural damping (then the energy falls; else it is conserved)."""
+        return any(bool(np.any(a.beam.C)) for a in self.appendages)
+
 
 def state_layout(sc: FlexibleSpacecraft) -> dict:
     """Slices of the state vector: ``q`` (Euler parameters), ``w`` (rad/s, body), ``r``

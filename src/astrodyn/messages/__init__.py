@@ -10,6 +10,7 @@ Every message lives under ``astrodyn/<scenario>/``::
     astrodyn/<scenario>/<body>/orbit        OrbitState      (one channel per body)
     astrodyn/<scenario>/<body>/attitude     AttitudeState
     astrodyn/<scenario>/<body>/crosscheck   CrossCheck      (``--cross-check`` mode)
+    astrodyn/<scenario>/<body>/appendages   AppendageState  (flexible spacecraft)
     astrodyn/<scenario>/@status             Status          (``serve``)
     astrodyn/<scenario>/@event              Event           (start, stop, restart, error ...)
     astrodyn/<scenario>/@control/<verb>     queryables      (status, pause, resume, rate, stop)
@@ -126,6 +127,7 @@ from astrodyn.messages.definitions import (
     SCHEMAS,
     STATUS_SCHEMA,
     ActuatorState,
+    AppendageState,
     AttitudeState,
     Command,
     CrossCheck,
@@ -162,6 +164,7 @@ from astrodyn.messages.keys import (
     STATE_KINDS,
     STATUS_STATES,
     alive_key,
+    appendages_key,
     attitude_key,
     batch_key,
     body_key,
@@ -183,6 +186,7 @@ __all__ = [
     "MessageError",
     "OrbitState",
     "AttitudeState",
+    "AppendageState",
     "CrossCheck",
     "Event",
     "Status",
@@ -216,6 +220,7 @@ __all__ = [
     "TachometerSample",
     "Tick",
     "StepDone",
+    "appendages_key",
     "crosscheck_key",
     "control_key",
     "schema_key",

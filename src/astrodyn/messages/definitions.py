@@ -81,6 +81,36 @@ class AttitudeState(Stamped, forbid_unknown_fields=True):
             raise ValueError(f"attitude.q: expected a unit quaternion (| |q| - 1 | <= {QUAT_NORM_TOL:g}), got |q| = {norm!r}")
 
 
+#: Most appendages of one flexible spacecraft, and assumed modes per bending plane.
+MAX_APPENDAGES = 32
+MAX_MODES = 24
+_PerAppendage = Annotated[list[float], Meta(min_length=2, max_length=2 * MAX_MODES)]
+
+
+class AppendageState(Stamped, forbid_unknown_fields=True):
+    """Elastic state of a flexible spacecraft's appendages at t (Baruh ch. 11; the model of
+    astrodyn.attitude.flexible): per appendage, in the order of the config, its assumed-mode
+    coordinates (the n modes of bending along its normal f, then the n along g = e x f, m),
+    their rates (m/s) and the displacement of its tip from the undeformed position (body
+    axes, m).  The hub's attitude is on the body's attitude key at the same seq."""
+
+    eta: Annotated[list[_PerAppendage], Meta(min_length=1, max_length=MAX_APPENDAGES, description=(
+        "per appendage: modal coordinates, bending along f (n values) then along g (n values), m"))]
+    eta_dot: Annotated[list[_PerAppendage], Meta(min_length=1, max_length=MAX_APPENDAGES, description=(
+        "per appendage: rates of the modal coordinates, same layout as eta, m/s"))]
+    tip: Annotated[list[_vec(3, "tip displacement, body axes, m")], Meta(
+        min_length=1, max_length=MAX_APPENDAGES, description="per appendage: tip displacement, body axes, m")]
+
+    def __post_init__(self) -> None:  # rules a JSON Schema cannot state
+        if not (len(self.eta) == len(self.eta_dot) == len(self.tip)):
+            raise ValueError(f"appendages: expected eta, eta_dot and tip for the same number of appendages, got "
+                             f"{len(self.eta)}, {len(self.eta_dot)}, {len(self.tip)}")
+        for k, (eta, eta_dot) in enumerate(zip(self.eta, self.eta_dot)):
+            if len(eta) % 2 or len(eta_dot) != len(eta):
+                raise ValueError(f"appendages.eta[{k}]: expected 2 n values (n modes in each bending plane) and as "
+                                 f"many in eta_dot[{k}], got {len(eta)} and {len(eta_dot)}")
+
+
 class CrossCheck(Stamped, forbid_unknown_fields=True):
     """astrodyn state minus the reference integrator's state for one body."""
 
@@ -210,6 +240,7 @@ MESSAGE_TYPES: dict[str, type[msgspec.Struct]] = {
     "orbit": OrbitState,
     "attitude": AttitudeState,
     "crosscheck": CrossCheck,
+    "appendages": AppendageState,
     "event": Event,
     "status": Status,
     "command": Command,

@@ -14,7 +14,8 @@ from astrodyn.messages.errors import MessageError
 #: Models a state message may name.  The scenario loader accepts the same names (plus
 #: "none" for attitude, which publishes nothing).
 ORBIT_MODELS: tuple[str, ...] = ("kepler", "j2", "zonal", "third_body", "actuated")
-ATTITUDE_MODELS: tuple[str, ...] = ("torque_free", "gravity_gradient", "gyrostat", "heavy_top", "user", "actuated")
+ATTITUDE_MODELS: tuple[str, ...] = ("torque_free", "gravity_gradient", "gyrostat", "heavy_top", "user", "flexible",
+                                    "actuated")
 #: The model name of a body moved by a closed loop (its actuators, commanded by controllers;
 #: docs/control.md).  A state message may name it; a config may not (the plan picks it).
 ACTUATED_MODEL = "actuated"
@@ -25,15 +26,17 @@ PREFIX = "astrodyn"
 NAME_PATTERN = r"[A-Za-z0-9_.-]{1,128}"
 #: a whole name (use ``.search``): ``^NAME_PATTERN$``
 NAME_FULL_RE = re.compile(f"^{NAME_PATTERN}$")
-#: Per-body kinds: states, then the closed loop's (docs/control.md): commands from
-#: controllers, actuator states and sensor samples from the plant.
-STATE_KINDS = ("orbit", "attitude", "crosscheck")
+#: Per-body kinds: states (one message per output step, ``seq`` = the step: orbit, attitude,
+#: the REBOUND cross-check and a flexible spacecraft's appendages), then the closed loop's
+#: (docs/control.md): commands from controllers, actuator states and sensor samples from
+#: the plant.
+STATE_KINDS = ("orbit", "attitude", "crosscheck", "appendages")
 CONTROL_KINDS = ("command", "actuators")
 SENSOR_KINDS = ("gyro", "star_tracker", "gps", "tachometer")
 _BODY_KINDS = STATE_KINDS + CONTROL_KINDS + SENSOR_KINDS
 #: Every message kind, one per message type (:data:`astrodyn.messages.MESSAGE_TYPES` has these keys).
-MESSAGE_KINDS = ("orbit", "attitude", "crosscheck", "event", "status", "command", "actuators", "gyro",
-                 "star_tracker", "gps", "tachometer", "tick", "done")
+MESSAGE_KINDS = ("orbit", "attitude", "crosscheck", "appendages", "event", "status", "command", "actuators",
+                 "gyro", "star_tracker", "gps", "tachometer", "tick", "done")
 _SPECIAL_WITH_NAME = ("@control", "@alive", "@batch", "@schema", "@done")
 _SPECIAL_PLAIN = {"@status": "status", "@event": "event", "@latest": "latest", "@tick": "tick"}
 
@@ -68,6 +71,11 @@ def attitude_key(scenario: str, body: str) -> str:
 def crosscheck_key(scenario: str, body: str) -> str:
     """``astrodyn/<scenario>/<body>/crosscheck``."""
     return f"{PREFIX}/{check_name(scenario, 'scenario')}/{check_name(body, 'body')}/crosscheck"
+
+
+def appendages_key(scenario: str, body: str) -> str:
+    """``astrodyn/<scenario>/<body>/appendages``: a flexible spacecraft's elastic state."""
+    return f"{PREFIX}/{check_name(scenario, 'scenario')}/{check_name(body, 'body')}/appendages"
 
 
 def latest_key(scenario: str) -> str:

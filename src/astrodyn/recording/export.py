@@ -138,7 +138,14 @@ def table(track: Track) -> dict[str, np.ndarray]:
     for name, a in track.fields.items():
         if name == "t":
             continue
-        if a.ndim == 2:
+        nested = _nested_numbers(a) if a.dtype == object else None
+        if nested is not None:  # per appendage a vector: eta_<k>_<i>, tip_<k>_x ...
+            a = nested.reshape(nested.shape[0], -1)
+            inner = [str(c) for c in _XYZ] if nested.shape[2] == 3 else [str(i) for i in range(nested.shape[2])]
+            names = [f"{name}_{k}_{c}" for k in range(nested.shape[1]) for c in inner]
+            for i, col in enumerate(names):
+                cols[col] = a[:, i]
+        elif a.ndim == 2:
             names = [f"{name}_{c}" for c in _XYZ] if a.shape[1] == 3 else [f"{name}_{i}" for i in range(a.shape[1])]
             for i, col in enumerate(names):
                 cols[col] = a[:, i]
@@ -149,6 +156,18 @@ def table(track: Track) -> dict[str, np.ndarray]:
     return cols
 
 
+def _nested_numbers(column: np.ndarray) -> np.ndarray | None:
+    """An object column whose every row is a list of equally long lists of numbers (the
+    appendages' ``eta``, ``eta_dot``, ``tip``) as a float array ``(rows, n, m)``; else None."""
+    if column.size == 0:
+        return None
+    try:
+        out = np.array(list(column), dtype=np.float64)
+    except (TypeError, ValueError):
+        return None
+    return out if out.ndim == 3 else None
+
+
 #: Unit of each message field as exported (SI; "1" for dimensionless, "" for text).
 FIELD_UNITS = {
     "t": "s", "seq": "1", "log_time_ns": "ns", "r": "m", "v": "m/s", "mu": "m^3/s^2", "q": "1", "w": "rad/s",
@@ -157,6 +176,8 @@ FIELD_UNITS = {
     # the closed loop's (docs/control.md): commands, actuator states, sensor samples
     "torque": "N m", "wheel_torque": "N m", "wheel_speed": "rad/s", "clipped": "", "thrust": "N", "mass": "kg",
     "dv_total": "m/s", "applied": "", "sender": "", "speeds": "rad/s", "step": "1", "commands": "1",
+    # a flexible spacecraft's appendages: modal coordinates, their rates, tip displacements
+    "eta": "m", "eta_dot": "m/s", "tip": "m",
 }
 
 
@@ -165,7 +186,9 @@ def column_units(columns) -> dict[str, str]:
     of foreign channels that astrodyn does not define."""
     out = {}
     for col in columns:
-        field = col if col in FIELD_UNITS else col.rsplit("_", 1)[0]
+        field = col
+        while field not in FIELD_UNITS and "_" in field:  # tip_0_x -> tip_0 -> tip
+            field = field.rsplit("_", 1)[0]
         out[col] = FIELD_UNITS.get(field, "?")
     return out
 

@@ -29,12 +29,12 @@ from pathlib import Path
 
 from mcap.writer import CompressionType, Writer
 
+from astrodyn.messages import STATE_KINDS
 from astrodyn.recording.stream import open_stream
 from astrodyn.recording.writer import RecordingError
 
 __all__ = ["MergeReport", "merge"]
 
-_STATE_KINDS = ("orbit", "attitude", "crosscheck")
 
 
 @dataclass
@@ -56,7 +56,7 @@ class MergeReport:
 
 def _seq_of(topic: str, sequence: int) -> int | None:
     kind = topic.rsplit("/", 1)[-1]
-    return sequence if kind in _STATE_KINDS and "/@" not in topic else None
+    return sequence if kind in STATE_KINDS and "/@" not in topic else None
 
 
 def merge(inputs: list[str | os.PathLike], out: str | os.PathLike, *, chunk_size: int = 1 << 20) -> MergeReport:

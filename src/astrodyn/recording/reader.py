@@ -100,12 +100,14 @@ class Track:
 
 @dataclass
 class BodyTracks:
-    """The tracks of one body: ``orbit``, ``attitude``, ``crosscheck`` (None if absent)."""
+    """The tracks of one body: ``orbit``, ``attitude``, ``crosscheck``, ``appendages``
+    (a flexible spacecraft's elastic state; None if absent)."""
 
     name: str
     orbit: Track | None = None
     attitude: Track | None = None
     crosscheck: Track | None = None
+    appendages: Track | None = None
 
 
 Body = BodyTracks
@@ -600,7 +602,7 @@ def _scan(path: str | os.PathLike, block_messages: int | None) -> Iterator[Run]:
         bodies: dict[str, BodyTracks] = {}
         gaps: dict[str, dict] = {}
         for topic, track in channels.items():
-            if track.kind in ("orbit", "attitude", "crosscheck"):
+            if track.kind in messages.STATE_KINDS:
                 _, body, kind = messages.parse_key(topic)
                 setattr(bodies.setdefault(body, BodyTracks(body)), kind, track)
             if track.kind == "event":

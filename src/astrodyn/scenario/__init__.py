@@ -29,7 +29,7 @@ A small example (``configs/demo.toml`` is a complete one)::
     q = [1, 0, 0, 0]                    # Euler parameters, scalar first (or euler + seq)
     w = ["0.1 deg/s", "0 deg/s", "0.5 deg/s"]
     inertia = ["1.2e8 kg m2", "1.0e8 kg m2", "2.0e8 kg m2"]   # principal moments, or 3x3
-    model = "torque_free"               # none | torque_free | gravity_gradient | gyrostat | heavy_top | user
+    model = "torque_free"               # none | torque_free | gravity_gradient | gyrostat | heavy_top | user | flexible
 
 Quantities are strings with a unit (``"7000 km"``, ``"51.6 deg"``, ``"0.1 rad/s"``,
 ``"10 Hz"``, ``"90 min"``, ``"3.986e14 m3/s2"``, ``"60 rpm"``) parsed by astropy and
@@ -61,7 +61,10 @@ Sections and keys (every other key is an error, with a "did you mean" suggestion
     triangle inequality), ``rotors`` (list of ``{axis, h}`` or ``{axis, speed, inertia}``),
     ``model`` (default torque_free, or gyrostat when rotors are given), ``mass``, ``cm``
     (distance fixed point to centre of mass along body axis 3) and ``g`` (default
-    9.80665 m/s^2) for heavy_top, ``torque`` (constant body-axis torque, N m) for user.
+    9.80665 m/s^2) for heavy_top, ``torque`` (constant body-axis torque, N m) for user;
+    for flexible (a hub with cantilevered beams) ``inertia`` and ``mass`` of the hub,
+    ``appendages`` (a list of beam tables), ``stiffening``, ``tolerance``
+    (:mod:`~astrodyn.scenario.appendages`).
 ``[walker]``
     Walker delta constellation ``i: t/p/f`` (Walker 1984, J. Br. Interplanet. Soc. 37,
     559): ``i``, ``t`` satellites in ``p`` equally spaced planes, phasing ``f`` (0..p-1),
@@ -86,7 +89,8 @@ zero) and which processes to start. ``astrodyn validate CONFIG`` prints it.
 Modules: this one reads the scene's sections into the :class:`Scenario` dataclasses;
 :mod:`~astrodyn.scenario.fields` reads single values (quantities with units, vectors,
 choices; errors naming the field), :mod:`~astrodyn.scenario.control` the closed loop's
-tables, :mod:`~astrodyn.scenario.planning` the plan; each re-exported here.
+tables, :mod:`~astrodyn.scenario.appendages` a flexible spacecraft's beams,
+:mod:`~astrodyn.scenario.planning` the plan; each re-exported here.
 
 The built-in central-body table takes the Earth, Moon and Sun from
 ``astrodyn.orbit.perturbations`` and adds Mars, Venus and Jupiter.
@@ -114,6 +118,12 @@ from astrodyn.orbit.perturbations import (
     MOON as _MOON,
     SUN as _SUN,
     CentralBody as GravityCentralBody,
+)
+from astrodyn.scenario.appendages import (
+    DEFAULT_TOLERANCE,
+    Appendage,
+    parse_appendages,
+    parse_tolerance,
 )
 from astrodyn.scenario.control import (
     Actuators,
@@ -283,7 +293,9 @@ class AttitudeSpec:
     columns are the principal axes in body components (identity when the inertia was
     given as principal moments or a diagonal tensor; then the moments keep the given
     order). Heavy top: ``mass`` kg, ``cm`` m along body axis 3 from the fixed point,
-    ``g`` m/s^2. User torque: ``torque`` N m, body axes.
+    ``g`` m/s^2. User torque: ``torque`` N m, body axes.  Flexible spacecraft
+    (:mod:`astrodyn.scenario.appendages`): ``inertia`` and ``mass`` are the hub's,
+    ``appendages`` its beams, ``stiffening`` and ``tolerance`` the model's options.
     """
 
     model: str
@@ -297,6 +309,9 @@ class AttitudeSpec:
     cm: float | None = None
     g: float | None = None
     torque: np.ndarray | None = None
+    appendages: tuple[Appendage, ...] = ()
+    stiffening: bool = True
+    tolerance: float | None = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -422,8 +437,9 @@ def _body_dict(b: Body, bp: BodyPlan) -> dict[str, Any]:
     if b.attitude is not None:
         a = b.attitude
         out["attitude"] = jsonable(
-            {f.name: getattr(a, f.name) for f in dataclasses.fields(a) if f.name != "rotors"}
+            {f.name: getattr(a, f.name) for f in dataclasses.fields(a) if f.name not in ("rotors", "appendages")}
             | {"rotors": [dataclasses.asdict(r) for r in a.rotors], "model_used": bp.attitude_model}
+            | ({"appendages": [dataclasses.asdict(x) for x in a.appendages]} if a.appendages else {})
         )
     return out
 
@@ -632,7 +648,8 @@ def _angle(ctx: Ctx, tb: Table, key: str, path: str) -> float:
     return x
 
 
-_ATT_KEYS = ("model", "q", "euler", "seq", "w", "inertia", "rotors", "mass", "cm", "g", "torque")
+_ATT_KEYS = ("model", "q", "euler", "seq", "w", "inertia", "rotors", "mass", "cm", "g", "torque", "appendages",
+             "stiffening", "tolerance")
 
 
 def _attitude(ctx: Ctx, data: Any, path: str) -> AttitudeSpec:
@@ -670,10 +687,26 @@ def _attitude(ctx: Ctx, data: Any, path: str) -> AttitudeSpec:
         raise ctx.error(f"{path}.inertia", f"the inertia (3 principal moments or a 3x3 tensor) for model {model}", "nothing", raw=True)
     inertia, moments, axes = _inertia(ctx, tb.get("inertia", [1.0, 1.0, 1.0]), f"{path}.inertia")
     # model-specific parameters
-    mass = cm = g = torque = None
-    for key, needs in (("mass", "heavy_top"), ("cm", "heavy_top"), ("g", "heavy_top"), ("torque", "user")):
-        if tb.has(key) and model != needs:
-            raise ctx.error(f"{path}.{key}", f'no {key} unless model = "{needs}"', tb.get(key))
+    mass = cm = g = torque = tolerance = None
+    appendages: tuple[Appendage, ...] = ()
+    stiffening = True
+    for key, needs in (("mass", ("heavy_top", "flexible")), ("cm", ("heavy_top",)), ("g", ("heavy_top",)),
+                       ("torque", ("user",)), ("appendages", ("flexible",)), ("stiffening", ("flexible",)),
+                       ("tolerance", ("flexible",))):
+        if tb.has(key) and model not in needs:
+            models = " or ".join(f'"{m}"' for m in needs)
+            raise ctx.error(f"{path}.{key}", f"no {key} unless model = {models}", tb.get(key))
+    if model == "flexible":
+        if not tb.has("mass"):
+            raise ctx.error(f"{path}.mass", "the hub's mass for model flexible", "nothing", raw=True)
+        mass = quantity(ctx, tb.get("mass"), "mass", f"{path}.mass")
+        check(ctx, mass > 0, f"{path}.mass", "mass > 0 (the hub's)", tb.get("mass"))
+        if not tb.has("appendages"):
+            raise ctx.error(f"{path}.appendages", "at least one [[...appendages]] table for model flexible "
+                            "(a hub without appendages is torque_free)", "none", raw=True)
+        appendages = parse_appendages(ctx, tb.get("appendages"), f"{path}.appendages")
+        stiffening = boolean(ctx, tb.get("stiffening", True), f"{path}.stiffening")
+        tolerance = parse_tolerance(ctx, tb.get("tolerance", DEFAULT_TOLERANCE), f"{path}.tolerance")
     if model == "heavy_top":
         mass = quantity(ctx, tb.get("mass"), "mass", f"{path}.mass")
         check(ctx, mass > 0, f"{path}.mass", "mass > 0", tb.get("mass"))
@@ -684,7 +717,8 @@ def _attitude(ctx: Ctx, data: Any, path: str) -> AttitudeSpec:
     if model == "user":
         torque = vector(ctx, tb.get("torque"), "torque", 3, f"{path}.torque")
     return AttitudeSpec(model=model, q0=q0, w0=w0, inertia=inertia, principal_moments=moments, principal_axes=axes,
-                        rotors=rotors, mass=mass, cm=cm, g=g, torque=torque)
+                        rotors=rotors, mass=mass, cm=cm, g=g, torque=torque, appendages=appendages,
+                        stiffening=stiffening, tolerance=tolerance)
 
 
 def _inertia(ctx: Ctx, value: Any, path: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -928,10 +962,11 @@ def load_dict(data: dict[str, Any], source: str = "<dict>", base_dir: str | Path
         raise ctx.error("bodies", "at least one body ([[bodies]] or [walker])", "none", raw=True)
     if len(bodies) > MAX_BODIES:
         raise ctx.error("bodies", f"at most {MAX_BODIES} bodies", f"{len(bodies)} bodies", raw=True)
-    channels = sum((b.orbit is not None) + (b.attitude is not None) + bool(b.cross_check) for b in bodies)
+    channels = sum((b.orbit is not None) + (b.attitude is not None) + bool(b.cross_check)
+                   + bool(b.attitude is not None and b.attitude.appendages) for b in bodies)
     if channels + EXTRA_CHANNELS > MAX_CHANNELS:
         raise ctx.error("bodies", f"at most {MAX_CHANNELS - EXTRA_CHANNELS} state channels in one recording (MCAP "
-                        f"channel ids are 16-bit; each body has one per orbit, attitude and cross-check)",
+                        f"channel ids are 16-bit; each body has one per orbit, attitude, cross-check and appendages)",
                         f"{channels} channels from {len(bodies)} bodies", raw=True)
     seen: dict[str, int] = {}
     for k, b in enumerate(bodies):

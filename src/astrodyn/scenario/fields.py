@@ -43,12 +43,14 @@ MAGNITUDE_MAX = {
     "acceleration": 1e7,  # m/s^2
     "torque": 1e15,  # N m
     "force": 1e12,  # N
+    "linear_density": 1e9,  # kg/m
+    "bending_stiffness": 1e15,  # N m^2: a 10 m steel tube 1 m across is ~1e10
     "angle": 1e9,  # rad (mean anomalies of many revolutions included)
     "dimensionless": 1e6,
 }
 #: Smallest non-zero magnitude of some kinds (below: a typo or a unit slip, and the
 #: dynamics lose their meaning in float64, e.g. an inertia of 1e-320 kg m^2 is subnormal).
-MAGNITUDE_MIN = {"inertia": 1e-15, "mass": 1e-15, "gm": 1e-3}
+MAGNITUDE_MIN = {"inertia": 1e-15, "mass": 1e-15, "gm": 1e-3, "linear_density": 1e-9, "bending_stiffness": 1e-9}
 
 class ScenarioError(ValueError):
     """A scenario that cannot be loaded; ``str`` is ``<file>: <key path>: expected ..., got ...``."""
@@ -176,6 +178,8 @@ QUANTITY_KINDS: dict[str, tuple[str, str]] = {
     "acceleration": ("m / s2", 'an acceleration, e.g. "9.81 m/s2"'),
     "torque": ("N m", 'a torque, e.g. "0.01 N m"'),
     "force": ("N", 'a force, e.g. "2 N"'),
+    "linear_density": ("kg / m", 'a mass per length, e.g. "0.3 kg/m"'),
+    "bending_stiffness": ("N m2", 'a bending stiffness EI, e.g. "34 N m2"'),
     "bytes": ("byte", 'a size, e.g. "256 MB"'),
     "dimensionless": ("", "a number"),
 }

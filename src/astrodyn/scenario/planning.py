@@ -48,11 +48,13 @@ class Plan:
     messages: int  #: every message the run records: states plus cross-checks
     warnings: tuple[str, ...] = ()
     crosscheck_messages: int = 0  #: of ``messages``: the REBOUND cross-check messages
+    appendage_messages: int = 0  #: of ``messages``: flexible spacecraft's appendage states
 
     @property
     def state_messages(self) -> int:
-        """Orbit and attitude state messages (``messages`` without the cross-checks)."""
-        return self.messages - self.crosscheck_messages
+        """Orbit and attitude state messages (``messages`` without the cross-checks and
+        the appendage states)."""
+        return self.messages - self.crosscheck_messages - self.appendage_messages
 
     @property
     def estimated_file_bytes(self) -> int:
@@ -62,6 +64,7 @@ class Plan:
     def text(self, max_bodies: int = 20) -> str:
         size = self.estimated_file_bytes
         xc = f" + {self.crosscheck_messages} cross-check messages" if self.crosscheck_messages else ""
+        xc += f" + {self.appendage_messages} appendage states" if self.appendage_messages else ""
         lines = [f"scenario {self.scenario}: {len(self.bodies)} bodies, {self.n_steps} output steps, "
                  f"{self.state_messages} state messages (orbit + attitude){xc}",
                  f"expected recording: about {_human_bytes(size)} ({BYTES_PER_STATE} bytes per state message after zstd)",
@@ -109,6 +112,7 @@ ATTITUDE_METHODS = {
     "gyrostat": "numerical splitting, gyrostat with rotors",
     "heavy_top": "numerical splitting, heavy top in uniform gravity",
     "user": "numerical splitting, constant body torque",
+    "flexible": "numerical, DOP853: rigid hub + assumed-mode beams with centrifugal stiffening (Baruh ch. 11)",
     ACTUATED_MODEL: "closed loop, step by step with the commands held (astrodyn.plant)",
 }
 
@@ -178,10 +182,12 @@ def plan(scenario: Scenario, cross_check_all: bool = False) -> Plan:
         processes.append("plant")
     processes.append("logger")
     n = scenario.n_steps
-    states = sum((bp.orbit_model is not None) + (bp.attitude_model is not None) for bp in out)
+    flexible = sum(bp.attitude_model == "flexible" for bp in out)  # + one appendages message per step
+    states = sum((bp.orbit_model is not None) + (bp.attitude_model is not None) for bp in out) + flexible
     checked = sum(bp.orbit_model is not None and (cross_check_all or b.cross_check) for bp, b in zip(out, scenario.bodies))
     return Plan(scenario=scenario.name, processes=tuple(processes), bodies=tuple(out), n_steps=n,
-                messages=n * (states + checked), warnings=tuple(warnings), crosscheck_messages=n * checked)
+                messages=n * (states + checked), warnings=tuple(warnings), crosscheck_messages=n * checked,
+                appendage_messages=n * flexible)
 
 
 def periapsis_radius(orbit: OrbitSpec, mu: float) -> float | None:

@@ -82,7 +82,7 @@ def publisher_of(rest: str) -> str | None:
         return tail
     if tail in ("orbit", "crosscheck") and head and not head.startswith("@"):
         return "orbit"
-    if tail == "attitude" and head and not head.startswith("@"):
+    if tail in ("attitude", "appendages") and head and not head.startswith("@"):
         return "attitude"
     return None
 
@@ -101,6 +101,8 @@ def scene_state_keys(scenario) -> set[str]:
             keys.add(messages.crosscheck_key(scenario.name, bp.name))
         if bp.attitude_model:
             keys.add(messages.attitude_key(scenario.name, bp.name))
+        if bp.attitude_model == "flexible":
+            keys.add(messages.appendages_key(scenario.name, bp.name))
     return keys
 
 
@@ -517,7 +519,7 @@ class Logger:
         if not channel.startswith(self.prefix):
             return None
         rest = channel[len(self.prefix):]
-        if rest.rpartition("/")[2] not in ("orbit", "attitude", "crosscheck"):
+        if rest.rpartition("/")[2] not in _STATE_KINDS:
             return None
         return self.publishers.get(channel) or publisher_of(rest)
 
@@ -720,7 +722,7 @@ def prefill(recorder: McapRecorder, path: str, scenario: str, steps: int) -> int
                 kind = messages.kind_of_key(m.topic)
             except messages.MessageError:
                 continue
-            if kind not in ("orbit", "attitude", "crosscheck"):
+            if kind not in _STATE_KINDS:
                 continue
             try:
                 msg = messages.decode(m.data, kind)

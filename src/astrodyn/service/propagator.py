@@ -147,6 +147,8 @@ def run_propagator(scenario: Scenario, session, opts: PropagatorOptions, log=pri
                              f"got {opts.start_step}")
         engine.resume(t_state, states)
     keys = [key_of(scenario.name, n) for n in names]
+    appendage_keys = {k: messages.appendages_key(scenario.name, names[k])
+                      for k, m in enumerate(models) if m == "flexible"} if opts.kind == "attitude" else {}
     groups: dict[str, np.ndarray] = {}
     for i, m in enumerate(models):
         groups.setdefault(m, []).append(i)  # type: ignore[arg-type]
@@ -177,8 +179,9 @@ def run_propagator(scenario: Scenario, session, opts: PropagatorOptions, log=pri
             bus.EventPublisher(session, scenario.name, opts.kind, signer=signer) as events, \
             session.declare_subscriber(command_key(scenario.name), _fifo()) as commands:
         batched = opts.batch == "always" or (opts.batch == "auto" and len(names) > BATCH_THRESHOLD)
+        extra_keys = [key for _, xkeys, _ in cross.scenes for key in xkeys] if cross is not None else []
         out = _StepOutput(opts.kind, engine, keys, groups, session, batch, signer, batched,
-                          [key for _, xkeys, _ in cross.scenes for key in xkeys] if cross is not None else [])
+                          extra_keys + list(appendage_keys.values()))
         bus.wait_for_process(session, scenario.name, "logger", timeout_s=opts.wait_logger_s)
         events.next_seq = int(opts.first_event_seq)
         events.emit("start", float(t_reached), json.dumps({"bodies": len(names), "first_step": start,
@@ -192,13 +195,19 @@ def run_propagator(scenario: Scenario, session, opts: PropagatorOptions, log=pri
                 tb = np.arange(k, min(stop_at, k + block), dtype=np.float64) / rate
                 a, b = engine.states(tb)
                 xc = cross.block(tb, a, b) if cross is not None else None
+                elastic = engine.appendage_states() if appendage_keys else {}
                 rows_done = 0
                 for j in range(tb.shape[0]):
                     t = float(tb[j])
                     pace_to(t, pacer, commands, stopping, heartbeat, commands_from, t_reached)
                     if stopping["why"]:
                         raise _Stop
-                    published += out.publish(t, k, a[j], b[j], None if xc is None else xc(j, k, t))
+                    step_extra = None if xc is None else xc(j, k, t)
+                    if elastic:  # each flexible body's appendages, on their own key at the same seq
+                        step_extra = (step_extra or []) + [
+                            (appendage_keys[i], messages.encode(st.message(j, t, k), "appendages"))
+                            for i, st in elastic.items()]
+                    published += out.publish(t, k, a[j], b[j], step_extra)
                     rows_done = j + 1
                     t_reached = t
                     k += 1
@@ -229,28 +238,30 @@ class _StepOutput:
     batch envelope (``batched``) or one signed put per key."""
 
     def __init__(self, kind: str, engine, keys: list[str], groups: dict[str, np.ndarray], session, batch,
-                 signer, batched: bool, crosscheck_keys: list[str]):
+                 signer, batched: bool, extra_keys: list[str]):
         self.kind, self.engine, self.keys, self.groups = kind, engine, keys, groups
         self.batch, self.signer = batch, signer
         self.group_keys = {m: messages.BatchKeys([keys[i] for i in ix]) for m, ix in groups.items()} if batched else None
         self.per_body = None if batched else {key: bus.declare_state_publisher(session, key)
-                                              for key in [*keys, *crosscheck_keys]}
+                                              for key in [*keys, *extra_keys]}
 
-    def publish(self, t: float, k: int, a: np.ndarray, b: np.ndarray, crosscheck: list | None) -> int:
-        """Step ``k`` at ``t`` with states ``a, b`` (rows per body); returns the messages sent."""
+    def publish(self, t: float, k: int, a: np.ndarray, b: np.ndarray, extra: list | None) -> int:
+        """Step ``k`` at ``t`` with states ``a, b`` (rows per body) and the ``extra``
+        ``(key, payload)`` pairs of the step (cross-checks, appendage states); returns the
+        messages sent."""
         if self.per_body is None:  # payloads written as envelope entries in the same compiled pass
             runs = [(_encode_group(self.kind, self.engine, t, k, model, a[ix], b[ix], self.group_keys[model]), len(ix))
                     for model, ix in self.groups.items()]
-            if crosscheck is not None:
-                runs.append(messages.frame_entries(crosscheck))
+            if extra is not None:
+                runs.append(messages.frame_entries(extra))
             self.batch.publish_envelope(messages.batch_envelope(runs))
             return sum(count for _, count in runs)
         items = []
         for model, ix in self.groups.items():
             payloads = _encode_group(self.kind, self.engine, t, k, model, a[ix], b[ix])
             items.extend(zip((self.keys[i] for i in ix), payloads))
-        if crosscheck is not None:
-            items.extend(crosscheck)
+        if extra is not None:
+            items.extend(extra)
         for key, payload in items:
             bus.signed_put(self.per_body[key], key, payload, self.signer)
         return len(items)

@@ -17,8 +17,10 @@ logger flushed).  ``seq`` of every state channel is the output step index
 
 Exact models (Kepler orbits, torque-free attitudes) need no state: they are evaluated
 from the initial state at each output time, so a resumed run reproduces them bit for bit.
-Integrated models (J2, zonal, third body, torqued attitudes) continue from the recorded
-state of the step before the resume point.
+Integrated models (J2, zonal, third body, torqued attitudes, flexible spacecraft) continue
+from the recorded state of the step before the resume point; a flexible body's state is its
+attitude and its appendages' coordinates (``eta``, ``eta_dot``) at that step, from its two
+channels (:func:`state_channels`).
 """
 
 from __future__ import annotations
@@ -34,7 +36,7 @@ import numpy as np
 from astrodyn import messages
 from astrodyn.scenario import Scenario, plan as make_plan
 
-__all__ = ["state_topics", "contiguous_steps", "last_common_step", "states_at", "write_state_file",
+__all__ = ["state_channels", "state_topics", "contiguous_steps", "last_common_step", "states_at", "write_state_file",
            "read_state_file", "propagator_resume_args", "resume_args", "tail_resume_point", "ResumeError"]
 
 
@@ -42,14 +44,32 @@ class ResumeError(ValueError):
     """A recording cannot be resumed from (the text says which file and why)."""
 
 
-def state_topics(scenario: Scenario, kind: str) -> dict[str, str]:
-    """body -> state key of the bodies whose ``kind`` ("orbit" | "attitude") is propagated."""
+#: message kind -> the fields of its messages that make a state to continue from
+_STATE_FIELDS = {"orbit": ("r", "v"), "attitude": ("q", "w"), "appendages": ("eta", "eta_dot")}
+
+
+def state_channels(scenario: Scenario, kind: str) -> list[tuple[str, str, str]]:
+    """``(body, message kind, key)`` of every state channel the ``kind`` ("orbit" |
+    "attitude") process publishes: each propagated body's orbit or attitude, and a
+    flexible body's appendages (its elastic state is part of the state to continue from)."""
     p = make_plan(scenario)
     if kind == "orbit":
-        return {b.name: messages.orbit_key(scenario.name, b.name) for b in p.bodies if b.orbit_model}
+        return [(b.name, "orbit", messages.orbit_key(scenario.name, b.name)) for b in p.bodies if b.orbit_model]
     if kind == "attitude":
-        return {b.name: messages.attitude_key(scenario.name, b.name) for b in p.bodies if b.attitude_model}
+        out = []
+        for b in p.bodies:
+            if b.attitude_model:
+                out.append((b.name, "attitude", messages.attitude_key(scenario.name, b.name)))
+            if b.attitude_model == "flexible":
+                out.append((b.name, "appendages", messages.appendages_key(scenario.name, b.name)))
+        return out
     raise ValueError(f"kind: expected 'orbit' or 'attitude', got {kind!r}")
+
+
+def state_topics(scenario: Scenario, kind: str) -> dict[str, str]:
+    """``body`` (``body/appendages`` for a flexible body's second channel) -> key of every
+    state channel of the ``kind`` process (:func:`state_channels`)."""
+    return {body if mk in ("orbit", "attitude") else f"{body}/{mk}": key for body, mk, key in state_channels(scenario, kind)}
 
 
 def _tracks(run, topics) -> list:
@@ -83,22 +103,29 @@ def states_at(run, scenario: Scenario, kind: str, step: int) -> tuple[float, dic
     """``(t, {body: state})`` of ``kind`` at output step ``step`` from the recording ``run``.
 
     Orbit states are ``{"r", "v"}`` (m, m/s), attitude states ``{"q", "w"}`` (scalar-first
-    Euler parameters, body rates rad/s), all as plain float lists.
+    Euler parameters, body rates rad/s), a flexible body's also ``{"eta", "eta_dot"}``
+    (one list per appendage), all as plain float lists.
     """
-    fields = ("r", "v") if kind == "orbit" else ("q", "w")
     out: dict[str, dict] = {}
     t = None
-    for body, topic in state_topics(scenario, kind).items():
+    for body, mk, topic in state_channels(scenario, kind):
         track = run.channels.get(topic)
         idx = np.flatnonzero(track.seq == step) if track is not None else np.zeros(0, int)
         if idx.size == 0:
-            raise ResumeError(f"{run.path}: no {kind} state of body {body!r} at step {step}")
+            raise ResumeError(f"{run.path}: no {mk} state of body {body!r} at step {step}")
         i = int(idx[0])
-        out[body] = {f: [float(x) for x in getattr(track, f)[i]] for f in fields}
+        out.setdefault(body, {}).update({f: _plain(getattr(track, f)[i]) for f in _STATE_FIELDS[mk]})
         t = float(track.t[i])
     if t is None:
         t = step / scenario.rate
     return t, out
+
+
+def _plain(value) -> list:
+    """A recorded vector (a row of floats, or per appendage a list of them) as plain lists."""
+    if len(value) and isinstance(value[0], (list, tuple, np.ndarray)):
+        return [[float(x) for x in row] for row in value]
+    return [float(x) for x in value]
 
 
 def write_state_file(path: str | os.PathLike, kind: str, step: int, t: float, states: dict) -> Path:
@@ -120,13 +147,20 @@ def read_state_file(path: str | os.PathLike, kind: str) -> tuple[int, float, dic
     if not (isinstance(step, int) and step >= 0 and isinstance(t, (int, float)) and math.isfinite(t)
             and isinstance(states, dict)):
         raise ResumeError(f"--resume-state {path}: expected step >= 0, finite t and a states object")
-    fields = ("r", "v") if kind == "orbit" else ("q", "w")
+    fields = _STATE_FIELDS[kind] if kind in _STATE_FIELDS else ()
+
+    def finite(xs, n=None) -> bool:
+        return (isinstance(xs, list) and (n is None or len(xs) == n)
+                and all(isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x) for x in xs))
+
     for body, st in states.items():
-        ok = isinstance(st, dict) and all(
-            isinstance(st.get(f), list) and len(st[f]) == (4 if f == "q" else 3)
-            and all(isinstance(x, (int, float)) and math.isfinite(x) for x in st[f]) for f in fields)
+        ok = isinstance(st, dict) and all(finite(st.get(f), 4 if f == "q" else 3) for f in fields)
+        if ok and kind == "attitude" and ("eta" in st or "eta_dot" in st):  # a flexible body's appendages
+            ok = all(isinstance(st.get(f), list) and st[f] and all(finite(row) for row in st[f])
+                     for f in _STATE_FIELDS["appendages"])
         if not ok:
-            raise ResumeError(f"--resume-state {path}: states.{body}: expected finite {' and '.join(fields)} vectors")
+            raise ResumeError(f"--resume-state {path}: states.{body}: expected finite {' and '.join(fields)} vectors"
+                              + (" (and eta, eta_dot lists of a flexible body)" if kind == "attitude" else ""))
     return step, float(t), states
 
 
@@ -159,24 +193,26 @@ def tail_resume_point(tails: dict[str, list[bytes]], scenario: Scenario, kind: s
     the states at it (as :func:`states_at`); None when a channel has no valid payload
     there or the channels share no step.  Payloads are validated (a hostile file's bytes
     are never a state to continue from)."""
-    fields = ("r", "v") if kind == "orbit" else ("q", "w")
-    decoded: dict[str, dict[int, dict]] = {}
-    for body, topic in state_topics(scenario, kind).items():
+    decoded: list[tuple[str, str, dict[int, dict]]] = []
+    for body, mk, topic in state_channels(scenario, kind):
         by_seq: dict[int, dict] = {}
         for data in tails.get(topic, ()):
             try:
-                msg = messages.decode(data, kind)
+                msg = messages.decode(data, mk)
             except messages.MessageError:
                 continue
             by_seq[msg["seq"]] = msg
         if not by_seq:
             return None
-        decoded[body] = by_seq
+        decoded.append((body, mk, by_seq))
     if not decoded:
         return None
-    common = set.intersection(*(set(s) for s in decoded.values()))
+    common = set.intersection(*(set(s) for _, _, s in decoded))
     if not common:
         return None
     step = max(common)
-    t = next(iter(decoded.values()))[step]["t"]
-    return step, t, {body: {f: list(s[step][f]) for f in fields} for body, s in decoded.items()}
+    t = decoded[0][2][step]["t"]
+    states: dict[str, dict] = {}
+    for body, mk, by_seq in decoded:
+        states.setdefault(body, {}).update({f: list(by_seq[step][f]) for f in _STATE_FIELDS[mk]})
+    return step, t, states

@@ -176,7 +176,7 @@ def part_number(path: str, out: str | os.PathLike) -> int:
 
 
 def _state_channel_of(scenario_name: str):
-    from astrodyn.messages import PREFIX, MessageError, kind_of_key
+    from astrodyn.messages import PREFIX, STATE_KINDS, MessageError, kind_of_key
 
     prefix = f"{PREFIX}/{scenario_name}/"
 
@@ -184,7 +184,7 @@ def _state_channel_of(scenario_name: str):
         if not topic.startswith(prefix):
             return False
         try:
-            return kind_of_key(topic) in ("orbit", "attitude", "crosscheck")
+            return kind_of_key(topic) in STATE_KINDS
         except MessageError:
             return False
     return wanted
