@@ -32,6 +32,9 @@ from astrodyn.scenario.appendages import flexible_spacecraft
 from astrodyn.service.resume import read_state_file, state_channels, states_at, tail_resume_point, write_state_file
 from astrodyn.simulate import AttitudeEngine
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _config_text import assert_config_error, edited
+
 ROOT = Path(__file__).resolve().parents[1]
 ASTRODYN = [sys.executable, "-m", "astrodyn"]
 
@@ -73,11 +76,8 @@ modes = 2
 assert abs(math.sqrt(0.81 + 0.09 + 0.09 + 0.01) - 1.0) < 1e-12
 
 
-def _scene(text: str = SCENE, **replace) -> str:
-    for old, new in replace.items():
-        assert old in text, old
-        text = text.replace(old, new, 1)
-    return text
+def _scene(**replace) -> str:
+    return edited(SCENE, **replace)
 
 
 # --------------------------------------------------------------------------- config
@@ -112,12 +112,8 @@ HOSTILE = [
 
 @pytest.mark.parametrize("old,new,field,says", HOSTILE, ids=[f"{h[2]}:{h[1][:24]}" for h in HOSTILE])
 def test_hostile_flexible_configs_name_the_field(old, new, field, says):
-    with pytest.raises(ScenarioError) as info:
-        loads(_scene(**{old: new}), source="x.toml")
-    text = str(info.value)
     path = field if field.startswith("attitude.") else f"attitude.{field}"
-    assert f"bodies[0] (sc).{path}" in text and says in text, text
-    assert "\n" not in text
+    assert_config_error(_scene(**{old: new}), f"bodies[0] (sc).{path}", says)
 
 
 def test_appendages_only_for_the_flexible_model_and_at_least_one():
@@ -139,8 +135,8 @@ def test_the_plan_counts_an_appendages_message_per_step():
     p = plan(scn)
     assert [bp.attitude_model for bp in p.bodies] == ["flexible"]
     assert p.processes == ("attitude", "logger")
-    assert p.n_steps == 61 and p.messages == 2 * 61 and p.appendage_messages == 61 and p.state_messages == 61
-    assert "61 appendage states" in p.text()
+    assert p.n_steps == 61 and p.messages == 2 * 61 and p.model_state_messages == 61 and p.state_messages == 61
+    assert "61 appendage / rolling states" in p.text()
 
 
 # --------------------------------------------------------------------------- the engine
@@ -158,8 +154,10 @@ def _engine_run(scn, blocks):
     qs, ws, etas, etads = [], [], [], []
     for tb in np.array_split(t, blocks):
         q, w = eng.states(tb)
-        st = eng.appendage_states()[0]
-        qs.append(q[:, 0]), ws.append(w[:, 0]), etas.append(st.eta), etads.append(st.eta_dot)
+        body = eng.extended_bodies()[0]
+        lay = body.layout
+        qs.append(q[:, 0]), ws.append(w[:, 0]), etas.append(body.last[:, lay["eta"]])
+        etads.append(body.last[:, lay["eta_dot"]])
     return t, np.concatenate(qs), np.concatenate(ws), np.concatenate(etas), np.concatenate(etads)
 
 
@@ -186,8 +184,7 @@ def test_engine_resumes_from_a_recorded_state():
     t, q, w, eta, eta_dot = _engine_run(scn, blocks=1)
     k = 30
     sc_eng = AttitudeEngine(scn)
-    st = sc_eng.appendage_states()
-    assert st == {}
+    assert sc_eng.extended_bodies()[0].last is None
     layout = fx.state_layout(_spacecraft(scn))
     columns = [slice(s.start - layout["eta"].start, s.stop - layout["eta"].start) for s in layout["eta_k"]]
     per, per_dot = [eta[k][c].tolist() for c in columns], [eta_dot[k][c].tolist() for c in columns]
@@ -195,8 +192,9 @@ def test_engine_resumes_from_a_recorded_state():
     assert taken == ["sc"]
     q2, w2 = sc_eng.states(t[k + 1:])
     assert np.max(np.abs(q2[:, 0] - q[k + 1:])) < 1e-8
-    assert np.max(np.abs(sc_eng.appendage_states()[0].eta - eta[k + 1:])) < 1e-8
-    with pytest.raises(ValueError, match=r"eta, eta_dot of flexible bodies\) of the integrated bodies \['sc'\]"):
+    lay = sc_eng.extended_bodies()[0].layout
+    assert np.max(np.abs(sc_eng.extended_bodies()[0].last[:, lay["eta"]] - eta[k + 1:])) < 1e-8
+    with pytest.raises(ValueError, match=r"rolling bodies\) of the integrated bodies \['sc'\]"):
         AttitudeEngine(scn).resume(1.0, {"sc": {"q": q[k].tolist(), "w": w[k].tolist()}})
 
 
@@ -243,7 +241,7 @@ def test_run_records_the_hub_and_the_appendages_of_every_step(recorded):
     # the summary's invariants come from the recording: H_i and T + V conserved
     rows = {r["name"]: r for r in result["bodies"][0]["attitude_invariants"]}
     assert rows["H_i (hub + appendages)"]["drift"] < 1e-8 and rows["E = T + V"]["drift"] < 1e-8
-    assert "+ 61 appendage states" in stdout and "H_i (hub + appendages)" in stdout
+    assert "+ 61 appendage / rolling states" in stdout and "H_i (hub + appendages)" in stdout
 
 
 @pytest.mark.network
@@ -304,7 +302,7 @@ def test_resume_point_and_state_file_carry_the_elastic_state(recorded, tmp_path)
     bad = json.loads(path.read_text())
     bad["states"]["sc"]["eta"][1] = [1.0, "x", 0.0, 0.0]
     path.write_text(json.dumps(bad))
-    with pytest.raises(ValueError, match=r"states\.sc: expected finite q and w vectors \(and eta, eta_dot"):
+    with pytest.raises(ValueError, match=r"states\.sc: expected finite q and w vectors \(and the finite fields"):
         read_state_file(path, "attitude")
 
 

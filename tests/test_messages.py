@@ -181,7 +181,7 @@ ERRORS = [
     ("attitude", "q", [1.0, 0.0, 0.0], "attitude.q: expected array of 4 finite numbers, got [1.0, 0.0, 0.0]"),
     ("attitude", "q", [2.0, 0.0, 0.0, 0.0], "attitude.q: expected a unit quaternion (| |q| - 1 | <= 1e-09), got |q| = 2.0"),
     ("attitude", "w", [0.0, 0.0], "attitude.w: expected array of 3 finite numbers, got [0.0, 0.0]"),
-    ("attitude", "model", "none", 'attitude.model: expected one of torque_free, gravity_gradient, gyrostat, heavy_top, user, flexible, actuated, got "none"'),
+    ("attitude", "model", "none", 'attitude.model: expected one of torque_free, gravity_gradient, gyrostat, heavy_top, user, flexible, rolling_disk, actuated, got "none"'),
     ("crosscheck", "dr_norm", -1.0, "crosscheck.dr_norm: expected >= 0.0, got -1.0"),
     ("crosscheck", "dv_norm", "0", 'crosscheck.dv_norm: expected a finite number, got "0"'),
     ("crosscheck", "dv", [0, 0], "crosscheck.dv: expected array of 3 finite numbers, got [0, 0]"),

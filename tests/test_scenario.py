@@ -472,7 +472,7 @@ ERROR_CASES = [
     ("bodies.2.attitude.seq", "324", 'bodies[2] (c).attitude.seq: expected one of 121, 123, 131, 132, 212, 213, 231, 232, 312, 313, 321, 323 (did you mean "323"?), got "324"'),
     ("bodies.2.attitude.seq", DELETE, "bodies[2] (c).attitude.seq: expected a rotation sequence with euler, one of 121, 123, 131, 132, 212, 213, 231, 232, 312, 313, 321, 323, got nothing"),
     ("bodies.0.attitude.w", ["1 rad", 0, 0], 'bodies[0] (a).attitude.w[0]: expected an angular velocity, e.g. "0.1 rad/s", got "1 rad"'),
-    ("bodies.0.attitude.model", "torquefree", 'bodies[0] (a).attitude.model: expected one of none, torque_free, gravity_gradient, gyrostat, heavy_top, user, flexible (did you mean "torque_free"?), got "torquefree"'),
+    ("bodies.0.attitude.model", "torquefree", 'bodies[0] (a).attitude.model: expected one of none, torque_free, gravity_gradient, gyrostat, heavy_top, user, flexible, rolling_disk (did you mean "torque_free"?), got "torquefree"'),
     ("bodies.0.attitude.mass", "1 kg", 'bodies[0] (a).attitude.mass: expected no mass unless model = "heavy_top" or "flexible", got "1 kg"'),
     ("bodies.0.attitude.rotors", [{"axis": [0, 0, 0], "h": 1.0}], "bodies[0] (a).attitude.rotors[0].axis: expected a non-zero axis (body components; normalized on load), got [0, 0, 0]"),
     ("bodies.0.attitude.rotors", [{"axis": [0, 0, 1], "h": 1.0, "speed": 2.0}], "bodies[0] (a).attitude.rotors[0].h: expected either h or speed + inertia, not both, got 1.0"),

@@ -20,9 +20,11 @@ exactly what :func:`simulate` returns for the same scenario.
   the same :class:`OrbitEngine` code the orbit process publishes from, evaluated at the
   integrator's own kick times (between output instants too), so the attitude sees exactly
   the published orbit.  ``flexible`` bodies (a hub with assumed-mode beams,
-  :mod:`astrodyn.attitude.flexible`) are integrated with DOP853 block after block
-  (:class:`FlexibleBody`); their appendages' elastic state of the last block is
-  :meth:`AttitudeEngine.appendage_states`.
+  :mod:`astrodyn.attitude.flexible`) and ``rolling_disk`` bodies
+  (:mod:`astrodyn.attitude.rolling_disk`) integrate their full state with DOP853 block
+  after block (:class:`ExtendedBody`: :class:`FlexibleBody`, :class:`RollingBody`) and
+  publish what ``(q, w)`` cannot hold on their own key
+  (:meth:`AttitudeEngine.extended_bodies`).
 
 Third bodies (``model = "third_body"``) move on the two-body conic fitted to their
 geocentric (central-body-centric) state at the epoch, taken from astropy's built-in
@@ -46,8 +48,8 @@ from astrodyn.rotation import dcm_from_quat, quat_from_dcm
 from astrodyn.scenario import CENTRAL_BODIES, Plan, Scenario, plan as make_plan
 from astrodyn.scenario.ephemeris import third_body_state
 
-__all__ = ["OrbitEngine", "AttitudeEngine", "FlexibleBody", "AppendageStates", "SimulationResult", "simulate",
-           "third_body_state"]
+__all__ = ["OrbitEngine", "AttitudeEngine", "ExtendedBody", "FlexibleBody", "RollingBody", "ModelEnded", "SimulationResult",
+           "simulate", "third_body_state"]
 
 
 # --------------------------------------------------------------------------- orbits
@@ -190,71 +192,154 @@ class OrbitEngine:
 # --------------------------------------------------------------------------- attitudes
 
 
-@dataclass
-class AppendageStates:
-    """The appendages' elastic state of one flexible body at a block of output times:
-    ``eta`` and ``eta_dot`` ``(T, n_elastic)`` (m, m/s; the layout of
-    :func:`astrodyn.attitude.flexible.state_layout`), ``tip`` ``(T, N, 3)`` (m, body axes),
-    ``slices`` the columns of each appendage."""
+class ModelEnded(Exception):
+    """A body's model cannot go on (a rolling disk fell flat: its equations are singular
+    there and it has no impact model).  ``rows``: the output times of the block that were
+    computed (``q``, ``w`` hold those rows for every body); ``str()`` names the body and
+    the time."""
 
-    eta: np.ndarray
-    eta_dot: np.ndarray
-    tip: np.ndarray
-    slices: list[slice]
+    def __init__(self, message: str, rows: int, q: np.ndarray, w: np.ndarray):
+        super().__init__(message)
+        self.rows, self.q, self.w = rows, q, w
+
+
+class ExtendedBody:
+    """A body whose state does not fit ``(q, w)`` alone (flexible spacecraft, rolling disk):
+    it integrates its full state vector block after block with DOP853 at its config's
+    ``tolerance`` (absolute: 1e-3 of it), publishes ``(q, w)`` on its attitude key and the
+    rest on its own key, kind :attr:`kind` (:data:`astrodyn.messages.MODEL_STATE_KINDS`),
+    at the same seq.  Subclasses give the integration (:meth:`_propagate`), the message of
+    one sample (:meth:`message`), the hub's or disk's ``q, w`` of states
+    (:meth:`attitude_of`) and the state vector from a recorded one (:meth:`state_from`)."""
+
+    kind = ""
+    #: the fields of the kind's message a resume needs (besides the attitude's q, w)
+    resume_fields: tuple[str, ...] = ()
+
+    def __init__(self, y0: np.ndarray, rtol: float):
+        self.y, self.rtol = np.asarray(y0, dtype=np.float64), float(rtol)
+        self.t0 = 0.0
+        self.first = True  # the first block includes t0 itself
+        self.last: np.ndarray | None = None  # full states at the last block's times
+        self.nfev = 0
+        self.ended: str | None = None  # why the model cannot go on (then states() returned fewer rows)
+
+    def resume(self, t: float, q: np.ndarray, w: np.ndarray, recorded: dict) -> None:
+        """Continue from a recorded state at ``t`` (s): the attitude's ``q``, ``w`` and the
+        fields :attr:`resume_fields` of the body's own message."""
+        self.y = self.state_from(q, w, recorded)
+        self.t0, self.first = float(t), False
+
+    def states(self, times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(q, w)`` at ``times`` (increasing, after the last block's end); the full states
+        go to :attr:`last`.  Fewer rows than ``times`` when the model ended inside the
+        block (:attr:`ended` says why)."""
+        rel = np.asarray(times, dtype=np.float64) - self.t0
+        if rel[0] < 0 or (rel[0] == 0 and not self.first):
+            raise ValueError(f"times: a {self.kind} body continues forward only, after t = {self.t0} s; got {times[0]} s")
+        prepend = rel[0] > 0  # the integration starts at the state's own time
+        grid = np.concatenate([[0.0], rel]) if prepend else rel
+        y, info = self._propagate(grid)
+        if "flat_at" in info:
+            self.ended = (f"the rolling disk lies flat (|lean| = 90 deg) at t = {self.t0 + info['flat_at']:.9g} s: "
+                          "the model (no impact with the plane) ends there")
+        if prepend:
+            y = y[1:]
+        self.nfev += int(info["nfev"])
+        if y.shape[0] == 0:  # ended before the block's first time
+            return self.attitude_of(np.zeros((0, self.y.size)))
+        self.first, self.t0, self.y, self.last = False, float(times[-1]), y[-1].copy(), y
+        return self.attitude_of(y)
+
+    def _propagate(self, grid: np.ndarray) -> tuple[np.ndarray, dict]:
+        raise NotImplementedError
+
+    def attitude_of(self, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        raise NotImplementedError
+
+    def state_from(self, q: np.ndarray, w: np.ndarray, recorded: dict) -> np.ndarray:
+        raise NotImplementedError
 
     def message(self, j: int, t: float, seq: int) -> dict:
-        """The ``AppendageState`` message of row ``j`` (docs/architecture.md, section 5)."""
-        eta, eta_dot = self.eta[j].tolist(), self.eta_dot[j].tolist()
-        rel = [slice(s.start - self.slices[0].start, s.stop - self.slices[0].start) for s in self.slices]
-        return {"t": t, "seq": seq, "eta": [eta[s] for s in rel], "eta_dot": [eta_dot[s] for s in rel],
-                "tip": self.tip[j].tolist()}
+        """The message of row ``j`` of :attr:`last` on the body's own key (docs/architecture.md, section 5)."""
+        raise NotImplementedError
 
 
-class FlexibleBody:
-    """A flexible spacecraft of the scene (``model = "flexible"``), integrated block after
-    block from its full state (:func:`astrodyn.attitude.flexible.propagate_spacecraft`,
-    DOP853 at the config's ``tolerance``, absolute tolerance 1e-3 of it).  The linear
-    momentum is zero (the system's mass centre at rest, :func:`make_state`); the hub's
-    attitude and rates are in the config's body axes."""
+class FlexibleBody(ExtendedBody):
+    """A flexible spacecraft (``model = "flexible"``): :func:`astrodyn.attitude.flexible.
+    propagate_spacecraft` on the hub's attitude, rates, the centre's motion and the
+    appendages' modal coordinates.  The linear momentum is zero (the system's mass centre
+    at rest, :func:`~astrodyn.attitude.flexible.make_state`); the hub's attitude and rates
+    are in the config's body axes.  Its own key carries :class:`astrodyn.messages.AppendageState`."""
+
+    kind = "appendages"
+    resume_fields = ("eta", "eta_dot")
 
     def __init__(self, spacecraft, q0: np.ndarray, w0: np.ndarray, rtol: float):
         from astrodyn.attitude import flexible as fx
 
-        self.sc, self.rtol = spacecraft, float(rtol)
+        self.sc = spacecraft
         self.layout = fx.state_layout(spacecraft)
-        self.t0 = 0.0
-        self.y = fx.make_state(spacecraft, q=q0, w=w0)
-        self.first = True  # the first block includes t0 itself
-        self.last: AppendageStates | None = None
-        self.nfev = 0
+        super().__init__(fx.make_state(spacecraft, q=q0, w=w0), rtol)
+        self._tip: tuple[int, np.ndarray] | None = None
 
-    def resume(self, t: float, q, w, eta, eta_dot) -> None:
-        """Continue from a recorded state at ``t`` (s): hub ``q``, ``w`` and the appendages'
-        ``eta``, ``eta_dot`` (flat, :func:`state_layout` order); v from zero momentum."""
+    def _propagate(self, grid):
         from astrodyn.attitude import flexible as fx
 
-        self.y = fx.make_state(self.sc, q=q, w=w, eta=eta, eta_dot=eta_dot)
-        self.t0, self.first = float(t), False
+        self._tip = None
+        return fx.propagate_spacecraft(self.sc, self.y, grid, rtol=self.rtol, atol=1e-3 * self.rtol)
 
-    def states(self, times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Hub ``(q, w)`` at ``times`` (increasing, from the last block's end); the elastic
-        state goes to :attr:`last`."""
+    def attitude_of(self, y):
+        return y[:, self.layout["q"]], y[:, self.layout["w"]]
+
+    def state_from(self, q, w, recorded):
         from astrodyn.attitude import flexible as fx
 
-        rel = np.asarray(times, dtype=np.float64) - self.t0
-        if rel[0] < 0 or (rel[0] == 0 and not self.first):
-            raise ValueError(f"times: a flexible body continues forward only, after t = {self.t0} s; got {times[0]} s")
-        prepend = rel[0] > 0  # the integration starts at the state's own time
-        grid = np.concatenate([[0.0], rel]) if prepend else rel
-        y, info = fx.propagate_spacecraft(self.sc, self.y, grid, rtol=self.rtol, atol=1e-3 * self.rtol)
-        if prepend:
-            y = y[1:]
-        self.nfev += int(info["nfev"])
-        self.first, self.t0, self.y = False, float(times[-1]), y[-1].copy()
-        lay = self.layout
-        self.last = AppendageStates(y[:, lay["eta"]], y[:, lay["eta_dot"]], fx.tip_deflections(self.sc, y),
-                                    list(lay["eta_k"]))
-        return y[:, lay["q"]], y[:, lay["w"]]
+        flat = [np.concatenate([np.asarray(x, dtype=np.float64) for x in recorded[f]]) for f in self.resume_fields]
+        return fx.make_state(self.sc, q=q, w=w, eta=flat[0], eta_dot=flat[1])
+
+    def message(self, j, t, seq):
+        from astrodyn.attitude import flexible as fx
+
+        if self._tip is None:  # tip displacements of the whole block, once
+            self._tip = fx.tip_deflections(self.sc, self.last)
+        lay, y = self.layout, self.last[j]
+        eta, eta_dot = [y[s].tolist() for s in lay["eta_k"]], [y[s].tolist() for s in lay["eta_dot_k"]]
+        return {"t": t, "seq": seq, "eta": eta, "eta_dot": eta_dot, "tip": self._tip[j].tolist()}
+
+
+class RollingBody(ExtendedBody):
+    """A disk rolling on the plane z = 0 (``model = "rolling_disk"``):
+    :func:`astrodyn.attitude.rolling_disk.propagate_rolling_disk` on ``(x, y, psi, theta,
+    phi, u1, u2, u3)``.  Its own key carries :class:`astrodyn.messages.RollingState`."""
+
+    kind = "rolling"
+    resume_fields = ("contact", "heading", "lean", "spin_angle", "u")
+
+    def __init__(self, disk, y0: np.ndarray, rtol: float):
+        self.disk = disk
+        super().__init__(y0, rtol)
+
+    def _propagate(self, grid):
+        from astrodyn.attitude.rolling_disk import propagate_rolling_disk
+
+        return propagate_rolling_disk(self.disk, self.y, grid, rtol=self.rtol, atol=1e-3 * self.rtol)
+
+    def attitude_of(self, y):
+        from astrodyn.attitude.rolling_disk import disk_body_rates, disk_quaternion
+
+        return disk_quaternion(y), disk_body_rates(y)
+
+    def state_from(self, q, w, recorded):
+        r = recorded
+        return np.array([*r["contact"], r["heading"], r["lean"], r["spin_angle"], *r["u"]], dtype=np.float64)
+
+    def message(self, j, t, seq):
+        from astrodyn.attitude.rolling_disk import center_position
+
+        y = self.last[j]
+        return {"t": t, "seq": seq, "contact": y[0:2].tolist(), "center": center_position(self.disk, y).tolist(),
+                "heading": float(y[2]), "lean": float(y[3]), "spin_angle": float(y[4]), "u": y[5:8].tolist()}
 
 
 @dataclass
@@ -269,7 +354,7 @@ class _AttitudeBody:
     torque: object = None
     top: object = None  # HeavyTop for a symmetric heavy top (its own exact-free-flow splitting)
     rotor_momentum: np.ndarray | None = None
-    flexible: FlexibleBody | None = None
+    extended: ExtendedBody | None = None  # flexible, rolling_disk: integrates its own full state
     error: float = 0.0
     steps: int = 0
 
@@ -336,38 +421,42 @@ class AttitudeEngine:
 
                 sc = flexible_spacecraft(a.mass, a.inertia, a.appendages, a.stiffening)
                 body.axes, body.q0, body.w0 = np.eye(3), np.asarray(a.q0, dtype=np.float64), np.asarray(a.w0, dtype=np.float64)
-                body.flexible = FlexibleBody(sc, body.q0, body.w0, a.tolerance)
+                body.extended = FlexibleBody(sc, body.q0, body.w0, a.tolerance)
+            elif model == "rolling_disk":
+                from astrodyn.scenario.rolling import rolling_disk, rolling_state0
+
+                body.axes = np.eye(3)
+                body.extended = RollingBody(rolling_disk(a.rolling), rolling_state0(a.rolling), a.tolerance)
             self.bodies.append(body)
         self.names = [b.name for b in self.bodies]
         self.models = [b.model for b in self.bodies]
 
-    def appendage_states(self) -> dict[int, AppendageStates]:
-        """Body index -> the elastic state of its appendages at the times of the last
-        :meth:`states` call, for the flexible bodies."""
-        return {k: b.flexible.last for k, b in enumerate(self.bodies) if b.flexible is not None and b.flexible.last}
+    def extended_bodies(self) -> dict[int, ExtendedBody]:
+        """Body index -> the :class:`ExtendedBody` of the flexible and rolling bodies (their
+        :attr:`~ExtendedBody.last` states are those of the last :meth:`states` call; their
+        :meth:`~ExtendedBody.message` the messages on their own key)."""
+        return {k: b.extended for k, b in enumerate(self.bodies) if b.extended is not None}
 
     def resume(self, t: float, states: dict[str, dict]) -> list[str]:
         """Continue the torqued (integrated) bodies from recorded states at time ``t`` (s).
 
         ``states`` maps body name -> ``{"q": (4,), "w": (3,)}`` in the config's body axes
-        (as published; a flexible body also ``"eta"``, ``"eta_dot"``: one list per
-        appendage, as on its appendages key).  Torque-free bodies need nothing (exact from
-        the initial state); every integrated body must be given (ValueError naming the
-        missing ones).  Returns the names of the bodies that took a state.
+        (as published; a flexible or rolling body also the fields of its own key that its
+        :class:`ExtendedBody` names, e.g. ``"eta"``, ``"eta_dot"``).  Torque-free bodies
+        need nothing (exact from the initial state); every integrated body must be given
+        (ValueError naming the missing ones).  Returns the names of the bodies that took a state.
         """
         integrated = [b for b in self.bodies if b.model != "torque_free"]
         missing = [b.name for b in integrated if b.name not in states
-                   or (b.flexible is not None and not {"eta", "eta_dot"} <= set(states[b.name]))]
+                   or (b.extended is not None and not set(b.extended.resume_fields) <= set(states[b.name]))]
         if missing:
-            raise ValueError(f"resume state: expected q and w (and eta, eta_dot of flexible bodies) of the integrated "
-                             f"bodies {missing} at t = {t} s")
+            raise ValueError(f"resume state: expected q and w (and the fields of their own key for flexible and "
+                             f"rolling bodies) of the integrated bodies {missing} at t = {t} s")
         for b in integrated:
             q = np.asarray(states[b.name]["q"], dtype=np.float64)
             w = np.asarray(states[b.name]["w"], dtype=np.float64)
-            if b.flexible is not None:
-                st = states[b.name]
-                b.flexible.resume(t, q, w, np.concatenate([np.asarray(x, dtype=np.float64) for x in st["eta"]]),
-                                  np.concatenate([np.asarray(x, dtype=np.float64) for x in st["eta_dot"]]))
+            if b.extended is not None:
+                b.extended.resume(t, q, w, states[b.name])
                 continue
             c_pb = b.axes.T  # body -> principal components
             b.t0 = float(t)
@@ -384,6 +473,7 @@ class AttitudeEngine:
         T, N = times.shape[0], len(self.bodies)
         q = np.empty((T, N, 4))
         w = np.empty((T, N, 3))
+        ended = (T, "")  # (rows computed, why) when a body's model ends inside the block
         free = [k for k, b in enumerate(self.bodies) if b.model == "torque_free"]
         if free and T:
             # one batched call for every torque-free body (exact from its initial state); their
@@ -404,8 +494,12 @@ class AttitudeEngine:
             else:
                 if times[0] < b.t0:
                     raise ValueError(f"times: torqued attitudes continue forward only; got {times[0]} s before {b.t0} s")
-                if b.flexible is not None:
-                    q[:, k], w[:, k] = b.flexible.states(times)
+                if b.extended is not None:
+                    qe, we = b.extended.states(times)
+                    rows = qe.shape[0]
+                    q[:rows, k], w[:rows, k] = qe, we
+                    if rows < T:
+                        ended = min(ended, (rows, f"{b.name}: {b.extended.ended}"))
                     continue
                 if b.top is not None:
                     wp, qp, info = b.top.simulate(b.w0, b.q0, times - b.t0, method="top4", step=self.step,
@@ -423,6 +517,8 @@ class AttitudeEngine:
             else:
                 q[:, k] = quat_from_dcm(b.axes @ dcm_from_quat(qp))
                 w[:, k] = wp @ b.axes.T
+        if ended[0] < T:
+            raise ModelEnded(ended[1], ended[0], q[: ended[0]], w[: ended[0]])
         return q, w
 
 

@@ -13,7 +13,8 @@ Writes into ``DIR`` (default ``<file>-report``):
   (Earth-centred runs), ``elements``, ``orbit-drift``, ``crosscheck`` (if recorded);
   with an attitude: ``euler``, ``quaternion``, ``rates``, and when the inertia is in the
   scenario metadata ``polhode`` and ``attitude-drift``; for heavy tops ``top-angles``;
-  for flexible spacecraft ``appendages`` and ``flexible-drift`` instead of the rigid two.
+  for flexible spacecraft ``appendages`` and ``flexible-drift`` instead of the rigid two,
+  for rolling disks ``contact-path`` and ``rolling-angles``.
 
 Definitions of every number: :mod:`astrodyn.analysis.metrics`.  A cut or damaged file is
 analysed up to what is complete and the report says so at the top.
@@ -51,6 +52,8 @@ FIGURES = {
     "top-angles": "precession and nutation",
     "appendages": "tip displacement of each flexible appendage",
     "flexible-drift": "energy, angular momentum drift and nutation of a flexible spacecraft",
+    "contact-path": "a rolling disk's path on the plane",
+    "rolling-angles": "a rolling disk's lean and heading",
     **CLOSED_LOOP_FIGURES,
     **POINTING_FIGURES,
 }
@@ -106,8 +109,9 @@ def analyze(path: str | os.PathLike, out: str | os.PathLike | None = None, seq: 
             figs.append(("crosscheck", fg.crosscheck(name, cc.t, cc.dr_norm, cc.dv_norm, Path(f"{stem}-crosscheck.png"))))
         if body.attitude is not None and len(body.attitude) > 0:
             tr = body.attitude
-            # a flexible body's hub alone conserves neither T nor H: its rows are the system's (below)
-            inertia = inertias.get(name) if set(tr.model) != {"flexible"} else None
+            # a flexible body's hub alone, a rolling disk (the plane's forces) conserve neither T
+            # nor H: their rows are their models' own (below)
+            inertia = inertias.get(name) if not set(tr.model) & {"flexible", "rolling_disk"} else None
             am = mt.attitude_metrics(tr.t, tr.q, tr.w, seq, inertia)
             numbers["attitude"] = {**am["summary"], "models": sorted(set(tr.model))}
             figs.append(("euler", fg.euler_angles(name, tr.t, am["euler"], seq, Path(f"{stem}-euler.png"))))
@@ -115,6 +119,10 @@ def analyze(path: str | os.PathLike, out: str | os.PathLike | None = None, seq: 
             figs.append(("rates", fg.body_rates(name, tr.t, tr.w, Path(f"{stem}-rates.png"))))
             if set(tr.model) == {"flexible"}:  # the hub's rigid invariants mean nothing: the whole system's
                 section, more = _flexible_section(run, name, body, stem)
+                numbers.update(section)
+                figs += more
+            elif set(tr.model) == {"rolling_disk"}:
+                section, more = _rolling_section(body, stem)
                 numbers.update(section)
                 figs += more
             elif inertia is not None and "actuated" not in set(tr.model):  # commanded torques: no polhode, no drift
@@ -178,21 +186,43 @@ def _flexible_section(run, name: str, body, stem: Path) -> tuple[dict, list[tupl
     return section, figs
 
 
+def _rolling_section(body, stem: Path) -> tuple[dict, list[tuple[str, Path]]]:
+    """A rolling disk (its rolling key): lean range, path length, the contact path and the
+    angles (:class:`astrodyn.messages.RollingState`)."""
+    from astrodyn.analysis import figures as fg
+
+    tr = body.rolling
+    if tr is None or not len(tr) or not {"contact", "center", "lean", "heading"} <= set(tr.fields):
+        return {"rolling": {"note": "no rolling channel: attitude only"}}, []
+    name = stem.name
+    steps = np.linalg.norm(np.diff(tr.contact, axis=0), axis=1)
+    section = {"rolling": {"lean_min_deg": float(np.degrees(np.min(tr.lean))),
+                           "lean_max_deg": float(np.degrees(np.max(tr.lean))),
+                           "path_length_m": float(np.sum(steps)),
+                           "displacement_m": float(np.linalg.norm(tr.contact[-1] - tr.contact[0]))}}
+    figs = [("contact-path", fg.contact_path(name, tr.contact, tr.center, Path(f"{stem}-contact-path.png"))),
+            ("rolling-angles", fg.rolling_angles(name, tr.t, tr.lean, tr.heading, Path(f"{stem}-rolling-angles.png")))]
+    return section, figs
+
+
 def _conserved(scenario: dict, name: str, body) -> dict:
     """The section "conserved quantities": each invariant of the body's model
     (:mod:`astrodyn.analysis.invariants`), the same rows as ``astrodyn run``'s summary."""
-    from astrodyn.analysis.invariants import appendage_arrays, recorded_invariants
+    from astrodyn.analysis.invariants import own_state_arrays, recorded_invariants
+    from astrodyn.messages import MODEL_STATE_KINDS
 
     kinds = {}
     if body.orbit is not None and len(body.orbit) > 0:
         kinds["orbit"] = (body.orbit.model[-1], body.orbit.r, body.orbit.v)
     if body.attitude is not None and len(body.attitude) > 0:
-        kinds["attitude"] = (body.attitude.model[-1], body.attitude.q, body.attitude.w)
-        arrays = appendage_arrays(body.appendages) if body.appendages is not None and len(body.appendages) else None
-        if arrays is not None:  # a flexible body: its states on both channels, step by step
-            _, ia, ie = np.intersect1d(body.attitude.seq, body.appendages.seq, return_indices=True)
-            kinds["attitude"] = (body.attitude.model[-1], body.attitude.q[ia], body.attitude.w[ia])
-            kinds["appendages"] = (arrays[0][ie], arrays[1][ie])
+        model = body.attitude.model[-1]
+        kinds["attitude"] = (model, body.attitude.q, body.attitude.w)
+        track = getattr(body, MODEL_STATE_KINDS.get(model, ""), None)
+        arrays = own_state_arrays(model, track)
+        if arrays is not None:  # a flexible or rolling body: its states on both channels, step by step
+            _, ia, ie = np.intersect1d(body.attitude.seq, track.seq, return_indices=True)
+            kinds["attitude"] = (model, body.attitude.q[ia], body.attitude.w[ia])
+            kinds["own"] = {k: a[ie] for k, a in arrays.items()}
     if not kinds:
         return {}
     rows = recorded_invariants(scenario, name, **kinds)

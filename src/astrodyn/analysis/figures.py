@@ -17,7 +17,7 @@ import numpy as np
 
 __all__ = ["time_axis", "orbit_3d", "ground_track", "elements", "orbit_drift", "crosscheck",
            "euler_angles", "quaternion", "body_rates", "polhode", "attitude_drift", "top_angles", "appendage_tips",
-           "flexible_drift"]
+           "flexible_drift", "contact_path", "rolling_angles"]
 
 _DPI = 110
 plt.rcParams.update({"font.size": 9, "axes.grid": True, "grid.alpha": 0.3, "axes.formatter.useoffset": False})
@@ -251,3 +251,23 @@ def flexible_drift(name: str, t: np.ndarray, energy_ratio, h_drift, nutation_deg
     axes[-1].set_xlabel(tl)
     fig.suptitle(f"{name}: energy ({'damped appendages' if damped else 'undamped: conserved'}), momentum, nutation")
     return _save(fig, path)
+
+
+def contact_path(name: str, contact: np.ndarray, center: np.ndarray, path: Path) -> Path:
+    """A rolling disk's contact point and centre seen from above (x, y on the plane, m),
+    equal axes, the start marked."""
+    fig, ax = plt.subplots(figsize=(5.5, 5.0), constrained_layout=True)
+    ax.plot(contact[:, 0], contact[:, 1], lw=1.0, label="contact point")
+    ax.plot(center[:, 0], center[:, 1], lw=0.8, ls="--", label="centre (projected)")
+    ax.plot(contact[:1, 0], contact[:1, 1], "o", ms=4, label="start")
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("y (m)")
+    ax.legend(fontsize=7)
+    fig.suptitle(f"{name}: path on the plane (from above)")
+    return _save(fig, path)
+
+
+def rolling_angles(name: str, t: np.ndarray, lean, heading, path: Path) -> Path:
+    return _stacked(t, [np.degrees(lean), np.degrees(heading)], ["lean theta (deg)", "heading psi (deg)"],
+                    f"{name}: lean from the vertical and heading of the rolling disk", path)

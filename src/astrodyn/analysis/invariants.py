@@ -52,8 +52,9 @@ import numpy as np
 from astrodyn.orbit import zonal_potential
 from astrodyn.rotation import dcm_from_quat
 
-__all__ = ["Invariant", "orbit_invariants", "attitude_invariants", "flexible_invariants", "recorded_invariants",
-           "appendage_arrays", "recorded_spacecraft", "flexible_states"]
+__all__ = ["Invariant", "orbit_invariants", "attitude_invariants", "flexible_invariants", "rolling_invariants",
+           "recorded_invariants", "appendage_arrays", "own_state_arrays", "recorded_spacecraft", "recorded_rolling_disk",
+           "flexible_states"]
 
 
 @dataclass(frozen=True)
@@ -218,13 +219,46 @@ def _recorded_constants(text: str) -> tuple[dict, dict[str, dict]]:
     return central, bodies
 
 
+def rolling_invariants(disk, q: np.ndarray, lean: np.ndarray, u: np.ndarray) -> list[Invariant]:
+    """The invariants of a rolling disk (:class:`astrodyn.attitude.rolling_disk.RollingDisk`)
+    over recorded leans (n,) rad and generalized speeds ``u`` (n, 3) rad/s: the energy
+    ``T + m g R cos theta`` (J; the rolling constraint does no work), and ``|q| - 1``."""
+    from astrodyn.attitude.rolling_disk import energy
+
+    lean, u = np.asarray(lean, dtype=np.float64).reshape(-1), np.asarray(u, dtype=np.float64)
+    if lean.size == 0 or u.shape != (lean.size, 3) or np.shape(q) != (lean.size, 4):
+        raise ValueError(f"q, lean, u: expected (n, 4), (n,) and (n, 3) with n >= 1, got {np.shape(q)}, {lean.shape}, "
+                         f"{u.shape}")
+    states = np.zeros((lean.size, 8))
+    states[:, 3], states[:, 5:8] = lean, u
+    e = energy(disk, states)
+    qn = np.linalg.norm(q, axis=-1)
+    return [Invariant("E = T + m g R cos(theta)", "J", float(e[0]), _drift(e, abs(float(e[0]))), "|E0|"),
+            Invariant("|q| - 1", "-", float(qn[0] - 1.0), float(np.max(np.abs(qn - 1.0))), "absolute")]
+
+
+def own_state_arrays(model: str, track) -> dict[str, np.ndarray] | None:
+    """The arrays of a flexible or rolling body's own channel (``load(path).bodies[b].
+    appendages`` / ``.rolling``) its invariants need: ``eta``, ``eta_dot``, ``tip`` or
+    ``lean``, ``u``; None when absent or not in one layout."""
+    if track is None or not len(track):
+        return None
+    if model == "flexible":
+        arrays = appendage_arrays(track)
+        return None if arrays is None else dict(zip(("eta", "eta_dot", "tip"), arrays))
+    if model == "rolling_disk" and "lean" in track.fields and "u" in track.fields:
+        return {"lean": np.asarray(track.lean, dtype=np.float64), "u": np.asarray(track.u, dtype=np.float64)}
+    return None
+
+
 def recorded_invariants(scenario: dict, body: str, *, orbit: tuple | None = None,
-                        attitude: tuple | None = None, appendages: tuple | None = None) -> dict[str, list[Invariant]]:
+                        attitude: tuple | None = None, own: dict | None = None) -> dict[str, list[Invariant]]:
     """The invariant rows of one recorded body, its models and constants taken from the
     recording's ``scenario`` metadata (``load(path).scenario``: the config as run).
 
     ``orbit = (model, r, v)``, ``attitude = (model, q, w)`` (arrays as recorded), for a
-    flexible body ``appendages = (eta, eta_dot)`` (n, n_elastic) at the same samples;
+    flexible or rolling body ``own`` the arrays of its own key at the same samples
+    (:func:`own_state_arrays`);
     returns ``{"orbit": [...], "attitude": [...]}`` for the kinds given.  Constants missing
     from the metadata (a recording of another tool) leave only the rows that need none."""
     text = scenario.get("json") or "{}"
@@ -257,9 +291,12 @@ def recorded_invariants(scenario: dict, body: str, *, orbit: tuple | None = None
                 h = sum((np.asarray(rt["axis"], dtype=np.float64).reshape(3) * float(rt["h"]) for rt in rotors), np.zeros(3))
         except (KeyError, TypeError, ValueError):
             h = None
-        sc = recorded_spacecraft(text, body) if model == "flexible" and appendages is not None else None
-        if sc is not None and appendages[0].shape[-1] == sc.n_elastic:
-            out["attitude"] = flexible_invariants(sc, q, w, *appendages)
+        sc = recorded_spacecraft(text, body) if model == "flexible" and own is not None else None
+        disk = recorded_rolling_disk(text, body) if model == "rolling_disk" and own is not None else None
+        if sc is not None and own["eta"].shape[-1] == sc.n_elastic:
+            out["attitude"] = flexible_invariants(sc, q, w, own["eta"], own["eta_dot"])
+        elif disk is not None:
+            out["attitude"] = rolling_invariants(disk, q, own["lean"], own["u"])
         else:
             out["attitude"] = attitude_invariants(model, q, w, inertia, rotor_momentum=h, mass=am.get("mass"),
                                                   cm=am.get("cm"), g=am.get("g"))
@@ -301,4 +338,18 @@ def recorded_spacecraft(text: str, body: str):
         return flexible_spacecraft(float(am["mass"]), np.asarray(am["inertia"], dtype=np.float64).reshape(3, 3), apps,
                                    bool(am.get("stiffening", True)))
     except (KeyError, TypeError, ValueError, IndexError, OverflowError):
+        return None
+
+
+@functools.lru_cache(maxsize=8)
+def recorded_rolling_disk(text: str, body: str):
+    """The rolling disk of ``body`` from a recording's config JSON, or None when the
+    metadata does not describe one."""
+    from astrodyn.attitude.rolling_disk import RollingDisk
+
+    am = _recorded_constants(text)[1].get(body, {}).get("attitude")
+    try:
+        r = am["rolling"]
+        return RollingDisk(float(r["radius"]), float(r["mass"]), float(r["A"]), float(r["C"]), float(r["g"]))
+    except (KeyError, TypeError, ValueError, OverflowError):
         return None

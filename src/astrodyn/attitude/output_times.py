@@ -29,16 +29,19 @@ def check_output_times(t) -> np.ndarray:
 
 
 def integrate_dop853(rhs: Callable, y0: np.ndarray, t: np.ndarray, rtol: float, atol: float,
-                     what: str) -> tuple[np.ndarray, int]:
+                     what: str, events: list | None = None):
     """``(states (len(t), len(y0)), nfev)``: ``dy/dt = rhs(t, y)`` from ``y0`` at ``t = 0``,
     sampled at the times ``t`` (:func:`check_output_times`) by scipy's DOP853 with the
     tolerances ``rtol``, ``atol``.  RuntimeError naming ``what`` when the integrator fails
-    (a step size below round-off: a singular or diverging motion)."""
+    (a step size below round-off: a singular or diverging motion).  With ``events``
+    (scipy's event functions; a terminal one ends the integration) the result is
+    ``(states, nfev, t_events)`` and ``states`` holds the times before a terminal event."""
     from scipy.integrate import solve_ivp
 
     if t[-1] == 0.0:
-        return np.tile(y0, (t.size, 1)), 0
-    sol = solve_ivp(rhs, (0.0, float(t[-1])), y0, method="DOP853", t_eval=t, rtol=rtol, atol=atol)
+        states = np.tile(y0, (t.size, 1))
+        return (states, 0) if events is None else (states, 0, [np.zeros(0) for _ in events])
+    sol = solve_ivp(rhs, (0.0, float(t[-1])), y0, method="DOP853", t_eval=t, rtol=rtol, atol=atol, events=events)
     if not sol.success:
         raise RuntimeError(f"{what}: DOP853 failed: {sol.message}")
-    return sol.y.T, sol.nfev
+    return (sol.y.T, sol.nfev) if events is None else (sol.y.T, sol.nfev, sol.t_events)

@@ -57,8 +57,8 @@ import numpy as np
 
 from astrodyn.attitude.output_times import check_output_times, integrate_dop853
 
-__all__ = ["RollingDisk", "rolling_disk_rates", "propagate_rolling_disk", "energy", "upright_critical_spin",
-           "steady_spin", "disk_quaternion", "center_position", "STATE_FIELDS"]
+__all__ = ["FLAT_COS", "RollingDisk", "rolling_disk_rates", "propagate_rolling_disk", "energy", "upright_critical_spin",
+           "steady_spin", "disk_quaternion", "disk_body_rates", "center_position", "STATE_FIELDS"]
 
 #: Names of the state vector's components, in order (m, rad, rad/s).
 STATE_FIELDS = ("x", "y", "psi", "theta", "phi", "u1", "u2", "u3")
@@ -147,10 +147,17 @@ def steady_spin(disk: RollingDisk, theta: float, psi_dot: float) -> float:
     return u2 - psi_dot * math.sin(theta)
 
 
+#: The disk "lies flat" when cos(lean) falls to this (lean within 0.06 deg of 90 deg): the
+#: equations are singular there and the model (no impact with the plane) ends.
+FLAT_COS = 1e-3
+
+
 def propagate_rolling_disk(disk: RollingDisk, state0, t, rtol: float = 1e-12, atol: float = 1e-14):
     """States (len(t), 8) at the times ``t`` (s, increasing from 0) from ``state0`` (8,),
     integrated with DOP853 (scipy) on Kane's equations; returns ``(states, info)`` with the
-    number of right-hand-side evaluations and the largest relative energy drift."""
+    number of right-hand-side evaluations and the largest relative energy drift.  A disk
+    that falls flat (``cos theta`` reaches :data:`FLAT_COS`) ends the integration there:
+    ``states`` then holds only the times before it and ``info["flat_at"]`` is the time (s)."""
     y0 = np.asarray(state0, dtype=np.float64).reshape(8)
     t = check_output_times(t)
     if not np.all(np.isfinite(y0)):
@@ -173,10 +180,17 @@ def propagate_rolling_disk(disk: RollingDisk, state0, t, rtol: float = 1e-12, at
                 -mR2 * u1 * u3 * k2,
                 (-C * u1 * u2 + A * u1 * u3 * tan) / A]
 
-    states, nfev = integrate_dop853(rhs, y0, t, rtol, atol, "rolling disk")
+    def flat(_, y):  # cos(theta) - FLAT_COS: zero when the disk is about to lie flat
+        return math.cos(y[3]) - FLAT_COS
+
+    flat.terminal, flat.direction = True, -1
+    states, nfev, events = integrate_dop853(rhs, y0, t, rtol, atol, "rolling disk", events=[flat])
+    info = {"method": "dop853", "rtol": rtol, "atol": atol, "nfev": nfev}
+    if events[0].size:
+        info["flat_at"] = float(events[0][0])
     e = energy(disk, states)
-    drift = float(np.max(np.abs(e - e[0])) / abs(e[0])) if e[0] else float(np.max(np.abs(e - e[0])))
-    return states, {"method": "dop853", "rtol": rtol, "atol": atol, "nfev": nfev, "energy_drift": drift}
+    info["energy_drift"] = float(np.max(np.abs(e - e[0])) / abs(e[0])) if e[0] else float(np.max(np.abs(e - e[0])))
+    return states, info
 
 
 def disk_quaternion(state: np.ndarray) -> np.ndarray:
@@ -187,6 +201,17 @@ def disk_quaternion(state: np.ndarray) -> np.ndarray:
 
     s = np.asarray(state, dtype=np.float64)
     return quat_from_euler(np.stack([s[..., 2], s[..., 3], s[..., 4]], axis=-1), "312")
+
+
+def disk_body_rates(state: np.ndarray) -> np.ndarray:
+    """The disk's angular velocity (..., 3, rad/s) in its body axes (those of
+    :func:`disk_quaternion`): the B-frame components ``(u1, u2, u3)`` turned by the spin
+    ``phi`` about b2, ``w = C_2(phi) (u1, u2, u3) = (u1 cos phi - u3 sin phi, u2,
+    u1 sin phi + u3 cos phi)``."""
+    s = np.asarray(state, dtype=np.float64)
+    phi, u1, u2, u3 = s[..., 4], s[..., 5], s[..., 6], s[..., 7]
+    c, sn = np.cos(phi), np.sin(phi)
+    return np.stack([c * u1 - sn * u3, u2, sn * u1 + c * u3], axis=-1)
 
 
 def center_position(disk: RollingDisk, state: np.ndarray) -> np.ndarray:

@@ -11,6 +11,7 @@ Every message lives under ``astrodyn/<scenario>/``::
     astrodyn/<scenario>/<body>/attitude     AttitudeState
     astrodyn/<scenario>/<body>/crosscheck   CrossCheck      (``--cross-check`` mode)
     astrodyn/<scenario>/<body>/appendages   AppendageState  (flexible spacecraft)
+    astrodyn/<scenario>/<body>/rolling      RollingState    (rolling disk)
     astrodyn/<scenario>/@status             Status          (``serve``)
     astrodyn/<scenario>/@event              Event           (start, stop, restart, error ...)
     astrodyn/<scenario>/@control/<verb>     queryables      (status, pause, resume, rate, stop)
@@ -135,6 +136,7 @@ from astrodyn.messages.definitions import (
     GpsSample,
     GyroSample,
     OrbitState,
+    RollingState,
     Stamped,
     StarTrackerSample,
     Status,
@@ -155,6 +157,7 @@ from astrodyn.messages.keys import (
     CROSSCHECK_REFERENCES,
     MAX_SEQ,
     MESSAGE_KINDS,
+    MODEL_STATE_KINDS,
     NAME_FULL_RE,
     NAME_PATTERN,
     ORBIT_MODELS,
@@ -164,7 +167,6 @@ from astrodyn.messages.keys import (
     STATE_KINDS,
     STATUS_STATES,
     alive_key,
-    appendages_key,
     attitude_key,
     batch_key,
     body_key,
@@ -187,6 +189,7 @@ __all__ = [
     "OrbitState",
     "AttitudeState",
     "AppendageState",
+    "RollingState",
     "CrossCheck",
     "Event",
     "Status",
@@ -209,6 +212,7 @@ __all__ = [
     "tick_key",
     "done_key",
     "STATE_KINDS",
+    "MODEL_STATE_KINDS",
     "CONTROL_KINDS",
     "SENSOR_KINDS",
     "ACTUATED_MODEL",
@@ -220,7 +224,6 @@ __all__ = [
     "TachometerSample",
     "Tick",
     "StepDone",
-    "appendages_key",
     "crosscheck_key",
     "control_key",
     "schema_key",

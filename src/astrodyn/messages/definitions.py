@@ -111,6 +111,21 @@ class AppendageState(Stamped, forbid_unknown_fields=True):
                                  f"many in eta_dot[{k}], got {len(eta)} and {len(eta_dot)}")
 
 
+class RollingState(Stamped, forbid_unknown_fields=True):
+    """State of a disk rolling without slipping on the horizontal plane z = 0 (Baruh 10.6;
+    the model of astrodyn.attitude.rolling_disk): the contact point, the centre, the angles
+    of the body-axis sequence 312 (heading psi about the vertical, lean theta, spin phi) and
+    Kane's generalized speeds u = (theta', psi' sin theta + phi', psi' cos theta).  The
+    disk's attitude is on the body's attitude key at the same seq."""
+
+    contact: _vec(2, "contact point (x, y) on the plane, m")
+    center: _vec(3, "position of the disk's centre, m")
+    heading: Annotated[float, Meta(description="heading psi: direction of the contact point's path from x, rad")]
+    lean: Annotated[float, Meta(description="lean theta from the vertical, rad (0 upright)")]
+    spin_angle: Annotated[float, Meta(description="spin angle phi about the symmetry axis, rad")]
+    u: _vec(3, "generalized speeds (theta', psi' sin theta + phi', psi' cos theta), rad/s")
+
+
 class CrossCheck(Stamped, forbid_unknown_fields=True):
     """astrodyn state minus the reference integrator's state for one body."""
 
@@ -241,6 +256,7 @@ MESSAGE_TYPES: dict[str, type[msgspec.Struct]] = {
     "attitude": AttitudeState,
     "crosscheck": CrossCheck,
     "appendages": AppendageState,
+    "rolling": RollingState,
     "event": Event,
     "status": Status,
     "command": Command,

@@ -15,7 +15,7 @@ from astrodyn.messages.errors import MessageError
 #: "none" for attitude, which publishes nothing).
 ORBIT_MODELS: tuple[str, ...] = ("kepler", "j2", "zonal", "third_body", "actuated")
 ATTITUDE_MODELS: tuple[str, ...] = ("torque_free", "gravity_gradient", "gyrostat", "heavy_top", "user", "flexible",
-                                    "actuated")
+                                    "rolling_disk", "actuated")
 #: The model name of a body moved by a closed loop (its actuators, commanded by controllers;
 #: docs/control.md).  A state message may name it; a config may not (the plan picks it).
 ACTUATED_MODEL = "actuated"
@@ -27,16 +27,19 @@ NAME_PATTERN = r"[A-Za-z0-9_.-]{1,128}"
 #: a whole name (use ``.search``): ``^NAME_PATTERN$``
 NAME_FULL_RE = re.compile(f"^{NAME_PATTERN}$")
 #: Per-body kinds: states (one message per output step, ``seq`` = the step: orbit, attitude,
-#: the REBOUND cross-check and a flexible spacecraft's appendages), then the closed loop's
-#: (docs/control.md): commands from controllers, actuator states and sensor samples from
-#: the plant.
-STATE_KINDS = ("orbit", "attitude", "crosscheck", "appendages")
+#: the REBOUND cross-check, a flexible spacecraft's appendages, a rolling disk's contact
+#: state), then the closed loop's (docs/control.md): commands from controllers, actuator
+#: states and sensor samples from the plant.
+STATE_KINDS = ("orbit", "attitude", "crosscheck", "appendages", "rolling")
+#: Attitude models whose state does not fit the attitude message alone: the kind of the
+#: second state channel they publish, at the same seq (the rest of the state to resume from).
+MODEL_STATE_KINDS = {"flexible": "appendages", "rolling_disk": "rolling"}
 CONTROL_KINDS = ("command", "actuators")
 SENSOR_KINDS = ("gyro", "star_tracker", "gps", "tachometer")
 _BODY_KINDS = STATE_KINDS + CONTROL_KINDS + SENSOR_KINDS
 #: Every message kind, one per message type (:data:`astrodyn.messages.MESSAGE_TYPES` has these keys).
-MESSAGE_KINDS = ("orbit", "attitude", "crosscheck", "appendages", "event", "status", "command", "actuators",
-                 "gyro", "star_tracker", "gps", "tachometer", "tick", "done")
+MESSAGE_KINDS = ("orbit", "attitude", "crosscheck", "appendages", "rolling", "event", "status", "command",
+                 "actuators", "gyro", "star_tracker", "gps", "tachometer", "tick", "done")
 _SPECIAL_WITH_NAME = ("@control", "@alive", "@batch", "@schema", "@done")
 _SPECIAL_PLAIN = {"@status": "status", "@event": "event", "@latest": "latest", "@tick": "tick"}
 
@@ -71,11 +74,6 @@ def attitude_key(scenario: str, body: str) -> str:
 def crosscheck_key(scenario: str, body: str) -> str:
     """``astrodyn/<scenario>/<body>/crosscheck``."""
     return f"{PREFIX}/{check_name(scenario, 'scenario')}/{check_name(body, 'body')}/crosscheck"
-
-
-def appendages_key(scenario: str, body: str) -> str:
-    """``astrodyn/<scenario>/<body>/appendages``: a flexible spacecraft's elastic state."""
-    return f"{PREFIX}/{check_name(scenario, 'scenario')}/{check_name(body, 'body')}/appendages"
 
 
 def latest_key(scenario: str) -> str:

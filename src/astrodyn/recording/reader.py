@@ -100,14 +100,16 @@ class Track:
 
 @dataclass
 class BodyTracks:
-    """The tracks of one body: ``orbit``, ``attitude``, ``crosscheck``, ``appendages``
-    (a flexible spacecraft's elastic state; None if absent)."""
+    """The tracks of one body: ``orbit``, ``attitude``, ``crosscheck``, ``appendages`` (a
+    flexible spacecraft's elastic state), ``rolling`` (a rolling disk's contact state);
+    None if absent."""
 
     name: str
     orbit: Track | None = None
     attitude: Track | None = None
     crosscheck: Track | None = None
     appendages: Track | None = None
+    rolling: Track | None = None
 
 
 Body = BodyTracks

@@ -29,7 +29,8 @@ A small example (``configs/demo.toml`` is a complete one)::
     q = [1, 0, 0, 0]                    # Euler parameters, scalar first (or euler + seq)
     w = ["0.1 deg/s", "0 deg/s", "0.5 deg/s"]
     inertia = ["1.2e8 kg m2", "1.0e8 kg m2", "2.0e8 kg m2"]   # principal moments, or 3x3
-    model = "torque_free"               # none | torque_free | gravity_gradient | gyrostat | heavy_top | user | flexible
+    model = "torque_free"               # none | torque_free | gravity_gradient | gyrostat | heavy_top | user
+                                        # | flexible | rolling_disk
 
 Quantities are strings with a unit (``"7000 km"``, ``"51.6 deg"``, ``"0.1 rad/s"``,
 ``"10 Hz"``, ``"90 min"``, ``"3.986e14 m3/s2"``, ``"60 rpm"``) parsed by astropy and
@@ -64,7 +65,9 @@ Sections and keys (every other key is an error, with a "did you mean" suggestion
     9.80665 m/s^2) for heavy_top, ``torque`` (constant body-axis torque, N m) for user;
     for flexible (a hub with cantilevered beams) ``inertia`` and ``mass`` of the hub,
     ``appendages`` (a list of beam tables), ``stiffening``, ``tolerance``
-    (:mod:`~astrodyn.scenario.appendages`).
+    (:mod:`~astrodyn.scenario.appendages`); for rolling_disk (a wheel rolling on the
+    plane z = 0) ``radius``, ``mass``, ``shape`` or ``moments``, ``g`` and the initial
+    angles and rates (:mod:`~astrodyn.scenario.rolling`).
 ``[walker]``
     Walker delta constellation ``i: t/p/f`` (Walker 1984, J. Br. Interplanet. Soc. 37,
     559): ``i``, ``t`` satellites in ``p`` equally spaced planes, phasing ``f`` (0..p-1),
@@ -90,6 +93,7 @@ Modules: this one reads the scene's sections into the :class:`Scenario` dataclas
 :mod:`~astrodyn.scenario.fields` reads single values (quantities with units, vectors,
 choices; errors naming the field), :mod:`~astrodyn.scenario.control` the closed loop's
 tables, :mod:`~astrodyn.scenario.appendages` a flexible spacecraft's beams,
+:mod:`~astrodyn.scenario.rolling` a rolling disk,
 :mod:`~astrodyn.scenario.planning` the plan; each re-exported here.
 
 The built-in central-body table takes the Earth, Moon and Sun from
@@ -157,6 +161,7 @@ from astrodyn.scenario.fields import (
     vector,
 )
 from astrodyn.scenario.planning import BYTES_PER_STATE, BodyPlan, Plan, plan
+from astrodyn.scenario.rolling import ROLLING_KEYS, RollingSpec, parse_rolling, rolling_state0
 
 __all__ = [
     "ScenarioError",
@@ -312,6 +317,7 @@ class AttitudeSpec:
     appendages: tuple[Appendage, ...] = ()
     stiffening: bool = True
     tolerance: float | None = None
+    rolling: RollingSpec | None = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -437,9 +443,10 @@ def _body_dict(b: Body, bp: BodyPlan) -> dict[str, Any]:
     if b.attitude is not None:
         a = b.attitude
         out["attitude"] = jsonable(
-            {f.name: getattr(a, f.name) for f in dataclasses.fields(a) if f.name not in ("rotors", "appendages")}
+            {f.name: getattr(a, f.name) for f in dataclasses.fields(a) if f.name not in ("rotors", "appendages", "rolling")}
             | {"rotors": [dataclasses.asdict(r) for r in a.rotors], "model_used": bp.attitude_model}
             | ({"appendages": [dataclasses.asdict(x) for x in a.appendages]} if a.appendages else {})
+            | ({"rolling": dataclasses.asdict(a.rolling)} if a.rolling is not None else {})
         )
     return out
 
@@ -649,7 +656,7 @@ def _angle(ctx: Ctx, tb: Table, key: str, path: str) -> float:
 
 
 _ATT_KEYS = ("model", "q", "euler", "seq", "w", "inertia", "rotors", "mass", "cm", "g", "torque", "appendages",
-             "stiffening", "tolerance")
+             "stiffening", "tolerance", *ROLLING_KEYS)
 
 
 def _attitude(ctx: Ctx, data: Any, path: str) -> AttitudeSpec:
@@ -661,6 +668,11 @@ def _attitude(ctx: Ctx, data: Any, path: str) -> AttitudeSpec:
         raise ctx.error(f"{path}.rotors", 'no rotors unless model = "gyrostat"', f'{len(rotors)} rotor(s) with model = "{model}"', raw=True)
     if model == "gyrostat" and not rotors:
         raise ctx.error(f"{path}.rotors", "at least one rotor for model gyrostat", "none", raw=True)
+    if model == "rolling_disk":
+        return _rolling_attitude(ctx, tb, path)
+    for key in ROLLING_KEYS:
+        if tb.has(key):
+            raise ctx.error(f"{path}.{key}", f'no {key} unless model = "rolling_disk"', tb.get(key))
     # orientation
     if tb.has("q") and tb.has("euler"):
         raise ctx.error(f"{path}.euler", "either q or euler (+ seq), not both", tb.get("euler"))
@@ -719,6 +731,32 @@ def _attitude(ctx: Ctx, data: Any, path: str) -> AttitudeSpec:
     return AttitudeSpec(model=model, q0=q0, w0=w0, inertia=inertia, principal_moments=moments, principal_axes=axes,
                         rotors=rotors, mass=mass, cm=cm, g=g, torque=torque, appendages=appendages,
                         stiffening=stiffening, tolerance=tolerance)
+
+
+def _rolling_attitude(ctx: Ctx, tb: Table, path: str) -> AttitudeSpec:
+    """A rolling disk (:mod:`astrodyn.scenario.rolling`): its state is given by angles and
+    rates, so q, w and inertia are derived, never given."""
+    from astrodyn.attitude.rolling_disk import disk_body_rates, disk_quaternion
+
+    allowed = ("model", "mass", "g", "tolerance", *ROLLING_KEYS)
+    for key in _ATT_KEYS:
+        if key not in allowed and tb.has(key):
+            raise ctx.error(f"{path}.{key}", f"no {key} for model rolling_disk (its state is given by "
+                            "position, heading, lean, spin_angle and their rates; mass and radius make its inertia)",
+                            tb.get(key))
+    if not tb.has("mass"):
+        raise ctx.error(f"{path}.mass", "the disk's mass for model rolling_disk", "nothing", raw=True)
+    mass = quantity(ctx, tb.get("mass"), "mass", f"{path}.mass")
+    check(ctx, mass > 0, f"{path}.mass", "mass > 0", tb.get("mass"))
+    g = quantity(ctx, tb.get("g", G0), "acceleration", f"{path}.g")
+    check(ctx, g > 0, f"{path}.g", "g > 0 (gravity along -z holds the disk on the plane)", tb.get("g", G0))
+    spec = parse_rolling(ctx, tb, path, mass, g)
+    state0 = rolling_state0(spec)
+    inertia = np.diag([spec.A, spec.C, spec.A])  # body axes b1, b2 (the symmetry axis), b3
+    return AttitudeSpec(model="rolling_disk", q0=disk_quaternion(state0), w0=disk_body_rates(state0), inertia=inertia,
+                        principal_moments=np.diag(inertia).copy(), principal_axes=np.eye(3), mass=mass, g=g,
+                        tolerance=parse_tolerance(ctx, tb.get("tolerance", DEFAULT_TOLERANCE), f"{path}.tolerance"),
+                        rolling=spec)
 
 
 def _inertia(ctx: Ctx, value: Any, path: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -781,6 +819,8 @@ def _body(ctx: Ctx, data: Any, path: str, cb: CentralBody, rate: float = 1.0, co
         raise ctx.error(path, "an orbit table, an attitude table or both", f'body "{name}" with neither', raw=True)
     if attitude is not None and attitude.model == "heavy_top" and orbit is not None:
         raise ctx.error(f"{path}.orbit", "no orbit for a heavy_top body (a top spins about a fixed point in uniform gravity)", "an orbit table", raw=True)
+    if attitude is not None and attitude.model == "rolling_disk" and orbit is not None:
+        raise ctx.error(f"{path}.orbit", "no orbit for a rolling_disk body (it rolls on the plane z = 0)", "an orbit table", raw=True)
     if attitude is not None and attitude.model == "gravity_gradient" and orbit is None:
         raise ctx.error(f"{path}.attitude.model", "an orbit table with gravity_gradient (the torque depends on the position)", '"gravity_gradient" without an orbit', raw=True)
     cross = boolean(ctx, tb.get("cross_check", False), f"{path}.cross_check")
@@ -832,8 +872,8 @@ def _walker(ctx: Ctx, data: Any, cb: CentralBody) -> tuple[list[Body], dict[str,
     model = choice(ctx, tb.get("model", _ORBIT_ANALYTIC), CONFIG_ORBIT_MODELS, "walker.model")
     cross = boolean(ctx, tb.get("cross_check", False), "walker.cross_check")
     attitude = _attitude(ctx, tb.get("attitude"), "walker.attitude") if tb.has("attitude") else None
-    if attitude is not None and attitude.model == "heavy_top":
-        raise ctx.error("walker.attitude.model", "an orbiting model (not heavy_top)", "heavy_top")
+    if attitude is not None and attitude.model in ("heavy_top", "rolling_disk"):
+        raise ctx.error("walker.attitude.model", "an orbiting model (not heavy_top or rolling_disk)", attitude.model)
     from astrodyn.orbit.elements import state_from_elements
 
     s = t // p

@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from astrodyn.messages import ACTUATED_MODEL
+from astrodyn.messages import ACTUATED_MODEL, MODEL_STATE_KINDS
 
 if TYPE_CHECKING:
     from astrodyn.scenario import OrbitSpec, Scenario
@@ -48,13 +48,13 @@ class Plan:
     messages: int  #: every message the run records: states plus cross-checks
     warnings: tuple[str, ...] = ()
     crosscheck_messages: int = 0  #: of ``messages``: the REBOUND cross-check messages
-    appendage_messages: int = 0  #: of ``messages``: flexible spacecraft's appendage states
+    model_state_messages: int = 0  #: of ``messages``: flexible and rolling bodies' own state messages
 
     @property
     def state_messages(self) -> int:
         """Orbit and attitude state messages (``messages`` without the cross-checks and
-        the appendage states)."""
-        return self.messages - self.crosscheck_messages - self.appendage_messages
+        the flexible and rolling bodies' own state messages)."""
+        return self.messages - self.crosscheck_messages - self.model_state_messages
 
     @property
     def estimated_file_bytes(self) -> int:
@@ -64,7 +64,8 @@ class Plan:
     def text(self, max_bodies: int = 20) -> str:
         size = self.estimated_file_bytes
         xc = f" + {self.crosscheck_messages} cross-check messages" if self.crosscheck_messages else ""
-        xc += f" + {self.appendage_messages} appendage states" if self.appendage_messages else ""
+        xc += (f" + {self.model_state_messages} appendage / rolling states (flexible and rolling bodies' own keys)"
+               if self.model_state_messages else "")
         lines = [f"scenario {self.scenario}: {len(self.bodies)} bodies, {self.n_steps} output steps, "
                  f"{self.state_messages} state messages (orbit + attitude){xc}",
                  f"expected recording: about {_human_bytes(size)} ({BYTES_PER_STATE} bytes per state message after zstd)",
@@ -113,6 +114,7 @@ ATTITUDE_METHODS = {
     "heavy_top": "numerical splitting, heavy top in uniform gravity",
     "user": "numerical splitting, constant body torque",
     "flexible": "numerical, DOP853: rigid hub + assumed-mode beams with centrifugal stiffening (Baruh ch. 11)",
+    "rolling_disk": "numerical, DOP853: Kane's equations of a disk rolling without slipping (Baruh 10.6)",
     ACTUATED_MODEL: "closed loop, step by step with the commands held (astrodyn.plant)",
 }
 
@@ -182,12 +184,13 @@ def plan(scenario: Scenario, cross_check_all: bool = False) -> Plan:
         processes.append("plant")
     processes.append("logger")
     n = scenario.n_steps
-    flexible = sum(bp.attitude_model == "flexible" for bp in out)  # + one appendages message per step
+    # flexible and rolling bodies publish one more state message per step on their own key
+    flexible = sum(bp.attitude_model in MODEL_STATE_KINDS for bp in out)
     states = sum((bp.orbit_model is not None) + (bp.attitude_model is not None) for bp in out) + flexible
     checked = sum(bp.orbit_model is not None and (cross_check_all or b.cross_check) for bp, b in zip(out, scenario.bodies))
     return Plan(scenario=scenario.name, processes=tuple(processes), bodies=tuple(out), n_steps=n,
                 messages=n * (states + checked), warnings=tuple(warnings), crosscheck_messages=n * checked,
-                appendage_messages=n * flexible)
+                model_state_messages=n * flexible)
 
 
 def periapsis_radius(orbit: OrbitSpec, mu: float) -> float | None:

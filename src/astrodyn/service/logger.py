@@ -62,6 +62,8 @@ from astrodyn.service.signals import catch_stop_signals
 __all__ = ["Logger", "main"]
 
 _STATE_KINDS = frozenset(messages.STATE_KINDS)
+#: per-body kinds the attitude process publishes: attitude, and the flexible / rolling bodies' own
+_ATTITUDE_PROCESS_KINDS = frozenset(("attitude", *messages.MODEL_STATE_KINDS.values()))
 _SCENE_KINDS = frozenset(messages.STATE_KINDS + messages.CONTROL_KINDS + messages.SENSOR_KINDS)
 #: keys whose newest sample @latest serves (the live view): states and the closed loop's
 _LATEST_SUFFIXES = tuple(f"/{k}" for k in ("orbit", "attitude", *messages.CONTROL_KINDS, *messages.SENSOR_KINDS))
@@ -82,7 +84,7 @@ def publisher_of(rest: str) -> str | None:
         return tail
     if tail in ("orbit", "crosscheck") and head and not head.startswith("@"):
         return "orbit"
-    if tail in ("attitude", "appendages") and head and not head.startswith("@"):
+    if tail in _ATTITUDE_PROCESS_KINDS and head and not head.startswith("@"):
         return "attitude"
     return None
 
@@ -101,8 +103,8 @@ def scene_state_keys(scenario) -> set[str]:
             keys.add(messages.crosscheck_key(scenario.name, bp.name))
         if bp.attitude_model:
             keys.add(messages.attitude_key(scenario.name, bp.name))
-        if bp.attitude_model == "flexible":
-            keys.add(messages.appendages_key(scenario.name, bp.name))
+        if bp.attitude_model in messages.MODEL_STATE_KINDS:  # flexible, rolling_disk: their own key too
+            keys.add(messages.body_key(scenario.name, bp.name, messages.MODEL_STATE_KINDS[bp.attitude_model]))
     return keys
 
 

@@ -39,7 +39,7 @@ from astrodyn.jit import service_threads, set_threads
 from astrodyn.scenario import Scenario, plan as make_plan
 from astrodyn.service.children import share_fate_with_supervisor
 from astrodyn.service.signals import catch_stop_signals
-from astrodyn.simulate import AttitudeEngine, OrbitEngine
+from astrodyn.simulate import AttitudeEngine, ModelEnded, OrbitEngine
 
 __all__ = ["Pacer", "PropagatorOptions", "run_propagator", "command_key", "CommandVerifier", "obey_commands", "pace_to",
            "wait_until_logged"]
@@ -123,6 +123,12 @@ class _Stop(Exception):
     pass
 
 
+#: Exit status of a propagator whose model cannot go on (a rolling disk fell flat): every
+#: state before that is published and logged; a supervisor does not restart it (it would
+#: end there again) and the run fails naming the body and the time.
+MODEL_ENDED_EXIT = 4
+
+
 def _auto_block(n_bodies: int) -> int:
     """About 2e5 states per engine call (memory ~ 10 MB), at least 1, at most 1000 instants."""
     return int(max(1, min(1000, 200_000 // max(1, n_bodies))))
@@ -147,8 +153,9 @@ def run_propagator(scenario: Scenario, session, opts: PropagatorOptions, log=pri
                              f"got {opts.start_step}")
         engine.resume(t_state, states)
     keys = [key_of(scenario.name, n) for n in names]
-    appendage_keys = {k: messages.appendages_key(scenario.name, names[k])
-                      for k, m in enumerate(models) if m == "flexible"} if opts.kind == "attitude" else {}
+    # flexible and rolling bodies: the rest of their state on their own key, same seq
+    model_keys = {k: messages.body_key(scenario.name, names[k], messages.MODEL_STATE_KINDS[m])
+                  for k, m in enumerate(models) if m in messages.MODEL_STATE_KINDS} if opts.kind == "attitude" else {}
     groups: dict[str, np.ndarray] = {}
     for i, m in enumerate(models):
         groups.setdefault(m, []).append(i)  # type: ignore[arg-type]
@@ -181,7 +188,7 @@ def run_propagator(scenario: Scenario, session, opts: PropagatorOptions, log=pri
         batched = opts.batch == "always" or (opts.batch == "auto" and len(names) > BATCH_THRESHOLD)
         extra_keys = [key for _, xkeys, _ in cross.scenes for key in xkeys] if cross is not None else []
         out = _StepOutput(opts.kind, engine, keys, groups, session, batch, signer, batched,
-                          extra_keys + list(appendage_keys.values()))
+                          extra_keys + list(model_keys.values()))
         bus.wait_for_process(session, scenario.name, "logger", timeout_s=opts.wait_logger_s)
         events.next_seq = int(opts.first_event_seq)
         events.emit("start", float(t_reached), json.dumps({"bodies": len(names), "first_step": start,
@@ -193,9 +200,13 @@ def run_propagator(scenario: Scenario, session, opts: PropagatorOptions, log=pri
         try:
             while k < stop_at:
                 tb = np.arange(k, min(stop_at, k + block), dtype=np.float64) / rate
-                a, b = engine.states(tb)
+                model_ended = None
+                try:
+                    a, b = engine.states(tb)
+                except ModelEnded as end:  # publish what was computed, then end the run with the reason
+                    a, b, tb, model_ended = end.q, end.w, tb[: end.rows], str(end)
                 xc = cross.block(tb, a, b) if cross is not None else None
-                elastic = engine.appendage_states() if appendage_keys else {}
+                extended = engine.extended_bodies() if model_keys else {}
                 rows_done = 0
                 for j in range(tb.shape[0]):
                     t = float(tb[j])
@@ -203,16 +214,20 @@ def run_propagator(scenario: Scenario, session, opts: PropagatorOptions, log=pri
                     if stopping["why"]:
                         raise _Stop
                     step_extra = None if xc is None else xc(j, k, t)
-                    if elastic:  # each flexible body's appendages, on their own key at the same seq
+                    if extended:  # each flexible / rolling body's own message, at the same seq
                         step_extra = (step_extra or []) + [
-                            (appendage_keys[i], messages.encode(st.message(j, t, k), "appendages"))
-                            for i, st in elastic.items()]
+                            (model_keys[i], messages.encode(body.message(j, t, k), body.kind))
+                            for i, body in extended.items()]
                     published += out.publish(t, k, a[j], b[j], step_extra)
                     rows_done = j + 1
                     t_reached = t
                     k += 1
                     heartbeat.beat(t=t_reached, step=k)
                 conservation.update(a, b)
+                if model_ended is not None:
+                    events.emit("error", float(t_reached), f"model ended: {model_ended}")
+                    stopping["why"] = f"model ended: {model_ended}"
+                    break
         except _Stop:
             conservation.update(a[:rows_done], b[:rows_done])
         wall = time.monotonic() - wall0
@@ -570,6 +585,9 @@ def service_main(kind: str, argv: list[str] | None = None) -> int:
         print(f"{kind}: {exc}", file=sys.stderr)
         return 2
     print(json.dumps(summary, separators=(",", ":")), flush=True)
+    if str(summary.get("reason", "")).startswith("model ended"):  # states up to there are published and logged
+        print(f"{kind}: {summary['reason']}", file=sys.stderr, flush=True)
+        return MODEL_ENDED_EXIT
     return 0
 
 

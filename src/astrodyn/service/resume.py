@@ -34,6 +34,7 @@ from pathlib import Path
 import numpy as np
 
 from astrodyn import messages
+from astrodyn.messages import MODEL_STATE_KINDS
 from astrodyn.scenario import Scenario, plan as make_plan
 
 __all__ = ["state_channels", "state_topics", "contiguous_steps", "last_common_step", "states_at", "write_state_file",
@@ -45,13 +46,15 @@ class ResumeError(ValueError):
 
 
 #: message kind -> the fields of its messages that make a state to continue from
-_STATE_FIELDS = {"orbit": ("r", "v"), "attitude": ("q", "w"), "appendages": ("eta", "eta_dot")}
+_STATE_FIELDS = {"orbit": ("r", "v"), "attitude": ("q", "w"), "appendages": ("eta", "eta_dot"),
+                 "rolling": ("contact", "heading", "lean", "spin_angle", "u")}
 
 
 def state_channels(scenario: Scenario, kind: str) -> list[tuple[str, str, str]]:
     """``(body, message kind, key)`` of every state channel the ``kind`` ("orbit" |
-    "attitude") process publishes: each propagated body's orbit or attitude, and a
-    flexible body's appendages (its elastic state is part of the state to continue from)."""
+    "attitude") process publishes: each propagated body's orbit or attitude, and the own
+    key of a flexible or rolling body (:data:`astrodyn.messages.MODEL_STATE_KINDS`: the
+    rest of the state to continue from)."""
     p = make_plan(scenario)
     if kind == "orbit":
         return [(b.name, "orbit", messages.orbit_key(scenario.name, b.name)) for b in p.bodies if b.orbit_model]
@@ -60,8 +63,9 @@ def state_channels(scenario: Scenario, kind: str) -> list[tuple[str, str, str]]:
         for b in p.bodies:
             if b.attitude_model:
                 out.append((b.name, "attitude", messages.attitude_key(scenario.name, b.name)))
-            if b.attitude_model == "flexible":
-                out.append((b.name, "appendages", messages.appendages_key(scenario.name, b.name)))
+            own = messages.MODEL_STATE_KINDS.get(b.attitude_model)
+            if own is not None:
+                out.append((b.name, own, messages.body_key(scenario.name, b.name, own)))
         return out
     raise ValueError(f"kind: expected 'orbit' or 'attitude', got {kind!r}")
 
@@ -121,11 +125,12 @@ def states_at(run, scenario: Scenario, kind: str, step: int) -> tuple[float, dic
     return t, out
 
 
-def _plain(value) -> list:
-    """A recorded vector (a row of floats, or per appendage a list of them) as plain lists."""
-    if len(value) and isinstance(value[0], (list, tuple, np.ndarray)):
-        return [[float(x) for x in row] for row in value]
-    return [float(x) for x in value]
+def _plain(value):
+    """A recorded value (a number, a row of floats, or per appendage a list of them) as
+    plain Python floats and lists."""
+    if isinstance(value, (list, tuple, np.ndarray)):
+        return [_plain(x) for x in value]
+    return float(value)
 
 
 def write_state_file(path: str | os.PathLike, kind: str, step: int, t: float, states: dict) -> Path:
@@ -149,18 +154,25 @@ def read_state_file(path: str | os.PathLike, kind: str) -> tuple[int, float, dic
         raise ResumeError(f"--resume-state {path}: expected step >= 0, finite t and a states object")
     fields = _STATE_FIELDS[kind] if kind in _STATE_FIELDS else ()
 
-    def finite(xs, n=None) -> bool:
-        return (isinstance(xs, list) and (n is None or len(xs) == n)
-                and all(isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x) for x in xs))
+    def number(x) -> bool:
+        return isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
 
+    def finite(xs, n=None) -> bool:
+        return isinstance(xs, list) and (n is None or len(xs) == n) and all(number(x) for x in xs)
+
+    def finite_tree(x, depth=2) -> bool:  # a number, or (nested) lists of finite numbers
+        return number(x) or (depth > 0 and isinstance(x, list) and bool(x)
+                             and all(finite_tree(y, depth - 1) for y in x))
+
+    own = sorted({f for k in MODEL_STATE_KINDS.values() for f in _STATE_FIELDS[k]}) if kind == "attitude" else []
     for body, st in states.items():
         ok = isinstance(st, dict) and all(finite(st.get(f), 4 if f == "q" else 3) for f in fields)
-        if ok and kind == "attitude" and ("eta" in st or "eta_dot" in st):  # a flexible body's appendages
-            ok = all(isinstance(st.get(f), list) and st[f] and all(finite(row) for row in st[f])
-                     for f in _STATE_FIELDS["appendages"])
+        # a flexible or rolling body's own fields: finite numbers, lists of them, lists of those
+        ok = ok and set(st) <= {*fields, *own} and all(finite_tree(st[f]) for f in own if f in st)
         if not ok:
             raise ResumeError(f"--resume-state {path}: states.{body}: expected finite {' and '.join(fields)} vectors"
-                              + (" (and eta, eta_dot lists of a flexible body)" if kind == "attitude" else ""))
+                              + (" (and the finite fields of a flexible or rolling body's own key)"
+                                 if kind == "attitude" else ""))
     return step, float(t), states
 
 

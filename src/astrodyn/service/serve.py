@@ -68,7 +68,7 @@ from astrodyn.service.children import (
     work_directory,
 )
 from astrodyn.service.output import check_output_path
-from astrodyn.service.propagator import command_key
+from astrodyn.service.propagator import MODEL_ENDED_EXIT, command_key
 from astrodyn.service.runner import MAX_LOGGERS, check_closed_loop_arguments
 from astrodyn.service.signals import StopFlag
 from astrodyn.service.supervision import (
@@ -277,6 +277,9 @@ class Supervisor:
             if name == "plant":  # a closed loop is not restarted: its controllers' state lives outside astrodyn
                 self.failures.append(msg + " (a closed-loop plant is not restarted; docs/control.md)")
                 self.state = "failed"
+                continue
+            if name in self.propagators and rc == MODEL_ENDED_EXIT:  # it would end there again
+                self.failures.append(msg + " (a model that ended is not restarted)")
                 continue
             if name in self.propagators and self.state in ("running", "paused") and n < self.max_restarts \
                     and self.budgets[name].allow():

@@ -18,7 +18,8 @@ from pathlib import Path
 
 import numpy as np
 
-from astrodyn.analysis.invariants import appendage_arrays, recorded_invariants
+from astrodyn.analysis.invariants import own_state_arrays, recorded_invariants
+from astrodyn.messages import MODEL_STATE_KINDS
 from astrodyn.scenario import Scenario, plan as make_plan
 
 __all__ = ["file_summary", "propagator_rows", "print_summary"]
@@ -89,26 +90,30 @@ def _merge_invariants(old: list[dict] | None, new: list[dict]) -> list[dict]:
     return [{**n, "drift": _max_nan(o["drift"], n["drift"])} for o, n in zip(old, new, strict=True)]
 
 
-def _attitude_block(rec, bp, first: dict) -> tuple[np.ndarray, np.ndarray, tuple | None]:
-    """``(q, w, elastic)`` of one block, led by the body's first recorded state (drifts are
-    from it).  A flexible body's states are its steps on both the attitude and the
-    appendages channel, ``elastic = (eta, eta_dot)``; a block with none of those is empty."""
+def _attitude_block(rec, bp, first: dict) -> tuple[np.ndarray, np.ndarray, dict | None]:
+    """``(q, w, own)`` of one block, led by the body's first recorded state (drifts are
+    from it).  A flexible or rolling body's states are its steps on both the attitude and
+    its own channel, ``own`` the arrays of that channel (:func:`own_state_arrays`); a block
+    with none of those is empty."""
     att = rec.attitude
-    if bp.attitude_model != "flexible":
+    kind = MODEL_STATE_KINDS.get(bp.attitude_model)
+    empty = np.zeros((0, 4)), np.zeros((0, 3)), None
+    if kind is None:
         q0, w0 = first.setdefault((bp.name, "attitude"), (att.q[:1].copy(), att.w[:1].copy()))
         return np.concatenate([q0, att.q]), np.concatenate([w0, att.w]), None
-    arrays = appendage_arrays(rec.appendages) if rec.appendages is not None and len(rec.appendages) else None
+    track = getattr(rec, kind, None)
+    arrays = own_state_arrays(bp.attitude_model, track)
     if arrays is None:
-        return np.zeros((0, 4)), np.zeros((0, 3)), None
-    _, ia, ie = np.intersect1d(att.seq, rec.appendages.seq, return_indices=True)
-    q, w, eta, eta_dot = att.q[ia], att.w[ia], arrays[0][ie], arrays[1][ie]
+        return empty
+    _, ia, ie = np.intersect1d(att.seq, track.seq, return_indices=True)
     if not ia.size:
-        return np.zeros((0, 4)), np.zeros((0, 3)), None
-    q0, w0, e0, ed0 = first.setdefault((bp.name, "attitude"), (q[:1], w[:1], eta[:1], eta_dot[:1]))
-    if e0.shape[1] != eta.shape[1]:
-        return np.zeros((0, 4)), np.zeros((0, 3)), None
-    return (np.concatenate([q0, q]), np.concatenate([w0, w]),
-            (np.concatenate([e0, eta]), np.concatenate([ed0, eta_dot])))
+        return empty
+    q0, w0, own0 = first.setdefault((bp.name, "attitude"), (att.q[ia[:1]], att.w[ia[:1]],
+                                                            {k: a[ie[:1]] for k, a in arrays.items()}))
+    if any(own0[k].shape[1:] != a.shape[1:] for k, a in arrays.items()):
+        return empty
+    return (np.concatenate([q0, att.q[ia]]), np.concatenate([w0, att.w[ia]]),
+            {k: np.concatenate([own0[k], a[ie]]) for k, a in arrays.items()})
 
 
 def _add_block(row: dict, rec, recorded_scenario: dict, bp, mu: float, first: dict) -> None:
@@ -128,18 +133,20 @@ def _add_block(row: dict, rec, recorded_scenario: dict, bp, mu: float, first: di
                                          float(np.max(np.abs(h - h[0])) / h[0]) if h[0] else 0.0)
     if rec.attitude is not None and len(rec.attitude):
         row["attitude_states"] = row.get("attitude_states", 0) + len(rec.attitude)
-        q, w, elastic = _attitude_block(rec, bp, first)
+        q, w, own = _attitude_block(rec, bp, first)
         if q.shape[0]:
             inv = recorded_invariants(recorded_scenario, bp.name, attitude=(bp.attitude_model, q, w),
-                                      appendages=elastic)["attitude"]
+                                      own=own)["attitude"]
             row["attitude_invariants"] = _merge_invariants(row.get("attitude_invariants"), [i.as_dict() for i in inv])
             row["quat_norm_error"] = _max_nan(row.get("quat_norm_error"),
                                               float(np.max(np.abs(np.linalg.norm(q, axis=1) - 1.0))))
         named = {i["name"]: i for i in row.get("attitude_invariants") or ()}
         if bp.attitude_model == "torque_free" and "T" in named:
             row.update(rot_energy_drift=named["T"]["drift"], inertial_momentum_drift=named["H_i"]["drift"])
-    if rec.appendages is not None and len(rec.appendages):
-        row["appendage_states"] = row.get("appendage_states", 0) + len(rec.appendages)
+    for kind in MODEL_STATE_KINDS.values():  # a flexible or rolling body's own key
+        track = getattr(rec, kind, None)
+        if track is not None and len(track):
+            row["own_states"] = row.get("own_states", 0) + len(track)
     if rec.crosscheck is not None and len(rec.crosscheck):
         row["crosscheck_states"] = row.get("crosscheck_states", 0) + len(rec.crosscheck)
         row["crosscheck_max_dr"] = _max_nan(row.get("crosscheck_max_dr"), float(np.max(rec.crosscheck.dr_norm)))
@@ -154,13 +161,13 @@ def print_summary(result: dict, rows: list[dict], scenario: Scenario, max_bodies
     log = result.get("logger") or {}
     states = sum(r.get("orbit_states", 0) + r.get("attitude_states", 0) for r in rows)
     xchecks = sum(r.get("crosscheck_states", 0) for r in rows)
-    elastic = sum(r.get("appendage_states", 0) for r in rows)
+    own = sum(r.get("own_states", 0) for r in rows)
     print(f"\nscenario {scenario.name}: {result['out']}")
     print(f"  wall {result['wall_s']:.2f} s for {scenario.duration:.6g} s of sim time "
           f"(real-time factor {scenario.duration / max(result['wall_s'], 1e-9):.1f}x)")
     print(f"  in the file: {states} state messages (orbit + attitude)"
           + (f" + {xchecks} cross-check messages" if xchecks else "")
-          + (f" + {elastic} appendage states" if elastic else "")
+          + (f" + {own} appendage / rolling states" if own else "")
           + f"; logger: missing {log.get('missing', '?')}, malformed {log.get('malformed', '?')}, "
           f"rejected {sum((log.get('rejected') or {}).values())}")
     if log.get("t") is not None and log.get("reason"):
