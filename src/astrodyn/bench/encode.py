@@ -10,9 +10,9 @@
   (list of payloads), the list plus :func:`~astrodyn.messages.encode_batch` framing
   (what the propagator did before), and the framed encoders plus
   :func:`~astrodyn.messages.batch_envelope` (what it does now);
-* us per single message: ``encode`` + validation, ``decode`` (parse + validation) and
-  ``check_state``; with ``--baseline SRC`` also for the tree in ``SRC`` (before/after in
-  one run, medians of 3 alternated rounds).
+* us per single message: ``encode`` without and with validation, ``decode`` (parse +
+  validation), the builders and ``check_state``; with ``--baseline SRC`` also for the tree
+  in ``SRC`` (before/after in one run, medians of 3 alternated rounds, and their ratio).
 
 Every timing is the best of K repeats (the machine is shared; the best is the least
 disturbed).  The outputs are compared byte for byte before timing.
@@ -101,28 +101,38 @@ def message_rows(n: int, repeat: int) -> list[tuple[str, str, float]]:
 
 def single_message_cases(repeat: int) -> dict[str, float]:
     """Seconds per message of the single-message calls that exist before and after issue 12
-    (``encode(msg, kind)`` with validation, ``decode(payload, kind)`` = parse + validate,
-    ``check_state`` on a canonical payload), for orbit, attitude and event messages.
-    Self-contained (imports inside) so that ``--baseline`` runs it against an older tree."""
+    (``encode(msg)``, ``encode(msg, kind)`` with validation, ``decode(payload, kind)`` =
+    parse + validate, the builder (``orbit_message``, ...) and ``check_state`` on a canonical
+    payload), for orbit, attitude and event messages.  The attitude message has a rate of
+    3e-5 rad/s, which ``repr`` writes in exponent form; the "attitude, floats in 1e-4..1e16"
+    rows have 3e-3 there.  Self-contained (imports inside) so that ``--baseline`` runs it
+    against an older tree."""
 
     from astrodyn import messages as m
 
     def best(fn, number=20000):
         return best_seconds_per_call(fn, number, repeat)
 
-    msgs = {
-        "orbit": m.orbit_message(1234.5, 12345, "kepler", [6878137.123456789, 1234.567890123, -98765.43210987],
-                                 [-12.3456789, 7612.345678901, 1.234567e-3], 3.986004418e14),
-        "attitude": m.attitude_message(1234.5, 12345, "torque_free",
-                                       [0.9238795325112867, 0.0, 0.3826834323650898, 0.0], [0.1, -0.02, 3e-5]),
-        "event": m.event_message(1234.5, 3, "orbit", "restart", "restarted from step 17 (pid 1234 -> 1240)"),
+    builders = {
+        "orbit": lambda: m.orbit_message(1234.5, 12345, "kepler", [6878137.123456789, 1234.567890123, -98765.43210987],
+                                         [-12.3456789, 7612.345678901, 1.234567e-3], 3.986004418e14),
+        "attitude": lambda: m.attitude_message(1234.5, 12345, "torque_free",
+                                               [0.9238795325112867, 0.0, 0.3826834323650898, 0.0], [0.1, -0.02, 3e-5]),
+        "attitude, floats in 1e-4..1e16": lambda: m.attitude_message(
+            1234.5, 12345, "torque_free", [0.9238795325112867, 0.0, 0.3826834323650898, 0.0], [0.1, -0.02, 3e-3]),
+        "event": lambda: m.event_message(1234.5, 3, "orbit", "restart", "restarted from step 17 (pid 1234 -> 1240)"),
     }
     out = {}
-    for kind, msg in msgs.items():
+    for label, build in builders.items():
+        kind = label.split(",")[0]
+        msg = build()
         data = m.encode(msg, kind)
-        out[f"{kind}: encode + validate"] = best(lambda msg=msg, kind=kind: m.encode(msg, kind))
-        out[f"{kind}: decode + validate"] = best(lambda data=data, kind=kind: m.decode(data, kind))
-        if kind in ("orbit", "attitude"):
+        out[f"{label}: encode"] = best(lambda msg=msg: m.encode(msg))
+        out[f"{label}: encode + validate"] = best(lambda msg=msg, kind=kind: m.encode(msg, kind))
+        if label == kind:
+            out[f"{kind}: decode + validate"] = best(lambda data=data, kind=kind: m.decode(data, kind))
+            out[f"{kind}: build ({kind}_message)"] = best(build)
+        if label in ("orbit", "attitude"):
             out[f"{kind}: check_state (canonical payload)"] = best(lambda data=data, kind=kind: m.check_state(data, kind))
     return out
 
@@ -153,11 +163,16 @@ def main(argv: list[str] | None = None) -> int:
             for case, secs in call_in_tree(single_message_cases, (args.repeat,), src).items():
                 rounds[label].setdefault(case, []).append(secs)
     cases = list(rounds[trees[-1][0]])
-    print(f"\n| single message | {' | '.join(f'{label} us' for label, _ in trees)} |\n|---|{'---|' * len(trees)}")
+    ratio = " before / after |" if args.baseline else ""
+    print(f"\n| single message | {' | '.join(f'{label} us' for label, _ in trees)} |{ratio}\n"
+          f"|---|{'---|' * (len(trees) + bool(ratio))}")
     for case in cases:
-        cells = [f"{statistics.median(rounds[label][case]) * 1e6:.2f}" if case in rounds[label] else "-"
-                 for label, _ in trees]
+        medians = [statistics.median(rounds[label][case]) if case in rounds[label] else None for label, _ in trees]
+        cells = [f"{x * 1e6:.2f}" if x is not None else "-" for x in medians]
+        if ratio:
+            cells.append(f"{medians[0] / medians[1]:.1f}x" if None not in medians else "-")
         print(f"| {case} | {' | '.join(cells)} |")
+    print(f"\nload average at the end {os.getloadavg()[0]:.1f}")
     return 0
 
 

@@ -52,8 +52,10 @@ Schema (:func:`json_schema`, stored with every MCAP channel), :func:`validate` a
 follow from it, plus the one rule a JSON Schema cannot state, ``|q| = 1`` within
 :data:`QUAT_NORM_TOL` (``AttitudeState.__post_init__``).  :func:`encode` writes the fields
 in definition order with Python's float ``repr``, byte for byte what the compiled batch
-encoders write (msgspec's own float text differs from ``repr`` in exponent form, e.g.
-``1e-05`` / ``0.00001``, so it is not used for encoding).  :func:`check_state` reaches
+encoders write: msgspec's encoder writes plain messages (its float text is ``repr``'s for
+|x| < 1e-9 and 1e-4 <= |x| < 1e16; other floats are laid out as ``repr`` does), after a
+check generated from the definition (:mod:`astrodyn.messages.codec`, "Plain messages");
+anything else goes through ``json``, with the same bytes and errors.  :func:`check_state` reaches
 the same verdict as :func:`decode` on the batch encoders' canonical layout with one
 precompiled regex (the logger's hot path); it and the compiled formatter and ingest are
 tested field by field against the definitions (tests/test_message_definitions.py).
