@@ -22,7 +22,7 @@ pytestmark = pytest.mark.network
 
 @pytest.mark.parametrize(
     "config",
-    [pytest.param(p, id=p.stem, marks=[pytest.mark.slow] if p.stem in ("constellation-1000", "explorer-1") else []) for p in CONFIGS],
+    [pytest.param(p, id=p.stem, marks=[pytest.mark.slow] if p.stem == "constellation-1000" else []) for p in CONFIGS],
 )
 def test_config_runs_with_nothing_lost(config, tmp_path):
     out, res = tmp_path / "run.mcap", tmp_path / "result.json"

@@ -17,7 +17,7 @@ antennas, the hub's moments exchanged), spin 2 pi rad/s (one turn per second), n
 10 deg at the start, antennas undeformed.
 
 Why these numbers (the run must show the drift within seconds of CPU; the model costs
-~0.5 ms per right-hand side, ~15 DOP853 steps per spin turn at rtol 1e-6):
+~10 us per right-hand side compiled (0.5 ms in numpy), ~15 DOP853 steps per spin turn at rtol 1e-6):
 
 * The sink rate.  The nutation (body rate ``w_t`` turning at ``lambda = (I_s - I_t)/I_t
   Omega`` in the body) forces each antenna's flap mode with the load ``b w_t (lambda - Omega)``
@@ -46,8 +46,8 @@ than this estimate, because the antennas' flap response is not small against the
 inertia here and shifts the nutation frequency itself (measured: 2.30 rad/s against the rigid
 2.07 for the prolate body; lambda^2 enters P), and the second-order in-plane load
 (``w_t^2``, at twice the nutation frequency) adds to it.  The tests hold the ratio to
-[0.9, 1.35].  The default run (~10 s) covers 20 turns of both bodies and the undamped
-control; the whole drift to the flat spin (200 turns, ~20 s CPU) is marked slow.
+[0.9, 1.35].  The runs cover 20 turns of both bodies and the undamped control, and the
+whole drift to the flat spin (200 turns, ~1 s of CPU with the compiled rates; ~20 s before).
 """
 
 from __future__ import annotations
@@ -230,9 +230,8 @@ def test_undamped_antennas_take_no_energy():
     assert info["energy_drift"] < 1e-6
 
 
-@pytest.mark.slow
 def test_minor_axis_spinner_drifts_to_a_flat_spin():
-    """200 turns (~20 s CPU): the nutation angle passes 45 deg and ends within 15 deg of
+    """200 turns (~1 s CPU): the nutation angle passes 45 deg and ends within 15 deg of
     90 deg (the deformed antennas tilt the major axis a few degrees off the hub's transverse
     plane, so it wobbles about 90), the rate about the minor axis is under 40 % of the
     rate, and the energy has fallen at least 97 % of the way to the flat spin's

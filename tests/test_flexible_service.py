@@ -340,7 +340,6 @@ def _nutation(sc, q, w, eta, eta_dot):
     return np.degrees(np.arccos(np.clip(np.einsum("ij,ij->i", z, h) / np.linalg.norm(h, axis=1), -1, 1))), h, states
 
 
-@pytest.mark.slow
 @pytest.mark.network
 def test_explorer_1_run_drifts_to_a_flat_spin_and_the_oblate_twin_stays_put(tmp_path):
     out, res = tmp_path / "explorer.mcap", tmp_path / "result.json"

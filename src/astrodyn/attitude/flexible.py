@@ -139,14 +139,17 @@ import numpy as np
 from numpy.polynomial import legendre as _leg
 
 from astrodyn.attitude.output_times import check_output_times, integrate_dop853
+from astrodyn.jit import jit
 
 __all__ = [
     "BeamModes", "beam_matrices", "shape_functions", "natural_frequencies",
     "krb_spinup", "tip_deflection",
     "planar_prescribed_rates", "propagate_planar_prescribed",
     "planar_free_rates", "propagate_planar_free", "planar_energy", "planar_angular_momentum",
-    "Appendage", "FlexibleSpacecraft", "state_layout", "make_state", "spacecraft_rates", "propagate_spacecraft",
-    "spacecraft_energy", "spacecraft_momentum", "tip_deflections",
+    "Appendage", "FlexibleSpacecraft", "state_layout", "make_state", "spacecraft_rates", "spacecraft_rates_reference",
+    "propagate_spacecraft",
+    "spacecraft_energy", "spacecraft_momentum", "spacecraft_energy_reference", "spacecraft_momentum_reference",
+    "tip_deflections",
 ]
 
 
@@ -564,6 +567,7 @@ class FlexibleSpacecraft:
     appendages: tuple
     stiffening: bool = True
     _data: tuple = field(default=(), repr=False)
+    _packed: tuple = field(default=(), repr=False)
 
     def __post_init__(self) -> None:
         _positive("hub_mass", self.hub_mass)
@@ -583,6 +587,7 @@ class FlexibleSpacecraft:
         object.__setattr__(self, "hub_inertia", J)
         object.__setattr__(self, "appendages", apps)
         object.__setattr__(self, "_data", tuple(_appendage_data(a, self.stiffening) for a in apps))
+        object.__setattr__(self, "_packed", _pack(self))
 
     @property
     def n_elastic(self) -> int:
@@ -726,9 +731,296 @@ def _assemble(sc: FlexibleSpacecraft, y):
             "fw_extra": fw_extra, "per": per, "m": m}
 
 
+# --------------------------------------------------------------------------- compiled rates
+#
+# The same equations as spacecraft_rates_reference (below, in numpy: the reference the
+# tests hold this kernel to), in one compiled pass: the per-appendage constants stacked
+# and zero-padded to the largest mode count (_pack), loops instead of small numpy calls.
+
+
+def _pack(sc) -> tuple:
+    """The constants of every appendage stacked for :func:`_rates_kernel`: mode counts
+    ``(N,)``, vectors ``(N, 6, 3)`` (a, e, f, g, a x e, s0), ``I0 (N, 3, 3)``, ``M, Sa, Sb
+    (N, n, n)``, ``Kq, Cq, Mq_inv (N, 2n, 2n)``, ``D1, D2, R (N, 3, 2n)`` (n the largest
+    mode count; each appendage's own block in the leading rows and columns)."""
+    N = len(sc._data)
+    n = max((d.n for d in sc._data), default=1)
+    nn = np.array([d.n for d in sc._data], dtype=np.int64)
+    vec, I0 = np.zeros((N, 6, 3)), np.zeros((N, 3, 3))
+    M, Sa, Sb = np.zeros((N, n, n)), np.zeros((N, n, n)), np.zeros((N, n, n))
+    Kq, Cq, Mi = np.zeros((N, 2 * n, 2 * n)), np.zeros((N, 2 * n, 2 * n)), np.zeros((N, 2 * n, 2 * n))
+    D1, D2, R = np.zeros((N, 3, 2 * n)), np.zeros((N, 3, 2 * n)), np.zeros((N, 3, 2 * n))
+    for k, d in enumerate(sc._data):
+        m = d.n
+        vec[k] = (d.a, d.e, d.f, d.g, d.axe, d.s0)
+        I0[k] = d.I0
+        M[k, :m, :m], Sa[k, :m, :m], Sb[k, :m, :m] = d.M, d.Sa, d.Sb
+        Kq[k, : 2 * m, : 2 * m], Cq[k, : 2 * m, : 2 * m], Mi[k, : 2 * m, : 2 * m] = d.Kq, d.Cq, d.Mq_inv
+        D1[k, :, : 2 * m], D2[k, :, : 2 * m], R[k, :, : 2 * m] = d.D1, d.D2, d.R
+    return (np.ascontiguousarray(sc.hub_inertia, dtype=np.float64), float(sc.mass), nn, vec, I0, M, Sa, Sb, Kq, Cq,
+            Mi, D1, D2, R)
+
+
+@jit
+def _cross3(a, b):
+    return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
+
+
+@jit
+def _add_inertia_terms(out, a, e, c1, c2, U0, U1, E2, f, g, Eff, Egg, Efg):
+    """``out += 2 I1(a, e, c1, c2) + (Eff + Egg) 1 - E + 2 I4(a, e, U0, U1)`` (module
+    docstring), with ``E = Eff f f^T + Egg g g^T + Efg (f g^T + g f^T)``; ``E2`` scratch."""
+    for i in range(3):
+        for j in range(3):
+            E2[i, j] = a[i] * c1[j] + e[i] * c2[j] + U0 * a[i] * e[j] + U1 * e[i] * e[j]
+    tr = E2[0, 0] + E2[1, 1] + E2[2, 2]
+    for i in range(3):
+        for j in range(3):
+            v = -(E2[i, j] + E2[j, i])  # 2 * (-(P + P^T) / 2)
+            if i == j:
+                v += 2.0 * tr + Eff + Egg
+            v -= Eff * f[i] * f[j] + Egg * g[i] * g[j] + Efg * (f[i] * g[j] + g[i] * f[j])
+            out[i, j] += v
+
+
+@jit
+def _assemble_kernel(y, J, mass, nn, vec, I0, M, Sa, Sb, Kq, Cq, Mi, D1, D2, R):
+    """The blocks of :func:`_assemble` at state ``y``, compiled: ``(P, H, s, sd, I, Id, fv,
+    fw, B, feta, T_el, V)`` with ``B`` the stacked ``[Bv; Bw]`` and ``feta`` the elastic
+    forces per appendage, ``T_el = sum etadot.Mq etadot`` and ``V`` the strain energy."""
+    N = nn.shape[0]
+    ne = 0
+    for k in range(N):
+        ne += 2 * nn[k]
+    w, v = y[4:7], y[10:13]
+    ww = w[0] * w[0] + w[1] * w[1] + w[2] * w[2]
+    s = np.zeros(3)
+    sd = np.zeros(3)
+    It = J.copy()
+    Id = np.zeros((3, 3))
+    h = np.zeros(3)
+    fv = np.zeros(3)
+    fw = np.zeros(3)
+    E2 = np.zeros((3, 3))
+    vxw = _cross3(v, w)
+    nmax2 = M.shape[1] * 2
+    B = np.zeros((N, 6, nmax2))  # [Bv; Bw] per appendage
+    feta = np.zeros((N, nmax2))
+    T_el = V = 0.0
+    k0 = 0
+    for k in range(N):
+        n = nn[k]
+        a, e, f, g, axe, s0 = vec[k, 0], vec[k, 1], vec[k, 2], vec[k, 3], vec[k, 4], vec[k, 5]
+        eta = y[13 + k0 : 13 + k0 + 2 * n]
+        etad = y[13 + ne + k0 : 13 + ne + k0 + 2 * n]
+        k0 += 2 * n
+        Mef, Meg, Medf, Medg = np.zeros(n), np.zeros(n), np.zeros(n), np.zeros(n)
+        Sae, Sbe, Saed = np.zeros(2 * n), np.zeros(2 * n), np.zeros(2 * n)
+        for i in range(n):
+            for j in range(n):
+                Mef[i] += M[k, i, j] * eta[j]
+                Meg[i] += M[k, i, j] * eta[n + j]
+                Medf[i] += M[k, i, j] * etad[j]
+                Medg[i] += M[k, i, j] * etad[n + j]
+                Sae[i] += Sa[k, i, j] * eta[j]
+                Sae[n + i] += Sa[k, i, j] * eta[n + j]
+                Sbe[i] += Sb[k, i, j] * eta[j]
+                Sbe[n + i] += Sb[k, i, j] * eta[n + j]
+                Saed[i] += Sa[k, i, j] * etad[j]
+                Saed[n + i] += Sa[k, i, j] * etad[n + j]
+        U0 = U1 = U0d = U1d = sdd = 0.0
+        for i in range(2 * n):
+            U0 -= 0.5 * eta[i] * Sae[i]
+            U1 -= 0.5 * eta[i] * Sbe[i]
+            U0d -= Sae[i] * etad[i]
+            U1d -= Sbe[i] * etad[i]
+            sdd += etad[i] * Saed[i]
+        c1, c2, c1d, c2d = np.zeros(3), np.zeros(3), np.zeros(3), np.zeros(3)
+        Reta = np.zeros(3)
+        for i in range(3):
+            for j in range(2 * n):
+                c1[i] += D1[k, i, j] * eta[j]
+                c2[i] += D2[k, i, j] * eta[j]
+                c1d[i] += D1[k, i, j] * etad[j]
+                c2d[i] += D2[k, i, j] * etad[j]
+                Reta[i] += R[k, i, j] * etad[j]
+        Eff = Egg = Efg = Edff = Edgg = Edfg = 0.0
+        for i in range(n):
+            Eff += eta[i] * Mef[i]
+            Egg += eta[n + i] * Meg[i]
+            Efg += eta[i] * Meg[i]
+            Edff += 2.0 * etad[i] * Mef[i]
+            Edgg += 2.0 * etad[n + i] * Meg[i]
+            Edfg += etad[i] * Meg[i] + etad[n + i] * Mef[i]
+        J2e_etad = 0.0  # J2e = [-Meg; Mef]
+        for i in range(n):
+            J2e_etad += -Meg[i] * etad[i] + Mef[i] * etad[n + i]
+        for i in range(3):
+            s[i] += s0[i] + c1[i] + U0 * e[i]
+            sd[i] += c1d[i] + U0d * e[i]
+            h[i] += Reta[i] + e[i] * J2e_etad + axe[i] * U0d
+            fv[i] += e[i] * sdd
+            fw[i] += axe[i] * sdd
+            for j in range(3):
+                It[i, j] += I0[k, i, j]
+        _add_inertia_terms(It, a, e, c1, c2, U0, U1, E2, f, g, Eff, Egg, Efg)
+        _add_inertia_terms(Id, a, e, c1d, c2d, U0d, U1d, E2, f, g, Edff, Edgg, Edfg)
+        for j in range(2 * n):
+            J2ej = -Meg[j] if j < n else Mef[j - n]
+            for i in range(3):
+                B[k, i, j] = D1[k, i, j] - e[i] * Sae[j]
+                B[k, 3 + i, j] = R[k, i, j] + e[i] * J2ej - axe[i] * Sae[j]
+        we = w[0] * e[0] + w[1] * e[1] + w[2] * e[2]
+        wf = w[0] * f[0] + w[1] * f[1] + w[2] * f[2]
+        wg = w[0] * g[0] + w[1] * g[1] + w[2] * g[2]
+        wa = w[0] * a[0] + w[1] * a[1] + w[2] * a[2]
+        Qff, Qgg, Qfg = ww - wf * wf, ww - wg * wg, -wf * wg
+        wxa, wxe = _cross3(w, a), _cross3(w, e)
+        u1 = np.zeros(3)  # vxw + ww a - (w.a) w
+        u2 = np.zeros(3)  # ww e - we w
+        for i in range(3):
+            u1[i] = vxw[i] + ww * a[i] - wa * w[i]
+            u2[i] = ww * e[i] - we * w[i]
+        geo = (vxw[0] * e[0] + vxw[1] * e[1] + vxw[2] * e[2]) + (wxa[0] * wxe[0] + wxa[1] * wxe[1] + wxa[2] * wxe[2])
+        cen = ww - we * we
+        for i in range(n):
+            T_el += etad[i] * Medf[i] + etad[n + i] * Medg[i]
+        for i in range(2 * n):
+            acc = 0.0
+            for j in range(2 * n):
+                V += 0.5 * eta[i] * Kq[k, i, j] * eta[j]
+                acc -= Kq[k, i, j] * eta[j] + Cq[k, i, j] * etad[j]
+            J2edi = -Medg[i] if i < n else Medf[i - n]
+            acc -= 2.0 * we * J2edi
+            for j in range(3):
+                acc += D1[k, j, i] * u1[j] + D2[k, j, i] * u2[j]
+            acc += (Qff * Mef[i] + Qfg * Meg[i]) if i < n else (Qfg * Mef[i - n] + Qgg * Meg[i - n])
+            acc -= geo * Sae[i] + cen * Sbe[i]
+            feta[k, i] = acc
+    P = mass * v + _cross3(w, s) + sd
+    H = _cross3(s, v) + It @ w + h
+    return P, H, s, sd, It, Id, fv, fw, B, feta, T_el, V
+
+
+@jit
+def _energy_momentum_kernel(y, J, mass, nn, vec, I0, M, Sa, Sb, Kq, Cq, Mi, D1, D2, R):
+    """``(E, P_i, H_i)`` of state ``y``: the energy ``T + V`` (J), the linear momentum (kg
+    m/s) and the angular momentum about the inertial origin (kg m^2/s), inertial components
+    (:func:`spacecraft_energy`, :func:`spacecraft_momentum`)."""
+    P, H, s, sd, It, Id, fv, fw, B, feta, T_el, V = _assemble_kernel(y, J, mass, nn, vec, I0, M, Sa, Sb, Kq, Cq, Mi,
+                                                                      D1, D2, R)
+    w, v = y[4:7], y[10:13]
+    ne = 0
+    for k in range(nn.shape[0]):
+        ne += 2 * nn[k]
+    T2 = v @ P + w @ H + T_el
+    k0 = 0
+    for k in range(nn.shape[0]):
+        for i in range(2 * nn[k]):
+            bvw = 0.0
+            for r in range(3):
+                bvw += B[k, r, i] * v[r] + B[k, 3 + r, i] * w[r]
+            T2 += y[13 + ne + k0 + i] * bvw
+        k0 += 2 * nn[k]
+    C = _dcm_kernel(y[0:4])
+    Pi = C.T @ P
+    Hi = _cross3(y[7:10], Pi) + C.T @ H
+    return 0.5 * T2 + V, Pi, Hi
+
+
+@jit
+def _dcm_kernel(q):
+    """``C(q)`` (``v_body = C v_inertial``) of the normalised Euler parameters ``q``."""
+    nq = math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
+    q0, q1, q2, q3 = q[0] / nq, q[1] / nq, q[2] / nq, q[3] / nq
+    return np.array([
+        [1 - 2 * (q2 * q2 + q3 * q3), 2 * (q1 * q2 + q0 * q3), 2 * (q1 * q3 - q0 * q2)],
+        [2 * (q1 * q2 - q0 * q3), 1 - 2 * (q1 * q1 + q3 * q3), 2 * (q2 * q3 + q0 * q1)],
+        [2 * (q1 * q3 + q0 * q2), 2 * (q2 * q3 - q0 * q1), 1 - 2 * (q1 * q1 + q2 * q2)],
+    ])
+
+
+@jit
+def _rates_kernel(y, tau, J, mass, nn, vec, I0, M, Sa, Sb, Kq, Cq, Mi, D1, D2, R):
+    """``dy/dt`` of a flexible spacecraft (the state of :func:`state_layout`) under the hub
+    torque ``tau`` (N m, body): Lagrange's equations in quasi-coordinates with the elastic
+    coordinates eliminated by the Schur complement (module docstring)."""
+    P, H, s, sd, It, Id, fv, fw, B, feta, _, _ = _assemble_kernel(y, J, mass, nn, vec, I0, M, Sa, Sb, Kq, Cq, Mi,
+                                                                   D1, D2, R)
+    N = nn.shape[0]
+    ne = 0
+    for k in range(N):
+        ne += 2 * nn[k]
+    w, v = y[4:7], y[10:13]
+    nmax2 = M.shape[1] * 2
+    rhs = np.zeros(6)
+    rhs[:3] = -_cross3(w, P) - _cross3(w, sd) + fv
+    rhs[3:] = tau - _cross3(w, H) - _cross3(v, P) - _cross3(sd, v) - Id @ w + fw
+    A = np.zeros((6, 6))
+    for i in range(3):
+        A[i, i] = mass
+        for j in range(3):
+            A[3 + i, 3 + j] = It[i, j]
+    A[0, 4], A[0, 5], A[1, 3], A[1, 5], A[2, 3], A[2, 4] = s[2], -s[1], -s[2], s[0], s[1], -s[0]  # -[s x]
+    A[3, 1], A[3, 2], A[4, 0], A[4, 2], A[5, 0], A[5, 1] = -s[2], s[1], s[2], -s[0], -s[1], s[0]  # [s x]
+    X = np.zeros((N, nmax2, 6))
+    yk = np.zeros((N, nmax2))
+    for k in range(N):
+        m2 = 2 * nn[k]
+        for i in range(m2):  # X = Minv B^T, yk = Minv f_eta
+            for j in range(m2):
+                mij = Mi[k, i, j]
+                yk[k, i] += mij * feta[k, j]
+                for c in range(6):
+                    X[k, i, c] += mij * B[k, c, j]
+        for r in range(6):  # A -= B X, rhs -= B yk
+            for i in range(m2):
+                b = B[k, r, i]
+                rhs[r] -= b * yk[k, i]
+                for c in range(6):
+                    A[r, c] -= b * X[k, i, c]
+    if np.all(np.isfinite(A)) and np.all(np.isfinite(rhs)):
+        acc = np.linalg.solve(A, rhs)
+    else:  # a non-finite state: non-finite rates (numba's solve would raise on NaN)
+        acc = np.full(6, np.nan)
+    out = np.empty_like(y)
+    e0, e1, e2, e3 = y[0], y[1], y[2], y[3]
+    out[0] = -0.5 * (e1 * w[0] + e2 * w[1] + e3 * w[2])
+    ev = y[1:4]
+    exw = _cross3(ev, w)
+    for i in range(3):
+        out[1 + i] = 0.5 * (e0 * w[i] + exw[i])
+    out[4:7] = acc[3:]
+    C = _dcm_kernel(y[0:4])  # C^T v with the normalised q
+    for i in range(3):
+        out[7 + i] = C[0, i] * v[0] + C[1, i] * v[1] + C[2, i] * v[2]
+    out[10:13] = acc[:3]
+    out[13 : 13 + ne] = y[13 + ne : 13 + 2 * ne]
+    k0 = 0
+    for k in range(N):
+        m2 = 2 * nn[k]
+        for i in range(m2):
+            val = yk[k, i]
+            for c in range(6):
+                val -= X[k, i, c] * acc[c]
+            out[13 + ne + k0 + i] = val
+        k0 += m2
+    return out
+
+
 def spacecraft_rates(sc: FlexibleSpacecraft, t: float, state, torque: Callable | None = None) -> np.ndarray:
     """Time derivative of the state (module docstring), with the hub torque
-    ``torque(t, state)`` (N m, body components) or none."""
+    ``torque(t, state)`` (N m, body components) or none: one compiled pass
+    (``_rates_kernel``; :func:`spacecraft_rates_reference` is the same in numpy)."""
+    y = _state_vector("state", state, 13 + 2 * sc.n_elastic, finite=False)
+    tau = np.zeros(3) if torque is None else np.asarray(torque(t, y), dtype=np.float64).reshape(3)
+    return _rates_kernel(y, tau, *sc._packed)
+
+
+def spacecraft_rates_reference(sc: FlexibleSpacecraft, t: float, state, torque: Callable | None = None) -> np.ndarray:
+    """:func:`spacecraft_rates` written with numpy calls on the assembled blocks
+    (:func:`_assemble`): the readable form, and the reference the compiled kernel is
+    tested against."""
     ne = sc.n_elastic
     y = _state_vector("state", state, 13 + 2 * ne, finite=False)
     q, w, v = y[0:4], y[4:7], y[10:13]
@@ -771,7 +1063,28 @@ def _each(sc, state, fn):
 
 def spacecraft_energy(sc: FlexibleSpacecraft, state) -> np.ndarray:
     """Kinetic plus strain energy ``T + V`` (J) of states ``(..., 13 + 2 n_el)``;
-    ``T = 1/2 (v.P + w.H + etadot.p_eta)``."""
+    ``T = 1/2 (v.P + w.H + etadot.p_eta)`` (compiled; :func:`spacecraft_energy_reference`
+    is the same in numpy)."""
+    packed = sc._packed
+    return _each(sc, state, lambda y: _energy_momentum_kernel(np.ascontiguousarray(y), *packed)[0])
+
+
+def spacecraft_momentum(sc: FlexibleSpacecraft, state):
+    """``(P, H)``: the linear momentum (kg m/s) and the angular momentum about the inertial
+    origin (kg m^2/s), inertial components, of states ``(..., 13 + 2 n_el)`` (compiled;
+    :func:`spacecraft_momentum_reference` is the same in numpy)."""
+    packed = sc._packed
+
+    def one(y):
+        _, p, h = _energy_momentum_kernel(np.ascontiguousarray(y), *packed)
+        return np.concatenate([p, h])
+
+    out = _each(sc, state, one)
+    return out[..., :3], out[..., 3:]
+
+
+def spacecraft_energy_reference(sc: FlexibleSpacecraft, state) -> np.ndarray:
+    """:func:`spacecraft_energy` from the numpy blocks (:func:`_assemble`): the reference."""
 
     def one(y):
         A = _assemble(sc, y)
@@ -786,9 +1099,8 @@ def spacecraft_energy(sc: FlexibleSpacecraft, state) -> np.ndarray:
     return _each(sc, state, one)
 
 
-def spacecraft_momentum(sc: FlexibleSpacecraft, state):
-    """``(P, H)``: the linear momentum (kg m/s) and the angular momentum about the inertial
-    origin (kg m^2/s), inertial components, of states ``(..., 13 + 2 n_el)``."""
+def spacecraft_momentum_reference(sc: FlexibleSpacecraft, state):
+    """:func:`spacecraft_momentum` from the numpy blocks (:func:`_assemble`): the reference."""
 
     def one(y):
         A = _assemble(sc, y)
@@ -832,8 +1144,11 @@ def propagate_spacecraft(sc: FlexibleSpacecraft, state0, t, torque: Callable | N
         raise ValueError(f"state0: expected {lay['size']} finite numbers (state_layout), got shape {y0.shape}")
     t = check_output_times(t)
 
-    def rhs(time, y):
-        return spacecraft_rates(sc, time, y, torque)
+    packed, zero = sc._packed, np.zeros(3)
+
+    def rhs(time, y):  # the compiled kernel straight, without spacecraft_rates' checks
+        tau = zero if torque is None else np.asarray(torque(time, y), dtype=np.float64).reshape(3)
+        return _rates_kernel(y, tau, *packed)
 
     states, nfev = integrate_dop853(rhs, y0, t, rtol, atol, "flexible spacecraft")
     states[:, 0:4] /= np.linalg.norm(states[:, 0:4], axis=1, keepdims=True)
