@@ -1,7 +1,7 @@
-"""``astrodyn bench flexible``: cost and accuracy of the flexible spacecraft and the rolling
-disk, against the rigid models, all in one process run.
+"""``astrodyn bench flexible``: cost and accuracy of the flexible spacecraft, the rolling
+disk and the gyroscopes, against the rigid models, all in one process run.
 
-Three models, each timed on its own fixed case (best of a few repeats; the machine is shared):
+Each model timed on its own fixed case (best of a few repeats; the machine is shared):
 
 * **rigid body**: the flexible spacecraft below frozen (its hub plus undeformed antennas:
   the composite inertia), same initial rates and attitude, same span.  Propagated by
@@ -19,6 +19,10 @@ Three models, each timed on its own fixed case (best of a few repeats; the machi
   (its right-hand side in Python floats) at several ``rtol``, and scipy DOP853 on the same
   equations through the numpy :func:`~astrodyn.attitude.rolling_disk.rolling_disk_rates`.
   Errors against ``rtol`` 1e-13, and the energy drift.
+* **gyroscopes** (:mod:`astrodyn.attitude.gyroscopes`, Baruh 10.7): a free gyroscope in
+  massive gimbals (errors against ``rtol`` 1e-13, drifts of its three integrals) and a
+  single-axis rate gyro on a steadily turning base (its settled gimbal angle against the
+  exact steady state).
 
 Reported per run: right-hand-side evaluations (``fev``; a DOP853 step is 12), wall time,
 microseconds per evaluation (ns per step for the splitting method, per output time for the
@@ -326,6 +330,56 @@ def disk_rows(repeats, rtols):
     return rows
 
 
+GYRO_SPAN = 1.0  # s
+
+
+def gyro_rows(repeats, rtols):
+    """The gyroscopes of Baruh 10.7: a free gyroscope in massive gimbals nutating at its
+    working attitude (errors against rtol 1e-13, drifts of its three integrals), and a
+    single-axis rate gyro on a base turning at a constant rate (error: the settled gimbal
+    angle against the exact steady state, :func:`steady_state_angle`)."""
+    from astrodyn.attitude import gyroscopes as gy
+
+    free = gy.FreeGyroscope(rotor_axial=2e-4, rotor_transverse=1.2e-4, inner_gimbal=(5e-5, 6e-5, 4e-5),
+                            outer_gimbal=1e-4)
+    y0 = gy.free_gyro_state(free, spin=2 * math.pi * 200, theta=0.5 * math.pi + 0.05, theta_dot=2.0, psi_dot=0.5)
+    t = np.linspace(0.0, GYRO_SPAN, N_OUT)
+    ref, _ = gy.propagate_free_gyro(free, y0, t, rtol=1e-13, atol=1e-15)
+    ints0 = gy.free_gyro_integrals(free, y0)
+    rows = []
+    for rtol in rtols:
+
+        def run(rtol=rtol):
+            return gy.propagate_free_gyro(free, y0, t, rtol=rtol, atol=rtol * 1e-3)
+
+        sec, (y, info) = _best(run, repeats, warm=True)
+        ints = gy.free_gyro_integrals(free, y)
+        drift = max(float(np.max(np.abs(x - x0))) / abs(float(x0)) for x, x0 in zip(ints, ints0))
+        rows.append(_row("free gyroscope (gimbals)", "`propagate_free_gyro` (plain-float rhs)", f"rtol {rtol:g}", 6,
+                         GYRO_SPAN, sec, fev=info["nfev"], err=f"{np.max(np.abs(y[:, :3] - ref[:, :3])):.1e} rad",
+                         drift=f"T, p_psi, h {drift:.1e}"))
+    # a rate gyro: 400 Hz rotor, gimbal at 30 Hz with damping ratio 0.7, on a base turning at
+    # 0.2 rad/s about its input axis and 0.05 about the others
+    C, A = 1e-4, 6e-5
+    wn, zeta = 2 * math.pi * 30, 0.7
+    k = wn * wn * A
+    rate = gy.SingleAxisGyro.rate_gyro(C, A, 2 * math.pi * 400, k, 2 * zeta * math.sqrt(k * A))
+    w = (0.2, 0.05, 0.05)
+    exact = gy.steady_state_angle(rate, w)
+    base = gy.constant_base_rate(w)
+    t = np.linspace(0.0, GYRO_SPAN, N_OUT)
+    for rtol in rtols:
+
+        def run(rtol=rtol):
+            return gy.propagate_single_axis(rate, base, t, rtol=rtol, atol=rtol * 1e-3)
+
+        sec, (y, info) = _best(run, repeats, warm=True)
+        rows.append(_row("rate gyro (single axis)", "`propagate_single_axis` (plain-float rhs)", f"rtol {rtol:g}", 3,
+                         GYRO_SPAN, sec, fev=info["nfev"],
+                         err=f"settled angle {abs(y[-1, 0] - exact) / abs(exact):.1e} rel. to the exact steady state"))
+    return rows
+
+
 def run(repeats: int = 3, quick: bool = False) -> dict:
     """All rows, in one process run; returns ``{"rows", "model_gap", "load", "seconds"}``."""
     rtols = RTOLS[:2] if quick else RTOLS
@@ -338,13 +392,15 @@ def run(repeats: int = 3, quick: bool = False) -> dict:
     rows += flex
     print("[bench flexible] rolling disk ...", file=sys.stderr, flush=True)
     rows += disk_rows(repeats, rtols)
+    print("[bench flexible] gyroscopes ...", file=sys.stderr, flush=True)
+    rows += gyro_rows(repeats, rtols)
     base_fev = min(r["cost"] for r in rows if r["method"].startswith("scipy DOP853, plain") and r["model"] == "rigid")
     rigid_dop = {r["setting"]: r["ms_per_sim_s"] for r in rows if r["method"].startswith("scipy DOP853, plain")}
     for r in rows:
         r["x_fev"] = r["cost"] / base_fev if r["cost_unit"] == "us/fev" else None
         r["x_sim"] = (
             r["ms_per_sim_s"] / rigid_dop[r["setting"]]
-            if r["model"] != "rolling disk" and r["setting"] in rigid_dop
+            if r["model"] in ("rigid", "flexible (4 antennas)") and r["setting"] in rigid_dop
             else None
         )
     return {"rows": rows, "model_gap": gap, "load": (load0[0], os.getloadavg()[0]), "seconds": time.perf_counter() - t0}
@@ -378,8 +434,10 @@ def table(result: dict, repeats: int) -> str:
         " against the exact solution, of the flexible rows against the flexible model at rtol 1e-13 (atol 1e-16),"
         " relative rate error over |w0|; a DOP853 step is 12 fev.  The flexible model's own attitude departs from the rigid composite's"
         f" by {result['model_gap']:.1e} rad over the span (modelling, not integration).  Rolling disk: {DISK_SPAN:g} s"
-        " of the general motion of the rolling-disk section, errors against rtol 1e-13.  atol = 1e-3 rtol"
-        " (1e-2 rtol for the disk).",
+        " of the general motion of the rolling-disk section, errors against rtol 1e-13.  Gyroscopes:"
+        f" {GYRO_SPAN:g} s; the free gyroscope (200 Hz rotor, massive gimbals, nutating from 0.05 rad off its"
+        " working attitude) against rtol 1e-13, the rate gyro's settled angle against the exact steady state"
+        " (30 Hz gimbal, damping ratio 0.7).  atol = 1e-3 rtol (1e-2 rtol for the disk).",
     ]
     return "\n".join(lines)
 
