@@ -40,7 +40,7 @@ import numpy as np
 from astrodyn.attitude import propagate_attitude, torque_free
 from astrodyn.attitude.integrators import HeldInputsBody
 from astrodyn.attitude.torques import ConstantTorque
-from astrodyn.attitude.wheels import ReactionWheels, step_with_wheels
+from astrodyn.attitude.wheels import HeldInputsBatch, ReactionWheels, step_with_wheels
 from astrodyn.orbit import propagate
 from astrodyn.orbit.maneuvers import G0, ConstantThrust
 from astrodyn.orbit.perturbations import propagate_perturbed
@@ -89,6 +89,7 @@ class PlantBody:
         self.name = body.name
         self.mu = float(mu)
         self.seed = tuple(int(x) for x in seed)  # (scene seed, body index): independent noise per body
+        self.index = self.seed[1]
         act = body.actuators
         self.limits = act
         self.has_orbit = body.orbit is not None
@@ -125,6 +126,7 @@ class PlantBody:
         self.step_dv: np.ndarray | None = None
         self.step_dv_t = 0.0  # when the step's impulse was applied, s
         self.step_applied: list[str] = []
+        self.step_applied_ids: list[tuple[str, int]] = []  # (sender, seq) of step_applied
 
     # ------------------------------------------------------------------ commands
     def apply(self, cmd: dict, at: float | None = None) -> None:
@@ -148,7 +150,8 @@ class PlantBody:
             if cmd.get("frame", "inertial") == "body" and not self.has_attitude:
                 raise CommandRefused(f"thrust in body axes needs an attitude; body {self.name} has none")
         if "torque" in cmd:
-            self.torque = np.clip(np.asarray(cmd["torque"], dtype=np.float64), -act.torque, act.torque)
+            torque = np.asarray(cmd["torque"], dtype=np.float64)
+            self.torque = np.minimum(np.maximum(torque, -act.torque), act.torque)  # np.clip, without its overhead
         if "wheel_torque" in cmd:
             self.wheel_command = np.asarray(cmd["wheel_torque"], dtype=np.float64)
         if "thrust" in cmd:
@@ -161,6 +164,7 @@ class PlantBody:
             self.step_dv = dv if self.step_dv is None else self.step_dv + dv
             self.step_dv_t = float(cmd["t"] if at is None else at)
         self.step_applied.append(command_id(cmd["sender"], cmd["seq"]))
+        self.step_applied_ids.append((cmd["sender"], cmd["seq"]))
 
     def seize_wheel(self, k: int) -> None:
         """Wheel ``k``'s rotor seizes: from now on it turns with the body (relative speed 0).
@@ -190,42 +194,64 @@ class PlantBody:
     def advance(self, dt: float) -> None:
         """Move the body from t to t + dt with the held commands."""
         if self.has_attitude:
-            torqued = bool(np.any(self.torque))
-            if self.wheels is not None and self.faults.stuck_wheels:
-                self._advance_with_locked_wheels(dt, torqued)
-            elif self.wheels is not None:
-                cmd = self.wheel_command.copy()
-                for k in self.faults.failed_wheels:
-                    cmd[k] = 0.0
-                s = step_with_wheels(self.inertia, self.wheels, self.w, self.q, self.h, cmd, dt,
-                                     external_torque=ConstantTorque(self.torque) if torqued else None, body=self._held)
-                self.w, self.q, self.h = s.w, s.q, s.h
-                self.applied_wheel = s.torque
-                self.clipped = [int(i) for i in np.flatnonzero(s.clipped & (cmd != 0))]
-            elif torqued:
-                self.w, self.q = self._held.step_held(self.w, self.q, float(dt), tau=self.torque)
-            elif self._diagonal:
-                w1, q1 = torque_free(np.diag(self.inertia).copy(), self.w, self.q, float(dt))
-                self.w, self.q = np.asarray(w1), np.asarray(q1)
-            else:
-                w1, q1, _ = propagate_attitude(self.inertia, self.w, self.q, float(dt), method="exact", error_estimate=False)
-                self.w, self.q = np.asarray(w1), np.asarray(q1)
+            self.advance_attitude(dt)
         if self.has_orbit:
-            f = self._thrust_inertial() if np.any(self.thrust) else None
-            if f is not None and np.any(f):
-                burn = ConstantThrust(f, self.mass, self.limits.isp)
-                out = propagate_perturbed(self.r, self.v, float(dt), self.mu, [burn], rtol=1e-13, atol=1e-15,
-                                          error_estimate=False)
-                r1, v1 = np.asarray(out.r).reshape(3), np.asarray(out.v).reshape(3)
-                # the rocket equation per step, ln(m0 / m1) = -log1p(-mdot dt / m0): accurate to
-                # round-off where log(m0 / m1) of a ratio near 1 would lose digits
-                self.dv_total += float(np.linalg.norm(f)) / self.mass * dt if math.isinf(self.limits.isp) else \
-                    -self.limits.isp * G0 * math.log1p(-burn.mdot * dt / self.mass)
-                self.mass = burn.mass_at(dt)
-                self.r, self.v = r1, v1
-            else:
-                r1, v1 = propagate(self.r, self.v, float(dt), self.mu)
-                self.r, self.v = np.asarray(r1), np.asarray(v1)
+            self.advance_orbit(dt)
+
+    def batched(self) -> bool:
+        """Whether :meth:`Plant.advance` steps this body's attitude in its compiled batch:
+        the held-input step with wheels (none seized) or a torque, what :meth:`advance_attitude`
+        does with :func:`step_with_wheels` / :class:`HeldInputsBody` (torque-free bodies keep
+        the exact solution)."""
+        return self.has_attitude and not self.faults.stuck_wheels and (self.wheels is not None or bool(self.torque.any()))
+
+    def wheel_command_applied(self) -> np.ndarray:
+        """The held wheel commands, failed wheels' zeroed (what the motors are asked for)."""
+        if not self.faults.failed_wheels:
+            return self.wheel_command
+        cmd = self.wheel_command.copy()
+        for k in self.faults.failed_wheels:
+            cmd[k] = 0.0
+        return cmd
+
+    def advance_attitude(self, dt: float) -> None:
+        """The attitude part of :meth:`advance`, one body."""
+        torqued = bool(np.any(self.torque))
+        if self.wheels is not None and self.faults.stuck_wheels:
+            self._advance_with_locked_wheels(dt, torqued)
+        elif self.wheels is not None:
+            cmd = self.wheel_command_applied()
+            s = step_with_wheels(self.inertia, self.wheels, self.w, self.q, self.h, cmd, dt,
+                                 external_torque=ConstantTorque(self.torque) if torqued else None, body=self._held)
+            self.w, self.q, self.h = s.w, s.q, s.h
+            self.applied_wheel = s.torque
+            self.clipped = [int(i) for i in np.flatnonzero(s.clipped & (cmd != 0))]
+        elif torqued:
+            self.w, self.q = self._held.step_held(self.w, self.q, float(dt), tau=self.torque)
+        elif self._diagonal:
+            w1, q1 = torque_free(np.diag(self.inertia).copy(), self.w, self.q, float(dt))
+            self.w, self.q = np.asarray(w1), np.asarray(q1)
+        else:
+            w1, q1, _ = propagate_attitude(self.inertia, self.w, self.q, float(dt), method="exact", error_estimate=False)
+            self.w, self.q = np.asarray(w1), np.asarray(q1)
+
+    def advance_orbit(self, dt: float) -> None:
+        """The orbit part of :meth:`advance` (after the attitude: a body-axis thrust turns with it)."""
+        f = self._thrust_inertial() if np.any(self.thrust) else None
+        if f is not None and np.any(f):
+            burn = ConstantThrust(f, self.mass, self.limits.isp)
+            out = propagate_perturbed(self.r, self.v, float(dt), self.mu, [burn], rtol=1e-13, atol=1e-15,
+                                      error_estimate=False)
+            r1, v1 = np.asarray(out.r).reshape(3), np.asarray(out.v).reshape(3)
+            # the rocket equation per step, ln(m0 / m1) = -log1p(-mdot dt / m0): accurate to
+            # round-off where log(m0 / m1) of a ratio near 1 would lose digits
+            self.dv_total += float(np.linalg.norm(f)) / self.mass * dt if math.isinf(self.limits.isp) else \
+                -self.limits.isp * G0 * math.log1p(-burn.mdot * dt / self.mass)
+            self.mass = burn.mass_at(dt)
+            self.r, self.v = r1, v1
+        else:
+            r1, v1 = propagate(self.r, self.v, float(dt), self.mu)
+            self.r, self.v = np.asarray(r1), np.asarray(v1)
 
     def _advance_with_locked_wheels(self, dt: float, torqued: bool) -> None:
         """:meth:`advance`'s attitude with seized wheels: the free wheels as in
@@ -248,24 +274,16 @@ class PlantBody:
     def wheel_speeds(self) -> np.ndarray | None:
         return None if self.wheels is None else self.wheels.speeds(self.h, self.w)
 
+    def due(self, s: Sensor, k: int, t: float) -> bool:
+        """Whether sensor ``s`` gives a sample at output step ``k`` (time ``t``): its rate, no dropout."""
+        return not k % s.every and t >= self.faults.dropouts.get(s.kind, -math.inf)
+
     def sensor_samples(self, k: int, t: float) -> list[tuple[str, dict]]:
         """``(kind, fields)`` of each sensor due at output step ``k`` (time ``t``), noise from
-        ``(scene seed, body index, sensor, k)``; a sensor in a dropout gives nothing."""
-        out = []
-        for s in self.sensors:
-            if k % s.every or t < self.faults.dropouts.get(s.kind, -math.inf):
-                continue
-            if s.kind == "gyro":
-                bias = s.bias if self.faults.gyro_bias is None else self.faults.gyro_bias
-                out.append(("gyro", {"w": RateGyro(s.sigma, bias, self.seed).sample(self.w, k)}))
-            elif s.kind == "star_tracker":
-                out.append(("star_tracker", {"q": StarTracker(s.sigma, self.seed).sample(self.q, k)}))
-            elif s.kind == "gps":
-                r, v = PositionReceiver(s.sigma, s.sigma_v, self.seed).sample(self.r, self.v, k)
-                out.append(("gps", {"r": r, "v": v}))
-            else:
-                out.append(("tachometer", {"speeds": WheelTachometer(s.sigma, self.seed).sample(self.wheel_speeds(), k)}))
-        return out
+        ``(scene seed, body index, sensor, k)``; a sensor in a dropout gives nothing.  One
+        body's share of :meth:`Plant.sensor_samples` (the same values, bit for bit)."""
+        return [(s.kind, {name: x[0] for name, x in _sensor_fields(s.kind, [(self, s)], k).items()})
+                for s in self.sensors if self.due(s, k, t)]
 
     def actuator_state(self) -> dict:
         """The fields of the :class:`astrodyn.messages.ActuatorState` of the step just advanced
@@ -290,12 +308,14 @@ class PlantBody:
             out["applied"] = list(self.step_applied)
         return out
 
-    def begin_step(self) -> None:
-        """Note what the step's actuator state reports about its start, and clear the step's records."""
-        self._speeds_at_start = self.wheel_speeds()
+    def begin_step(self, speeds: np.ndarray | None = None) -> None:
+        """Note what the step's actuator state reports about its start, and clear the step's
+        records.  ``speeds``: the wheel speeds now, if the caller has them (:meth:`Plant.begin_step`)."""
+        self._speeds_at_start = self.wheel_speeds() if speeds is None else speeds
         self._mass_at_start = self.mass
         self.step_dv = None
         self.step_applied = []
+        self.step_applied_ids = []
 
     def finish_commands(self) -> None:
         """After the step's commands: the thrust and dv budget the step starts with."""
@@ -303,8 +323,31 @@ class PlantBody:
         self._dv_total_at_start = self.dv_total
 
 
+def _sensor_fields(kind: str, due: list[tuple[PlantBody, Sensor]], k: int) -> dict[str, np.ndarray]:
+    """The fields of sample ``k`` of the sensors ``due`` (all of one ``kind``; for the
+    tachometer, bodies with the same number of wheels), one row per body: every body's
+    noise in one call (:mod:`astrodyn.sensors`)."""
+    seed = due[0][0].seed[0]
+    bodies = [b.index for b, _ in due]
+    sigma = np.array([s.sigma for _, s in due])
+    if kind == "gyro":
+        bias = np.array([s.bias if b.faults.gyro_bias is None else b.faults.gyro_bias for b, s in due], dtype=np.float64)
+        return {"w": RateGyro.samples(seed, bodies, k, np.array([b.w for b, _ in due]), sigma, bias)}
+    if kind == "star_tracker":
+        return {"q": StarTracker.samples(seed, bodies, k, np.array([b.q for b, _ in due]), sigma)}
+    if kind == "gps":
+        r, v = PositionReceiver.samples(seed, bodies, k, np.array([b.r for b, _ in due]), np.array([b.v for b, _ in due]),
+                                        sigma, np.array([s.sigma_v for _, s in due]))
+        return {"r": r, "v": v}
+    return {"speeds": WheelTachometer.samples(seed, bodies, k, np.array([b.wheel_speeds() for b, _ in due]), sigma)}
+
+
 class Plant:
-    """Every actuated body of ``scenario`` (its bodies with actuators or sensors)."""
+    """Every actuated body of ``scenario`` (its bodies with actuators or sensors).
+
+    :meth:`sensor_samples` and :meth:`advance` work on all the bodies of a step at once:
+    one noise call per kind of sensor, one compiled held-input step for every body whose
+    attitude takes it (:meth:`PlantBody.batched`); the others step one by one."""
 
     def __init__(self, scenario: Scenario):
         if scenario.control is None:
@@ -315,6 +358,82 @@ class Plant:
         self.bodies = {b.name: PlantBody(b, scenario.central_body.mu, (self.control.seed, index))
                        for index, b in enumerate(scenario.bodies) if b.in_plant}
         self._faults = list(self.control.faults)
+        self._attitude = [b for b in self.bodies.values() if b.has_attitude]
+        for row, b in enumerate(self._attitude):
+            b.row = row
+        self._batch = None  # HeldInputsBatch of self._attitude, built at the first step that needs it
+        self._sensors = {}  # (kind, wheels) -> [(body, sensor)], in body order
+        for b in self.bodies.values():
+            for s in b.sensors:
+                self._sensors.setdefault((s.kind, b.wheels.n if s.kind == "tachometer" else 0), []).append((b, s))
+
+    def sensor_samples(self, k: int, t: float) -> list[tuple[str, list[str], dict[str, np.ndarray]]]:
+        """The sensor samples due at output step ``k`` (time ``t``) of every body, by kind:
+        ``(kind, body names, fields)`` with each field an array of one row per body, the rows
+        those :meth:`PlantBody.sensor_samples` gives."""
+        out = []
+        for (kind, _), pairs in self._sensors.items():
+            due = [(b, s) for b, s in pairs if b.due(s, k, t)]
+            if due:
+                out.append((kind, [b.name for b, _ in due], _sensor_fields(kind, due, k)))
+        return out
+
+    def begin_step(self) -> None:
+        """:meth:`PlantBody.begin_step` of every body, the wheel speeds of all computed at once."""
+        wheeled = [b for b in self._attitude if b.wheels is not None]
+        speeds = None
+        if wheeled:
+            batch = self._held_batch()
+            rows = [b.row for b in wheeled]
+            h = np.ones((len(wheeled), batch.m))
+            w = np.array([b.w for b in wheeled])
+            for i, b in enumerate(wheeled):
+                h[i, :b.wheels.n] = b.h
+            speeds = batch.wheel_speeds(rows, w, h)
+            for i, b in enumerate(wheeled):
+                b.begin_step(speeds[i, :b.wheels.n])
+        for b in self.bodies.values():
+            if b.wheels is None:
+                b.begin_step()
+
+    def _held_batch(self) -> HeldInputsBatch:
+        if self._batch is None:
+            self._batch = HeldInputsBatch([b.inertia for b in self._attitude], [b.wheels for b in self._attitude])
+        return self._batch
+
+    def advance(self, bodies: list[PlantBody], dt: float) -> None:
+        """:meth:`PlantBody.advance` of each of ``bodies`` by ``dt`` s; the attitudes that take
+        the held-input step (:meth:`PlantBody.batched`) in one compiled call, to round-off
+        the same as one by one."""
+        group = [b for b in bodies if b.batched()]
+        if group:
+            self._advance_batch(group, dt)
+        batched = set(map(id, group))
+        for b in bodies:
+            if b.has_attitude and id(b) not in batched:
+                b.advance_attitude(dt)
+        for b in bodies:
+            if b.has_orbit:
+                b.advance_orbit(dt)
+
+    def _advance_batch(self, group: list[PlantBody], dt: float) -> None:
+        batch = self._held_batch()
+        n, m = len(group), batch.m
+        w, q = np.array([b.w for b in group]), np.array([b.q for b in group])
+        h, cmd = np.zeros((n, m)), np.zeros((n, m))
+        for i, b in enumerate(group):
+            if b.wheels is not None:
+                h[i, :b.wheels.n] = b.h
+                cmd[i, :b.wheels.n] = b.wheel_command_applied()
+        g, clipped = batch.step([b.row for b in group], w, q, h, cmd, np.array([b.torque for b in group]), dt)
+        clipped &= cmd != 0
+        any_clipped = clipped.any(axis=1).tolist()
+        for i, b in enumerate(group):
+            b.w, b.q = w[i], q[i]
+            if b.wheels is not None:
+                nw = b.wheels.n
+                b.h, b.applied_wheel = h[i, :nw], g[i, :nw]
+                b.clipped = [int(j) for j in np.flatnonzero(clipped[i, :nw])] if any_clipped[i] else []
 
     def faults_at(self, t: float) -> list[Fault]:
         """Faults that begin at or before ``t`` and have not begun yet: applied, returned."""

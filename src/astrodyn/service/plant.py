@@ -40,9 +40,12 @@ reproduces REC's states and sensor samples bit for bit.
 from __future__ import annotations
 
 import argparse
+import functools
+import gc
 import json
 import math
 import queue
+import re
 import sys
 import time
 from pathlib import Path
@@ -65,7 +68,8 @@ from astrodyn.service.propagator import (
 )
 from astrodyn.service.signals import catch_stop_signals
 
-__all__ = ["main", "run_plant", "PlantLoop", "recorded_commands", "recorded_faults", "tick_payload", "ControllerTimeout", "PROCESS"]
+__all__ = ["main", "run_plant", "PlantLoop", "recorded_commands", "recorded_faults", "tick_payload", "encode_stamped",
+           "ControllerTimeout", "PROCESS"]
 
 PROCESS = "plant"
 #: Samples waiting in the plant's intake before it drops new ones (a flood from a hostile
@@ -90,6 +94,8 @@ class Intake:
     def __init__(self, scenario: str, bodies, verifier: auth.Verifier | None, token: str | None):
         self.scenario = scenario
         self.bodies = set(bodies)
+        # the command keys of the plant's bodies, known valid: judged without parsing the key
+        self.command_keys = {messages.body_key(scenario, b, "command"): b for b in self.bodies}
         self.verifier = verifier
         self.token = token
         self.queue: queue.Queue = queue.Queue(INTAKE_CAPACITY)
@@ -158,7 +164,10 @@ class Intake:
         return self._judge_entry(key, payload, signer if signer is not True else None)
 
     def _judge_entry(self, key: str, payload: bytes, signer: str | None) -> tuple[str, str, dict] | None:
+        who = self.command_keys.get(key)
         try:
+            if who is not None:  # the common case: a command for one of the plant's bodies
+                return self._judged("command", who, key, messages.decode(payload, "command"), signer)
             _, who, kind = messages.parse_key(key)  # ("s", body, "command") or ("s", "@done", controller)
             if who == "@done":
                 who = kind
@@ -169,6 +178,9 @@ class Intake:
         except messages.MessageError as exc:
             self.reject("malformed", f"{key}: {exc}")
             return None
+        return self._judged(kind, who, key, msg, signer)
+
+    def _judged(self, kind: str, who: str, key: str, msg: dict, signer: str | None) -> tuple[str, str, dict] | None:
         if signer is not None and signer != msg["sender"]:
             self.reject("impersonation", f"{key}: sender {msg['sender']!r} signed by {signer!r}")
             return None
@@ -284,6 +296,7 @@ class PlantLoop:
         self.att_keys = [messages.attitude_key(self.name, bname) for bname, _ in self.att_bodies]
         self.orb_keys = [messages.orbit_key(self.name, bname) for bname, _ in self.orb_bodies]
         self.seqs: dict[str, int] = {}  # sensor key -> next seq
+        self.keys: dict[tuple[str, str], str] = {}  # (body, kind) -> its key
         self.pending: dict[str, list[tuple[dict, bytes | None]]] = {b: [] for b in plant.bodies}
         self.received: dict[str, int] = {}  # authenticated commands per sender
         self.promised: dict[str, int] = {}  # commands announced by the sender's answers
@@ -342,8 +355,7 @@ class PlantLoop:
             self.refuse(bname, cmd, str(exc))
             return
         self.applied += 1
-        # decoded and validated on arrival: encoded again without a second validation
-        self.outbox.append((messages.body_key(self.name, bname, "command"), raw if raw is not None else messages.encode(cmd)))
+        self.applied_now.append((self.key(bname, "command"), cmd, raw))  # re-published by apply_commands
 
     def drain(self, block_s: float | None) -> bool:
         """Take what the intake holds (waiting up to ``block_s`` for the first); False if nothing came."""
@@ -380,11 +392,10 @@ class PlantLoop:
     def publish_step(self, k: int, t: float, events) -> list[tuple[str, bytes]]:
         """Faults that begin now, then the step's states and sensor samples into the outbox;
         returns them as ``(body/kind, payload)`` for the tick."""
-        name, plant = self.name, self.plant
+        plant = self.plant
         for f in plant.faults_at(t):
             events.emit("fault", t, Plant.fault_detail(f))
-        for b in plant.bodies.values():
-            b.begin_step()
+        plant.begin_step()
         samples: list[tuple[str, bytes]] = []
         if self.orb_bodies:  # states: the compiled encoders (canonical layout, validated there)
             payloads = messages.encode_orbit_batch(
@@ -398,15 +409,21 @@ class PlantLoop:
             self.outbox.extend(zip(self.att_keys, payloads))
             samples.extend((f"{bname}/attitude", p) for (bname, _), p in zip(self.att_bodies, payloads))
         self.published += len(self.orb_bodies) + len(self.att_bodies)
-        for bname, b in plant.bodies.items():
-            for kind, fields in b.sensor_samples(k, t):
-                key = messages.body_key(name, bname, kind)
-                seq = self.seqs.get(key, 0)
-                payload = messages.encode({"t": t, "seq": seq, **fields})  # NaN refused; fields are the plant's
-                self.outbox.append((key, payload))
-                samples.append((f"{bname}/{kind}", payload))
+        for kind, bnames, fields in plant.sensor_samples(k, t):  # every body's samples of a kind at once
+            keys = [self.key(bname, kind) for bname in bnames]
+            seqs = [self.seqs.get(key, 0) for key in keys]
+            payloads = encode_stamped(t, seqs, fields)  # NaN refused; fields are the plant's
+            self.outbox.extend(zip(keys, payloads))
+            samples.extend((f"{bname}/{kind}", p) for bname, p in zip(bnames, payloads))
+            for key, seq in zip(keys, seqs):
                 self.seqs[key] = seq + 1
         return samples
+
+    def key(self, bname: str, kind: str) -> str:
+        key = self.keys.get((bname, kind))
+        if key is None:
+            key = self.keys[bname, kind] = messages.body_key(self.name, bname, kind)
+        return key
 
     def exchange(self, k: int, t: float, samples, supervisor, heartbeat) -> None:
         """A control step: publish the tick; in lockstep, wait for every controller's answer
@@ -446,9 +463,12 @@ class PlantLoop:
 
     def apply_commands(self, k: int, t: float) -> None:
         """Apply each body's due commands (those inside the step at their own time), advance
-        it to the next step, and put its actuator state in the outbox."""
+        it to the next step, and put its actuator state in the outbox.  The bodies advanced by
+        a whole step go together (:meth:`astrodyn.plant.Plant.advance`)."""
         last = k == self.n_steps - 1
         eps, dt = self.eps, self.dt
+        whole = []
+        self.applied_now: list[tuple[str, dict, bytes | None]] = []
         for bname, b in self.plant.bodies.items():
             inside = []
             for cmd, raw in self.commands_due(k, t, bname):
@@ -468,11 +488,30 @@ class PlantLoop:
                     b.advance(cmd["t"] - t - done_s)
                     done_s = cmd["t"] - t
                 self.apply_command(b, bname, cmd, raw, cmd["t"])
-            if not last and dt > done_s:
+            if not last and done_s == 0.0:
+                whole.append(b)
+            elif not last and dt > done_s:
                 b.advance(dt - done_s)
+        self.plant.advance(whole, dt)
+        # the applied commands, decoded and validated on arrival: encoded again (canonical) without a second validation
+        payloads = encode_commands([cmd for _, cmd, raw in self.applied_now if raw is None])[::-1]
+        self.outbox.extend((key, raw if raw is not None else payloads.pop()) for key, _, raw in self.applied_now)
+        self.outbox.extend(self.actuator_states(k, t))
+
+    def actuator_states(self, k: int, t: float) -> list[tuple[str, bytes]]:
+        """``(key, payload)`` of every actuated body's actuator state of step ``k``: the
+        bodies with the same float fields encoded together (:func:`encode_stamped`)."""
+        groups: dict[int, list] = {}  # wheels -> [(body, state)]
+        for bname, b in self.plant.bodies.items():
             if b.limits is not None:
-                self.outbox.append((messages.body_key(self.name, bname, "actuators"),
-                                    messages.encode({"t": t, "seq": k, **b.actuator_state()})))
+                groups.setdefault(0 if b.wheels is None else b.wheels.n, []).append((bname, b.actuator_state()))
+        out = []
+        for wheels, items in groups.items():
+            lead = _ACTUATOR_ARRAYS if wheels else _ACTUATOR_ARRAYS[:1]  # always there, first, in this order
+            fields = {f: np.array([state[f] for _, state in items], dtype=np.float64) for f in lead}
+            rest = [{f: state[f] for f in state if f not in lead} for _, state in items]
+            out.extend(zip([self.key(bname, "actuators") for bname, _ in items], encode_stamped(t, k, fields, rest)))
+        return out
 
     # ------------------------------------------------------------------ the run
 
@@ -495,6 +534,10 @@ class PlantLoop:
             heartbeat.beat(force=True, t=0.0, step=0, preparing=True)
             failure = None
             k = 0
+            # the scene, the plant and the modules stay for the whole run: out of the cyclic
+            # collector's scans (a full scan of a 1000-body plant cost ~10 ms every few steps)
+            gc.collect()
+            gc.freeze()
             try:
                 while k < self.n_steps:
                     t = k * self.dt
@@ -537,6 +580,102 @@ class PlantLoop:
         if failure:
             summary["error"] = failure
         return summary
+
+
+#: Fewer messages than this are encoded one by one (:func:`encode_stamped`, :func:`encode_commands`).
+FEW = 4
+#: The leading fields of an ActuatorState that are float arrays of one width per body (in order).
+_ACTUATOR_ARRAYS = ("torque", "wheel_torque", "wheel_speed")
+
+
+def encode_stamped(t: float, seqs, fields: dict[str, np.ndarray], rest: list[dict] | None = None) -> list[bytes]:
+    """Payloads ``{"t": t, "seq": seqs[i], <field>: row i of fields[field], ..., **rest[i]}``
+    of ``n`` messages, byte for byte what :func:`astrodyn.messages.encode` gives each (floats
+    as ``repr``, compact): the float arrays of all of them written in one compiled pass
+    (:func:`astrodyn.messages.shortest.format_records`), ``rest`` (other fields, after them)
+    by the encoder.  ``seqs``: one int or ``n``; ``fields`` (n, width) float arrays.
+    MessageError for a NaN or an infinity, as :func:`astrodyn.messages.encode`."""
+    from astrodyn.messages import shortest
+
+    names = list(fields)
+    n = len(fields[names[0]])
+    if n < FEW:  # the encoder, message by message, costs less than the set-up of one pass
+        seq_list = [int(seqs)] * n if np.ndim(seqs) == 0 else [int(x) for x in seqs]
+        return [messages.encode({"t": t, "seq": seq_list[i], **{f: fields[f][i] for f in names}, **(rest[i] if rest else {})})
+                for i in range(n)]
+    values = np.concatenate([np.asarray(fields[f], dtype=np.float64) for f in names], axis=1)
+    seq_arr = np.broadcast_to(np.asarray(seqs, dtype=np.int64), (n,))
+    if not np.all(np.isfinite(values)):  # the encoder names the field
+        for i in range(n):
+            messages.encode({"t": t, "seq": int(seq_arr[i]), **{f: fields[f][i] for f in names}})
+    data, offsets = shortest.format_records(_template(True, None, tuple((f, fields[f].shape[1]) for f in names)),
+                                            seq_arr, values, (float(t),))
+    out = [data[offsets[i]:offsets[i + 1]] for i in range(n)]
+    if rest is not None:
+        out = [p if not r else p[:-1] + _tail(r) for p, r in zip(out, rest)]
+    return out
+
+
+_PLAIN_STRING = re.compile(r"[A-Za-z0-9_.#-]*")
+
+
+def _tail(fields: dict) -> bytes:
+    """``,"<field>":value,...}``: what :func:`astrodyn.messages.encode` writes for ``fields``
+    after a message's first ones.  Alone, the usual ``applied`` list of ``sender#seq`` (names
+    need no escape in JSON) is written directly."""
+    applied = fields.get("applied")
+    if len(fields) == 1 and applied is not None and all(_PLAIN_STRING.fullmatch(a) for a in applied):
+        return b',"applied":["' + '","'.join(applied).encode() + b'"]}'
+    return b"," + messages.encode(fields)[1:]
+
+
+#: Command fields that are float arrays, in the order of the message type.
+_COMMAND_ARRAYS = ("torque", "wheel_torque", "dv", "thrust")
+
+
+def encode_commands(commands: list[dict]) -> list[bytes]:
+    """:func:`astrodyn.messages.encode` of each of ``commands`` (decoded, valid), byte for
+    byte; those of one sender and one layout written together, in one compiled pass."""
+    if len(commands) < FEW:
+        return [messages.encode(cmd) for cmd in commands]
+    groups: dict[tuple, list[int]] = {}
+    out: list[bytes | None] = [None] * len(commands)
+    for i, cmd in enumerate(commands):
+        arrays = tuple((f, len(cmd[f])) for f in _COMMAND_ARRAYS if f in cmd)
+        if len(cmd) == 3 + len(arrays):  # t, seq, sender and float arrays only (no frame)
+            groups.setdefault((cmd["sender"], arrays), []).append(i)
+        else:
+            out[i] = messages.encode(cmd)
+    from astrodyn.messages import shortest
+
+    for (sender, arrays), rows in groups.items():
+        values = np.array([[commands[i]["t"], *(x for f, _ in arrays for x in commands[i][f])] for i in rows], dtype=np.float64)
+        data, offsets = shortest.format_records(_template(False, sender, arrays), [commands[i]["seq"] for i in rows], values)
+        for j, i in enumerate(rows):
+            out[i] = data[offsets[j]:offsets[j + 1]]
+    return out
+
+
+@functools.lru_cache(maxsize=256)
+def _template(t_shared: bool, sender: str | None, layout: tuple[tuple[str, int], ...]):
+    """``{"t":T,"seq":S[,"sender":"<sender>"],"<name>":[c, ...], ...}`` for ``layout`` ((name,
+    width), ...): ``T`` the shared float 0 or the first column, then the arrays' columns."""
+    from astrodyn.messages.shortest import SEQ, RecordTemplate, shared
+
+    pieces, slots, column = [b'{"t":', b',"seq":', b""], [shared(0) if t_shared else 0, SEQ], 0 if t_shared else 1
+    if sender is not None:
+        pieces[-1] += b',"sender":' + json.dumps(sender, ensure_ascii=False).encode()
+    for name, width in layout:
+        pieces[-1] += b"," + json.dumps(name, ensure_ascii=False).encode() + b":["
+        if width == 0:
+            pieces[-1] += b"]"
+            continue
+        for j in range(width):
+            slots.append(column)
+            pieces.append(b"," if j < width - 1 else b"]")
+            column += 1
+    pieces[-1] += b"}"
+    return RecordTemplate(pieces, slots)
 
 
 def tick_payload(t: float, seq: int, step: int, samples: list[tuple[str, bytes]]) -> bytes:
