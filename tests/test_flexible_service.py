@@ -136,7 +136,7 @@ def test_the_plan_counts_an_appendages_message_per_step():
     assert [bp.attitude_model for bp in p.bodies] == ["flexible"]
     assert p.processes == ("attitude", "logger")
     assert p.n_steps == 61 and p.messages == 2 * 61 and p.model_state_messages == 61 and p.state_messages == 61
-    assert "61 appendage / rolling states" in p.text()
+    assert "61 appendage / rolling / gimbal states" in p.text()
 
 
 # --------------------------------------------------------------------------- the engine
@@ -194,7 +194,7 @@ def test_engine_resumes_from_a_recorded_state():
     assert np.max(np.abs(q2[:, 0] - q[k + 1:])) < 1e-8
     lay = sc_eng.extended_bodies()[0].layout
     assert np.max(np.abs(sc_eng.extended_bodies()[0].last[:, lay["eta"]] - eta[k + 1:])) < 1e-8
-    with pytest.raises(ValueError, match=r"rolling bodies\) of the integrated bodies \['sc'\]"):
+    with pytest.raises(ValueError, match=r"gyroscopes\) of the integrated bodies \['sc'\]"):
         AttitudeEngine(scn).resume(1.0, {"sc": {"q": q[k].tolist(), "w": w[k].tolist()}})
 
 
@@ -241,7 +241,7 @@ def test_run_records_the_hub_and_the_appendages_of_every_step(recorded):
     # the summary's invariants come from the recording: H_i and T + V conserved
     rows = {r["name"]: r for r in result["bodies"][0]["attitude_invariants"]}
     assert rows["H_i (hub + appendages)"]["drift"] < 1e-8 and rows["E = T + V"]["drift"] < 1e-8
-    assert "+ 61 appendage / rolling states" in stdout and "H_i (hub + appendages)" in stdout
+    assert "+ 61 appendage / rolling / gimbal states" in stdout and "H_i (hub + appendages)" in stdout
 
 
 @pytest.mark.network

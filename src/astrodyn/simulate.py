@@ -41,14 +41,15 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from astrodyn.messages import ACTUATED_MODEL
+from astrodyn.messages import ACTUATED_MODEL, GIMBALS_KIND
 from astrodyn.orbit import propagate
 from astrodyn.orbit.perturbations import KeplerOrbit, ThirdBody, propagate_perturbed
 from astrodyn.rotation import dcm_from_quat, quat_from_dcm
 from astrodyn.scenario import CENTRAL_BODIES, Plan, Scenario, plan as make_plan
 from astrodyn.scenario.ephemeris import third_body_state
 
-__all__ = ["OrbitEngine", "AttitudeEngine", "ExtendedBody", "FlexibleBody", "RollingBody", "ModelEnded", "SimulationResult",
+__all__ = ["OrbitEngine", "AttitudeEngine", "ExtendedBody", "FlexibleBody", "RollingBody", "GyroSet", "ModelEnded",
+           "SimulationResult",
            "simulate", "third_body_state"]
 
 
@@ -342,6 +343,100 @@ class RollingBody(ExtendedBody):
                 "heading": float(y[2]), "lean": float(y[3]), "spin_angle": float(y[4]), "u": y[5:8].tolist()}
 
 
+class GyroSet:
+    """The single-axis gyroscopes mounted on one body (``[[bodies.gyros]]``, Baruh 10.7.3;
+    :func:`astrodyn.attitude.gyroscopes.propagate_single_axis`), integrated block after block
+    on the body's rates at the output times (a cubic spline through them, continued across
+    blocks from the previous block's last samples), DOP853 at rtol 1e-10.  Rate gyros start
+    at their exact steady angle for the body's initial rate (the instrument has been
+    running), rate-integrating gyros at zero (they measure the angle turned from t = 0).
+    Published on ``<body>/gimbals`` (:class:`astrodyn.messages.GimbalState`)."""
+
+    kind = GIMBALS_KIND
+    resume_fields = ("angle", "angle_rate")
+    RTOL = 1e-10
+
+    def __init__(self, gyros, w0: np.ndarray):
+        from astrodyn.attitude.gyroscopes import steady_state_angle
+        from astrodyn.scenario.gyros import single_axis_gyro
+
+        self.models = [single_axis_gyro(g) for g in gyros]
+        self.mounts = [np.asarray(g.mount, dtype=np.float64) for g in gyros]
+        self.state = np.zeros((len(gyros), 2))  # theta (rad), theta' (rad/s) of each gimbal
+        for i, (m, mount) in enumerate(zip(self.models, self.mounts)):
+            if m.spring > 0:
+                try:
+                    self.state[i, 0] = steady_state_angle(m, mount @ np.asarray(w0, dtype=np.float64))
+                except ValueError:  # no stable steady angle at this rate: start at rest
+                    pass
+        self.t0 = 0.0
+        self.first = True
+        self.tail_t, self.tail_w = np.zeros(0), np.zeros((0, 3))  # the previous block's last samples
+        self.last: np.ndarray | None = None  # (T, n, 2) states at the last block's times
+
+    def resume(self, t: float, recorded: dict) -> None:
+        """Continue from recorded gimbal angles and rates at ``t`` (s); the body's rate
+        ``w`` there (body axes, as recorded on its attitude key) starts the base's samples."""
+        self.state = np.column_stack([np.asarray(recorded["angle"], dtype=np.float64),
+                                      np.asarray(recorded["angle_rate"], dtype=np.float64)])
+        self.t0, self.first = float(t), False
+        self.tail_t, self.tail_w = np.array([self.t0]), np.asarray(recorded["w"], dtype=np.float64).reshape(1, 3)
+
+    @staticmethod
+    def _base(times: np.ndarray, w: np.ndarray, mount: np.ndarray):
+        """``t -> (w, w')`` in the gyro's case axes from body-rate samples at absolute times."""
+        from astrodyn.attitude.gyroscopes import sampled_base_rate
+
+        if times.size >= 4:
+            return sampled_base_rate(times, w, mount)
+        wc = w @ mount.T  # too few samples for a spline: piecewise linear
+        slopes = np.diff(wc, axis=0) / np.diff(times)[:, None] if times.size > 1 else np.zeros((1, 3))
+
+        def base(t):
+            if times.size == 1:
+                return wc[0], np.zeros(3)
+            i = int(np.clip(np.searchsorted(times, t) - 1, 0, times.size - 2))
+            return wc[i] + slopes[i] * (t - times[i]), slopes[i]
+
+        return base
+
+    def advance(self, times: np.ndarray, w: np.ndarray) -> None:
+        """Integrate every gimbal to ``times`` (increasing, after :attr:`t0`) on the body's
+        rates ``w`` (len(times), 3) there (rad/s, body axes)."""
+        from astrodyn.attitude.gyroscopes import propagate_single_axis
+
+        times = np.asarray(times, dtype=np.float64)
+        rel = times - self.t0
+        prepend = rel[0] > 0
+        grid = np.concatenate([[0.0], rel]) if prepend else rel
+        if prepend:  # the previous block's last samples (they end at t0), or the resumed state's rate
+            samples_t, samples_w = np.concatenate([self.tail_t, times]), np.concatenate([self.tail_w, w])
+        else:
+            samples_t, samples_w = times, w
+        out = np.empty((times.size, len(self.models), 2))
+        t0 = self.t0
+        for i, (m, mount) in enumerate(zip(self.models, self.mounts)):
+            base_abs = self._base(samples_t, samples_w, mount)
+
+            def base(t, base_abs=base_abs):
+                return base_abs(t0 + t)
+
+            y, _ = propagate_single_axis(m, base, grid, theta0=self.state[i, 0], theta_dot0=self.state[i, 1],
+                                         rtol=self.RTOL, atol=1e-3 * self.RTOL)
+            out[:, i] = (y[1:] if prepend else y)[:, :2]
+        self.state = out[-1].copy()
+        self.t0, self.first, self.last = float(times[-1]), False, out
+        keep = max(0, samples_t.size - 3)
+        self.tail_t, self.tail_w = samples_t[keep:], samples_w[keep:]
+
+    def message(self, j: int, t: float, seq: int) -> dict:
+        """The ``GimbalState`` of row ``j`` of the last block."""
+        angle, rate = self.last[j, :, 0], self.last[j, :, 1]
+        gain = np.array([(m.spring if m.spring > 0 else m.damping) / m.momentum for m in self.models])
+        return {"t": t, "seq": seq, "angle": angle.tolist(), "angle_rate": rate.tolist(),
+                "indicated": (gain * angle).tolist()}
+
+
 @dataclass
 class _AttitudeBody:
     name: str
@@ -355,6 +450,7 @@ class _AttitudeBody:
     top: object = None  # HeavyTop for a symmetric heavy top (its own exact-free-flow splitting)
     rotor_momentum: np.ndarray | None = None
     extended: ExtendedBody | None = None  # flexible, rolling_disk: integrates its own full state
+    gyros: GyroSet | None = None  # single-axis gyroscopes mounted on it
     error: float = 0.0
     steps: int = 0
 
@@ -427,9 +523,20 @@ class AttitudeEngine:
 
                 body.axes = np.eye(3)
                 body.extended = RollingBody(rolling_disk(a.rolling), rolling_state0(a.rolling), a.tolerance)
+            if b.gyros:  # their base: the body's rates in the config's body axes, as published
+                body.gyros = GyroSet(b.gyros, a.w0)
             self.bodies.append(body)
         self.names = [b.name for b in self.bodies]
         self.models = [b.model for b in self.bodies]
+
+    def own_channels(self) -> list[tuple[int, ExtendedBody | GyroSet]]:
+        """``(body index, source)`` of every further state channel of the bodies (their
+        kinds: ``BodyPlan.own_kinds``): each source's ``kind`` and ``message(j, t, seq)`` give
+        the messages of the last :meth:`states` call's row ``j``."""
+        out: list[tuple[int, ExtendedBody | GyroSet]] = []
+        for k, b in enumerate(self.bodies):
+            out += [(k, src) for src in (b.extended, b.gyros) if src is not None]
+        return out
 
     def extended_bodies(self) -> dict[int, ExtendedBody]:
         """Body index -> the :class:`ExtendedBody` of the flexible and rolling bodies (their
@@ -446,13 +553,18 @@ class AttitudeEngine:
         need nothing (exact from the initial state); every integrated body must be given
         (ValueError naming the missing ones).  Returns the names of the bodies that took a state.
         """
-        integrated = [b for b in self.bodies if b.model != "torque_free"]
+        integrated = [b for b in self.bodies if b.model != "torque_free" or b.gyros is not None]
         missing = [b.name for b in integrated if b.name not in states
-                   or (b.extended is not None and not set(b.extended.resume_fields) <= set(states[b.name]))]
+                   or (b.extended is not None and not set(b.extended.resume_fields) <= set(states[b.name]))
+                   or (b.gyros is not None and not set(b.gyros.resume_fields) <= set(states[b.name]))]
         if missing:
             raise ValueError(f"resume state: expected q and w (and the fields of their own key for flexible and "
-                             f"rolling bodies) of the integrated bodies {missing} at t = {t} s")
+                             f"rolling bodies and gyroscopes) of the integrated bodies {missing} at t = {t} s")
         for b in integrated:
+            if b.gyros is not None:
+                b.gyros.resume(t, states[b.name])
+                if b.model == "torque_free":
+                    continue
             q = np.asarray(states[b.name]["q"], dtype=np.float64)
             w = np.asarray(states[b.name]["w"], dtype=np.float64)
             if b.extended is not None:
@@ -517,8 +629,12 @@ class AttitudeEngine:
             else:
                 q[:, k] = quat_from_dcm(b.axes @ dcm_from_quat(qp))
                 w[:, k] = wp @ b.axes.T
-        if ended[0] < T:
-            raise ModelEnded(ended[1], ended[0], q[: ended[0]], w[: ended[0]])
+        rows = ended[0]
+        for k, b in enumerate(self.bodies):
+            if b.gyros is not None and rows:
+                b.gyros.advance(times[:rows], w[:rows, k])
+        if rows < T:
+            raise ModelEnded(ended[1], rows, q[:rows], w[:rows])
         return q, w
 
 

@@ -14,7 +14,7 @@ Writes into ``DIR`` (default ``<file>-report``):
   with an attitude: ``euler``, ``quaternion``, ``rates``, and when the inertia is in the
   scenario metadata ``polhode`` and ``attitude-drift``; for heavy tops ``top-angles``;
   for flexible spacecraft ``appendages`` and ``flexible-drift`` instead of the rigid two,
-  for rolling disks ``contact-path`` and ``rolling-angles``.
+  for rolling disks ``contact-path`` and ``rolling-angles``; with gyroscopes on board ``gyros``.
 
 Definitions of every number: :mod:`astrodyn.analysis.metrics`.  A cut or damaged file is
 analysed up to what is complete and the report says so at the top.
@@ -53,6 +53,7 @@ FIGURES = {
     "appendages": "tip displacement of each flexible appendage",
     "flexible-drift": "energy, angular momentum drift and nutation of a flexible spacecraft",
     "contact-path": "a rolling disk's path on the plane",
+    "gyros": "single-axis gyroscopes: indication against the body's motion",
     "rolling-angles": "a rolling disk's lean and heading",
     **CLOSED_LOOP_FIGURES,
     **POINTING_FIGURES,
@@ -131,6 +132,10 @@ def analyze(path: str | os.PathLike, out: str | os.PathLike | None = None, seq: 
                                                                  Path(f"{stem}-attitude-drift.png"))))
                 if inertia.is_top:
                     figs.append(("top-angles", fg.top_angles(name, tr.t, am["precession"], am["nutation"], Path(f"{stem}-top-angles.png"))))
+        if body.gimbals is not None and len(body.gimbals) and body.attitude is not None and len(body.attitude):
+            section, more = _gyro_section(run, name, body, stem)
+            numbers.update(section)
+            figs += more
         numbers.update(_conserved(run.scenario, name, body))
         section, more = closed_loop_section(run, name, stem)  # commands, actuators, momentum, pointing, dv
         numbers.update(section)
@@ -184,6 +189,36 @@ def _flexible_section(run, name: str, body, stem: Path) -> tuple[dict, list[tupl
             ("flexible-drift", fg.flexible_drift(name, t, energy / energy[0] if energy[0] else energy, h_drift, nutation,
                                                  sc.damped, Path(f"{stem}-flexible-drift.png")))]
     return section, figs
+
+
+def _gyro_section(run, name: str, body, stem: Path) -> tuple[dict, list[tuple[str, Path]]]:
+    """The body's single-axis gyroscopes (its gimbals key) against its recorded motion: a
+    rate gyro's indication against the body rate about its input axis, a rate-integrating
+    gyro's against the angle turned about it (trapezoidal integral of that rate from the
+    first sample); input axes and types from the recording's config."""
+    from astrodyn.analysis import figures as fg
+
+    try:
+        meta = json.loads(run.scenario.get("json") or "{}")
+        gyros = next(b for b in meta.get("bodies", []) if b.get("name") == name)["gyros"]
+        axes = np.array([np.asarray(g["mount"], dtype=np.float64)[0] for g in gyros])
+        types = [str(g["type"]) for g in gyros]
+        indicated = np.array([np.asarray(row, dtype=np.float64) for row in body.gimbals.indicated])
+    except (StopIteration, KeyError, TypeError, ValueError, IndexError):
+        return {"gyros": {"note": "gyroscopes not described in the recording's config"}}, []
+    _, ia, ig = np.intersect1d(body.attitude.seq, body.gimbals.seq, return_indices=True)
+    if indicated.ndim != 2 or indicated.shape[1] != len(types) or axes.shape != (len(types), 3) or ia.size < 2:
+        return {"gyros": {"note": "gimbal states do not match the recorded gyroscopes"}}, []
+    t = body.attitude.t[ia]
+    rate = body.attitude.w[ia] @ axes.T  # (T, n) the body's rate about each input axis
+    angle = np.vstack([np.zeros((1, rate.shape[1])), np.cumsum(0.5 * (rate[1:] + rate[:-1]) * np.diff(t)[:, None], axis=0)])
+    truth = np.where(np.array(types) == "rate", rate, angle)
+    ind = indicated[ig]
+    labels = [f"{k}: {ty} ({'rad/s' if ty == 'rate' else 'rad'})" for k, ty in enumerate(types)]
+    section = {"gyros": {"types": types,
+                         "max_error": [float(x) for x in np.max(np.abs(ind - truth), axis=0)],
+                         "max_truth": [float(x) for x in np.max(np.abs(truth), axis=0)]}}
+    return section, [("gyros", fg.gyro_indications(name, t, ind, truth, labels, Path(f"{stem}-gyros.png")))]
 
 
 def _rolling_section(body, stem: Path) -> tuple[dict, list[tuple[str, Path]]]:

@@ -17,7 +17,7 @@ import numpy as np
 
 __all__ = ["time_axis", "orbit_3d", "ground_track", "elements", "orbit_drift", "crosscheck",
            "euler_angles", "quaternion", "body_rates", "polhode", "attitude_drift", "top_angles", "appendage_tips",
-           "flexible_drift", "contact_path", "rolling_angles"]
+           "flexible_drift", "contact_path", "rolling_angles", "gyro_indications"]
 
 _DPI = 110
 plt.rcParams.update({"font.size": 9, "axes.grid": True, "grid.alpha": 0.3, "axes.formatter.useoffset": False})
@@ -271,3 +271,26 @@ def contact_path(name: str, contact: np.ndarray, center: np.ndarray, path: Path)
 def rolling_angles(name: str, t: np.ndarray, lean, heading, path: Path) -> Path:
     return _stacked(t, [np.degrees(lean), np.degrees(heading)], ["lean theta (deg)", "heading psi (deg)"],
                     f"{name}: lean from the vertical and heading of the rolling disk", path)
+
+
+def gyro_indications(name: str, t: np.ndarray, indicated: np.ndarray, truth: np.ndarray, labels: list[str],
+                     path: Path) -> Path:
+    """Each gyroscope's indication against the truth it measures (``indicated``, ``truth``
+    (T, n); a rate gyro's input rate in rad/s, a rate-integrating gyro's input angle in rad),
+    one panel per gyroscope: the two curves, and their difference on a second axis."""
+    ts, tl = time_axis(t)
+    n = indicated.shape[1]
+    fig, axes = plt.subplots(n, 1, figsize=(7.5, 1.6 + 1.6 * n), sharex=True, constrained_layout=True)
+    axes = np.atleast_1d(axes)
+    for k, ax in enumerate(axes):
+        ax.plot(ts, truth[:, k], lw=1.2, label="truth (from the attitude)")
+        ax.plot(ts, indicated[:, k], lw=0.8, ls="--", label="indicated")
+        ax.set_ylabel(labels[k])
+        err = ax.twinx()
+        err.plot(ts, indicated[:, k] - truth[:, k], lw=0.6, color="tab:red")
+        err.set_ylabel("indicated - truth", color="tab:red", fontsize=7)
+        if k == 0:
+            ax.legend(fontsize=7, loc="upper left")
+    axes[-1].set_xlabel(tl)
+    fig.suptitle(f"{name}: single-axis gyroscopes, indication against the body's motion")
+    return _save(fig, path)

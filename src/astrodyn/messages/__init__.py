@@ -12,6 +12,7 @@ Every message lives under ``astrodyn/<scenario>/``::
     astrodyn/<scenario>/<body>/crosscheck   CrossCheck      (``--cross-check`` mode)
     astrodyn/<scenario>/<body>/appendages   AppendageState  (flexible spacecraft)
     astrodyn/<scenario>/<body>/rolling      RollingState    (rolling disk)
+    astrodyn/<scenario>/<body>/gimbals      GimbalState     (single-axis gyroscopes on the body)
     astrodyn/<scenario>/@status             Status          (``serve``)
     astrodyn/<scenario>/@event              Event           (start, stop, restart, error ...)
     astrodyn/<scenario>/@control/<verb>     queryables      (status, pause, resume, rate, stop)
@@ -135,6 +136,7 @@ from astrodyn.messages.definitions import (
     Command,
     CrossCheck,
     Event,
+    GimbalState,
     GpsSample,
     GyroSample,
     OrbitState,
@@ -160,6 +162,8 @@ from astrodyn.messages.keys import (
     MAX_SEQ,
     MESSAGE_KINDS,
     MODEL_STATE_KINDS,
+    GIMBALS_KIND,
+    ATTITUDE_PROCESS_KINDS,
     NAME_FULL_RE,
     NAME_PATTERN,
     ORBIT_MODELS,
@@ -192,6 +196,7 @@ __all__ = [
     "AttitudeState",
     "AppendageState",
     "RollingState",
+    "GimbalState",
     "CrossCheck",
     "Event",
     "Status",
@@ -215,6 +220,8 @@ __all__ = [
     "done_key",
     "STATE_KINDS",
     "MODEL_STATE_KINDS",
+    "GIMBALS_KIND",
+    "ATTITUDE_PROCESS_KINDS",
     "CONTROL_KINDS",
     "SENSOR_KINDS",
     "ACTUATED_MODEL",

@@ -126,6 +126,28 @@ class RollingState(Stamped, forbid_unknown_fields=True):
     u: _vec(3, "generalized speeds (theta', psi' sin theta + phi', psi' cos theta), rad/s")
 
 
+#: Most single-axis gyroscopes on one body.
+MAX_GYROS = 16
+_PerGyro = Annotated[list[float], Meta(min_length=1, max_length=MAX_GYROS)]
+
+
+class GimbalState(Stamped, forbid_unknown_fields=True):
+    """The single-axis gyroscopes mounted on a body (Baruh 10.7.3; astrodyn.attitude.gyroscopes),
+    in the order of the config: each one's gimbal (output) angle, its rate, and what the
+    instrument indicates from it -- a rate gyro the input rate k theta / H (rad/s), a
+    rate-integrating gyro the input angle c theta / H (rad)."""
+
+    angle: Annotated[_PerGyro, Meta(description="gimbal (output) angle of each gyroscope, rad")]
+    angle_rate: Annotated[_PerGyro, Meta(description="rate of each gimbal angle, rad/s")]
+    indicated: Annotated[_PerGyro, Meta(description=(
+        "each gyroscope's indication: rate gyro k theta / H (rad/s), rate-integrating gyro c theta / H (rad)"))]
+
+    def __post_init__(self) -> None:
+        if not (len(self.angle) == len(self.angle_rate) == len(self.indicated)):
+            raise ValueError(f"gimbals: expected angle, angle_rate and indicated for the same gyroscopes, got "
+                             f"{len(self.angle)}, {len(self.angle_rate)}, {len(self.indicated)}")
+
+
 class CrossCheck(Stamped, forbid_unknown_fields=True):
     """astrodyn state minus the reference integrator's state for one body."""
 
@@ -257,6 +279,7 @@ MESSAGE_TYPES: dict[str, type[msgspec.Struct]] = {
     "crosscheck": CrossCheck,
     "appendages": AppendageState,
     "rolling": RollingState,
+    "gimbals": GimbalState,
     "event": Event,
     "status": Status,
     "command": Command,

@@ -30,16 +30,20 @@ NAME_FULL_RE = re.compile(f"^{NAME_PATTERN}$")
 #: the REBOUND cross-check, a flexible spacecraft's appendages, a rolling disk's contact
 #: state), then the closed loop's (docs/control.md): commands from controllers, actuator
 #: states and sensor samples from the plant.
-STATE_KINDS = ("orbit", "attitude", "crosscheck", "appendages", "rolling")
+STATE_KINDS = ("orbit", "attitude", "crosscheck", "appendages", "rolling", "gimbals")
 #: Attitude models whose state does not fit the attitude message alone: the kind of the
 #: second state channel they publish, at the same seq (the rest of the state to resume from).
 MODEL_STATE_KINDS = {"flexible": "appendages", "rolling_disk": "rolling"}
+#: The kind of the channel of a body's single-axis gyroscopes (its ``gyros`` tables).
+GIMBALS_KIND = "gimbals"
+#: Per-body state kinds the attitude process publishes.
+ATTITUDE_PROCESS_KINDS = ("attitude", *MODEL_STATE_KINDS.values(), GIMBALS_KIND)
 CONTROL_KINDS = ("command", "actuators")
 SENSOR_KINDS = ("gyro", "star_tracker", "gps", "tachometer")
 _BODY_KINDS = STATE_KINDS + CONTROL_KINDS + SENSOR_KINDS
 #: Every message kind, one per message type (:data:`astrodyn.messages.MESSAGE_TYPES` has these keys).
-MESSAGE_KINDS = ("orbit", "attitude", "crosscheck", "appendages", "rolling", "event", "status", "command",
-                 "actuators", "gyro", "star_tracker", "gps", "tachometer", "tick", "done")
+MESSAGE_KINDS = ("orbit", "attitude", "crosscheck", "appendages", "rolling", "gimbals", "event", "status",
+                 "command", "actuators", "gyro", "star_tracker", "gps", "tachometer", "tick", "done")
 _SPECIAL_WITH_NAME = ("@control", "@alive", "@batch", "@schema", "@done")
 _SPECIAL_PLAIN = {"@status": "status", "@event": "event", "@latest": "latest", "@tick": "tick"}
 

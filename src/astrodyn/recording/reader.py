@@ -101,8 +101,8 @@ class Track:
 @dataclass
 class BodyTracks:
     """The tracks of one body: ``orbit``, ``attitude``, ``crosscheck``, ``appendages`` (a
-    flexible spacecraft's elastic state), ``rolling`` (a rolling disk's contact state);
-    None if absent."""
+    flexible spacecraft's elastic state), ``rolling`` (a rolling disk's contact state),
+    ``gimbals`` (its single-axis gyroscopes); None if absent."""
 
     name: str
     orbit: Track | None = None
@@ -110,6 +110,7 @@ class BodyTracks:
     crosscheck: Track | None = None
     appendages: Track | None = None
     rolling: Track | None = None
+    gimbals: Track | None = None
 
 
 Body = BodyTracks

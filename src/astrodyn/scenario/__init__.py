@@ -50,7 +50,8 @@ Sections and keys (every other key is an error, with a "did you mean" suggestion
     given), optional overrides ``mu``, ``radius``, ``j2`` ... ``j6``.
 ``[[bodies]]``
     ``name``, ``cross_check`` (bool: also run REBOUND and publish the difference),
-    ``[bodies.orbit]`` and/or ``[bodies.attitude]``.
+    ``[bodies.orbit]`` and/or ``[bodies.attitude]``, ``[[bodies.gyros]]`` (single-axis
+    gyroscopes mounted on the body, :mod:`~astrodyn.scenario.gyros`).
 ``orbit``
     ``r`` and ``v``, or elements: one of ``a`` (negative for a hyperbola), ``p``, ``rp``
     (periapsis radius; works for every conic), ``e`` (default 0), ``i``, ``raan``,
@@ -160,6 +161,7 @@ from astrodyn.scenario.fields import (
     unit_quaternion,
     vector,
 )
+from astrodyn.scenario.gyros import Gyro, parse_gyros
 from astrodyn.scenario.planning import BYTES_PER_STATE, BodyPlan, Plan, plan
 from astrodyn.scenario.rolling import ROLLING_KEYS, RollingSpec, parse_rolling, rolling_state0
 
@@ -331,6 +333,7 @@ class Body:
     actuators: Actuators | None = None  #: closed loop (astrodyn.scenario.control)
     sensors: Sensors | None = None
     pointing: Pointing | None = None  #: the attitude it should hold (analyze reports the error)
+    gyros: tuple[Gyro, ...] = ()  #: single-axis gyroscopes mounted on it (astrodyn.scenario.gyros)
 
     @property
     def in_plant(self) -> bool:
@@ -440,6 +443,8 @@ def _body_dict(b: Body, bp: BodyPlan) -> dict[str, Any]:
     out: dict[str, Any] = {"name": b.name, "cross_check": b.cross_check}
     if b.orbit is not None:
         out["orbit"] = jsonable(dataclasses.asdict(b.orbit)) | {"model_used": bp.orbit_model}
+    if b.gyros:
+        out["gyros"] = [jsonable(dataclasses.asdict(g)) for g in b.gyros]
     if b.attitude is not None:
         a = b.attitude
         out["attitude"] = jsonable(
@@ -810,7 +815,7 @@ def _rotors(ctx: Ctx, value: Any, path: str) -> tuple[Rotor, ...]:
 
 
 def _body(ctx: Ctx, data: Any, path: str, cb: CentralBody, rate: float = 1.0, control_every: int | None = None) -> Body:
-    tb = Table(ctx, data, path, ("name", "orbit", "attitude", "cross_check", "actuators", "sensors", "pointing"))
+    tb = Table(ctx, data, path, ("name", "orbit", "attitude", "cross_check", "actuators", "sensors", "pointing", "gyros"))
     name = field_name(ctx, tb.get("name"), f"{path}.name")
     path = f"{path} ({name})"  # errors name the body by index and name: bodies[0] (iss).orbit.a
     orbit = _orbit(ctx, tb.get("orbit"), f"{path}.orbit", cb) if tb.has("orbit") else None
@@ -835,9 +840,9 @@ def _body(ctx: Ctx, data: Any, path: str, cb: CentralBody, rate: float = 1.0, co
         if orbit is not None and orbit.model != "kepler":
             raise ctx.error(f"{path}.orbit.model", "kepler for a body with actuators or sensors (the closed loop flies "
                             "two-body orbits with their burns)", orbit.model)
-        if attitude is not None and attitude.model not in ("torque_free", "none"):
-            raise ctx.error(f"{path}.attitude.model", "torque_free for a body with actuators or sensors (torques come "
-                            "from the commands)", attitude.model)
+        if attitude is not None and attitude.model not in ("torque_free", "flexible", "none"):
+            raise ctx.error(f"{path}.attitude.model", "torque_free or flexible for a body with actuators or sensors "
+                            "(torques come from the commands)", attitude.model)
         has_att = attitude is not None and attitude.model != "none"
         if tb.has("actuators"):
             actuators = parse_actuators(ctx, tb.get("actuators"), f"{path}.actuators", orbit is not None, has_att)
@@ -845,8 +850,17 @@ def _body(ctx: Ctx, data: Any, path: str, cb: CentralBody, rate: float = 1.0, co
             sensors = parse_sensors(ctx, tb.get("sensors"), f"{path}.sensors", rate, control_every, orbit is not None,
                                     has_att, bool(actuators is not None and actuators.wheels))
     pointing = parse_pointing(ctx, tb.get("pointing"), f"{path}.pointing", attitude is not None) if tb.has("pointing") else None
+    gyros: tuple[Gyro, ...] = ()
+    if tb.has("gyros"):
+        if attitude is None or attitude.model == "none":
+            raise ctx.error(f"{path}.gyros", "an attitude for the gyroscopes to sense (their base)",
+                            "gyros on a body without a propagated attitude", raw=True)
+        if actuators is not None or sensors is not None:
+            raise ctx.error(f"{path}.gyros", "no gyros on a closed-loop body (its sensors table has the gyro)",
+                            "gyros with actuators or sensors", raw=True)
+        gyros = parse_gyros(ctx, tb.get("gyros"), f"{path}.gyros")
     return Body(name=name, orbit=orbit, attitude=attitude, cross_check=cross, actuators=actuators, sensors=sensors,
-                pointing=pointing)
+                pointing=pointing, gyros=gyros)
 
 
 _WALKER_KEYS = ("prefix", "i", "t", "p", "f", "altitude", "a", "raan0", "model", "cross_check", "attitude")
@@ -1002,8 +1016,8 @@ def load_dict(data: dict[str, Any], source: str = "<dict>", base_dir: str | Path
         raise ctx.error("bodies", "at least one body ([[bodies]] or [walker])", "none", raw=True)
     if len(bodies) > MAX_BODIES:
         raise ctx.error("bodies", f"at most {MAX_BODIES} bodies", f"{len(bodies)} bodies", raw=True)
-    channels = sum((b.orbit is not None) + (b.attitude is not None) + bool(b.cross_check)
-                   + bool(b.attitude is not None and b.attitude.appendages) for b in bodies)
+    channels = sum((b.orbit is not None) + (b.attitude is not None) + bool(b.cross_check) + bool(b.gyros)
+                   + bool(b.attitude is not None and (b.attitude.appendages or b.attitude.rolling)) for b in bodies)
     if channels + EXTRA_CHANNELS > MAX_CHANNELS:
         raise ctx.error("bodies", f"at most {MAX_CHANNELS - EXTRA_CHANNELS} state channels in one recording (MCAP "
                         f"channel ids are 16-bit; each body has one per orbit, attitude, cross-check and appendages)",

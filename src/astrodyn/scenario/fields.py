@@ -45,6 +45,8 @@ MAGNITUDE_MAX = {
     "force": 1e12,  # N
     "linear_density": 1e9,  # kg/m
     "bending_stiffness": 1e15,  # N m^2: a 10 m steel tube 1 m across is ~1e10
+    "rotational_stiffness": 1e15,  # N m/rad
+    "rotational_damping": 1e15,  # N m s/rad
     "angle": 1e9,  # rad (mean anomalies of many revolutions included)
     "dimensionless": 1e6,
 }
@@ -180,6 +182,8 @@ QUANTITY_KINDS: dict[str, tuple[str, str]] = {
     "force": ("N", 'a force, e.g. "2 N"'),
     "linear_density": ("kg / m", 'a mass per length, e.g. "0.3 kg/m"'),
     "bending_stiffness": ("N m2", 'a bending stiffness EI, e.g. "34 N m2"'),
+    "rotational_stiffness": ("N m / rad", 'a torsional spring constant, e.g. "0.5 N m/rad"'),
+    "rotational_damping": ("N m s / rad", 'a rotational damping constant, e.g. "0.01 N m s/rad"'),
     "bytes": ("byte", 'a size, e.g. "256 MB"'),
     "dimensionless": ("", "a number"),
 }

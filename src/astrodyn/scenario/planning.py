@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from astrodyn.messages import ACTUATED_MODEL, MODEL_STATE_KINDS
+from astrodyn.messages import ACTUATED_MODEL, GIMBALS_KIND, MODEL_STATE_KINDS
 
 if TYPE_CHECKING:
     from astrodyn.scenario import OrbitSpec, Scenario
@@ -35,6 +35,9 @@ class BodyPlan:
     attitude_model: str | None
     attitude_method: str
     notes: tuple[str, ...] = ()
+    #: kinds of the body's further state channels, published by the attitude process at the
+    #: same seq as its attitude: a flexible or rolling body's own, its gyroscopes' gimbals
+    own_kinds: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -48,12 +51,12 @@ class Plan:
     messages: int  #: every message the run records: states plus cross-checks
     warnings: tuple[str, ...] = ()
     crosscheck_messages: int = 0  #: of ``messages``: the REBOUND cross-check messages
-    model_state_messages: int = 0  #: of ``messages``: flexible and rolling bodies' own state messages
+    model_state_messages: int = 0  #: of ``messages``: the bodies' further state channels (``BodyPlan.own_kinds``)
 
     @property
     def state_messages(self) -> int:
         """Orbit and attitude state messages (``messages`` without the cross-checks and
-        the flexible and rolling bodies' own state messages)."""
+        the bodies' further state channels)."""
         return self.messages - self.crosscheck_messages - self.model_state_messages
 
     @property
@@ -64,7 +67,7 @@ class Plan:
     def text(self, max_bodies: int = 20) -> str:
         size = self.estimated_file_bytes
         xc = f" + {self.crosscheck_messages} cross-check messages" if self.crosscheck_messages else ""
-        xc += (f" + {self.model_state_messages} appendage / rolling states (flexible and rolling bodies' own keys)"
+        xc += (f" + {self.model_state_messages} appendage / rolling / gimbal states (the bodies' own keys)"
                if self.model_state_messages else "")
         lines = [f"scenario {self.scenario}: {len(self.bodies)} bodies, {self.n_steps} output steps, "
                  f"{self.state_messages} state messages (orbit + attitude){xc}",
@@ -171,9 +174,15 @@ def plan(scenario: Scenario, cross_check_all: bool = False) -> Plan:
             om = ACTUATED_MODEL if b.orbit is not None else None
             am = ACTUATED_MODEL if am is not None else None
             notes = ["closed loop: moved by the plant with its controllers' commands (docs/control.md)"]
+        # a flexible body keeps its appendages channel in the closed loop too (the plant publishes it)
+        config_model = b.attitude.model if b.attitude is not None else None
+        own = (MODEL_STATE_KINDS[config_model],) if am is not None and config_model in MODEL_STATE_KINDS else ()
+        if b.gyros and am not in (None, ACTUATED_MODEL):
+            own += (GIMBALS_KIND,)
+            notes.append(f"{len(b.gyros)} single-axis gyroscope(s) on board, on {b.name}/{GIMBALS_KIND}")
         out.append(BodyPlan(
             name=b.name, orbit_model=om, orbit_method=ORBIT_METHODS.get(om, ""),
-            attitude_model=am, attitude_method=ATTITUDE_METHODS.get(am, ""), notes=tuple(notes),
+            attitude_model=am, attitude_method=ATTITUDE_METHODS.get(am, ""), notes=tuple(notes), own_kinds=own,
         ))
     processes = []
     if any(bp.orbit_model not in (None, ACTUATED_MODEL) for bp in out):
@@ -184,8 +193,8 @@ def plan(scenario: Scenario, cross_check_all: bool = False) -> Plan:
         processes.append("plant")
     processes.append("logger")
     n = scenario.n_steps
-    # flexible and rolling bodies publish one more state message per step on their own key
-    flexible = sum(bp.attitude_model in MODEL_STATE_KINDS for bp in out)
+    # flexible and rolling bodies, and bodies with gyroscopes, publish more state messages per step
+    flexible = sum(len(bp.own_kinds) for bp in out)
     states = sum((bp.orbit_model is not None) + (bp.attitude_model is not None) for bp in out) + flexible
     checked = sum(bp.orbit_model is not None and (cross_check_all or b.cross_check) for bp, b in zip(out, scenario.bodies))
     return Plan(scenario=scenario.name, processes=tuple(processes), bodies=tuple(out), n_steps=n,

@@ -63,7 +63,7 @@ __all__ = ["Logger", "main"]
 
 _STATE_KINDS = frozenset(messages.STATE_KINDS)
 #: per-body kinds the attitude process publishes: attitude, and the flexible / rolling bodies' own
-_ATTITUDE_PROCESS_KINDS = frozenset(("attitude", *messages.MODEL_STATE_KINDS.values()))
+_ATTITUDE_PROCESS_KINDS = frozenset(messages.ATTITUDE_PROCESS_KINDS)
 _SCENE_KINDS = frozenset(messages.STATE_KINDS + messages.CONTROL_KINDS + messages.SENSOR_KINDS)
 #: keys whose newest sample @latest serves (the live view): states and the closed loop's
 _LATEST_SUFFIXES = tuple(f"/{k}" for k in ("orbit", "attitude", *messages.CONTROL_KINDS, *messages.SENSOR_KINDS))
@@ -103,8 +103,8 @@ def scene_state_keys(scenario) -> set[str]:
             keys.add(messages.crosscheck_key(scenario.name, bp.name))
         if bp.attitude_model:
             keys.add(messages.attitude_key(scenario.name, bp.name))
-        if bp.attitude_model in messages.MODEL_STATE_KINDS:  # flexible, rolling_disk: their own key too
-            keys.add(messages.body_key(scenario.name, bp.name, messages.MODEL_STATE_KINDS[bp.attitude_model]))
+        for kind in bp.own_kinds if bp.attitude_model != messages.ACTUATED_MODEL else ():  # the plant's: above
+            keys.add(messages.body_key(scenario.name, bp.name, kind))
     return keys
 
 
@@ -121,6 +121,8 @@ def scene_publishers(scenario) -> dict[str, str]:
             kinds.append("orbit")
         if b.attitude is not None and b.attitude.model != "none":
             kinds.append("attitude")
+        if b.attitude is not None and b.attitude.model in messages.MODEL_STATE_KINDS:  # a flexible body's appendages
+            kinds.append(messages.MODEL_STATE_KINDS[b.attitude.model])
         kinds += [s.kind for s in (b.sensors.present() if b.sensors is not None else ())]
         for kind in kinds:
             out[messages.body_key(scenario.name, b.name, kind)] = "plant"

@@ -153,9 +153,9 @@ def run_propagator(scenario: Scenario, session, opts: PropagatorOptions, log=pri
                              f"got {opts.start_step}")
         engine.resume(t_state, states)
     keys = [key_of(scenario.name, n) for n in names]
-    # flexible and rolling bodies: the rest of their state on their own key, same seq
-    model_keys = {k: messages.body_key(scenario.name, names[k], messages.MODEL_STATE_KINDS[m])
-                  for k, m in enumerate(models) if m in messages.MODEL_STATE_KINDS} if opts.kind == "attitude" else {}
+    # flexible and rolling bodies, gyroscopes: the rest of their state on their own keys, same seq
+    own_channels = engine.own_channels() if opts.kind == "attitude" else []
+    model_keys = {(k, src.kind): messages.body_key(scenario.name, names[k], src.kind) for k, src in own_channels}
     groups: dict[str, np.ndarray] = {}
     for i, m in enumerate(models):
         groups.setdefault(m, []).append(i)  # type: ignore[arg-type]
@@ -206,7 +206,6 @@ def run_propagator(scenario: Scenario, session, opts: PropagatorOptions, log=pri
                 except ModelEnded as end:  # publish what was computed, then end the run with the reason
                     a, b, tb, model_ended = end.q, end.w, tb[: end.rows], str(end)
                 xc = cross.block(tb, a, b) if cross is not None else None
-                extended = engine.extended_bodies() if model_keys else {}
                 rows_done = 0
                 for j in range(tb.shape[0]):
                     t = float(tb[j])
@@ -214,10 +213,10 @@ def run_propagator(scenario: Scenario, session, opts: PropagatorOptions, log=pri
                     if stopping["why"]:
                         raise _Stop
                     step_extra = None if xc is None else xc(j, k, t)
-                    if extended:  # each flexible / rolling body's own message, at the same seq
+                    if own_channels:  # each body's further state messages, at the same seq
                         step_extra = (step_extra or []) + [
-                            (model_keys[i], messages.encode(body.message(j, t, k), body.kind))
-                            for i, body in extended.items()]
+                            (model_keys[(i, src.kind)], messages.encode(src.message(j, t, k), src.kind))
+                            for i, src in own_channels]
                     published += out.publish(t, k, a[j], b[j], step_extra)
                     rows_done = j + 1
                     t_reached = t

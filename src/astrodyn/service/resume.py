@@ -34,7 +34,7 @@ from pathlib import Path
 import numpy as np
 
 from astrodyn import messages
-from astrodyn.messages import MODEL_STATE_KINDS
+from astrodyn.messages import ATTITUDE_PROCESS_KINDS
 from astrodyn.scenario import Scenario, plan as make_plan
 
 __all__ = ["state_channels", "state_topics", "contiguous_steps", "last_common_step", "states_at", "write_state_file",
@@ -47,7 +47,7 @@ class ResumeError(ValueError):
 
 #: message kind -> the fields of its messages that make a state to continue from
 _STATE_FIELDS = {"orbit": ("r", "v"), "attitude": ("q", "w"), "appendages": ("eta", "eta_dot"),
-                 "rolling": ("contact", "heading", "lean", "spin_angle", "u")}
+                 "rolling": ("contact", "heading", "lean", "spin_angle", "u"), "gimbals": ("angle", "angle_rate")}
 
 
 def state_channels(scenario: Scenario, kind: str) -> list[tuple[str, str, str]]:
@@ -63,9 +63,8 @@ def state_channels(scenario: Scenario, kind: str) -> list[tuple[str, str, str]]:
         for b in p.bodies:
             if b.attitude_model:
                 out.append((b.name, "attitude", messages.attitude_key(scenario.name, b.name)))
-            own = messages.MODEL_STATE_KINDS.get(b.attitude_model)
-            if own is not None:
-                out.append((b.name, own, messages.body_key(scenario.name, b.name, own)))
+                if b.attitude_model != messages.ACTUATED_MODEL:  # the plant's channels are not resumed
+                    out += [(b.name, own, messages.body_key(scenario.name, b.name, own)) for own in b.own_kinds]
         return out
     raise ValueError(f"kind: expected 'orbit' or 'attitude', got {kind!r}")
 
@@ -164,7 +163,7 @@ def read_state_file(path: str | os.PathLike, kind: str) -> tuple[int, float, dic
         return number(x) or (depth > 0 and isinstance(x, list) and bool(x)
                              and all(finite_tree(y, depth - 1) for y in x))
 
-    own = sorted({f for k in MODEL_STATE_KINDS.values() for f in _STATE_FIELDS[k]}) if kind == "attitude" else []
+    own = sorted({f for k in ATTITUDE_PROCESS_KINDS[1:] for f in _STATE_FIELDS[k]}) if kind == "attitude" else []
     for body, st in states.items():
         ok = isinstance(st, dict) and all(finite(st.get(f), 4 if f == "q" else 3) for f in fields)
         # a flexible or rolling body's own fields: finite numbers, lists of them, lists of those
@@ -191,7 +190,8 @@ def resume_args(scenario: Scenario, kind: str, step: int, states: Callable[[], t
     args: dict = {"--start-step": step + 1}
     p = make_plan(scenario)
     exact = "kepler" if kind == "orbit" else "torque_free"
-    integrated = {b.name for b in p.bodies if (b.orbit_model if kind == "orbit" else b.attitude_model) not in (None, exact)}
+    integrated = {b.name for b in p.bodies if (b.orbit_model if kind == "orbit" else b.attitude_model) not in (None, exact)
+                  or (kind == "attitude" and b.own_kinds and b.attitude_model != messages.ACTUATED_MODEL)}
     if integrated:
         t, all_states = states()
         chosen = {b: st for b, st in all_states.items() if b in integrated}

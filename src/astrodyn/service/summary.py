@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from astrodyn.analysis.invariants import own_state_arrays, recorded_invariants
-from astrodyn.messages import MODEL_STATE_KINDS
+from astrodyn.messages import ATTITUDE_PROCESS_KINDS, MODEL_STATE_KINDS
 from astrodyn.scenario import Scenario, plan as make_plan
 
 __all__ = ["file_summary", "propagator_rows", "print_summary"]
@@ -143,7 +143,7 @@ def _add_block(row: dict, rec, recorded_scenario: dict, bp, mu: float, first: di
         named = {i["name"]: i for i in row.get("attitude_invariants") or ()}
         if bp.attitude_model == "torque_free" and "T" in named:
             row.update(rot_energy_drift=named["T"]["drift"], inertial_momentum_drift=named["H_i"]["drift"])
-    for kind in MODEL_STATE_KINDS.values():  # a flexible or rolling body's own key
+    for kind in ATTITUDE_PROCESS_KINDS[1:]:  # a flexible or rolling body's own key, gyroscopes' gimbals
         track = getattr(rec, kind, None)
         if track is not None and len(track):
             row["own_states"] = row.get("own_states", 0) + len(track)
@@ -167,7 +167,7 @@ def print_summary(result: dict, rows: list[dict], scenario: Scenario, max_bodies
           f"(real-time factor {scenario.duration / max(result['wall_s'], 1e-9):.1f}x)")
     print(f"  in the file: {states} state messages (orbit + attitude)"
           + (f" + {xchecks} cross-check messages" if xchecks else "")
-          + (f" + {own} appendage / rolling states" if own else "")
+          + (f" + {own} appendage / rolling / gimbal states" if own else "")
           + f"; logger: missing {log.get('missing', '?')}, malformed {log.get('malformed', '?')}, "
           f"rejected {sum((log.get('rejected') or {}).values())}")
     if log.get("t") is not None and log.get("reason"):
