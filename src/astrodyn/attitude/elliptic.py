@@ -293,6 +293,22 @@ def _sncndn(u, m, m1, K):
 # Carlson symmetric integrals
 
 
+@jit(inline="always")
+def carlson_roots(x, y, z):
+    """``(sqrt x, sqrt y, sqrt z, lam)`` of one duplication step of Carlson's algorithms,
+    ``lam = sqrt(x) sqrt(y) + sqrt(x) sqrt(z) + sqrt(y) sqrt(z)`` (Carlson 1995, sec. 2)."""
+    sx = math.sqrt(x)
+    sy = math.sqrt(y)
+    sz = math.sqrt(z)
+    return sx, sy, sz, sx * sy + sx * sz + sy * sz
+
+
+@jit(inline="always")
+def carlson_duplicate(lam, a, x, y, z):
+    """The duplication step of Carlson's algorithms: ``(a, x, y, z) -> ((a + lam) / 4, (x + lam) / 4, ...)``."""
+    return 0.25 * (a + lam), 0.25 * (x + lam), 0.25 * (y + lam), 0.25 * (z + lam)
+
+
 @jit
 def elliprf_scalar(x, y, z):
     """Carlson R_F(x, y, z), x, y, z >= 0, at most one zero (Carlson 1995, sec. 2)."""
@@ -304,14 +320,8 @@ def elliprf_scalar(x, y, z):
     for _ in range(_MAX_IT):
         if fac * q < abs(a):
             break
-        sx = math.sqrt(xn)
-        sy = math.sqrt(yn)
-        sz = math.sqrt(zn)
-        lam = sx * sy + sx * sz + sy * sz
-        a = 0.25 * (a + lam)
-        xn = 0.25 * (xn + lam)
-        yn = 0.25 * (yn + lam)
-        zn = 0.25 * (zn + lam)
+        _, _, _, lam = carlson_roots(xn, yn, zn)
+        a, xn, yn, zn = carlson_duplicate(lam, a, xn, yn, zn)
         fac *= 0.25
     X = fac * (a0 - x) / a
     Y = fac * (a0 - y) / a
@@ -361,18 +371,12 @@ def elliprj_scalar(x, y, z, p):
     for _ in range(_MAX_IT):
         if fac * q < abs(a):
             break
-        sx = math.sqrt(xn)
-        sy = math.sqrt(yn)
-        sz = math.sqrt(zn)
+        sx, sy, sz, lam = carlson_roots(xn, yn, zn)
         sp = math.sqrt(pn)
-        lam = sx * sy + sx * sz + sy * sz
         d = (sp + sx) * (sp + sy) * (sp + sz)
         e = fac * fac * fac * delta / (d * d)
         s += fac * _rc1(e) / d
-        a = 0.25 * (a + lam)
-        xn = 0.25 * (xn + lam)
-        yn = 0.25 * (yn + lam)
-        zn = 0.25 * (zn + lam)
+        a, xn, yn, zn = carlson_duplicate(lam, a, xn, yn, zn)
         pn = 0.25 * (pn + lam)
         fac *= 0.25
     X = fac * (a0 - x) / a
@@ -399,15 +403,9 @@ def _rd(x, y, z):
     for _ in range(_MAX_IT):
         if fac * q < abs(a):
             break
-        sx = math.sqrt(xn)
-        sy = math.sqrt(yn)
-        sz = math.sqrt(zn)
-        lam = sx * sy + sx * sz + sy * sz
+        _, _, sz, lam = carlson_roots(xn, yn, zn)
         s += fac / (sz * (zn + lam))
-        a = 0.25 * (a + lam)
-        xn = 0.25 * (xn + lam)
-        yn = 0.25 * (yn + lam)
-        zn = 0.25 * (zn + lam)
+        a, xn, yn, zn = carlson_duplicate(lam, a, xn, yn, zn)
         fac *= 0.25
     X = fac * (a0 - x) / a
     Y = fac * (a0 - y) / a

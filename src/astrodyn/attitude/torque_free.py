@@ -257,7 +257,31 @@ def _evaluate(p, t):
 
 @jit
 def _setup(inertia, w0, q0, p):
-    """The constants of body ``(inertia, w0, q0)`` into the record ``p`` (:data:`BODY_DTYPE`)."""
+    """The constants of body ``(inertia, w0, q0)`` into the record ``p`` (:data:`BODY_DTYPE`):
+    mode 0 (NaN states) for a non-finite or zero input, mode 1 for a uniform rotation,
+    else mode 2 with the constants of the elliptic solution (module docstring, 1-3)."""
+    clear_body(p, inertia)
+    ok, qn = finite_state_norm(inertia, w0, q0)
+    if not ok:
+        return
+    if is_uniform_rotation(inertia, w0):
+        p.mode = 1
+        for i in range(4):
+            p.qb0[i] = q0[i] / qn
+        for i in range(3):
+            p.w[i] = w0[i]
+        return
+    p.mode = 2
+    ia, ib, ic, sb, sep = ordered_axes(inertia, w0)
+    set_rate_constants(p, inertia, w0, ia, ib, ic, sb, sep)
+    set_half_period_increments(p)
+    set_initial_attitude(p, q0, qn)
+
+
+@jit(inline="always")
+def clear_body(p, inertia):
+    """Record ``p`` as a mode-0 body (NaN states) of principal moments ``inertia`` (kg m^2):
+    every constant zero (signs +1, axes in body order)."""
     p.mode = 0
     p.ia, p.ib, p.ic = 0, 1, 2
     p.sb = p.sig = p.eps1 = p.sns = 1.0
@@ -269,6 +293,12 @@ def _setup(inertia, w0, q0, p):
     for i in range(3):
         p.w[i] = 0.0
         p.inertia[i] = inertia[i]
+
+
+@jit(inline="always")
+def finite_state_norm(inertia, w0, q0):
+    """``(ok, |q0|)``: ok when the moments, rates (rad/s) and Euler parameters are finite
+    and ``q0`` is not zero."""
     ok = True
     for i in range(3):
         if not (math.isfinite(w0[i]) and math.isfinite(inertia[i])):
@@ -278,23 +308,25 @@ def _setup(inertia, w0, q0, p):
         if not math.isfinite(q0[i]):
             ok = False
         qn += q0[i] * q0[i]
-    if not ok or qn == 0.0:
-        return
-    qn = math.sqrt(qn)
+    return ok and qn != 0.0, math.sqrt(qn)
+
+
+@jit(inline="always")
+def is_uniform_rotation(inertia, w0):
+    """True when ``w x (I w) == 0`` exactly: the body spins uniformly about ``w0``."""
     I0, I1, I2 = inertia[0], inertia[1], inertia[2]
     W0, W1, W2 = w0[0], w0[1], w0[2]
-    # uniform rotation iff w x (I w) == 0 exactly
     cx = W1 * I2 * W2 - W2 * I1 * W1
     cy = W2 * I0 * W0 - W0 * I2 * W2
     cz = W0 * I1 * W1 - W1 * I0 * W0
-    if cx == 0.0 and cy == 0.0 and cz == 0.0:
-        p.mode = 1
-        for i in range(4):
-            p.qb0[i] = q0[i] / qn
-        for i in range(3):
-            p.w[i] = w0[i]
-        return
-    p.mode = 2
+    return cx == 0.0 and cy == 0.0 and cz == 0.0
+
+
+@jit(inline="always")
+def ordered_axes(inertia, w0):
+    """``(ia, ib, ic, sb, sep)``: the body indices of the ordered axes (``ic`` the
+    circulation axis: the major one if ``sep = H^2 - 2TB >= 0``, else the minor one) and
+    the sign ``sb`` applied to the ``ib`` component to keep ``(ia, ib, ic)`` right-handed."""
     # ascending order i1, i2, i3 (stable)
     i1, i2, i3 = 0, 1, 2
     if inertia[i2] < inertia[i1]:
@@ -311,8 +343,14 @@ def _setup(inertia, w0, q0, p):
         ia, ib, ic = i3, i2, i1
     # sign making (ia, ib, ic) right-handed: even permutation of (0, 1, 2) <=> ib == (ia + 1) % 3
     sb = 1.0 if ib == (ia + 1) % 3 else -1.0
-    Ia, Ib, Ic = inertia[ia], inertia[ib], inertia[ic]
-    wa, wb, wc = w0[ia], sb * w0[ib], w0[ic]
+    return ia, ib, ic, sb, sep
+
+
+@jit(inline="always")
+def rate_amplitudes(Ia, Ib, Ic, wa, wb, wc, sep):
+    """``(a1, a2, a3, wp, m, m1)``: the rate amplitudes (rad/s), the rate of the elliptic
+    argument (rad/s), the parameter and its complement (module docstring, 1), from the
+    moments (kg m^2) and rates (rad/s) along the ordered axes and ``sep = H^2 - 2TB``."""
     d31 = Ic - Ia
     d32 = Ic - Ib
     d21 = Ib - Ia
@@ -326,14 +364,19 @@ def _setup(inertia, w0, q0, p):
     m1 = d31 * sep / (d32 * p31)
     m = min(max(m, 0.0), 1.0)
     m1 = min(max(m1, 0.0), 1.0)
-    K = ellipk_scalar(m1)
+    return a1, a2, a3, wp, m, m1
+
+
+@jit(inline="always")
+def initial_phase(wa, wb, wc, a1, a2, a3, rho, m1, K):
+    """``(tau0, sig, e1, sns)``: the initial phase from ``(sn, cn, dn)`` at ``t = 0``
+    (``F = sn R_F(cn^2, dn^2, 1)``, quadrant from ``cn``) and the signs ``s``, ``e`` and
+    ``rho e s`` (module docstring, 1); ``rho = sign(C - B)``."""
     sig = 1.0 if wc > 0.0 else -1.0
     e1 = 1.0
     if m1 == 0.0 and wa < 0.0:
         e1 = -1.0
-    # initial phase from (sn, cn, dn): F = sn R_F(cn^2, dn^2, 1), quadrant from cn
     cn0 = e1 * wa / a1
-    rho = 1.0 if d32 > 0.0 else -1.0
     sns = rho * e1 * sig
     sn0 = sns * wb / a2
     nr = math.sqrt(cn0 * cn0 + sn0 * sn0)
@@ -345,10 +388,21 @@ def _setup(inertia, w0, q0, p):
         tau0 = f
     else:
         tau0 = math.copysign(2.0 * K, sn0) - f
-    n = -Ic * d21 / (Ia * d32)
-    sq1n = math.sqrt(1.0 - n)
-    hmag = math.sqrt((I0 * W0) ** 2 + (I1 * W1) ** 2 + (I2 * W2) ** 2)
-    kco = d31 / (Ia * wp)
+    return tau0, sig, e1, sns
+
+
+@jit(inline="always")
+def set_rate_constants(p, inertia, w0, ia, ib, ic, sb, sep):
+    """The rate solution and the weights of the precession angle (module docstring, 1-2)
+    of an elliptic-mode body into ``p``, from its ordered axes (:func:`ordered_axes`)."""
+    Ia, Ib, Ic = inertia[ia], inertia[ib], inertia[ic]
+    wa, wb, wc = w0[ia], sb * w0[ib], w0[ic]
+    a1, a2, a3, wp, m, m1 = rate_amplitudes(Ia, Ib, Ic, wa, wb, wc, sep)
+    K = ellipk_scalar(m1)
+    tau0, sig, e1, sns = initial_phase(wa, wb, wc, a1, a2, a3, 1.0 if Ic - Ib > 0.0 else -1.0, m1, K)
+    n = -Ic * (Ib - Ia) / (Ia * (Ic - Ib))
+    hmag = math.sqrt((inertia[0] * w0[0]) ** 2 + (inertia[1] * w0[1]) ** 2 + (inertia[2] * w0[2]) ** 2)
+    kco = (Ic - Ia) / (Ia * wp)
     p.ia, p.ib, p.ic = ia, ib, ic
     p.sb = sb
     p.sig = sig
@@ -363,7 +417,14 @@ def _setup(inertia, w0, q0, p):
     p.kj = kco * hmag / Ic
     p.kg = kco * a3
     p.n = n
-    p.sq1n = sq1n
+    p.sq1n = math.sqrt(1.0 - n)
+
+
+@jit(inline="always")
+def set_half_period_increments(p):
+    """The increments of ``J`` and ``G`` per half period ``2K`` into ``p`` (module docstring,
+    3), and for ``n < -1`` the Pi form (see :func:`_j_g`); nothing on the separatrix."""
+    m, m1, n, sq1n = p.m, p.m1, p.n, p.sq1n
     if m1 > 0.0 and n < -1.0:
         # Pi form (see _j_g): psi = (H/C) t + k [(H/C)(Pi - Pi0) - a3 (G - G0)]
         # (H/A - k (H/C) wp = H/C); per half period Pi gains 2 Pi(n|m)
@@ -371,7 +432,7 @@ def _setup(inertia, w0, q0, p):
         gpf = math.sqrt(1.0 + m - n - n2)
         p.pi_form = 1
         p.gpf = gpf
-        p.lin = hmag / Ic
+        p.lin = p.hmag / p.inertia[p.ic]
         pk = 0.5 * math.pi / gpf
         if n2 != 0.0:
             pk -= n2 / 3.0 * elliprj_scalar(0.0, m1, 1.0, 1.0 - n2)
@@ -380,6 +441,12 @@ def _setup(inertia, w0, q0, p):
     elif m1 > 0.0:
         p.dj = 2.0 * n / 3.0 * elliprj_scalar(0.0, m1, 1.0, 1.0 - n) if n != 0.0 else 0.0
         p.dg = math.pi / sq1n
+
+
+@jit(inline="always")
+def set_initial_attitude(p, q0, qn):
+    """``J``, ``G`` at ``t = 0`` and ``C_B0`` into ``p`` from the initial Euler parameters
+    ``q0`` (norm ``qn``), so that ``psi(0) == 0`` and the state at ``t = 0`` is ``q0``."""
     # J, G at tau0 through the same reduction as every later time (psi(0) == 0 exactly)
     s_, c_, d_, j0, g0 = _phase(p, 0.0)
     p.j0 = j0

@@ -309,59 +309,104 @@ def _parse(argv):
 
 
 def main(argv: list[str] | None = None) -> int:
+    """``astrodyn bench orbit`` (module docstring): 0 when astrodyn's error on the sample
+    is within :data:`ACCURACY_TARGET`, else 1."""
     args = _parse(list(sys.argv[1:] if argv is None else argv))
     if args.branches:
         return _print_branches(args)
-    from astrodyn.orbit import propagate, solve_kepler
-    from astrodyn.reference.conditioning import path_sensitivity, ulp_sensitivity
-
     mu = MU_EARTH
     n_max = max(max(args.sizes), args.sample)
     r0_all, v0_all, dt_all, kind_all = mixed_conic_states(n_max, args.seed, mu)
     print(f"astrodyn bench orbit: seed {args.seed}, {machine_description()}", flush=True)
+    ns_astrodyn, cpu_ns, load_before = time_propagate(r0_all, v0_all, dt_all, mu, args.sizes, args.repeats)
+    nk, ns_kepler = time_solve_kepler(args.sizes, args.seed, args.repeats)
+    s = slice(0, args.sample)
+    r0, v0, dt, kind = r0_all[s], v0_all[s], dt_all[s], kind_all[s]
+    r_ref, rel_ad, ratio_ad = sample_errors(r0, v0, dt, mu)
+    rows = astrodyn_rows(args.sizes, ns_astrodyn, rel_ad, ratio_ad, nk, ns_kepler)
+    if args.compare:
+        rows += competitor_rows(r0, v0, dt, mu, r_ref, rel_ad, ratio_ad, ns_astrodyn, args.compare, args.repeats)
+    ok = bool(ratio_ad.max() <= ACCURACY_TARGET)
+    headers = ["method", "states", "ns/state", "max rel err", "median rel err", "max err/floor", "astrodyn faster by (batch)", "astrodyn faster by (1 call)", "err ratio (them/astrodyn)"]
+    text, md = _table(rows, headers)
+    kinds = {KIND_NAMES[k]: int((kind == k).sum()) for k in range(3)}
+    print()
+    print(f"error sample: {args.sample} states {kinds}; floor = one-ulp sensitivity (path floor for integrators); target err/floor <= {ACCURACY_TARGET:g}")
+    print(text)
+    cpu_line = "; ".join(f"{n:,} states {cpu_ns[n]:.1f}" for n in sorted(cpu_ns))
+    load_line = f"load average (1, 5, 15 min) {load_before[0]:.2f} {load_before[1]:.2f} {load_before[2]:.2f} before the timing"
+    print(f"\nCPU time per state (process_time, all threads): {cpu_line}; {load_line}")
+    verdict = "within" if ok else "ABOVE"
+    print(f"\nastrodyn max err/floor {ratio_ad.max():.2f}: {verdict} the stated target {ACCURACY_TARGET:g}")
+    if args.markdown:
+        write_markdown(args, argv, md, kinds, f"{cpu_line}; {load_line}")
+        print(f"table written to {args.markdown}")
+    return 0 if ok else 1
 
-    # --- speed of astrodyn.propagate
+
+def time_propagate(r0_all, v0_all, dt_all, mu: float, sizes: list[int], repeats: int):
+    """Wall ns per state of :func:`astrodyn.orbit.propagate` at each batch size (size 1: a
+    scalar call), CPU ns per state of the batch calls (all threads), and the load average
+    before the timing; each size printed as it is done."""
+    from astrodyn.orbit import propagate
+
     propagate(r0_all[0], v0_all[0], dt_all[0], mu)  # warm-up: numba compile / cache load
     propagate(r0_all[:2], v0_all[:2], dt_all[:2], mu)
     ns_astrodyn = {}
     cpu_ns = {}
     load_before = os.getloadavg()
-    for n in args.sizes:
+    for n in sizes:
         if n == 1:
             r1, v1, d1 = r0_all[0], v0_all[0], float(dt_all[0])
-            sec = _best_seconds(lambda: propagate(r1, v1, d1, mu), args.repeats, inner=2000)
+            sec = _best_seconds(lambda: propagate(r1, v1, d1, mu), repeats, inner=2000)
         else:
             rr, vv, dd = r0_all[:n], v0_all[:n], dt_all[:n]
             inner = max(1, 200_000 // n)
             cpu = {}
-            sec = _best_seconds(lambda: propagate(rr, vv, dd, mu), args.repeats, inner=inner, cpu=cpu) / n
+            sec = _best_seconds(lambda: propagate(rr, vv, dd, mu), repeats, inner=inner, cpu=cpu) / n
             cpu_ns[n] = cpu["seconds"] / n * 1e9
         ns_astrodyn[n] = sec * 1e9
         extra = f" wall, {cpu_ns[n]:.1f} ns/state CPU (all threads)" if n in cpu_ns else ""
         print(f"  propagate x{n}: {ns_astrodyn[n]:.1f} ns/state{extra}", flush=True)
+    return ns_astrodyn, cpu_ns, load_before
 
-    # --- Kepler solve alone
-    nk = min(10**6, max(args.sizes) if max(args.sizes) > 1 else 1000)
-    rng = np.random.default_rng(args.seed + 1)
+
+def time_solve_kepler(sizes: list[int], seed: int, repeats: int) -> tuple[int, float]:
+    """``(count, ns per call)`` of :func:`astrodyn.orbit.solve_kepler` alone on up to 10^6
+    elliptic ``(M, e)`` (seed ``seed + 1``), printed."""
+    from astrodyn.orbit import solve_kepler
+
+    nk = min(10**6, max(sizes) if max(sizes) > 1 else 1000)
+    rng = np.random.default_rng(seed + 1)
     m_k = rng.uniform(-1e3, 1e3, nk)
     e_k = rng.uniform(0.0, 0.999999, nk)
     solve_kepler(m_k[:2], e_k[:2])
-    ns_kepler = _best_seconds(lambda: solve_kepler(m_k, e_k), args.repeats, inner=max(1, 200_000 // nk)) / nk * 1e9
+    ns_kepler = _best_seconds(lambda: solve_kepler(m_k, e_k), repeats, inner=max(1, 200_000 // nk)) / nk * 1e9
     print(f"  solve_kepler x{nk}: {ns_kepler:.1f} ns/call", flush=True)
+    return nk, ns_kepler
 
-    # --- accuracy on the sample
-    s = slice(0, args.sample)
-    r0, v0, dt, kind = r0_all[s], v0_all[s], dt_all[s], kind_all[s]
+
+def sample_errors(r0, v0, dt, mu: float):
+    """On the accuracy sample: the 50-digit reference final positions (m), and astrodyn's
+    relative error |dr| / |r| and error over the one-ulp floor of each state; the time
+    taken printed."""
+    from astrodyn.orbit import propagate
+    from astrodyn.reference.conditioning import ulp_sensitivity
+
     t0 = time.perf_counter()
     r_ref, _ = _reference(r0, v0, dt, mu)
     floor_ulp, _ = ulp_sensitivity(r0, v0, dt, mu, dps=30)
     r_ad, _ = propagate(r0, v0, dt, mu)
     rel_ad, ratio_ad = _errors(np.asarray(r_ad), r_ref, floor_ulp)
-    print(f"  reference + floors on {args.sample} states: {time.perf_counter() - t0:.1f} s", flush=True)
+    print(f"  reference + floors on {len(dt)} states: {time.perf_counter() - t0:.1f} s", flush=True)
+    return r_ref, rel_ad, ratio_ad
 
-    batch_n = max(args.sizes)
+
+def astrodyn_rows(sizes: list[int], ns_astrodyn: dict, rel_ad, ratio_ad, nk: int, ns_kepler: float) -> list[list[str]]:
+    """Table rows of astrodyn: one per batch size (the errors on the largest), and solve_kepler."""
+    batch_n = max(sizes)
     rows = []
-    for n in args.sizes:
+    for n in sizes:
         is_top = n == batch_n
         rows.append(
             [
@@ -377,74 +422,68 @@ def main(argv: list[str] | None = None) -> int:
             ]
         )
     rows.append(["astrodyn solve_kepler (ns/call)", f"{nk:,}", _fmt(ns_kepler, ".1f"), "", "", "", "", "", ""])
+    return rows
 
-    # --- REBOUND and DOP853 on the compare subset
-    result = {"astrodyn_ok": bool(ratio_ad.max() <= ACCURACY_TARGET)}
-    if args.compare:
-        c = slice(0, args.compare)
-        rc0, vc0, dtc, kc = r0[c], v0[c], dt[c], kind[c]
+
+def competitor_rows(r0, v0, dt, mu: float, r_ref, rel_ad, ratio_ad, ns_astrodyn: dict, compare: int,
+                    repeats: int) -> list[list[str]]:
+    """Table rows of astrodyn, REBOUND IAS15, REBOUND WHFast (bound orbits) and scipy DOP853
+    on the first ``compare`` states of the sample; errors over the path floor, ratios to
+    astrodyn's batch and scalar ns and to its error on the same states."""
+    from astrodyn.reference.conditioning import path_sensitivity
+
+    c = slice(0, compare)
+    rc0, vc0, dtc = r0[c], v0[c], dt[c]
+    t0 = time.perf_counter()
+    floor_path, _ = path_sensitivity(rc0, vc0, dtc, mu, dps=30)
+    print(f"  path floors on {compare} states: {time.perf_counter() - t0:.1f} s", flush=True)
+    bound = (0.5 * np.einsum("ij,ij->i", vc0, vc0) - mu / np.linalg.norm(rc0, axis=-1)) < 0
+    ad_max_all = float(rel_ad[c].max())
+    ad_max_bound = float(rel_ad[c][bound].max()) if bound.any() else math.nan
+    rows = [["astrodyn on the compare states", f"{compare}", "", _fmt(ad_max_all), _fmt(float(np.median(rel_ad[c]))),
+             _fmt(float(ratio_ad[c].max()), ".3g"), "", "", ""]]
+    reps = min(repeats, 3)
+    competitors = [
+        ("REBOUND IAS15", np.ones(compare, bool), lambda a, b, d: _timed_each(_rebound_one, a, b, d, mu, reps, "ias15")),
+        ("REBOUND WHFast (bound)", bound, lambda a, b, d: _timed_each(_rebound_one, a, b, d, mu, reps, "whfast")),
+        ("scipy DOP853 rtol 1e-12", np.ones(compare, bool), lambda a, b, d: _timed_each(_dop853_one, a, b, d, mu, 1)),
+    ]
+    batch_n = max(ns_astrodyn)  # the largest batch size
+    for name, sel, run in competitors:
+        if not sel.any():
+            continue
         t0 = time.perf_counter()
-        floor_path, _ = path_sensitivity(rc0, vc0, dtc, mu, dps=30)
-        print(f"  path floors on {args.compare} states: {time.perf_counter() - t0:.1f} s", flush=True)
-        bound = (0.5 * np.einsum("ij,ij->i", vc0, vc0) - mu / np.linalg.norm(rc0, axis=-1)) < 0
-        ad_max_all = float(rel_ad[c].max())
-        ad_max_bound = float(rel_ad[c][bound].max()) if bound.any() else math.nan
+        sec, (r_c, _) = run(rc0[sel], vc0[sel], dtc[sel])
+        rel, ratio = _errors(r_c, r_ref[c][sel], floor_path[sel])
+        ns = sec / sel.sum() * 1e9
+        ad_ref = ad_max_bound if name.startswith("REBOUND WHFast") else ad_max_all
         rows.append(
-            ["astrodyn on the compare states", f"{args.compare}", "", _fmt(ad_max_all), _fmt(float(np.median(rel_ad[c]))),
-             _fmt(float(ratio_ad[c].max()), ".3g"), "", "", ""]
+            [
+                name,
+                f"{int(sel.sum())}",
+                _fmt(ns, ".0f"),
+                _fmt(float(rel.max())),
+                _fmt(float(np.median(rel))),
+                _fmt(float(ratio.max()), ".3g"),
+                _fmt(ns / ns_astrodyn[batch_n], ",.0f") + " x",
+                _fmt(ns / ns_astrodyn[1], ",.3g") + " x" if 1 in ns_astrodyn else "",
+                _fmt(float(rel.max()) / max(ad_ref, 1e-300), ".3g") + " x",
+            ]
         )
-        reps = min(args.repeats, 3)
-        competitors = [
-            ("REBOUND IAS15", np.ones(args.compare, bool), lambda a, b, d: _timed_each(_rebound_one, a, b, d, mu, reps, "ias15")),
-            ("REBOUND WHFast (bound)", bound, lambda a, b, d: _timed_each(_rebound_one, a, b, d, mu, reps, "whfast")),
-            ("scipy DOP853 rtol 1e-12", np.ones(args.compare, bool), lambda a, b, d: _timed_each(_dop853_one, a, b, d, mu, 1)),
-        ]
-        for name, sel, run in competitors:
-            if not sel.any():
-                continue
-            t0 = time.perf_counter()
-            sec, (r_c, _) = run(rc0[sel], vc0[sel], dtc[sel])
-            rel, ratio = _errors(r_c, r_ref[c][sel], floor_path[sel])
-            ns = sec / sel.sum() * 1e9
-            ad_ref = ad_max_bound if name.startswith("REBOUND WHFast") else ad_max_all
-            rows.append(
-                [
-                    name,
-                    f"{int(sel.sum())}",
-                    _fmt(ns, ".0f"),
-                    _fmt(float(rel.max())),
-                    _fmt(float(np.median(rel))),
-                    _fmt(float(ratio.max()), ".3g"),
-                    _fmt(ns / ns_astrodyn[batch_n], ",.0f") + " x",
-                    _fmt(ns / ns_astrodyn[1], ",.3g") + " x" if 1 in ns_astrodyn else "",
-                    _fmt(float(rel.max()) / max(ad_ref, 1e-300), ".3g") + " x",
-                ]
-            )
-            print(f"  {name}: {time.perf_counter() - t0:.1f} s", flush=True)
-        result["kinds"] = {KIND_NAMES[k]: int((kc == k).sum()) for k in range(3)}
+        print(f"  {name}: {time.perf_counter() - t0:.1f} s", flush=True)
+    return rows
 
-    headers = ["method", "states", "ns/state", "max rel err", "median rel err", "max err/floor", "astrodyn faster by (batch)", "astrodyn faster by (1 call)", "err ratio (them/astrodyn)"]
-    text, md = _table(rows, headers)
-    kinds = {KIND_NAMES[k]: int((kind == k).sum()) for k in range(3)}
-    print()
-    print(f"error sample: {args.sample} states {kinds}; floor = one-ulp sensitivity (path floor for integrators); target err/floor <= {ACCURACY_TARGET:g}")
-    print(text)
-    cpu_line = "; ".join(f"{n:,} states {cpu_ns[n]:.1f}" for n in sorted(cpu_ns))
-    load_line = f"load average (1, 5, 15 min) {load_before[0]:.2f} {load_before[1]:.2f} {load_before[2]:.2f} before the timing"
-    print(f"\nCPU time per state (process_time, all threads): {cpu_line}; {load_line}")
-    verdict = "within" if result["astrodyn_ok"] else "ABOVE"
-    print(f"\nastrodyn max err/floor {ratio_ad.max():.2f}: {verdict} the stated target {ACCURACY_TARGET:g}")
-    if args.markdown:
-        stamp = _dt.datetime.now(_dt.UTC).strftime("%Y-%m-%d %H:%M UTC")
-        cmd = "astrodyn bench orbit " + " ".join(argv if argv is not None else sys.argv[1:])
-        with open(args.markdown, "w") as f:
-            f.write(f"<!-- written by `{cmd.strip()}` on {stamp} -->\n")
-            f.write(f"Machine: {machine_description()}\n\nDate: {stamp}; seed {args.seed}; best of {args.repeats} repeats.\n\n")
-            f.write(f"Error sample: {args.sample} states {kinds}; REBOUND/DOP853 on the first {args.compare}.\n\n")
-            f.write(md + "\n")
-            f.write(f"\nCPU ns/state of the batch calls (process_time, all threads): {cpu_line}; {load_line}.\n")
-        print(f"table written to {args.markdown}")
-    return 0 if result["astrodyn_ok"] else 1
+
+def write_markdown(args, argv: list[str] | None, md: str, kinds: dict, cpu_and_load: str) -> None:
+    """The table (markdown) into ``args.markdown`` with the command, date, machine and sample."""
+    stamp = _dt.datetime.now(_dt.UTC).strftime("%Y-%m-%d %H:%M UTC")
+    cmd = "astrodyn bench orbit " + " ".join(argv if argv is not None else sys.argv[1:])
+    with open(args.markdown, "w") as f:
+        f.write(f"<!-- written by `{cmd.strip()}` on {stamp} -->\n")
+        f.write(f"Machine: {machine_description()}\n\nDate: {stamp}; seed {args.seed}; best of {args.repeats} repeats.\n\n")
+        f.write(f"Error sample: {args.sample} states {kinds}; REBOUND/DOP853 on the first {args.compare}.\n\n")
+        f.write(md + "\n")
+        f.write(f"\nCPU ns/state of the batch calls (process_time, all threads): {cpu_and_load}.\n")
 
 
 if __name__ == "__main__":

@@ -180,6 +180,24 @@ def _decimal_length17(v):
     return n
 
 
+@jit(inline="always")
+def mul_shift_all64(m2, mm_shift, mul_lo, mul_hi, j):
+    """Ryu's mulShiftAll64: ``(vr, vp, vm)``, the interval ``4 m2``, ``4 m2 + 2`` and
+    ``4 m2 - 1 - mm_shift`` each multiplied by the 128-bit table entry ``(mul_hi, mul_lo)``
+    and shifted right by ``j`` bits (:func:`_mul_shift64`)."""
+    vr = _mul_shift64(_U4 * m2, mul_lo, mul_hi, j)
+    vp = _mul_shift64(_U4 * m2 + _U2, mul_lo, mul_hi, j)
+    vm = _mul_shift64(_U4 * m2 - _U1 - mm_shift, mul_lo, mul_hi, j)
+    return vr, vp, vm
+
+
+@jit(inline="always")
+def drop_digits(vr, vp, vm, base):
+    """``(vr, vp, vm) // base``: the last decimal digit (``base`` 10) or two (``base`` 100)
+    removed from each bound of the interval."""
+    return vr // base, vp // base, vm // base
+
+
 @jit
 def _d2d(ieee_mantissa, ieee_exponent):
     """Ryu d2d: the shortest, nearest decimal (digits, exponent10) of a finite nonzero double.
@@ -213,9 +231,7 @@ def _d2d(ieee_mantissa, ieee_exponent):
         i = -e2 + q + k
         lo = _POW5_INV_LO[q]
         hi = _POW5_INV_HI[q]
-        vr = _mul_shift64(_U4 * m2, lo, hi, i)
-        vp = _mul_shift64(_U4 * m2 + _U2, lo, hi, i)
-        vm = _mul_shift64(_U4 * m2 - _U1 - mm_shift, lo, hi, i)
+        vr, vp, vm = mul_shift_all64(m2, mm_shift, lo, hi, i)
         if q <= 21:
             # Only one of mp, mv, mm can be a multiple of 5, if any.
             if mv % _U5 == _U0:
@@ -232,9 +248,7 @@ def _d2d(ieee_mantissa, ieee_exponent):
         j = q - k
         lo = _POW5_LO[i]
         hi = _POW5_HI[i]
-        vr = _mul_shift64(_U4 * m2, lo, hi, j)
-        vp = _mul_shift64(_U4 * m2 + _U2, lo, hi, j)
-        vm = _mul_shift64(_U4 * m2 - _U1 - mm_shift, lo, hi, j)
+        vr, vp, vm = mul_shift_all64(m2, mm_shift, lo, hi, j)
         if q <= 1:
             # mv = 4 m2 has at least two trailing zero bits.
             vr_trailing_zeros = True
@@ -254,17 +268,13 @@ def _d2d(ieee_mantissa, ieee_exponent):
             vm_trailing_zeros = vm_trailing_zeros and (vm % _U10 == _U0)
             vr_trailing_zeros = vr_trailing_zeros and (last_removed_digit == _U0)
             last_removed_digit = vr % _U10
-            vr //= _U10
-            vp //= _U10
-            vm //= _U10
+            vr, vp, vm = drop_digits(vr, vp, vm, _U10)
             removed += 1
         if vm_trailing_zeros:
             while vm % _U10 == _U0 and vm > _U0:
                 vr_trailing_zeros = vr_trailing_zeros and (last_removed_digit == _U0)
                 last_removed_digit = vr % _U10
-                vr //= _U10
-                vp //= _U10
-                vm //= _U10
+                vr, vp, vm = drop_digits(vr, vp, vm, _U10)
                 removed += 1
         if vr_trailing_zeros and last_removed_digit == _U5 and vr % _U2 == _U0:
             last_removed_digit = _U4  # exactly halfway: round to even
@@ -275,15 +285,11 @@ def _d2d(ieee_mantissa, ieee_exponent):
         round_up = False
         if vp // _U100 > vm // _U100:
             round_up = vr % _U100 >= np.uint64(50)
-            vr //= _U100
-            vp //= _U100
-            vm //= _U100
+            vr, vp, vm = drop_digits(vr, vp, vm, _U100)
             removed += 2
         while vp // _U10 > vm // _U10:
             round_up = vr % _U10 >= _U5
-            vr //= _U10
-            vp //= _U10
-            vm //= _U10
+            vr, vp, vm = drop_digits(vr, vp, vm, _U10)
             removed += 1
         output = vr + (_U1 if (vr == vm or round_up) else _U0)
     return output, e10 + removed

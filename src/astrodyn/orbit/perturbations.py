@@ -689,6 +689,39 @@ def propagate_perturbed(
     Returns a :class:`PerturbedStates`.  Bodies with a non-finite state or
     ``r0 = 0`` get NaN outputs (the others are integrated normally).
     """
+    r0, v0, mu, t_arr = checked_propagation_inputs(r0, v0, t, mu, method, rtol, atol)
+    active = _active(perturbations)
+    if not active:
+        return kepler_states(r0, v0, t_arr, mu)
+    t_flat = np.atleast_1d(t_arr)
+    r_all, v_all, er_all, ev_all, nfev, steps, rect = integrate_finite_bodies(
+        r0.reshape(-1, 3), v0.reshape(-1, 3), t_flat, mu, active, method, rtol, atol,
+        error_estimate, rectify_ratio, max_steps,
+    )
+    lead, scalar_t = r0.shape[:-1], t_arr.ndim == 0
+    names = ", ".join(type(p).__name__ for p in active)
+    return PerturbedStates(
+        t_arr,
+        states_in_input_shape(r_all, lead, scalar_t),
+        states_in_input_shape(v_all, lead, scalar_t),
+        errors_in_input_shape(er_all, lead, scalar_t),
+        errors_in_input_shape(ev_all, lead, scalar_t),
+        method,
+        True,
+        nfev=nfev,
+        nsteps=steps,
+        rectifications=rect,
+        message=f"{method} (DOP853, rtol={rtol:g}, atol={atol:g}) with {names}; {steps} steps, {rect} rectifications",
+        perturbations=active,
+    )
+
+
+def checked_propagation_inputs(r0, v0, t, mu, method, rtol, atol):
+    """The arguments of :func:`propagate_perturbed` checked and converted: ``(r0, v0)``
+    float64 ``(..., 3)`` rows of one shape (m, m/s), ``mu`` a finite positive float
+    (m^3/s^2), ``t`` a finite float64 scalar or 1-D array (s); ValueError naming the
+    argument otherwise (also for a ``method`` other than "cowell" / "encke" and
+    non-positive ``rtol``, ``atol``)."""
     if method not in ("cowell", "encke"):
         raise ValueError(f"method must be 'cowell' or 'encke', got {method!r}")
     r0 = _rows(r0, "r0")
@@ -705,32 +738,33 @@ def propagate_perturbed(
         raise ValueError(f"t must be a scalar or a 1-D array of times in s, got shape {t_arr.shape}")
     if not np.all(np.isfinite(t_arr)):
         raise ValueError("t must be finite (seconds since the epoch of r0, v0)")
-    active = _active(perturbations)
-    lead = r0.shape[:-1]
+    return r0, v0, mu, t_arr
+
+
+def kepler_states(r0, v0, t_arr, mu) -> PerturbedStates:
+    """The result of :func:`propagate_perturbed` with nothing to integrate: exact two-body
+    states (:func:`astrodyn.orbit.propagate`) of ``(r0, v0)`` (..., 3) at the times
+    ``t_arr`` (s, scalar or 1-D), with zero error estimates."""
     t_flat = np.atleast_1d(t_arr)
-    T = t_flat.shape[0]
+    r, v = propagate(r0[..., None, :], v0[..., None, :], t_flat, mu)
+    if t_arr.ndim == 0:
+        r, v = r[..., 0, :], v[..., 0, :]
+    zeros = np.zeros(r.shape[:-1])
+    return PerturbedStates(
+        t_arr, r, v, zeros, zeros.copy(), "kepler", False,
+        message="no perturbations: exact two-body propagation (astrodyn.orbit.propagate), nothing integrated",
+    )
 
-    def shape_out(x_TN3):  # (T, N, 3) -> (..., T, 3) or (..., 3)
-        x = np.moveaxis(x_TN3, 0, -2).reshape(lead + (T,) + x_TN3.shape[2:])
-        return x[..., 0, :] if t_arr.ndim == 0 else x
 
-    def shape_err(x_TN):
-        x = np.moveaxis(x_TN, 0, -1).reshape(lead + (T,))
-        return x[..., 0] if t_arr.ndim == 0 else x
+def integrate_finite_bodies(R0, V0, t_flat, mu, active, method, rtol, atol, error_estimate, rectify_ratio, max_steps):
+    """Integrate the bodies of ``R0, V0`` (N, 3) whose state is finite with ``|r0| > 0``
+    (the others stay NaN) to the times ``t_flat`` (T,): returns ``r, v`` (T, N, 3),
+    ``error_r, error_v`` (T, N) and ``nfev, steps, rectifications`` of the tight run.
 
-    if not active:
-        r, v = propagate(r0[..., None, :], v0[..., None, :], t_flat, mu)
-        if t_arr.ndim == 0:
-            r, v = r[..., 0, :], v[..., 0, :]
-        zeros = np.zeros(r.shape[:-1])
-        return PerturbedStates(
-            t_arr, r, v, zeros, zeros.copy(), "kepler", False,
-            message="no perturbations: exact two-body propagation (astrodyn.orbit.propagate), nothing integrated",
-        )
-
-    R0 = r0.reshape(-1, 3)
-    V0 = v0.reshape(-1, 3)
-    N = R0.shape[0]
+    The tolerances of :func:`propagate_perturbed` are per body: the stacked system of
+    ``n`` bodies runs at ``rtol / sqrt(n)`` (not below 100 eps) and ``atol / sqrt(n)``;
+    the error estimate is the difference to a run at 10x those tolerances."""
+    T, N = t_flat.shape[0], R0.shape[0]
     L = np.linalg.norm(R0, axis=-1)
     ok = np.isfinite(L) & np.all(np.isfinite(V0), axis=-1) & (L > 0)
     r_all = np.full((T, N, 3), np.nan)
@@ -758,18 +792,18 @@ def propagate_perturbed(
             r_l, v_l, *_ = once(10.0)
             er_all[:, ok] = np.linalg.norm(r_k - r_l, axis=-1)
             ev_all[:, ok] = np.linalg.norm(v_k - v_l, axis=-1)
-    names = ", ".join(type(p).__name__ for p in active)
-    return PerturbedStates(
-        t_arr,
-        shape_out(r_all),
-        shape_out(v_all),
-        shape_err(er_all),
-        shape_err(ev_all),
-        method,
-        True,
-        nfev=nfev,
-        nsteps=steps,
-        rectifications=rect,
-        message=f"{method} (DOP853, rtol={rtol:g}, atol={atol:g}) with {names}; {steps} steps, {rect} rectifications",
-        perturbations=active,
-    )
+    return r_all, v_all, er_all, ev_all, nfev, steps, rect
+
+
+def states_in_input_shape(x_TN3, lead, scalar_t):
+    """``(T, N, 3)`` states -> ``lead + (T, 3)``, or ``lead + (3,)`` for a scalar ``t``."""
+    T = x_TN3.shape[0]
+    x = np.moveaxis(x_TN3, 0, -2).reshape(lead + (T,) + x_TN3.shape[2:])
+    return x[..., 0, :] if scalar_t else x
+
+
+def errors_in_input_shape(x_TN, lead, scalar_t):
+    """``(T, N)`` error norms -> ``lead + (T,)``, or ``lead`` for a scalar ``t``."""
+    T = x_TN.shape[0]
+    x = np.moveaxis(x_TN, 0, -1).reshape(lead + (T,))
+    return x[..., 0] if scalar_t else x

@@ -524,32 +524,99 @@ def load_blocks(path: str | os.PathLike, block_messages: int = 200_000) -> Itera
 
 def _scan(path: str | os.PathLike, block_messages: int | None) -> Iterator[Run]:
     """The reader behind :func:`load` (one Run) and :func:`load_blocks` (Runs of about
-    ``block_messages`` messages)."""
-
+    ``block_messages`` messages): one walk over the top-level records
+    (:func:`read_records`), each handed to a :class:`RecordingScan`; a block ends after
+    the chunk that brings it to ``block_messages`` messages."""
     path = os.fspath(path)
     f, size = open_recording(path)
-    state: dict[str, Any] = {}
-    schemas: dict[int, tuple[str, dict | None]] = {}
-    channel_info: dict[int, tuple[str, str | None, _Builder]] = {}
-    builders: dict[str, _Builder] = {}
-    metadata: dict[str, dict[str, str]] = {}
-    events: list[dict] = []
-    notes: list[str] = []
-    counters = {"messages": 0, "invalid": 0, "corrupt": 0, "orphans": 0}
-    examples: list[str] = []
-    invalid_by_channel: dict[str, int] = {}
+    scan = RecordingScan(path)
+    with f:
+        for opcode, body, offset in read_records(f, size, path, scan.state):
+            chunk_read = scan.read_record(opcode, body, offset)
+            if chunk_read and block_messages is not None and scan.counters["messages"] >= block_messages:
+                yield scan.run(last=False)
+                scan.start_next_block()
+    yield scan.run(last=True)
 
-    def on_schema(rec: Schema) -> None:
+
+class RecordingScan:
+    """What one pass over a recording has gathered so far, and the steps that add to it.
+
+    Schema and Channel records define channels (:meth:`read_schema`, :meth:`read_channel`);
+    each Message is decoded and appended to its channel's builder (:meth:`read_message`);
+    :meth:`run` turns the builders into a :class:`Run` and :meth:`start_next_block` empties
+    them for the next block of :func:`load_blocks`.  Damage is counted, never raised:
+    ``counters`` holds ``messages`` (valid ones appended), ``invalid``, ``corrupt`` (damaged
+    records and chunks) and ``orphans`` (messages on a channel never defined); ``notes``
+    the lines that become :attr:`Run.truncation`; ``state`` is filled by
+    :func:`scan_records` (``truncation``, ``complete``)."""
+
+    __slots__ = ("path", "state", "schemas", "channel_info", "builders", "metadata", "events", "notes",
+                 "counters", "examples", "invalid_by_channel", "handlers", "limits")
+
+    def __init__(self, path: str):
+        self.path = path
+        self.state: dict[str, Any] = {}
+        self.schemas: dict[int, tuple[str, dict | None]] = {}
+        self.channel_info: dict[int, tuple[str, str | None, _Builder]] = {}
+        self.builders: dict[str, _Builder] = {}
+        self.metadata: dict[str, dict[str, str]] = {}
+        self.events: list[dict] = []
+        self.notes: list[str] = []
+        self.counters = {"messages": 0, "invalid": 0, "corrupt": 0, "orphans": 0}
+        self.examples: list[str] = []
+        self.invalid_by_channel: dict[str, int] = {}
+        self.handlers = {Schema: self.read_schema, Channel: self.read_channel, Message: self.read_message}
+        self.limits = chunk_limits()
+
+    def read_record(self, opcode: int, body: bytes, offset: int) -> bool:
+        """Take one top-level record (``offset``: its byte in the file); True when it was a
+        chunk whose records were read (the one place a block may end)."""
+        try:
+            rec = parse_record(opcode, body)
+        except Exception as exc:  # a damaged record whose framing is intact
+            self.counters["corrupt"] += 1
+            self.notes.append(f"damaged {Opcode(opcode).name if opcode in Opcode._value2member_map_ else opcode} record at byte {offset}: {exc}")
+            return False
+        if rec is None:
+            return False
+        if isinstance(rec, Chunk):
+            return self.read_chunk(rec, offset)
+        if isinstance(rec, Metadata):
+            self.metadata[rec.name] = dict(rec.metadata)
+        else:
+            self.handlers[type(rec)](rec)
+        return False
+
+    def read_chunk(self, chunk: Chunk, offset: int) -> bool:
+        """The records of one chunk (:func:`chunk_records`, within ``limits``); a chunk that
+        cannot be opened is counted as corrupt and skipped (False)."""
+        try:
+            inner = chunk_records(chunk, self.limits)
+        except Exception as exc:  # a bomb, zstd error, CRC mismatch, cut inner record
+            self.counters["corrupt"] += 1
+            self.notes.append(f"corrupt chunk at byte {offset} skipped: {type(exc).__name__}: {exc}")
+            return False
+        handlers = self.handlers
+        for r in inner:
+            handlers[type(r)](r)
+        return True
+
+    def read_schema(self, rec: Schema) -> None:
+        """Keep a schema's name and its JSON Schema (None unless a ``jsonschema`` object)."""
         try:
             data = json.loads(rec.data) if rec.encoding == "jsonschema" and rec.data else None
         except ValueError:
             data = None
-        schemas[rec.id] = (rec.name, data if isinstance(data, dict) else None)
+        self.schemas[rec.id] = (rec.name, data if isinstance(data, dict) else None)
 
-    def on_channel(rec: Channel) -> None:
-        if rec.id in channel_info:
+    def read_channel(self, rec: Channel) -> None:
+        """Define a channel (the first definition of an id wins): its astrodyn kind from
+        the key (JSON channels only), its columns from astrodyn's own definition on astrodyn
+        keys, else from the schema stored in the file; channels of one topic share a builder."""
+        if rec.id in self.channel_info:
             return
-        name, schema = schemas.get(rec.schema_id, ("", None))
+        name, schema = self.schemas.get(rec.schema_id, ("", None))
         try:
             kind = messages.kind_of_key(rec.topic) if rec.message_encoding == "json" else None
         except messages.MessageError:
@@ -557,123 +624,109 @@ def _scan(path: str | os.PathLike, block_messages: int | None) -> Iterator[Run]:
         own = messages.schema_for_key(rec.topic) if kind is not None else None
         if own is not None:  # astrodyn's own definition, never the one stored in the file
             name, schema = own
-        b = builders.get(rec.topic)
+        b = self.builders.get(rec.topic)
         if b is None:
-            b = builders[rec.topic] = _Builder(rec.topic, kind, name, _columns_for(schema) if rec.message_encoding == "json" else None)
-        channel_info[rec.id] = (rec.topic, kind if rec.message_encoding == "json" else None, b)
+            b = self.builders[rec.topic] = _Builder(rec.topic, kind, name, _columns_for(schema) if rec.message_encoding == "json" else None)
+        self.channel_info[rec.id] = (rec.topic, kind if rec.message_encoding == "json" else None, b)
 
-    def invalid(topic: str, sequence: int, why: str) -> None:
-        counters["invalid"] += 1
-        invalid_by_channel[topic] = invalid_by_channel.get(topic, 0) + 1
-        if len(examples) < _MAX_EXAMPLES:
-            examples.append(f"{topic} seq {sequence}: {why}")
+    def count_invalid(self, topic: str, sequence: int, why: str) -> None:
+        """Count one invalid message of ``topic`` (the first :data:`_MAX_EXAMPLES` kept as examples)."""
+        self.counters["invalid"] += 1
+        self.invalid_by_channel[topic] = self.invalid_by_channel.get(topic, 0) + 1
+        if len(self.examples) < _MAX_EXAMPLES:
+            self.examples.append(f"{topic} seq {sequence}: {why}")
 
-    def on_message(rec: Message) -> None:
-        info = channel_info.get(rec.channel_id)
+    def read_message(self, rec: Message) -> None:
+        """Decode one message and append it to its channel: astrodyn kinds through
+        :func:`astrodyn.messages.decode` (events also to ``events``), other JSON channels
+        through ``json``, anything else as bytes; invalid ones are counted, not appended."""
+        info = self.channel_info.get(rec.channel_id)
         if info is None:
-            counters["orphans"] += 1
+            self.counters["orphans"] += 1
             return
         topic, kind, b = info
         if kind is not None:
             try:
                 msg = messages.decode(rec.data, kind)
             except messages.MessageError as exc:
-                invalid(topic, rec.sequence, str(exc))
+                self.count_invalid(topic, rec.sequence, str(exc))
                 return
             if kind == "event":
-                events.append(msg)
+                self.events.append(msg)
         else:
             try:
                 msg = json.loads(rec.data) if b.columns is not None or b.records is not None else rec.data
             except (ValueError, RecursionError) as exc:  # not JSON, bad UTF-8, nested past the parser's depth
                 if b.columns is not None:
-                    invalid(topic, rec.sequence, f"not JSON: {type(exc).__name__}")
+                    self.count_invalid(topic, rec.sequence, f"not JSON: {type(exc).__name__}")
                     return
                 msg = rec.data
         try:
             b.add(msg, rec.sequence, rec.log_time)
         except ValueError as exc:  # violates the schema stored in the file
-            invalid(topic, rec.sequence, str(exc))
+            self.count_invalid(topic, rec.sequence, str(exc))
             return
-        counters["messages"] += 1
+        self.counters["messages"] += 1
 
-    handlers = {Schema: on_schema, Channel: on_channel, Message: on_message}
-    limits = chunk_limits()
-
-    def block(last: bool) -> Run:
-        channels = {topic: b.build() for topic, b in builders.items() if last or len(b.seq)}
-        bodies: dict[str, BodyTracks] = {}
-        gaps: dict[str, dict] = {}
-        for topic, track in channels.items():
-            if track.kind in messages.STATE_KINDS:
-                _, body, kind = messages.parse_key(topic)
-                setattr(bodies.setdefault(body, BodyTracks(body)), kind, track)
-            if track.kind == "event":
-                for process in sorted(set(track.fields["process"])):
-                    gaps[f"{topic}#{process}"] = gap_report(track.seq[track.fields["process"] == process])
-            else:
-                gaps[topic] = gap_report(track.seq)
-        events.sort(key=lambda e: (e["t"], e["process"], e["seq"]))
+    def run(self, last: bool) -> Run:
+        """The :class:`Run` of what was read since the last block (all of it for
+        :func:`load`); ``last``: the file is done, so channels without messages are kept
+        and ``truncated`` / ``truncation`` are filled in."""
+        counters, notes = self.counters, self.notes
+        channels = {topic: b.build() for topic, b in self.builders.items() if last or len(b.seq)}
+        bodies, gaps = bodies_and_gaps(channels)
+        self.events.sort(key=lambda e: (e["t"], e["process"], e["seq"]))
         if last and counters["orphans"]:
             notes.append(f"{counters['orphans']} messages on channels whose definition was lost")
-        if last and "truncation" in state:
-            notes.insert(0, state["truncation"])
+        if last and "truncation" in self.state:
+            notes.insert(0, self.state["truncation"])
         return Run(
-            path=path,
-            scenario=metadata.get("scenario", {}),
-            metadata=dict(metadata),
+            path=self.path,
+            scenario=self.metadata.get("scenario", {}),
+            metadata=dict(self.metadata),
             bodies=bodies,
             channels=channels,
-            events=list(events),
+            events=list(self.events),
             gaps=gaps,
             messages=counters["messages"],
-            truncated=not state.get("complete", False) if last else False,
+            truncated=not self.state.get("complete", False) if last else False,
             truncation="; ".join(notes) if last else "",
             corrupt_chunks=counters["corrupt"],
             invalid=counters["invalid"],
-            invalid_examples=list(examples),
-            invalid_by_channel=dict(invalid_by_channel),
+            invalid_examples=list(self.examples),
+            invalid_by_channel=dict(self.invalid_by_channel),
         )
 
-    def reset() -> None:  # fresh builders for the next block, in one pass over channels (not channels^2)
-        fresh = {id(b): _Builder(b.topic, b.kind, b.schema_name, b.columns) for b in builders.values()}
-        for topic, b in builders.items():
-            builders[topic] = fresh[id(b)]
-        for cid, (t, k, old) in channel_info.items():
-            channel_info[cid] = (t, k, fresh[id(old)])
-        events.clear()
-        counters.update(messages=0, invalid=0, corrupt=0)
-        examples.clear()
-        invalid_by_channel.clear()
+    def start_next_block(self) -> None:
+        """Fresh builders (same channels, no messages) and zeroed block counters, in one
+        pass over the channels (not channels^2); ``orphans`` and ``notes`` run on."""
+        fresh = {id(b): _Builder(b.topic, b.kind, b.schema_name, b.columns) for b in self.builders.values()}
+        for topic, b in self.builders.items():
+            self.builders[topic] = fresh[id(b)]
+        for cid, (t, k, old) in self.channel_info.items():
+            self.channel_info[cid] = (t, k, fresh[id(old)])
+        self.events.clear()
+        self.counters.update(messages=0, invalid=0, corrupt=0)
+        self.examples.clear()
+        self.invalid_by_channel.clear()
 
-    with f:
-        for opcode, body, offset in read_records(f, size, path, state):
-            try:
-                rec = parse_record(opcode, body)
-            except Exception as exc:  # a damaged record whose framing is intact
-                counters["corrupt"] += 1
-                notes.append(f"damaged {Opcode(opcode).name if opcode in Opcode._value2member_map_ else opcode} record at byte {offset}: {exc}")
-                continue
-            if rec is None:
-                continue
-            if isinstance(rec, Chunk):
-                try:
-                    inner = chunk_records(rec, limits)
-                except Exception as exc:  # a bomb, zstd error, CRC mismatch, cut inner record
-                    counters["corrupt"] += 1
-                    notes.append(f"corrupt chunk at byte {offset} skipped: {type(exc).__name__}: {exc}")
-                    continue
-                for r in inner:
-                    handlers[type(r)](r)
-                if block_messages is not None and counters["messages"] >= block_messages:
-                    yield block(last=False)
-                    reset()
-            elif isinstance(rec, Metadata):
-                metadata[rec.name] = dict(rec.metadata)
-            else:
-                handlers[type(rec)](rec)
 
-    yield block(last=True)
+def bodies_and_gaps(channels: dict[str, Track]) -> tuple[dict[str, BodyTracks], dict[str, dict]]:
+    """The state tracks grouped per body (``<scenario>/<body>/<kind>`` keys), and the
+    :func:`gap_report` of every channel (of every process on an event channel:
+    ``<topic>#<process>``)."""
+    bodies: dict[str, BodyTracks] = {}
+    gaps: dict[str, dict] = {}
+    for topic, track in channels.items():
+        if track.kind in messages.STATE_KINDS:
+            _, body, kind = messages.parse_key(topic)
+            setattr(bodies.setdefault(body, BodyTracks(body)), kind, track)
+        if track.kind == "event":
+            for process in sorted(set(track.fields["process"])):
+                gaps[f"{topic}#{process}"] = gap_report(track.seq[track.fields["process"] == process])
+        else:
+            gaps[topic] = gap_report(track.seq)
+    return bodies, gaps
 
 
 def main(argv: list[str] | None = None) -> int:  # pragma: no cover - small inspection helper

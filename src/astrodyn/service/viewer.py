@@ -431,6 +431,53 @@ def _scenario_metadata(path: str | None) -> tuple[int, dict, set[str] | None]:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """``python -m astrodyn.service.viewer --scenario NAME ...`` (module docstring): exit 0
+    when stopped, 1 when the server or the bus cannot start, 2 for bad arguments."""
+    args = parse_viewer_arguments(argv)
+    try:
+        epoch_ns, central, orbiting, verbs = checked_viewer_arguments(args)
+    except (ValueError, OSError, messages.MessageError) as exc:
+        print(f"astrodyn viewer: error: {exc}", file=sys.stderr)
+        return 2
+    share_fate_with_supervisor()
+    try:
+        os.nice(VIEWER_NICE)
+    except OSError:
+        pass
+    stop = StopFlag()
+    secret = auth.secret_from_environment()
+    samples = ViewerSamples(args.scenario, args.from_logger, auth.Verifier(secret) if secret is not None else None)
+    scene = LiveScene(epoch_ns, central, orbiting)
+    try:
+        view = _View(args.host, args.port, args.scenario, args.raw_rate, services=bool(verbs))
+    except Exception as exc:  # foxglove-sdk: port taken, bad host
+        print(f"astrodyn viewer: error: cannot start the Foxglove server on {args.host}:{args.port}: {exc}",
+              file=sys.stderr)
+        return 1
+    try:
+        with bus.session_from_args(args) as session:
+            base = f"{messages.PREFIX}/{args.scenario}"
+            subs = [] if args.from_logger else [session.declare_subscriber(key, samples.latest)
+                                                for key in (f"{base}/**", f"{base}/@batch/*")]
+            if verbs:
+                view.add_control_services(session, args.scenario, verbs)
+            print(json.dumps({"foxglove": f"ws://{args.host}:{view.server.port}", "scenario": args.scenario,
+                              "authenticated": samples.verifier is not None}), flush=True)
+            run_view_frames(session, 1.0 / args.rate, stop, samples, scene, view)
+            for sub in subs:
+                sub.undeclare()
+    except bus.BusError as exc:
+        print(f"astrodyn viewer: error: {exc}", file=sys.stderr)
+        return 1
+    finally:
+        view.close()
+    print(json.dumps({"viewer": "stopped", "reason": stop.why, "received": samples.latest.received,
+                      "bodies": len(scene.bodies), "invalid": scene.invalid, "rejected": samples.rejected}), flush=True)
+    return 0
+
+
+def parse_viewer_arguments(argv: list[str] | None) -> argparse.Namespace:
+    """The viewer's command line (``--scenario``, ``--port``, ``--rate`` ..., and the bus options)."""
     ap = argparse.ArgumentParser(prog="astrodyn.service.viewer", description=__doc__.splitlines()[0])
     ap.add_argument("--scenario", required=True, help="scenario name (the keys astrodyn/<scenario>/...)")
     ap.add_argument("--port", type=int, default=8765, help="Foxglove WebSocket port on 127.0.0.1 (0: a free one)")
@@ -445,126 +492,131 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--raw-rate", type=float, default=1000.0,
                     help="raw state messages per second sent to Foxglove, all channels together (default 1000)")
     bus.add_bus_arguments(ap)
-    args = ap.parse_args(argv)
-    try:
-        messages.check_name(args.scenario, "--scenario")
-        for name in ("rate", "raw_rate"):
-            value = getattr(args, name)
-            if not (math.isfinite(value) and 0 < value <= 1000 * (100 if name == "raw_rate" else 1)):
-                raise ValueError(f"--{name.replace('_', '-')}: expected a number in (0, "
-                                 f"{1000 * (100 if name == 'raw_rate' else 1)}], got {value}")
-        if not 0 <= args.port <= 65535:
-            raise ValueError(f"--port: expected 0..65535, got {args.port}")
-        epoch_ns, central, orbiting = _scenario_metadata(args.metadata)
-        verbs = [v for v in args.services.split(",") if v]
-        for verb in verbs:
-            if verb not in (*bus.CONTROL_VERBS, "seek", "fault"):
-                raise ValueError(f"--services: expected verbs from {', '.join((*bus.CONTROL_VERBS, 'seek', 'fault'))}, "
-                                 f"got {verb!r}")
-    except (ValueError, OSError, messages.MessageError) as exc:
-        print(f"astrodyn viewer: error: {exc}", file=sys.stderr)
-        return 2
-    share_fate_with_supervisor()
-    try:
-        os.nice(VIEWER_NICE)
-    except OSError:
-        pass
-    stop = StopFlag()
-    secret = auth.secret_from_environment()
-    verifier = auth.Verifier(secret) if secret is not None else None
-    scene = LiveScene(epoch_ns, central, orbiting)
-    latest = LatestSamples()
-    try:
-        view = _View(args.host, args.port, args.scenario, args.raw_rate, services=bool(verbs))
-    except Exception as exc:  # foxglove-sdk: port taken, bad host
-        print(f"astrodyn viewer: error: cannot start the Foxglove server on {args.host}:{args.port}: {exc}",
-              file=sys.stderr)
-        return 1
-    rejected = 0
-    try:
-        with bus.session_from_args(args) as session:
-            base = f"{messages.PREFIX}/{args.scenario}"
-            subs = [] if args.from_logger else [session.declare_subscriber(key, latest)
-                                                for key in (f"{base}/**", f"{base}/@batch/*")]
-            latest_key = messages.latest_key(args.scenario)
-            if verbs:
-                view.add_control_services(session, args.scenario, verbs)
+    return ap.parse_args(argv)
 
-            def newest() -> dict[str, tuple[bytes, bytes | None]]:
-                """The samples to show: the logger's newest (one query, one envelope, checked
-                against the logger's authenticator) or what the subscription kept."""
-                if not args.from_logger:
-                    return latest.take()
-                nonlocal rejected
-                out: dict[str, tuple[bytes, bytes | None]] = {}
-                for reply in session.get(latest_key, timeout=2.0):
-                    if reply.ok is None:
-                        continue
-                    payload = reply.ok.payload.to_bytes()
-                    attachment = reply.ok.attachment
-                    if verifier is not None:
-                        try:
-                            verifier.verify(latest_key, payload, None if attachment is None else attachment.to_bytes())
-                        except auth.AuthError:
-                            rejected += 1
-                            continue
-                    try:
-                        out.update((k, (p, None)) for k, p in messages.decode_batch(payload))
-                    except messages.MessageError:
-                        continue
-                latest.received += len(out)
-                return out
 
-            print(json.dumps({"foxglove": f"ws://{args.host}:{view.server.port}", "scenario": args.scenario,
-                              "authenticated": verifier is not None}), flush=True)
-            period = 1.0 / args.rate
-            next_frame = next_scene = time.monotonic()
-            while stop.why is None:
-                now = time.monotonic()
-                if now < next_frame:
-                    time.sleep(min(next_frame - now, 0.05))
+def checked_viewer_arguments(args: argparse.Namespace) -> tuple[int, dict, set[str] | None, list[str]]:
+    """``(epoch_unix_ns, central_body table, names of the bodies with an orbit or None,
+    control verbs)`` of valid arguments; ValueError (or OSError, MessageError) naming the
+    option otherwise: ``--rate`` in (0, 1000], ``--raw-rate`` in (0, 100000], ``--port``
+    0..65535, ``--services`` verbs of the run."""
+    messages.check_name(args.scenario, "--scenario")
+    for name in ("rate", "raw_rate"):
+        value = getattr(args, name)
+        if not (math.isfinite(value) and 0 < value <= 1000 * (100 if name == "raw_rate" else 1)):
+            raise ValueError(f"--{name.replace('_', '-')}: expected a number in (0, "
+                             f"{1000 * (100 if name == 'raw_rate' else 1)}], got {value}")
+    if not 0 <= args.port <= 65535:
+        raise ValueError(f"--port: expected 0..65535, got {args.port}")
+    epoch_ns, central, orbiting = _scenario_metadata(args.metadata)
+    verbs = [v for v in args.services.split(",") if v]
+    for verb in verbs:
+        if verb not in (*bus.CONTROL_VERBS, "seek", "fault"):
+            raise ValueError(f"--services: expected verbs from {', '.join((*bus.CONTROL_VERBS, 'seek', 'fault'))}, "
+                             f"got {verb!r}")
+    return epoch_ns, central, orbiting, verbs
+
+
+class ViewerSamples:
+    """Where the viewer's samples come from, and their check: the logger's newest
+    (``from_logger``: one query per view frame, one envelope checked against the run's
+    authenticator) or what the subscription kept (:class:`LatestSamples`: each sample
+    checked on its own).  ``rejected`` counts what failed the check."""
+
+    def __init__(self, scenario: str, from_logger: bool, verifier: auth.Verifier | None):
+        self.from_logger = from_logger
+        self.verifier = verifier
+        self.latest = LatestSamples()
+        self.latest_key = messages.latest_key(scenario)
+        self.rejected = 0
+
+    def newest(self, session) -> dict[str, tuple[bytes, bytes | None]]:
+        """key -> (payload, attachment) of the samples to show at this view frame."""
+        if not self.from_logger:
+            return self.latest.take()
+        out: dict[str, tuple[bytes, bytes | None]] = {}
+        for reply in session.get(self.latest_key, timeout=2.0):
+            if reply.ok is None:
+                continue
+            payload = reply.ok.payload.to_bytes()
+            attachment = reply.ok.attachment
+            if self.verifier is not None:
+                try:
+                    self.verifier.verify(self.latest_key, payload, None if attachment is None else attachment.to_bytes())
+                except auth.AuthError:
+                    self.rejected += 1
                     continue
-                frame_period = max(period, len(scene.bodies) / MAX_TRANSFORMS_PER_S)
-                next_frame = max(next_frame + frame_period, now)
-                for key, (payload, attachment) in newest().items():
-                    if verifier is not None and not args.from_logger:  # from the logger: checked as one envelope
-                        try:
-                            verifier.verify(key, payload, attachment)
-                        except auth.AuthError:
-                            rejected += 1
-                            continue
-                    try:
-                        pairs = bus.state_samples(key, payload)
-                    except messages.MessageError:
-                        continue
-                    for k, p in pairs:
-                        log_time = scene.update(k, p)
-                        if log_time is None:  # the closed loop's channels: for the Plot panel only
-                            log_time = closed_loop_log_time(k, p, scene.epoch_ns)
-                        if log_time is not None:
-                            view.pending[k] = (p, log_time)
-                            view.pending.move_to_end(k)
-                if scene.bodies:  # what no client subscribes to is not built (has_sinks)
-                    lt = scene.log_time()
-                    if view.tf.has_sinks():
-                        view.tf.log(_VIEW_JSON.encode(scene.transforms()), log_time=lt)  # 10x json.dumps
-                    view.server.broadcast_time(lt)
-                    view.forward(frame_period)
-                    if view.scene.has_sinks() and (now >= next_scene or view.scene_wanted.is_set() or scene.changed):
-                        view.scene_wanted.clear()
-                        scene.changed = False
-                        view.scene.log(_VIEW_JSON.encode(scene.scene()), log_time=lt)
-                        next_scene = now + SCENE_PERIOD_S
-            for sub in subs:
-                sub.undeclare()
-    except bus.BusError as exc:
-        print(f"astrodyn viewer: error: {exc}", file=sys.stderr)
-        return 1
-    finally:
-        view.close()
-    print(json.dumps({"viewer": "stopped", "reason": stop.why, "received": latest.received, "bodies": len(scene.bodies),
-                      "invalid": scene.invalid, "rejected": rejected}), flush=True)
-    return 0
+            try:
+                out.update((k, (p, None)) for k, p in messages.decode_batch(payload))
+            except messages.MessageError:
+                continue
+        self.latest.received += len(out)
+        return out
+
+    def accepted(self, key: str, payload: bytes, attachment: bytes | None) -> bool:
+        """False (and counted) for a subscribed sample that fails the run's authenticator;
+        the logger's samples were checked as one envelope by :meth:`newest`."""
+        if self.verifier is not None and not self.from_logger:
+            try:
+                self.verifier.verify(key, payload, attachment)
+            except auth.AuthError:
+                self.rejected += 1
+                return False
+        return True
+
+
+def run_view_frames(session, period: float, stop: StopFlag, samples: ViewerSamples, scene: LiveScene, view: _View) -> None:
+    """Until ``stop``: every ``period`` s of wall time (longer for scenes of more than
+    :data:`MAX_TRANSFORMS_PER_S` ``* period`` bodies) take the newest samples into the scene
+    and send one view frame."""
+    next_frame = next_scene = time.monotonic()
+    while stop.why is None:
+        now = time.monotonic()
+        if now < next_frame:
+            time.sleep(min(next_frame - now, 0.05))
+            continue
+        frame_period = max(period, len(scene.bodies) / MAX_TRANSFORMS_PER_S)
+        next_frame = max(next_frame + frame_period, now)
+        take_samples(samples.newest(session), samples, scene, view)
+        if scene.bodies:  # what no client subscribes to is not built (has_sinks)
+            next_scene = send_view_frame(scene, view, frame_period, now, next_scene)
+
+
+def take_samples(newest: dict[str, tuple[bytes, bytes | None]], samples: ViewerSamples, scene: LiveScene,
+                 view: _View) -> None:
+    """The accepted, valid states of ``newest`` into ``scene``, and every state or closed-loop
+    sample into the raw channels waiting to be sent (``view.pending``, newest last)."""
+    for key, (payload, attachment) in newest.items():
+        if not samples.accepted(key, payload, attachment):
+            continue
+        try:
+            pairs = bus.state_samples(key, payload)
+        except messages.MessageError:
+            continue
+        for k, p in pairs:
+            log_time = scene.update(k, p)
+            if log_time is None:  # the closed loop's channels: for the Plot panel only
+                log_time = closed_loop_log_time(k, p, scene.epoch_ns)
+            if log_time is not None:
+                view.pending[k] = (p, log_time)
+                view.pending.move_to_end(k)
+
+
+def send_view_frame(scene: LiveScene, view: _View, frame_period: float, now: float, next_scene: float) -> float:
+    """One view frame (the transforms, the time, the raw channels' share of the frame) and,
+    when due, wanted or changed, the scene update; returns the time the next scene update
+    is due (monotonic s)."""
+    lt = scene.log_time()
+    if view.tf.has_sinks():
+        view.tf.log(_VIEW_JSON.encode(scene.transforms()), log_time=lt)  # 10x json.dumps
+    view.server.broadcast_time(lt)
+    view.forward(frame_period)
+    if view.scene.has_sinks() and (now >= next_scene or view.scene_wanted.is_set() or scene.changed):
+        view.scene_wanted.clear()
+        scene.changed = False
+        view.scene.log(_VIEW_JSON.encode(scene.scene()), log_time=lt)
+        next_scene = now + SCENE_PERIOD_S
+    return next_scene
 
 
 if __name__ == "__main__":
