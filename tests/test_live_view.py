@@ -280,6 +280,15 @@ SERVICE_CLIENT = CONNECT + textwrap.dedent('''
 ''')
 
 
+def _run_script(tmp_path: Path, source: str, *argv: str) -> dict:
+    """Run a client script (the source above) to its end; its last stdout line, as JSON."""
+    script = tmp_path / "client_script.py"
+    script.write_text(source)
+    client = subprocess.run([sys.executable, str(script), *argv], capture_output=True, text=True, timeout=120)
+    assert client.returncode == 0, client.stderr[-3000:]
+    return json.loads(client.stdout.strip().splitlines()[-1])
+
+
 def test_the_control_verbs_are_foxglove_services_with_the_token_rules(tmp_path):
     """serve's verbs (status, pause, resume, rate, stop) are advertised as Foxglove services
     with JSON request schemas; a call without the control token is refused by serve, with
@@ -292,12 +301,7 @@ def test_the_control_verbs_are_foxglove_services_with_the_token_rules(tmp_path):
         calls = [["status", {}], ["pause", {"token": "forged"}], ["pause", {"token": token}],
                  ["status", {"token": token}], ["rate", {"token": token, "factor": 5}],
                  ["resume", {"token": token}], ["rate", "[1, 2"], ["rate", [1, 2]]]
-        script = tmp_path / "service_client.py"
-        script.write_text(SERVICE_CLIENT)
-        client = subprocess.run([sys.executable, str(script), hello["foxglove"], json.dumps(calls)],
-                                capture_output=True, text=True, timeout=120)
-        assert client.returncode == 0, client.stderr[-3000:]
-        got = json.loads(client.stdout.strip().splitlines()[-1])
+        got = _run_script(tmp_path, SERVICE_CLIENT, hello["foxglove"], json.dumps(calls))
         with bus.open_session(connect=[hello["hub"]]) as s:
             status = bus.send_control(s, "svc", "status", token=token)[0]
             bus.send_control(s, "svc", "stop", token=token, timeout_s=60)
@@ -315,3 +319,76 @@ def test_the_control_verbs_are_foxglove_services_with_the_token_rules(tmp_path):
     assert "error" not in answers[4]["reply"][0] and "error" not in answers[5]["reply"][0]
     assert status["state"] == "running" and status["real_time_factor"] == 5
     assert "rate: expected a JSON object" in answers[6]["failure"] and "rate: expected a JSON object" in answers[7]["failure"]
+
+
+#: Foxglove's playback bar, as the app sends it (ws-protocol: client binary opcode 3, playback
+#: command u8 (0 play, 1 pause), speed f32, had_seek u8, seek time u64 ns, request id u32 +
+#: UTF-8; the server answers with opcode 5: status u8 (0 playing, 1 paused, 2 buffering,
+#: 3 ended), current time u64 ns, speed f32, did_seek u8, request id u32 + UTF-8).
+PLAYBACK_CLIENT = CONNECT + textwrap.dedent('''
+    requests = json.loads(sys.argv[2])
+    out = {"states": []}
+    with ws:
+        while "server" not in out:
+            frame = ws.recv(timeout=30)
+            if isinstance(frame, str) and json.loads(frame)["op"] == "serverInfo":
+                out["server"] = json.loads(frame)
+        for n, (command, speed, seek_ns) in enumerate(requests):
+            rid = f"req-{n}".encode()
+            ws.send(struct.pack("<BBfBQI", 3, command, speed, seek_ns is not None, seek_ns or 0, len(rid)) + rid)
+            deadline = time.monotonic() + 30
+            while time.monotonic() < deadline:
+                frame = ws.recv(timeout=30)
+                if isinstance(frame, bytes) and frame[0] == 5:
+                    status, now, speed_back, did_seek, k = struct.unpack_from("<BQfBI", frame, 1)
+                    rid_back = frame[19:19 + k].decode()
+                    if rid_back == rid.decode():
+                        out["states"].append([status, now, speed_back, did_seek, rid_back])
+                        break
+    print(json.dumps(out))
+''')
+
+
+def test_replay_playback_bar_drives_the_replay(tmp_path):
+    """``replay --foxglove PORT --foxglove-playback``: the server advertises playbackControl;
+    the bar's pause, speed, seek and play reach the replay (read back through the bus with
+    the control token, not through the view) and each answer is the replay's new state."""
+    rec = tmp_path / "rec.mcap"
+    leo_recording(rec, name="pb", duration="3000 s", rate="2 Hz")
+    epoch_ns = int(load(rec).scenario["epoch_unix_ns"])
+    replay = subprocess.Popen([*ASTRODYN, "replay", str(rec), "--rate", "2", "--foxglove", "0", "--foxglove-playback",
+                               "--wait", "30", "--quiet"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        hello = json.loads(replay.stdout.readline())
+        seek_ns = epoch_ns + 1500 * 10**9
+        requests = [[1, 2.0, None], [1, 4.0, seek_ns], [0, 4.0, None]]  # pause; speed 4 + seek to 1500 s; play
+        got = _run_script(tmp_path, PLAYBACK_CLIENT, hello["foxglove"], json.dumps(requests))
+        with bus.open_session(connect=hello["listen"]) as s:
+            status = bus.send_control(s, "pb", "status", token=hello["control_token"])[0]
+    finally:
+        stop_process(replay)
+    log = replay.stderr.read()[-3000:]
+    assert "playbackControl" in got["server"]["capabilities"]
+    assert "refused" not in log, log
+    paused, seeked, playing = got["states"]
+    assert paused[0] == 1 and paused[4] == "req-0"
+    assert seeked[0] == 1 and seeked[3] == 1 and seeked[2] == pytest.approx(4.0)
+    assert seeked[1] == pytest.approx(seek_ns, abs=10**9)  # the replay's t after the seek, one sample at most
+    assert playing[0] == 0
+    assert status["state"] == "running" and status["real_time_factor"] == 4 and status["t"] >= 1500.0
+
+
+def test_without_the_flag_the_playback_bar_is_not_offered(tmp_path):
+    rec = tmp_path / "rec.mcap"
+    leo_recording(rec, name="nopb", duration="60 s", rate="2 Hz")
+    bad = subprocess.run([*ASTRODYN, "replay", str(rec), "--foxglove-playback"], capture_output=True, text=True,
+                         timeout=60)
+    assert bad.returncode == 2 and "--foxglove-playback: expected --foxglove PORT as well" in bad.stderr
+    replay = subprocess.Popen([*ASTRODYN, "replay", str(rec), "--rate", "1", "--foxglove", "0", "--wait", "30",
+                               "--quiet"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        hello = json.loads(replay.stdout.readline())
+        got = _run_script(tmp_path, PLAYBACK_CLIENT, hello["foxglove"], "[]")
+    finally:
+        stop_process(replay)
+    assert "playbackControl" not in got["server"]["capabilities"]

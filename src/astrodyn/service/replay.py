@@ -248,7 +248,8 @@ class Replayer:
 
     def status(self) -> dict:
         lo, hi = self.lo or 0, self.hi or 0
-        now_ns = self.last_ns if self.last_ns is not None else lo
+        # the last message published; right after a seek (nothing published yet) the seek's point
+        now_ns = self.last_ns if self.last_ns is not None else getattr(self, "_anchor_ns", lo)
         span = max(hi - lo, 1)
         return {
             "file": self.stream.path,
@@ -351,6 +352,10 @@ def build_parser() -> argparse.ArgumentParser:
                     help="answer control verbs from anyone who reaches the bus (default: only with the control token "
                          "printed at start and stored in a 0600 file; docs/security.md)")
     add_foxglove_argument(ap, "the replay")
+    ap.add_argument("--foxglove-playback", action="store_true",
+                    help="with --foxglove: wire Foxglove's playback bar (play, pause, speed, seek) to this replay; "
+                         "the viewer then holds the control token, so any local process that reaches the WebSocket "
+                         "port can steer the replay (never the recording; docs/foxglove.md)")
     bus.add_bus_arguments(ap)
     return ap
 
@@ -374,6 +379,10 @@ def open_recording(args: argparse.Namespace) -> tuple[float, McapStream]:
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
+    if args.foxglove_playback and args.foxglove is None:
+        print("astrodyn replay: error: --foxglove-playback: expected --foxglove PORT as well (the bar is the "
+              "view's)", file=sys.stderr)
+        return 2
     try:
         rate, stream = open_recording(args)
     except (ValueError, RecordingError) as exc:
@@ -410,7 +419,12 @@ def main(argv: list[str] | None = None) -> int:
                 viewer_url = None
                 if args.foxglove is not None:  # the live view: a child process that subscribes to what we publish
                     port = args.foxglove or bus.free_port()
-                    viewer = start_viewer(stream, scenario, port, listen or args.connect or [], token_dir)
+                    playback = None
+                    if args.foxglove_playback:
+                        if token is None:  # --open-control: the verbs need no token; the viewer sends an empty one
+                            auth.write_private_file(token_dir / "control-token", b"")
+                        playback = (token_dir / "control-token", rep.lo, rep.hi)
+                    viewer = start_viewer(stream, scenario, port, listen or args.connect or [], token_dir, playback)
                     viewer_url = f"ws://127.0.0.1:{port}"
                 print(json.dumps({"replaying": stream.path, "scenario": scenario, "listen": listen,
                                   "connect": args.connect, "foxglove": viewer_url,
@@ -433,12 +447,17 @@ def main(argv: list[str] | None = None) -> int:
     return 0
 
 
-def start_viewer(stream: McapStream, scenario: str, port: int, endpoints: list[str], work: Path) -> Child:
-    """The live view (``--foxglove``): a child process subscribing to what the replay publishes."""
+def start_viewer(stream: McapStream, scenario: str, port: int, endpoints: list[str], work: Path,
+                 playback: tuple[Path, int, int] | None = None) -> Child:
+    """The live view (``--foxglove``): a child process subscribing to what the replay publishes;
+    ``playback`` = (token file, first ns, last ns) wires Foxglove's playback bar to the replay."""
     meta = work / "scenario.json"
     meta.write_text(json.dumps(stream.metadata.get("scenario", {})))
+    bar = [] if playback is None else ["--playback-token-file", str(playback[0]),
+                                       "--playback-range", f"{playback[1]},{playback[2]}"]
     return Child("viewer", [*viewer_command(), "--scenario", scenario, "--port", str(port), "--metadata", str(meta),
-                            "--services", ",".join(REPLAY_VERBS), *sum((["--connect", e] for e in endpoints), [])], work)
+                            "--services", ",".join(REPLAY_VERBS), *bar, *sum((["--connect", e] for e in endpoints), [])],
+                 work)
 
 
 def play(rep: Replayer, session, scenario: str, token: str | None, args: argparse.Namespace,

@@ -297,7 +297,8 @@ def _schema(name: str, schema: dict):
 class _View:
     """The Foxglove server and its channels; raw state channels made on first use."""
 
-    def __init__(self, host: str, port: int, scenario: str, raw_rate: float, services: bool = False):
+    def __init__(self, host: str, port: int, scenario: str, raw_rate: float, services: bool = False,
+                 playback: PlaybackBar | None = None):
         import foxglove
 
         self.foxglove = foxglove
@@ -309,10 +310,15 @@ class _View:
                 if channel.topic == SCENE_TOPIC:
                     view.scene_wanted.set()
 
-        capabilities = [foxglove.Capability.Time, *([foxglove.Capability.Services] if services else [])]
+            def on_playback_control_request(self, request):
+                return playback.handle(request)
+
+        capabilities = [foxglove.Capability.Time, *([foxglove.Capability.Services] if services else []),
+                        *([foxglove.Capability.PlaybackControl] if playback is not None else [])]
         self.server = foxglove.start_server(name=f"astrodyn {scenario}", host=host, port=port,
                                             capabilities=capabilities, server_listener=Listener(),
-                                            supported_encodings=["json"] if services else None)
+                                            supported_encodings=["json"] if services else None,
+                                            playback_time_range=None if playback is None else playback.time_range)
         self.tf = foxglove.Channel(TF_TOPIC, schema=_schema("foxglove.FrameTransforms", FRAME_TRANSFORMS_SCHEMA),
                                    message_encoding="json")
         self.scene = foxglove.Channel(SCENE_TOPIC, schema=_schema("foxglove.SceneUpdate", SCENE_UPDATE_SCHEMA),
@@ -360,6 +366,70 @@ class _View:
 
     def close(self) -> None:
         self.server.stop()
+
+
+class PlaybackBar:
+    """Foxglove's playback bar (play, pause, speed, seek) wired to a replay's control verbs
+    (``replay --foxglove PORT --foxglove-playback``): each PlaybackControlRequest becomes
+    ``seek`` (when the bar was dragged), ``rate`` (when the speed changed), then ``resume`` or
+    ``pause``, sent with the replay's control token, which this viewer holds for it; the
+    answer is the replay's state after them.  ``time_range``: the recording's span in ns
+    since the Unix epoch; ``epoch_ns`` the scenario epoch (``t`` = (ns - epoch_ns) / 1e9)."""
+
+    def __init__(self, scenario: str, token: str, time_range: tuple[int, int], epoch_ns: int):
+        self.scenario, self.token, self.time_range, self.epoch_ns = scenario, token, time_range, epoch_ns
+        self.session = None  # set once the bus session is open
+        self.speed = 1.0
+
+    def _send(self, verb: str, args: dict | None = None) -> dict:
+        replies = bus.send_control(self.session, self.scenario, verb, args, timeout_s=5.0, token=self.token)
+        reply = next((r for r in replies if isinstance(r, dict)), {})
+        if "error" in reply:
+            raise ValueError(str(reply["error"]))
+        return reply
+
+    def handle(self, request):
+        """The PlaybackState after ``request`` (a foxglove PlaybackControlRequest)."""
+        from foxglove.websocket import PlaybackCommand, PlaybackState, PlaybackStatus
+
+        did_seek = request.seek_time is not None
+        reply: dict = {}
+        try:
+            if self.session is None:
+                raise ValueError("the viewer's bus session is not open yet")
+            if did_seek:
+                reply = self._send("seek", {"t": (int(request.seek_time) - self.epoch_ns) / 1e9})
+            speed = float(request.playback_speed)
+            if math.isfinite(speed) and speed > 0 and speed != self.speed:
+                reply = self._send("rate", {"factor": speed})
+                self.speed = speed
+            verb = "resume" if request.playback_command == PlaybackCommand.Play else "pause"
+            reply = self._send(verb)
+        except (ValueError, bus.BusError) as exc:  # the bar shows the state it had; the reason goes to stderr
+            print(f"astrodyn viewer: playback request refused: {exc}", file=sys.stderr, flush=True)
+            did_seek = False
+        state = reply.get("state")
+        status = {"running": PlaybackStatus.Playing, "paused": PlaybackStatus.Paused,
+                  "finished": PlaybackStatus.Ended, "stopped": PlaybackStatus.Ended}.get(state, PlaybackStatus.Paused)
+        t = reply.get("t")
+        now = self.epoch_ns + int(round(float(t) * 1e9)) if isinstance(t, (int, float)) and math.isfinite(t) \
+            else self.time_range[0]
+        return PlaybackState(status=status, current_time=max(self.time_range[0], min(self.time_range[1], now)),
+                             playback_speed=self.speed, did_seek=did_seek, request_id=request.request_id)
+
+
+def playback_bar(args, epoch_ns: int) -> PlaybackBar | None:
+    """The :class:`PlaybackBar` of ``--playback-token-file`` and ``--playback-range``, or None."""
+    if args.playback_token_file is None:
+        return None
+    token = Path(args.playback_token_file).read_text(encoding="utf-8").strip()
+    try:
+        lo, hi = (int(x) for x in args.playback_range.split(","))
+    except (AttributeError, ValueError):
+        raise ValueError(f"--playback-range: expected START_NS,END_NS, got {args.playback_range!r}") from None
+    if not 0 <= lo <= hi:
+        raise ValueError(f"--playback-range: expected 0 <= START_NS <= END_NS, got {args.playback_range!r}")
+    return PlaybackBar(args.scenario, token, (lo, hi), epoch_ns)
 
 
 #: The arguments each control verb takes besides the token (docs/clients.md).
@@ -449,7 +519,12 @@ def main(argv: list[str] | None = None) -> int:
     samples = ViewerSamples(args.scenario, args.from_logger, auth.Verifier(secret) if secret is not None else None)
     scene = LiveScene(epoch_ns, central, orbiting)
     try:
-        view = _View(args.host, args.port, args.scenario, args.raw_rate, services=bool(verbs))
+        playback = playback_bar(args, epoch_ns)
+    except (ValueError, OSError) as exc:
+        print(f"astrodyn viewer: error: {exc}", file=sys.stderr)
+        return 2
+    try:
+        view = _View(args.host, args.port, args.scenario, args.raw_rate, services=bool(verbs), playback=playback)
     except Exception as exc:  # foxglove-sdk: port taken, bad host
         print(f"astrodyn viewer: error: cannot start the Foxglove server on {args.host}:{args.port}: {exc}",
               file=sys.stderr)
@@ -461,6 +536,8 @@ def main(argv: list[str] | None = None) -> int:
                                                 for key in (f"{base}/**", f"{base}/@batch/*")]
             if verbs:
                 view.add_control_services(session, args.scenario, verbs)
+            if playback is not None:
+                playback.session = session
             print(json.dumps({"foxglove": f"ws://{args.host}:{view.server.port}", "scenario": args.scenario,
                               "authenticated": samples.verifier is not None}), flush=True)
             run_view_frames(session, 1.0 / args.rate, stop, samples, scene, view)
@@ -489,6 +566,11 @@ def parse_viewer_arguments(argv: list[str] | None) -> argparse.Namespace:
                          "subscribing to the full-rate streams (what serve does: the bus then carries nothing extra)")
     ap.add_argument("--services", default="", metavar="VERBS",
                     help="comma-separated control verbs to offer as Foxglove services (serve and replay pass theirs)")
+    ap.add_argument("--playback-token-file", default=None, metavar="FILE",
+                    help="wire Foxglove's playback bar to the replay's control verbs with the token in FILE "
+                         "(replay --foxglove-playback passes it)")
+    ap.add_argument("--playback-range", default=None, metavar="START_NS,END_NS",
+                    help="the recording's span for the playback bar, ns since the Unix epoch")
     ap.add_argument("--raw-rate", type=float, default=1000.0,
                     help="raw state messages per second sent to Foxglove, all channels together (default 1000)")
     bus.add_bus_arguments(ap)
