@@ -18,6 +18,9 @@ One output step ``k`` (``t_k = k / rate``, ``dt = 1 / rate``) of a body:
    torque-free solution; the orbit by the exact
    two-body propagation, or under thrust by :func:`astrodyn.orbit.propagate_perturbed`
    with :class:`astrodyn.orbit.maneuvers.ConstantThrust` (mass falls at ``|F| / (isp g0)``).
+   A flexible body (``attitude.model = "flexible"``: a rigid hub with cantilevered beams,
+   :mod:`astrodyn.attitude.flexible`) advances its whole state (hub attitude and rates,
+   the appendages' modal coordinates) with the same held commands: :class:`FlexiblePlantBody`.
 
 Limits, applied to each command (after which it is valid): external torque clipped to the
 actuators' ``torque`` per body axis; wheel torques saturated per step by
@@ -37,7 +40,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from astrodyn.attitude import propagate_attitude, torque_free
+from astrodyn.attitude import flexible as fx, propagate_attitude, torque_free
 from astrodyn.attitude.integrators import HeldInputsBody
 from astrodyn.attitude.torques import ConstantTorque
 from astrodyn.attitude.wheels import HeldInputsBatch, ReactionWheels, step_with_wheels
@@ -46,10 +49,11 @@ from astrodyn.orbit.maneuvers import G0, ConstantThrust
 from astrodyn.orbit.perturbations import propagate_perturbed
 from astrodyn.rotation import dcm_from_quat
 from astrodyn.scenario import Body, Scenario
+from astrodyn.scenario.appendages import DEFAULT_TOLERANCE, flexible_spacecraft
 from astrodyn.scenario.control import Fault, Sensor
 from astrodyn.sensors import PositionReceiver, RateGyro, StarTracker, WheelTachometer
 
-__all__ = ["CommandRefused", "PlantBody", "Plant", "command_id", "limited"]
+__all__ = ["CommandRefused", "PlantBody", "FlexiblePlantBody", "Plant", "command_id", "limited", "plant_body"]
 
 
 class CommandRefused(ValueError):
@@ -323,6 +327,142 @@ class PlantBody:
         self._dv_total_at_start = self.dv_total
 
 
+def _hub_torque(tau_ext, h0, hdot):
+    """The hub torque of a flexible body with reaction wheels over one step of held inputs
+    (:class:`FlexiblePlantBody`): ``torque(s, y) = tau_ext - hdot - w x (h0 + hdot s)``,
+    ``s`` s from the step's start, ``w = y[4:7]`` the hub's rates; written out in floats
+    (called at every evaluation of the compiled right-hand side)."""
+    c0, c1, c2 = (float(x) for x in np.asarray(tau_ext, dtype=np.float64) - hdot)
+    a0, a1, a2 = (float(x) for x in h0)
+    b0, b1, b2 = (float(x) for x in hdot)
+
+    def torque(s, y):
+        w0, w1, w2 = y[4], y[5], y[6]
+        h0_, h1_, h2_ = a0 + b0 * s, a1 + b1 * s, a2 + b2 * s
+        return (c0 - (w1 * h2_ - w2 * h1_), c1 - (w2 * h0_ - w0 * h2_), c2 - (w0 * h1_ - w1 * h0_))
+
+    return torque
+
+
+class FlexiblePlantBody(PlantBody):
+    """An actuated flexible spacecraft (``attitude.model = "flexible"``): a rigid hub with
+    cantilevered Euler-Bernoulli appendages (:mod:`astrodyn.attitude.flexible`, Baruh ch. 11),
+    commanded like any actuated body (external ``torque``, reaction wheels; sensors see the
+    hub).
+
+    Reaction wheels are axisymmetric rotors whose transverse inertia (and mass) belongs to
+    the hub: the spacecraft the equations integrate has the hub inertia ``I_kin = inertia -
+    sum_k J_k a_k a_k^T`` (``inertia`` the config's hub tensor with the wheels held fixed,
+    as for a rigid body), and the wheels enter through their absolute axial momenta
+    ``h_k = J_k (a_k . w + Omega_k)`` (body components ``h_w = sum_k h_k a_k``).  With the
+    motor torques ``tau_m = sum_k g_k a_k`` held over a step (after
+    :meth:`astrodyn.attitude.wheels.ReactionWheels.saturate`, the rigid path's torque and
+    speed limits, failed wheels giving none), ``dh_k/dt = g_k`` gives exactly
+    ``h_w(t) = h_w0 + tau_m (t - t0)``, and Lagrange's equation for the hub's rates
+    (``dT/dw = H + h_w``, the wheels' energy free of the elastic coordinates) gives the
+    hub the torque
+
+        tau_hub = tau_ext - tau_m - w x h_w(t)
+
+    (body components), exact for held inputs: each step is one
+    :func:`astrodyn.attitude.flexible.propagate_spacecraft` call (DOP853 at the config's
+    ``tolerance``) with that torque, and ``h_k`` then advance by ``g_k dt`` as the rigid
+    plant's do.  Without wheels and torque the hub is torque-free.  The inertial angular
+    momentum ``C^T (H + h_w)`` is conserved under wheel torques to the integration tolerance.
+
+    A seized wheel (``wheel_stuck``) joins the hub: the internal impulse that stops the
+    rotor acts on the hub's rates only (the generalized momenta of the elastic coordinates
+    and of the centre's motion are unchanged), so the velocities jump by ``s du`` with
+    ``du`` the response of the state rates to a unit hub torque along ``a_k`` (the rates
+    are affine in the torque) and ``s = J_k Omega_k / (1 + J_k a_k . dw)``; the hub's
+    inertia gains ``J_k a_k a_k^T``.
+    """
+
+    def __init__(self, body: Body, mu: float, seed: tuple[int, ...]):
+        super().__init__(body, mu, seed)
+        a = body.attitude
+        self._hub = (a.mass, a.inertia, a.appendages, a.stiffening)
+        self.rtol = float(a.tolerance if a.tolerance is not None else DEFAULT_TOLERANCE)
+        self.sc = self._spacecraft()
+        self.layout = fx.state_layout(self.sc)
+        self.y = fx.make_state(self.sc, q=self.q, w=self.w)
+        self.q, self.w = self.y[0:4].copy(), self.y[4:7].copy()
+        self.nfev = 0
+
+    def _spacecraft(self) -> fx.FlexibleSpacecraft:
+        """The model with the hub's inertia without the free wheels' axial moments."""
+        mass, inertia, appendages, stiffening = self._hub
+        inertia = np.asarray(inertia, dtype=np.float64)
+        if self.wheels is not None:
+            free = [k for k in range(self.wheels.n) if k not in self.faults.stuck_wheels]
+            a, J = self.wheels.axes[free], self.wheels.rotor_inertia[free]
+            inertia = inertia - np.einsum("k,ki,kj->ij", J, a, a)
+        return flexible_spacecraft(mass, inertia, appendages, stiffening)
+
+    def batched(self) -> bool:
+        return False  # its own integration (advance_attitude)
+
+    def _free(self) -> np.ndarray:
+        free = np.ones(self.wheels.n, dtype=bool)
+        free[sorted(self.faults.stuck_wheels)] = False
+        return free
+
+    def advance_attitude(self, dt: float) -> None:
+        """Hub, appendages and wheels over ``dt`` s with the held commands (class docstring)."""
+        h0 = hdot = np.zeros(3)
+        if self.wheels is not None:
+            a = self.wheels.axes
+            free = self._free()
+            cmd = self.wheel_command.copy()
+            for k in self.faults.failed_wheels | self.faults.stuck_wheels:
+                cmd[k] = 0.0
+            g, clipped = self.wheels.saturate(cmd, self.h, self.w, dt)
+            g = np.where(free, g, 0.0)
+            h0, hdot = (self.h * free) @ a, g @ a
+        states, info = fx.propagate_spacecraft(self.sc, self.y, np.array([0.0, float(dt)]),
+                                               torque=_hub_torque(self.torque, h0, hdot), rtol=self.rtol,
+                                               atol=1e-3 * self.rtol)
+        self.nfev += int(info["nfev"])
+        self.y = states[-1].copy()
+        self.q, self.w = self.y[0:4].copy(), self.y[4:7].copy()
+        if self.wheels is not None:
+            self.h = np.where(free, self.h + g * dt, self.wheels.rotor_inertia * (a @ self.w))
+            self.applied_wheel = g
+            self.clipped = [int(i) for i in np.flatnonzero(clipped & (cmd != 0))]
+
+    def seize_wheel(self, k: int) -> None:
+        """Wheel ``k``'s rotor seizes and joins the hub (class docstring): the total angular
+        momentum, the elastic coordinates' and the centre's momenta kept."""
+        if self.wheels is None or k in self.faults.stuck_wheels:
+            return
+        a, J = self.wheels.axes[k], float(self.wheels.rotor_inertia[k])
+        unit = fx.spacecraft_rates(self.sc, 0.0, self.y, lambda t, y: a)
+        du = unit - fx.spacecraft_rates(self.sc, 0.0, self.y, None)  # zero but in the velocities' rates
+        omega = float(self.h[k] / J - a @ self.w)
+        self.y = self.y + (J * omega / (1.0 + J * float(a @ du[4:7]))) * du
+        self.faults.stuck_wheels.add(k)
+        self.sc = self._spacecraft()
+        self.q, self.w = self.y[0:4].copy(), self.y[4:7].copy()
+        locked = sorted(self.faults.stuck_wheels)
+        self.h = self.h.copy()
+        self.h[locked] = self.wheels.rotor_inertia[locked] * (self.wheels.axes[locked] @ self.w)
+
+    def appendage_state(self, t: float, seq: int) -> dict:
+        """The fields of the :class:`astrodyn.messages.AppendageState` now (time ``t``): per
+        appendage its modal coordinates, their rates and the tip's displacement (m, body),
+        as the attitude process publishes them (``astrodyn.simulate.FlexibleBody.message``)."""
+        lay, y = self.layout, self.y
+        return {"t": t, "seq": seq, "eta": [y[s].tolist() for s in lay["eta_k"]],
+                "eta_dot": [y[s].tolist() for s in lay["eta_dot_k"]],
+                "tip": fx.tip_deflections(self.sc, y).tolist()}
+
+
+def plant_body(body: Body, mu: float, seed: tuple[int, ...]) -> PlantBody:
+    """The plant's body for config body ``body``: flexible or rigid."""
+    flexible = body.attitude is not None and body.attitude.model == "flexible"
+    return (FlexiblePlantBody if flexible else PlantBody)(body, mu, seed)
+
+
 def _sensor_fields(kind: str, due: list[tuple[PlantBody, Sensor]], k: int) -> dict[str, np.ndarray]:
     """The fields of sample ``k`` of the sensors ``due`` (all of one ``kind``; for the
     tachometer, bodies with the same number of wheels), one row per body: every body's
@@ -355,7 +495,7 @@ class Plant:
         self.scenario = scenario
         self.control = scenario.control
         self.rate = scenario.rate
-        self.bodies = {b.name: PlantBody(b, scenario.central_body.mu, (self.control.seed, index))
+        self.bodies = {b.name: plant_body(b, scenario.central_body.mu, (self.control.seed, index))
                        for index, b in enumerate(scenario.bodies) if b.in_plant}
         self._faults = list(self.control.faults)
         self._attitude = [b for b in self.bodies.values() if b.has_attitude]

@@ -5,7 +5,8 @@ For each actuated body (one with a ``<body>/actuators`` or ``<body>/command`` ch
 * commands: how many, from whom; wheel torque commanded (each command held until the
   next, zero-order hold) against applied after saturation, per wheel;
 * wheels: speeds relative to the body (rad/s) against their ``max_speed``, steps clipped;
-* angular momentum, inertial frame (N m s): body ``C(q)^T I_kin w``, wheels
+* angular momentum, inertial frame (N m s): body ``C(q)^T I_kin w`` (a flexible body: its
+  hub and appendages, :func:`astrodyn.attitude.flexible.spacecraft_momentum`), wheels
   ``C(q)^T sum_k h_k a_k`` with ``h_k = J_k (a_k . w + Omega_k)``, and their sum, which
   internal (wheel) torques cannot change: its drift is the check of a wheels-only loop;
 * pointing knowledge: the angle between the true attitude and the star tracker's
@@ -62,6 +63,35 @@ def _rows(track, field: str, n: int | None = None) -> np.ndarray | None:
         if isinstance(v, (list, tuple, np.ndarray)) and len(v) == n:
             out[i] = np.asarray(v, dtype=np.float64)
     return out
+
+
+def _flexible_hub_momentum(run, name: str, prefix: str, i_kin: np.ndarray, t: np.ndarray, q: np.ndarray,
+                           w: np.ndarray) -> np.ndarray | None:
+    """The inertial angular momentum (N m s) of a flexible body's hub and appendages at the
+    recorded times ``t`` (its ``<body>/appendages`` states at the same times), with the
+    hub inertia ``i_kin`` (the wheels' axial moments taken out, as the plant integrates
+    it); None for a rigid body or when the record does not hold what it needs."""
+    from astrodyn.analysis.invariants import appendage_arrays, flexible_states
+    from astrodyn.attitude import flexible as fx
+    from astrodyn.scenario.appendages import flexible_spacecraft
+
+    body = recorded_body(run.scenario, name)
+    app = run.channels.get(prefix + "appendages")
+    if body is None or body.attitude is None or body.attitude.model != "flexible" or app is None or not len(app):
+        return None
+    arrays = appendage_arrays(app)
+    a = body.attitude
+    try:
+        sc = flexible_spacecraft(a.mass, i_kin, a.appendages, a.stiffening)
+    except ValueError:
+        return None
+    if arrays is None or arrays[0].shape[1] != sc.n_elastic:
+        return None
+    k = np.searchsorted(np.asarray(app.t), t)
+    if np.any(k >= len(app)) or np.any(np.asarray(app.t)[np.minimum(k, len(app) - 1)] != t):
+        return None
+    _, h = fx.spacecraft_momentum(sc, flexible_states(sc, q, w, arrays[0][k], arrays[1][k]))
+    return h
 
 
 def closed_loop_section(run, name: str, stem: Path) -> tuple[dict, list[tuple[str, Path]]]:
@@ -129,6 +159,9 @@ def closed_loop_section(run, name: str, stem: Path) -> tuple[dict, list[tuple[st
             h = J * (w @ axes.T + sp)  # absolute axial momenta
             ct = np.transpose(dcm_from_quat(q), (0, 2, 1))  # C^T: body -> inertial
             h_body = np.einsum("nij,nj->ni", ct, w @ i_kin.T)
+            flexible = _flexible_hub_momentum(run, name, prefix, i_kin, np.asarray(att.t)[k], q, w)
+            if flexible is not None:  # hub + appendages (astrodyn.attitude.flexible), not the rigid hub alone
+                h_body = flexible
             h_wheels = np.einsum("nij,nj->ni", ct, h @ axes)
             total = h_body + h_wheels
             drift = np.linalg.norm(total - total[0], axis=1)

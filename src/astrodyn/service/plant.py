@@ -7,8 +7,9 @@ Every output step ``k`` (``t = k / rate``), for the scene's actuated bodies
 (:class:`astrodyn.plant.Plant`):
 
 1. faults that begin now take effect and are recorded as ``fault`` events;
-2. states (``<body>/orbit``, ``<body>/attitude``, model ``actuated``) and the sensor
-   samples due (``<body>/gyro|star_tracker|gps|tachometer``) are published;
+2. states (``<body>/orbit``, ``<body>/attitude``, model ``actuated``; a flexible body's
+   ``<body>/appendages`` too, at its attitude's seq) and the sensor samples due
+   (``<body>/gyro|star_tracker|gps|tachometer``) are published;
 3. on a control step (every ``control.period``) the plant publishes ``@tick`` (which
    carries the step's states and samples too: Zenoh orders samples per subscriber, not
    across a client's subscribers, so a controller reads one consistent step from it) and, in
@@ -54,7 +55,7 @@ import numpy as np
 import zenoh
 
 from astrodyn import auth, bus, messages
-from astrodyn.plant import CommandRefused, Plant, command_id
+from astrodyn.plant import CommandRefused, FlexiblePlantBody, Plant, command_id
 from astrodyn.recording import RecordingError
 from astrodyn.service.children import share_fate_with_supervisor
 from astrodyn.service.propagator import (
@@ -293,6 +294,7 @@ class PlantLoop:
         self.batched = len(plant.bodies) > BATCH_THRESHOLD
         self.att_bodies = [(bname, b) for bname, b in plant.bodies.items() if b.has_attitude]
         self.orb_bodies = [(bname, b) for bname, b in plant.bodies.items() if b.has_orbit]
+        self.flex_bodies = [(bname, b) for bname, b in plant.bodies.items() if isinstance(b, FlexiblePlantBody)]
         self.att_keys = [messages.attitude_key(self.name, bname) for bname, _ in self.att_bodies]
         self.orb_keys = [messages.orbit_key(self.name, bname) for bname, _ in self.orb_bodies]
         self.seqs: dict[str, int] = {}  # sensor key -> next seq
@@ -408,7 +410,11 @@ class PlantLoop:
                                                       np.array([b.w for _, b in self.att_bodies]))
             self.outbox.extend(zip(self.att_keys, payloads))
             samples.extend((f"{bname}/attitude", p) for (bname, _), p in zip(self.att_bodies, payloads))
-        self.published += len(self.orb_bodies) + len(self.att_bodies)
+        for bname, b in self.flex_bodies:  # a flexible body's appendages, at its attitude's seq
+            payload = messages.encode(b.appendage_state(t, k), "appendages")
+            self.outbox.append((self.key(bname, "appendages"), payload))
+            samples.append((f"{bname}/appendages", payload))
+        self.published += len(self.orb_bodies) + len(self.att_bodies) + len(self.flex_bodies)
         for kind, bnames, fields in plant.sensor_samples(k, t):  # every body's samples of a kind at once
             keys = [self.key(bname, kind) for bname in bnames]
             seqs = [self.seqs.get(key, 0) for key in keys]
