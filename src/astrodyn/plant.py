@@ -51,6 +51,7 @@ from astrodyn.rotation import dcm_from_quat
 from astrodyn.scenario import Body, Scenario
 from astrodyn.scenario.appendages import DEFAULT_TOLERANCE, flexible_spacecraft
 from astrodyn.scenario.control import Fault, Sensor
+from astrodyn.scenario.gyros import GimbalBank
 from astrodyn.sensors import PositionReceiver, RateGyro, StarTracker, WheelTachometer
 
 __all__ = ["CommandRefused", "PlantBody", "FlexiblePlantBody", "Plant", "command_id", "limited", "plant_body"]
@@ -123,6 +124,9 @@ class PlantBody:
         self.dv_total = 0.0
         self.sensors: tuple[Sensor, ...] = body.sensors.present() if body.sensors is not None else ()
         self.sensor_counts = {s.kind: 0 for s in self.sensors}
+        # a dynamic gyro sensor: three rate gyros' gimbals, driven by the body's rate step by step
+        gyro = body.sensors.gyro if body.sensors is not None else None
+        self.gimbals = GimbalBank(gyro.dynamics, self.w) if gyro is not None and gyro.dynamics else None
         self.faults = _Faults()
         # what the last advance applied (for the actuator state of the step)
         self.applied_wheel = np.zeros(n)
@@ -196,11 +200,14 @@ class PlantBody:
         return f
 
     def advance(self, dt: float) -> None:
-        """Move the body from t to t + dt with the held commands."""
+        """Move the body from t to t + dt with the held commands (and a dynamic gyro's gimbals)."""
+        w_before = None if self.gimbals is None else self.w.copy()
         if self.has_attitude:
             self.advance_attitude(dt)
         if self.has_orbit:
             self.advance_orbit(dt)
+        if w_before is not None and dt > 0:
+            self.advance_gimbals(w_before, dt)
 
     def batched(self) -> bool:
         """Whether :meth:`Plant.advance` steps this body's attitude in its compiled batch:
@@ -277,6 +284,19 @@ class PlantBody:
     # ------------------------------------------------------------------ outputs
     def wheel_speeds(self) -> np.ndarray | None:
         return None if self.wheels is None else self.wheels.speeds(self.h, self.w)
+
+    def advance_gimbals(self, w_before: np.ndarray, dt: float) -> None:
+        """The dynamic gyro sensor's gimbals over the step just taken, on the body rate
+        linear between ``w_before`` and the new :attr:`w` (exact for a constant torque on a
+        spherical body; otherwise the rate's curvature within one output step is left out)."""
+        slope = (self.w - w_before) / dt
+        bases = [lambda t, m=m: (m @ (w_before + slope * t), m @ slope) for m in self.gimbals.mounts]
+        self.gimbals.advance(bases, np.array([0.0, dt]))
+
+    def gyro_input(self) -> np.ndarray:
+        """What the gyro sensor measures before bias and noise: the body rate, or with
+        ``dynamics`` the three rate gyros' indications (body axes x, y, z)."""
+        return self.w if self.gimbals is None else self.gimbals.indicated()
 
     def due(self, s: Sensor, k: int, t: float) -> bool:
         """Whether sensor ``s`` gives a sample at output step ``k`` (time ``t``): its rate, no dropout."""
@@ -472,7 +492,7 @@ def _sensor_fields(kind: str, due: list[tuple[PlantBody, Sensor]], k: int) -> di
     sigma = np.array([s.sigma for _, s in due])
     if kind == "gyro":
         bias = np.array([s.bias if b.faults.gyro_bias is None else b.faults.gyro_bias for b, s in due], dtype=np.float64)
-        return {"w": RateGyro.samples(seed, bodies, k, np.array([b.w for b, _ in due]), sigma, bias)}
+        return {"w": RateGyro.samples(seed, bodies, k, np.array([b.gyro_input() for b, _ in due]), sigma, bias)}
     if kind == "star_tracker":
         return {"q": StarTracker.samples(seed, bodies, k, np.array([b.q for b, _ in due]), sigma)}
     if kind == "gps":
@@ -545,6 +565,7 @@ class Plant:
         """:meth:`PlantBody.advance` of each of ``bodies`` by ``dt`` s; the attitudes that take
         the held-input step (:meth:`PlantBody.batched`) in one compiled call, to round-off
         the same as one by one."""
+        before = {id(b): b.w.copy() for b in bodies if b.gimbals is not None}
         group = [b for b in bodies if b.batched()]
         if group:
             self._advance_batch(group, dt)
@@ -555,6 +576,9 @@ class Plant:
         for b in bodies:
             if b.has_orbit:
                 b.advance_orbit(dt)
+        for b in bodies:
+            if b.gimbals is not None and dt > 0:
+                b.advance_gimbals(before[id(b)], dt)
 
     def _advance_batch(self, group: list[PlantBody], dt: float) -> None:
         batch = self._held_batch()

@@ -345,41 +345,28 @@ class RollingBody(ExtendedBody):
 
 class GyroSet:
     """The single-axis gyroscopes mounted on one body (``[[bodies.gyros]]``, Baruh 10.7.3;
-    :func:`astrodyn.attitude.gyroscopes.propagate_single_axis`), integrated block after block
-    on the body's rates at the output times (a cubic spline through them, continued across
-    blocks from the previous block's last samples), DOP853 at rtol 1e-10.  Rate gyros start
-    at their exact steady angle for the body's initial rate (the instrument has been
-    running), rate-integrating gyros at zero (they measure the angle turned from t = 0).
-    Published on ``<body>/gimbals`` (:class:`astrodyn.messages.GimbalState`)."""
+    their gimbals an :class:`astrodyn.scenario.gyros.GimbalBank`), integrated block after
+    block on the body's rates at the output times (a cubic spline through them, continued
+    across blocks from the previous block's last samples).  Published on ``<body>/gimbals``
+    (:class:`astrodyn.messages.GimbalState`)."""
 
     kind = GIMBALS_KIND
     resume_fields = ("angle", "angle_rate")
-    RTOL = 1e-10
 
     def __init__(self, gyros, w0: np.ndarray):
-        from astrodyn.attitude.gyroscopes import steady_state_angle
-        from astrodyn.scenario.gyros import single_axis_gyro
+        from astrodyn.scenario.gyros import GimbalBank
 
-        self.models = [single_axis_gyro(g) for g in gyros]
-        self.mounts = [np.asarray(g.mount, dtype=np.float64) for g in gyros]
-        self.state = np.zeros((len(gyros), 2))  # theta (rad), theta' (rad/s) of each gimbal
-        for i, (m, mount) in enumerate(zip(self.models, self.mounts)):
-            if m.spring > 0:
-                try:
-                    self.state[i, 0] = steady_state_angle(m, mount @ np.asarray(w0, dtype=np.float64))
-                except ValueError:  # no stable steady angle at this rate: start at rest
-                    pass
+        self.bank = GimbalBank(gyros, w0)
         self.t0 = 0.0
-        self.first = True
         self.tail_t, self.tail_w = np.zeros(0), np.zeros((0, 3))  # the previous block's last samples
         self.last: np.ndarray | None = None  # (T, n, 2) states at the last block's times
 
     def resume(self, t: float, recorded: dict) -> None:
         """Continue from recorded gimbal angles and rates at ``t`` (s); the body's rate
         ``w`` there (body axes, as recorded on its attitude key) starts the base's samples."""
-        self.state = np.column_stack([np.asarray(recorded["angle"], dtype=np.float64),
-                                      np.asarray(recorded["angle_rate"], dtype=np.float64)])
-        self.t0, self.first = float(t), False
+        self.bank.state = np.column_stack([np.asarray(recorded["angle"], dtype=np.float64),
+                                           np.asarray(recorded["angle_rate"], dtype=np.float64)])
+        self.t0 = float(t)
         self.tail_t, self.tail_w = np.array([self.t0]), np.asarray(recorded["w"], dtype=np.float64).reshape(1, 3)
 
     @staticmethod
@@ -403,8 +390,6 @@ class GyroSet:
     def advance(self, times: np.ndarray, w: np.ndarray) -> None:
         """Integrate every gimbal to ``times`` (increasing, after :attr:`t0`) on the body's
         rates ``w`` (len(times), 3) there (rad/s, body axes)."""
-        from astrodyn.attitude.gyroscopes import propagate_single_axis
-
         times = np.asarray(times, dtype=np.float64)
         rel = times - self.t0
         prepend = rel[0] > 0
@@ -413,28 +398,21 @@ class GyroSet:
             samples_t, samples_w = np.concatenate([self.tail_t, times]), np.concatenate([self.tail_w, w])
         else:
             samples_t, samples_w = times, w
-        out = np.empty((times.size, len(self.models), 2))
         t0 = self.t0
-        for i, (m, mount) in enumerate(zip(self.models, self.mounts)):
+        bases = []
+        for mount in self.bank.mounts:
             base_abs = self._base(samples_t, samples_w, mount)
-
-            def base(t, base_abs=base_abs):
-                return base_abs(t0 + t)
-
-            y, _ = propagate_single_axis(m, base, grid, theta0=self.state[i, 0], theta_dot0=self.state[i, 1],
-                                         rtol=self.RTOL, atol=1e-3 * self.RTOL)
-            out[:, i] = (y[1:] if prepend else y)[:, :2]
-        self.state = out[-1].copy()
-        self.t0, self.first, self.last = float(times[-1]), False, out
+            bases.append(lambda t, base_abs=base_abs: base_abs(t0 + t))
+        out = self.bank.advance(bases, grid)
+        self.t0, self.last = float(times[-1]), out[1:] if prepend else out
         keep = max(0, samples_t.size - 3)
         self.tail_t, self.tail_w = samples_t[keep:], samples_w[keep:]
 
     def message(self, j: int, t: float, seq: int) -> dict:
         """The ``GimbalState`` of row ``j`` of the last block."""
         angle, rate = self.last[j, :, 0], self.last[j, :, 1]
-        gain = np.array([(m.spring if m.spring > 0 else m.damping) / m.momentum for m in self.models])
         return {"t": t, "seq": seq, "angle": angle.tolist(), "angle_rate": rate.tolist(),
-                "indicated": (gain * angle).tolist()}
+                "indicated": self.bank.indicated(angle).tolist()}
 
 
 @dataclass

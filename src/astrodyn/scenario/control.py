@@ -11,7 +11,7 @@ examples)::
     period = "0.1 s"             # control step: a whole number of output steps (default 1 / rate)
     controllers = ["pd"]         # who answers every control step (lockstep; [] for none)
     timeout = "10 s"             # wall time one controller may take for one step (lockstep)
-    seed = 7                     # sensor noise: sample k of a sensor draws from (seed, sensor, k)
+    seed = 7                     # sensor noise: sample k of a sensor draws from (seed, body, sensor, k)
 
     [[control.faults]]           # faults on demand, each recorded as an event when it begins
     t = "60 s"
@@ -36,6 +36,9 @@ examples)::
 
     [bodies.sensors]             # rate default: the control rate; a whole number of output steps
     gyro = { sigma = "1e-5 rad/s", bias = [0, 0, 0], rate = "10 Hz" }
+                                 # + dynamics = { natural_frequency = "30 Hz", damping_ratio = 0.7,
+                                 #   spin_rate = "24000 rpm", spin_inertia = "1e-4 kg m2",
+                                 #   transverse_inertia = "6e-5 kg m2" }: three rate gyros' gimbals
     star_tracker = { sigma = "20 arcsec", rate = "1 Hz" }
     gps = { sigma_r = "5 m", sigma_v = "0.05 m/s", rate = "1 Hz" }
     tachometer = { sigma = "0.1 rad/s" }
@@ -55,7 +58,8 @@ import numpy as np
 from astrodyn.scenario.fields import Ctx, Table, check, choice, field_name, integer, quantity, unit_quaternion, vector
 
 __all__ = ["Pointing", "parse_pointing", "Wheel", "Actuators", "Sensor", "Sensors", "Fault", "Control", "CONTROL_MODES", "FAULTS",
-           "parse_actuators", "parse_sensors", "parse_control", "parse_fault", "plant_bodies", "steps_per"]
+           "parse_actuators", "parse_sensors", "parse_control", "parse_fault", "plant_bodies", "steps_per",
+           "parse_gyro_dynamics", "GYRO_TRIAD_AXES"]
 
 CONTROL_MODES = ("lockstep", "free")
 FAULTS = ("gyro_bias", "sensor_dropout", "wheel_failed", "wheel_stuck", "thruster_efficiency")
@@ -101,6 +105,9 @@ class Sensor:
     every: int
     sigma_v: float = 0.0
     bias: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    #: gyro only: three single-axis rate gyros (input axes body x, y, z; astrodyn.scenario.gyros.Gyro)
+    #: whose indications replace the true rates before bias and noise; None: ideal (the true rates)
+    dynamics: tuple | None = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -228,7 +235,7 @@ def parse_actuators(ctx: Ctx, data: Any, path: str, has_orbit: bool, has_attitud
 
 
 _SENSOR_KEYS = {
-    "gyro": ("sigma", "bias", "rate"),
+    "gyro": ("sigma", "bias", "rate", "dynamics"),
     "star_tracker": ("sigma", "rate"),
     "gps": ("sigma_r", "sigma_v", "rate"),
     "tachometer": ("sigma", "rate"),
@@ -259,14 +266,40 @@ def parse_sensors(ctx: Ctx, data: Any, path: str, rate: float, control_every: in
         bias = (0.0, 0.0, 0.0)
         if kind == "gyro" and s.has("bias"):
             bias = tuple(float(x) for x in vector(ctx, s.get("bias"), "angular_velocity", 3, f"{p}.bias"))
+        dynamics = None
+        if kind == "gyro" and s.has("dynamics"):
+            dynamics = parse_gyro_dynamics(ctx, s.get("dynamics"), f"{p}.dynamics")
         if s.has("rate"):
             hz = quantity(ctx, s.get("rate"), "frequency", f"{p}.rate")
             check(ctx, hz > 0, f"{p}.rate", "rate > 0", s.get("rate"))
             every = steps_per(ctx, 1.0 / hz, rate, f"{p}.rate", s.get("rate"))
         else:
             every = control_every
-        found[kind] = Sensor(kind=kind, sigma=sigma, every=every, sigma_v=sigma_v, bias=bias)  # type: ignore[arg-type]
+        found[kind] = Sensor(kind=kind, sigma=sigma, every=every, sigma_v=sigma_v, bias=bias,  # type: ignore[arg-type]
+                             dynamics=dynamics)
     return Sensors(**found)
+
+
+#: The three rate gyros of a dynamic gyro sensor: (input, output) axes in body components.
+GYRO_TRIAD_AXES = (([1, 0, 0], [0, 1, 0]), ([0, 1, 0], [0, 0, 1]), ([0, 0, 1], [1, 0, 0]))
+
+
+def parse_gyro_dynamics(ctx: Ctx, data: Any, path: str) -> tuple:
+    """A gyro sensor's ``dynamics`` table: the rotor and gimbal of three single-axis rate
+    gyros along the body axes (Baruh 10.7.3; keys of :mod:`astrodyn.scenario.gyros` without
+    type and axes), e.g. ``{ natural_frequency = "30 Hz", damping_ratio = 0.7, spin_rate =
+    "24000 rpm", spin_inertia = "1e-4 kg m2", transverse_inertia = "6e-5 kg m2" }``."""
+    from astrodyn.scenario.gyros import parse_gyros
+
+    if not isinstance(data, dict):
+        raise ctx.error(path, "a table of the rate gyros' rotor and gimbal (natural_frequency, damping_ratio, "
+                        "spin_rate, spin_inertia, transverse_inertia)", data)
+    for key in ("type", "input_axis", "output_axis"):
+        if key in data:
+            raise ctx.error(f"{path}.{key}", f"no {key} (three rate gyros along the body axes)", data[key])
+    gyros = parse_gyros(ctx, [{**data, "type": "rate", "input_axis": i, "output_axis": o} for i, o in GYRO_TRIAD_AXES],
+                        path)
+    return gyros
 
 
 def parse_fault(ctx: Ctx, data: Any, path: str, duration: float,

@@ -32,7 +32,7 @@ import numpy as np
 
 from astrodyn.scenario.fields import Ctx, Table, check, choice, quantity, vector
 
-__all__ = ["Gyro", "GYRO_TYPES", "MAX_GYROS", "parse_gyros", "single_axis_gyro"]
+__all__ = ["Gyro", "GYRO_TYPES", "MAX_GYROS", "parse_gyros", "single_axis_gyro", "GimbalBank"]
 
 GYRO_TYPES = ("rate", "rate_integrating")
 #: Most gyroscopes on one body (astrodyn.messages.definitions.MAX_GYROS).
@@ -138,3 +138,49 @@ def single_axis_gyro(g: Gyro):
     from astrodyn.attitude.gyroscopes import SingleAxisGyro
 
     return SingleAxisGyro(g.spin_inertia, g.transverse_inertia, g.spin_rate, spring=g.spring, damping=g.damping)
+
+
+class GimbalBank:
+    """The gimbals of a body's single-axis gyroscopes (``gyros``, each a :class:`Gyro`): their
+    state ``(theta, theta')`` (rad, rad/s) per gyro, advanced over an interval on a base
+    rate given per gyro, and their indications.  Rate gyros start at their exact steady
+    angle for the body rate ``w0`` (the instrument has been running), rate-integrating gyros
+    at zero (they measure the angle turned from the start).  Used by the attitude process
+    (``<body>/gimbals``, :class:`astrodyn.simulate.GyroSet`) and by the closed loop's dynamic
+    gyro sensor (:mod:`astrodyn.plant`)."""
+
+    RTOL = 1e-10
+
+    def __init__(self, gyros, w0):
+        from astrodyn.attitude.gyroscopes import steady_state_angle
+
+        self.models = [single_axis_gyro(g) for g in gyros]
+        self.mounts = [np.asarray(g.mount, dtype=np.float64) for g in gyros]
+        self.state = np.zeros((len(self.models), 2))
+        for i, (m, mount) in enumerate(zip(self.models, self.mounts)):
+            if m.spring > 0:
+                try:
+                    self.state[i, 0] = steady_state_angle(m, mount @ np.asarray(w0, dtype=np.float64))
+                except ValueError:  # no stable steady angle at this rate: start at rest
+                    pass
+        # indication per gimbal angle: a rate gyro k / H (rad/s per rad), a rate-integrating c / H
+        self.gain = np.array([(m.spring if m.spring > 0 else m.damping) / m.momentum for m in self.models])
+
+    def advance(self, bases, grid) -> np.ndarray:
+        """Integrate every gimbal over ``grid`` (s from the current state, starting at 0) on
+        its base ``bases[i](t) -> (w, w')`` (the gyro's case axes); returns the states
+        ``(len(grid), n, 2)`` and keeps the last as the current state."""
+        from astrodyn.attitude.gyroscopes import propagate_single_axis
+
+        out = np.empty((len(grid), len(self.models), 2))
+        for i, m in enumerate(self.models):
+            y, _ = propagate_single_axis(m, bases[i], grid, theta0=self.state[i, 0], theta_dot0=self.state[i, 1],
+                                         rtol=self.RTOL, atol=1e-3 * self.RTOL)
+            out[:, i] = y[:, :2]
+        self.state = out[-1].copy()
+        return out
+
+    def indicated(self, angles=None) -> np.ndarray:
+        """Each gyro's indication (rate gyro k theta / H rad/s, rate-integrating c theta / H
+        rad) for gimbal ``angles`` (default the current ones)."""
+        return self.gain * (self.state[:, 0] if angles is None else np.asarray(angles))
