@@ -51,7 +51,9 @@ def test_the_documented_plain_zenoh_client_works(tmp_path):
     assert titles == {"astrodyn.OrbitState", "astrodyn.AttitudeState", "astrodyn.CrossCheck", "astrodyn.Event",
                       "astrodyn.Status",  # and the closed loop's (docs/control.md):
                       "astrodyn.Command", "astrodyn.ActuatorState", "astrodyn.GyroSample", "astrodyn.StarTrackerSample",
-                      "astrodyn.GpsSample", "astrodyn.TachometerSample", "astrodyn.Tick", "astrodyn.StepDone"}
+                      "astrodyn.GpsSample", "astrodyn.TachometerSample", "astrodyn.Tick", "astrodyn.StepDone",
+                      # and the further state channels (flexible, rolling, gyroscopes):
+                      "astrodyn.AppendageState", "astrodyn.RollingState", "astrodyn.GimbalState"}
     states = [line for line in lines if line.startswith("astrodyn/tap/sat/orbit")]
     assert len(states) == 10
     for line in states:
