@@ -44,7 +44,7 @@ import numpy as np
 from astrodyn.jit import jit
 from astrodyn.rotation import quat_from_rotvec, quat_multiply
 
-__all__ = ["RateGyro", "StarTracker", "PositionReceiver", "WheelTachometer", "STREAMS", "philox4x64", "standard_normals"]
+__all__ = ["NoisySensor", "RateGyro", "StarTracker", "PositionReceiver", "WheelTachometer", "STREAMS", "philox4x64", "standard_normals"]
 
 #: The noise stream of each model (the second word of the generator's key).
 STREAMS = {"gyro": 1, "star_tracker": 2, "position": 3, "tachometer": 4}
@@ -174,8 +174,9 @@ class RateGyro:
 
 
 @dataclass(frozen=True)
-class StarTracker:
-    """Attitude sensor: ``sigma`` rad per body axis (see the module docstring)."""
+class NoisySensor:
+    """A sensor with one white-noise level ``sigma`` (in its unit), the ``seed`` of its
+    noise (the scene's seed, or ``(scene seed, body index)``) and ``dropout`` (no samples)."""
 
     sigma: float
     seed: int | tuple = 0
@@ -184,6 +185,11 @@ class StarTracker:
     def __post_init__(self):
         _sigma(self.sigma, "sigma")
         _seed_body(self.seed)
+
+
+@dataclass(frozen=True)
+class StarTracker(NoisySensor):
+    """Attitude sensor: ``sigma`` rad per body axis (see the module docstring)."""
 
     def sample(self, q, step: int):
         """The measured Euler parameters (4,) for the true ``q`` at sample ``step``."""
@@ -233,16 +239,8 @@ class PositionReceiver:
 
 
 @dataclass(frozen=True)
-class WheelTachometer:
+class WheelTachometer(NoisySensor):
     """Wheel speed sensor: ``sigma`` rad/s per wheel."""
-
-    sigma: float
-    seed: int | tuple = 0
-    dropout: bool = False
-
-    def __post_init__(self):
-        _sigma(self.sigma, "sigma")
-        _seed_body(self.seed)
 
     def sample(self, speeds, step: int):
         """Measured wheel speeds (n,) rad/s at sample ``step``."""
