@@ -389,3 +389,49 @@ def test_csv_export_flattens_the_appendages_into_numeric_columns_with_units(reco
     assert [float(r["eta_1_3"]) for r in rows] == eta[:, 7].tolist()
     assert [float(r["eta_dot_0_2"]) for r in rows] == eta_dot[:, 2].tolist()
     assert [float(r["tip_1_y"]) for r in rows] == tip[:, 1, 1].tolist()
+
+
+@pytest.mark.network
+def test_hostile_appendage_channels_and_metadata_end_in_notes_not_tracebacks(recorded, tmp_path):
+    """A file whose appendages change layout mid-run (valid messages, inconsistent with the
+    config), or whose config metadata does not describe a spacecraft: load, the run summary,
+    analyze and export read what they can, say what they could not, and never raise."""
+    from mcap.reader import make_reader
+    from mcap.writer import Writer
+
+    from astrodyn.analysis import analyze
+    from astrodyn.recording import export
+    from astrodyn.service.summary import file_summary
+
+    _, out, _, _ = recorded
+    for case in ("layout", "metadata"):
+        bad = tmp_path / f"{case}.mcap"
+        with open(out, "rb") as src, open(bad, "wb") as dst:
+            reader = make_reader(src)
+            summary = reader.get_summary()
+            w = Writer(dst)
+            w.start("astrodyn", "")
+            schema_ids = {sid: w.register_schema(s.name, s.encoding, s.data) for sid, s in summary.schemas.items()}
+            chan_ids = {cid: w.register_channel(c.topic, c.message_encoding, schema_ids[c.schema_id])
+                        for cid, c in summary.channels.items()}
+            for rec in reader.iter_metadata():
+                meta = dict(rec.metadata)
+                if case == "metadata":
+                    meta["json"] = json.dumps({"bodies": [{"name": "sc", "attitude": {"appendages": [{"modes": "x"}] * 99}}]})
+                w.add_metadata(rec.name, meta)
+            for _, channel, message in reader.iter_messages():
+                data = message.data
+                if case == "layout" and channel.topic.endswith("/appendages") and message.sequence % 7 == 3:
+                    msg = json.loads(data)  # one appendage fewer, still a valid AppendageState
+                    msg["eta"], msg["eta_dot"], msg["tip"] = msg["eta"][:1], msg["eta_dot"][:1], msg["tip"][:1]
+                    data = json.dumps(msg, separators=(",", ":")).encode()
+                w.add_message(chan_ids[channel.id], message.log_time, data, message.publish_time, message.sequence)
+            w.finish()
+        run = load(bad)
+        assert len(run.bodies["sc"].appendages) == 61  # valid messages: all kept
+        rows = file_summary(bad, loads(SCENE))
+        assert rows and rows[0]["attitude_states"] == 61
+        report = analyze(bad, tmp_path / f"{case}-report")
+        assert "note" in report["bodies"]["sc"]["appendages"]
+        written = export.export(str(bad), "csv", str(tmp_path / f"{case}-csv"))
+        assert any("appendages" in str(p) for p in written)
