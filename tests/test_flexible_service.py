@@ -154,7 +154,7 @@ def _engine_run(scn, blocks):
     qs, ws, etas, etads = [], [], [], []
     for tb in np.array_split(t, blocks):
         q, w = eng.states(tb)
-        body = eng.extended_bodies()[0]
+        body = eng.own_channels()[0][1]
         lay = body.layout
         qs.append(q[:, 0]), ws.append(w[:, 0]), etas.append(body.last[:, lay["eta"]])
         etads.append(body.last[:, lay["eta_dot"]])
@@ -184,7 +184,7 @@ def test_engine_resumes_from_a_recorded_state():
     t, q, w, eta, eta_dot = _engine_run(scn, blocks=1)
     k = 30
     sc_eng = AttitudeEngine(scn)
-    assert sc_eng.extended_bodies()[0].last is None
+    assert sc_eng.own_channels()[0][1].last is None
     layout = fx.state_layout(_spacecraft(scn))
     columns = [slice(s.start - layout["eta"].start, s.stop - layout["eta"].start) for s in layout["eta_k"]]
     per, per_dot = [eta[k][c].tolist() for c in columns], [eta_dot[k][c].tolist() for c in columns]
@@ -192,8 +192,8 @@ def test_engine_resumes_from_a_recorded_state():
     assert taken == ["sc"]
     q2, w2 = sc_eng.states(t[k + 1:])
     assert np.max(np.abs(q2[:, 0] - q[k + 1:])) < 1e-8
-    lay = sc_eng.extended_bodies()[0].layout
-    assert np.max(np.abs(sc_eng.extended_bodies()[0].last[:, lay["eta"]] - eta[k + 1:])) < 1e-8
+    lay = sc_eng.own_channels()[0][1].layout
+    assert np.max(np.abs(sc_eng.own_channels()[0][1].last[:, lay["eta"]] - eta[k + 1:])) < 1e-8
     with pytest.raises(ValueError, match=r"gyroscopes\) of the integrated bodies \['sc'\]"):
         AttitudeEngine(scn).resume(1.0, {"sc": {"q": q[k].tolist(), "w": w[k].tolist()}})
 

@@ -228,7 +228,7 @@ def test_engine_resumes_a_rolling_disk_and_ends_it_at_the_flat_event():
     t = scn.output_times()
     eng = AttitudeEngine(scn)
     q, w = eng.states(t)
-    ext = eng.extended_bodies()
+    ext = dict(eng.own_channels())
     k = 40
     states = {b.name: {"q": q[k, i].tolist(), "w": w[k, i].tolist(),
                        **{f: v for f, v in ext[i].message(k, float(t[k]), k).items() if f not in ("t", "seq")}}

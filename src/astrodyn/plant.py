@@ -49,7 +49,7 @@ from astrodyn.orbit.maneuvers import G0, ConstantThrust
 from astrodyn.orbit.perturbations import propagate_perturbed
 from astrodyn.rotation import dcm_from_quat
 from astrodyn.scenario import Body, Scenario
-from astrodyn.scenario.appendages import DEFAULT_TOLERANCE, flexible_spacecraft
+from astrodyn.scenario.appendages import DEFAULT_TOLERANCE, appendage_message, flexible_spacecraft
 from astrodyn.scenario.control import Fault, Sensor
 from astrodyn.scenario.gyros import GimbalBank
 from astrodyn.sensors import PositionReceiver, RateGyro, StarTracker, WheelTachometer
@@ -470,11 +470,8 @@ class FlexiblePlantBody(PlantBody):
     def appendage_state(self, t: float, seq: int) -> dict:
         """The fields of the :class:`astrodyn.messages.AppendageState` now (time ``t``): per
         appendage its modal coordinates, their rates and the tip's displacement (m, body),
-        as the attitude process publishes them (``astrodyn.simulate.FlexibleBody.message``)."""
-        lay, y = self.layout, self.y
-        return {"t": t, "seq": seq, "eta": [y[s].tolist() for s in lay["eta_k"]],
-                "eta_dot": [y[s].tolist() for s in lay["eta_dot_k"]],
-                "tip": fx.tip_deflections(self.sc, y).tolist()}
+        as the attitude process publishes them (:func:`astrodyn.scenario.appendages.appendage_message`)."""
+        return appendage_message(self.sc, self.y, t, seq)
 
 
 def plant_body(body: Body, mu: float, seed: tuple[int, ...]) -> PlantBody:

@@ -24,7 +24,7 @@ exactly what :func:`simulate` returns for the same scenario.
   (:mod:`astrodyn.attitude.rolling_disk`) integrate their full state with DOP853 block
   after block (:class:`ExtendedBody`: :class:`FlexibleBody`, :class:`RollingBody`) and
   publish what ``(q, w)`` cannot hold on their own key
-  (:meth:`AttitudeEngine.extended_bodies`).
+  (:meth:`AttitudeEngine.own_channels`).
 
 Third bodies (``model = "third_body"``) move on the two-body conic fitted to their
 geocentric (central-body-centric) state at the epoch, taken from astropy's built-in
@@ -301,12 +301,11 @@ class FlexibleBody(ExtendedBody):
 
     def message(self, j, t, seq):
         from astrodyn.attitude import flexible as fx
+        from astrodyn.scenario.appendages import appendage_message
 
         if self._tip is None:  # tip displacements of the whole block, once
             self._tip = fx.tip_deflections(self.sc, self.last)
-        lay, y = self.layout, self.last[j]
-        eta, eta_dot = [y[s].tolist() for s in lay["eta_k"]], [y[s].tolist() for s in lay["eta_dot_k"]]
-        return {"t": t, "seq": seq, "eta": eta, "eta_dot": eta_dot, "tip": self._tip[j].tolist()}
+        return appendage_message(self.sc, self.last[j], t, seq, self._tip[j])
 
 
 class RollingBody(ExtendedBody):
@@ -515,12 +514,6 @@ class AttitudeEngine:
         for k, b in enumerate(self.bodies):
             out += [(k, src) for src in (b.extended, b.gyros) if src is not None]
         return out
-
-    def extended_bodies(self) -> dict[int, ExtendedBody]:
-        """Body index -> the :class:`ExtendedBody` of the flexible and rolling bodies (their
-        :attr:`~ExtendedBody.last` states are those of the last :meth:`states` call; their
-        :meth:`~ExtendedBody.message` the messages on their own key)."""
-        return {k: b.extended for k, b in enumerate(self.bodies) if b.extended is not None}
 
     def resume(self, t: float, states: dict[str, dict]) -> list[str]:
         """Continue the torqued (integrated) bodies from recorded states at time ``t`` (s).

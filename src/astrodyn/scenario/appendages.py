@@ -38,7 +38,7 @@ import numpy as np
 from astrodyn.scenario.fields import Ctx, Table, check, integer, quantity, vector
 
 __all__ = ["Appendage", "parse_appendages", "MAX_APPENDAGES", "MAX_MODES", "DEFAULT_MODES",
-           "DEFAULT_TOLERANCE", "parse_tolerance", "flexible_spacecraft"]
+           "DEFAULT_TOLERANCE", "parse_tolerance", "flexible_spacecraft", "appendage_message"]
 
 #: Most appendages of one body, and modes per bending plane of each (the model's cost
 #: grows with both: a scene pays for what it configures; docs/benchmarks.md).
@@ -130,3 +130,17 @@ def flexible_spacecraft(hub_mass: float, hub_inertia: np.ndarray, appendages: tu
                                 damping_ratio=a.damping_ratio)
         apps.append(fx.Appendage(beam, a.axis, a.normal, root=a.root))
     return fx.FlexibleSpacecraft(hub_mass, hub_inertia, tuple(apps), stiffening=stiffening)
+
+
+def appendage_message(spacecraft, y: np.ndarray, t: float, seq: int, tip: np.ndarray | None = None) -> dict:
+    """The :class:`astrodyn.messages.AppendageState` of the flexible spacecraft's state ``y``
+    (:func:`astrodyn.attitude.flexible.state_layout`) at ``t``: per appendage its modal
+    coordinates, their rates and the tip's displacement (m, body axes; ``tip`` when already
+    computed, else from ``y``).  The attitude process and the closed loop's plant both
+    publish it."""
+    from astrodyn.attitude import flexible as fx
+
+    lay = fx.state_layout(spacecraft)
+    tip = fx.tip_deflections(spacecraft, y) if tip is None else tip
+    return {"t": t, "seq": seq, "eta": [y[s].tolist() for s in lay["eta_k"]],
+            "eta_dot": [y[s].tolist() for s in lay["eta_dot_k"]], "tip": np.asarray(tip).tolist()}

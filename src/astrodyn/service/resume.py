@@ -36,6 +36,7 @@ import numpy as np
 from astrodyn import messages
 from astrodyn.messages import ATTITUDE_PROCESS_KINDS
 from astrodyn.scenario import Scenario, plan as make_plan
+from astrodyn.simulate import FlexibleBody, GyroSet, RollingBody
 
 __all__ = ["state_channels", "state_topics", "contiguous_steps", "last_common_step", "states_at", "write_state_file",
            "read_state_file", "propagator_resume_args", "resume_args", "tail_resume_point", "ResumeError"]
@@ -46,8 +47,8 @@ class ResumeError(ValueError):
 
 
 #: message kind -> the fields of its messages that make a state to continue from
-_STATE_FIELDS = {"orbit": ("r", "v"), "attitude": ("q", "w"), "appendages": ("eta", "eta_dot"),
-                 "rolling": ("contact", "heading", "lean", "spin_angle", "u"), "gimbals": ("angle", "angle_rate")}
+_STATE_FIELDS = {"orbit": ("r", "v"), "attitude": ("q", "w"),
+                 **{src.kind: src.resume_fields for src in (FlexibleBody, RollingBody, GyroSet)}}
 
 
 def state_channels(scenario: Scenario, kind: str) -> list[tuple[str, str, str]]:
