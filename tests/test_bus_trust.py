@@ -97,6 +97,16 @@ ATTACKER = textwrap.dedent(r'''
                 ev = {"t": 0.0, "seq": rounds, "process": proc, "kind": "stop", "detail": json.dumps({"messages": 0})}
                 put("astrodyn/trust/@event", json.dumps(ev, separators=(",", ":")).encode()); count("event")
             put("astrodyn/trust/@command", b'{"verb":"stop"}'); count("command")
+            # valid messages of the further state kinds, on the scene's body and on a ghost
+            own = {"appendages": {"t": 0.0, "seq": rounds, "eta": [[0.1, 0.2]], "eta_dot": [[0.0, 0.0]],
+                                  "tip": [[0.0, 0.0, 0.1]]},
+                   "rolling": {"t": 0.0, "seq": rounds, "contact": [0.0, 0.0], "center": [0.0, 0.0, 0.01],
+                               "heading": 0.0, "lean": 0.1, "spin_angle": 0.0, "u": [0.0, 1.0, 0.0]},
+                   "gimbals": {"t": 0.0, "seq": rounds, "angle": [0.01], "angle_rate": [0.0], "indicated": [0.1]}}
+            for kind, msg in own.items():
+                for body in ("sat", f"ghost{rounds}"):
+                    put(f"astrodyn/trust/{body}/{kind}", json.dumps(msg, separators=(",", ":")).encode())
+                    count("forged-own")
             # a forged authenticator claiming to be the orbit process
             put("astrodyn/trust/sat/orbit", orbit(rounds, float(rounds)),
                 b"ADA1" + bytes([5]) + b"orbit" + bytes(8) + struct.pack("<Q", rounds) + bytes(32)); count("bad-mac")
@@ -169,7 +179,7 @@ def test_a_hostile_local_client_cannot_change_the_record(tmp_path):
     rc, err, _ = _run(config, clean_dir / "run.mcap", clean_dir, attack=False)
     assert rc == 0, err[-3000:]
     rc, err, sent = _run(config, attacked_dir / "run.mcap", attacked_dir, attack=True)
-    assert sent.get("forged-state", 0) > 0 and sent.get("ghost", 0) > 0, sent
+    assert sent.get("forged-state", 0) > 0 and sent.get("ghost", 0) > 0 and sent.get("forged-own", 0) > 0, sent
 
     clean, attacked = _channels(clean_dir / "run.mcap"), _channels(attacked_dir / "run.mcap")
     state_topics = sorted(k for k in clean if not k.split("/")[-1].startswith("@") and "/@" not in k)
