@@ -49,9 +49,11 @@ v in m/s, mu in m^3/s^2, w in rad/s (body components), q = (e0, e1, e2, e3) scal
 Each message type is one msgspec Struct (:data:`MESSAGE_TYPES`: :class:`OrbitState`,
 :class:`AttitudeState`, :class:`CrossCheck`, :class:`Event`, :class:`Status`); its JSON
 Schema (:func:`json_schema`, stored with every MCAP channel), :func:`validate` and
-:func:`decode` (msgspec's typed decoder: about 1 us per state message, docs/benchmarks.md)
-follow from it, plus the one rule a JSON Schema cannot state, ``|q| = 1`` within
-:data:`QUAT_NORM_TOL` (``AttitudeState.__post_init__``).  :func:`encode` writes the fields
+:func:`decode` (msgspec's typed decoder of the definition, its string patterns tested after
+the decode: under 1 us per state message, docs/benchmarks.md) follow from it, plus the rules
+a JSON Schema cannot state, each written once as the type's ``rule`` (e.g. ``|q| = 1``
+within :data:`QUAT_NORM_TOL`, ``AttitudeState.rule``), which ``__post_init__`` and the
+generated checks both call.  :func:`encode` writes the fields
 in definition order with Python's float ``repr``, byte for byte what the compiled batch
 encoders write: msgspec's encoder writes plain messages (its float text is ``repr``'s for
 |x| < 1e-9 and 1e-4 <= |x| < 1e16; other floats are laid out as ``repr`` does), after a

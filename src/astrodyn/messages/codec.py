@@ -5,9 +5,13 @@ logger's hot path); the message builders."""
 from __future__ import annotations
 
 import functools
+import inspect
 import json
 import math
+import operator
 import re
+import types
+import typing
 from collections.abc import Sequence
 from typing import Any
 
@@ -17,7 +21,7 @@ import numpy as np
 
 from astrodyn.messages.definitions import KIND_OF_SCHEMA_TITLE, MESSAGE_TYPES
 from astrodyn.messages.errors import MessageError, show_value
-from astrodyn.messages.keys import ATTITUDE_MODELS, MAX_SEQ, ORBIT_MODELS, QUAT_NORM_TOL, kind_of_key
+from astrodyn.messages.keys import ATTITUDE_MODELS, MAX_SEQ, ORBIT_MODELS, kind_of_key
 
 # ---------------------------------------------------------------------------------------
 # Validation and decoding: msgspec, from the definitions above.  When msgspec refuses a
@@ -150,8 +154,9 @@ def validate(msg: Any, key_or_kind: str) -> dict:
     ``"crosscheck"``, ``"event"``, ``"status"``) or a schema name (``"astrodyn.OrbitState"``).
     """
     if type(msg) is dict and type(key_or_kind) is str:
-        plain = _plain_check(tuple(msg), key_or_kind, _VALID)
-        if plain is not None and plain(msg):
+        keys = tuple(msg)
+        by_keys = _VALID_ONLY.get(key_or_kind)
+        if ((by_keys is not None and by_keys.get(keys)) or _check_for(keys, key_or_kind, _VALID))(msg):
             return msg
     return _validate_reference(msg, key_or_kind)
 
@@ -170,6 +175,69 @@ def _validate_reference(msg: Any, key_or_kind: str) -> dict:
     return msg
 
 
+_DECODE_JSON = msgspec.json.Decoder().decode
+_CONSTRAINTS = ("gt", "ge", "lt", "le", "multiple_of", "min_length", "max_length", "tz")
+
+
+def _unpatterned(tp: Any, name: str, patterns: dict[str, str]) -> Any:
+    """Annotation ``tp`` of field ``name`` without the pattern of its string (entered in
+    ``patterns``); an optional field's ``X | UnsetType`` keeps its union."""
+    if typing.get_origin(tp) in (typing.Union, types.UnionType):
+        return functools.reduce(operator.or_, (_unpatterned(a, name, patterns) for a in typing.get_args(tp)))
+    if typing.get_origin(tp) is not typing.Annotated:
+        return tp
+    base, *metas = typing.get_args(tp)
+    kept = []
+    for meta in metas:
+        if isinstance(meta, msgspec.Meta) and meta.pattern is not None:
+            patterns[name] = meta.pattern
+            meta = msgspec.Meta(**{k: getattr(meta, k) for k in _CONSTRAINTS if getattr(meta, k) is not None})
+        kept.append(meta)
+    return typing.Annotated[(base, *kept)]
+
+
+@functools.cache
+def _loose_decoding(kind: str) -> tuple[Any, tuple, Any]:
+    """``(decode, tests, as_dict)`` for ``kind``: msgspec's decoder of the message type as
+    defined but without the patterns of its top-level string fields (the same fields, order,
+    constraints, config and ``__post_init__``: a type derived from the definition, not a
+    second one), ``(field, known, test)`` of each pattern (:func:`_pattern_test`, as the
+    generated checks test them), and the conversion to a dict.  A type with patterns
+    elsewhere (dict keys, list items) keeps its own decoder and no tests."""
+    message_type = MESSAGE_TYPES[kind]
+    as_dict = msgspec.to_builtins if message_type.__struct_config__.omit_defaults else msgspec.structs.asdict
+    patterns: dict[str, str] = {}
+    hints = typing.get_type_hints(message_type, include_extras=True)
+    fields = [(name, _unpatterned(hints[name], name, patterns), default)
+              for name, default in zip(message_type.__struct_fields__,
+                                       (msgspec.NODEFAULT,) * (len(message_type.__struct_fields__)
+                                                               - len(message_type.__struct_defaults__))
+                                       + message_type.__struct_defaults__)]
+    config = message_type.__struct_config__
+    namespace = {"__post_init__": message_type.__post_init__} if hasattr(message_type, "__post_init__") else {}
+    loose = msgspec.defstruct(message_type.__name__, fields, namespace=namespace, omit_defaults=config.omit_defaults,
+                              forbid_unknown_fields=config.forbid_unknown_fields)
+    if not patterns or "pattern" in json.dumps(msgspec.json.schema(loose)):
+        return _decoder(kind).decode, (), as_dict
+    tests = tuple((name, *_pattern_test(pattern)) for name, pattern in patterns.items())
+    return msgspec.json.Decoder(loose).decode, tests, as_dict
+
+
+#: key, kind or schema name -> :func:`_loose_decoding` of its kind (bounded, as ``_TABLES``)
+_LOOSE: dict[str, tuple[Any, tuple, Any]] = {}
+
+
+def _loose_for(key_or_kind: str) -> tuple[Any, tuple, Any] | None:
+    try:
+        kind = _kind_of_str(key_or_kind)
+    except MessageError:
+        return None
+    if len(_LOOSE) >= 65536:
+        _LOOSE.clear()
+    found = _LOOSE[key_or_kind] = _loose_decoding(kind)
+    return found
+
+
 def _reject_constant(name: str) -> Any:
     raise MessageError(f"payload: expected JSON numbers, got {name}")
 
@@ -181,7 +249,27 @@ def decode(data: bytes | bytearray | memoryview, key_or_kind: str) -> dict:
     Raises MessageError naming the field for anything that is not the message type of
     ``key_or_kind``: invalid UTF-8, invalid JSON, NaN / Infinity literals, numbers beyond
     float64, missing or extra fields, a wrong type or range.
+
+    The payload is first decoded by :func:`_loose_decoding`'s decoder (the definition without
+    its string patterns, which msgspec tests by calling ``re``), the patterns then tested on
+    the decoded strings; whatever that refuses, the decoder of the definition decides.
     """
+    loose = _LOOSE.get(key_or_kind) if type(key_or_kind) is str else None
+    if loose is None and type(key_or_kind) is str:
+        loose = _loose_for(key_or_kind)
+    if loose is not None:
+        loose_decode, tests, as_dict = loose
+        try:
+            obj = loose_decode(data)
+        except Exception:  # whatever it is, the decoder of the definition below says it
+            obj = None
+        if obj is not None:
+            for name, known, test in tests:
+                x = getattr(obj, name)
+                if type(x) is str and not (x in known or test(x)):
+                    break
+            else:
+                return as_dict(obj)
     kind = _kind(key_or_kind)
     try:
         return _as_dict(_decoder(kind).decode(data))
@@ -246,10 +334,10 @@ _FAST_ORBIT = re.compile(
 )
 _FAST_ATTITUDE = re.compile(
     rb'\{"t":(' + _FAST_NUM + rb'),"seq":' + _FAST_SEQ + rb',"model":"' + _fast_enum(ATTITUDE_MODELS)
-    + rb'","q":\[(' + _FAST_NUM + rb"),(" + _FAST_NUM + rb"),(" + _FAST_NUM + rb"),(" + _FAST_NUM
-    + rb')\],"w":\[' + _FAST_NUM + rb"," + _FAST_NUM + rb"," + _FAST_NUM + rb"\]\}"
+    + rb'","q":(\[' + _FAST_NUM + rb"," + _FAST_NUM + rb"," + _FAST_NUM + rb"," + _FAST_NUM
+    + rb'\]),"w":\[' + _FAST_NUM + rb"," + _FAST_NUM + rb"," + _FAST_NUM + rb"\]\}"
 )
-_sqrt = math.sqrt
+_attitude_rule = MESSAGE_TYPES["attitude"].rule
 
 
 def _fast_orbit(data: bytes) -> tuple[float, int] | None:
@@ -267,11 +355,11 @@ def _fast_attitude(data: bytes) -> tuple[float, int] | None:
     m = _FAST_ATTITUDE.fullmatch(data)
     if m is None:
         return None
-    t, seq, q0, q1, q2, q3 = m.groups()
+    t, seq, q = m.groups()
     seq = int(seq)
-    q0, q1, q2, q3 = float(q0), float(q1), float(q2), float(q3)
-    # the same expression as AttitudeState.__post_init__, so both paths agree to the last bit
-    if seq > MAX_SEQ or not abs(_sqrt(q0 * q0 + q1 * q1 + q2 * q2 + q3 * q3) - 1.0) <= QUAT_NORM_TOL:
+    # q: four floats (every number of the grammar has a fraction or an exponent), parsed in
+    # one call; |q| = 1 by AttitudeState's own rule, so both paths agree to the last bit
+    if seq > MAX_SEQ or _attitude_rule(_DECODE_JSON(q)) is not None:
         return None
     return float(t), seq
 
@@ -340,27 +428,24 @@ def _in_text_range(x: str) -> str:
 
 
 def _raw_repr(x: float) -> msgspec.Raw:
-    """``repr(x)`` as raw JSON text, for a finite float outside the text range: msgspec's
-    text of ``x`` (the same digits) laid out as ``repr`` lays it out, ``0.000012`` ->
-    ``1.2e-05``, ``1e-7`` -> ``1e-07``, ``1e16`` -> ``1e+16`` (tested against ``repr`` over
-    random bit patterns; 1.5-2x faster than ``repr`` for full-precision values)."""
-    text = _MSGSPEC_ENCODE(x)
-    mantissa, e, exponent = text.partition(b"e")
-    if not e:  # 1e-6 <= |x| < 1e-4: [-]0.0000ddd
-        negative = text[0] == 45  # "-"
-        fraction = text[2 + negative :]
-        digits = fraction.lstrip(b"0")
-        mantissa = digits[:1] + b"." + digits[1:] if len(digits) > 1 else digits
-        return msgspec.Raw(b"-" * negative + mantissa + (b"e-05" if len(fraction) - len(digits) == 4 else b"e-06"))
-    if exponent[0] == 45:
-        return msgspec.Raw(text if len(exponent) > 2 else mantissa + b"e-0" + exponent[1:])
-    return msgspec.Raw(mantissa + (b"e+" if len(exponent) > 1 else b"e+0") + exponent)
+    """``repr(x)`` as raw JSON text, for a finite float outside the text range (the
+    generated checks inline the same expression, ``_Raw(f"{x!r}")``)."""
+    return _Raw(f"{x!r}")
+
+
+_Raw = msgspec.Raw
 
 
 def _as_text(x: str) -> str:
     """Source of float ``x`` as msgspec is to write it: itself in the text range, else
     ``repr``'s text as raw JSON."""
-    return f"({x} if {_in_text_range(x)} else _raw_repr({x}))"
+    return f"({x} if {_in_text_range(x)} else {_repr_text(x)})"
+
+
+def _repr_text(x: str) -> str:
+    """Source of ``repr``'s text of float ``x`` as raw JSON (what :func:`_raw_repr` returns)."""
+    return f'_Raw(f"{{{x}!r}}")'
+
 
 
 def _bound_terms(x: str, t: Any) -> list[str]:
@@ -390,11 +475,12 @@ def _pattern_test(pattern: str) -> tuple[set, Any]:
     return known, test
 
 
-def _value_test(x: str, t: Any, mode: int, consts: dict, indent: str, rebind: bool = True) -> list[str] | None:
+def _value_test(x: str, t: Any, mode: int, consts: dict, indent: str, rebind: bool = True,
+                flag: int = 1) -> list[str] | None:
     """Source lines that return None unless the value named ``x`` passes field type ``t``
     (msgspec.inspect) for ``mode``; with ``_TEXT``, a float outside the text range sets
-    ``fix`` and (``rebind``) is replaced by its ``repr`` as raw text.  None for a type or
-    constraint the generator does not cover."""
+    bit ``flag`` of ``fix`` (its field is to be replaced) and (``rebind``) is replaced by
+    its ``repr`` as raw text.  None for a type or constraint the generator does not cover."""
     ins = msgspec.inspect
     extra = {}
     if isinstance(t, ins.Metadata):
@@ -410,8 +496,8 @@ def _value_test(x: str, t: Any, mode: int, consts: dict, indent: str, rebind: bo
         if not mode & _TEXT:
             return finite
         return [f"{indent}if not (type({x}) is float and {_in_text_range(x)}{bounds}):",
-                *("    " + line for line in finite), *([f"{indent}    {x} = _raw_repr({x})"] if rebind else []),
-                f"{indent}    fix = True"]
+                *("    " + line for line in finite), *([f"{indent}    {x} = {_repr_text(x)}"] if rebind else []),
+                f"{indent}    fix |= {flag}"]
     if isinstance(t, ins.LiteralType) and all(type(v) is str for v in t.values):
         if not mode & _VALID:
             return [f"{indent}if type({x}) is not str:", *fail]
@@ -435,6 +521,19 @@ def _is_float(t: Any) -> bool:
     return isinstance(t.type if isinstance(t, ins.Metadata) else t, ins.FloatType)
 
 
+def _rule_call(message_type: type[msgspec.Struct], given: dict[str, str]) -> str | None:
+    """Source of the call of ``message_type.rule`` (the rules its field types cannot state,
+    :mod:`astrodyn.messages.definitions`) on the values named in ``given`` (field -> name),
+    or None if it has no ``rule`` or the rule needs a field that is not given."""
+    rule = message_type.__dict__.get("rule")
+    if not isinstance(rule, staticmethod):
+        return None
+    params = inspect.signature(rule.__func__).parameters
+    if any(name not in given for name in params):
+        return None
+    return f"_rule({', '.join(given[name] for name in params)})"
+
+
 def _check_source(message_type: type[msgspec.Struct], keys: tuple[str, ...], mode: int) -> tuple[str, dict] | None:
     """``(source, globals)`` of ``plain(msg)`` (see above) for dicts of ``message_type`` with
     exactly the fields ``keys`` in this order, or None if the generator does not cover one."""
@@ -444,41 +543,53 @@ def _check_source(message_type: type[msgspec.Struct], keys: tuple[str, ...], mod
     named = tuple(name for name, _, _ in fields if name in keys)  # the keys, as the definition spells them
     if named != keys or any(required and name not in keys for name, _, required in fields):
         return None  # unknown, missing or reordered fields: the reference path says what
-    consts: dict[str, Any] = {"_inf": math.inf, "_raw_repr": _raw_repr, "_encode": _MSGSPEC_ENCODE}
+    consts: dict[str, Any] = {"_inf": math.inf, "_Raw": _Raw, "_encode": _MSGSPEC_ENCODE}
     names = [f"v{i}" for i in range(len(keys))]
-    body = [f"    {', '.join(names)}, = msg.values()", "    fix = False"]
-    as_text = []  # the values of the copy with raw text for floats outside the range
-    for x, key in zip(names, keys):
+    body = [f"    {', '.join(names)}, = msg.values()", "    fix = 0"]
+    as_text = []  # (bit of fix, key, value of the copy with raw text for floats outside the range)
+    for i, (x, key) in enumerate(zip(names, keys)):
         t = types[key]
         inner = t.type if isinstance(t, ins.Metadata) else t
+        flag = 1 << i
         if not isinstance(inner, ins.ListType):
-            lines = _value_test(x, t, mode, consts, "    ")
-            as_text.append(x)
+            lines = _value_test(x, t, mode, consts, "    ", flag=flag)
+            if _is_float(t):
+                as_text.append((flag, key, x))
         elif inner.min_length is not None and inner.min_length == inner.max_length <= _UNROLL:  # r, q: unrolled
             items = [f"{x}_{k}" for k in range(inner.min_length)]
-            tests = [_value_test(e, inner.item_type, mode, consts, "    ") for e in items]
+            tests = [_value_test(e, inner.item_type, mode, consts, "    ", flag=flag) for e in items]
             lines = None if None in tests else [
                 f"    if type({x}) is not list or len({x}) != {len(items)}:", "        return None",
                 f"    {', '.join(items)}, = {x}", *(line for test in tests for line in test)]
-            as_text.append(f"[{', '.join(items)}]" if _is_float(inner.item_type) else x)
+            if _is_float(inner.item_type):
+                as_text.append((flag, key, f"[{', '.join(items)}]"))
         else:
-            test = _value_test("e", inner.item_type, mode, consts, "        ", rebind=False)  # copied below
+            test = _value_test("e", inner.item_type, mode, consts, "        ", rebind=False, flag=flag)  # copied below
             lengths = "".join(f" or not {term}" for term in _length_terms(x, inner)) if mode & _VALID else ""
             lines = None if test is None else [f"    if type({x}) is not list{lengths}:", "        return None",
                                                f"    for e in {x}:", *test]
-            as_text.append(f"[{_as_text('e')} for e in {x}]" if _is_float(inner.item_type) else x)
+            if _is_float(inner.item_type):
+                as_text.append((flag, key, f"[{_as_text('e')} for e in {x}]"))
         if lines is None or isinstance(inner, ins.ListType) and isinstance(inner.item_type, ins.Metadata):
             return None
         body += lines
     if mode & _VALID and hasattr(message_type, "__post_init__"):  # a rule the field types cannot state
-        consts["_struct"] = message_type
-        given = [f"msg[{k!r}]" if mode & _TEXT and _is_float(types[k]) else x for k, x in zip(named, names)]  # not Raw
-        args = ", ".join(given) if len(keys) == len(fields) else ", ".join(f"{k}={x}" for k, x in zip(named, given))
-        body += ["    try:", f"        _struct({args})", "    except Exception:", "        return None"]
+        given = {k: f"msg[{k!r}]" if mode & _TEXT and _is_float(types[k]) else x for k, x in zip(named, names)}  # not Raw
+        call = _rule_call(message_type, given)
+        if call is not None:  # the rule itself, on the values
+            consts["_rule"] = message_type.__dict__["rule"].__func__
+            body += ["    try:", f"        if {call} is not None:", "            return None",
+                     "    except Exception:", "        return None"]
+        else:  # a __post_init__ without a rule function: build the Struct to run it
+            consts["_struct"] = message_type
+            args = ", ".join(f"{k}={x}" for k, x in given.items())
+            body += ["    try:", f"        _struct({args})", "    except Exception:", "        return None"]
     if not mode & _TEXT:
         return "def plain(msg):\n" + "\n".join([*body, "    return True"]) + "\n", consts
-    body += ["    if fix:", f"        msg = {{{', '.join(f'{k!r}: {v}' for k, v in zip(named, as_text))}}}",
-             "    try:", "        return _encode(msg)",
+    if as_text:  # a copy with the raw text of the floats outside the range, in the fields that have one
+        body += ["    if fix:", "        msg = msg.copy()",
+                 *(f"        if fix & {flag}:\n            msg[{key!r}] = {text}" for flag, key, text in as_text)]
+    body += ["    try:", "        return _encode(msg)",
              "    except ValueError:  # a lone surrogate (UnicodeEncodeError): the reference path says so",
              "        return None"]
     return "def plain(msg):\n" + "\n".join(body) + "\n", consts
@@ -513,6 +624,50 @@ def _plain_check(keys: tuple, key_or_kind: str | None, mode: int) -> Any:
         if plain is not None:
             return plain
     return None
+
+
+def _refuse(msg: dict) -> None:
+    """The check of a key layout that has no generated one: the reference path decides."""
+    return None
+
+
+#: The per-call lookup of the generated checks: mode -> key, kind or schema name (None: any
+#: kind, for :func:`encode` without one) -> tuple of keys -> check (or :func:`_refuse`): two
+#: dict lookups on the caller's strings (their hashes are cached) instead of resolving the
+#: key and hashing an lru_cache key.  Every key or name of one kind shares the kind's table
+#: (``_BY_KIND``); both are bounded (cleared when full: unusual layouts only cost time).
+_TABLES: dict[int, dict[str | None, dict[tuple, Any]]] = {_TEXT: {}, _VALID: {}, _TEXT | _VALID: {}}
+_BY_KIND: dict[int, dict[str | None, dict[tuple, Any]]] = {mode: {None: {}} for mode in _TABLES}
+for _mode in _TABLES:
+    _TABLES[_mode][None] = _BY_KIND[_mode][None]
+_ANY_TEXT = _TABLES[_TEXT][None]
+_TEXT_VALID = _TABLES[_TEXT | _VALID]
+_VALID_ONLY = _TABLES[_VALID]
+
+
+def _check_for(keys: tuple, key_or_kind: str | None, mode: int) -> Any:
+    """The check of ``keys`` on ``key_or_kind`` for ``mode`` (:func:`_plain_check`, or
+    :func:`_refuse`), entered in ``_TABLES``."""
+    if key_or_kind is None:
+        kind = None
+    else:
+        try:
+            kind = _kind_of_str(key_or_kind)
+        except MessageError:
+            return _refuse
+    by_kind = _BY_KIND[mode]
+    by_keys = by_kind.get(kind)
+    if by_keys is None:
+        by_keys = by_kind[kind] = {}
+    if len(by_keys) >= 4096:
+        by_keys.clear()  # in place: the tables refer to it
+    plain = by_keys[keys] = _plain_check(keys, kind, mode) or _refuse
+    tables = _TABLES[mode]
+    if len(tables) >= 65536:
+        tables.clear()
+        tables[None] = by_kind[None]
+    tables[key_or_kind] = by_keys
+    return plain
 
 
 # ---------------------------------------------------------------------------------------
@@ -561,9 +716,15 @@ def encode(msg: dict, kind: str | None = None) -> bytes:
     :func:`decode` of the bytes would check, generated from the definition); anything
     else by ``json`` and validated by :func:`decode` -- the same bytes and errors.
     """
-    if type(msg) is dict and (kind is None or type(kind) is str):
-        plain = _plain_check(tuple(msg), kind, _TEXT if kind is None else _TEXT | _VALID)
-        data = None if plain is None else plain(msg)
+    if type(msg) is dict:
+        keys = tuple(msg)
+        if kind is None:
+            data = (_ANY_TEXT.get(keys) or _check_for(keys, None, _TEXT))(msg)
+        elif type(kind) is str:
+            by_keys = _TEXT_VALID.get(kind)
+            data = ((by_keys is not None and by_keys.get(keys)) or _check_for(keys, kind, _TEXT | _VALID))(msg)
+        else:
+            data = None
         if data is not None:
             return data
     return _encode_reference(msg, kind)
@@ -631,8 +792,9 @@ def _listed(x: Any) -> Any:
 def _built(msg: dict, kind: str) -> bool:
     """True if ``msg`` (a builder's dict, fields in definition order) is plain and valid as
     it is: the builder returns it without converting anything."""
-    plain = _plain_check(tuple(msg), kind, _VALID)
-    return plain is not None and plain(msg) is True
+    keys = tuple(msg)
+    by_keys = _VALID_ONLY.get(kind)
+    return ((by_keys is not None and by_keys.get(keys)) or _check_for(keys, kind, _VALID))(msg) is True
 
 
 def orbit_message(t: float, seq: int, model: str, r: Any, v: Any, mu: float, frame: str = "GCRF") -> dict:

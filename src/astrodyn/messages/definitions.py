@@ -49,6 +49,24 @@ _DETAIL = Annotated[str, Meta(max_length=4096, description="human-readable detai
                               extra={"expected": "a string of at most 4096 characters"})]
 
 
+# Rules the field types cannot state (|q| = 1, equal lengths, ...) are each written once, as
+# the message type's static method ``rule``: its parameters are fields of the type, it
+# returns the problem (the error text) or None.  ``__post_init__`` raises it (msgspec's
+# decoding and construction); the checks generated from the definition
+# (:mod:`astrodyn.messages.codec`) call the same function on the values, without building
+# the Struct.  A type with ``__post_init__`` but no ``rule`` is checked by building it.
+
+
+_sqrt = math.sqrt
+
+
+def _enforce(problem: str | None) -> None:
+    """``__post_init__``'s half of a ``rule``: raise its problem (msgspec reports a ValueError
+    raised in ``__post_init__`` as a ValidationError with this text)."""
+    if problem is not None:
+        raise ValueError(problem)
+
+
 class Stamped(msgspec.Struct, forbid_unknown_fields=True):
     """The fields every message type starts with: ``t`` (s since the scenario epoch) and
     ``seq`` (the message's number on its channel)."""
@@ -74,11 +92,17 @@ class AttitudeState(Stamped, forbid_unknown_fields=True):
     q: _vec(4, "Euler parameters, scalar first, |q| = 1")
     w: _vec(3, "angular velocity in body axes, rad/s")
 
+    @staticmethod
+    def rule(q: list[float]) -> str | None:
+        """|q| = 1: a rule a JSON Schema cannot state (see the note above :class:`Stamped`)."""
+        q0, q1, q2, q3 = q
+        norm = _sqrt(q0 * q0 + q1 * q1 + q2 * q2 + q3 * q3)
+        if abs(norm - 1.0) <= QUAT_NORM_TOL:
+            return None
+        return f"attitude.q: expected a unit quaternion (| |q| - 1 | <= {QUAT_NORM_TOL:g}), got |q| = {norm!r}"
+
     def __post_init__(self) -> None:
-        q = self.q
-        norm = math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
-        if not abs(norm - 1.0) <= QUAT_NORM_TOL:  # a rule a JSON Schema cannot state
-            raise ValueError(f"attitude.q: expected a unit quaternion (| |q| - 1 | <= {QUAT_NORM_TOL:g}), got |q| = {norm!r}")
+        _enforce(self.rule(self.q))
 
 
 #: Most appendages of one flexible spacecraft, and assumed modes per bending plane.
@@ -101,14 +125,20 @@ class AppendageState(Stamped, forbid_unknown_fields=True):
     tip: Annotated[list[_vec(3, "tip displacement, body axes, m")], Meta(
         min_length=1, max_length=MAX_APPENDAGES, description="per appendage: tip displacement, body axes, m")]
 
-    def __post_init__(self) -> None:  # rules a JSON Schema cannot state
-        if not (len(self.eta) == len(self.eta_dot) == len(self.tip)):
-            raise ValueError(f"appendages: expected eta, eta_dot and tip for the same number of appendages, got "
-                             f"{len(self.eta)}, {len(self.eta_dot)}, {len(self.tip)}")
-        for k, (eta, eta_dot) in enumerate(zip(self.eta, self.eta_dot)):
-            if len(eta) % 2 or len(eta_dot) != len(eta):
-                raise ValueError(f"appendages.eta[{k}]: expected 2 n values (n modes in each bending plane) and as "
-                                 f"many in eta_dot[{k}], got {len(eta)} and {len(eta_dot)}")
+    @staticmethod
+    def rule(eta: list[list[float]], eta_dot: list[list[float]], tip: list[list[float]]) -> str | None:
+        """Rules a JSON Schema cannot state (see the note above :class:`Stamped`)."""
+        if not (len(eta) == len(eta_dot) == len(tip)):
+            return (f"appendages: expected eta, eta_dot and tip for the same number of appendages, got "
+                    f"{len(eta)}, {len(eta_dot)}, {len(tip)}")
+        for k, (eta_k, eta_dot_k) in enumerate(zip(eta, eta_dot)):
+            if len(eta_k) % 2 or len(eta_dot_k) != len(eta_k):
+                return (f"appendages.eta[{k}]: expected 2 n values (n modes in each bending plane) and as "
+                        f"many in eta_dot[{k}], got {len(eta_k)} and {len(eta_dot_k)}")
+        return None
+
+    def __post_init__(self) -> None:
+        _enforce(self.rule(self.eta, self.eta_dot, self.tip))
 
 
 class RollingState(Stamped, forbid_unknown_fields=True):
@@ -142,10 +172,16 @@ class GimbalState(Stamped, forbid_unknown_fields=True):
     indicated: Annotated[_PerGyro, Meta(description=(
         "each gyroscope's indication: rate gyro k theta / H (rad/s), rate-integrating gyro c theta / H (rad)"))]
 
+    @staticmethod
+    def rule(angle: list[float], angle_rate: list[float], indicated: list[float]) -> str | None:
+        """A rule a JSON Schema cannot state (see the note above :class:`Stamped`)."""
+        if not (len(angle) == len(angle_rate) == len(indicated)):
+            return (f"gimbals: expected angle, angle_rate and indicated for the same gyroscopes, got "
+                    f"{len(angle)}, {len(angle_rate)}, {len(indicated)}")
+        return None
+
     def __post_init__(self) -> None:
-        if not (len(self.angle) == len(self.angle_rate) == len(self.indicated)):
-            raise ValueError(f"gimbals: expected angle, angle_rate and indicated for the same gyroscopes, got "
-                             f"{len(self.angle)}, {len(self.angle_rate)}, {len(self.indicated)}")
+        _enforce(self.rule(self.angle, self.angle_rate, self.indicated))
 
 
 class CrossCheck(Stamped, forbid_unknown_fields=True):
