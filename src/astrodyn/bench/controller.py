@@ -10,7 +10,6 @@ from __future__ import annotations
 import gc
 import json
 import os
-import queue
 
 import msgspec
 import zenoh
@@ -56,16 +55,18 @@ def main() -> int:
     scenario, name = os.environ["ASTRODYN_SCENARIO"], os.environ["ASTRODYN_CONTROLLER"]
     signer = auth.Signer(auth.secret_from_environment(), name)
     base = f"astrodyn/{scenario}"
-    ticks: queue.Queue = queue.Queue()
-    def on_event(sample) -> None:
-        event = json.loads(sample.payload.to_bytes())
-        if event["process"] == "plant" and event["kind"] == "stop":
-            ticks.put(None)
 
     # a loopback peer with gossip (astrodyn.bus defaults): straight to the plant, not via the hub
     with bus.open_session(connect=os.environ["ASTRODYN_CONNECT"]) as session:
-        subscribers = [session.declare_subscriber(f"{base}/@tick", lambda s: ticks.put(s.payload.to_bytes())),
-                       session.declare_subscriber(f"{base}/@event", on_event)]  # held for the session's life
+        tick_key = f"{base}/@tick"
+
+        def on_event(sample) -> None:  # the plant's stop wakes the loop: an empty tick, to this session only
+            event = json.loads(sample.payload.to_bytes())
+            if event["process"] == "plant" and event["kind"] == "stop":
+                session.put(tick_key, b"", allowed_destination=zenoh.Locality.SESSION_LOCAL)
+
+        ticks = session.declare_subscriber(tick_key, zenoh.handlers.FifoChannel(1024))  # read here, no thread hand-off
+        events = session.declare_subscriber(f"{base}/@event", on_event)  # noqa: F841 (held for the session's life)
         done_key = f"{base}/@done/{name}"
         seqs: dict[str, int] = {}
         pubs: dict[str, zenoh.Publisher] = {}
@@ -78,13 +79,12 @@ def main() -> int:
 
         batch_key = f"{base}/@batch/{name}"
         gc.freeze()  # what is loaded now stays: out of the cyclic collector's scans
-        while (raw := ticks.get()) is not None:
+        while raw := ticks.recv().payload.to_bytes():
             commands, done = answer(raw, base, name, seqs)
             if commands:  # one envelope: the commands and the answer (docs/control.md)
                 put(batch_key, messages.encode_batch([*commands, (done_key, done)]))
             else:
                 put(done_key, done)
-        del subscribers
     return 0
 
 
