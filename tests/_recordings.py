@@ -16,40 +16,49 @@ from astrodyn.recording import McapRecorder
 from astrodyn.scenario import loads
 from astrodyn.simulate import simulate
 
-LEO_TWO_BODIES = """
+
+def scenario_head(name: str, duration: str, rate: str, scale: str = "UTC", central_body: str | None = None) -> str:
+    """TOML of a scenario's ``[scenario]`` table, epoch 2026-03-20T12:00:00 in the time
+    ``scale``, ``duration`` and ``rate`` as quantity text (e.g. "60 s", "2 Hz"), and when
+    ``central_body`` is named, its ``[central_body]`` table."""
+    text = f"""
 [scenario]
 name = "{name}"
-epoch = "2026-03-20T12:00:00 UTC"
+epoch = "2026-03-20T12:00:00 {scale}"
 duration = "{duration}"
 rate = "{rate}"
-
-[central_body]
-name = "earth"
-
-[[bodies]]
-name = "leo"
-[bodies.orbit]
-a = "6800 km"
-e = 0.001
-i = "51.6 deg"
-raan = "30 deg"
-argp = "40 deg"
-nu = "10 deg"
-[bodies.attitude]
-q = [1, 0, 0, 0]
-w = ["0.001 rad/s", "0.3 rad/s", "0.002 rad/s"]
-inertia = ["0.03 kg m2", "0.035 kg m2", "0.01 kg m2"]
-
-[[bodies]]
-name = "geo"
-[bodies.orbit]
-a = "42164 km"
-e = 0.0
-i = "0.1 deg"
-raan = "0 deg"
-argp = "0 deg"
-nu = "0 deg"
 """
+    return text if central_body is None else text + f'\n[central_body]\nname = "{central_body}"\n'
+
+
+def orbiter(name: str, a: str, e: float, i: str, raan: str = "0 deg", argp: str = "0 deg", nu: str = "0 deg",
+            w: list[str] | None = None) -> str:
+    """TOML of a ``[[bodies]]`` entry: a Kepler orbit from its elements (lengths and angles
+    as quantity text, e.g. "7000 km", "51.6 deg") and, when the body rates ``w`` are given
+    (3 quantity texts, body axes, e.g. "0.3 rad/s"), a torque-free attitude from
+    q = [1, 0, 0, 0] with the principal inertia 0.03, 0.035, 0.01 kg m^2."""
+    text = f"""[[bodies]]
+name = "{name}"
+[bodies.orbit]
+a = "{a}"
+e = {e}
+i = "{i}"
+raan = "{raan}"
+argp = "{argp}"
+nu = "{nu}"
+"""
+    if w is None:
+        return text
+    return text + f"""[bodies.attitude]
+q = [1, 0, 0, 0]
+w = ["{w[0]}", "{w[1]}", "{w[2]}"]
+inertia = ["0.03 kg m2", "0.035 kg m2", "0.01 kg m2"]
+"""
+
+
+LEO_TWO_BODIES = scenario_head("{name}", "{duration}", "{rate}", central_body="earth") + "\n" + orbiter(
+    "leo", "6800 km", 0.001, "51.6 deg", "30 deg", "40 deg", "10 deg", w=["0.001 rad/s", "0.3 rad/s", "0.002 rad/s"]
+) + "\n" + orbiter("geo", "42164 km", 0.0, "0.1 deg")
 
 
 def record(path: Path, toml_text: str, chunk_size: int = 1 << 14):
@@ -78,13 +87,7 @@ def leo_recording(path: Path, name: str = "rp", duration: str = "60 s", rate: st
 def one_satellite_scene(name: str, duration: str, rate: str, extra: str = "") -> str:
     """TOML of a scene with one body ``sat`` (Kepler orbit, torque-free attitude), for the
     process tests; ``extra`` is appended (more bodies)."""
-    return f"""
-[scenario]
-name = "{name}"
-epoch = "2026-03-20T12:00:00 TDB"
-duration = "{duration}"
-rate = "{rate}"
-
+    return scenario_head(name, duration, rate, "TDB") + f"""
 [[bodies]]
 name = "sat"
 [bodies.orbit]

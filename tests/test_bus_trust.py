@@ -24,32 +24,14 @@ from mcap.reader import make_reader
 
 from astrodyn.service.children import children_of
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _recordings import orbiter, scenario_head
+
 pytestmark = pytest.mark.network
 
-SCENE = textwrap.dedent("""
-    [scenario]
-    name = "trust"
-    epoch = "2026-03-20T12:00:00 TDB"
-    duration = "3000 s"
-    rate = "1 Hz"
-
-    [central_body]
-    name = "earth"
-
-    [[bodies]]
-    name = "sat"
-    [bodies.orbit]
-    a = "7000 km"
-    e = 0.01
-    i = "51 deg"
-    raan = "0 deg"
-    argp = "0 deg"
-    nu = "0 deg"
-    [bodies.attitude]
-    q = [1, 0, 0, 0]
-    w = ["0.3 rad/s", "0.001 rad/s", "0.002 rad/s"]
-    inertia = ["0.03 kg m2", "0.035 kg m2", "0.01 kg m2"]
-
+SCENE = scenario_head("trust", "3000 s", "1 Hz", "TDB", central_body="earth") + "\n" + orbiter(
+    "sat", "7000 km", 0.01, "51 deg", w=["0.3 rad/s", "0.001 rad/s", "0.002 rad/s"]
+) + textwrap.dedent("""
     [[bodies]]
     name = "sat2"
     [bodies.orbit]

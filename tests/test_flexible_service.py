@@ -448,6 +448,7 @@ def test_serve_restarts_a_killed_attitude_propagator_from_the_recorded_elastic_s
     import signal
     import time
 
+    from _serve_control import serve_status, wait_until
     from astrodyn import bus
     from astrodyn.service.children import stop_process
 
@@ -459,26 +460,16 @@ def test_serve_restarts_a_killed_attitude_propagator_from_the_recorded_elastic_s
         hello = json.loads(proc.stdout.readline())
         token = hello["control_token"]
         with bus.open_session(connect=[hello["hub"]]) as s:
-            def status():
-                return bus.send_control(s, "flexsc", "status", token=token)[0]
-
-            deadline = time.monotonic() + 60
-            while status()["t"] < 10:
-                assert time.monotonic() < deadline, "serve never reached t = 10 s"
-                time.sleep(0.2)
+            status = serve_status(s, "flexsc", token)
+            wait_until(lambda: status()["t"] >= 10, 60, "serve never reached t = 10 s")
             time.sleep(2.0)  # the logger flushes what it holds
             old = status()["processes"]["attitude"]["pid"]
             os.kill(old, signal.SIGKILL)
-            deadline = time.monotonic() + 60
-            while not status()["restarts"]:
-                assert time.monotonic() < deadline, "no restart reported"
-                time.sleep(0.1)
+            wait_until(lambda: status()["restarts"], 60, "no restart reported", poll_s=0.1)
             restart = status()["restarts"][0]
             assert restart["process"] == "attitude" and restart["old_pid"] == old
-            deadline = time.monotonic() + 60
-            while status()["t"] < restart["from_step"] / 20 + 10:  # the new process publishes
-                assert time.monotonic() < deadline, "the restarted propagator does not advance"
-                time.sleep(0.2)
+            wait_until(lambda: status()["t"] >= restart["from_step"] / 20 + 10, 60,  # the new process publishes
+                       "the restarted propagator does not advance")
             (final,) = bus.send_control(s, "flexsc", "stop", timeout_s=120, token=token)
             assert final.get("state") == "stopped", final
         proc.communicate(timeout=60)

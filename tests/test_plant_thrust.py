@@ -80,6 +80,18 @@ def test_thrust_and_dv_are_limited_and_the_efficiency_fault_scales_them():
     np.testing.assert_allclose(b.v - v0, [0.0, 0.0, 2.0], rtol=1e-15)
 
 
+def _wheel(axis: str, speed: str) -> str:
+    """A ``[[bodies.actuators.wheels]]`` entry: ``axis`` in body components, rotor 0.05 kg m^2, 0.2 N m and
+    600 rad/s at most, the initial ``speed`` (a quantity)."""
+    return f"""[[bodies.actuators.wheels]]
+axis = {axis}
+inertia = 0.05
+max_torque = 0.2
+max_speed = 600
+speed = "{speed}"
+"""
+
+
 WHEELED = """
 [scenario]
 name = "seize"
@@ -98,19 +110,7 @@ name = "sc"
 w = [0.01, -0.02, 0.03]
 inertia = [[120, 2, -1], [2, 100, 0.5], [-1, 0.5, 80]]
 [bodies.actuators]
-[[bodies.actuators.wheels]]
-axis = [1, 0, 0]
-inertia = 0.05
-max_torque = 0.2
-max_speed = 600
-speed = "300 rpm"
-[[bodies.actuators.wheels]]
-axis = [0, 0.6, 0.8]
-inertia = 0.05
-max_torque = 0.2
-max_speed = 600
-speed = "-2000 rpm"
-"""
+""" + _wheel("[1, 0, 0]", "300 rpm") + _wheel("[0, 0.6, 0.8]", "-2000 rpm")
 
 
 def test_a_seized_wheel_hands_its_momentum_to_the_body_and_the_total_is_kept():

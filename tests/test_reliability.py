@@ -32,6 +32,7 @@ from astrodyn.scenario import load as load_scenario
 from astrodyn.simulate import OrbitEngine
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _serve_control import serve_status, wait_until
 from test_service import ASTRODYN, CONFIGS, _stop  # same process handling as the service tests
 
 pytestmark = pytest.mark.network
@@ -296,13 +297,8 @@ def test_serve_restarts_a_killed_propagator_from_the_last_state(tmp_path):
         assert hello["serving"] == "demo"
         token = hello["control_token"]
         with bus.open_session(connect=[bus.loopback_endpoint(port)]) as s, bus.AliveWatcher(s, "demo") as alive:
-            def status():
-                return bus.send_control(s, "demo", "status", token=token)[0]
-
-            deadline = time.monotonic() + 90
-            while status()["t"] < 60:
-                assert time.monotonic() < deadline, "serve never reached t = 60 s"
-                time.sleep(0.2)
+            status = serve_status(s, "demo", token)
+            wait_until(lambda: status()["t"] >= 60, 90, "serve never reached t = 60 s")
             _wait_states(out, 100)  # flushed to the file: the restart has a state to start from
             alive.poll()
             assert "orbit" in alive.alive
@@ -315,10 +311,7 @@ def test_serve_restarts_a_killed_propagator_from_the_last_state(tmp_path):
             latency = time.monotonic() - killed
             assert latency < 1.0, f"liveliness loss seen after {latency:.3f} s"
             print(f"\nliveliness loss of a SIGKILLed propagator seen after {latency * 1e3:.0f} ms")
-            deadline = time.monotonic() + 60
-            while not status()["restarts"]:
-                assert time.monotonic() < deadline, "no restart reported"
-                time.sleep(0.1)
+            wait_until(lambda: status()["restarts"], 60, "no restart reported", poll_s=0.1)
             st = status()
             restart = st["restarts"][0]
             assert restart["process"] == "orbit" and restart["old_pid"] == old and "killed by signal 9" in restart["why"]
@@ -326,10 +319,8 @@ def test_serve_restarts_a_killed_propagator_from_the_last_state(tmp_path):
             # status t comes from heartbeats (rate-limited: at x300 it lags the published states
             # by up to ~150 s of sim time), so measure from the restart step itself (1 Hz scene)
             t_restart = max(st["t"], restart["from_step"] / 1.0)
-            deadline = time.monotonic() + 60
-            while status()["t"] < t_restart + 60:  # the new process publishes
-                assert time.monotonic() < deadline, "the restarted propagator does not advance"
-                time.sleep(0.2)
+            wait_until(lambda: status()["t"] >= t_restart + 60, 60,  # the new process publishes
+                       "the restarted propagator does not advance")
             (final,) = bus.send_control(s, "demo", "stop", timeout_s=120, token=token)
             assert final.get("state") == "stopped", final
         proc.communicate(timeout=60)

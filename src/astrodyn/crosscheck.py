@@ -100,6 +100,14 @@ def _check_mu(mu) -> float:
     return mu
 
 
+def _check_choices(integrator: str, model: str) -> None:
+    """ValueError unless ``integrator`` is one of :data:`INTEGRATORS` and ``model`` one of :data:`MODELS`."""
+    if integrator not in INTEGRATORS:
+        raise ValueError(f"integrator: expected one of {INTEGRATORS}, got {integrator!r}")
+    if model not in MODELS:
+        raise ValueError(f"model: expected one of {MODELS}, got {model!r}")
+
+
 def _two_sum(a: float, b: float) -> tuple[float, float]:
     """Knuth's TwoSum: s = fl(a + b) and the exact rounding error e, a + b = s + e."""
     s = a + b
@@ -177,10 +185,7 @@ class ReboundScene:
 
         r, v = _as_states(r0, v0)
         self.mu = _check_mu(mu)
-        if integrator not in INTEGRATORS:
-            raise ValueError(f"integrator: expected one of {INTEGRATORS}, got {integrator!r}")
-        if model not in MODELS:
-            raise ValueError(f"model: expected one of {MODELS}, got {model!r}")
+        _check_choices(integrator, model)
         if not math.isfinite(float(t0)):
             raise ValueError(f"t0: expected a finite scene time in s, got {t0!r}")
         self.t0 = float(t0)
@@ -346,6 +351,17 @@ class CrossCheckResult:
     max_relative_velocity_error = property(lambda self: float(np.max(self.relative_velocity_error)),
                                            doc="Largest |dv| / |v| over times and bodies.")
 
+    @classmethod
+    def of_states(cls, times, elapsed, r_rebound, v_rebound, r_astrodyn, v_astrodyn, steps, integrator: str,
+                  model: str, mu: float) -> CrossCheckResult:
+        """The result for these states (the attributes of the same names; SI units), with
+        the errors, absolute and relative to REBOUND's |r| and |v|, computed from them."""
+        dr = np.linalg.norm(r_astrodyn - r_rebound, axis=-1)
+        dv = np.linalg.norm(v_astrodyn - v_rebound, axis=-1)
+        return cls(times, elapsed, r_rebound, v_rebound, r_astrodyn, v_astrodyn, dr, dv,
+                   dr / np.linalg.norm(r_rebound, axis=-1), dv / np.linalg.norm(v_rebound, axis=-1),
+                   steps, integrator, model, mu)
+
     def per_body_max(self) -> dict[str, np.ndarray]:
         """Per-body maxima over time, each shape (N,)."""
         return {
@@ -447,10 +463,7 @@ def crosscheck(
         raise ValueError(f"times: expected a scalar or a 1-D array of elapsed times in s, got shape {np.shape(times)}")
     if not np.all(np.isfinite(t)):
         raise ValueError("times: every time must be finite")
-    if integrator not in INTEGRATORS:
-        raise ValueError(f"integrator: expected one of {INTEGRATORS}, got {integrator!r}")
-    if model not in MODELS:
-        raise ValueError(f"model: expected one of {MODELS}, got {model!r}")
+    _check_choices(integrator, model)
     if model == "j2" and (j2 is None or body_radius is None):
         raise ValueError("model='j2' needs j2 (dimensionless) and body_radius (m)")
     prop = propagator if propagator is not None else _default_propagator(model)
@@ -487,21 +500,4 @@ def crosscheck(
     r_ad, v_ad = prop(np.broadcast_to(r, (nt, n, 3)), np.broadcast_to(v, (nt, n, 3)), elapsed, mu)
     r_ad = np.asarray(r_ad, dtype=np.float64).reshape(nt, n, 3)
     v_ad = np.asarray(v_ad, dtype=np.float64).reshape(nt, n, 3)
-    dr = np.linalg.norm(r_ad - r_reb, axis=-1)
-    dv = np.linalg.norm(v_ad - v_reb, axis=-1)
-    return CrossCheckResult(
-        times=t,
-        elapsed=elapsed,
-        r_rebound=r_reb,
-        v_rebound=v_reb,
-        r_astrodyn=r_ad,
-        v_astrodyn=v_ad,
-        position_error=dr,
-        velocity_error=dv,
-        relative_position_error=dr / np.linalg.norm(r_reb, axis=-1),
-        relative_velocity_error=dv / np.linalg.norm(v_reb, axis=-1),
-        steps=steps,
-        integrator=integrator,
-        model=model,
-        mu=mu,
-    )
+    return CrossCheckResult.of_states(t, elapsed, r_reb, v_reb, r_ad, v_ad, steps, integrator, model, mu)

@@ -143,20 +143,17 @@ class PlantBody:
         act = self.limits
         if act is None:
             raise CommandRefused(f"body {self.name} has no actuators (only sensors)")
-        if "torque" in cmd and act.torque is None:
-            raise CommandRefused(f"body {self.name} has no torque actuator (actuators.torque)")
-        if "wheel_torque" in cmd:
-            if self.wheels is None:
-                raise CommandRefused(f"body {self.name} has no reaction wheels")
-            if len(cmd["wheel_torque"]) != self.wheels.n:
-                raise CommandRefused(f"wheel_torque: expected {self.wheels.n} values (one per wheel), got {len(cmd['wheel_torque'])}")
-        if "dv" in cmd and act.dv is None:
-            raise CommandRefused(f"body {self.name} has no impulsive dv capability (actuators.dv)")
-        if "thrust" in cmd:
-            if act.thrust is None:
-                raise CommandRefused(f"body {self.name} has no thrusters (actuators.thrust)")
-            if cmd.get("frame", "inertial") == "body" and not self.has_attitude:
-                raise CommandRefused(f"thrust in body axes needs an attitude; body {self.name} has none")
+        lacks = (("torque", act.torque is None, "no torque actuator (actuators.torque)"),
+                 ("wheel_torque", self.wheels is None, "no reaction wheels"),
+                 ("dv", act.dv is None, "no impulsive dv capability (actuators.dv)"),
+                 ("thrust", act.thrust is None, "no thrusters (actuators.thrust)"))
+        for name, lacking, what in lacks:
+            if lacking and name in cmd:
+                raise CommandRefused(f"body {self.name} has {what}")
+        if "wheel_torque" in cmd and len(cmd["wheel_torque"]) != self.wheels.n:
+            raise CommandRefused(f"wheel_torque: expected {self.wheels.n} values (one per wheel), got {len(cmd['wheel_torque'])}")
+        if "thrust" in cmd and cmd.get("frame", "inertial") == "body" and not self.has_attitude:
+            raise CommandRefused(f"thrust in body axes needs an attitude; body {self.name} has none")
         if "torque" in cmd:
             torque = np.asarray(cmd["torque"], dtype=np.float64)
             self.torque = np.minimum(np.maximum(torque, -act.torque), act.torque)  # np.clip, without its overhead

@@ -14,6 +14,7 @@ import os
 import platform
 import subprocess
 import sys
+from collections.abc import Iterable, Sequence
 
 SUITES = {
     "orbit": "astrodyn.bench.orbit",
@@ -40,6 +41,16 @@ def cpu_model() -> str:
     except OSError:
         pass
     return platform.processor() or "unknown CPU"
+
+
+def print_table(header: Sequence[str], rows: Iterable[Sequence[object]], align: str | None = None) -> None:
+    """Print a Markdown table: the ``header`` cells, then one line per row of cells (already
+    formatted; printed with ``str``).  ``align``: one letter per column, ``l`` (default) or
+    ``r`` (right-aligned, for numbers)."""
+    print("| " + " | ".join(header) + " |")
+    print("| " + " | ".join("---:" if a == "r" else "---" for a in (align or "l" * len(header))) + " |")
+    for row in rows:
+        print("| " + " | ".join(str(cell) for cell in row) + " |")
 
 
 def env_for_source(src: str | None, **extra: str) -> dict:

@@ -21,7 +21,7 @@ import time
 import numpy as np
 
 from astrodyn import auth, messages
-from astrodyn.bench import best_seconds_per_call
+from astrodyn.bench import best_seconds_per_call, print_table
 
 
 def _best(fn, repeat: int, number: int) -> float:
@@ -78,11 +78,9 @@ def main(argv: list[str] | None = None) -> int:
         print(f"astrodyn bench auth: --bodies: expected 1 .. 100000, got {args.bodies}", file=sys.stderr)
         return 2
     rows = measure(args.bodies, max(1, args.repeat))
-    print("| case | encode (us) | sign (us) | verify (us) | per | sign / encode |")
-    print("| --- | ---: | ---: | ---: | --- | ---: |")
-    for row in rows:
-        print(f"| {row['case']} | {row['encode_us']:.3f} | {row['sign_us']:.3f} | {row['verify_us']:.3f} | {row['per']} "
-              f"| {row['sign_us'] / row['encode_us']:.2f} |")
+    print_table(["case", "encode (us)", "sign (us)", "verify (us)", "per", "sign / encode"],
+                ([row["case"], f"{row['encode_us']:.3f}", f"{row['sign_us']:.3f}", f"{row['verify_us']:.3f}", row["per"],
+                  f"{row['sign_us'] / row['encode_us']:.2f}"] for row in rows), align="lrrrlr")
     return 0
 
 

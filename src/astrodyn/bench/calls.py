@@ -27,7 +27,7 @@ import time
 
 import numpy as np
 
-from astrodyn.bench import best_seconds_per_call, call_in_tree, env_for_source
+from astrodyn.bench import best_seconds_per_call, call_in_tree, env_for_source, print_table
 
 DZHANIBEKOV = (np.array([1.0, 2.0, 3.0]), np.array([1e-3, 1.0, 1e-3]))
 
@@ -386,11 +386,10 @@ def main(argv: list[str] | None = None) -> int:
             with Load(os.cpu_count() or 2, threads=args.load_threads):
                 regimes["loaded"] = sweep()
         print(f"load average at the end: {os.getloadavg()[0]:.2f}; OMP_WAIT_POLICY={os.environ.get('OMP_WAIT_POLICY')}")
-        print("| kernel | n | regime | serial | parallel (2 thr) | serial / parallel |")
-        print("| --- | ---: | --- | ---: | ---: | ---: |")
-        for regime, rows in regimes.items():
-            for n, name, ser, par_ in sorted(rows, key=lambda r: (r[1], r[0])):
-                print(f"| {name} | {n} | {regime} | {_fmt(ser)} | {_fmt(par_)} | {ser / par_:.2f} |")
+        print_table(["kernel", "n", "regime", "serial", "parallel (2 thr)", "serial / parallel"],
+                    ([name, n, regime, _fmt(ser), _fmt(par_), f"{ser / par_:.2f}"]
+                     for regime, rows in regimes.items() for n, name, ser, par_ in sorted(rows, key=lambda r: (r[1], r[0]))),
+                    align="lrlrrr")
         return 0
     if args.baseline is not None:
         if not os.path.isfile(os.path.join(args.baseline, "astrodyn", "__init__.py")):
@@ -400,10 +399,8 @@ def main(argv: list[str] | None = None) -> int:
         table = compare(os.path.abspath(args.baseline), args.repeat)
         cols = ["before 1 thr", "after 1 thr", "before 2 thr", "after 2 thr"]
         print(f"load average at the end: {os.getloadavg()[0]:.2f}")
-        print("| case | regime | " + " | ".join(cols) + " |")
-        print("| --- | --- | " + " | ".join("---:" for _ in cols) + " |")
-        for (name, regime), row in sorted(table.items()):
-            print(f"| {name} | {regime} | " + " | ".join(_fmt(row.get(c)) for c in cols) + " |")
+        print_table(["case", "regime", *cols], ([name, regime, *(_fmt(row.get(c)) for c in cols)]
+                                                for (name, regime), row in sorted(table.items())), align="ll" + "r" * len(cols))
         return 0
     regimes = {"idle": measure(args.repeat)}
     if args.load:
@@ -411,11 +408,9 @@ def main(argv: list[str] | None = None) -> int:
             regimes["loaded"] = measure(args.repeat)
     cols = ["astrodyn 1 thr", "astrodyn 2 thr", "heyoka", "scipy", "note"]
     print(f"load average at the end: {os.getloadavg()[0]:.2f}")
-    print("| case | regime | " + " | ".join(cols) + " |")
-    print("| --- | --- | " + " | ".join("---:" for _ in cols) + " |")
-    for regime, rows in regimes.items():
-        for name, row in rows.items():
-            print(f"| {name} | {regime} | " + " | ".join(_fmt(row.get(c)) for c in cols) + " |")
+    print_table(["case", "regime", *cols], ([name, regime, *(_fmt(row.get(c)) for c in cols)]
+                                            for regime, rows in regimes.items() for name, row in rows.items()),
+                align="ll" + "r" * len(cols))
     return 0
 
 

@@ -17,7 +17,7 @@ import sys
 import tempfile
 from pathlib import Path
 
-from astrodyn.bench import cpu_model
+from astrodyn.bench import cpu_model, print_table
 
 __all__ = ["main", "scene"]
 
@@ -129,11 +129,11 @@ def main(argv: list[str] | None = None) -> int:
     print(f"# closed-loop lockstep on {cpu_model()}: one controller commanding every body each step, 10 Hz\n")
     print(f"floor: bare zenoh-python round trip between two processes (peers, loopback), same run: p50 "
           f"{floor['p50_us']:.0f} us, p99 {floor['p99_us']:.0f} us\n")
-    print("| bodies | wheels | steps | control steps/s | round trip p50 (us) | p99 (us) | p50 / zenoh floor | real-time factor |")
-    print("|---|---|---|---|---|---|---|---|")
-    for r in rows:
-        print(f"| {r['bodies']} | {'3' if r['wheels'] else '-'} | {r['steps']} | {r['steps_per_s']:.0f} | "
-              f"{r['p50_us']:.0f} | {r['p99_us']:.0f} | {r['p50_us'] / floor['p50_us']:.1f}x | {r['rtf']:.1f} |")
+    print_table(["bodies", "wheels", "steps", "control steps/s", "round trip p50 (us)", "p99 (us)", "p50 / zenoh floor",
+                 "real-time factor"],
+                ([r["bodies"], "3" if r["wheels"] else "-", r["steps"], f"{r['steps_per_s']:.0f}", f"{r['p50_us']:.0f}",
+                  f"{r['p99_us']:.0f}", f"{r['p50_us'] / floor['p50_us']:.1f}x", f"{r['rtf']:.1f}"] for r in rows),
+                align="rlrrrrrr")
     return 0
 
 

@@ -152,61 +152,24 @@ def rigid_rows(repeats, rtols):
     def errs(w, q):
         return f"{np.max(_angle(q, q_ex)):.1e} rad, rate {np.max(np.linalg.norm(w - w_ex, axis=-1)) / wscale:.1e}"
 
-    rows = []
+    def rigid(method, setting, sec, err, **cost):
+        return _row("rigid", method, setting, 7, SPAN, sec, err=err, **cost)
+
     tt = np.linspace(0.0, SPAN, 20001)
     sec, _ = _best(lambda: torque_free(inertia, w0, q0, tt), repeats, warm=True)
-    rows.append(
-        _row(
-            "rigid",
-            "`torque_free` (exact)",
-            "-",
-            7,
-            SPAN,
-            sec * N_OUT / tt.size,
-            outputs=N_OUT,
-            err="reference (exact)",
-        )
-    )
-    for h in (0.01, 0.002):
+    rows = [rigid("`torque_free` (exact)", "-", sec * N_OUT / tt.size, "reference (exact)", outputs=N_OUT)]
+    # (method, setting, its options): the fixed steps of split4, then DOP853's tolerances
+    runs = [("split4", f"h = {h:g} s", {"step": h, "error_estimate": False}) for h in (0.01, 0.002)]
+    runs += [("dop853", f"rtol {rtol:g}", {"rtol": rtol, "atol": rtol * 1e-3}) for rtol in rtols]
+    for method, setting, options in runs:
 
-        def run(h=h):
-            return propagate_attitude(
-                inertia, w0, q0, t[1:], rotor_momentum=np.zeros(3), method="split4", step=h, error_estimate=False
-            )
+        def run(method=method, options=options):
+            return propagate_attitude(inertia, w0, q0, t[1:], rotor_momentum=np.zeros(3), method=method, **options)
 
         sec, (w, q, info) = _best(run, repeats, warm=True)
-        rows.append(
-            _row(
-                "rigid",
-                "`propagate_attitude` split4",
-                f"h = {h:g} s",
-                7,
-                SPAN,
-                sec,
-                steps=info["n_steps"],
-                err=errs(np.vstack([w0, w]), np.vstack([q0, q])),
-            )
-        )
-    for rtol in rtols:
-
-        def run(rtol=rtol):
-            return propagate_attitude(
-                inertia, w0, q0, t[1:], rotor_momentum=np.zeros(3), method="dop853", rtol=rtol, atol=rtol * 1e-3
-            )
-
-        sec, (w, q, info) = _best(run, repeats, warm=True)
-        rows.append(
-            _row(
-                "rigid",
-                "`propagate_attitude` dop853",
-                f"rtol {rtol:g}",
-                7,
-                SPAN,
-                sec,
-                fev=info["nfev"],
-                err=errs(np.vstack([w0, w]), np.vstack([q0, q])),
-            )
-        )
+        cost = {"steps": info["n_steps"]} if method == "split4" else {"fev": info["nfev"]}
+        rows.append(rigid(f"`propagate_attitude` {method}", setting, sec, errs(np.vstack([w0, w]), np.vstack([q0, q])),
+                          **cost))
     rhs = _rigid_rhs(inertia)
     y0 = np.concatenate([q0, w0])
     for rtol in rtols:
@@ -216,18 +179,7 @@ def rigid_rows(repeats, rtols):
 
         sec, sol = _best(run, repeats, warm=True)
         q = sol.y[:4].T / np.linalg.norm(sol.y[:4].T, axis=1, keepdims=True)
-        rows.append(
-            _row(
-                "rigid",
-                "scipy DOP853, plain-float rhs",
-                f"rtol {rtol:g}",
-                7,
-                SPAN,
-                sec,
-                fev=sol.nfev,
-                err=errs(sol.y[4:].T, q),
-            )
-        )
+        rows.append(rigid("scipy DOP853, plain-float rhs", f"rtol {rtol:g}", sec, errs(sol.y[4:].T, q), fev=sol.nfev))
     return rows
 
 

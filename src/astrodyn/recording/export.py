@@ -366,6 +366,23 @@ def _message_head(version_key: str, version: str, run: Run, tr: Track, comments:
     ]
 
 
+def _ccsds_tracks(run: Run, kind: str):
+    """``(name, body, track, epochs, time_system)`` for each body whose ``kind`` track
+    ("orbit" or "attitude") has samples; ``epochs``, ``time_system``: :func:`ccsds_epochs`."""
+    for name, body in run.bodies.items():
+        tr = getattr(body, kind)
+        if tr is None or len(tr) == 0:
+            continue
+        epochs, system = ccsds_epochs(run, tr.t, tr.log_time)
+        yield name, body, tr, epochs, system
+
+
+def _write_lines(path: Path, lines: list[str]) -> Path:
+    """Write ``lines`` to ``path``, each ended by a newline (a KVN message); returns ``path``."""
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
 def _impulse_steps(run: Run, name: str) -> dict[float, float]:
     """``{t_k: |dv| m/s}`` of the closed loop's impulsive burns of body ``name``: applied
     in the step that starts at ``t_k`` (its actuator state's ``dv``; docs/control.md)."""
@@ -383,11 +400,7 @@ def write_oem(run: Run, out: Path) -> list[Path]:
     applied in and the next (a new META block), so that no reader interpolates across the
     velocity jump."""
     written = []
-    for name, body in run.bodies.items():
-        tr = body.orbit
-        if tr is None or len(tr) == 0:
-            continue
-        epochs, system = ccsds_epochs(run, tr.t, tr.log_time)
+    for name, _, tr, epochs, system in _ccsds_tracks(run, "orbit"):
         frames = sorted(set(tr.frame))
         comment = (f"scenario {run.scenario.get('name', '?')}, epoch {run.scenario.get('epoch', '?')}; "
                    f"models {', '.join(sorted(set(tr.model)))}")
@@ -412,9 +425,7 @@ def write_oem(run: Run, out: Path) -> list[Path]:
             lines.append("COMMENT position km, velocity km/s")
             for k in range(a, b):
                 lines.append(" ".join([epochs[k], *map(_f, r[k]), *map(_f, v[k])]))
-        path = out / f"{name}.oem"
-        path.write_text("\n".join(lines) + "\n")
-        written.append(path)
+        written.append(_write_lines(out / f"{name}.oem", lines))
     return written
 
 
@@ -440,11 +451,7 @@ def write_aem(run: Run, out: Path, version: str = "2.0") -> list[Path]:
     if version not in ("1.0", "2.0"):
         raise ExportError(f"AEM version: expected 1.0 or 2.0, got {version!r}")
     written = []
-    for name, body in run.bodies.items():
-        tr = body.attitude
-        if tr is None or len(tr) == 0:
-            continue
-        epochs, system = ccsds_epochs(run, tr.t, tr.log_time)
+    for name, body, tr, epochs, system in _ccsds_tracks(run, "attitude"):
         frame_a = _orbit_frame(body)
         w = _body_rates(tr) if version == "2.0" else None
         comments = ["Quaternion rotates REF_FRAME_A into REF_FRAME_B: v_B = C(q) v_A (Baruh ch. 7),",
@@ -474,9 +481,7 @@ def write_aem(run: Run, out: Path, version: str = "2.0") -> list[Path]:
                 row += [_f(w_deg[k, 0]), _f(w_deg[k, 1]), _f(w_deg[k, 2])]
             lines.append(" ".join(row))
         lines.append("DATA_STOP")
-        path = out / f"{name}.aem"
-        path.write_text("\n".join(lines) + "\n")
-        written.append(path)
+        written.append(_write_lines(out / f"{name}.aem", lines))
     return written
 
 

@@ -52,32 +52,47 @@ def frame_batch(buf, key_start, key_len, pay_start, pay_len):
     size = buf.shape[0]
     if size < 8 or buf[0] != 65 or buf[1] != 68 or buf[2] != 66 or buf[3] != 49:  # b"ADB1"
         return -1
-    count = np.int64(buf[4]) | (np.int64(buf[5]) << 8) | (np.int64(buf[6]) << 16) | (np.int64(buf[7]) << 24)
+    count = _le_uint(buf, 4, 4)
     if count > key_start.shape[0]:
         return -1
     pos = 8
     for i in range(count):
-        if pos + 2 > size:
+        start, n = _prefixed_span(buf, pos, 2)  # the key, u16 length
+        if start < 0:
             return -1
-        klen = np.int64(buf[pos]) | (np.int64(buf[pos + 1]) << 8)
-        pos += 2
-        if pos + klen > size:
+        key_start[i] = start
+        key_len[i] = n
+        start, n = _prefixed_span(buf, start + n, 4)  # the payload, u32 length
+        if start < 0:
             return -1
-        key_start[i] = pos
-        key_len[i] = klen
-        pos += klen
-        if pos + 4 > size:
-            return -1
-        plen = np.int64(buf[pos]) | (np.int64(buf[pos + 1]) << 8) | (np.int64(buf[pos + 2]) << 16) | (np.int64(buf[pos + 3]) << 24)
-        pos += 4
-        if pos + plen > size:
-            return -1
-        pay_start[i] = pos
-        pay_len[i] = plen
-        pos += plen
+        pay_start[i] = start
+        pay_len[i] = n
+        pos = start + n
     if pos != size:
         return -1
     return count
+
+
+@jit(inline="always")
+def _le_uint(buf, pos, width):
+    """The unsigned little-endian integer of the ``width`` bytes of ``buf`` at ``pos`` (int64)."""
+    n = np.int64(0)
+    for j in range(width):
+        n |= np.int64(buf[pos + j]) << (8 * j)
+    return n
+
+
+@jit(inline="always")
+def _prefixed_span(buf, pos, width):
+    """The span of bytes that a ``width``-byte little-endian length at ``pos`` heads:
+    ``(start, length)``, or ``(-1, 0)`` when the length or the span runs past the end."""
+    size = buf.shape[0]
+    if pos + width > size:
+        return -1, np.int64(0)
+    n = _le_uint(buf, pos, width)
+    if pos + width + n > size:
+        return -1, np.int64(0)
+    return pos + width, n
 
 
 @jit

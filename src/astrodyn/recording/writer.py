@@ -36,6 +36,7 @@ not recorded: the first message with a seq wins).
 from __future__ import annotations
 
 import json
+import operator
 import os
 import time
 from collections.abc import Mapping
@@ -62,6 +63,20 @@ class RecordingError(Exception):
     """An MCAP file cannot be written or read; the text starts with the path."""
 
 
+def _tracker_slot(view: str, doc: str) -> property:
+    """A read-write property: the element at the channel's ``slot`` of its tracker's
+    memoryview named ``view``."""
+    get_view = operator.attrgetter(view)
+
+    def fget(self) -> int:
+        return get_view(self.tracker)[self.slot]
+
+    def fset(self, value: int) -> None:
+        get_view(self.tracker)[self.slot] = value
+
+    return property(fget, fset, doc=doc)
+
+
 class _ChannelSeq:
     """One channel's seq accounting; ``next`` and ``count`` live in the tracker's arrays
     (slot ``slot``) so the compiled batch ingest (:mod:`astrodyn.recording.ingest`) can
@@ -81,21 +96,8 @@ class _ChannelSeq:
         self.seeded_below = 0  # seqs below this are in an earlier part (seed)
         self.already_recorded = 0  # arrivals below seeded_below: dropped, not duplicates
 
-    @property
-    def next(self) -> int:
-        return self.tracker._next_view[self.slot]
-
-    @next.setter
-    def next(self, value: int) -> None:
-        self.tracker._next_view[self.slot] = value
-
-    @property
-    def count(self) -> int:
-        return self.tracker._count_view[self.slot]
-
-    @count.setter
-    def count(self, value: int) -> None:
-        self.tracker._count_view[self.slot] = value
+    next = _tracker_slot("_next_view", "The next seq expected (int): the tracker's ``next_seq[slot]``.")
+    count = _tracker_slot("_count_view", "Messages recorded (int): the tracker's ``counts[slot]``.")
 
 
 class SeqTracker:

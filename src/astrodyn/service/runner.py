@@ -58,7 +58,7 @@ from astrodyn.service.signals import catch_stop_signals
 from astrodyn.service.summary import file_summary, print_summary, propagator_rows
 from astrodyn.service.supervision import RestartBudget, next_event_seq, plan_logger_restart, wait_until_gone
 
-__all__ = ["main", "run_scenario", "ScenarioRun", "EXIT_REJECTED"]
+__all__ = ["main", "run_scenario", "ScenarioRun", "EXIT_REJECTED", "logger_base_argv", "propagator_argv"]
 
 #: Most loggers of one run (``--loggers``): the main one and its hot standbys.
 MAX_LOGGERS = 8
@@ -66,6 +66,25 @@ MAX_LOGGERS = 8
 #: Exit status of ``astrodyn run`` when the run completed but the logger rejected messages
 #: that were not the run's own (forged, replayed, ghost bodies): the record was attacked.
 EXIT_REJECTED = 3
+
+
+def logger_base_argv(scenario: Scenario, metadata: Path, config_path: Path, expect: list[str],
+                     connect_args: list[str]) -> list[str]:
+    """The command line every logger of a run starts from (``run`` and ``serve``: the main
+    logger, its restarts and the hot standbys add ``--out`` and the rest): the scenario's
+    name and epoch (Unix time in ns), its ``metadata`` file (JSON), the config, no
+    control channel of its own, the processes it expects (``--expect``) and the bus
+    arguments ``connect_args``."""
+    return [*logger_command(), "--scenario", scenario.name, "--epoch-ns", str(scenario.epoch_unix_ns),
+            "--metadata", str(metadata), "--config", str(config_path), "--no-control",
+            *sum((["--expect", k] for k in expect), []), *connect_args]
+
+
+def propagator_argv(kind: str, config_path: Path, connect_args: list[str], *options: str) -> list[str]:
+    """The command line of the process ``kind`` of a run (a propagator, or ``"plant"``, the
+    closed loop's plant): the config, ``options``, then the bus arguments ``connect_args``."""
+    return [*(plant_command() if kind == "plant" else propagator_command(kind)), str(config_path), *options,
+            *connect_args]
 
 
 def run_scenario(scenario: Scenario, config_path: Path, out: Path, *, cross_check: bool = False,
@@ -150,9 +169,7 @@ class ScenarioRun:
             meta_path = self.tmpd / "scenario.json"
             meta_path.write_text(json.dumps(scenario.to_metadata()))
             try:
-                common = [*logger_command(), "--scenario", scenario.name, "--epoch-ns", str(scenario.epoch_unix_ns),
-                          "--metadata", str(meta_path), "--config", str(self.config_path), "--no-control",
-                          *sum((["--expect", k] for k in self.propagators), []), *self.connect_args]
+                common = logger_base_argv(scenario, meta_path, self.config_path, self.propagators, self.connect_args)
                 self.logger_argv = [*common, "--out", str(self.out), "--leave-partial"]
                 self.children["logger"] = Child("logger", [*self.logger_argv, *self.logger_args], self.tmpd,
                                                  env=self.child_env)
@@ -191,14 +208,14 @@ class ScenarioRun:
     def start_propagator(self, kind: str, resume_args: dict, n: int = 0, event_seq: int = 0) -> None:
         children = self.children
         if kind == "plant":
-            argv = [*plant_command(), str(self.config_path), *self.connect_args]
+            argv = propagator_argv(kind, self.config_path, self.connect_args)
             if self.token_file is not None:
                 argv += ["--control-token-file", str(self.token_file)]
             if self.commands is not None:
                 argv += ["--commands", str(self.commands)]
             children[kind] = Child(kind, argv, self.tmpd, env=self.child_env)
             return
-        argv = [*propagator_command(kind), str(self.config_path), *self.connect_args]
+        argv = propagator_argv(kind, self.config_path, self.connect_args)
         if event_seq:
             argv += ["--first-event-seq", str(event_seq)]
         if not math.isinf(self.real_time_factor):

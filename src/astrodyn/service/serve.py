@@ -58,18 +58,10 @@ from pathlib import Path
 from astrodyn import auth, bus
 from astrodyn.recording.writer import standby_path
 from astrodyn.scenario import ScenarioError, load, plan as make_plan
-from astrodyn.service.children import (
-    Child,
-    logger_command,
-    plant_command,
-    propagator_command,
-    start_controller,
-    wait_ready,
-    work_directory,
-)
+from astrodyn.service.children import Child, start_controller, wait_ready, work_directory
 from astrodyn.service.output import check_output_path
 from astrodyn.service.propagator import MODEL_ENDED_EXIT, command_key
-from astrodyn.service.runner import MAX_LOGGERS, check_closed_loop_arguments
+from astrodyn.service.runner import MAX_LOGGERS, check_closed_loop_arguments, logger_base_argv, propagator_argv
 from astrodyn.service.signals import StopFlag
 from astrodyn.service.supervision import (
     RestartBudget,
@@ -113,9 +105,7 @@ class Supervisor:
         secret = auth.RunSecret.generate()
         self.child_env = {auth.SECRET_ENV: str(secret.save(tmp))}
         self.signer = auth.Signer(secret, "serve")
-        common = [*logger_command(), "--scenario", scenario.name, "--epoch-ns", str(scenario.epoch_unix_ns),
-                  "--metadata", str(meta), "--config", str(config_path), "--no-control",
-                  *sum((["--expect", k] for k in self.propagators), []), *connect_args]
+        common = logger_base_argv(scenario, meta, config_path, self.propagators, connect_args)
         if roll_size:
             common += ["--roll-size", str(roll_size)]
         if roll_interval:
@@ -135,8 +125,7 @@ class Supervisor:
                     ch.stop()
                     ch.close()
                 raise bus.BusError(failure)
-        self._argv = {kind: [*(plant_command() if kind == "plant" else propagator_command(kind)), str(config_path),
-                             "--endless", *connect_args] for kind in self.propagators}
+        self._argv = {kind: propagator_argv(kind, config_path, connect_args, "--endless") for kind in self.propagators}
         if "plant" in self._argv and token_file is not None:  # outside controllers present serve's token
             self._argv["plant"] += ["--control-token-file", str(token_file)]
         self.schedule: tuple[float, float] | None = None  # (wall, t): sim t due at that monotonic wall time

@@ -1,0 +1,28 @@
+"""Driving a running ``astrodyn serve`` from a test: its status over the control channel,
+and waiting (wall clock) until it reports what the test needs."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+
+from astrodyn import bus
+
+
+def serve_status(session, scenario: str, token: str) -> Callable[[], dict]:
+    """A callable that asks the serve of ``scenario`` for its ``status`` (the reply dict,
+    fresh on each call) through the Zenoh ``session``, with the control ``token``."""
+
+    def status() -> dict:
+        return bus.send_control(session, scenario, "status", token=token)[0]
+
+    return status
+
+
+def wait_until(ready: Callable[[], object], timeout_s: float, what: str, poll_s: float = 0.2) -> None:
+    """Call ``ready()`` every ``poll_s`` s until it returns a true value; fail with ``what``
+    once ``timeout_s`` s of wall time have passed without it."""
+    deadline = time.monotonic() + timeout_s
+    while not ready():
+        assert time.monotonic() < deadline, what
+        time.sleep(poll_s)
