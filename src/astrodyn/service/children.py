@@ -41,7 +41,8 @@ from pathlib import Path
 from astrodyn import auth, bus
 
 __all__ = ["Child", "wait_ready", "children_of", "logger_command", "propagator_command", "plant_command", "controller_argv", "start_controller", "share_fate_with_supervisor",
-           "stop_process", "work_directory", "SUPERVISOR_ENV", "ORPHAN_GRACE_S", "EXIT_ORPHANED"]
+           "stop_process", "work_directory", "SUPERVISOR_ENV", "ORPHAN_GRACE_S", "EXIT_ORPHANED", "LOGGED_WAIT_S",
+           "MODEL_ENDED_EXIT"]
 
 #: Environment variable that carries the supervisor's PID to each child.
 SUPERVISOR_ENV = "ASTRODYN_SUPERVISOR_PID"
@@ -49,6 +50,13 @@ SUPERVISOR_ENV = "ASTRODYN_SUPERVISOR_PID"
 ORPHAN_GRACE_S = 1.5
 #: Exit status of a child that found its supervisor gone.
 EXIT_ORPHANED = 70
+#: Exit status of a propagator whose model cannot go on (a rolling disk fell flat): every
+#: state before that is published and logged; a supervisor (``run``, ``serve``) does not
+#: restart it (it would end there again) and the run fails naming the body and the time.
+MODEL_ENDED_EXIT = 4
+#: Seconds a process waits, after its end-of-run event, for the logger's receipt of it
+#: (``astrodyn.service.propagator.wait_until_logged``) before it closes its session.
+LOGGED_WAIT_S = 60.0
 _PR_SET_PDEATHSIG = 1
 
 

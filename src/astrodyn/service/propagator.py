@@ -37,7 +37,7 @@ import numpy as np
 from astrodyn import bus, messages
 from astrodyn.jit import service_threads, set_threads
 from astrodyn.scenario import Scenario, plan as make_plan
-from astrodyn.service.children import share_fate_with_supervisor
+from astrodyn.service.children import LOGGED_WAIT_S, MODEL_ENDED_EXIT, share_fate_with_supervisor
 from astrodyn.service.signals import catch_stop_signals
 from astrodyn.simulate import AttitudeEngine, ModelEnded, OrbitEngine
 
@@ -121,12 +121,6 @@ class PropagatorOptions:
 
 class _Stop(Exception):
     pass
-
-
-#: Exit status of a propagator whose model cannot go on (a rolling disk fell flat): every
-#: state before that is published and logged; a supervisor does not restart it (it would
-#: end there again) and the run fails naming the body and the time.
-MODEL_ENDED_EXIT = 4
 
 
 def _auto_block(n_bodies: int) -> int:
@@ -357,7 +351,7 @@ class _Conservation:
         return out
 
 
-def wait_until_logged(session, scenario: str, kind: str, timeout_s: float = 60.0) -> None:
+def wait_until_logged(session, scenario: str, kind: str, timeout_s: float = LOGGED_WAIT_S) -> None:
     """Keep the session open until the logger has our end-of-run event (so every sample
     before it too: puts return once queued locally, and closing the session drops what is
     still queued -- measured: 7000 of 600k samples lost without this wait).  Gives up when

@@ -44,6 +44,8 @@ from astrodyn import auth, bus
 from astrodyn.recording.writer import partial_path, standby_path
 from astrodyn.scenario import Scenario, ScenarioError, load, plan as make_plan
 from astrodyn.service.children import (
+    LOGGED_WAIT_S,
+    MODEL_ENDED_EXIT,
     Child,
     logger_command,
     plant_command,
@@ -488,7 +490,8 @@ def _watch(scenario: Scenario, p, children: dict, beats, alive, progress: bool, 
         alive.poll()
         for name, ch in list(children.items()):
             rc = ch.poll()
-            if rc not in (None, 0) and on_death is not None and not (interrupted and interrupted["signal"]):
+            ended = name in propagators and rc == MODEL_ENDED_EXIT  # not restarted: it would end there again
+            if rc not in (None, 0) and on_death is not None and not ended and not (interrupted and interrupted["signal"]):
                 failure = on_death(name, rc)
                 if failure:
                     return failure
@@ -496,16 +499,21 @@ def _watch(scenario: Scenario, p, children: dict, beats, alive, progress: bool, 
             if rc is not None and (name == "logger" or rc != 0):
                 if name == "logger" and rc == 0:
                     # the logger ends by itself once it holds everything: give the
-                    # propagators a moment to exit after their end-of-run event
-                    deadline = time.monotonic() + 10.0
+                    # propagators time to exit after their end-of-run event (a propagator
+                    # waits up to LOGGED_WAIT_S for the logger's receipt; on loaded cores
+                    # its exit can take seconds)
+                    deadline = time.monotonic() + LOGGED_WAIT_S + 5.0
                     while time.monotonic() < deadline and any(children[k].poll() is None for k in propagators):
                         time.sleep(0.05)
                     if all(children[k].poll() == 0 for k in propagators):
-                        return None if rc == 0 else f"logger exited with status {rc}: {ch.stderr_tail()}"
+                        return None
                     failed = [k for k in propagators if children[k].poll() not in (0, None)]
-                    if failed:  # the logger finished the file after a process failed: report that one
-                        name, ch = failed[0], children[failed[0]]
-                        rc = ch.poll()
+                    if not failed:
+                        late = [k for k in propagators if children[k].poll() is None]
+                        return (f"process {late[0]} (pid {children[late[0]].pid}) did not exit within "
+                                f"{LOGGED_WAIT_S + 5.0:g} s after the logger finished the recording")
+                    name, ch = failed[0], children[failed[0]]  # the logger finished the file after it failed
+                    rc = ch.poll()
                 how_far = beats.last.get(name, {}).get("t")
                 where = f", sim t reached {how_far:.6g} s of {duration:.6g} s" if how_far is not None else ""
                 bodies = [b.name for b in p.bodies if (b.orbit_model if name == "orbit" else b.attitude_model)]

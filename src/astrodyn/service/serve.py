@@ -58,9 +58,9 @@ from pathlib import Path
 from astrodyn import auth, bus
 from astrodyn.recording.writer import standby_path
 from astrodyn.scenario import ScenarioError, load, plan as make_plan
-from astrodyn.service.children import Child, start_controller, wait_ready, work_directory
+from astrodyn.service.children import MODEL_ENDED_EXIT, Child, start_controller, wait_ready, work_directory
 from astrodyn.service.output import check_output_path
-from astrodyn.service.propagator import MODEL_ENDED_EXIT, command_key
+from astrodyn.service.propagator import command_key
 from astrodyn.service.runner import MAX_LOGGERS, check_closed_loop_arguments, logger_base_argv, propagator_argv
 from astrodyn.service.signals import StopFlag
 from astrodyn.service.supervision import (
