@@ -234,6 +234,57 @@ def test_an_outside_controller_joins_with_the_token_and_forgers_are_rejected(tmp
     assert energy[-1] < 0.5 * energy[0]  # the token controller's damping acted
 
 
+def test_a_flood_of_forged_commands_does_not_starve_the_controllers_answers(tmp_path):
+    """A forger floods the body's command key and the controller's answer key with unsigned
+    messages, as fast as one Python process can put (~900,000 a second), for 3 s of a
+    lockstep run.  The controller's commands and answers still reach the plant: the run
+    completes (no controller timeout), no forged command is applied, the attack is
+    reported (exit 3).  (An intake read from a zenoh FIFO channel deadlocked here, one
+    read from a ring channel lost the controller's commands: astrodyn.service.plant.)"""
+    cfg = _config("detumble", tmp_path, **{'duration = "900 s"': 'duration = "30 s"', 't = "300 s"': 't = "10 s"',
+                                            't = "500 s"': 't = "20 s"'})
+    out = tmp_path / "out.mcap"
+    proc, found = _start_run([cfg, "--out", out, "--quiet"])
+    env = {**os.environ, "ASTRODYN_CONTROL_TOKEN_FILE": found["token"]}
+    env.pop("ASTRODYN_RUN_SECRET_FILE", None)
+    ctl = subprocess.Popen([sys.executable, str(EXAMPLES / "detumble.py")], cwd=ROOT, stderr=subprocess.PIPE,
+                           env={**env, "ASTRODYN_CONNECT": found["hub"], "ASTRODYN_SCENARIO": "detumble",
+                                "ASTRODYN_CONTROLLER": "detumble"})
+    conf = zenoh.Config()
+    conf.insert_json5("mode", '"client"')
+    conf.insert_json5("connect/endpoints", json.dumps([found["hub"]]))
+    conf.insert_json5("scouting/multicast/enabled", "false")
+    forged = json.dumps({"t": 1.0, "seq": 0, "sender": "detumble", "torque": [1.0, 1.0, 1.0]}).encode()
+    answer = json.dumps({"t": 1.0, "seq": 10, "sender": "detumble", "commands": 0}).encode()
+    sent = 0
+    with zenoh.open(conf) as session:
+        ticks = session.declare_subscriber("astrodyn/detumble/@tick", zenoh.handlers.FifoChannel(1024))
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline:  # flood while the loop runs
+            tick = ticks.try_recv()
+            if tick is not None and json.loads(tick.payload.to_bytes())["seq"] >= 5:
+                break
+            time.sleep(0.001)
+        commands = session.declare_publisher("astrodyn/detumble/sc/command")
+        answers = session.declare_publisher("astrodyn/detumble/@done/detumble")
+        stop = time.monotonic() + 3.0
+        while time.monotonic() < stop:
+            for _ in range(100):
+                commands.put(forged)
+            answers.put(answer)
+            sent += 101
+        err = _finish(proc)
+    ctl.wait(timeout=30)
+    assert sent > 10_000, sent  # a flood, not a trickle
+    assert proc.returncode == 3, err
+    assert "did not answer" not in err and "ATTACKED" in err and "command unsigned" in err, err
+    run = load(out)
+    commands = run.channels["astrodyn/detumble/sc/command"]
+    assert len(commands) > 100 and set(commands.sender) == {"detumble"}
+    assert not np.any(np.all(np.stack(commands.torque) == 1.0, axis=1))  # no forged command was applied
+    assert run.channels["astrodyn/detumble/sc/attitude"].t[-1] == pytest.approx(30.0)  # the whole run
+
+
 def test_commands_on_a_scene_without_control_and_bad_closed_loop_arguments_are_refused(tmp_path):
     proc = _run([ROOT / "configs" / "demo.toml", "--out", tmp_path / "x.mcap", "--controller", "python x.py"])
     assert proc.returncode == 2 and "--controller: expected a closed-loop scene" in proc.stderr, proc.stderr

@@ -45,6 +45,7 @@ import functools
 import gc
 import json
 import math
+import queue
 import re
 import sys
 import time
@@ -72,13 +73,15 @@ __all__ = ["main", "run_plant", "PlantLoop", "recorded_commands", "recorded_faul
            "ControllerTimeout", "PROCESS"]
 
 PROCESS = "plant"
-#: Samples each of the plant's intake channels holds (a flood from a hostile process must not
-#: grow memory without bound; a controller sends a few per step).
+#: Samples waiting in the plant's intake before it drops new ones (a flood from a hostile
+#: process must not grow memory without bound; a controller sends a few per step).  The
+#: intake is a callback into a queue.Queue, not a zenoh FIFO or ring channel read by the
+#: plant's thread (measured faster by 50-70 us a round trip): a FIFO channel that fills
+#: blocks zenoh's threads and deadlocked a lockstep run under a flood of forged commands,
+#: a ring channel drops the controller's commands under the same flood, while a callback
+#: slows zenoh's receiving enough that the hub drops the flood, not the controller's
+#: messages (tests/test_closed_loop.py).
 INTAKE_CAPACITY = 100_000
-#: Waiting for a controller: the intake is polled without a pause for up to SPIN_S (s), then
-#: after pauses of POLL_S, growing with the wait to 5 % of it, at most 5 ms (see Intake.wait).
-SPIN_S = 0.001
-POLL_S = 0.0002
 MAX_EXAMPLES = 20
 #: Processes of a run whose @batch envelopes carry states, never commands.
 RUN_PROCESSES = frozenset(("plant", "orbit", "attitude", "logger", "serve", "run"))
@@ -102,48 +105,17 @@ class Intake:
         self.command_keys = {messages.body_key(scenario, b, "command"): b for b in self.bodies}
         self.verifier = verifier
         self.token = token
-        self.channels: list = []  # try_recv of each subscriber's channel (see subscribe)
+        self.queue: queue.Queue = queue.Queue(INTAKE_CAPACITY)
         self.rejected: dict[str, int] = {}
         self.examples: list[str] = []
+        self.dropped = 0
 
-    def subscribe(self, session) -> list:
-        """Subscribe to the scenario's commands, answers and controller envelopes, each into a
-        bounded FIFO channel (full: zenoh holds the sender back until the plant drains it, so
-        a flood costs the flooder, not memory).  Returns the subscribers, to be held."""
-        base = f"{messages.PREFIX}/{self.scenario}"
-        subs = [session.declare_subscriber(f"{base}/{tail}", zenoh.handlers.FifoChannel(INTAKE_CAPACITY))
-                for tail in ("*/command", "@done/*", "@batch/*")]
-        self.channels = [s.try_recv for s in subs]
-        return subs
-
-    def take(self) -> tuple[str, bytes, bytes | None] | None:
-        """The next sample waiting in any channel as ``(key, payload, attachment)``, or None."""
-        for try_recv in self.channels:
-            sample = try_recv()
-            if sample is not None:
-                a = sample.attachment
-                return str(sample.key_expr), sample.payload.to_bytes(), None if a is None else a.to_bytes()
-        return None
-
-    def wait(self, block_s: float, spin_s: float = 0.0) -> tuple[str, bytes, bytes | None] | None:
-        """:meth:`take`, waiting up to ``block_s`` s: polled without a pause for the first
-        ``spin_s`` s, then after pauses of ``POLL_S`` growing to 5 % of the time waited (at
-        most 5 ms: the pauses add at most ~5 % to a long wait and cost little CPU while a
-        controller thinks).  Spinning saves the wake-up of a sleeping thread, 50-70 us of a
-        ~200 us lockstep round trip on a 2-core VM (``astrodyn bench control``), but takes a
-        core from the controller and the logger: the plant spins only while answers come
-        within ``SPIN_S`` (see PlantLoop.exchange)."""
-        start = time.monotonic()
-        spin_until, deadline = start + spin_s, start + block_s
-        while True:
-            item = self.take()
-            if item is not None:
-                return item
-            now = time.monotonic()
-            if now >= deadline:
-                return None
-            if now >= spin_until:
-                time.sleep(min(max(POLL_S, 0.05 * (now - start)), 0.005, deadline - now))
+    def callback(self, sample) -> None:  # Zenoh's thread: copy out, never block
+        a = sample.attachment
+        try:
+            self.queue.put_nowait((str(sample.key_expr), sample.payload.to_bytes(), None if a is None else a.to_bytes()))
+        except queue.Full:
+            self.dropped += 1
 
     def reject(self, reason: str, detail: str) -> None:
         self.rejected[reason] = self.rejected.get(reason, 0) + 1
@@ -342,7 +314,6 @@ class PlantLoop:
         self.answered: dict[str, int] = {}  # last control step each controller answered
         self.late = self.refused = self.applied = self.published = 0
         self.round_trips: list[float] = []  # lockstep: wall s from a tick to the last answer (the first MAX_ROUND_TRIPS)
-        self.last_round_trip = 0.0  # s, of the last lockstep exchange (spin while answers come fast)
         self.refusals: list[str] = []
         self.t_reached = 0.0
         if real_time_factor is None:
@@ -398,14 +369,12 @@ class PlantLoop:
         self.applied += 1
         self.applied_now.append((self.key(bname, "command"), cmd, raw))  # re-published by apply_commands
 
-    def drain(self, block_s: float | None, spin_s: float = 0.0) -> bool:
-        """Take what the intake holds (waiting up to ``block_s`` for the first, the first
-        ``spin_s`` of it without a pause); False if nothing came."""
+    def drain(self, block_s: float | None) -> bool:
+        """Take what the intake holds (waiting up to ``block_s`` for the first); False if nothing came."""
         intake = self.intake
-        item = intake.take()
-        if item is None and block_s:
-            item = intake.wait(block_s, spin_s)
-        if item is None:
+        try:
+            item = intake.queue.get(timeout=block_s) if block_s else intake.queue.get_nowait()
+        except queue.Empty:
             return False
         while True:
             for kind, who, msg in (intake.judge_batch(*item) if "/@batch/" in item[0] else
@@ -419,8 +388,9 @@ class PlantLoop:
                 elif kind == "done":
                     self.promised[who] = self.promised.get(who, 0) + int(msg["commands"])
                     self.answered[who] = max(self.answered.get(who, -1), int(msg["seq"]))
-            item = intake.take()
-            if item is None:
+            try:
+                item = intake.queue.get_nowait()
+            except queue.Empty:
                 return True
 
     # ------------------------------------------------------------------ one step
@@ -485,16 +455,15 @@ class PlantLoop:
             waiting = [c for c in self.expected
                        if self.answered.get(c, -1) < j or self.received.get(c, 0) < self.promised.get(c, 0)]
             if not waiting or self.stopping["why"]:
-                self.last_round_trip = time.monotonic() - sent_at
                 if self.expected and len(self.round_trips) < MAX_ROUND_TRIPS:
-                    self.round_trips.append(self.last_round_trip)
+                    self.round_trips.append(time.monotonic() - sent_at)
                 return
             left = deadline - time.monotonic()
             if left <= 0:
                 raise ControllerTimeout(
                     f"controller {waiting[0]!r} did not answer control step {j} (t = {t:g} s) within "
                     f"{self.control.timeout:g} s" + (f" (also {', '.join(map(repr, waiting[1:]))})" if waiting[1:] else ""))
-            self.drain(min(left, 0.5), SPIN_S if self.last_round_trip < SPIN_S else 0.0)
+            self.drain(min(left, 0.5))
             heartbeat.beat(t=t, step=k, waiting=waiting)
             obey_commands(supervisor, self.pacer, t, self.stopping, heartbeat, self.commands_from, self.verbs)
 
@@ -570,9 +539,11 @@ class PlantLoop:
         with bus.declare_alive(session, name, PROCESS), \
                 bus.Heartbeat(session, name, PROCESS, signer=self.signer) as heartbeat, \
                 bus.EventPublisher(session, name, PROCESS, signer=self.signer) as events, \
+                session.declare_subscriber(f"{messages.PREFIX}/{name}/*/command", self.intake.callback), \
+                session.declare_subscriber(f"{messages.PREFIX}/{name}/@done/*", self.intake.callback), \
+                session.declare_subscriber(f"{messages.PREFIX}/{name}/@batch/*", self.intake.callback), \
                 bus.BatchPublisher(session, name, PROCESS, signer=self.signer) as batch, \
                 session.declare_subscriber(command_key(name), zenoh.handlers.FifoChannel(256)) as supervisor:
-            intake_subscribers = self.intake.subscribe(session)  # noqa: F841 (held for the run)
             bus.wait_for_process(session, name, "logger", timeout_s=wait_logger_s)
             events.next_seq = int(first_event_seq)
             events.emit("start", 0.0, json.dumps({"bodies": len(self.plant.bodies), "mode": self.control.mode,
@@ -614,7 +585,7 @@ class PlantLoop:
             wall = time.monotonic() - wall0
             extra = {"last_step": k - 1, "t_reached": self.t_reached, "reason": failure or self.stopping["why"] or "end of scenario",
                      "applied": self.applied, "refused": self.refused, "late": self.late,
-                     "rejected": dict(self.intake.rejected)}
+                     "rejected": dict(self.intake.rejected), "dropped": self.intake.dropped}
             events.end(self.t_reached, self.published, **extra)
             heartbeat.beat(force=True, t=self.t_reached, step=k, done=True)
             wait_until_logged(session, name, PROCESS)
