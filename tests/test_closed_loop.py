@@ -191,13 +191,13 @@ def _finish(proc: subprocess.Popen) -> str:
     return err
 
 
-def test_an_outside_controller_joins_with_the_token_and_forgers_are_rejected(tmp_path):
-    """An outside controller (started by hand, not by the run) commands with the control
-    token; a forger on the same bus (no token, a wrong token, a stolen name) is dropped by
-    the plant, counted, and the run exits 3 (the record was attacked; docs/security.md)."""
+def _detumble_with_outside_controller(tmp_path: Path, out: Path):
+    """configs/detumble.toml cut to 30 s, run in the background into ``out``, and its
+    controller (examples/detumble.py) started by hand with the run's control token.
+    Returns the run, the controller and a zenoh client config for a third party on the
+    run's hub."""
     cfg = _config("detumble", tmp_path, **{'duration = "900 s"': 'duration = "30 s"', 't = "300 s"': 't = "10 s"',
                                             't = "500 s"': 't = "20 s"'})
-    out = tmp_path / "out.mcap"
     proc, found = _start_run([cfg, "--out", out, "--quiet"])
     env = {**os.environ, "ASTRODYN_CONTROL_TOKEN_FILE": found["token"]}
     env.pop("ASTRODYN_RUN_SECRET_FILE", None)
@@ -208,15 +208,30 @@ def test_an_outside_controller_joins_with_the_token_and_forgers_are_rejected(tmp
     conf.insert_json5("mode", '"client"')
     conf.insert_json5("connect/endpoints", json.dumps([found["hub"]]))
     conf.insert_json5("scouting/multicast/enabled", "false")
+    return proc, ctl, conf
+
+
+def _wait_for_tick(session, seq: int, timeout_s: float = 60.0) -> None:
+    """Until the plant's tick number ``seq`` (the lockstep loop is running)."""
+    ticks = session.declare_subscriber("astrodyn/detumble/@tick", zenoh.handlers.FifoChannel(1024))
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        tick = ticks.try_recv()
+        if tick is not None and json.loads(tick.payload.to_bytes())["seq"] >= seq:
+            break
+        time.sleep(0.001)
+    ticks.undeclare()
+
+
+def test_an_outside_controller_joins_with_the_token_and_forgers_are_rejected(tmp_path):
+    """An outside controller (started by hand, not by the run) commands with the control
+    token; a forger on the same bus (no token, a wrong token, a stolen name) is dropped by
+    the plant, counted, and the run exits 3 (the record was attacked; docs/security.md)."""
+    out = tmp_path / "out.mcap"
+    proc, ctl, conf = _detumble_with_outside_controller(tmp_path, out)
     forged = {"t": 1.0, "seq": 0, "sender": "detumble", "torque": [1.0, 1.0, 1.0]}
     with zenoh.open(conf) as session:
-        ticks = session.declare_subscriber("astrodyn/detumble/@tick", zenoh.handlers.FifoChannel(1024))
-        deadline = time.monotonic() + 60
-        while time.monotonic() < deadline:  # forge while the loop runs (not before it, not after it)
-            tick = ticks.try_recv()
-            if tick is not None and json.loads(tick.payload.to_bytes())["seq"] >= 5:
-                break
-            time.sleep(0.001)
+        _wait_for_tick(session, 5)  # forge while the loop runs (not before it, not after it)
         session.put("astrodyn/detumble/sc/command", json.dumps(forged))  # no authenticator
         session.put("astrodyn/detumble/sc/command", json.dumps(forged), attachment=b"ADT1" + b"x" * 43)  # wrong token
         session.put("astrodyn/detumble/ghost/command", json.dumps(forged), attachment=b"ADT1" + b"y" * 43)
@@ -241,30 +256,13 @@ def test_a_flood_of_forged_commands_does_not_starve_the_controllers_answers(tmp_
     completes (no controller timeout), no forged command is applied, the attack is
     reported (exit 3).  (An intake read from a zenoh FIFO channel deadlocked here, one
     read from a ring channel lost the controller's commands: astrodyn.service.plant.)"""
-    cfg = _config("detumble", tmp_path, **{'duration = "900 s"': 'duration = "30 s"', 't = "300 s"': 't = "10 s"',
-                                            't = "500 s"': 't = "20 s"'})
     out = tmp_path / "out.mcap"
-    proc, found = _start_run([cfg, "--out", out, "--quiet"])
-    env = {**os.environ, "ASTRODYN_CONTROL_TOKEN_FILE": found["token"]}
-    env.pop("ASTRODYN_RUN_SECRET_FILE", None)
-    ctl = subprocess.Popen([sys.executable, str(EXAMPLES / "detumble.py")], cwd=ROOT, stderr=subprocess.PIPE,
-                           env={**env, "ASTRODYN_CONNECT": found["hub"], "ASTRODYN_SCENARIO": "detumble",
-                                "ASTRODYN_CONTROLLER": "detumble"})
-    conf = zenoh.Config()
-    conf.insert_json5("mode", '"client"')
-    conf.insert_json5("connect/endpoints", json.dumps([found["hub"]]))
-    conf.insert_json5("scouting/multicast/enabled", "false")
+    proc, ctl, conf = _detumble_with_outside_controller(tmp_path, out)
     forged = json.dumps({"t": 1.0, "seq": 0, "sender": "detumble", "torque": [1.0, 1.0, 1.0]}).encode()
     answer = json.dumps({"t": 1.0, "seq": 10, "sender": "detumble", "commands": 0}).encode()
     sent = 0
     with zenoh.open(conf) as session:
-        ticks = session.declare_subscriber("astrodyn/detumble/@tick", zenoh.handlers.FifoChannel(1024))
-        deadline = time.monotonic() + 60
-        while time.monotonic() < deadline:  # flood while the loop runs
-            tick = ticks.try_recv()
-            if tick is not None and json.loads(tick.payload.to_bytes())["seq"] >= 5:
-                break
-            time.sleep(0.001)
+        _wait_for_tick(session, 5)  # flood while the loop runs
         commands = session.declare_publisher("astrodyn/detumble/sc/command")
         answers = session.declare_publisher("astrodyn/detumble/@done/detumble")
         stop = time.monotonic() + 3.0
