@@ -399,7 +399,7 @@ def check_state(data: bytes, kind: str) -> tuple[float, int]:
 # alike if and only if |x| < 1e-9 (exponents of two or three digits, e.g. ``1e-10``, and
 # 0.0) or 1e-4 <= |x| < 1e16 (tests/test_encode_single.py: random bit patterns, the
 # boundaries; string escapes agree for every code point); the other finite floats are
-# handed to msgspec as raw text, ``repr``'s (:func:`_raw_repr`).  For each message type
+# handed to msgspec as raw text, ``repr``'s (:func:`_repr_text`).  For each message type
 # and tuple of keys a check is generated from the definition -- one straight-line function,
 # a type test and a few comparisons per value, instead of a walk over the message.  By ``mode``:
 #
@@ -427,12 +427,6 @@ def _in_text_range(x: str) -> str:
     return f"({lo!r} <= {x} < {hi!r} or {-hi!r} < {x} <= {-lo!r} or {-tiny!r} < {x} < {tiny!r})"
 
 
-def _raw_repr(x: float) -> msgspec.Raw:
-    """``repr(x)`` as raw JSON text, for a finite float outside the text range (the
-    generated checks inline the same expression, ``_Raw(f"{x!r}")``)."""
-    return _Raw(f"{x!r}")
-
-
 _Raw = msgspec.Raw
 
 
@@ -443,7 +437,7 @@ def _as_text(x: str) -> str:
 
 
 def _repr_text(x: str) -> str:
-    """Source of ``repr``'s text of float ``x`` as raw JSON (what :func:`_raw_repr` returns)."""
+    """Source of ``repr``'s text of float ``x`` (a name) as raw JSON: ``_Raw(f"{x!r}")``."""
     return f'_Raw(f"{{{x}!r}}")'
 
 
