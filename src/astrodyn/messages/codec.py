@@ -196,6 +196,15 @@ def _unpatterned(tp: Any, name: str, patterns: dict[str, str]) -> Any:
     return typing.Annotated[(base, *kept)]
 
 
+def _has_pattern(schema: Any) -> bool:
+    """True if a JSON Schema (nested dicts and lists) still states a string pattern."""
+    if isinstance(schema, dict):
+        return isinstance(schema.get("pattern"), str) or any(_has_pattern(v) for v in schema.values())
+    if isinstance(schema, list):
+        return any(_has_pattern(v) for v in schema)
+    return False
+
+
 @functools.cache
 def _loose_decoding(kind: str) -> tuple[Any, tuple, Any]:
     """``(decode, tests, as_dict)`` for ``kind``: msgspec's decoder of the message type as
@@ -217,7 +226,7 @@ def _loose_decoding(kind: str) -> tuple[Any, tuple, Any]:
     namespace = {"__post_init__": message_type.__post_init__} if hasattr(message_type, "__post_init__") else {}
     loose = msgspec.defstruct(message_type.__name__, fields, namespace=namespace, omit_defaults=config.omit_defaults,
                               forbid_unknown_fields=config.forbid_unknown_fields)
-    if not patterns or "pattern" in json.dumps(msgspec.json.schema(loose)):
+    if not patterns or _has_pattern(msgspec.json.schema(loose)):
         return _decoder(kind).decode, (), as_dict
     tests = tuple((name, *_pattern_test(pattern)) for name, pattern in patterns.items())
     return msgspec.json.Decoder(loose).decode, tests, as_dict
