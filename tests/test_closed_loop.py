@@ -148,6 +148,24 @@ def test_a_controller_that_dies_ends_the_run_naming_it_and_the_recording_stays_v
     assert not run.truncated  # the logger finished the file
 
 
+def test_a_controller_that_dies_under_serve_ends_it_at_once_naming_it(tmp_path):
+    """In lockstep, ``serve`` does not wait out ``control.timeout`` (here 100 s) for a
+    controller that is gone: it stops, exit 1, naming it; the recording stays valid."""
+    cfg = _config("slew", tmp_path, **{'duration = "180 s"': 'duration = "100000 s"', 'timeout = "10 s"': 'timeout = "100 s"'})
+    out = tmp_path / "served.mcap"
+    ctl = _controller(tmp_path, "if n == 30: sys.exit(7)")
+    started = time.monotonic()
+    proc = subprocess.run([*RUN[:-1], "serve", str(cfg), "--out", str(out), "--rate", "50", "--max-wall", "90",
+                           "--controller", ctl], capture_output=True, text=True, timeout=120, cwd=ROOT)
+    assert time.monotonic() - started < 60, proc.stderr
+    assert proc.returncode == 1, proc.stderr
+    summary = json.loads(proc.stdout.strip().splitlines()[-1])
+    assert len(summary["failures"]) == 1 and summary["failures"][0].startswith("controller pd (pid "), summary
+    assert "exited with status 7" in summary["failures"][0], summary
+    att = load(summary["file"]).channels["astrodyn/slew/sc/attitude"]
+    assert 25 <= len(att) and np.array_equal(att.seq, np.arange(len(att)))  # every step up to the stop
+
+
 def test_a_controller_that_stalls_times_out_with_the_named_error(tmp_path):
     cfg = _config("slew", tmp_path, **{'duration = "180 s"': 'duration = "20 s"', 'timeout = "10 s"': 'timeout = "1 s"'})
     out = tmp_path / "stall.mcap"

@@ -22,7 +22,7 @@ class FakeChild:
     def poll(self) -> int | None:
         return self.rc
 
-    def stderr_tail(self, n: int = 1) -> str:
+    def last_words(self, n: int = 3) -> str:
         return TAIL
 
 

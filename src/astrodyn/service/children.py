@@ -243,6 +243,10 @@ class Child:
         except OSError:
             return ""
 
+    def last_words(self, n: int = 3) -> str:
+        """The last ``n`` lines of stderr, for a failure message ("no output on stderr" if none)."""
+        return self.stderr_tail(n) or "no output on stderr"
+
 
 def wait_ready(session, scenario: str, child: Child, timeout_s: float, interrupted: dict) -> str | None:
     """Wait for ``child``'s liveliness token; a failure description if it exits first (e.g.
@@ -252,7 +256,7 @@ def wait_ready(session, scenario: str, child: Child, timeout_s: float, interrupt
         rc = child.poll()
         if rc is not None:
             time.sleep(0.1)  # let its last words reach the stderr file
-            return f"process {child.name} (pid {child.pid}) exited with status {rc} during start-up: {child.stderr_tail(3)}"
+            return f"process {child.name} (pid {child.pid}) exited with status {rc} during start-up: {child.last_words(3)}"
         if interrupted["signal"]:
             return f"interrupted by {interrupted['signal']} during start-up"
         try:
@@ -260,4 +264,4 @@ def wait_ready(session, scenario: str, child: Child, timeout_s: float, interrupt
             return None
         except bus.BusError:
             if time.monotonic() > deadline:
-                return f"process {child.name} (pid {child.pid}) not ready after {timeout_s} s: {child.stderr_tail(3)}"
+                return f"process {child.name} (pid {child.pid}) not ready after {timeout_s} s: {child.last_words(3)}"

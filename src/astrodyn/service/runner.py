@@ -329,7 +329,7 @@ class ScenarioRun:
             dead = self.children[name]
             return (f"{name} (pid {dead.pid}) {_how(rc)}: a closed-loop run is not restarted (its controllers' "
                     f"state lives outside astrodyn); the recording holds everything up to here: "
-                    f"{dead.stderr_tail(3)}")
+                    f"{dead.last_words(3)}")
         return self.restart_logger(rc) if name == "logger" else self.restart_propagator(name, rc)
 
     def restart_logger(self, rc: int) -> str | None:
@@ -343,7 +343,7 @@ class ScenarioRun:
             dead = children["logger"]
             how = _how(rc)
             if not budget.allow():
-                return f"{budget.refusal()}; last: logger (pid {dead.pid}) {how}: {dead.stderr_tail(3)}"
+                return f"{budget.refusal()}; last: logger (pid {dead.pid}) {how}: {dead.last_words(3)}"
             dead.close()
             wait_until_gone(self.session, scenario.name, "logger")
             attempt = len(self.restarts_of("logger")) + 1
@@ -376,7 +376,7 @@ class ScenarioRun:
         dead = self.children[kind]
         how = _how(rc)
         if not self.budgets[kind].allow():
-            return f"{self.budgets[kind].refusal()}; last: {kind} (pid {dead.pid}) {how}: {dead.stderr_tail(3)}"
+            return f"{self.budgets[kind].refusal()}; last: {kind} (pid {dead.pid}) {how}: {dead.last_words(3)}"
         dead.close()
         wait_until_gone(self.session, scenario.name, kind)
         args, step = dict(self.extra_args.get(kind, {})), None
@@ -425,7 +425,7 @@ class ScenarioRun:
             self.result["processes"][name] = {"pid": ch.pid, "exit": ch.poll(), "summary": ch.summary(),
                                               "stderr": ch.stderr_tail()}
         if logger.poll() not in (0, None) and not failure:
-            failure = f"logger exited with status {logger.poll()}: {logger.stderr_tail()}"
+            failure = f"logger exited with status {logger.poll()}: {logger.last_words(5)}"
         return failure
 
 
@@ -519,7 +519,7 @@ def _watch(scenario: Scenario, p, children: dict, beats, alive, progress: bool, 
                 bodies = [b.name for b in p.bodies if (b.orbit_model if name == "orbit" else b.attitude_model)]
                 who = f" (bodies: {', '.join(bodies[:5])}{', ...' if len(bodies) > 5 else ''})" if name != "logger" else ""
                 sig = f"killed by signal {-rc}" if rc < 0 else f"exited with status {rc}"
-                return f"process {name} (pid {ch.pid}) {sig}{who}{where}: {ch.stderr_tail(3)}"
+                return f"process {name} (pid {ch.pid}) {sig}{who}{where}: {ch.last_words(3)}"
         if all(children[k].poll() == 0 for k in propagators):
             return None
         for cname, ch in (controllers or {}).items():
@@ -533,7 +533,7 @@ def _watch(scenario: Scenario, p, children: dict, beats, alive, progress: bool, 
                 how = f"killed by signal {-rc}" if rc < 0 else f"exited with status {rc}"
                 t = beats.last.get("plant", {}).get("t")
                 return (f"controller {cname} (pid {ch.pid}) {how} before the end of the run"
-                        f"{f' (sim t {t:.6g} s)' if t is not None else ''}: {ch.stderr_tail(3) or 'no output on stderr'}")
+                        f"{f' (sim t {t:.6g} s)' if t is not None else ''}: {ch.last_words(3)}")
         if printer.show(lambda dt=now - last_time, n=last_msgs: progress_line(beats.last, propagators, duration, dt, n),
                         now):
             last_msgs, last_time = beats.last.get("logger", {}).get("messages", 0), now

@@ -165,6 +165,8 @@ class Supervisor:
             procs[name] = {"pid": ch.pid, "running": ch.poll() is None, "exit": ch.poll(),
                            "t": hb.get("t"), "messages": hb.get("messages")}
         ts = [procs[k]["t"] for k in self.propagators if procs[k]["t"] is not None]
+        for name, ch in self.controllers.items():
+            procs[f"controller {name}"] = {"pid": ch.pid, "running": ch.poll() is None, "exit": ch.poll()}
         return {"scenario": self.scenario.name, "state": self.state,
                 "real_time_factor": "inf" if math.isinf(self.rate) else self.rate,
                 "t": min(ts) if ts else 0.0, "wall_s": round(time.monotonic() - self.started, 3),
@@ -216,8 +218,8 @@ class Supervisor:
 
     def check_children(self) -> None:
         """Notice dead processes (exit status or lost liveliness token); restart propagators."""
+        self.beats.poll()  # the sim times a failure message names are the latest
         if self.schedule is None and self.state == "running":  # the pace the propagators keep, once they do
-            self.beats.poll()
             ts = [self.beats.last.get(k, {}).get("t") for k in self.propagators]
             if ts and all(t is not None and t > 0 for t in ts):
                 self.schedule = (time.monotonic(), min(ts))
@@ -234,7 +236,7 @@ class Supervisor:
             ch.reported = True
             hb = self.beats.last.get(name, {})
             how = "killed by signal " + str(-rc) if rc < 0 else "exited with status " + str(rc)
-            msg = f"process {name} (pid {ch.pid}) {how} at sim t {hb.get('t')}: {ch.stderr_tail(3)}"
+            msg = f"process {name} (pid {ch.pid}) {how} at {sim_time(hb.get('t'))}: {ch.last_words(3)}"
             print(f"astrodyn serve: {msg}", file=sys.stderr, flush=True)
             n = sum(1 for r in self.restarts if r["process"] == name)
             if name == "viewer":  # the view is not the record: restart it, never fail the run for it
@@ -278,6 +280,27 @@ class Supervisor:
                 except Exception as exc:  # keep serving the others; the failure is final for this one
                     msg += f"; restart failed: {exc}"
             self.failures.append(msg)
+        self.check_controllers()
+
+    def check_controllers(self) -> None:
+        """A ``--controller`` that ended is not restarted (its state is its own): in lockstep
+        the plant cannot go on without its answers, so serve fails now, naming it, instead of
+        after ``control.timeout``; in free mode the plant goes on, and serve says so once."""
+        for name, ch in self.controllers.items():
+            rc = ch.poll()
+            if rc is None or getattr(ch, "reported", False) or self.state not in ("running", "paused"):
+                continue
+            ch.reported = True
+            how = "killed by signal " + str(-rc) if rc < 0 else "exited with status " + str(rc)
+            msg = f"controller {name} (pid {ch.pid}) {how} at {sim_time(self.beats.last.get('plant', {}).get('t'))}: " \
+                  f"{ch.last_words(3)}"
+            if self.scenario.control.mode == "lockstep":
+                self.failures.append(msg + " (a lockstep plant cannot go on without it; a controller is not "
+                                           "restarted: docs/control.md)")
+                self.state = "failed"
+            print(f"astrodyn serve: {msg}" + ("" if self.state == "failed" else
+                                              "; the plant goes on without its commands (free mode)"),
+                  file=sys.stderr, flush=True)
 
     def start_first_logger(self, timeout_s: float = 30.0) -> None:
         """Start the logger and wait until it is ready.  One killed by a signal before it is
@@ -467,6 +490,11 @@ class Supervisor:
         self.commands.undeclare()
 
 
+def sim_time(t) -> str:
+    """``sim t 5.6 s`` for a failure message (``sim t unknown`` before the first heartbeat)."""
+    return f"sim t {t:.6g} s" if isinstance(t, (int, float)) else "sim t unknown"
+
+
 def control_token_path(out: Path) -> Path:
     """Where ``serve`` stores the control token of the run recording ``out`` (mode 0600):
     ``.<name>.control-token`` beside it."""
@@ -544,7 +572,8 @@ def main(argv: list[str] | None = None) -> int:
                             stop_requests.append(req)
                             stopping = True
                     sup.check_children()
-                    if stop_signal.why or stopping or (t_end is not None and time.monotonic() > t_end):
+                    if stop_signal.why or stopping or sup.state == "failed" or \
+                            (t_end is not None and time.monotonic() > t_end):
                         break
                     if all(sup.children[k].poll() is not None for k in sup.propagators):
                         break
