@@ -286,12 +286,18 @@ def test_resume_rejects_what_it_cannot_continue(full_run, tmp_path, capsys):
 # ----------------------------------------------------------------------------- serve restarts
 
 
-def test_serve_restarts_a_killed_propagator_from_the_last_state(tmp_path):
+@pytest.mark.parametrize("fault", ["SIGKILL", "SIGSTOP"])
+def test_serve_restarts_a_killed_or_hung_propagator_from_the_last_state(tmp_path, fault):
+    """SIGKILL: seen through the liveliness token within a second.  SIGSTOP (hung: alive,
+    token kept for zenoh's lease, no heartbeat): killed after ``--stall-timeout`` (3 s
+    here) and restarted the same way; the stopped process is gone (checked by PID)."""
     port = bus.free_port()
     out = tmp_path / "serve.mcap"
     cfg = _config(tmp_path, "30 d")
     proc = subprocess.Popen([*ASTRODYN, "serve", str(cfg), "--out", str(out), "--rate", "300", "--port", str(port),
-                             "--max-wall", "150"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                             "--max-wall", "150", "--stall-timeout", "3"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True)
+    old = None
     try:
         hello = json.loads(proc.stdout.readline())
         assert hello["serving"] == "demo"
@@ -303,18 +309,23 @@ def test_serve_restarts_a_killed_propagator_from_the_last_state(tmp_path):
             alive.poll()
             assert "orbit" in alive.alive
             old = status()["processes"]["orbit"]["pid"]
-            os.kill(old, signal.SIGKILL)
+            os.kill(old, getattr(signal, fault))
             killed = time.monotonic()
-            while "orbit" in alive.alive and time.monotonic() - killed < 5:
-                alive.poll()
-                time.sleep(0.005)
-            latency = time.monotonic() - killed
-            assert latency < 1.0, f"liveliness loss seen after {latency:.3f} s"
-            print(f"\nliveliness loss of a SIGKILLed propagator seen after {latency * 1e3:.0f} ms")
+            if fault == "SIGKILL":
+                while "orbit" in alive.alive and time.monotonic() - killed < 5:
+                    alive.poll()
+                    time.sleep(0.005)
+                latency = time.monotonic() - killed
+                assert latency < 1.0, f"liveliness loss seen after {latency:.3f} s"
+                print(f"\nliveliness loss of a SIGKILLed propagator seen after {latency * 1e3:.0f} ms")
             wait_until(lambda: status()["restarts"], 60, "no restart reported", poll_s=0.1)
             st = status()
             restart = st["restarts"][0]
-            assert restart["process"] == "orbit" and restart["old_pid"] == old and "killed by signal 9" in restart["why"]
+            why = "killed by signal 9" if fault == "SIGKILL" else "stalled (no heartbeat for "
+            assert restart["process"] == "orbit" and restart["old_pid"] == old and why in restart["why"], restart
+            # not before the stall timeout (3 s) from its last heartbeat, sent at most 0.5 s before the stop
+            assert time.monotonic() - killed > (0 if fault == "SIGKILL" else 3.0 - 0.5)
+            wait_until(lambda: not Path(f"/proc/{old}").exists(), 10, f"pid {old} still there")
             assert st["processes"]["orbit"]["pid"] == restart["new_pid"] != old and not st["failures"]
             # status t comes from heartbeats (rate-limited: at x300 it lags the published states
             # by up to ~150 s of sim time), so measure from the restart step itself (1 Hz scene)
@@ -327,6 +338,8 @@ def test_serve_restarts_a_killed_propagator_from_the_last_state(tmp_path):
         assert proc.returncode == 0
     finally:
         _stop(proc)
+        if old is not None and Path(f"/proc/{old}").exists():  # only the process this test stopped
+            os.kill(old, signal.SIGKILL)
     run = load(out)
     assert run.complete
     (ev,) = [e for e in run.events if e["kind"] == "restart"]

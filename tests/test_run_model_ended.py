@@ -10,14 +10,18 @@ failing with the disk's name and time."""
 from types import SimpleNamespace
 
 from astrodyn.service import runner
-from astrodyn.service.children import MODEL_ENDED_EXIT
+from astrodyn.service.children import MODEL_ENDED_EXIT, Child
 
 TAIL = "attitude: model ended: coin: the rolling disk lies flat (|lean| = 90 deg) at t = 0.0437 s"
 
 
 class FakeChild:
+    how = Child.how  # the real wording of an exit
+    kill_if_stalled = Child.kill_if_stalled
+
     def __init__(self, pid: int, rc: int | None):
         self.pid, self.rc = pid, rc
+        self.stalled_s = None
 
     def poll(self) -> int | None:
         return self.rc

@@ -181,8 +181,10 @@ def _long_config(tmp_path: Path, duration: str = "30 d") -> Path:
     return cfg
 
 
-def test_killed_propagator_is_restarted_and_the_file_has_no_hole(tmp_path):
-    """SIGKILL of the orbit propagator during `astrodyn run`: the runner restarts it after the
+@pytest.mark.parametrize("fault", ["SIGKILL", "SIGSTOP"])
+def test_killed_or_hung_propagator_is_restarted_and_the_file_has_no_hole(tmp_path, fault):
+    """SIGKILL of the orbit propagator during `astrodyn run`, or SIGSTOP (hung: no heartbeat,
+    so killed after ``--stall-timeout``, 3 s here): the runner restarts it after the
     last step the logger flushed; the run goes on (stopped here by Ctrl-C after the restart)
     and every orbit channel in the file is 0, 1, 2, ... without a hole or a duplicate,
     reaching past the step where the process was killed."""
@@ -191,10 +193,10 @@ def test_killed_propagator_is_restarted_and_the_file_has_no_hole(tmp_path):
     cfg = _long_config(tmp_path)
     out = tmp_path / "killed.mcap"
     partial = tmp_path / "killed.partial.mcap"
-    proc = subprocess.Popen([*ASTRODYN, "run", str(cfg), "--out", str(out)], stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True)
+    proc = subprocess.Popen([*ASTRODYN, "run", str(cfg), "--out", str(out), "--stall-timeout", "3"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    pid = None
     try:
-        pid = None
         deadline = time.monotonic() + 120
         while pid is None and time.monotonic() < deadline:
             line = proc.stderr.readline()
@@ -212,19 +214,23 @@ def test_killed_propagator_is_restarted_and_the_file_has_no_hole(tmp_path):
                 before = max((len(b.orbit) for b in run.bodies.values() if b.orbit is not None), default=0)
                 if before > 1000:
                     break
-        os.kill(pid, signal.SIGKILL)
+        os.kill(pid, getattr(signal, fault))
+        how = "killed by signal 9" if fault == "SIGKILL" else "stalled (no heartbeat for"
         restarted, lines = False, []
         deadline = time.monotonic() + 60
         while not restarted and time.monotonic() < deadline:
             line = proc.stderr.readline()
             lines.append(line)
-            restarted = f"orbit (pid {pid}) killed by signal 9: restarted" in line
+            restarted = f"orbit (pid {pid}) {how}" in line and "restarted" in line
         assert restarted, "".join(lines[-20:])
+        assert not Path(f"/proc/{pid}").exists()  # the hung one was killed (and reaped) before its restart
         time.sleep(3.0)  # the new process publishes past the point of the kill
         os.kill(proc.pid, signal.SIGINT)
         stdout, stderr = proc.communicate(timeout=120)
     finally:
         _stop(proc)
+        if pid is not None and Path(f"/proc/{pid}").exists():  # only the process this test stopped
+            os.kill(pid, signal.SIGKILL)
     assert proc.returncode == 128 + signal.SIGINT
     assert not out.exists()  # an interrupted run does not claim the final name
     run = load_run(partial)

@@ -23,9 +23,11 @@ supervisor leaves there is found and removed by ``astrodyn recover``.
 
 from __future__ import annotations
 
+import argparse
 import contextlib
 import ctypes
 import json
+import math
 import os
 import shlex
 import shutil
@@ -190,6 +192,29 @@ def start_controller(name: str, cmd: str, scenario: str, hub: str, log_dir: Path
     return Child(f"controller-{name}", controller_argv(cmd), log_dir, env=env, foreign=True)
 
 
+#: A propagator or logger with no heartbeat for this many wall seconds (ten times that while
+#: it prepares) is hung: the supervisor kills it and handles it as a crash (``--stall-timeout``).
+STALL_S = 120.0
+
+
+def stall_timeout(text: str) -> float:
+    """``--stall-timeout`` of ``run`` and ``serve``: wall seconds >= 0, 0 meaning never."""
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not 0.0 <= value < math.inf:
+        raise argparse.ArgumentTypeError(f"expected wall seconds >= 0 (0: never), got {text!r}")
+    return value
+
+
+def add_stall_argument(ap: argparse.ArgumentParser) -> None:
+    """``--stall-timeout S`` (``run`` and ``serve``): :data:`STALL_S` by default."""
+    ap.add_argument("--stall-timeout", type=stall_timeout, default=STALL_S, metavar="S",
+                    help=f"a propagator or logger with no heartbeat for S wall seconds is hung: killed and restarted "
+                         f"like a crashed one (default {STALL_S:g}; 0: never; docs/reliability.md)")
+
+
 class Child:
     """One child process: ``argv`` started in its own session, stdout / stderr to
     ``log_dir/<name>.out|.err``; ``env`` adds variables to the supervisor's environment
@@ -206,6 +231,32 @@ class Child:
         self.proc = subprocess.Popen(argv, stdout=self._out, stderr=self._err, stdin=subprocess.DEVNULL,
                                      start_new_session=True, preexec_fn=_die_with_parent if foreign else None,
                                      env={**os.environ, **(env or {}), SUPERVISOR_ENV: str(os.getpid())})
+        self.started = time.monotonic()
+        self.stalled_s: float | None = None  # set when kill_if_stalled ended it
+
+    def how(self, rc: int) -> str:
+        """How it ended, for a failure message."""
+        if self.stalled_s is not None:
+            return f"stalled (no heartbeat for {self.stalled_s:.0f} s) and was killed"
+        return f"killed by signal {-rc}" if rc < 0 else f"exited with status {rc}"
+
+    def kill_if_stalled(self, beats, limit_s: float | None, now: float) -> bool:
+        """SIGKILL this child (by PID) when it runs but is silent: no heartbeat on
+        ``beats`` (an :class:`astrodyn.bus.HeartbeatMonitor`, keyed by :attr:`name`) for
+        ``limit_s`` wall seconds since its last one or since it started; ten times that
+        while its last heartbeat says ``preparing`` (the numeric kernels compile).  A hung
+        process (deadlock, SIGSTOP, an endless loop) thus ends like a crash and takes the
+        same path: restarted, or the run fails naming it (:meth:`how`).  None or 0: never."""
+        if not limit_s or self.stalled_s is not None or self.proc.poll() is not None:
+            return False
+        seen = beats.seen.get(self.name, 0.0)
+        since = max(seen, self.started)
+        preparing = seen > self.started and beats.last.get(self.name, {}).get("preparing")
+        if now - since <= (10 * limit_s if preparing else limit_s):
+            return False
+        self.stalled_s = now - since
+        self.proc.kill()
+        return True
 
     @property
     def pid(self) -> int:

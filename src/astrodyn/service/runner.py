@@ -46,7 +46,9 @@ from astrodyn.scenario import Scenario, ScenarioError, load, plan as make_plan
 from astrodyn.service.children import (
     LOGGED_WAIT_S,
     MODEL_ENDED_EXIT,
+    STALL_S,
     Child,
+    add_stall_argument,
     logger_command,
     plant_command,
     propagator_command,
@@ -94,7 +96,7 @@ def run_scenario(scenario: Scenario, config_path: Path, out: Path, *, cross_chec
                  progress: bool = True, timeout_s: float | None = None, extra_args: dict | None = None,
                  logger_args: list[str] | None = None, zenoh_config: str | None = None,
                  authenticate: bool = True, controllers: list[str] | None = None,
-                 commands: Path | None = None, loggers: int = 1) -> dict:
+                 commands: Path | None = None, loggers: int = 1, stall_s: float | None = STALL_S) -> dict:
     """Run ``scenario`` with real processes; return the result dict (see :func:`main`).
 
     ``zenoh_config``: a Zenoh JSON5 file (TLS, access control) every process starts from.
@@ -104,6 +106,9 @@ def run_scenario(scenario: Scenario, config_path: Path, out: Path, *, cross_chec
     whose commands the plant re-applies instead (``--commands``).
     ``loggers``: how many loggers record the run; the second and later are hot standbys,
     each recording a complete file of its own (:func:`astrodyn.recording.writer.standby_path`).
+    ``stall_s``: a propagator or logger silent (no heartbeat) this many wall seconds is
+    killed and handled as a crash (:meth:`astrodyn.service.children.Child.kill_if_stalled`);
+    None: never.
     ``authenticate=False`` runs without the run secret (children neither sign nor verify):
     only for measuring what authentication costs (``astrodyn bench service``).
 
@@ -115,7 +120,7 @@ def run_scenario(scenario: Scenario, config_path: Path, out: Path, *, cross_chec
     return ScenarioRun(scenario, config_path, out, cross_check=cross_check, real_time_factor=real_time_factor,
                        connect=connect, progress=progress, timeout_s=timeout_s, extra_args=extra_args,
                        logger_args=logger_args, zenoh_config=zenoh_config, authenticate=authenticate,
-                       controllers=controllers, commands=commands, loggers=loggers).run()
+                       controllers=controllers, commands=commands, loggers=loggers, stall_s=stall_s).run()
 
 
 class ScenarioRun:
@@ -125,8 +130,10 @@ class ScenarioRun:
     def __init__(self, scenario: Scenario, config_path: Path, out: Path, *, cross_check: bool,
                  real_time_factor: float, connect: list[str] | None, progress: bool, timeout_s: float | None,
                  extra_args: dict | None, logger_args: list[str] | None, zenoh_config: str | None,
-                 authenticate: bool, controllers: list[str] | None, commands: Path | None, loggers: int = 1):
+                 authenticate: bool, controllers: list[str] | None, commands: Path | None, loggers: int = 1,
+                 stall_s: float | None = STALL_S):
         self.scenario, self.config_path, self.out = scenario, config_path, out
+        self.stall_s = stall_s
         self.cross_check, self.real_time_factor = cross_check, real_time_factor
         self.progress, self.timeout_s = progress, timeout_s
         self.extra_args, self.logger_args = extra_args or {}, logger_args or []
@@ -256,7 +263,7 @@ class ScenarioRun:
             children["logger"] = Child(f"logger-r{attempt}", [*self.logger_argv, "--attempt", str(attempt),
                                                               *self.logger_args], self.tmpd, env=self.child_env)
             children["logger"].name = "logger"
-            how = _how(rc)
+            how = dead.how(rc)
             self.restarts.append({"process": "logger", "old_pid": dead.pid, "new_pid": children["logger"].pid,
                                   "why": f"{how} while starting", "from_step": 0, "state_from": None})
             self.say(f"  logger (pid {dead.pid}) {how} while starting: restarted (pid {children['logger'].pid})")
@@ -298,7 +305,7 @@ class ScenarioRun:
                          "stderr": child.stderr_tail()}
             if child.poll() != 0 or file != final:
                 self.result.setdefault("warnings", []).append(
-                    f"standby {name} (pid {child.pid}) {_how(child.poll() or 0) if child.poll() else 'did not finish'}: "
+                    f"standby {name} (pid {child.pid}) {child.how(child.poll()) if child.poll() else 'did not finish'}: "
                     f"its recording stays at {file} (`astrodyn recover`, or `astrodyn merge` with the main file)")
 
     def start_and_watch(self, beats, alive) -> str | None:
@@ -317,7 +324,8 @@ class ScenarioRun:
             self.say("  controllers " + ", ".join(f"{n} (pid {c.pid})" for n, c in self.controllers.items()))
         self.say("  started " + ", ".join(f"{n} (pid {c.pid})" for n, c in self.children.items()))
         return failure or _watch(scenario, self.plan, self.children, beats, alive, self.progress, self.timeout_s,
-                                 self.interrupted, on_death=self.restart, controllers=self.controllers)
+                                 self.interrupted, on_death=self.restart, controllers=self.controllers,
+                                 stall_s=self.stall_s)
 
     # ------------------------------------------------------------------ restarts
 
@@ -327,7 +335,7 @@ class ScenarioRun:
     def restart(self, name: str, rc: int) -> str | None:
         if "plant" in self.propagators and name in ("plant", "logger"):
             dead = self.children[name]
-            return (f"{name} (pid {dead.pid}) {_how(rc)}: a closed-loop run is not restarted (its controllers' "
+            return (f"{name} (pid {dead.pid}) {dead.how(rc)}: a closed-loop run is not restarted (its controllers' "
                     f"state lives outside astrodyn); the recording holds everything up to here: "
                     f"{dead.last_words(3)}")
         return self.restart_logger(rc) if name == "logger" else self.restart_propagator(name, rc)
@@ -341,7 +349,7 @@ class ScenarioRun:
             children[kind].close()
         while True:
             dead = children["logger"]
-            how = _how(rc)
+            how = dead.how(rc)
             if not budget.allow():
                 return f"{budget.refusal()}; last: logger (pid {dead.pid}) {how}: {dead.last_words(3)}"
             dead.close()
@@ -374,7 +382,7 @@ class ScenarioRun:
 
         scenario = self.scenario
         dead = self.children[kind]
-        how = _how(rc)
+        how = dead.how(rc)
         if not self.budgets[kind].allow():
             return f"{self.budgets[kind].refusal()}; last: {kind} (pid {dead.pid}) {how}: {dead.last_words(3)}"
         dead.close()
@@ -429,10 +437,6 @@ class ScenarioRun:
         return failure
 
 
-def _how(rc: int) -> str:
-    return f"killed by signal {-rc}" if rc < 0 else f"exited with status {rc}"
-
-
 def _name_the_recording(written: str | None, out: Path, result: dict) -> str | None:
     """Give the finished file its name: the logger left it as ``NAME.partial.mcap``; a run
     that succeeded renames it over ``out`` (an earlier recording of that name is replaced
@@ -470,14 +474,16 @@ def progress_line(last: dict, propagators: list[str], duration: float, dt: float
 
 
 def _watch(scenario: Scenario, p, children: dict, beats, alive, progress: bool, timeout_s: float | None,
-           interrupted: dict | None = None, on_death=None, controllers: dict | None = None) -> str | None:
+           interrupted: dict | None = None, on_death=None, controllers: dict | None = None,
+           stall_s: float | None = None) -> str | None:
     """Wait for the propagators to finish; return a failure description or None.
 
     ``on_death(name, rc)``: called when a child dies before the end; it restarts it (and
     for the logger the propagators too) in ``children`` (:mod:`astrodyn.service.supervision`)
     and returns None, or a failure description when it cannot.  ``controllers``: the closed
     loop's controller processes; in lockstep one that exits before the plant is a failure
-    named after it (it would never answer again)."""
+    named after it (it would never answer again).  ``stall_s``: a child silent that long
+    is killed first, so that it takes the same path (:meth:`Child.kill_if_stalled`)."""
     lockstep = scenario.control is not None and scenario.control.mode == "lockstep"
     propagators = [k for k in children if k != "logger"]
     duration = (scenario.n_steps - 1) / scenario.rate if scenario.n_steps else 0.0  # last output instant, no array
@@ -488,6 +494,8 @@ def _watch(scenario: Scenario, p, children: dict, beats, alive, progress: bool, 
         now = time.monotonic()
         beats.poll()
         alive.poll()
+        for ch in children.values():
+            ch.kill_if_stalled(beats, stall_s, now)
         for name, ch in list(children.items()):
             rc = ch.poll()
             ended = name in propagators and rc == MODEL_ENDED_EXIT  # not restarted: it would end there again
@@ -518,8 +526,7 @@ def _watch(scenario: Scenario, p, children: dict, beats, alive, progress: bool, 
                 where = f", sim t reached {how_far:.6g} s of {duration:.6g} s" if how_far is not None else ""
                 bodies = [b.name for b in p.bodies if (b.orbit_model if name == "orbit" else b.attitude_model)]
                 who = f" (bodies: {', '.join(bodies[:5])}{', ...' if len(bodies) > 5 else ''})" if name != "logger" else ""
-                sig = f"killed by signal {-rc}" if rc < 0 else f"exited with status {rc}"
-                return f"process {name} (pid {ch.pid}) {sig}{who}{where}: {ch.last_words(3)}"
+                return f"process {name} (pid {ch.pid}) {ch.how(rc)}{who}{where}: {ch.last_words(3)}"
         if all(children[k].poll() == 0 for k in propagators):
             return None
         for cname, ch in (controllers or {}).items():
@@ -530,7 +537,7 @@ def _watch(scenario: Scenario, p, children: dict, beats, alive, progress: bool, 
                     time.sleep(0.05)
                 if children["plant"].poll() is not None:
                     break  # look again: the plant's exit says what happened
-                how = f"killed by signal {-rc}" if rc < 0 else f"exited with status {rc}"
+                how = ch.how(rc)
                 t = beats.last.get("plant", {}).get("t")
                 return (f"controller {cname} (pid {ch.pid}) {how} before the end of the run"
                         f"{f' (sim t {t:.6g} s)' if t is not None else ''}: {ch.last_words(3)}")
@@ -569,6 +576,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--loggers", type=int, default=1, metavar="N",
                     help="loggers recording the run (default 1, at most 8): the 2nd ... Nth are hot standbys, each "
                          "writing a complete file of its own, NAME.logger-2.mcap, ... (docs/reliability.md)")
+    add_stall_argument(ap)
     ap.add_argument("--tolerate-rejected", action="store_true",
                     help="exit 0 even when the logger rejected messages that did not come from this run's own "
                          "processes (default: exit 3, the record was attacked; docs/security.md)")
@@ -608,7 +616,7 @@ def main(argv: list[str] | None = None) -> int:
                               progress=not args.quiet, timeout_s=args.timeout, extra_args=resume.get("extra_args"),
                               logger_args=resume.get("logger_args"), zenoh_config=args.zenoh_config,
                               controllers=args.controller, commands=Path(args.commands) if args.commands else None,
-                              loggers=args.loggers)
+                              loggers=args.loggers, stall_s=args.stall_timeout or None)
     print("", file=sys.stderr)
     rows = None
     recording = result.get("file")

@@ -58,7 +58,15 @@ from pathlib import Path
 from astrodyn import auth, bus
 from astrodyn.recording.writer import standby_path
 from astrodyn.scenario import ScenarioError, load, plan as make_plan
-from astrodyn.service.children import MODEL_ENDED_EXIT, Child, start_controller, wait_ready, work_directory
+from astrodyn.service.children import (
+    MODEL_ENDED_EXIT,
+    STALL_S,
+    Child,
+    add_stall_argument,
+    start_controller,
+    wait_ready,
+    work_directory,
+)
 from astrodyn.service.output import check_output_path
 from astrodyn.service.propagator import command_key
 from astrodyn.service.runner import MAX_LOGGERS, check_closed_loop_arguments, logger_base_argv, propagator_argv
@@ -81,12 +89,14 @@ class Supervisor:
     def __init__(self, scenario, config_path: Path, out: Path, session, hub: str, *, rate: float,
                  roll_size: int | None = None, roll_interval: float | None = None, connect=(), tmp: Path,
                  max_restarts: int = 5, zenoh_config: str | None = None, foxglove_port: int | None = None,
-                 controllers: list[str] | None = None, token_file: Path | None = None, loggers: int = 1):
+                 controllers: list[str] | None = None, token_file: Path | None = None, loggers: int = 1,
+                 stall_s: float | None = STALL_S):
         self.scenario = scenario
         self.session = session
         self.out = Path(out)
         self.tmp = tmp
         self.max_restarts = int(max_restarts)
+        self.stall_s = stall_s  # a propagator or logger silent this long is killed, then restarted
         self.restarts: list[dict] = []
         self.finishing: list[Child] = []  # `recover` of dead loggers' parts (restart_logger)
         self.rate = float(rate)
@@ -219,6 +229,12 @@ class Supervisor:
     def check_children(self) -> None:
         """Notice dead processes (exit status or lost liveliness token); restart propagators."""
         self.beats.poll()  # the sim times a failure message names are the latest
+        now = time.monotonic()
+        for name in (*self.propagators, "logger"):
+            ch = self.children[name]
+            if self.state in ("running", "paused") and ch.kill_if_stalled(self.beats, self.stall_s, now):
+                print(f"astrodyn serve: process {name} (pid {ch.pid}) has sent no heartbeat for {ch.stalled_s:.0f} s: "
+                      f"killed as hung", file=sys.stderr, flush=True)
         if self.schedule is None and self.state == "running":  # the pace the propagators keep, once they do
             ts = [self.beats.last.get(k, {}).get("t") for k in self.propagators]
             if ts and all(t is not None and t > 0 for t in ts):
@@ -235,8 +251,7 @@ class Supervisor:
                 continue
             ch.reported = True
             hb = self.beats.last.get(name, {})
-            how = "killed by signal " + str(-rc) if rc < 0 else "exited with status " + str(rc)
-            msg = f"process {name} (pid {ch.pid}) {how} at {sim_time(hb.get('t'))}: {ch.last_words(3)}"
+            msg = f"process {name} (pid {ch.pid}) {ch.how(rc)} at {sim_time(hb.get('t'))}: {ch.last_words(3)}"
             print(f"astrodyn serve: {msg}", file=sys.stderr, flush=True)
             n = sum(1 for r in self.restarts if r["process"] == name)
             if name == "viewer":  # the view is not the record: restart it, never fail the run for it
@@ -291,8 +306,7 @@ class Supervisor:
             if rc is None or getattr(ch, "reported", False) or self.state not in ("running", "paused"):
                 continue
             ch.reported = True
-            how = "killed by signal " + str(-rc) if rc < 0 else "exited with status " + str(rc)
-            msg = f"controller {name} (pid {ch.pid}) {how} at {sim_time(self.beats.last.get('plant', {}).get('t'))}: " \
+            msg = f"controller {name} (pid {ch.pid}) {ch.how(rc)} at {sim_time(self.beats.last.get('plant', {}).get('t'))}: " \
                   f"{ch.last_words(3)}"
             if self.scenario.control.mode == "lockstep":
                 self.failures.append(msg + " (a lockstep plant cannot go on without it; a controller is not "
@@ -522,6 +536,7 @@ def main(argv: list[str] | None = None) -> int:
                          "writing a complete file of its own, NAME.logger-2.mcap, ... (docs/reliability.md)")
     ap.add_argument("--controller", action="append", default=None, metavar="CMD",
                     help="closed loop: start this controller program under serve (as with run; docs/control.md)")
+    add_stall_argument(ap)
     args = ap.parse_args(argv)
     try:
         scenario = load(args.config)
@@ -554,7 +569,8 @@ def main(argv: list[str] | None = None) -> int:
                              roll_interval=args.roll_interval, connect=args.connect, tmp=Path(tmp),
                              zenoh_config=args.zenoh_config,
                              foxglove_port=None if args.foxglove is None else (args.foxglove or bus.free_port()),
-                             controllers=args.controller, token_file=token_file, loggers=args.loggers)
+                             controllers=args.controller, token_file=token_file, loggers=args.loggers,
+                             stall_s=args.stall_timeout or None)
         except bus.BusError as exc:  # the logger could not start: nothing else was started
             print(f"astrodyn serve: {exc}", file=sys.stderr)
             return 1
