@@ -70,11 +70,14 @@ from __future__ import annotations
 
 import argparse
 import csv
+import hashlib
 import heapq
 import json
 import os
 import re
+import shutil
 import sys
+import tempfile
 from datetime import UTC, datetime
 from pathlib import Path
 
@@ -101,7 +104,7 @@ from astrodyn.recording.writer import McapRecorder, RecordingError
 from astrodyn.rotation import quat_to_scalar_last
 
 __all__ = [
-    "FORMATS", "FIELD_UNITS", "column_units", "channel_header", "ExportError", "export", "write_csv", "write_parquet", "write_oem", "write_aem", "write_aem_v1",
+    "FORMATS", "FIELD_UNITS", "channel_file_stems", "column_units", "channel_header", "ExportError", "export", "write_csv", "write_parquet", "write_oem", "write_aem", "write_aem_v1",
     "write_foxglove", "ccsds_epochs", "parse_ccsds_epoch", "FRAME_TRANSFORM_SCHEMA", "SCENE_UPDATE_SCHEMA",
     "SCENE_TOPIC", "MAX_LINE_POINTS", "MAX_SCENE_POINTS", "scene_updates", "line_indices", "main",
 ]
@@ -126,6 +129,26 @@ def channel_file_stem(topic: str) -> str:
         return f"{body}.{kind}"
     except messages.MessageError:
         return re.sub(r"[^A-Za-z0-9_.-]+", ".", topic).strip(".") or "channel"
+
+
+def channel_file_stems(topics) -> dict[str, str]:
+    """``topic -> file stem`` (:func:`channel_file_stem`) made unique and short enough for
+    any file system: a stem already taken by an earlier topic gets ``-2``, ``-3``, ... (two
+    foreign topics ``a/b`` and ``a.b``, or ``events``, would otherwise write one file and
+    lose a channel), one longer than 150 characters is cut and given a hash of its topic."""
+    out: dict[str, str] = {}
+    taken: set[str] = set()
+    for topic in topics:
+        stem = channel_file_stem(topic)
+        if len(stem) > 150:
+            stem = f"{stem[:140]}.{hashlib.sha256(topic.encode('utf-8', 'surrogatepass')).hexdigest()[:8]}"
+        unique, n = stem, 1
+        while unique.lower() in taken:
+            n += 1
+            unique = f"{stem}-{n}"
+        taken.add(unique.lower())
+        out[topic] = unique
+    return out
 
 
 def table(track: Track) -> dict[str, np.ndarray]:
@@ -233,9 +256,10 @@ def write_csv(run: Run, out: Path) -> list[Path]:
     message.  ``pandas.read_csv(path, comment="#")`` reads it; so does any CSV reader
     told to skip lines starting with ``#``."""
     written = []
+    stems = channel_file_stems(run.channels)
     for topic, track in run.channels.items():
         cols = table(track)
-        path = out / f"{channel_file_stem(topic)}.csv"
+        path = out / f"{stems[topic]}.csv"
         with open(path, "w", newline="") as f:
             for key, value in channel_header(run, topic, cols).items():
                 f.write(f"# {key}: {value}\n")
@@ -257,6 +281,7 @@ def write_parquet(run: Run, out: Path) -> list[Path]:
     except ImportError:
         raise ExportError("--format parquet needs the optional package pyarrow: pip install 'astrodyn[parquet]'") from None
     written = []
+    stems = channel_file_stems(run.channels)
     for topic, track in run.channels.items():
         cols = table(track)
         units = column_units(cols)
@@ -266,7 +291,7 @@ def write_parquet(run: Run, out: Path) -> list[Path]:
             fields.append(pa.field(k, arr.type, metadata={"unit": units[k]}))
             arrays.append(arr)
         meta = {f"astrodyn.{k}": v for k, v in channel_header(run, topic, cols).items()}
-        path = out / f"{channel_file_stem(topic)}.parquet"
+        path = out / f"{stems[topic]}.parquet"
         pq.write_table(pa.Table.from_arrays(arrays, schema=pa.schema(fields, metadata=meta)), path)
         written.append(path)
     return written
@@ -285,7 +310,11 @@ def ccsds_epochs(run: Run, t: np.ndarray, log_time: np.ndarray) -> tuple[list[st
     scale = run.scenario.get("epoch_scale", "utc").lower()
     if given and scale in _CCSDS_SCALES:
         text = given.split()[0]
-        base = Time(text, format="isot" if "T" in text else "iso", scale=scale)
+        try:
+            base = Time(text, format="isot" if "T" in text else "iso", scale=scale)
+        except ValueError:
+            raise ExportError(f"{run.path}: scenario metadata epoch {given[:80]!r}: expected an ISO date and time "
+                              f"(e.g. 2026-03-20T12:00:00 UTC)") from None
         times = base + TimeDelta(np.asarray(t, dtype=np.float64), format="sec")
         system = _CCSDS_SCALES[scale]
     else:  # no scenario metadata: POSIX log times as UTC
@@ -597,7 +626,11 @@ def write_foxglove(run: Run, out: Path, max_line_points: int = MAX_LINE_POINTS) 
     path = out / (Path(run.path).name.removesuffix(".mcap") + ".foxglove.mcap")
     if path.resolve() == Path(run.path).resolve():
         raise ExportError(f"--out: would overwrite the input {run.path}")
-    epoch_ns = int(run.metadata.get("recording", {}).get("epoch_unix_ns", run.scenario.get("epoch_unix_ns", 0)))
+    raw = run.metadata.get("recording", {}).get("epoch_unix_ns", run.scenario.get("epoch_unix_ns", "0"))
+    try:
+        epoch_ns = int(raw)
+    except (TypeError, ValueError):
+        raise ExportError(f"{run.path}: metadata epoch_unix_ns {str(raw)[:40]!r}: expected an integer number of ns") from None
     # the scene first: at the first instant it is there before the first transform
     tfs = sorted(scene_updates(run, max_line_points) + frame_transforms(run), key=lambda m: m[0])
     with open_stream(run.path) as stream, McapRecorder(path, run.scenario, epoch_ns=epoch_ns) as rec:
@@ -641,13 +674,35 @@ def export(path: str | os.PathLike, fmt: str, out: str | os.PathLike) -> list[Pa
     out = Path(out)
     try:
         out.mkdir(parents=True, exist_ok=True)
+        work = Path(tempfile.mkdtemp(prefix=".export-", dir=out))
     except OSError as exc:
         raise ExportError(f"--out: cannot create directory {out}: {exc.strerror or exc}") from None
-    files = _WRITERS[fmt](run, out)
-    if not files:
-        what = {"oem": "orbit", "aem": "attitude", "aem1": "attitude"}.get(fmt, "message")
-        raise ExportError(f"{run.path}: no {what} channels to export as {fmt}")
-    return files
+    # every file is written in a work directory inside --out and moved into place only when
+    # all of them are complete: a failed export leaves the files already in --out as they were
+    try:
+        try:
+            files = _WRITERS[fmt](run, work)
+        except OSError as exc:
+            raise ExportError(f"{run.path}: --out {out}: cannot write {exc.filename or ''}: {exc.strerror or exc}; "
+                              f"nothing in {out} was replaced") from None
+        if not files:
+            what = {"oem": "orbit", "aem": "attitude", "aem1": "attitude"}.get(fmt, "message")
+            raise ExportError(f"{run.path}: no {what} channels to export as {fmt}")
+        placed = []
+        for f in files:
+            target = out / f.name
+            if target.resolve() == Path(run.path).resolve() or target.is_dir():
+                raise ExportError(f"{run.path}: --out {out}: {target} is {'the input' if target.is_file() else 'a directory'}; "
+                                  f"it is never replaced (nothing was written)")
+            placed.append(target)
+        try:
+            for f, target in zip(files, placed):
+                os.replace(f, target)
+        except OSError as exc:
+            raise ExportError(f"{run.path}: --out {out}: cannot write {target}: {exc.strerror or exc}") from None
+        return placed
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
 
 
 def main(argv: list[str] | None = None) -> int:

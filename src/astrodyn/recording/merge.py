@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import heapq
 import os
+import struct
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -73,26 +74,35 @@ def merge(inputs: list[str | os.PathLike], out: str | os.PathLike, *, chunk_size
         raise RecordingError(f"--out {out}: is one of the inputs")
     streams = [open_stream(p) for p in paths]
     try:
-        names = {s.metadata.get("scenario", {}).get("name") for s in streams} - {None}
-        if len(names) > 1:
-            raise RecordingError(f"merge: the inputs record different scenarios ({', '.join(sorted(names))}); "
-                                 "expected parts of one run")
+        names = {p: s.metadata.get("scenario", {}).get("name") for p, s in zip(paths, streams)}
+        if len(set(names.values()) - {None}) > 1:
+            shown = ", ".join(f"{p}: {name}" for p, name in names.items() if name is not None)
+            raise RecordingError(f"merge: the inputs record different scenarios ({shown}); expected parts of one run")
         report = MergeReport(str(out))
         tmp = out.with_name(f".{out.name}.merging")
-        with open(tmp, "wb") as f:
-            writer = Writer(f, chunk_size=chunk_size, compression=CompressionType.ZSTD)
-            writer.start(profile="", library="astrodyn merge")
-            _copy(streams, writer, report)
-            seen_meta: set[str] = set()
-            for s in streams:
-                for name, data in s.metadata.items():
-                    if name not in seen_meta:
-                        writer.add_metadata(name, {str(k): str(v) for k, v in data.items()})
-                        seen_meta.add(name)
-            writer.add_metadata("merged_from", {"files": ";".join(str(p) for p in paths),
-                                                "duplicates": str(report.duplicates), "conflicts": str(report.conflicts)})
-            writer.finish()
-        os.replace(tmp, out)
+        try:
+            with open(tmp, "wb") as f:
+                writer = Writer(f, chunk_size=chunk_size, compression=CompressionType.ZSTD)
+                writer.start(profile="", library="astrodyn merge")
+                _copy(streams, writer, report)
+                seen_meta: set[str] = set()
+                for s in streams:
+                    for name, data in s.metadata.items():
+                        if name not in seen_meta:
+                            writer.add_metadata(name, {str(k): str(v) for k, v in data.items()})
+                            seen_meta.add(name)
+                writer.add_metadata("merged_from", {"files": ";".join(str(p) for p in paths),
+                                                    "duplicates": str(report.duplicates), "conflicts": str(report.conflicts)})
+                writer.finish()
+            os.replace(tmp, out)
+        except (OSError, struct.error) as exc:  # --out unwritable, disk full, more channels than MCAP's 65,535 ids
+            raise RecordingError(f"--out {out}: cannot write the merged file: "
+                                 f"{getattr(exc, 'strerror', None) or exc}; nothing was written") from None
+        finally:
+            try:
+                os.unlink(tmp)
+            except OSError:
+                pass
         for p, s in zip(paths, streams):
             report.inputs[str(p)] = s.report()
         return report

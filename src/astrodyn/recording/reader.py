@@ -23,6 +23,7 @@ from __future__ import annotations
 import io
 import json
 import os
+import stat
 import struct
 import sys
 import zlib
@@ -178,11 +179,17 @@ class _Truncated(Exception):
 def open_recording(path: str) -> tuple[BinaryIO, int]:
     """``(file, size)`` of the recording ``path`` opened for reading;
     :class:`RecordingError` ``<path>: cannot open: ...`` when it cannot be."""
-    try:
-        f = open(path, "rb")
-        return f, os.fstat(f.fileno()).st_size
+    try:  # O_NONBLOCK: opening a FIFO must not wait for a writer; only regular files are read
+        fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
     except OSError as exc:
         raise RecordingError(f"{path}: cannot open: {exc.strerror or exc}") from None
+    st = os.fstat(fd)
+    if not stat.S_ISREG(st.st_mode):
+        os.close(fd)
+        what = "a directory" if stat.S_ISDIR(st.st_mode) else "a FIFO" if stat.S_ISFIFO(st.st_mode) else \
+            "a device or socket"
+        raise RecordingError(f"{path}: cannot open: expected a regular file, got {what}")
+    return os.fdopen(fd, "rb"), st.st_size
 
 
 def read_records(f: BinaryIO, size: int, path: str, state: dict) -> Iterator[tuple[int, bytes, int]]:
@@ -363,19 +370,28 @@ def parse_record(opcode: int, body: bytes) -> Any:
 # ------------------------------------------------------------------------------- columns
 
 
+_INT64_MIN, _INT64_MAX = -(2**63), 2**63 - 1
+#: Longest fixed-length number array of a foreign schema read as a (n, k) column; longer
+#: ones (a schema may claim 10**9 items, which a missing field would fill with NaN) stay objects.
+_MAX_VECTOR = 4096
+
+
 def _columns_for(schema: dict | None) -> dict[str, tuple[str, int]] | None:
     """field -> (kind, width) from a JSON Schema: ("f", 1) float, ("i", 1) int, ("f", k) vector, ("s", 0) string."""
-    if not schema or "properties" not in schema:
+    properties = schema.get("properties") if isinstance(schema, dict) else None
+    if not isinstance(properties, dict):
         return None
     out = {}
-    for name, prop in schema["properties"].items():
-        typ = prop.get("type")
+    for name, prop in properties.items():  # the file's schema: any JSON, never trusted
+        prop = prop if isinstance(prop, dict) else {}
+        typ, items, width = prop.get("type"), prop.get("items"), prop.get("minItems")
         if typ == "number":
             out[name] = ("f", 1)
         elif typ == "integer":
             out[name] = ("i", 1)
-        elif typ == "array" and prop.get("minItems") == prop.get("maxItems") and prop.get("items", {}).get("type") == "number":
-            out[name] = ("f", int(prop["minItems"]))
+        elif (typ == "array" and _is_int64(width) and 1 <= width <= _MAX_VECTOR and prop.get("maxItems") == width
+              and isinstance(items, dict) and items.get("type") == "number"):
+            out[name] = ("f", width)
         elif typ == "string" or "enum" in prop:
             out[name] = ("s", 0)
         else:
@@ -383,7 +399,6 @@ def _columns_for(schema: dict | None) -> dict[str, tuple[str, int]] | None:
     return out
 
 
-_INT64_MIN, _INT64_MAX = -(2**63), 2**63 - 1
 
 
 def _is_number(x: Any) -> bool:
@@ -645,6 +660,9 @@ class RecordingScan:
             self.counters["orphans"] += 1
             return
         topic, kind, b = info
+        if rec.log_time > _INT64_MAX:  # MCAP's uint64; a Track's log_time is int64 ns
+            self.count_invalid(topic, rec.sequence, f"log_time {rec.log_time} ns: expected at most {_INT64_MAX} (int64)")
+            return
         if kind is not None:
             try:
                 msg = messages.decode(rec.data, kind)

@@ -298,6 +298,11 @@ def main(argv: list[str] | None = None) -> int:
                 status = 1
                 continue
             remove_source = True
+        elif dst is not None and os.path.lexists(dst) and not (os.path.exists(src) and os.path.samefile(src, dst)):
+            print(f"astrodyn recover: error: {src}: --out {dst} exists already; recover writes a new file "
+                  f"(nothing is overwritten; only the input itself is rewritten in place)", file=sys.stderr)
+            status = 1
+            continue
         try:
             summary = recover(src, dst, chunk_size=args.chunk_size)
         except RecordingError as exc:

@@ -217,10 +217,10 @@ def recorded_commands(path: str | Path, scenario: str) -> dict[int, list[dict]]:
             if not m.topic.startswith(f"{messages.PREFIX}/{scenario}/"):
                 continue
             if kind == "command":
-                msg = messages.decode(m.data, "command")
+                msg = _decode_recorded(m, "command")
                 commands[f"{body}/{command_id(msg['sender'], msg['seq'])}"] = msg
             elif kind == "actuators":
-                msg = messages.decode(m.data, "actuators")
+                msg = _decode_recorded(m, "actuators")
                 if msg.get("applied"):
                     applied.append((msg["seq"], body, msg["applied"]))
     out: dict[int, list[dict]] = {}
@@ -247,11 +247,24 @@ def recorded_faults(path: str | Path, scenario) -> list:
         for m in s.messages():
             if m.topic != key:
                 continue
-            event = messages.decode(m.data, "event")
+            event = _decode_recorded(m, "event")
             if event["process"] == PROCESS and event["kind"] == "fault":
-                out.append(parse_fault(Ctx(f"--commands {path}"), json.loads(event["detail"]), "fault event",
+                try:
+                    detail = json.loads(event["detail"])
+                except (ValueError, RecursionError) as exc:
+                    raise ValueError(f"{m.topic} at log time {m.log_time} ns: fault event detail: expected JSON, "
+                                     f"got {type(exc).__name__}: {exc}") from None
+                out.append(parse_fault(Ctx(f"--commands {path}"), detail, "fault event",
                                        math.inf, plant_bodies(scenario), t=event["t"]))
     return out
+
+
+def _decode_recorded(m, kind: str) -> dict:
+    """A recorded message of ``kind`` decoded; MessageError naming its channel and log time."""
+    try:
+        return messages.decode(m.data, kind)
+    except messages.MessageError as exc:
+        raise messages.MessageError(f"{m.topic} at log time {m.log_time} ns: {exc}") from None
 
 
 def run_plant(scenario, session, *, token: str | None = None, replay: dict | None = None,
