@@ -181,3 +181,28 @@ def test_repr_of_a_loaded_run_is_one_short_line(report):
     assert "'an'" in text and "leo" in text and "geo" in text and f"{run.messages} messages" in text
     assert f"t 0..{res.t[-1]:.6g} s" in text
     assert run.scenario["epoch"] not in text  # the config is one attribute away, not printed
+
+
+def test_many_bodies_numbers_for_all_figures_for_the_first_few(tmp_path):
+    """A report draws the figures of the first ``figures_for`` bodies by name (a 1000-body
+    scene would otherwise take an hour) and the numbers of every selected body: the PNG
+    files on disk are those of "geo" only (sorted before "leo"), the numbers of both agree
+    with a full report's; ``bodies`` picks by name or shell pattern, and a pattern that
+    matches nothing is an error naming it."""
+    path = tmp_path / "two.mcap"
+    record(path, LEO_TWO_BODIES.format(name="two", duration="200 s", rate="0.5 Hz"))
+    full = analyze(path, tmp_path / "full")
+    one = analyze(path, tmp_path / "one", figures_for=1)
+    assert one["bodies"] == full["bodies"] and set(one["bodies"]) == {"geo", "leo"}
+    assert one["figures"]["leo"] == {} and one["figures"]["geo"] == full["figures"]["geo"]
+    assert sorted(p.name.split("-")[0] for p in (tmp_path / "one").glob("*.png")) == ["geo"] * len(full["figures"]["geo"])
+    md = (tmp_path / "one" / "report.md").read_text()
+    assert "Numbers for all 2 bodies; figures for the first 1 of them by name" in md
+    picked = analyze(path, tmp_path / "picked", bodies=["l*"])
+    assert set(picked["bodies"]) == {"leo"} and picked["bodies"]["leo"] == full["bodies"]["leo"]
+    assert "Numbers for 1 of the 2 bodies" in (tmp_path / "picked" / "report.md").read_text()
+    with pytest.raises(ValueError, match=r"--bodies: 'sat\*' matches no body of the recording \(it has 2: geo, leo\)"):
+        analyze(path, tmp_path / "none", bodies=["sat*"])
+    proc = subprocess.run([sys.executable, "-m", "astrodyn", "analyze", str(path), "--out", str(tmp_path / "cli"),
+                           "--figures-for", "0", "--bodies", "geo,leo"], capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0 and not list((tmp_path / "cli").glob("*.png")), proc.stderr

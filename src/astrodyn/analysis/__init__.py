@@ -23,10 +23,12 @@ analysed up to what is complete and the report says so at the top.
 from __future__ import annotations
 
 import argparse
+import fnmatch
 import html
 import json
 import os
 import sys
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
@@ -68,13 +70,42 @@ def _fmt(x) -> str:
     return str(x)
 
 
-def analyze(path: str | os.PathLike, out: str | os.PathLike | None = None, seq: str = "321") -> dict:
-    """Write the report of ``path`` into ``out``; returns the numbers (as in report.json)."""
+#: Bodies whose figures a report draws by default (the first by name); the numbers cover all.
+FIGURE_BODIES = 12
+
+
+def select_bodies(names, patterns: Sequence[str] | None) -> list[str]:
+    """The body names (sorted) that match any of ``patterns`` (names or shell globs such as
+    ``sat-00*``; None: all); ValueError naming a pattern that matches none."""
+    names = sorted(names)
+    if patterns is None:
+        return names
+    chosen = set()
+    for pattern in patterns:
+        found = fnmatch.filter(names, pattern)
+        if not found:
+            shown = ", ".join(names[:8]) + (", ..." if len(names) > 8 else "")
+            raise ValueError(f"--bodies: {pattern!r} matches no body of the recording (it has {len(names)}: {shown})")
+        chosen.update(found)
+    return [n for n in names if n in chosen]
+
+
+def analyze(path: str | os.PathLike, out: str | os.PathLike | None = None, seq: str = "321",
+            bodies: Sequence[str] | None = None, figures_for: int = FIGURE_BODIES) -> dict:
+    """Write the report of ``path`` into ``out``; returns the numbers (as in report.json).
+
+    ``bodies``: names or shell patterns of the bodies to report (default all);
+    ``figures_for``: draw the figures of the first this many of them (by name; the numbers
+    cover every one): a figure takes ~0.2-1 s to draw, so a scene of 1000 bodies with all of
+    them would take about an hour."""
     from astrodyn.analysis import figures as fg, metrics as mt
 
     if seq not in _SEQS:
         raise ValueError(f"seq: expected one of {', '.join(_SEQS)}, got {seq!r}")
+    if type(figures_for) is not int or figures_for < 0:
+        raise ValueError(f"--figures-for: expected an integer >= 0, got {figures_for!r}")
     run = load(path)
+    names = select_bodies(run.bodies, bodies)
     out = Path(out) if out is not None else Path(os.fspath(path)).with_suffix("").with_name(Path(path).stem + "-report")
     try:
         out.mkdir(parents=True, exist_ok=True)
@@ -87,68 +118,78 @@ def analyze(path: str | os.PathLike, out: str | os.PathLike | None = None, seq: 
         "file": run.path, "scenario": run.scenario.get("name", "?"), "epoch": run.scenario.get("epoch", "?"),
         "messages": run.messages, "complete": run.complete, "file_report": run.incomplete_reason,
         "euler_sequence": seq, "bodies": {}, "figures": {},
+        "bodies_in_file": len(run.bodies), "figures_drawn_for": min(figures_for, len(names)),
     }
-    for name, body in sorted(run.bodies.items()):
-        numbers: dict = {}
-        figs: list[tuple[str, Path]] = []
-        stem = out / name
-        if body.orbit is not None and len(body.orbit) > 0:
-            tr = body.orbit
-            mu = float(tr.mu[0])
-            om = mt.orbit_metrics(tr.t, tr.r, tr.v, mu)
-            numbers["orbit"] = {**om["summary"], "models": sorted(set(tr.model)), "frame": sorted(set(tr.frame))[0]}
-            figs.append(("orbit3d", fg.orbit_3d(name, tr.r, central.get("radius"), Path(f"{stem}-orbit3d.png"))))
-            if earth:
-                lon, lat = mt.ground_track(tr.r, tr.log_time)
-                figs.append(("groundtrack", fg.ground_track(name, lon, lat, Path(f"{stem}-groundtrack.png"))))
-            figs.append(("elements", fg.elements(name, tr.t, om["elements"], Path(f"{stem}-elements.png"))))
-            figs.append(("orbit-drift", fg.orbit_drift(name, tr.t, om["energy_drift"], om["h_drift"], Path(f"{stem}-orbit-drift.png"))))
-        if body.crosscheck is not None and len(body.crosscheck) > 0:
-            cc = body.crosscheck
-            numbers["crosscheck"] = {"dr_max_m": float(np.max(cc.dr_norm)), "dv_max_m_s": float(np.max(cc.dv_norm)),
-                                     "reference": sorted(set(cc.reference))[0]}
-            figs.append(("crosscheck", fg.crosscheck(name, cc.t, cc.dr_norm, cc.dv_norm, Path(f"{stem}-crosscheck.png"))))
-        if body.attitude is not None and len(body.attitude) > 0:
-            tr = body.attitude
-            # a flexible body's hub alone, a rolling disk (the plane's forces) conserve neither T
-            # nor H: their rows are their models' own (below)
-            inertia = inertias.get(name) if not set(tr.model) & {"flexible", "rolling_disk"} else None
-            am = mt.attitude_metrics(tr.t, tr.q, tr.w, seq, inertia)
-            numbers["attitude"] = {**am["summary"], "models": sorted(set(tr.model))}
-            figs.append(("euler", fg.euler_angles(name, tr.t, am["euler"], seq, Path(f"{stem}-euler.png"))))
-            figs.append(("quaternion", fg.quaternion(name, tr.t, tr.q, Path(f"{stem}-quaternion.png"))))
-            figs.append(("rates", fg.body_rates(name, tr.t, tr.w, Path(f"{stem}-rates.png"))))
-            if set(tr.model) == {"flexible"}:  # the hub's rigid invariants mean nothing: the whole system's
-                section, more = _flexible_section(run, name, body, stem)
-                numbers.update(section)
-                figs += more
-            elif set(tr.model) == {"rolling_disk"}:
-                section, more = _rolling_section(body, stem)
-                numbers.update(section)
-                figs += more
-            elif inertia is not None and "actuated" not in set(tr.model):  # commanded torques: no polhode, no drift
-                figs.append(("polhode", fg.polhode(name, am["h_body"], inertia.inertia, Path(f"{stem}-polhode.png"))))
-                figs.append(("attitude-drift", fg.attitude_drift(name, tr.t, am["energy_drift"], am["h_inertial_drift"],
-                                                                 Path(f"{stem}-attitude-drift.png"))))
-                if inertia.is_top:
-                    figs.append(("top-angles", fg.top_angles(name, tr.t, am["precession"], am["nutation"], Path(f"{stem}-top-angles.png"))))
-        if body.gimbals is not None and len(body.gimbals) and body.attitude is not None and len(body.attitude):
-            section, more = _gyro_section(run, name, body, stem)
-            numbers.update(section)
-            figs += more
-        numbers.update(_conserved(run.scenario, name, body))
-        section, more = closed_loop_section(run, name, stem)  # commands, actuators, momentum, pointing, dv
-        numbers.update(section)
-        figs += more
-        section, more = pointing_section(run, name, stem)  # against the config's target, if it names one
-        numbers.update(section)
-        figs += more
-        report["bodies"][name] = numbers
-        report["figures"][name] = {kind: p.name for kind, p in figs}
+    for i, name in enumerate(names):
+        with fg.drawing(i < figures_for):
+            report["bodies"][name], report["figures"][name] = _body_report(run, name, run.bodies[name], out / name, seq,
+                                                                           central, inertias, earth)
     _write_markdown(report, out / "report.md")
     _write_html(report, out / "report.html")
     (out / "report.json").write_text(json.dumps(report, indent=1, default=str))
     return report
+
+
+def _body_report(run, name: str, body, stem: Path, seq: str, central: dict, inertias: dict, earth: bool
+                 ) -> tuple[dict, dict[str, str]]:
+    """``(numbers, figures)`` of one body: its sections and ``{kind: PNG file name}`` of the
+    figures drawn (none outside :func:`astrodyn.analysis.figures.drawing`)."""
+    from astrodyn.analysis import figures as fg, metrics as mt
+
+    numbers: dict = {}
+    figs: list[tuple[str, Path]] = []
+    if body.orbit is not None and len(body.orbit) > 0:
+        tr = body.orbit
+        mu = float(tr.mu[0])
+        om = mt.orbit_metrics(tr.t, tr.r, tr.v, mu)
+        numbers["orbit"] = {**om["summary"], "models": sorted(set(tr.model)), "frame": sorted(set(tr.frame))[0]}
+        figs.append(("orbit3d", fg.orbit_3d(name, tr.r, central.get("radius"), Path(f"{stem}-orbit3d.png"))))
+        if earth:
+            lon, lat = mt.ground_track(tr.r, tr.log_time)
+            figs.append(("groundtrack", fg.ground_track(name, lon, lat, Path(f"{stem}-groundtrack.png"))))
+        figs.append(("elements", fg.elements(name, tr.t, om["elements"], Path(f"{stem}-elements.png"))))
+        figs.append(("orbit-drift", fg.orbit_drift(name, tr.t, om["energy_drift"], om["h_drift"], Path(f"{stem}-orbit-drift.png"))))
+    if body.crosscheck is not None and len(body.crosscheck) > 0:
+        cc = body.crosscheck
+        numbers["crosscheck"] = {"dr_max_m": float(np.max(cc.dr_norm)), "dv_max_m_s": float(np.max(cc.dv_norm)),
+                                 "reference": sorted(set(cc.reference))[0]}
+        figs.append(("crosscheck", fg.crosscheck(name, cc.t, cc.dr_norm, cc.dv_norm, Path(f"{stem}-crosscheck.png"))))
+    if body.attitude is not None and len(body.attitude) > 0:
+        tr = body.attitude
+        # a flexible body's hub alone, a rolling disk (the plane's forces) conserve neither T
+        # nor H: their rows are their models' own (below)
+        inertia = inertias.get(name) if not set(tr.model) & {"flexible", "rolling_disk"} else None
+        am = mt.attitude_metrics(tr.t, tr.q, tr.w, seq, inertia)
+        numbers["attitude"] = {**am["summary"], "models": sorted(set(tr.model))}
+        figs.append(("euler", fg.euler_angles(name, tr.t, am["euler"], seq, Path(f"{stem}-euler.png"))))
+        figs.append(("quaternion", fg.quaternion(name, tr.t, tr.q, Path(f"{stem}-quaternion.png"))))
+        figs.append(("rates", fg.body_rates(name, tr.t, tr.w, Path(f"{stem}-rates.png"))))
+        if set(tr.model) == {"flexible"}:  # the hub's rigid invariants mean nothing: the whole system's
+            section, more = _flexible_section(run, name, body, stem)
+            numbers.update(section)
+            figs += more
+        elif set(tr.model) == {"rolling_disk"}:
+            section, more = _rolling_section(body, stem)
+            numbers.update(section)
+            figs += more
+        elif inertia is not None and "actuated" not in set(tr.model):  # commanded torques: no polhode, no drift
+            figs.append(("polhode", fg.polhode(name, am["h_body"], inertia.inertia, Path(f"{stem}-polhode.png"))))
+            figs.append(("attitude-drift", fg.attitude_drift(name, tr.t, am["energy_drift"], am["h_inertial_drift"],
+                                                             Path(f"{stem}-attitude-drift.png"))))
+            if inertia.is_top:
+                figs.append(("top-angles", fg.top_angles(name, tr.t, am["precession"], am["nutation"], Path(f"{stem}-top-angles.png"))))
+    if body.gimbals is not None and len(body.gimbals) and body.attitude is not None and len(body.attitude):
+        section, more = _gyro_section(run, name, body, stem)
+        numbers.update(section)
+        figs += more
+    numbers.update(_conserved(run.scenario, name, body))
+    section, more = closed_loop_section(run, name, stem)  # commands, actuators, momentum, pointing, dv
+    numbers.update(section)
+    figs += more
+    section, more = pointing_section(run, name, stem)  # against the config's target, if it names one
+    numbers.update(section)
+    figs += more
+    return numbers, {kind: p.name for kind, p in figs if p is not None}
 
 
 def _flexible_section(run, name: str, body, stem: Path) -> tuple[dict, list[tuple[str, Path]]]:
@@ -310,12 +351,23 @@ def at_a_glance(report: dict) -> list[str]:
     return lines
 
 
+def figures_note(report: dict) -> str:
+    """The sentence that says which bodies the report covers and draws, when not all."""
+    n, shown, drawn = report["bodies_in_file"], len(report["bodies"]), report["figures_drawn_for"]
+    if drawn == shown == n:
+        return ""
+    which = f"{shown} of the {n} bodies (`--bodies`)" if shown < n else f"all {n} bodies"
+    return (f"Numbers for {which}; figures for the first {drawn} of them by name (`--figures-for N`: a figure "
+            f"takes about a second to draw).")
+
+
 def _write_markdown(report: dict, path: Path) -> None:
     lines = [f"# astrodyn report: {report['scenario']}", "",
              f"File `{report['file']}`, epoch {report['epoch']}, {report['messages']} messages, "
              f"Euler sequence {report['euler_sequence']}.", ""]
     if not report["complete"]:
         lines += [f"**Incomplete file**: {report['file_report'] or 'invalid messages skipped'}.", ""]
+    lines += [f"{figures_note(report)}", ""] if figures_note(report) else []
     lines += ["At a glance:", ""] + [f"- {line}" for line in at_a_glance(report)] + [""]
     for name, numbers in report["bodies"].items():
         lines += [f"## {name}", ""]
@@ -338,6 +390,8 @@ def _write_html(report: dict, path: Path) -> None:
              f"Euler sequence {e(report['euler_sequence'])}.</p>"]
     if not report["complete"]:
         parts.append(f"<p><b>Incomplete file</b>: {e(report['file_report'] or 'invalid messages skipped')}.</p>")
+    if figures_note(report):
+        parts.append(f"<p>{e(figures_note(report))}</p>")
     parts.append("<p>At a glance:</p><ul>" + "".join(f"<li>{e(line)}</li>" for line in at_a_glance(report)) + "</ul>")
     for name, numbers in report["bodies"].items():
         parts.append(f"<h2>{e(name)}</h2>")
@@ -357,6 +411,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("file", help="MCAP file recorded by astrodyn, or a sweep directory (with summary.csv)")
     ap.add_argument("--out", default=None, help="report directory (default <file>-report)")
     ap.add_argument("--seq", default="321", help="Euler angle sequence for the attitude plots (default 321)")
+    ap.add_argument("--bodies", default=None, metavar="NAMES",
+                    help="comma-separated body names or shell patterns to report, e.g. 'sat-00*,leo' (default: all)")
+    ap.add_argument("--figures-for", type=int, default=FIGURE_BODIES, metavar="N",
+                    help=f"draw the figures of the first N reported bodies by name; the numbers cover all "
+                         f"(default {FIGURE_BODIES}; 0: none)")
     args = ap.parse_args(argv)
     if Path(args.file).is_dir():
         if not (Path(args.file) / "summary.csv").is_file():
@@ -370,7 +429,8 @@ def main(argv: list[str] | None = None) -> int:
         print(out / "report.md")
         return 0
     try:
-        report = analyze(args.file, args.out, args.seq)
+        report = analyze(args.file, args.out, args.seq, None if args.bodies is None else args.bodies.split(","),
+                         args.figures_for)
     except (RecordingError, ValueError) as exc:
         print(f"astrodyn analyze: error: {exc}", file=sys.stderr)
         return 1

@@ -7,6 +7,10 @@ the span (:func:`time_axis`) so tick labels stay short.
 
 from __future__ import annotations
 
+import contextlib
+import contextvars
+import functools
+from collections.abc import Iterator
 from pathlib import Path
 
 import matplotlib
@@ -15,7 +19,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
-__all__ = ["time_axis", "orbit_3d", "ground_track", "elements", "orbit_drift", "crosscheck",
+__all__ = ["drawing", "time_axis", "stacked_pairs", "orbit_3d", "ground_track", "elements", "orbit_drift", "crosscheck",
            "euler_angles", "quaternion", "body_rates", "polhode", "attitude_drift", "top_angles", "appendage_tips",
            "flexible_drift", "contact_path", "rolling_angles", "gyro_indications"]
 
@@ -294,3 +298,33 @@ def gyro_indications(name: str, t: np.ndarray, indicated: np.ndarray, truth: np.
     axes[-1].set_xlabel(tl)
     fig.suptitle(f"{name}: single-axis gyroscopes, indication against the body's motion")
     return _save(fig, path)
+
+
+# ---------------------------------------------------------------------------------------
+# Figures on or off: a report of many bodies draws those of the first few only (drawing one
+# body's figures takes ~1-5 s; 1000 bodies' would take an hour), with the numbers of all.
+
+_DRAW = contextvars.ContextVar("astrodyn_analysis_draw", default=True)
+
+
+@contextlib.contextmanager
+def drawing(on: bool) -> Iterator[None]:
+    """Within this block every figure function of this module draws (``on``) or returns
+    None at once, without touching matplotlib."""
+    token = _DRAW.set(bool(on))
+    try:
+        yield
+    finally:
+        _DRAW.reset(token)
+
+
+def _when_drawing(f):
+    @functools.wraps(f)
+    def figure_or_none(*args, **kwargs):
+        return f(*args, **kwargs) if _DRAW.get() else None
+    return figure_or_none
+
+
+for _name in __all__:
+    if _name not in ("drawing", "time_axis"):
+        globals()[_name] = _when_drawing(globals()[_name])
