@@ -473,3 +473,21 @@ def test_generated_valid_messages_pass_both(kind, t, seq, vec, q):
         msg["q"] = q
     assert jsonschema.Draft202012Validator(SCHEMA_OF[kind]).is_valid(msg)
     assert m.is_valid(m.encode(msg), kind)
+
+
+def test_an_integer_beyond_float64_is_a_message_error_never_an_overflow():
+    """A JSON integer of 400 digits fits no float64: decode and the builders say which field
+    (the contract: MessageError for numbers beyond float64), instead of the OverflowError
+    that math.isfinite / float() raise on it."""
+    huge = "1" + "0" * 399
+    good = {"t": 1.0, "seq": 0, "model": "kepler", "r": [7e6, 0.0, 0.0], "v": [0.0, 7.5e3, 0.0], "mu": 3.986004418e14,
+            "frame": "GCRF"}
+    for field, text in [("t", huge), ("mu", "-" + huge), ("r", f"[{huge},0,0]"), ("seq", huge)]:
+        payload = json.dumps({**good, field: "@"}).replace('"@"', text).encode()
+        with pytest.raises(m.MessageError, match=rf"orbit\.{field}: expected"):
+            m.decode(payload, "orbit")
+    for args, field in [((10**400, 0), "t"), ((1.0, 10**400), "seq")]:
+        with pytest.raises(m.MessageError, match=rf"orbit\.{field}: expected"):
+            m.orbit_message(*args, "kepler", [7e6, 0, 0], [0, 7.5e3, 0], 3.986004418e14)
+    with pytest.raises(m.MessageError, match=r"orbit\.r: expected array of 3 finite numbers"):
+        m.orbit_message(1.0, 0, "kepler", [10**400, 0, 0], [0, 7.5e3, 0], 3.986004418e14)

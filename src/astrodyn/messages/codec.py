@@ -10,6 +10,7 @@ import json
 import math
 import operator
 import re
+import sys
 import types
 import typing
 from collections.abc import Sequence
@@ -30,7 +31,13 @@ from astrodyn.messages.keys import ATTITUDE_MODELS, MAX_SEQ, ORBIT_MODELS, kind_
 
 
 def _is_number(x: Any) -> bool:
-    return (type(x) is float or type(x) is int) and math.isfinite(x)
+    """A finite JSON number that fits a float64 (an integer of 400 digits does not)."""
+    if type(x) is int:
+        return -_FLOAT64_MAX <= x <= _FLOAT64_MAX
+    return type(x) is float and math.isfinite(x)
+
+
+_FLOAT64_MAX = int(sys.float_info.max)
 
 
 @functools.cache
@@ -748,7 +755,10 @@ def _encode_reference(msg: Any, kind: str | None = None) -> bytes:
 
 
 def checked_floats(x: Any, n: int, kind: str, field: str) -> list[float]:
-    a = np.asarray(x, dtype=float)
+    try:
+        a = np.asarray(x, dtype=float)
+    except (TypeError, ValueError, OverflowError):  # not numbers; an integer beyond float64
+        a = np.full(max(n, 1) + 1, np.nan)  # refused below
     if a.shape != (n,) or not np.all(np.isfinite(a)):
         raise MessageError(f"{kind}.{field}: expected array of {n} finite numbers, got {show_value(np.asarray(x).tolist() if np.ndim(x) else x)}")
     return a.tolist()
@@ -757,7 +767,7 @@ def checked_floats(x: Any, n: int, kind: str, field: str) -> list[float]:
 def checked_float(x: Any, kind: str, field: str) -> float:
     try:
         f = float(x)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):
         raise MessageError(f"{kind}.{field}: expected a finite number, got {show_value(x)}") from None
     if not math.isfinite(f):
         raise MessageError(f"{kind}.{field}: expected a finite number, got {f!r}")
@@ -775,7 +785,7 @@ def checked_int(x: Any, kind: str, field: str) -> int:
         raise MessageError(expected + show_value(x))
     i = int(x)
     if not 0 <= i <= MAX_SEQ:
-        raise MessageError(expected + str(i))
+        raise MessageError(expected + show_value(i))
     return i
 
 
