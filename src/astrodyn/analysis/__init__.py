@@ -245,7 +245,7 @@ def _gyro_section(run, name: str, body, stem: Path) -> tuple[dict, list[tuple[st
         axes = np.array([np.asarray(g["mount"], dtype=np.float64)[0] for g in gyros])
         types = [str(g["type"]) for g in gyros]
         indicated = np.array([np.asarray(row, dtype=np.float64) for row in body.gimbals.indicated])
-    except (StopIteration, KeyError, TypeError, ValueError, IndexError):
+    except (StopIteration, KeyError, TypeError, ValueError, IndexError, AttributeError, RecursionError):
         return {"gyros": {"note": "gyroscopes not described in the recording's config"}}, []
     _, ia, ig = np.intersect1d(body.attitude.seq, body.gimbals.seq, return_indices=True)
     if indicated.ndim != 2 or indicated.shape[1] != len(types) or axes.shape != (len(types), 3) or ia.size < 2:

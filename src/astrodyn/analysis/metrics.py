@@ -92,16 +92,17 @@ def _scenario_json(scenario: dict) -> dict:
     try:
         data = json.loads(scenario.get("json", "{}"))
         return data if isinstance(data, dict) else {}
-    except ValueError:
+    except (TypeError, ValueError, RecursionError):  # the file's metadata: any text, nested past the parser's depth
         return {}
 
 
 def inertia_from_scenario(scenario: dict) -> dict[str, BodyInertia]:
     """Per body with an attitude: its inertia (and top parameters) from the scenario metadata."""
     out = {}
-    for b in _scenario_json(scenario).get("bodies", []):
+    bodies = _scenario_json(scenario).get("bodies")
+    for b in bodies if isinstance(bodies, list) else []:
         att = b.get("attitude") if isinstance(b, dict) else None
-        if not att or att.get("inertia") is None:
+        if not isinstance(att, dict) or att.get("inertia") is None or not isinstance(b.get("name"), str):
             continue
         try:
             inertia = np.array(att["inertia"], dtype=np.float64).reshape(3, 3)
@@ -115,7 +116,7 @@ def inertia_from_scenario(scenario: dict) -> dict[str, BodyInertia]:
 def central_body_from_scenario(scenario: dict) -> dict:
     """``{"name", "mu", "radius"}`` of the scenario's central body ({} when unknown)."""
     cb = _scenario_json(scenario).get("central_body") or {}
-    return {k: cb[k] for k in ("name", "mu", "radius") if k in cb}
+    return {k: cb[k] for k in ("name", "mu", "radius") if k in cb} if isinstance(cb, dict) else {}
 
 
 def attitude_metrics(t: np.ndarray, q: np.ndarray, w: np.ndarray, seq: str,

@@ -356,7 +356,7 @@ def _central_body(run: Run) -> dict:
     try:
         cb = json.loads(run.scenario["json"])["central_body"]
         return cb if isinstance(cb, dict) else {}
-    except (KeyError, ValueError, TypeError):
+    except (KeyError, ValueError, TypeError, RecursionError):  # any text, nested past the parser's depth
         return {}
 
 
@@ -402,7 +402,11 @@ def _ccsds_tracks(run: Run, kind: str):
         tr = getattr(body, kind)
         if tr is None or len(tr) == 0:
             continue
-        epochs, system = ccsds_epochs(run, tr.t, tr.log_time)
+        try:
+            epochs, system = ccsds_epochs(run, tr.t, tr.log_time)
+        except ValueError as exc:  # erfa's "unacceptable date": a hostile t (1e300 s) beyond any calendar
+            raise ExportError(f"{run.path}: {tr.topic}: t from {float(np.min(tr.t)):g} to {float(np.max(tr.t)):g} s: "
+                              f"expected times a calendar date can show ({type(exc).__name__}: {exc})") from None
         yield name, body, tr, epochs, system
 
 
@@ -629,8 +633,11 @@ def write_foxglove(run: Run, out: Path, max_line_points: int = MAX_LINE_POINTS) 
     raw = run.metadata.get("recording", {}).get("epoch_unix_ns", run.scenario.get("epoch_unix_ns", "0"))
     try:
         epoch_ns = int(raw)
+        if not -(2**63) <= epoch_ns < 2**63:  # log times are uint64 ns: a 400-digit epoch overflowed t's float
+            raise ValueError(raw)
     except (TypeError, ValueError):
-        raise ExportError(f"{run.path}: metadata epoch_unix_ns {str(raw)[:40]!r}: expected an integer number of ns") from None
+        raise ExportError(f"{run.path}: metadata epoch_unix_ns {str(raw)[:40]!r}: expected an integer number of ns "
+                          f"(int64)") from None
     # the scene first: at the first instant it is there before the first transform
     tfs = sorted(scene_updates(run, max_line_points) + frame_transforms(run), key=lambda m: m[0])
     with open_stream(run.path) as stream, McapRecorder(path, run.scenario, epoch_ns=epoch_ns) as rec:

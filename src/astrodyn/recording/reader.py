@@ -621,7 +621,7 @@ class RecordingScan:
         """Keep a schema's name and its JSON Schema (None unless a ``jsonschema`` object)."""
         try:
             data = json.loads(rec.data) if rec.encoding == "jsonschema" and rec.data else None
-        except ValueError:
+        except (ValueError, RecursionError):  # not JSON, or nested past the parser's depth
             data = None
         self.schemas[rec.id] = (rec.name, data if isinstance(data, dict) else None)
 

@@ -151,14 +151,18 @@ class McapStream:
 
     @property
     def epoch_ns(self) -> int | None:
-        """``epoch_unix_ns`` of the "recording" (or "scenario") metadata record, if any."""
+        """``epoch_unix_ns`` of the "recording" (or "scenario") metadata record, if any: the
+        first that is an integer within int64 (log times are uint64 ns; anything else, a
+        400-digit number included, is not an epoch)."""
         for name in ("recording", "scenario"):
             raw = self.metadata.get(name, {}).get("epoch_unix_ns")
             if raw is not None:
                 try:
-                    return int(raw)
+                    epoch = int(raw)
                 except ValueError:
-                    pass
+                    continue
+                if -(2**63) <= epoch < 2**63:
+                    return epoch
         return None
 
     @property

@@ -200,43 +200,73 @@ class Intake:
         return kind, who, msg
 
 
-def recorded_commands(path: str | Path, scenario: str) -> dict[int, list[dict]]:
+def recorded_commands(path: str | Path, scenario) -> dict[int, list[dict]]:
     """The commands of recording ``path``, by the output step at which they were applied:
     ``{k: [command, ...]}`` in the order the plant applied them (its actuator states'
-    ``applied`` lists)."""
+    ``applied`` lists).
+
+    ``scenario``: the :class:`astrodyn.scenario.Scenario` re-simulated, or only its name.
+    ValueError naming the channel and log time for what the plant never records: one
+    command id recorded twice with different contents, a command applied at two steps, and
+    (given the Scenario) a command or actuator state of a body that is not the scene's plant
+    body, or a command applied in a step that ends before its ``t`` (it would move the body
+    to that ``t`` inside the step)."""
     from astrodyn.recording.stream import open_stream
 
-    commands: dict[str, dict] = {}
-    applied: list[tuple[int, str, list[str]]] = []
+    name = scenario if isinstance(scenario, str) else scenario.name
+    bodies = rate = None
+    if not isinstance(scenario, str):
+        from astrodyn.scenario.control import plant_bodies
+
+        bodies, rate = plant_bodies(scenario), scenario.rate
+    commands: dict[str, tuple[dict, str]] = {}  # body/id -> (command, where it is recorded)
+    applied: list[tuple[int, str, list[str], str]] = []
     with open_stream(path) as s:
         for m in s.messages():
             try:
                 _, body, kind = messages.parse_key(m.topic)
             except messages.MessageError:
                 continue
-            if not m.topic.startswith(f"{messages.PREFIX}/{scenario}/"):
+            if not m.topic.startswith(f"{messages.PREFIX}/{name}/") or kind not in ("command", "actuators"):
                 continue
+            where = f"{m.topic} at log time {m.log_time} ns"
+            if bodies is not None and body not in bodies:
+                raise ValueError(f"{where}: body {body!r} is not an actuated body of scenario {name!r} "
+                                 f"({', '.join(bodies) or 'none'})")
+            msg = _decode_recorded(m, kind)
             if kind == "command":
-                msg = _decode_recorded(m, "command")
-                commands[f"{body}/{command_id(msg['sender'], msg['seq'])}"] = msg
-            elif kind == "actuators":
-                msg = _decode_recorded(m, "actuators")
-                if msg.get("applied"):
-                    applied.append((msg["seq"], body, msg["applied"]))
+                cid = f"{body}/{command_id(msg['sender'], msg['seq'])}"
+                if cid in commands and commands[cid][0] != msg:
+                    raise ValueError(f"{where}: command {cid} is recorded twice with different contents "
+                                     f"(first at {commands[cid][1]})")
+                commands.setdefault(cid, (msg, where))
+            elif msg.get("applied"):
+                applied.append((msg["seq"], body, msg["applied"], where))
     out: dict[int, list[dict]] = {}
-    for k, body, ids in sorted(applied, key=lambda x: x[0]):
+    first: dict[str, tuple[int, str]] = {}
+    for k, body, ids, where in sorted(applied, key=lambda x: x[0]):
         for cid in ids:
-            cmd = commands.get(f"{body}/{cid}")
+            key = f"{body}/{cid}"
+            if key in first and first[key][0] != k:
+                raise ValueError(f"{where}: actuator state of {body} at step {k} names command {cid}, already "
+                                 f"applied at step {first[key][0]} ({first[key][1]}): the plant applies a command once")
+            first.setdefault(key, (k, where))
+            cmd = commands.get(key)
             if cmd is None:
                 raise ValueError(f"--commands {path}: actuator state of {body} at step {k} names command {cid}, "
                                  f"which the recording does not hold")
-            out.setdefault(k, []).append((body, cmd))
+            if rate is not None and cmd[0]["t"] > (k + 1) / rate * (1 + 1e-12):
+                raise ValueError(f"{cmd[1]}: command {cid} has t = {cmd[0]['t']!r} s, after the end of step {k} "
+                                 f"(t = {k / rate:g} s) where {where} says it was applied")
+            out.setdefault(k, []).append((body, cmd[0]))
     return out
 
 
 def recorded_faults(path: str | Path, scenario) -> list:
     """The faults that began in recording ``path`` (the plant's ``fault`` events: those of
-    the config and those injected by serve's ``fault`` verb), each at the time it began."""
+    the config and those injected by serve's ``fault`` verb), each at the time it began.
+    First checks that the recording's commands fit ``scenario`` (:func:`recorded_commands`
+    given the Scenario: ValueError for a body not in the scene, or a command after its step)."""
     from astrodyn.recording.stream import open_stream
     from astrodyn.scenario.control import parse_fault, plant_bodies
     from astrodyn.scenario.fields import Ctx
@@ -256,6 +286,7 @@ def recorded_faults(path: str | Path, scenario) -> list:
                                      f"got {type(exc).__name__}: {exc}") from None
                 out.append(parse_fault(Ctx(f"--commands {path}"), detail, "fault event",
                                        math.inf, plant_bodies(scenario), t=event["t"]))
+    recorded_commands(path, scenario)  # the commands fit this scene (bodies, step times), or ValueError
     return out
 
 

@@ -35,7 +35,7 @@ import numpy as np
 
 from astrodyn import messages
 from astrodyn.messages import ATTITUDE_PROCESS_KINDS
-from astrodyn.scenario import Scenario, plan as make_plan
+from astrodyn.scenario import Scenario, ScenarioError, plan as make_plan
 from astrodyn.simulate import FlexibleBody, GyroSet, RollingBody
 
 __all__ = ["state_channels", "state_topics", "contiguous_steps", "last_common_step", "states_at", "write_state_file",
@@ -67,6 +67,10 @@ def state_channels(scenario: Scenario, kind: str) -> list[tuple[str, str, str]]:
                 if b.attitude_model != messages.ACTUATED_MODEL:  # the plant's channels are not resumed
                     out += [(b.name, own, messages.body_key(scenario.name, b.name, own)) for own in b.own_kinds]
         return out
+    if kind == "plant":  # a ScenarioError: `run --resume` reports it as it reports a wrong file
+        raise ScenarioError(f"scenario {scenario.name!r} is a closed loop: its plant cannot be resumed (the "
+                            f"controllers' state lives outside astrodyn; docs/control.md); re-simulate it from "
+                            f"its commands with --commands REC.mcap instead")
     raise ValueError(f"kind: expected 'orbit' or 'attitude', got {kind!r}")
 
 
