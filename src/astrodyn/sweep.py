@@ -803,8 +803,7 @@ def run_cases(spec: SweepSpec, cases: Iterable[int], workers: int = 2, scheduler
     ``chunk`` cases make one Dask task (for cases of a few ms, where the scheduler's
     per-task overhead of ~10-20 ms would dominate)."""
     cases = list(cases)
-    if not (isinstance(chunk, int) and chunk >= 1):
-        raise SweepError(f"--chunk: expected an integer >= 1, got {chunk!r}")
+    check_chunk(chunk)
     if workers == 0 and scheduler is None:
         for k in cases:
             yield run_case(k, spec)
@@ -1021,6 +1020,18 @@ def _parser() -> argparse.ArgumentParser:
     return ap
 
 
+def check_chunk(chunk: Any) -> None:
+    """``--chunk``: an integer >= 1 (SweepError naming it)."""
+    if not (isinstance(chunk, int) and chunk >= 1):
+        raise SweepError(f"--chunk: expected an integer >= 1, got {chunk!r}")
+
+
+def max_local_workers() -> int:
+    """The most ``--workers`` of a LocalCluster: 4 per core of this machine (each worker is a
+    process that imports the numeric core; more only thrash)."""
+    return 4 * (os.cpu_count() or 1)
+
+
 def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
     from astrodyn.scenario import ScenarioError
@@ -1028,19 +1039,27 @@ def main(argv: list[str] | None = None) -> int:
     try:
         if args.workers < 0:
             raise SweepError(f"--workers: expected an integer >= 0, got {args.workers}")
+        if args.scheduler is None and args.workers > max_local_workers():
+            raise SweepError(f"--workers: expected at most {max_local_workers()} local worker processes (4 per core; "
+                             f"{os.cpu_count()} cores here), got {args.workers}")
+        check_chunk(args.chunk)
         spec = make_spec(args.config, args.vary, n=args.n, seed=args.seed, cases_csv=args.cases)
-        out = Path(args.out)
-        if out.exists() and not out.is_dir():
-            raise SweepError(f"--out {out}: expected a directory, got a file")
-        out.mkdir(parents=True, exist_ok=True)
-        if not os.access(out, os.W_OK):
-            raise SweepError(f"--out {out}: expected a writable directory")
-        if args.mcap:
-            spec.mcap_dir = str((out / "mcap").resolve())
         cases = list(range(spec.n)) if args.case is None else sorted(set(args.case))
         for k in cases:
             if not 0 <= k < spec.n:
                 raise SweepError(f"--case: expected 0 <= K < {spec.n} (the sweep's -n), got {k}")
+        out = Path(args.out)
+        try:  # the last check: a refused sweep creates nothing
+            if out.exists() and not out.is_dir():
+                raise SweepError(f"--out {out}: expected a directory, got a file")
+            out.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise SweepError(f"--out {str(out)[:200]}: expected a directory that can be created, got "
+                             f"{exc.strerror or exc}") from None
+        if not os.access(out, os.W_OK):
+            raise SweepError(f"--out {out}: expected a writable directory")
+        if args.mcap:
+            spec.mcap_dir = str((out / "mcap").resolve())
     except (SweepError, ScenarioError) as exc:
         print(f"astrodyn sweep: {exc}", file=sys.stderr)
         return 2

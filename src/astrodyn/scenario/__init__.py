@@ -933,6 +933,18 @@ def _output(ctx: Ctx, data: Any, base: Path | None) -> tuple[Path | None, int | 
     return path, roll_size, roll_interval
 
 
+def _channels(b: Body) -> int:
+    """State channels body ``b`` records: orbit, attitude, cross-check, gimbals, appendages or rolling."""
+    return ((b.orbit is not None) + (b.attitude is not None) + bool(b.cross_check) + bool(b.gyros)
+            + bool(b.attitude is not None and (b.attitude.appendages or b.attitude.rolling)))
+
+
+def _too_many_channels(ctx: Ctx, got: str) -> ScenarioError:
+    return ctx.error("bodies", f"at most {MAX_CHANNELS - EXTRA_CHANNELS} state channels in one recording (MCAP "
+                     f"channel ids are 16-bit; each body has one per orbit, attitude, cross-check and appendages)",
+                     got, raw=True)
+
+
 # --------------------------------------------------------------------------- loading
 
 
@@ -998,6 +1010,10 @@ def load_dict(data: dict[str, Any], source: str = "<dict>", base_dir: str | Path
         raise ctx.error("bodies", "an array of tables [[bodies]]", raw_bodies)
     if len(raw_bodies) > MAX_BODIES:
         raise ctx.error("bodies", f"at most {MAX_BODIES} bodies", f"{len(raw_bodies)} bodies", raw=True)
+    max_state_channels = MAX_CHANNELS - EXTRA_CHANNELS
+    if len(raw_bodies) > max_state_channels:  # refused before reading them: each body records at least one channel
+        raise ctx.error("bodies", f"at most {max_state_channels} bodies (each records at least one state channel in "
+                        f"the recording; MCAP channel ids are 16-bit)", f"{len(raw_bodies)} bodies", raw=True)
     control_every = None
     if top.has("control"):
         ct = top.get("control")
@@ -1006,8 +1022,17 @@ def load_dict(data: dict[str, Any], source: str = "<dict>", base_dir: str | Path
             period = quantity(ctx, ct["period"], "time", "control.period")
             check(ctx, period > 0, "control.period", "period > 0", ct["period"])
             control_every = steps_per(ctx, period, rate, "control.period", ct["period"])
+    seen: dict[str, int] = {}
+    channels = 0
     for k, item in enumerate(raw_bodies):
-        bodies.append(_body(ctx, item, f"bodies[{k}]", cb, rate, control_every))
+        b = _body(ctx, item, f"bodies[{k}]", cb, rate, control_every)
+        if b.name in seen:  # at once: a file of 60,000 copies of one body is refused without reading them all
+            raise ctx.error(f"bodies[{k}].name", f"a unique body name (also bodies[{seen[b.name]}])", b.name)
+        seen[b.name] = k
+        channels += _channels(b)
+        if channels > max_state_channels:
+            raise _too_many_channels(ctx, f"more than that from the first {k + 1} bodies")
+        bodies.append(b)
     walker = None
     if top.has("walker"):
         generated, walker = _walker(ctx, top.get("walker"), cb)
@@ -1016,15 +1041,11 @@ def load_dict(data: dict[str, Any], source: str = "<dict>", base_dir: str | Path
         raise ctx.error("bodies", "at least one body ([[bodies]] or [walker])", "none", raw=True)
     if len(bodies) > MAX_BODIES:
         raise ctx.error("bodies", f"at most {MAX_BODIES} bodies", f"{len(bodies)} bodies", raw=True)
-    channels = sum((b.orbit is not None) + (b.attitude is not None) + bool(b.cross_check) + bool(b.gyros)
-                   + bool(b.attitude is not None and (b.attitude.appendages or b.attitude.rolling)) for b in bodies)
+    channels = sum(_channels(b) for b in bodies)
     if channels + EXTRA_CHANNELS > MAX_CHANNELS:
-        raise ctx.error("bodies", f"at most {MAX_CHANNELS - EXTRA_CHANNELS} state channels in one recording (MCAP "
-                        f"channel ids are 16-bit; each body has one per orbit, attitude, cross-check and appendages)",
-                        f"{channels} channels from {len(bodies)} bodies", raw=True)
-    seen: dict[str, int] = {}
-    for k, b in enumerate(bodies):
-        where = f"bodies[{k}].name" if k < len(raw_bodies) else "walker.prefix"
+        raise _too_many_channels(ctx, f"{channels} channels from {len(bodies)} bodies")
+    for k, b in enumerate(bodies[len(raw_bodies):], start=len(raw_bodies)):  # the walker's, against all
+        where = "walker.prefix"
         if b.name in seen:
             raise ctx.error(where, f"a unique body name (also bodies[{seen[b.name]}])", b.name)
         seen[b.name] = k

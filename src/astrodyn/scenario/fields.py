@@ -23,7 +23,7 @@ import numpy as np
 from astrodyn.messages import NAME_PATTERN
 
 __all__ = ["QUAT_TOL", "unit_quaternion", "ScenarioError", "Ctx", "Table", "MISSING", "MAX_STRING", "MAGNITUDE_MAX", "MAGNITUDE_MIN", "QUANTITY_KINDS",
-           "jsonable", "show", "did_you_mean", "units", "parse_quantity_string", "quantity", "vector", "check",
+           "jsonable", "show", "short_key", "MAX_SHOWN_DEPTH", "did_you_mean", "units", "parse_quantity_string", "quantity", "vector", "check",
            "field_name", "choice", "boolean", "integer", "string"]
 
 MAX_STRING = 256  #: longest accepted quantity / epoch string
@@ -94,11 +94,34 @@ def show(value: Any) -> str:
         return value.isoformat()
     if isinstance(value, np.ndarray):
         value = value.tolist()
+    if _depth(value) > MAX_SHOWN_DEPTH:  # a hostile nesting: json / jsonable would exhaust the stack
+        return f"a value nested more than {MAX_SHOWN_DEPTH} levels deep"
     try:
         text = json.dumps(jsonable(value), ensure_ascii=False)
     except (TypeError, ValueError):  # pragma: no cover - TOML values are always JSON-able
         text = repr(value)
     return text if len(text) <= 100 else text[:97] + "..."
+
+
+MAX_SHOWN_DEPTH = 32  #: deeper lists / tables are described, not printed, in error messages
+
+
+def _depth(value: Any) -> int:
+    """Nesting depth of lists and tables, counted without recursion (stops past the limit)."""
+    depth, level = 0, [value]
+    while level and depth <= MAX_SHOWN_DEPTH:
+        level = [x for v in level for x in (v.values() if isinstance(v, dict) else v if isinstance(v, list) else ())]
+        depth += 1 if level else 0
+    return depth
+
+
+def short_key(key: Any) -> str:
+    """A config key as it goes into a key path: on one line (control characters escaped as in
+    JSON) and shortened (a hostile key may be megabytes long)."""
+    text = str(key)[:64]
+    if not text.isprintable():
+        text = json.dumps(text, ensure_ascii=False)[1:-1]
+    return text if len(str(key)) <= 64 else f"{text[:61]}..."
 
 
 class Ctx:
@@ -132,8 +155,9 @@ class Table:
         self.ctx, self.data, self.path, self.allowed = ctx, data, path, allowed
         for key in data:
             if key not in allowed:
-                hint = did_you_mean(str(key), allowed)
-                raise ctx.error(self.sub(key), f"one of the keys {', '.join(allowed)}{hint}", f'unknown key "{key}"', raw=True)
+                hint = did_you_mean(str(key)[:256], allowed)
+                raise ctx.error(self.sub(short_key(key)), f"one of the keys {', '.join(allowed)}{hint}",
+                                f'unknown key "{short_key(key)}"', raw=True)
 
     def sub(self, key: str) -> str:
         return f"{self.path}.{key}" if self.path else str(key)

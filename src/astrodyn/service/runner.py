@@ -560,7 +560,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--connect", action="append", metavar="ENDPOINT", help="also connect to this Zenoh endpoint (router)")
     ap.add_argument("--zenoh-config", metavar="FILE", help="Zenoh JSON5 config every process starts from (TLS, "
                     "access control; docs/security.md)")
-    ap.add_argument("--timeout", type=float, default=None, help="fail if the run takes longer than this many wall seconds")
+    ap.add_argument("--timeout", type=wall_seconds, default=None, help="fail if the run takes longer than this many wall seconds")
     ap.add_argument("--quiet", action="store_true", help="no progress line")
     ap.add_argument("--json", metavar="FILE", help="write the full result (per-body summary included) as JSON")
     ap.add_argument("--resume", metavar="MCAP", help="continue the scenario from the last complete step recorded in "
@@ -583,18 +583,19 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     with tempfile.TemporaryDirectory(prefix="astrodyn-resume-") as work:
         try:
+            if args.out == "":
+                raise ScenarioError("--out: expected a file path, got an empty string")
             scenario = load(args.config)
             out = Path(args.out) if args.out else (scenario.output_path or Path(f"{scenario.name}.mcap"))
             if not 1 <= args.loggers <= MAX_LOGGERS:
                 raise ScenarioError(f"--loggers: expected 1 <= N <= {MAX_LOGGERS}, got {args.loggers}")
             inputs = (args.config, args.resume, args.zenoh_config, args.json, args.commands)
-            for path in [out, *(Path(standby_path(out, k)) for k in range(2, args.loggers + 1))]:
-                check_output_path(path, inputs=inputs)
-            if args.zenoh_config:
-                try:
-                    bus.make_config(mode="peer", config_file=args.zenoh_config)
-                except bus.BusError as exc:
-                    raise ScenarioError(str(exc)) from None
+            outputs = [out, *(Path(standby_path(out, k)) for k in range(2, args.loggers + 1))]
+            for path in outputs:
+                checked_output_path(path, inputs)
+            if args.json is not None:
+                check_json_path(Path(args.json), (args.config, args.resume, args.zenoh_config, args.commands, *outputs))
+            check_bus_flags(args.connect, args.zenoh_config)
             resume = resume_plan(Path(args.resume), scenario, out, Path(work)) if args.resume else {}
             check_closed_loop_arguments(scenario, args.controller or [], args.commands, out)
         except ScenarioError as exc:
@@ -664,6 +665,65 @@ def main(argv: list[str] | None = None) -> int:
         if not args.tolerate_rejected:
             return EXIT_REJECTED
     return 0
+
+
+def wall_seconds(text: str) -> float:
+    """An argparse type: wall seconds, a finite number > 0 (``--timeout``, ``--max-wall``)."""
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not 0.0 < value < math.inf:
+        raise argparse.ArgumentTypeError(f"expected wall seconds, a finite number > 0, got {text!r}")
+    return value
+
+
+def check_bus_flags(connect: list[str] | None, zenoh_config: str | None) -> None:
+    """``--connect`` endpoints and the ``--zenoh-config`` file, checked before anything
+    starts (a bad endpoint made every child fail at start-up); ScenarioError naming the flag."""
+    if zenoh_config:
+        try:
+            bus.make_config(mode="peer", config_file=zenoh_config)
+        except bus.BusError as exc:
+            raise ScenarioError(str(exc)) from None
+    if connect:
+        try:
+            bus.make_config(mode="peer", connect=connect)
+        except bus.BusError as exc:  # "connect: expected Zenoh endpoints like ..."
+            raise ScenarioError(f"--{exc}") from None
+
+
+def checked_output_path(path: Path, inputs: tuple) -> None:
+    """:func:`check_output_path`, with the operating system's refusals (a name too long, a
+    file where a directory should be) as a ScenarioError naming ``--out``."""
+    try:
+        check_output_path(path, inputs=inputs)
+    except OSError as exc:
+        raise ScenarioError(f"--out {str(path)[:200]}: expected a usable file path, got {exc.strerror or exc}") from None
+
+
+def check_json_path(path: Path, inputs: tuple) -> None:
+    """``--json FILE``: written when the run ends, so checked before it starts: a file in an
+    existing, writable directory, none of the run's inputs or outputs, and never an existing
+    file other than an earlier result (a JSON object); ScenarioError naming ``--json``."""
+    shown = str(path)[:200]
+    try:
+        parent = path.resolve().parent
+        for given in inputs:
+            if given is not None and path.resolve() == Path(given).resolve():
+                raise ScenarioError(f"--json {shown}: names a file of the run ({given}); expected a new .json path")
+        if not parent.is_dir() or not os.access(parent, os.W_OK):
+            raise ScenarioError(f"--json {shown}: expected a file in an existing, writable directory, got {parent}")
+        if path.is_dir():
+            raise ScenarioError(f"--json {shown}: expected a file path, got a directory")
+        if path.exists():
+            with open(path, "rb") as f:
+                head = f.read(64).lstrip()
+            if not head.startswith(b"{"):
+                raise ScenarioError(f"--json {shown}: exists and is not an earlier JSON result; it is never "
+                                    f"overwritten (expected a new path or an earlier result to replace)")
+    except OSError as exc:
+        raise ScenarioError(f"--json {shown}: expected a usable file path, got {exc.strerror or exc}") from None
 
 
 def check_closed_loop_arguments(scenario: Scenario, controllers: list[str], commands: str | None, out: Path) -> None:

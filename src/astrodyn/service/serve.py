@@ -44,12 +44,14 @@ and the failure is final (exit 1).
 from __future__ import annotations
 
 import argparse
+import contextlib
 import glob
 import json
 import math
 import os
 import re
 import signal
+import socket
 import subprocess
 import sys
 import time
@@ -67,9 +69,16 @@ from astrodyn.service.children import (
     wait_ready,
     work_directory,
 )
-from astrodyn.service.output import check_output_path
 from astrodyn.service.propagator import command_key
-from astrodyn.service.runner import MAX_LOGGERS, check_closed_loop_arguments, logger_base_argv, propagator_argv
+from astrodyn.service.runner import (
+    MAX_LOGGERS,
+    check_bus_flags,
+    check_closed_loop_arguments,
+    checked_output_path,
+    logger_base_argv,
+    propagator_argv,
+    wall_seconds,
+)
 from astrodyn.service.signals import StopFlag
 from astrodyn.service.supervision import (
     RestartBudget,
@@ -515,6 +524,45 @@ def control_token_path(out: Path) -> Path:
     return out.parent / f".{out.stem}.control-token"
 
 
+#: ``--roll-size`` bytes and ``--roll-interval`` wall seconds: the ranges of a config's
+#: ``output.roll_size`` and ``output.roll_interval`` (astrodyn.scenario).
+ROLL_SIZE_BOUNDS = (2**20, 2**50)
+ROLL_INTERVAL_BOUNDS = (1.0, 250 * 365.25 * 86400.0)
+
+
+def check_serve_flags(args: argparse.Namespace) -> None:
+    """The numeric flags of ``serve`` argparse does not bound; ScenarioError naming the flag."""
+    lo, hi = ROLL_SIZE_BOUNDS
+    if args.roll_size is not None and not lo <= args.roll_size <= hi:
+        raise ScenarioError(f"--roll-size: expected bytes {lo} (1 MiB) <= N <= {hi} (1 PiB), got {args.roll_size}")
+    lo, hi = ROLL_INTERVAL_BOUNDS
+    if not lo <= args.roll_interval <= hi:  # nan fails too
+        raise ScenarioError(f"--roll-interval: expected wall seconds {lo:g} <= S <= {hi:g}, got {args.roll_interval}")
+    if args.port is not None and not 0 <= args.port <= 65535:
+        raise ScenarioError(f"--port: expected a port 0..65535 (0: a free one), got {args.port}")
+    if args.port:
+        try:
+            with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as sock:
+                sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)  # a listener refuses it, TIME_WAIT does not
+                sock.bind((bus.DEFAULT_HOST, args.port))
+        except OSError as exc:
+            raise ScenarioError(f"--port: expected a free port on {bus.DEFAULT_HOST}, got {args.port} "
+                                f"({exc.strerror or exc})") from None
+    check_bus_flags(args.connect, args.zenoh_config)
+
+
+def make_parents(out: Path) -> list[Path]:
+    """Create the missing directories above ``out`` (serve's default is ``out/NAME.mcap``);
+    returns those it created, top first.  ScenarioError naming ``--out`` when it cannot."""
+    missing = [d for d in reversed(out.parent.parents) if not d.exists()] + ([out.parent] if not out.parent.exists() else [])
+    try:
+        out.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise ScenarioError(f"--out {str(out)[:200]}: expected a file path in a directory that can be created, got "
+                            f"{exc.strerror or exc}: {str(exc.filename)[:200]}") from None
+    return missing
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="astrodyn serve", description="Long-running real-time service controlled over Zenoh.")
     ap.add_argument("config", help="scenario TOML file")
@@ -523,7 +571,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--roll-size", type=int, default=None, help="start a new MCAP file after this many bytes")
     ap.add_argument("--roll-interval", type=float, default=3600.0,
                     help="start a new MCAP file after this many wall seconds (default 3600: hourly files keep each file's chunk index, held in memory for its summary, small)")
-    ap.add_argument("--max-wall", type=float, default=None, help="stop by itself after this many wall seconds")
+    ap.add_argument("--max-wall", type=wall_seconds, default=None, help="stop by itself after this many wall seconds")
     ap.add_argument("--port", type=int, default=None, help="loopback port of the control hub (default: a free one)")
     ap.add_argument("--connect", action="append", default=[], metavar="ENDPOINT", help="also connect to this endpoint (router)")
     ap.add_argument("--zenoh-config", metavar="FILE", help="Zenoh JSON5 config every process starts from (TLS, access control)")
@@ -538,15 +586,19 @@ def main(argv: list[str] | None = None) -> int:
                     help="closed loop: start this controller program under serve (as with run; docs/control.md)")
     add_stall_argument(ap)
     args = ap.parse_args(argv)
+    created: list[Path] = []
     try:
+        if args.out == "":
+            raise ScenarioError("--out: expected a file path, got an empty string")
         scenario = load(args.config)
         out = Path(args.out) if args.out else (scenario.output_path or Path("out") / f"{scenario.name}.mcap")
-        out.parent.mkdir(parents=True, exist_ok=True)
         if not 1 <= args.loggers <= MAX_LOGGERS:
             raise ScenarioError(f"--loggers: expected 1 <= N <= {MAX_LOGGERS}, got {args.loggers}")
-        for path in [out, *(Path(standby_path(out, k)) for k in range(2, args.loggers + 1))]:
-            check_output_path(path, inputs=(args.config, args.zenoh_config))
+        check_serve_flags(args)
         check_closed_loop_arguments(scenario, args.controller or [], None, out)
+        created = make_parents(out)  # the last step before the output checks: nothing is created for a refused flag
+        for path in [out, *(Path(standby_path(out, k)) for k in range(2, args.loggers + 1))]:
+            checked_output_path(path, (args.config, args.zenoh_config))
         rate = args.rate if args.rate is not None else scenario.real_time_factor
         try:
             rate = bus.parse_rate_factor(rate)
@@ -554,6 +606,9 @@ def main(argv: list[str] | None = None) -> int:
             raise ScenarioError(f"--rate: expected a real-time factor with {bus.RATE_BOUNDS[0]:g} <= x <= "
                                 f"{bus.RATE_BOUNDS[1]:g} (or inf), got {rate}") from None
     except ScenarioError as exc:
+        for d in reversed(created):  # the directories made for --out, left as they were
+            with contextlib.suppress(OSError):
+                d.rmdir()
         print(f"astrodyn serve: {exc}", file=sys.stderr)
         return 2
     hub = bus.loopback_endpoint(args.port or bus.free_port())
