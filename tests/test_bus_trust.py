@@ -127,29 +127,38 @@ def _child_endpoint(pid: int, timeout_s: float = 60.0) -> str | None:
     return None
 
 
-def _run(config: Path, out: Path, tmp: Path, attack: bool) -> tuple[int, str, dict]:
-    cmd = [sys.executable, "-m", "astrodyn", "run", str(config), "--out", str(out), "--quiet", "--timeout", "240"]
-    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, cwd=tmp)
+def run_attacked(cmd: list[str], cwd: Path, attacker: str | None, args: tuple[str, ...] = (),
+                 timeout_s: float = 300) -> tuple[int, str, dict]:
+    """Run ``cmd`` (an ``astrodyn run``) in ``cwd``; with ``attacker`` (a script's text),
+    start it as a separate process with the hub endpoint found in the children's command
+    lines, ``args`` and a report file whose JSON it writes.  Exit status, stderr, report."""
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, cwd=cwd)
     sent: dict = {}
-    attacker = None
+    attacking = None
     try:
-        if attack:
+        if attacker is not None:
             endpoint = _child_endpoint(proc.pid)
             assert endpoint is not None, "no child with --connect found"
-            script = tmp / "attacker.py"
-            script.write_text(ATTACKER)
-            attacker = subprocess.Popen([sys.executable, str(script), endpoint, str(tmp / "sent.json")],
-                                        stdout=subprocess.PIPE, stderr=subprocess.PIPE)
-        stdout, stderr = proc.communicate(timeout=300)
-        if attacker is not None:
-            a_out, a_err = attacker.communicate(timeout=60)
-            assert attacker.returncode == 0, a_err.decode()[-2000:]
-            sent = json.loads((tmp / "sent.json").read_text())
+            script = cwd / "attacker.py"
+            script.write_text(attacker)
+            attacking = subprocess.Popen([sys.executable, str(script), endpoint, *args, str(cwd / "sent.json")],
+                                         stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+        _, stderr = proc.communicate(timeout=timeout_s)
+        if attacking is not None:
+            _, a_err = attacking.communicate(timeout=60)
+            assert attacking.returncode == 0, a_err.decode()[-2000:]
+            sent = json.loads((cwd / "sent.json").read_text())
     finally:
-        for p in (proc, attacker):
+        for p in (proc, attacking):
             if p is not None and p.poll() is None:
                 p.kill()
+                p.wait()
     return proc.returncode, stderr.decode(), sent
+
+
+def _run(config: Path, out: Path, tmp: Path, attack: bool) -> tuple[int, str, dict]:
+    cmd = [sys.executable, "-m", "astrodyn", "run", str(config), "--out", str(out), "--quiet", "--timeout", "240"]
+    return run_attacked(cmd, tmp, ATTACKER if attack else None)
 
 
 def test_a_hostile_local_client_cannot_change_the_record(tmp_path):

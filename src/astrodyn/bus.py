@@ -85,6 +85,7 @@ __all__ = [
     "scenario_keys",
     "declare_alive",
     "wait_for_process",
+    "wait_for_logger",
     "AliveWatcher",
     "Heartbeat",
     "HeartbeatMonitor",
@@ -441,6 +442,43 @@ def wait_for_process(
         time.sleep(0.02)
 
 
+def wait_for_logger(session: zenoh.Session, scenario: str, process: str = "logger", timeout_s: float = 10.0,
+                    verifier: auth.Verifier | None = None) -> None:
+    """:func:`wait_for_process` for a run's logger, then, in a run's child (the run secret in
+    its environment, :func:`process_signer`), a reply of the logger's ``@latest`` queryable
+    signed by ``process`` with the run secret: a liveliness token carries no authenticator,
+    and a token forged in the logger's name would otherwise let a propagator publish before
+    the real logger subscribes (those samples would be lost).  The queryable is declared
+    after the logger's subscribers.  A supervisor passes its own ``verifier`` (it holds the
+    secret, not the variable).  :class:`BusError` after ``timeout_s``."""
+    deadline = time.monotonic() + timeout_s
+    wait_for_process(session, scenario, process, timeout_s)
+    if verifier is None:
+        try:
+            secret = auth.secret_from_environment()
+        except auth.AuthError as exc:
+            raise BusError(str(exc)) from None
+        if secret is None:
+            return
+        verifier = auth.Verifier(secret)
+    key = messages.latest_key(scenario)
+    while True:
+        for reply in session.get(key, timeout=max(0.05, min(1.0, deadline - time.monotonic())),
+                                 target=zenoh.QueryTarget.ALL):
+            sample = reply.ok
+            if sample is None:
+                continue
+            try:
+                if verifier.verify(str(sample.key_expr), sample.payload.to_bytes(), _attachment_bytes(sample)) == process:
+                    return
+            except auth.AuthError:
+                continue
+        if time.monotonic() >= deadline:
+            raise BusError(f"process {process!r} of scenario {scenario!r}: no reply signed by the run's {process} "
+                           f"after {timeout_s} s (a liveliness token in its name is there)")
+        time.sleep(0.02)
+
+
 class AliveWatcher(_Declared):
     """Tracks which processes of a scenario are alive, from their liveliness tokens.
 
@@ -494,7 +532,12 @@ class Heartbeat(_Declared):
         self.period_s = float(period_s)
         self.count = 0
         self._next = 0.0
-        self._entity = session.declare_publisher(self.key, encoding=zenoh.Encoding.APPLICATION_JSON)
+        # REMOTE: never delivered to this session's own subscribers.  The logger subscribes to
+        # @heartbeat/* with a FIFO channel that only its main loop drains; a put delivered to
+        # that channel while a flood of forged heartbeats held it full parked the main loop in
+        # its own put, for ever (tests/test_bus_fuzz_regressions.py).
+        self._entity = session.declare_publisher(self.key, encoding=zenoh.Encoding.APPLICATION_JSON,
+                                                 allowed_destination=zenoh.Locality.REMOTE)
 
     def beat(self, force: bool = False, **progress: Any) -> bool:
         """Send a heartbeat if ``period_s`` has passed (or ``force``); returns whether it sent."""

@@ -232,6 +232,10 @@ class Logger:
         self.rejected: dict[str, int] = {}  # reason -> samples rejected (trust, scene)
         self.rejected_by_sender: dict[str, int] = {}  # claimed process / Zenoh id -> samples
         self.rejected_examples: list[str] = []
+        #: processes whose authenticated samples reached us: liveliness is watched for these
+        #: and the expected ones only (a token carries no authenticator)
+        self.signers: set[str] = set()
+        self.liveliness_ignored = 0  # token changes of processes we do not watch (counted, never recorded)
 
     # ------------------------------------------------------------------ control
 
@@ -385,7 +389,22 @@ class Logger:
                 last = detail.get("last_step")
                 if isinstance(last, int) and not isinstance(last, bool) and 0 <= last <= messages.MAX_SEQ:
                     self.last_step[process] = last
+                self._fold_refusals(process, detail.get("rejected"))
             self.ended[process] = count
+
+    def _fold_refusals(self, process: str, rejected: Any) -> None:
+        """Count the supervisor commands a propagator refused (its end event's ``rejected``,
+        reason -> n) among this logger's rejections, as ``command <reason>``: they were sent
+        to the run by someone else (docs/security.md).  Only from an authenticated event, and
+        not the plant's (``run`` adds those from the plant's own summary)."""
+        if self.verifier is None or process in ("plant", self.name) or not isinstance(rejected, dict):
+            return
+        for reason, n in list(rejected.items())[:len(auth.REJECT_REASONS) + 1]:
+            if isinstance(n, int) and not isinstance(n, bool) and 0 < n <= messages.MAX_SEQ and isinstance(reason, str):
+                why = f"command {reason[:40]}"
+                self.rejected[why] = self.rejected.get(why, 0) + n
+                sender = f"(commands to {process})"
+                self.rejected_by_sender[sender] = self.rejected_by_sender.get(sender, 0) + n
 
     def handle(self, key: str, payload: bytes, attachment: bytes | None = None) -> None:
         """Handle one sample (exposed for tests and for replaying captured traffic);
@@ -398,7 +417,7 @@ class Logger:
             self.inputs += 1  # a controller's envelope of commands, addressed to the plant (docs/control.md)
             return
         if self.verifier is not None:
-            if key.endswith("/command") and _claimed_process(attachment) != "claims plant":
+            if key.endswith("/command") and "plant" in self.expect and _claimed_process(attachment) != "claims plant":
                 self.inputs += 1  # a controller's command, addressed to the plant: it judges and re-publishes it
                 return
             try:
@@ -410,6 +429,7 @@ class Logger:
             if entitled is not None and entitled != sender:
                 self._reject(key, "wrong-publisher", sender, f"{key} belongs to process {entitled!r}")
                 return
+            self.signers.add(sender)  # one of the run's processes (bounded: only they can sign)
         if rest is not None and rest.startswith("@batch/"):
             self.latest[key] = payload
             self._record_batch(key, payload, now_ns, sender)
@@ -466,6 +486,7 @@ class Logger:
             "ended": dict(self.ended),
             "died": dict(self.died),
             "stalled": sorted(self.stalled),
+            "liveliness_ignored": self.liveliness_ignored,
             "expected_states": expected,
             "complete": self.is_complete(),
             "t": self.max_t,
@@ -539,7 +560,9 @@ class Logger:
             else:
                 request.reply(self.status(channels=bool(request.args.get("channels"))))
         for process, is_alive in alive.poll():
-            if not is_alive and process not in self.ended and process != self.name:
+            if not self._watched(process):
+                self.liveliness_ignored += 1
+            elif not is_alive and process not in self.ended:
                 self._lost.setdefault(process, now)
             elif is_alive:
                 self._lost.pop(process, None)
@@ -551,6 +574,11 @@ class Logger:
                 del self._lost[process]
             elif self._drained_at >= lost_at or now - lost_at > 5.0:
                 del self._lost[process]
+                if self._token_present(process):
+                    # another token of that name is still there: the one that went was not
+                    # the process's own (anyone can declare one; docs/security.md)
+                    self.liveliness_ignored += 1
+                    continue
                 self.died[process] = f"liveliness lost at sim t = {self.max_t!r} s"
                 self._own_event("error", f"process {process} died (liveliness token lost) before its end-of-run event; "
                                 f"{self.states} states recorded so far, sim t reached {self.max_t!r} s")
@@ -580,6 +608,26 @@ class Logger:
             if idle >= self.drain_idle_s or now - self._all_ended_at > self.drain_timeout_s:
                 self.reason = "end of run: expected processes ended or died; bus quiet"
                 return True
+        return False
+
+    def _watched(self, process: str) -> bool:
+        """Whether a liveliness change of ``process`` may be reported (a death is written to
+        the file as an ``error`` event): an expected process or one whose authenticated
+        samples we received; under no secret (a logger run by hand) any, up to a bound."""
+        if process == self.name:
+            return False
+        if process in self.expect or process in self.signers or process in self.died or process in self._lost:
+            return True
+        return self.verifier is None and len(self.died) + len(self._lost) < _MAX_EXAMPLES
+
+    def _token_present(self, process: str) -> bool:
+        """A liveliness query for ``process``'s token (bounded wait)."""
+        try:
+            for reply in self.session.liveliness().get(messages.alive_key(self.scenario, process), timeout=0.5):
+                if reply.ok is not None:
+                    return True
+        except zenoh.ZError:  # a failed query confirms nothing: report the loss
+            return False
         return False
 
     # ------------------------------------------------------------------ main loop

@@ -588,7 +588,7 @@ class PlantLoop:
                 session.declare_subscriber(f"{messages.PREFIX}/{name}/@batch/*", self.intake.callback), \
                 bus.BatchPublisher(session, name, PROCESS, signer=self.signer) as batch, \
                 session.declare_subscriber(command_key(name), zenoh.handlers.FifoChannel(256)) as supervisor:
-            bus.wait_for_process(session, name, "logger", timeout_s=wait_logger_s)
+            bus.wait_for_logger(session, name, timeout_s=wait_logger_s)
             events.next_seq = int(first_event_seq)
             events.emit("start", 0.0, json.dumps({"bodies": len(self.plant.bodies), "mode": self.control.mode,
                                                   "controllers": list(self.expected), "steps": self.n_steps,
@@ -629,7 +629,9 @@ class PlantLoop:
             wall = time.monotonic() - wall0
             extra = {"last_step": k - 1, "t_reached": self.t_reached, "reason": failure or self.stopping["why"] or "end of scenario",
                      "applied": self.applied, "refused": self.refused, "late": self.late,
-                     "rejected": dict(self.intake.rejected), "dropped": self.intake.dropped}
+                     "rejected": {**self.intake.rejected,  # forged supervisor commands (@command) too
+                                  **{f"supervisor {r}": n for r, n in self.commands_from.rejected.items()}},
+                     "dropped": self.intake.dropped}
             events.end(self.t_reached, self.published, **extra)
             heartbeat.beat(force=True, t=self.t_reached, step=k, done=True)
             wait_until_logged(session, name, PROCESS)

@@ -183,7 +183,7 @@ def run_propagator(scenario: Scenario, session, opts: PropagatorOptions, log=pri
         extra_keys = [key for _, xkeys, _ in cross.scenes for key in xkeys] if cross is not None else []
         out = _StepOutput(opts.kind, engine, keys, groups, session, batch, signer, batched,
                           extra_keys + list(model_keys.values()))
-        bus.wait_for_process(session, scenario.name, "logger", timeout_s=opts.wait_logger_s)
+        bus.wait_for_logger(session, scenario.name, timeout_s=opts.wait_logger_s)
         events.next_seq = int(opts.first_event_seq)
         events.emit("start", float(t_reached), json.dumps({"bodies": len(names), "first_step": start,
                                                            "steps": stop_at - start}))
@@ -227,11 +227,13 @@ def run_propagator(scenario: Scenario, session, opts: PropagatorOptions, log=pri
         extra = {"last_step": k - 1, "t_reached": float(t_reached), "reason": stopping["why"] or "end of scenario"}
         if cross is not None:
             extra["crosscheck_max_dr"] = cross.max_dr
+        if commands_from.rejected:  # forged supervisor commands: counted by the logger from this event
+            extra["rejected"] = dict(commands_from.rejected)
         events.end(float(t_reached), published, **extra)
         heartbeat.beat(force=True, t=t_reached, step=k, done=True)
         wait_until_logged(session, scenario.name, opts.kind)
     summary = {"process": opts.kind, "bodies": len(names), "steps": k - start, "messages": published,
-               "t": float(t_reached), "wall_s": wall, "reason": extra["reason"]}
+               "t": float(t_reached), "wall_s": wall, "reason": extra["reason"], "rejected": extra.get("rejected", {})}
     per_body = conservation.report()
     if cross is not None:
         summary["crosscheck_max_dr"] = cross.max_dr
@@ -387,6 +389,8 @@ class CommandVerifier:
         secret = auth.secret_from_environment()
         self._verifier = None if secret is None else auth.Verifier(secret)
         self.refused = 0
+        #: refusals per reason (the end-of-run event carries them: the logger counts them)
+        self.rejected: dict[str, int] = {}
 
     def accepts(self, sample) -> bool:
         if self._verifier is None:
@@ -399,10 +403,11 @@ class CommandVerifier:
                                            None if attachment is None else attachment.to_bytes())
             if sender in self.SUPERVISORS:
                 return True
-            why = f"signed by {sender!r}, not the supervisor"
+            why, reason = f"signed by {sender!r}, not the supervisor", "wrong-publisher"
         except auth.AuthError as exc:
-            why = exc.reason
+            why = reason = exc.reason
         self.refused += 1
+        self.rejected[reason] = self.rejected.get(reason, 0) + 1
         if self.refused <= 20:
             print(f"propagator: refused a command ({why})", file=sys.stderr)
         return False

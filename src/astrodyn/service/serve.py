@@ -252,10 +252,13 @@ class Supervisor:
         for name, ch in list(self.children.items()):
             rc = ch.poll()
             if rc is None and name in lost and self.state in ("running", "paused"):
-                try:  # the token went first: the process is on its way out
-                    rc = ch.proc.wait(timeout=1.0)
-                except Exception:
-                    continue  # token lost but still running (e.g. a network blip): the heartbeat will tell
+                try:  # the token went first: the process is likely on its way out
+                    rc = ch.proc.wait(timeout=0.05)
+                except subprocess.TimeoutExpired:
+                    # still running: a network blip, or a token forged in its name and withdrawn
+                    # (never wait long on that: anyone can toggle one); its exit or its silence
+                    # (kill_if_stalled) tells on a later check
+                    continue
             if rc is None or rc == 0 or getattr(ch, "reported", False):
                 continue
             ch.reported = True
