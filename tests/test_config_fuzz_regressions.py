@@ -233,3 +233,23 @@ def test_cli_run_json_naming_the_config_exits_2_and_keeps_it(short):
     assert "Traceback" not in proc.stderr and "--json" in proc.stderr, proc.stderr
     assert short.read_bytes() == before
     assert list(short.parent.iterdir()) == [short]
+
+
+@pytest.mark.parametrize("command", ["serve", "replay"])
+def test_a_foxglove_port_in_use_is_refused_before_anything_starts(tmp_path, command):
+    """``--foxglove PORT`` on a port another process listens on: the view's own process
+    would fail to bind it, unseen (replay printed the ws:// URL and served nothing); now
+    the flag is refused, exit 2, naming the port.  Checked by parsing alone (in process)."""
+    import socket
+
+    from astrodyn.service import replay
+
+    with socket.socket() as listener:
+        listener.bind(("127.0.0.1", 0))
+        listener.listen()
+        port = listener.getsockname()[1]
+        main = serve.main if command == "serve" else replay.main
+        with pytest.raises(SystemExit) as exit_info:
+            main([str(tmp_path / "x.toml" if command == "serve" else tmp_path / "x.mcap"), "--foxglove", str(port)])
+    assert exit_info.value.code == 2
+    assert not list(tmp_path.iterdir())  # nothing written

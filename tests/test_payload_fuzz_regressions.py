@@ -101,14 +101,14 @@ def test_a_genuine_command_file_is_re_simulated(tmp_path):
 def test_commands_for_a_body_not_in_the_scene_are_refused(tmp_path):
     """They were dropped without a word (0 refused), so a recording of another scene was
     "re-simulated" without its commands and the run exited 0."""
-    from astrodyn.service.plant import recorded_faults
+    from astrodyn.service.plant import recorded_commands
 
     ghost = _commands_file(tmp_path / "ghost.mcap", [_command(5, 0)], [_actuators(5, ["c#0"])], body="ghost",
                            extra={"astrodyn/det/sc/command": [_command(2, 0)],
                                   "astrodyn/det/sc/actuators": [_actuators(2, ["c#0"])]})
     with pytest.raises(ValueError, match=f"astrodyn/det/ghost/(command|actuators) at log time {_at(5)} ns: "
                                          "body 'ghost' is not an actuated body of scenario 'det' \\(sc\\)"):
-        recorded_faults(ghost, DET)
+        recorded_commands(ghost, DET)
 
 
 def test_a_command_applied_at_two_steps_is_refused(tmp_path):
@@ -138,12 +138,12 @@ def test_one_command_id_with_two_contents_is_refused(tmp_path):
 def test_a_command_whose_t_is_after_its_step_is_refused(tmp_path):
     """A command with t = 1e9 s applied at step 5 made the re-simulating plant advance the
     body 1e9 s inside the step: the run hung until killed."""
-    from astrodyn.service.plant import recorded_faults
+    from astrodyn.service.plant import recorded_commands
 
     path = _commands_file(tmp_path / "late.mcap", [_command(5, 0, t=1e9)], [_actuators(5, ["c#0"])])
     with pytest.raises(ValueError, match=f"astrodyn/det/sc/command at log time {_at(5)} ns: command c#0 has "
                                          "t = 1000000000.0 s, after the end of step 5"):
-        recorded_faults(path, DET)
+        recorded_commands(path, DET)
 
 
 def test_resume_of_a_closed_loop_scene_is_a_clear_error(tmp_path):

@@ -86,6 +86,7 @@ __all__ = [
     "declare_alive",
     "wait_for_process",
     "wait_for_logger",
+    "port_taken",
     "AliveWatcher",
     "Heartbeat",
     "HeartbeatMonitor",
@@ -117,6 +118,19 @@ def free_port(host: str = DEFAULT_HOST) -> int:
     with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as sock:
         sock.bind((host, 0))
         return int(sock.getsockname()[1])
+
+
+def port_taken(port: int, host: str = DEFAULT_HOST) -> str | None:
+    """Why TCP ``port`` on ``host`` cannot be listened on now (e.g. "Address already in
+    use"), or None if it can; a port another process listens on is taken, one in TIME_WAIT
+    is not (SO_REUSEADDR, as the servers set it)."""
+    try:
+        with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as sock:
+            sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+            sock.bind((host, int(port)))
+    except OSError as exc:
+        return exc.strerror or str(exc)
+    return None
 
 
 def loopback_endpoint(port: int | None = None) -> str:

@@ -264,9 +264,7 @@ def recorded_commands(path: str | Path, scenario) -> dict[int, list[dict]]:
 
 def recorded_faults(path: str | Path, scenario) -> list:
     """The faults that began in recording ``path`` (the plant's ``fault`` events: those of
-    the config and those injected by serve's ``fault`` verb), each at the time it began.
-    First checks that the recording's commands fit ``scenario`` (:func:`recorded_commands`
-    given the Scenario: ValueError for a body not in the scene, or a command after its step)."""
+    the config and those injected by serve's ``fault`` verb), each at the time it began."""
     from astrodyn.recording.stream import open_stream
     from astrodyn.scenario.control import parse_fault, plant_bodies
     from astrodyn.scenario.fields import Ctx
@@ -286,7 +284,6 @@ def recorded_faults(path: str | Path, scenario) -> list:
                                      f"got {type(exc).__name__}: {exc}") from None
                 out.append(parse_fault(Ctx(f"--commands {path}"), detail, "fault event",
                                        math.inf, plant_bodies(scenario), t=event["t"]))
-    recorded_commands(path, scenario)  # the commands fit this scene (bodies, step times), or ValueError
     return out
 
 
@@ -793,7 +790,7 @@ def main(argv: list[str] | None = None) -> int:
     replay = faults = None
     if args.commands:
         try:
-            replay = recorded_commands(args.commands, scenario.name)
+            replay = recorded_commands(args.commands, scenario)
             faults = recorded_faults(args.commands, scenario)
         except (OSError, ValueError, RecordingError) as exc:
             print(f"plant: --commands: {exc}", file=sys.stderr)

@@ -755,7 +755,7 @@ def check_closed_loop_arguments(scenario: Scenario, controllers: list[str], comm
         if not path.is_file():
             raise ScenarioError(f"--commands {commands}: expected an MCAP recording of this scenario, no such file")
         try:  # read here, so a foreign, damaged or empty file is refused before anything starts
-            found = recorded_commands(path, scenario.name)
+            found = recorded_commands(path, scenario)
             recorded_faults(path, scenario)
         except (RecordingError, ValueError, OSError) as exc:
             raise ScenarioError(f"--commands {commands}: expected an MCAP recording of scenario {scenario.name!r}: "

@@ -51,7 +51,6 @@ import math
 import os
 import re
 import signal
-import socket
 import subprocess
 import sys
 import time
@@ -543,14 +542,8 @@ def check_serve_flags(args: argparse.Namespace) -> None:
         raise ScenarioError(f"--roll-interval: expected wall seconds {lo:g} <= S <= {hi:g}, got {args.roll_interval}")
     if args.port is not None and not 0 <= args.port <= 65535:
         raise ScenarioError(f"--port: expected a port 0..65535 (0: a free one), got {args.port}")
-    if args.port:
-        try:
-            with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as sock:
-                sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)  # a listener refuses it, TIME_WAIT does not
-                sock.bind((bus.DEFAULT_HOST, args.port))
-        except OSError as exc:
-            raise ScenarioError(f"--port: expected a free port on {bus.DEFAULT_HOST}, got {args.port} "
-                                f"({exc.strerror or exc})") from None
+    if args.port and (why := bus.port_taken(args.port)):
+        raise ScenarioError(f"--port: expected a free port on {bus.DEFAULT_HOST}, got {args.port} ({why})")
     check_bus_flags(args.connect, args.zenoh_config)
 
 

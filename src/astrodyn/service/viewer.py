@@ -105,6 +105,8 @@ def add_foxglove_argument(parser: argparse.ArgumentParser, what: str) -> None:
             value = -1
         if not 0 <= value <= 65535:
             raise argparse.ArgumentTypeError(f"expected a port 0..65535 (0: a free one), got {text!r}")
+        if value and (why := bus.port_taken(value)):  # the view would fail in its own process, unseen
+            raise argparse.ArgumentTypeError(f"expected a free port on {bus.DEFAULT_HOST}, got {value} ({why})")
         return value
 
     parser.add_argument("--foxglove", type=port, default=None, metavar="PORT",
