@@ -342,3 +342,22 @@ def test_a_restarted_propagator_catches_up_with_the_schedule():
     assert 0.9 < late.wait_time(30.0) <= 1.0  # 10 s of sim ahead of the schedule: 1 s of wall
     fresh = Pacer(10.0)  # no anchor: the first instant starts the schedule
     assert fresh.wait_time(100.0) == 0.0 and 0.09 < fresh.wait_time(101.0) <= 0.1
+
+
+def test_a_restarted_propagator_with_no_step_left_ends_when_the_logger_has_finished():
+    """Found by the random-fault series: a propagator killed after its last step was recorded
+    (while it waited for the logger's receipt) was restarted at step N = n_steps, the logger
+    finished the file meanwhile, and the new process waited 30 s for a logger that was gone:
+    the run failed.  With nothing left to publish it now ends at once, exit 0; with steps left
+    it still refuses to publish into the void (exit 1, naming the logger)."""
+    from astrodyn.scenario import load as load_scenario
+
+    n = load_scenario(CONFIGS / "demo.toml").n_steps
+    started = time.monotonic()
+    done = subprocess.run([sys.executable, "-m", "astrodyn.service.propagator", "orbit", str(CONFIGS / "demo.toml"),
+                           "--start-step", str(n), "--wait-logger", "30"], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert time.monotonic() - started < 25  # the 5 s of NOTHING_LEFT_WAIT_S, not the 30 s of --wait-logger
+    left = subprocess.run([sys.executable, "-m", "astrodyn.service.propagator", "orbit", str(CONFIGS / "demo.toml"),
+                           "--start-step", str(n - 10), "--wait-logger", "2"], capture_output=True, text=True, timeout=120)
+    assert left.returncode != 0 and "logger" in left.stderr, left.stderr[-2000:]

@@ -123,6 +123,11 @@ class _Stop(Exception):
     pass
 
 
+#: wall s a restarted propagator with no step left to publish waits for the logger (it may
+#: have finished the file already: then the propagator ends at once, exit 0)
+NOTHING_LEFT_WAIT_S = 5.0
+
+
 def _auto_block(n_bodies: int) -> int:
     """About 2e5 states per engine call (memory ~ 10 MB), at least 1, at most 1000 instants."""
     return int(max(1, min(1000, 200_000 // max(1, n_bodies))))
@@ -183,7 +188,19 @@ def run_propagator(scenario: Scenario, session, opts: PropagatorOptions, log=pri
         extra_keys = [key for _, xkeys, _ in cross.scenes for key in xkeys] if cross is not None else []
         out = _StepOutput(opts.kind, engine, keys, groups, session, batch, signer, batched,
                           extra_keys + list(model_keys.values()))
-        bus.wait_for_logger(session, scenario.name, timeout_s=opts.wait_logger_s)
+        # a restart after its last step was recorded (killed while it waited for the logger's
+        # receipt) has only its end event left; if the logger has finished the file meanwhile,
+        # there is nothing to do (waiting the full wait_logger_s would fail the run instead)
+        nothing_left = start >= stop_at
+        logger_gone = False
+        try:
+            bus.wait_for_logger(session, scenario.name,
+                                timeout_s=min(opts.wait_logger_s, NOTHING_LEFT_WAIT_S) if nothing_left else opts.wait_logger_s)
+        except bus.BusError:
+            if not nothing_left:
+                raise
+            logger_gone = True
+            stopping["why"] = "every step already recorded; the logger has finished"
         events.next_seq = int(opts.first_event_seq)
         events.emit("start", float(t_reached), json.dumps({"bodies": len(names), "first_step": start,
                                                            "steps": stop_at - start}))
@@ -231,7 +248,8 @@ def run_propagator(scenario: Scenario, session, opts: PropagatorOptions, log=pri
             extra["rejected"] = dict(commands_from.rejected)
         events.end(float(t_reached), published, **extra)
         heartbeat.beat(force=True, t=t_reached, step=k, done=True)
-        wait_until_logged(session, scenario.name, opts.kind)
+        if not logger_gone:
+            wait_until_logged(session, scenario.name, opts.kind)
     summary = {"process": opts.kind, "bodies": len(names), "steps": k - start, "messages": published,
                "t": float(t_reached), "wall_s": wall, "reason": extra["reason"], "rejected": extra.get("rejected", {})}
     per_body = conservation.report()
