@@ -197,20 +197,22 @@ def start_controller(name: str, cmd: str, scenario: str, hub: str, log_dir: Path
 STALL_S = 120.0
 
 
-def stall_timeout(text: str) -> float:
-    """``--stall-timeout`` of ``run`` and ``serve``: wall seconds >= 0, 0 meaning never."""
+def wall_seconds(text: str, zero: bool = False) -> float:
+    """An argparse type: wall seconds, a finite number > 0 (``--timeout``, ``--max-wall``);
+    ``zero``: 0 too (meaning never: ``--stall-timeout``)."""
     try:
         value = float(text)
     except ValueError:
         value = math.nan
-    if not 0.0 <= value < math.inf:
-        raise argparse.ArgumentTypeError(f"expected wall seconds >= 0 (0: never), got {text!r}")
+    if not (0.0 <= value if zero else 0.0 < value) or not value < math.inf:  # nan fails both
+        raise argparse.ArgumentTypeError(f"expected wall seconds, a finite number {'>= 0 (0: never)' if zero else '> 0'}, "
+                                         f"got {text!r}")
     return value
 
 
 def add_stall_argument(ap: argparse.ArgumentParser) -> None:
     """``--stall-timeout S`` (``run`` and ``serve``): :data:`STALL_S` by default."""
-    ap.add_argument("--stall-timeout", type=stall_timeout, default=STALL_S, metavar="S",
+    ap.add_argument("--stall-timeout", type=lambda text: wall_seconds(text, zero=True), default=STALL_S, metavar="S",
                     help=f"a propagator or logger with no heartbeat for S wall seconds is hung: killed and restarted "
                          f"like a crashed one (default {STALL_S:g}; 0: never; docs/reliability.md)")
 

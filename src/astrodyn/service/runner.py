@@ -54,6 +54,7 @@ from astrodyn.service.children import (
     propagator_command,
     start_controller,
     wait_ready,
+    wall_seconds,
     work_directory,
 )
 from astrodyn.service.output import check_output_path
@@ -665,17 +666,6 @@ def main(argv: list[str] | None = None) -> int:
         if not args.tolerate_rejected:
             return EXIT_REJECTED
     return 0
-
-
-def wall_seconds(text: str) -> float:
-    """An argparse type: wall seconds, a finite number > 0 (``--timeout``, ``--max-wall``)."""
-    try:
-        value = float(text)
-    except ValueError:
-        value = math.nan
-    if not 0.0 < value < math.inf:
-        raise argparse.ArgumentTypeError(f"expected wall seconds, a finite number > 0, got {text!r}")
-    return value
 
 
 def check_bus_flags(connect: list[str] | None, zenoh_config: str | None) -> None:

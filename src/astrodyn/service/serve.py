@@ -66,6 +66,7 @@ from astrodyn.service.children import (
     add_stall_argument,
     start_controller,
     wait_ready,
+    wall_seconds,
     work_directory,
 )
 from astrodyn.service.propagator import command_key
@@ -76,7 +77,6 @@ from astrodyn.service.runner import (
     checked_output_path,
     logger_base_argv,
     propagator_argv,
-    wall_seconds,
 )
 from astrodyn.service.signals import StopFlag
 from astrodyn.service.supervision import (
