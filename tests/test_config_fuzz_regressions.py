@@ -253,3 +253,35 @@ def test_a_foxglove_port_in_use_is_refused_before_anything_starts(tmp_path, comm
             main([str(tmp_path / "x.toml" if command == "serve" else tmp_path / "x.mcap"), "--foxglove", str(port)])
     assert exit_info.value.code == 2
     assert not list(tmp_path.iterdir())  # nothing written
+
+
+@pytest.mark.parametrize("command", ["run", "serve"])
+@pytest.mark.parametrize("value", ["nan", "-1", "inf", "1e999", "x"])
+def test_stall_timeout_must_be_finite_wall_seconds(short, capsys, command, value):
+    """``--stall-timeout`` (0: never) refuses what is not a finite number >= 0, before anything starts."""
+    main = runner.main if command == "run" else serve.main
+    with pytest.raises(SystemExit) as info:
+        main([str(short), "--out", str(short.parent / "o.mcap"), "--stall-timeout", value])
+    assert info.value.code == 2
+    assert (f"argument --stall-timeout: expected wall seconds, a finite number >= 0 (0: never), got '{value}'"
+            in capsys.readouterr().err)
+    assert list(short.parent.iterdir()) == [short]
+
+
+@pytest.mark.parametrize("args, error", [(["--figures-for", "-1"], "--figures-for: expected an integer >= 0, got -1"),
+                                         (["--bodies", "nope*"], "--bodies: 'nope*' matches no body of the recording"),
+                                         (["--figures-for", "x"], "argument --figures-for: invalid int value: 'x'")])
+def test_analyze_bad_body_and_figure_flags_are_clear(tmp_path, capsys, args, error):
+    """Hostile ``analyze`` flags: an error naming the flag, no report directory written."""
+    from _recordings import LEO_TWO_BODIES, record
+
+    from astrodyn import analysis
+
+    path = tmp_path / "two.mcap"
+    record(path, LEO_TWO_BODIES.format(name="two", duration="20 s", rate="1 Hz"))
+    try:
+        code = analysis.main([str(path), "--out", str(tmp_path / "rep"), *args])
+    except SystemExit as exc:  # argparse's own refusals
+        code = exc.code
+    assert code in (1, 2) and error in capsys.readouterr().err
+    assert not (tmp_path / "rep").exists()
