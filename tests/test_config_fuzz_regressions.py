@@ -274,7 +274,6 @@ def test_stall_timeout_must_be_finite_wall_seconds(short, capsys, command, value
 def test_analyze_bad_body_and_figure_flags_are_clear(tmp_path, capsys, args, error):
     """Hostile ``analyze`` flags: an error naming the flag, no report directory written."""
     from _recordings import LEO_TWO_BODIES, record
-
     from astrodyn import analysis
 
     path = tmp_path / "two.mcap"
