@@ -368,3 +368,49 @@ def test_a_seeded_channel_drops_what_an_earlier_part_holds_and_counts_no_gap():
         tr.seed("k", 20)
     with pytest.raises(ValueError, match="expected a seq >= 0"):
         SeqTracker().seed("k", -1)
+
+
+def test_validated_channels_give_the_columns_the_checked_path_gives(tmp_path):
+    """States on astrodyn keys are validated by messages.decode and appended without a second
+    check; the same payloads on a foreign key with the same stored JSON Schema go through the
+    field-by-field check.  Both paths must give identical columns, optional fields left out
+    included (NaN for a number, -1 for an integer)."""
+    from mcap.writer import Writer
+
+    rng = np.random.default_rng(7)
+    orbit_name, orbit_schema = messages.schema_for_key(messages.orbit_key("v", "sat"))
+    status_name, status_schema = messages.schema_for_key(messages.status_key("v"))
+    path = tmp_path / "both.mcap"
+    with open(path, "wb") as f:
+        w = Writer(f)
+        w.start()
+        ids = {}
+        for name, schema, topics in ((orbit_name, orbit_schema, (messages.orbit_key("v", "sat"), "foreign/sat/orbit")),
+                                     (status_name, status_schema, (messages.status_key("v"), "foreign/status"))):
+            sid = w.register_schema(name=name, encoding="jsonschema", data=json.dumps(schema).encode())
+            for topic in topics:
+                ids[topic] = w.register_channel(topic=topic, message_encoding="json", schema_id=sid)
+        for i in range(200):
+            r, v = rng.normal(size=3) * 7e6, rng.normal(size=3) * 7e3
+            orbit = messages.encode(messages.orbit_message(0.5 * i, i, "kepler", r, v, 3.986004418e14), "orbit")
+            extra = {"rate": 2.0} if i % 3 else {"messages": i}  # each optional field absent from some
+            status = messages.encode(messages.status_message(0.5 * i, i, "running", 1.0 + i, **extra), "status")
+            for topic, payload in ((messages.orbit_key("v", "sat"), orbit), ("foreign/sat/orbit", orbit),
+                                   (messages.status_key("v"), status), ("foreign/status", status)):
+                w.add_message(ids[topic], log_time=i, publish_time=i, data=payload, sequence=i)
+        w.finish()
+    run = load(path)
+    assert run.invalid == 0 and run.messages == 800
+    for ours, foreign in ((messages.orbit_key("v", "sat"), "foreign/sat/orbit"), (messages.status_key("v"), "foreign/status")):
+        a, b = run.channels[ours], run.channels[foreign]
+        assert a.kind is not None and b.kind is None  # one validated, one checked
+        assert np.array_equal(a.seq, b.seq) and np.array_equal(a.log_time, b.log_time)
+        assert sorted(a.fields) == sorted(b.fields)
+        for name, column in a.fields.items():
+            assert column.dtype == b.fields[name].dtype, name
+            if column.dtype == object:
+                assert list(column) == list(b.fields[name]), name
+            else:
+                assert np.array_equal(column, b.fields[name], equal_nan=column.dtype.kind == "f"), name
+    status = run.channels[messages.status_key("v")].fields
+    assert np.isnan(status["rate"][0]) and status["rate"][1] == 2.0 and status["messages"][1] == -1

@@ -401,6 +401,9 @@ def _columns_for(schema: dict | None) -> dict[str, tuple[str, int]] | None:
 
 
 
+_NAN = float("nan")
+
+
 def _is_number(x: Any) -> bool:
     """A JSON number that fits a float64 (bool is not a number; 10**400 does not fit)."""
     if isinstance(x, bool) or not isinstance(x, (int, float)):
@@ -420,10 +423,14 @@ def _short(x: Any) -> str:
 
 
 class _Builder:
-    __slots__ = ("topic", "kind", "schema_name", "columns", "seq", "log_time", "data", "records", "strings")
+    __slots__ = ("topic", "kind", "schema_name", "columns", "seq", "log_time", "data", "records", "strings", "validated", "plan")
 
-    def __init__(self, topic: str, kind: str | None, schema_name: str, columns: dict | None):
+    def __init__(self, topic: str, kind: str | None, schema_name: str, columns: dict | None, validated: bool = False):
+        """``validated``: every message given to :meth:`add_validated` was decoded by
+        :func:`astrodyn.messages.decode` against the definition the columns come from, so
+        its fields are known to be of their columns' types and are not checked again."""
         self.topic, self.kind, self.schema_name, self.columns = topic, kind, schema_name, columns
+        self.validated = validated and columns is not None
         self.seq, self.log_time = array("q"), array("q")
         self.strings: dict[str, str] = {}
         self.records: list | None = None
@@ -435,6 +442,7 @@ class _Builder:
                 name: (array("d") if k == "f" else array("q") if k == "i" else [])
                 for name, (k, _) in columns.items()
             }
+        self.plan = tuple((name, k, width, self.data[name]) for name, (k, width) in (columns or {}).items())
 
     def add(self, msg: Any, seq: int, log_time: int) -> None:
         """Append one decoded message.  On a channel with columns (a JSON Schema was stored
@@ -482,6 +490,25 @@ class _Builder:
                 self.data[name].extend(value)
             else:
                 self.data[name].append(value)
+
+    def add_validated(self, msg: dict, seq: int, log_time: int) -> None:
+        """Append one message already validated against this channel's definition (see
+        ``validated``): absent optional fields as NaN / -1 / None, as :meth:`add` does."""
+        for name, k, width, column in self.plan:
+            value = msg.get(name)
+            if k == "f":
+                if width == 1:
+                    column.append(_NAN if value is None else value)
+                else:
+                    column.extend((_NAN,) * width if value is None else value)
+            elif k == "i":
+                column.append(-1 if value is None else value)
+            elif k == "s":
+                column.append(None if value is None else self.strings.setdefault(value, value))
+            else:
+                column.append(value)
+        self.log_time.append(log_time)
+        self.seq.append(msg.get("seq", seq))
 
     def build(self) -> Track:
         seq = np.frombuffer(self.seq, dtype=np.int64).copy() if len(self.seq) else np.zeros(0, np.int64)
@@ -641,7 +668,8 @@ class RecordingScan:
             name, schema = own
         b = self.builders.get(rec.topic)
         if b is None:
-            b = self.builders[rec.topic] = _Builder(rec.topic, kind, name, _columns_for(schema) if rec.message_encoding == "json" else None)
+            b = self.builders[rec.topic] = _Builder(rec.topic, kind, name, _columns_for(schema) if rec.message_encoding == "json" else None,
+                                                    validated=own is not None)
         self.channel_info[rec.id] = (rec.topic, kind if rec.message_encoding == "json" else None, b)
 
     def count_invalid(self, topic: str, sequence: int, why: str) -> None:
@@ -680,7 +708,10 @@ class RecordingScan:
                     return
                 msg = rec.data
         try:
-            b.add(msg, rec.sequence, rec.log_time)
+            if kind is not None and b.validated:
+                b.add_validated(msg, rec.sequence, rec.log_time)
+            else:
+                b.add(msg, rec.sequence, rec.log_time)
         except ValueError as exc:  # violates the schema stored in the file
             self.count_invalid(topic, rec.sequence, str(exc))
             return
@@ -718,7 +749,7 @@ class RecordingScan:
     def start_next_block(self) -> None:
         """Fresh builders (same channels, no messages) and zeroed block counters, in one
         pass over the channels (not channels^2); ``orphans`` and ``notes`` run on."""
-        fresh = {id(b): _Builder(b.topic, b.kind, b.schema_name, b.columns) for b in self.builders.values()}
+        fresh = {id(b): _Builder(b.topic, b.kind, b.schema_name, b.columns, b.validated) for b in self.builders.values()}
         for topic, b in self.builders.items():
             self.builders[topic] = fresh[id(b)]
         for cid, (t, k, old) in self.channel_info.items():
