@@ -417,7 +417,10 @@ def test_a_logger_killed_while_serve_starts_is_replaced(tmp_path, processes):
     assert len(killed) == 2
     hello = json.loads(sup.stdout.readline() or "{}")
     assert hello.get("serving") == "longrun", sup.stderr.read()[-2000:] if sup.poll() is not None else hello
-    time.sleep(2.0)
+    deadline = time.monotonic() + 60  # wait for states in the new logger's file (early.partial-N.mcap), not a
+    while time.monotonic() < deadline and not any(  # fixed 2 s: the propagators may still be loading their kernels
+            p.stat().st_size > 200_000 for p in tmp_path.glob("early.partial*.mcap")):
+        time.sleep(0.1)
     os.kill(sup.pid, signal.SIGTERM)
     out_text, err = sup.communicate(timeout=120)
     assert sup.returncode == 0, err[-3000:]

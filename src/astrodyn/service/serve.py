@@ -279,6 +279,12 @@ class Supervisor:
                     print(f"astrodyn serve: warning: the live view is gone ({self.budgets['viewer'].refusal()}); "
                           f"the simulation and the recording go on", file=sys.stderr, flush=True)
                 continue
+            if name in ("plant", "logger") and "plant" in self.propagators:
+                # a closed loop is not restarted: its controllers' state lives outside astrodyn,
+                # and a plant cannot resume mid-run (docs/control.md, docs/reliability.md)
+                self.failures.append(msg + f" (the {name} of a closed-loop run is not restarted; docs/control.md)")
+                self.state = "failed"
+                continue
             if name == "logger" and self.state in ("running", "paused"):
                 if self.budgets["logger"].allow():
                     try:
@@ -289,10 +295,6 @@ class Supervisor:
                 else:
                     msg = f"{self.budgets['logger'].refusal()}; last: {msg}"
                 self.failures.append(msg)
-                self.state = "failed"
-                continue
-            if name == "plant":  # a closed loop is not restarted: its controllers' state lives outside astrodyn
-                self.failures.append(msg + " (a closed-loop plant is not restarted; docs/control.md)")
                 self.state = "failed"
                 continue
             if name in self.propagators and rc == MODEL_ENDED_EXIT:  # it would end there again
@@ -457,6 +459,11 @@ class Supervisor:
             except Exception:
                 ch.stop()
         logger = self.children["logger"]
+        if any(self.children[kind].poll() != 0 for kind in self.propagators):
+            # one ended without its last states (dead, not restarted, or stopped above): the
+            # logger would wait for them until the deadline; it records what is queued and
+            # finishes the file now
+            deadline = min(deadline, time.monotonic() + 1.0)
         try:
             logger.proc.wait(timeout=max(1.0, deadline - time.monotonic()))
         except Exception:
@@ -486,6 +493,12 @@ class Supervisor:
         summary["standbys"] = standbys
         summary["logger"] = log = logger.summary()
         summary["file"] = self.name_the_recording((log or {}).get("file"), bool(self.failures))
+        if summary["file"] is None:  # the logger died, not restarted: its part stays partial
+            summary["file"] = next((p for p in self._parts() if ".partial" in os.path.basename(p)), None)
+        if self.failures and summary["file"] and ".partial" in os.path.basename(summary["file"]):
+            print(f"astrodyn serve: the recording stays at {summary['file']} (serve failed, so it keeps its partial "
+                  f"name); `astrodyn recover {summary['file']}` finishes it and gives it its name",
+                  file=sys.stderr, flush=True)
         return summary
 
     def name_the_recording(self, written: str | None, failed: bool) -> str | None:
