@@ -83,7 +83,7 @@ class _ChannelSeq:
     advance them for in-order messages."""
 
     __slots__ = ("tracker", "slot", "missing", "duplicates", "out_of_order", "gaps", "gaps_truncated", "seeded_below",
-                 "already_recorded")
+                 "already_recorded", "gaps_expected")
 
     def __init__(self, tracker: SeqTracker, slot: int) -> None:
         self.tracker = tracker
@@ -95,6 +95,7 @@ class _ChannelSeq:
         self.gaps_truncated = False
         self.seeded_below = 0  # seqs below this are in an earlier part (seed)
         self.already_recorded = 0  # arrivals below seeded_below: dropped, not duplicates
+        self.gaps_expected = False  # its gaps are not losses (SeqTracker.expect_gaps)
 
     next = _tracker_slot("_next_view", "The next seq expected (int): the tracker's ``next_seq[slot]``.")
     count = _tracker_slot("_count_view", "Messages recorded (int): the tracker's ``counts[slot]``.")
@@ -146,6 +147,13 @@ class SeqTracker:
         self._next_view[c.slot] = next_seq
         c.seeded_below = next_seq
 
+    def expect_gaps(self, channel: str) -> None:
+        """Gaps on ``channel`` are not losses: it records a selection of a sender's messages
+        (the commands the plant applied, each with its sender's seq; refused ones are not
+        re-published).  Its gaps stay in :meth:`report`; :meth:`totals` leaves them out of
+        ``missing`` and counts them as ``skipped``."""
+        self._channel(channel).gaps_expected = True
+
     def add(self, channel: str, seq: int) -> int:
         c = self.channels.get(channel)
         if c is None:
@@ -188,12 +196,14 @@ class SeqTracker:
         return DUPLICATE
 
     def totals(self) -> dict[str, int]:
-        """Sums over channels: count, missing, duplicates, out_of_order, already_recorded."""
-        out = {"count": 0, "missing": 0, "duplicates": 0, "out_of_order": 0, "already_recorded": 0}
+        """Sums over channels: count, missing, duplicates, out_of_order, already_recorded;
+        ``skipped``: the gaps of channels whose gaps are expected (:meth:`expect_gaps`), not
+        in ``missing``."""
+        out = {"count": 0, "missing": 0, "duplicates": 0, "out_of_order": 0, "already_recorded": 0, "skipped": 0}
         for c in self.channels.values():
             out["already_recorded"] += c.already_recorded
             out["count"] += c.count
-            out["missing"] += c.missing
+            out["skipped" if c.gaps_expected else "missing"] += c.missing
             out["duplicates"] += c.duplicates
             out["out_of_order"] += c.out_of_order
         return out

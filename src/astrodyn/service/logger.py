@@ -301,8 +301,10 @@ class Logger:
                 self._reject(key, "impersonation", sender, f"event of process {msg['process']!r} signed by {sender!r}")
                 return
             track = f"{key}#{msg['process']}"
-        elif kind == "command":  # seq counts each sender's commands to this body
-            track = f"{key}#{msg['sender']}"
+        elif kind == "command":  # seq counts each sender's commands to this body; the plant
+            track = f"{key}#{msg['sender']}"  # re-publishes those it applied: a refused one is a gap, not a loss
+            if track not in self.recorder.seq.channels:
+                self.recorder.seq.expect_gaps(track)
         try:
             status = self.recorder.write_encoded(key, payload, t, seq, now_ns, track)
         except ValueError as exc:  # t outside MCAP's log_time range

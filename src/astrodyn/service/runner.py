@@ -643,19 +643,19 @@ def main(argv: list[str] | None = None) -> int:
             print(f"  standby {name}: {standby['file']}", file=sys.stderr)
     if args.json:
         Path(args.json).write_text(json.dumps(result, indent=1, default=str))
+    plant = (result.get("processes", {}).get("plant") or {}).get("summary") or {}
+    if plant:  # also when the run failed: a refused command may be why
+        print(f"astrodyn run: closed loop: {plant.get('applied', 0)} commands applied, {plant.get('refused', 0)} "
+              f"refused, {plant.get('late', 0)} late" + "".join(f"\n  refused: {r}" for r in plant.get("refusals", [])[:5]),
+              file=sys.stderr)
     if result.get("failure"):
         print(f"astrodyn run: FAILED: {result['failure']}", file=sys.stderr)
         if result.get("interrupted"):  # shell convention: 128 + signal number
             return 128 + int(signal.Signals[result["interrupted"]])
         return 1
     rejected = dict((result.get("logger") or {}).get("rejected") or {})
-    plant = (result.get("processes", {}).get("plant") or {}).get("summary") or {}
     for reason, n in (plant.get("rejected") or {}).items():  # forged commands and answers, dropped by the plant
         rejected[f"command {reason}"] = rejected.get(f"command {reason}", 0) + n
-    if plant:
-        print(f"astrodyn run: closed loop: {plant.get('applied', 0)} commands applied, {plant.get('refused', 0)} "
-              f"refused, {plant.get('late', 0)} late" + "".join(f"\n  refused: {r}" for r in plant.get("refusals", [])[:5]),
-              file=sys.stderr)
     if rejected:
         total = sum(rejected.values())
         why = ", ".join(f"{n} {reason}" for reason, n in sorted(rejected.items()))
