@@ -49,8 +49,11 @@ together cover everything a scenario publishes.
 
 from __future__ import annotations
 
+import argparse
+import ipaddress
 import json
 import math
+import re
 import socket
 import time
 from collections.abc import Iterable, Mapping, Sequence
@@ -72,6 +75,11 @@ __all__ = [
     "BusError",
     "free_port",
     "loopback_endpoint",
+    "ENDPOINT_PROTOCOLS",
+    "host_port_problem",
+    "endpoint_problem",
+    "check_endpoint",
+    "endpoint_argument",
     "make_config",
     "open_session",
     "add_bus_arguments",
@@ -138,15 +146,91 @@ def loopback_endpoint(port: int | None = None) -> str:
     return f"tcp/{DEFAULT_HOST}:{free_port() if port is None else int(port)}"
 
 
+#: The Zenoh transports an endpoint may name: the IP ones, whose address is HOST:PORT.
+ENDPOINT_PROTOCOLS = ("tcp", "udp", "tls", "quic", "ws")
+
+_HOST_LABEL = re.compile(r"^[A-Za-z0-9_]([A-Za-z0-9_-]{0,61}[A-Za-z0-9_])?$")
+
+
+def host_port_problem(address: str) -> str | None:
+    """Why ``address`` is not ``HOST:PORT`` -- HOST an IPv4 address, a bracketed IPv6
+    address (``[::1]``) or a host name (RFC 1123 labels), PORT an integer 1..65535 -- or
+    None when it is.  The one check of a network address (Zenoh endpoints, the Dask
+    scheduler of ``astrodyn sweep``)."""
+    host, colon, port = address.rpartition(":")
+    if not colon:
+        return "no ':PORT' in the address"
+    if not host:
+        return "no HOST before ':PORT'"
+    if not port.isdigit() or not port.isascii():
+        return f"port {port[:20]!r} is not an integer"
+    if len(port) > 5 or not 1 <= int(port) <= 65535:  # (a 5000-digit port is not even converted)
+        return f"port {port if len(port) <= 20 else port[:20] + '...'} is not in 1..65535"
+    if host.startswith("["):
+        if not host.endswith("]"):
+            return f"host {host[:60]!r}: an IPv6 address opened with '[' is not closed with ']'"
+        try:
+            ipaddress.IPv6Address(host[1:-1].split("%", 1)[0])
+        except ValueError:
+            return f"host {host[:60]!r} is not an IPv6 address"
+        return None
+    labels = host.split(".")
+    if len(labels) == 4 and all(label.isdigit() for label in labels):
+        try:
+            ipaddress.IPv4Address(host)
+        except ValueError:
+            return f"host {host[:60]!r} is not an IPv4 address (4 numbers 0..255)"
+        return None
+    if len(host) > 253 or not all(_HOST_LABEL.match(label) for label in labels):
+        return f"host {host[:60]!r} is not an IPv4 address, [IPv6 address] or host name"
+    return None
+
+
+def endpoint_problem(endpoint: Any) -> str | None:
+    """Why ``endpoint`` is not a Zenoh endpoint astrodyn accepts --
+    ``PROTOCOL/HOST:PORT[?metadata][#config]`` with PROTOCOL one of
+    :data:`ENDPOINT_PROTOCOLS` and the address as :func:`host_port_problem` says, or
+    ``unixsock-stream/PATH`` (a Unix socket) -- or None."""
+    if not isinstance(endpoint, str):
+        return f"not a string but {type(endpoint).__name__}"
+    protocol, slash, rest = endpoint.partition("/")
+    if not slash:
+        return "no PROTOCOL/ before the address"
+    address = re.split(r"[?#]", rest, maxsplit=1)[0]
+    if protocol == "unixsock-stream":  # a local socket: its address is a file path
+        return None if address and "\0" not in address else "no socket path after unixsock-stream/"
+    if protocol not in ENDPOINT_PROTOCOLS:
+        return f"protocol {protocol[:40]!r} is not one of {', '.join(ENDPOINT_PROTOCOLS)}, unixsock-stream"
+    return host_port_problem(address)
+
+
+def check_endpoint(endpoint: Any, what: str) -> str:
+    """``endpoint`` if :func:`endpoint_problem` finds nothing wrong, else BusError naming
+    ``what`` (the flag or argument), the form expected and the problem."""
+    problem = endpoint_problem(endpoint)
+    if problem is not None:
+        shown = endpoint[:200] + "..." if isinstance(endpoint, str) and len(endpoint) > 200 else endpoint
+        raise BusError(f"{what}: expected Zenoh endpoints like 'tcp/127.0.0.1:7447', got {shown!r}: {problem} "
+                       f"(PROTOCOL/HOST:PORT, PROTOCOL one of {', '.join(ENDPOINT_PROTOCOLS)}, HOST an IPv4 address, "
+                       f"[IPv6 address] or host name, PORT 1..65535; or unixsock-stream/PATH)")
+    return endpoint
+
+
+def endpoint_argument(value: str) -> str:
+    """The argparse ``type`` of an endpoint flag (``--connect``, ``--listen``): the value, or
+    argparse's usage error (exit 2) naming the flag, with :func:`check_endpoint`'s text."""
+    try:
+        return check_endpoint(value, "endpoint")
+    except BusError as exc:
+        raise argparse.ArgumentTypeError(str(exc).removeprefix("endpoint: ")) from None
+
+
 def _endpoint_list(name: str, value: str | Sequence[str] | None) -> list[str]:
     if value is None:
         return []
     items = [value] if isinstance(value, str) else list(value)
     for item in items:
-        if not isinstance(item, str) or "/" not in item or ":" not in item.split("/", 1)[1]:
-            raise BusError(
-                f"{name}: expected Zenoh endpoints like 'tcp/127.0.0.1:7447', got {item!r}"
-            )
+        check_endpoint(item, name)
     return items
 
 
@@ -218,11 +302,11 @@ def open_session(
 def add_bus_arguments(parser: Any) -> None:
     """Add ``--listen``, ``--connect`` and ``--mode`` to an argparse parser (for services)."""
     parser.add_argument(
-        "--listen", action="append", default=None, metavar="ENDPOINT",
+        "--listen", action="append", default=None, metavar="ENDPOINT", type=endpoint_argument,
         help="Zenoh endpoint to listen on (repeatable); default tcp/127.0.0.1:<free port>",
     )
     parser.add_argument(
-        "--connect", action="append", default=None, metavar="ENDPOINT",
+        "--connect", action="append", default=None, metavar="ENDPOINT", type=endpoint_argument,
         help="Zenoh endpoint to connect to (repeatable), e.g. the runner's hub or a router",
     )
     parser.add_argument("--mode", choices=_MODES, default="peer", help="Zenoh mode (default peer)")

@@ -114,6 +114,13 @@ __all__ = [
     "write_tables",
     "read_table",
     "METRIC_UNITS",
+    "SCHEDULER_PROTOCOLS",
+    "check_scheduler_address",
+    "RESULT_TABLES",
+    "SPEC_KEYS",
+    "earlier_results",
+    "check_out_directory",
+    "remove_earlier_results",
     "main",
 ]
 
@@ -433,6 +440,10 @@ def read_cases_csv(path: str | os.PathLike) -> tuple[list[str], list[dict[str, A
                              for h, c in zip(header, cells) if c.strip()})
     except OSError as exc:
         raise SweepError(f"--cases {path}: expected a readable CSV file ({exc.strerror or exc})") from None
+    except UnicodeDecodeError as exc:
+        raise SweepError(f"--cases {path}: expected UTF-8 text, got an invalid byte at offset {exc.start}") from None
+    except csv.Error as exc:  # e.g. a cell over csv.field_size_limit() characters (131,072)
+        raise SweepError(f"--cases {path}: expected a CSV file of cases: {exc}") from None
     for h in header:
         parse_path(h, f"--cases {path}: column {h!r}")
     if not rows:
@@ -1015,7 +1026,11 @@ def _parser() -> argparse.ArgumentParser:
     ap.add_argument("--case", action="append", type=int, default=None, metavar="K",
                     help="rerun only case K (repeatable), serially, updating the tables in --out")
     ap.add_argument("--mcap", action="store_true", help="also write one MCAP per case into OUT/mcap/")
-    ap.add_argument("--out", required=True, metavar="DIR", help="output directory")
+    ap.add_argument("--out", required=True, metavar="DIR",
+                    help="output directory; one holding an earlier sweep's results is refused (a new directory, "
+                         "--case K to rerun cases of that sweep, or --overwrite)")
+    ap.add_argument("--overwrite", action="store_true",
+                    help="replace the results of an earlier sweep in --out (its tables and its per-case files)")
     ap.add_argument("--quiet", action="store_true", help="no progress line")
     return ap
 
@@ -1024,6 +1039,95 @@ def check_chunk(chunk: Any) -> None:
     """``--chunk``: an integer >= 1 (SweepError naming it)."""
     if not (isinstance(chunk, int) and chunk >= 1):
         raise SweepError(f"--chunk: expected an integer >= 1, got {chunk!r}")
+
+
+#: Dask's comm protocols a ``--scheduler`` address may name (``tcp`` when none is given);
+#: all but ``inproc`` (a scheduler in this very process: ``inproc://IP/PID/N``) take HOST:PORT.
+SCHEDULER_PROTOCOLS = ("tcp", "tls", "ws", "wss", "ucx", "inproc")
+
+
+def check_scheduler_address(address: str) -> str:
+    """``--scheduler``: ``[PROTOCOL://]HOST:PORT`` with PROTOCOL one of
+    :data:`SCHEDULER_PROTOCOLS`, HOST an IPv4 address, [IPv6 address] or host name and PORT
+    1..65535 (:func:`astrodyn.bus.host_port_problem`); SweepError naming the flag, at once
+    (a bad address was found only after 30 s of trying to reach it)."""
+    from astrodyn.bus import host_port_problem
+
+    protocol, sep, rest = address.partition("://")
+    if not sep:
+        protocol, rest = "tcp", address
+    if protocol not in SCHEDULER_PROTOCOLS:
+        problem = f"protocol {protocol[:40]!r} is not one of {', '.join(SCHEDULER_PROTOCOLS)}"
+    else:
+        problem = None if protocol == "inproc" else host_port_problem(rest.rstrip("/"))
+    if problem is not None:
+        shown = address if len(address) <= 200 else address[:200] + "..."
+        raise SweepError(f"--scheduler: expected a Dask scheduler address [PROTOCOL://]HOST:PORT (PROTOCOL one of "
+                         f"{', '.join(SCHEDULER_PROTOCOLS)}; PORT 1..65535), e.g. tcp://10.0.0.5:8786, got {shown!r}: "
+                         f"{problem}")
+    return address
+
+
+#: The tables a sweep writes into --out (:func:`write_tables`).
+RESULT_TABLES = ("summary.csv", "summary.parquet", "failures.csv", "sweep.json")
+_CASE_FILE = re.compile(r"^case-\d{6,}\.(txt|mcap)$")
+
+
+def earlier_results(out: Path) -> list[Path]:
+    """The files an earlier sweep wrote into ``out``: its tables (:data:`RESULT_TABLES`) and
+    its per-case files (``failures/case-K.txt``, ``mcap/case-K.mcap``); nothing else."""
+    found = [out / name for name in RESULT_TABLES if (out / name).is_file()]
+    for sub in ("failures", "mcap"):
+        if (out / sub).is_dir():
+            found += sorted(p for p in (out / sub).iterdir() if _CASE_FILE.match(p.name) and p.is_file())
+    return found
+
+
+#: The keys of sweep.json that define which cases a sweep runs (its spec); a ``--case``
+#: rerun must have the same, or its rows would join another sweep's table.
+SPEC_KEYS = ("n", "seed", "varies", "cases_csv_columns", "cases_csv_rows", "grid_sizes", "config")
+
+
+def check_out_directory(out: Path, spec: SweepSpec, rerun: bool, overwrite: bool) -> None:
+    """``--out`` against what it already holds: a new sweep never replaces an earlier one's
+    results without ``--overwrite`` (an interrupted sweep would leave a partial table in
+    place of a complete one, and case files of two sweeps would mix); a ``--case`` rerun
+    updates only a sweep of the same spec (:data:`SPEC_KEYS`).  SweepError naming the flag."""
+    if rerun and overwrite:
+        raise SweepError("--overwrite: expected either --overwrite (a new sweep replacing an earlier one) or --case "
+                         "(rerun cases of the sweep in --out, updating its tables), not both")
+    earlier = earlier_results(out) if out.is_dir() else []
+    if rerun:
+        try:
+            recorded = json.loads((out / "sweep.json").read_text(encoding="utf-8"))
+        except (OSError, ValueError, RecursionError):
+            recorded = None
+        if earlier and not isinstance(recorded, dict):
+            raise SweepError(f"--case: {out} holds sweep results without a readable sweep.json; the rerun cannot "
+                             f"tell whether they are of this sweep (expected the --out of the sweep to rerun)")
+        if isinstance(recorded, dict):
+            current = json.loads(json.dumps(spec.to_json(), default=str))
+            differ = [k for k in SPEC_KEYS if recorded.get(k) != current.get(k)]
+            if differ:
+                raise SweepError(f"--case: {out} holds a sweep of another spec (it differs in {', '.join(differ)}); "
+                                 f"rerun with the config, --vary, --cases, -n and --seed of that sweep, or choose a "
+                                 f"new --out")
+        return
+    if earlier and not overwrite:
+        shown = ", ".join(str(p.relative_to(out)) for p in earlier[:4]) + (f", ... ({len(earlier)} files)"
+                                                                         if len(earlier) > 4 else "")
+        raise SweepError(f"--out {out}: holds the results of an earlier sweep ({shown}); they are never overwritten: "
+                         f"choose a new directory, rerun cases of that sweep with --case K, or pass --overwrite to "
+                         f"replace them")
+
+
+def remove_earlier_results(out: Path) -> list[Path]:
+    """``--overwrite``: remove what :func:`earlier_results` lists (only those files), so the
+    new sweep's tables and case files never mix with the earlier one's; returns them."""
+    removed = earlier_results(out)
+    for path in removed:
+        path.unlink()
+    return removed
 
 
 def max_local_workers() -> int:
@@ -1043,6 +1147,8 @@ def main(argv: list[str] | None = None) -> int:
             raise SweepError(f"--workers: expected at most {max_local_workers()} local worker processes (4 per core; "
                              f"{os.cpu_count()} cores here), got {args.workers}")
         check_chunk(args.chunk)
+        if args.scheduler is not None:
+            check_scheduler_address(args.scheduler)
         spec = make_spec(args.config, args.vary, n=args.n, seed=args.seed, cases_csv=args.cases)
         cases = list(range(spec.n)) if args.case is None else sorted(set(args.case))
         for k in cases:
@@ -1052,6 +1158,7 @@ def main(argv: list[str] | None = None) -> int:
         try:  # the last check: a refused sweep creates nothing
             if out.exists() and not out.is_dir():
                 raise SweepError(f"--out {out}: expected a directory, got a file")
+            check_out_directory(out, spec, rerun=args.case is not None, overwrite=args.overwrite)
             out.mkdir(parents=True, exist_ok=True)
         except OSError as exc:
             raise SweepError(f"--out {str(out)[:200]}: expected a directory that can be created, got "
@@ -1063,6 +1170,11 @@ def main(argv: list[str] | None = None) -> int:
     except (SweepError, ScenarioError) as exc:
         print(f"astrodyn sweep: {exc}", file=sys.stderr)
         return 2
+    if args.overwrite:
+        removed = remove_earlier_results(out)
+        if removed and not args.quiet:
+            print(f"astrodyn sweep: --overwrite: removed the {len(removed)} result files of the earlier sweep in {out}",
+                  file=sys.stderr)
     rerun = args.case is not None
     workers, scheduler = (0, None) if rerun else (args.workers, args.scheduler)
     where = "serially in this process" if workers == 0 and scheduler is None else (

@@ -17,7 +17,9 @@ Writes into ``DIR`` (default ``<file>-report``):
   for rolling disks ``contact-path`` and ``rolling-angles``; with gyroscopes on board ``gyros``.
 
 Definitions of every number: :mod:`astrodyn.analysis.metrics`.  A cut or damaged file is
-analysed up to what is complete and the report says so at the top.
+analysed up to what is complete and the report says so at the top; so does a channel with
+duplicated or missing sequence numbers (count, channel, the missing seqs;
+:func:`sequence_issues`), which ``astrodyn analyze`` also prints as a warning.
 """
 
 from __future__ import annotations
@@ -37,7 +39,7 @@ from astrodyn.analysis.closed_loop import CLOSED_LOOP_FIGURES, closed_loop_secti
 from astrodyn.analysis.pointing import POINTING_FIGURES, pointing_section
 from astrodyn.recording import RecordingError, load
 
-__all__ = ["analyze", "main", "FIGURES"]
+__all__ = ["analyze", "main", "FIGURES", "SEQ_NOT_COUNTED", "sequence_issues", "sequence_note"]
 
 #: figure name -> what it shows (report captions)
 FIGURES = {
@@ -90,6 +92,49 @@ def select_bodies(names, patterns: Sequence[str] | None) -> list[str]:
     return [n for n in names if n in chosen]
 
 
+#: Kinds whose seq is not a count of their channel's messages: a command channel's seq counts
+#: each sender's commands over every body (docs/control.md), so repeats and jumps are normal.
+SEQ_NOT_COUNTED = ("command",)
+
+
+def sequence_issues(run) -> dict[str, dict]:
+    """The seq accounting of ``run`` (``load(path)``: its per-channel gap report) for every
+    channel whose seq counts its messages (per process on the event channel,
+    ``<topic>#<process>``) and has duplicates or missing seqs: ``{"duplicates": messages
+    repeating a seq already present, "missing": seqs absent below the largest, "gap_count",
+    "gaps": the first 5 [first, last] ranges}``."""
+    issues = {}
+    for key, report in run.gaps.items():
+        track = run.channels.get(key.split("#", 1)[0])
+        if track is not None and track.kind in SEQ_NOT_COUNTED:
+            continue
+        if report.get("duplicates") or report.get("missing"):
+            gaps = report.get("gaps", [])
+            issues[key] = {"duplicates": int(report.get("duplicates", 0)), "missing": int(report.get("missing", 0)),
+                           "gap_count": len(gaps), "gaps": [list(g) for g in gaps[:5]]}
+    return issues
+
+
+def sequence_note(issues: dict[str, dict], channels: int = 5) -> str:
+    """One line for the report and the warning: per channel of :func:`sequence_issues`
+    (the first ``channels``) its duplicated and missing seqs."""
+    parts = []
+    for key, issue in list(issues.items())[:channels]:
+        said = []
+        n = issue["duplicates"]
+        if n:
+            said.append(f"{n} duplicated sequence number{'' if n == 1 else 's'} (a message repeating a seq already "
+                        f"recorded)")
+        n = issue["missing"]
+        if n:
+            ranges = ", ".join(f"{a}" if a == b else f"{a}-{b}" for a, b in issue["gaps"])
+            ranges += ", ..." if issue["gap_count"] > len(issue["gaps"]) else ""
+            said.append(f"{n} missing sequence number{'' if n == 1 else 's'} (seq {ranges})")
+        parts.append(f"{key}: {' and '.join(said)}")
+    more = len(issues) - channels
+    return "; ".join(parts) + (f"; and {more} more channels (report.json, \"sequence\")" if more > 0 else "")
+
+
 def analyze(path: str | os.PathLike, out: str | os.PathLike | None = None, seq: str = "321",
             bodies: Sequence[str] | None = None, figures_for: int = FIGURE_BODIES) -> dict:
     """Write the report of ``path`` into ``out``; returns the numbers (as in report.json).
@@ -119,6 +164,7 @@ def analyze(path: str | os.PathLike, out: str | os.PathLike | None = None, seq: 
         "messages": run.messages, "complete": run.complete, "file_report": run.incomplete_reason,
         "euler_sequence": seq, "bodies": {}, "figures": {},
         "bodies_in_file": len(run.bodies), "figures_drawn_for": min(figures_for, len(names)),
+        "sequence": sequence_issues(run),
     }
     for i, name in enumerate(names):
         with fg.drawing(i < figures_for):
@@ -319,6 +365,11 @@ _LABELS = {
     "reference": "reference", "quat_norm_error_max": "max ||q| - 1|", "rate_max_rad_s": "max |w| (rad/s)",
     "kinetic_energy_drift_max": "max |T - T0| / |T0|", "h_inertial_drift_max": "max |Hi - Hi0| / |Hi0|",
     "nutation_min_deg": "min nutation (deg)", "nutation_max_deg": "max nutation (deg)",
+    # a quantity that starts at 0 (a body at rest, a parabola): its absolute drift, in its unit
+    "energy_drift_max_abs": "max |E - E0| (J/kg; E0 = 0, so absolute)",
+    "h_drift_max_abs": "max |h - h0| (m^2/s; h0 = 0, so absolute)",
+    "kinetic_energy_drift_max_abs": "max |T - T0| (J; T0 = 0, so absolute)",
+    "h_inertial_drift_max_abs": "max |Hi - Hi0| (N m s; Hi0 = 0, so absolute)",
 }
 
 
@@ -367,6 +418,8 @@ def _write_markdown(report: dict, path: Path) -> None:
              f"Euler sequence {report['euler_sequence']}.", ""]
     if not report["complete"]:
         lines += [f"**Incomplete file**: {report['file_report'] or 'invalid messages skipped'}.", ""]
+    if report["sequence"]:
+        lines += [f"**Sequence numbers**: {sequence_note(report['sequence'])}.", ""]
     lines += [f"{figures_note(report)}", ""] if figures_note(report) else []
     lines += ["At a glance:", ""] + [f"- {line}" for line in at_a_glance(report)] + [""]
     for name, numbers in report["bodies"].items():
@@ -390,6 +443,8 @@ def _write_html(report: dict, path: Path) -> None:
              f"Euler sequence {e(report['euler_sequence'])}.</p>"]
     if not report["complete"]:
         parts.append(f"<p><b>Incomplete file</b>: {e(report['file_report'] or 'invalid messages skipped')}.</p>")
+    if report["sequence"]:
+        parts.append(f"<p><b>Sequence numbers</b>: {e(sequence_note(report['sequence']))}.</p>")
     if figures_note(report):
         parts.append(f"<p>{e(figures_note(report))}</p>")
     parts.append("<p>At a glance:</p><ul>" + "".join(f"<li>{e(line)}</li>" for line in at_a_glance(report)) + "</ul>")
@@ -437,5 +492,7 @@ def main(argv: list[str] | None = None) -> int:
     out = Path(args.out) if args.out else Path(args.file).with_name(Path(args.file).stem + "-report")
     if not report["complete"]:
         print(f"astrodyn analyze: warning: {args.file}: {report['file_report']}; analysed what is complete", file=sys.stderr)
+    if report["sequence"]:
+        print(f"astrodyn analyze: warning: {args.file}: {sequence_note(report['sequence'])}", file=sys.stderr)
     print(out / "report.html")
     return 0

@@ -39,6 +39,8 @@ Every attitude row list ends with ``|q| - 1`` (absolute).  Drifts are
 where ``|x_0|`` is not the size of the terms: orbit energies use ``mu / |r_0|`` when
 ``|E_0| < 1e-6 mu/|r_0|`` (near-parabolic), ``h_z`` uses ``|h_0|``, ``L_z`` and ``H_3``
 use ``|H_0|``, the top's energy uses ``T_0 + m g cm`` -- the row's ``scale`` says which.
+A scale of 0 (a body at rest: ``T_0 = 0``, ``H_0 = 0``) gives the absolute drift in the
+row's unit, its scale ``absolute (|T0| = 0)`` (was inf).
 """
 
 from __future__ import annotations
@@ -49,6 +51,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from astrodyn.analysis.metrics import drift_against
 from astrodyn.orbit import zonal_potential
 from astrodyn.rotation import dcm_from_quat
 
@@ -73,13 +76,13 @@ class Invariant:
                 "scale": self.scale, "conserved": self.conserved}
 
 
-def _drift(x: np.ndarray, scale: float) -> float:
-    x = np.asarray(x, dtype=np.float64)
-    d = x - x[:1]
-    dev = np.linalg.norm(d, axis=-1) if x.ndim > 1 else np.abs(d)
-    if scale == 0:
-        return 0.0 if not np.any(dev) else float("inf")
-    return float(np.max(dev) / scale)
+def _row(name: str, unit: str, initial: float, x: np.ndarray, scale: float, scale_name: str) -> Invariant:
+    """The row of quantity ``x`` (samples along axis 0) and its drift relative to ``scale``
+    (named ``scale_name``); a zero scale (a body at rest, ``T0 = H0 = 0``) gives the absolute
+    drift in ``unit``, named ``absolute (<scale_name> = 0)`` (:func:`~astrodyn.analysis.
+    metrics.drift_against`)."""
+    drift, relative = drift_against(x, scale)
+    return Invariant(name, unit, initial, drift, scale_name if relative else f"absolute ({scale_name} = 0)")
 
 
 def _norm0(x: np.ndarray) -> float:
@@ -91,8 +94,8 @@ def _energy_row(name: str, energy: np.ndarray, mu: float, r0: float) -> Invarian
     e0 = float(energy[0])
     terms = mu / r0
     if abs(e0) < 1e-6 * terms:
-        return Invariant(name, "J/kg", e0, _drift(energy, terms), "mu/r0")
-    return Invariant(name, "J/kg", e0, _drift(energy, abs(e0)), "|E0|")
+        return _row(name, "J/kg", e0, energy, terms, "mu/r0")
+    return _row(name, "J/kg", e0, energy, abs(e0), "|E0|")
 
 
 def orbit_invariants(model: str, r: np.ndarray, v: np.ndarray, mu: float, *, radius: float | None = None,
@@ -116,13 +119,13 @@ def orbit_invariants(model: str, r: np.ndarray, v: np.ndarray, mu: float, *, rad
                           conserved=False)]
     if model == "kepler" or degree < 2:
         return [_energy_row("E (two-body)", kinetic - mu / rn, mu, float(rn[0])),
-                Invariant("h", "m^2/s", _norm0(h), _drift(h, _norm0(h)), "|h0|")]
+                _row("h", "m^2/s", _norm0(h), h, _norm0(h), "|h0|")]
     if radius is None or len(j) < degree - 1:
         raise ValueError(f"orbit_invariants({model!r}): expected radius and J2..J{degree}, got radius={radius}, j={j}")
     potential = mu / rn + zonal_potential(r, mu, radius, tuple(j[: degree - 1]))
     return [_energy_row(f"E (with J2..J{degree})" if degree > 2 else "E (with J2)", kinetic - potential, mu,
                         float(rn[0])),
-            Invariant("h_z", "m^2/s", float(h[0, 2]), _drift(h[:, 2], _norm0(h)), "|h0|")]
+            _row("h_z", "m^2/s", float(h[0, 2]), h[:, 2], _norm0(h), "|h0|")]
 
 
 def attitude_invariants(model: str, q: np.ndarray, w: np.ndarray, inertia: np.ndarray | None, *,
@@ -151,16 +154,16 @@ def attitude_invariants(model: str, q: np.ndarray, w: np.ndarray, inertia: np.nd
             height = c[:, 2, 2]  # (C^T e3)_z: the vertical component of body axis 3
             total = energy + m * gg * l * height
             scale = float(energy[0]) + m * gg * l
-            rows.append(Invariant("E = T + m g cm cos(theta)", "J", float(total[0]), _drift(total, scale), "T0 + m g cm"))
+            rows.append(_row("E = T + m g cm cos(theta)", "J", float(total[0]), total, scale, "T0 + m g cm"))
             h0 = _norm0(hi)
-            rows.append(Invariant("L_z", "N m s", float(hi[0, 2]), _drift(hi[:, 2], h0), "|H0|"))
+            rows.append(_row("L_z", "N m s", float(hi[0, 2]), hi[:, 2], h0, "|H0|"))
             if abs(inertia[0, 0] - inertia[1, 1]) <= 1e-12 * abs(inertia[0, 0]) and not inertia[0, 1] and not inertia[0, 2] \
                     and not inertia[1, 2]:
-                rows.append(Invariant("H_3 (spin)", "N m s", float(hb[0, 2]), _drift(hb[:, 2], h0), "|H0|"))
+                rows.append(_row("H_3 (spin)", "N m s", float(hb[0, 2]), hb[:, 2], h0, "|H0|"))
         else:
             t0 = float(energy[0])
-            rows.append(Invariant("T", "J", t0, _drift(energy, abs(t0)), "|T0|"))
-            rows.append(Invariant("H_i", "N m s", _norm0(hi), _drift(hi, _norm0(hi)), "|H0|"))
+            rows.append(_row("T", "J", t0, energy, abs(t0), "|T0|"))
+            rows.append(_row("H_i", "N m s", _norm0(hi), hi, _norm0(hi), "|H0|"))
     rows.append(Invariant("|q| - 1", "-", float(qn[0] - 1.0), float(np.max(np.abs(qn - 1.0))), "absolute"))
     return rows
 
@@ -191,12 +194,13 @@ def flexible_invariants(spacecraft, q: np.ndarray, w: np.ndarray, eta: np.ndarra
     energy = fx.spacecraft_energy(spacecraft, states)
     _, hi = fx.spacecraft_momentum(spacecraft, states)
     e0, h0 = float(energy[0]), _norm0(hi)
-    rows = [Invariant("H_i (hub + appendages)", "N m s", h0, _drift(hi, h0), "|H0|")]
-    if spacecraft.damped:
-        rise = float(np.max(energy - e0)) / abs(e0) if e0 else 0.0
-        rows.append(Invariant("E = T + V: rise (damped)", "J", e0, max(rise, 0.0), "|E0|"))
+    rows = [_row("H_i (hub + appendages)", "N m s", h0, hi, h0, "|H0|")]
+    if spacecraft.damped:  # a rise from E0 = 0 (at rest, undeformed) is given in J: relative to 0 it is inf
+        rise = max(float(np.max(energy - e0)), 0.0)
+        rows.append(Invariant("E = T + V: rise (damped)", "J", e0, rise / abs(e0) if e0 else rise,
+                              "|E0|" if e0 else "absolute (|E0| = 0)"))
     else:
-        rows.append(Invariant("E = T + V", "J", e0, _drift(energy, abs(e0)), "|E0|"))
+        rows.append(_row("E = T + V", "J", e0, energy, abs(e0), "|E0|"))
     qn = np.linalg.norm(q, axis=-1)
     rows.append(Invariant("|q| - 1", "-", float(qn[0] - 1.0), float(np.max(np.abs(qn - 1.0))), "absolute"))
     return rows
@@ -233,7 +237,7 @@ def rolling_invariants(disk, q: np.ndarray, lean: np.ndarray, u: np.ndarray) -> 
     states[:, 3], states[:, 5:8] = lean, u
     e = energy(disk, states)
     qn = np.linalg.norm(q, axis=-1)
-    return [Invariant("E = T + m g R cos(theta)", "J", float(e[0]), _drift(e, abs(float(e[0]))), "|E0|"),
+    return [_row("E = T + m g R cos(theta)", "J", float(e[0]), e, abs(float(e[0])), "|E0|"),
             Invariant("|q| - 1", "-", float(qn[0] - 1.0), float(np.max(np.abs(qn - 1.0))), "absolute")]
 
 

@@ -4,7 +4,10 @@ Orbit (two-body invariants, Vallado 4th ed. sec. 1.3 / 2.2): specific energy
 ``E = |v|^2 / 2 - mu / |r|`` (J/kg) and specific angular momentum ``h = r x v`` (m^2/s);
 their drifts are ``max_k |E_k - E_0| / |E_0|`` and ``max_k |h_k - h_0| / |h_0|``
 (exact constants for a Kepler orbit; for a perturbed orbit the drift *is* the
-perturbation's effect, reported as such).  Elements: :func:`astrodyn.orbit.elements_from_state`.
+perturbation's effect, reported as such).  A quantity that starts at 0 (``E_0 = 0`` on a
+parabola, ``T_0 = H_0 = 0`` for a body at rest) has its drift reported as the absolute
+``max_k |x_k - x_0|`` in its unit instead (``*_drift_max_abs``; :func:`drift_against`).
+Elements: :func:`astrodyn.orbit.elements_from_state`.
 
 Attitude (Baruh ch. 7-8): kinetic energy ``T = w . I w / 2`` (J), body angular momentum
 ``H_b = I w`` (kg m^2/s), inertial ``H_i = C(q)^T H_b`` (``v_body = C(q) v_inertial``);
@@ -32,8 +35,8 @@ from astrodyn.orbit import elements_from_state
 from astrodyn.rotation import dcm_from_quat, euler_from_quat
 
 __all__ = [
-    "relative_drift", "orbit_metrics", "attitude_metrics", "gmst_rad", "ground_track",
-    "BodyInertia", "inertia_from_scenario", "central_body_from_scenario",
+    "relative_drift", "drift_against", "drift_summary", "orbit_metrics", "attitude_metrics", "gmst_rad",
+    "ground_track", "BodyInertia", "inertia_from_scenario", "central_body_from_scenario",
 ]
 
 _J2000_JD = 2451545.0
@@ -41,7 +44,8 @@ _UNIX_EPOCH_JD = 2440587.5
 
 
 def relative_drift(x: np.ndarray) -> np.ndarray:
-    """``|x_k - x_0| / |x_0|`` per sample (vectors: Euclidean norms); 0/0 -> 0."""
+    """``|x_k - x_0| / |x_0|`` per sample (vectors: Euclidean norms); 0/0 -> 0, and inf
+    where x moved from ``x_0 = 0`` (the report's numbers use :func:`drift_against` there)."""
     x = np.asarray(x, dtype=np.float64)
     d = x - x[:1]
     num = np.linalg.norm(d, axis=-1) if x.ndim > 1 else np.abs(d)
@@ -49,6 +53,30 @@ def relative_drift(x: np.ndarray) -> np.ndarray:
     if den == 0:
         return np.where(num == 0, 0.0, np.inf)
     return num / den
+
+
+def drift_against(x: np.ndarray, scale: float) -> tuple[float, bool]:
+    """The largest drift of ``x`` (samples along axis 0; vectors: Euclidean norms) from
+    ``x[0]``: ``(max_k |x_k - x_0| / scale, True)``, or, when ``scale`` is 0 -- a body at
+    rest (``T_0 = 0``, ``H_0 = 0``), a parabola (``E_0 = 0``), a radial orbit (``h_0 = 0``),
+    where a relative drift is 0/0 or inf -- ``(max_k |x_k - x_0|, False)``, in the unit of
+    ``x``.  The one rule of every drift the report and the run summary give."""
+    x = np.asarray(x, dtype=np.float64)
+    d = x - x[:1]
+    dev = float(np.max(np.linalg.norm(d, axis=-1) if x.ndim > 1 else np.abs(d))) if x.shape[0] else 0.0
+    if scale == 0:
+        return dev, False
+    return dev / scale, True
+
+
+def drift_summary(name: str, x: np.ndarray) -> dict[str, float]:
+    """The report's number for the drift of ``x`` from ``x[0]`` (:func:`drift_against`
+    relative to ``|x_0|``): ``{name + "_drift_max": relative}``, or when ``x_0 = 0``
+    ``{name + "_drift_max_abs": absolute}`` in the unit of ``x`` (the report's labels give it)."""
+    x = np.asarray(x, dtype=np.float64)
+    scale = float(np.linalg.norm(x[0])) if x.shape[0] else 1.0
+    value, relative = drift_against(x, scale)
+    return {f"{name}_drift_max" if relative else f"{name}_drift_max_abs": value}
 
 
 def orbit_metrics(t: np.ndarray, r: np.ndarray, v: np.ndarray, mu: float) -> dict:
@@ -65,8 +93,8 @@ def orbit_metrics(t: np.ndarray, r: np.ndarray, v: np.ndarray, mu: float) -> dic
         "summary": {
             "states": int(t.size),
             "t_span_s": float(t[-1] - t[0]) if t.size else 0.0,
-            "energy_drift_max": float(e_drift.max()) if t.size else 0.0,
-            "h_drift_max": float(h_drift.max()) if t.size else 0.0,
+            **(drift_summary("energy", energy) if t.size else {"energy_drift_max": 0.0}),
+            **(drift_summary("h", h) if t.size else {"h_drift_max": 0.0}),
             "r_min_m": float(rn.min()) if t.size else 0.0,
             "r_max_m": float(rn.max()) if t.size else 0.0,
         },
@@ -136,8 +164,8 @@ def attitude_metrics(t: np.ndarray, q: np.ndarray, w: np.ndarray, seq: str,
         hi = np.einsum("kji,kj->ki", dcm_from_quat(q), hb)  # C^T H_b
         out.update(kinetic_energy=energy, h_body=hb, h_inertial=hi,
                    energy_drift=relative_drift(energy), h_inertial_drift=relative_drift(hi))
-        summary.update(kinetic_energy_drift_max=float(out["energy_drift"].max()),
-                       h_inertial_drift_max=float(out["h_inertial_drift"].max()))
+        if t.size:
+            summary.update(drift_summary("kinetic_energy", energy), **drift_summary("h_inertial", hi))
         if body.is_top:
             e313 = euler_from_quat(q, "313")
             out.update(precession=np.unwrap(e313[:, 0]), nutation=e313[:, 1])

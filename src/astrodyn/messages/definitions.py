@@ -60,6 +60,16 @@ _DETAIL = Annotated[str, Meta(max_length=4096, description="human-readable detai
 _sqrt = math.sqrt
 
 
+def _unit_quaternion_problem(q: list[float], field: str) -> str | None:
+    """The rule of every quaternion a message carries (Euler parameters, dimensionless):
+    None when | |q| - 1 | <= :data:`QUAT_NORM_TOL`, else the error text naming ``field``."""
+    q0, q1, q2, q3 = q
+    norm = _sqrt(q0 * q0 + q1 * q1 + q2 * q2 + q3 * q3)
+    if abs(norm - 1.0) <= QUAT_NORM_TOL:
+        return None
+    return f"{field}: expected a unit quaternion (| |q| - 1 | <= {QUAT_NORM_TOL:g}), got |q| = {norm!r}"
+
+
 def _enforce(problem: str | None) -> None:
     """``__post_init__``'s half of a ``rule``: raise its problem (msgspec reports a ValueError
     raised in ``__post_init__`` as a ValidationError with this text)."""
@@ -95,11 +105,7 @@ class AttitudeState(Stamped, forbid_unknown_fields=True):
     @staticmethod
     def rule(q: list[float]) -> str | None:
         """|q| = 1: a rule a JSON Schema cannot state (see the note above :class:`Stamped`)."""
-        q0, q1, q2, q3 = q
-        norm = _sqrt(q0 * q0 + q1 * q1 + q2 * q2 + q3 * q3)
-        if abs(norm - 1.0) <= QUAT_NORM_TOL:
-            return None
-        return f"attitude.q: expected a unit quaternion (| |q| - 1 | <= {QUAT_NORM_TOL:g}), got |q| = {norm!r}"
+        return _unit_quaternion_problem(q, "attitude.q")
 
     def __post_init__(self) -> None:
         _enforce(self.rule(self.q))
@@ -273,9 +279,20 @@ class GyroSample(Stamped, forbid_unknown_fields=True):
 
 
 class StarTrackerSample(Stamped, forbid_unknown_fields=True):
-    """A star tracker's measured attitude: Euler parameters, scalar first, e0 >= 0."""
+    """A star tracker's measured attitude: Euler parameters, scalar first, e0 >= 0, unit norm."""
 
-    q: _vec(4, "measured Euler parameters, scalar first")
+    q: _vec(4, "measured Euler parameters, scalar first, |q| = 1")
+
+    @staticmethod
+    def rule(q: list[float]) -> str | None:
+        """|q| = 1 within the attitude state's :data:`QUAT_NORM_TOL`: the sensor's noise is a
+        rotation composed with the true attitude (``C(q_meas) = C(d) C(q)``,
+        :class:`astrodyn.sensors.StarTracker`), never added to the components, so a
+        measured quaternion is as unit as the true one (round-off, ~1e-16)."""
+        return _unit_quaternion_problem(q, "star_tracker.q")
+
+    def __post_init__(self) -> None:
+        _enforce(self.rule(self.q))
 
 
 class GpsSample(Stamped, forbid_unknown_fields=True):

@@ -49,7 +49,8 @@ from astrodyn.recording.chunked_writer import ChunkedWriter
 from astrodyn.recording.reader import chunk_records, open_recording, parse_record, read_records
 from astrodyn.recording.writer import RecordingError
 
-__all__ = ["recover", "write_atomically", "main", "finished_name", "find_partials", "stale_work_dirs"]
+__all__ = ["recover", "write_atomically", "main", "finished_name", "find_partials", "partials_of", "nothing_to_recover",
+           "stale_work_dirs"]
 
 
 class _Copier:
@@ -221,15 +222,32 @@ def find_partials(target: str) -> list[str]:
         return sorted(os.path.join(target, f) for f in os.listdir(target) if _PARTIAL.match(f) and f.endswith(".mcap"))
     if os.path.exists(target):
         return [target]
-    root, ext = os.path.splitext(target)
-    folder = os.path.dirname(target) or "."
+    return partials_of(target)
+
+
+def partials_of(recording: str) -> list[str]:
+    """The partial recordings (``NAME.partial.mcap``, ``NAME.partial-N.mcap``) beside
+    ``recording`` (``NAME.mcap``) that finish as it, sorted."""
+    root, _ = os.path.splitext(recording)
+    folder = os.path.dirname(recording) or "."
     stem = os.path.basename(root) + ".partial"
     try:
         names = os.listdir(folder)
     except OSError:
         return []
     return sorted(os.path.join(folder, f) for f in names
-                  if f.startswith(stem) and _PARTIAL.match(f) and finished_name(os.path.join(folder, f)) == target)
+                  if f.startswith(stem) and _PARTIAL.match(f) and finished_name(os.path.join(folder, f)) == recording)
+
+
+def nothing_to_recover(target: str) -> str:
+    """Why ``recover TARGET`` has nothing to do when TARGET does not exist: a partial
+    recording's own name is missing (the others of its recording are named, if any); a
+    recording's name has no partial recording either (``NAME.partial*.mcap``)."""
+    final = finished_name(target)
+    if final is None:
+        return f"{target}: no such file, and no partial recording of it ({os.path.splitext(target)[0]}.partial*.mcap)"
+    others = [p for p in partials_of(final) if p != target]
+    return f"{target}: no such file" + (f"; other partial recordings of {final}: {', '.join(others)}" if others else "")
 
 
 def stale_work_dirs(folder: str) -> list[str]:
@@ -279,8 +297,7 @@ def main(argv: list[str] | None = None) -> int:
     if not sources and os.path.isdir(args.file):
         print(json.dumps({"partial_recordings": 0, "directory": args.file}), flush=True)
     elif not sources:
-        print(f"astrodyn recover: error: {args.file}: no such file, and no partial recording of it "
-              f"({os.path.splitext(args.file)[0]}.partial*.mcap)", file=sys.stderr)
+        print(f"astrodyn recover: error: {nothing_to_recover(args.file)}", file=sys.stderr)
         return 1
     if args.out is not None and len(sources) > 1:
         print(f"astrodyn recover: --out: {len(sources)} partial files found ({', '.join(sources)}); recover them one "

@@ -18,8 +18,8 @@ from astrodyn.messages import ACTUATED_MODEL, GIMBALS_KIND, MODEL_STATE_KINDS
 if TYPE_CHECKING:
     from astrodyn.scenario import OrbitSpec, Scenario
 
-__all__ = ["BodyPlan", "Plan", "plan", "BYTES_PER_STATE", "ORBIT_METHODS", "ATTITUDE_METHODS", "EXACT_ATTITUDE_MODEL",
-           "periapsis_radius"]
+__all__ = ["BodyPlan", "Plan", "plan", "state_kinds_text", "BYTES_PER_STATE", "ORBIT_METHODS", "ATTITUDE_METHODS",
+           "EXACT_ATTITUDE_MODEL", "periapsis_radius"]
 
 #: The exact attitude model a torque that is zero for the body falls back to.
 EXACT_ATTITUDE_MODEL = "torque_free"
@@ -69,8 +69,10 @@ class Plan:
         xc = f" + {self.crosscheck_messages} cross-check messages" if self.crosscheck_messages else ""
         xc += (f" + {self.model_state_messages} appendage / rolling / gimbal states (the bodies' own keys)"
                if self.model_state_messages else "")
+        kinds = state_kinds_text(sum(bp.orbit_model is not None for bp in self.bodies),
+                                 sum(bp.attitude_model is not None for bp in self.bodies))
         lines = [f"scenario {self.scenario}: {len(self.bodies)} bodies, {self.n_steps} output steps, "
-                 f"{self.state_messages} state messages (orbit + attitude){xc}",
+                 f"{self.state_messages} state messages ({kinds}){xc}",
                  f"expected recording: about {_human_bytes(size)} ({BYTES_PER_STATE} bytes per state message after zstd)",
                  f"processes: {', '.join(self.processes)}"]
         groups: dict[tuple, list[str]] = {}
@@ -88,6 +90,13 @@ class Plan:
             lines += [f"    note: {n}" for n in notes]
             shown += len(names)
         return "\n".join(lines)
+
+
+def state_kinds_text(orbits: int, attitudes: int) -> str:
+    """What the state messages of a plan or a recording are, from how many orbit and
+    attitude channels (or messages) there are: "orbit + attitude", "orbit", "attitude"
+    ("none" for neither)."""
+    return " + ".join(k for k, n in (("orbit", orbits), ("attitude", attitudes)) if n) or "none"
 
 
 #: Bytes per state message in a recording after zstd: 87 measured on a Kepler + torque-free

@@ -62,7 +62,8 @@ from astrodyn.service.progress import Progress
 from astrodyn.service.signals import StopFlag
 from astrodyn.service.viewer import add_foxglove_argument, viewer_command
 
-__all__ = ["Replayer", "main", "build_parser", "open_recording", "start_viewer", "play", "REPLAY_VERBS"]
+__all__ = ["Replayer", "main", "build_parser", "open_recording", "start_viewer", "play", "REPLAY_VERBS",
+           "check_control_scenario"]
 
 REPLAY_VERBS = (*bus.CONTROL_VERBS, "seek")
 _BATCH_PROCESS = {"orbit": "orbit", "crosscheck": "orbit", "attitude": "attitude"}
@@ -96,6 +97,22 @@ def scenario_of(stream: McapStream) -> str:
         except messages.MessageError:
             continue
     raise RecordingError(f"{stream.path}: no astrodyn topic and no scenario metadata; give --control-scenario")
+
+
+def check_control_scenario(name, path: str, given: bool) -> str:
+    """``name`` if it can be the scenario of the control keys, else MessageError naming where
+    it came from: ``--control-scenario`` when ``given``, else the recording ``path``'s
+    scenario name (its metadata or its first topic), with the way out (``--control-scenario``).
+    The bad value is shown shortened (a 10 kB name stays a one-line error)."""
+    try:
+        return messages.check_name(name, "--control-scenario")
+    except messages.MessageError:
+        expected = f"expected a name matching {messages.NAME_PATTERN} (not '.' or '..')"
+        shown = f"{messages.show_value(name)} ({len(name)} characters)" if isinstance(name, str) else messages.show_value(name)
+        if given:
+            raise messages.MessageError(f"--control-scenario: {expected}, got {shown}") from None
+        raise messages.MessageError(f"{path}: the recorded scenario name: {expected}, got {shown}; give "
+                                    f"--control-scenario NAME to replay it under another name") from None
 
 
 class Replayer:
@@ -396,7 +413,7 @@ def main(argv: list[str] | None = None) -> int:
     with stream:
         try:
             scenario = args.control_scenario or scenario_of(stream)
-            messages.check_name(scenario, "--control-scenario")
+            check_control_scenario(scenario, stream.path, given=args.control_scenario is not None)
             session = bus.open_session(listen=listen, connect=args.connect, mode=args.mode)
         except (RecordingError, messages.MessageError, bus.BusError) as exc:
             print(f"astrodyn replay: error: {exc}", file=sys.stderr)

@@ -668,10 +668,24 @@ def main(argv: list[str] | None = None) -> int:
     return 0
 
 
+#: Largest ``--zenoh-config`` file, bytes: every process of a run parses it (Zenoh's JSON5
+#: parser); a config with TLS paths and access-control rules is a few kB.
+ZENOH_CONFIG_MAX_BYTES = 2**20
+
+
 def check_bus_flags(connect: list[str] | None, zenoh_config: str | None) -> None:
-    """``--connect`` endpoints and the ``--zenoh-config`` file, checked before anything
-    starts (a bad endpoint made every child fail at start-up); ScenarioError naming the flag."""
+    """``--connect`` endpoints (:func:`astrodyn.bus.check_endpoint`: protocol, host, port
+    1..65535) and the ``--zenoh-config`` file (at most :data:`ZENOH_CONFIG_MAX_BYTES`, and
+    one Zenoh can read), checked before anything starts (a bad endpoint made every child fail at
+    start-up, or was accepted and never connected); ScenarioError naming the flag."""
     if zenoh_config:
+        try:
+            size = os.path.getsize(zenoh_config)
+        except OSError:
+            size = 0  # missing or unreadable: Zenoh's own refusal below names it
+        if size > ZENOH_CONFIG_MAX_BYTES:
+            raise ScenarioError(f"--zenoh-config {zenoh_config}: expected a Zenoh JSON5 configuration of at most "
+                                f"{ZENOH_CONFIG_MAX_BYTES // 2**20} MiB ({ZENOH_CONFIG_MAX_BYTES} bytes), got {size} bytes")
         try:
             bus.make_config(mode="peer", config_file=zenoh_config)
         except bus.BusError as exc:

@@ -88,7 +88,7 @@ from astrodyn.service.supervision import (
 )
 from astrodyn.service.viewer import add_foxglove_argument, viewer_command
 
-__all__ = ["main", "Supervisor"]
+__all__ = ["main", "Supervisor", "roll_settings", "check_serve_flags", "ROLL_INTERVAL_DEFAULT_S"]
 
 
 class Supervisor:
@@ -543,6 +543,19 @@ def control_token_path(out: Path) -> Path:
 #: ``output.roll_size`` and ``output.roll_interval`` (astrodyn.scenario).
 ROLL_SIZE_BOUNDS = (2**20, 2**50)
 ROLL_INTERVAL_BOUNDS = (1.0, 250 * 365.25 * 86400.0)
+#: Wall seconds between rolled files when neither ``--roll-interval`` nor the config's
+#: ``output.roll_interval`` says: hourly files keep each file's chunk index (held in the
+#: logger's memory for its summary) small (docs/soak.md).
+ROLL_INTERVAL_DEFAULT_S = 3600.0
+
+
+def roll_settings(args: argparse.Namespace, scenario) -> tuple[int | None, float]:
+    """``(bytes, wall seconds)`` after which serve's logger starts a new file: each flag
+    (``--roll-size``, ``--roll-interval``) when given, else the config's ``[output]``
+    ``roll_size`` / ``roll_interval``, else no size limit and :data:`ROLL_INTERVAL_DEFAULT_S`."""
+    size = args.roll_size if args.roll_size is not None else scenario.roll_size
+    interval = args.roll_interval if args.roll_interval is not None else scenario.roll_interval
+    return size, (interval if interval is not None else ROLL_INTERVAL_DEFAULT_S)
 
 
 def check_serve_flags(args: argparse.Namespace) -> None:
@@ -551,7 +564,7 @@ def check_serve_flags(args: argparse.Namespace) -> None:
     if args.roll_size is not None and not lo <= args.roll_size <= hi:
         raise ScenarioError(f"--roll-size: expected bytes {lo} (1 MiB) <= N <= {hi} (1 PiB), got {args.roll_size}")
     lo, hi = ROLL_INTERVAL_BOUNDS
-    if not lo <= args.roll_interval <= hi:  # nan fails too
+    if args.roll_interval is not None and not lo <= args.roll_interval <= hi:  # nan fails too
         raise ScenarioError(f"--roll-interval: expected wall seconds {lo:g} <= S <= {hi:g}, got {args.roll_interval}")
     if args.port is not None and not 0 <= args.port <= 65535:
         raise ScenarioError(f"--port: expected a port 0..65535 (0: a free one), got {args.port}")
@@ -577,9 +590,13 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("config", help="scenario TOML file")
     ap.add_argument("--out", help="MCAP file (default out/<scenario>.mcap; rolled files get -0001, -0002, ...)")
     ap.add_argument("--rate", type=float, default=None, help="real-time factor (default: the scenario's real_time_factor)")
-    ap.add_argument("--roll-size", type=int, default=None, help="start a new MCAP file after this many bytes")
-    ap.add_argument("--roll-interval", type=float, default=3600.0,
-                    help="start a new MCAP file after this many wall seconds (default 3600: hourly files keep each file's chunk index, held in memory for its summary, small)")
+    ap.add_argument("--roll-size", type=int, default=None,
+                    help="start a new MCAP file after this many bytes (default: the config's [output] roll_size, "
+                         "else no size limit)")
+    ap.add_argument("--roll-interval", type=float, default=None,
+                    help="start a new MCAP file after this many wall seconds (default: the config's [output] "
+                         "roll_interval, else 3600: hourly files keep each file's chunk index, held in memory for its "
+                         "summary, small)")
     ap.add_argument("--max-wall", type=wall_seconds, default=None, help="stop by itself after this many wall seconds")
     ap.add_argument("--port", type=int, default=None, help="loopback port of the control hub (default: a free one)")
     ap.add_argument("--connect", action="append", default=[], metavar="ENDPOINT", help="also connect to this endpoint (router)")
@@ -604,6 +621,7 @@ def main(argv: list[str] | None = None) -> int:
         if not 1 <= args.loggers <= MAX_LOGGERS:
             raise ScenarioError(f"--loggers: expected 1 <= N <= {MAX_LOGGERS}, got {args.loggers}")
         check_serve_flags(args)
+        roll_size, roll_interval = roll_settings(args, scenario)
         check_closed_loop_arguments(scenario, args.controller or [], None, out)
         created = make_parents(out)  # the last step before the output checks: nothing is created for a refused flag
         for path in [out, *(Path(standby_path(out, k)) for k in range(2, args.loggers + 1))]:
@@ -629,8 +647,8 @@ def main(argv: list[str] | None = None) -> int:
             token_file.unlink(missing_ok=True)  # a previous run's token: never valid again
             auth.write_private_file(token_file, token.encode())
         try:
-            sup = Supervisor(scenario, Path(args.config), out, session, hub, rate=rate, roll_size=args.roll_size,
-                             roll_interval=args.roll_interval, connect=args.connect, tmp=Path(tmp),
+            sup = Supervisor(scenario, Path(args.config), out, session, hub, rate=rate, roll_size=roll_size,
+                             roll_interval=roll_interval, connect=args.connect, tmp=Path(tmp),
                              zenoh_config=args.zenoh_config,
                              foxglove_port=None if args.foxglove is None else (args.foxglove or bus.free_port()),
                              controllers=args.controller, token_file=token_file, loggers=args.loggers,
@@ -639,7 +657,8 @@ def main(argv: list[str] | None = None) -> int:
             print(f"astrodyn serve: {exc}", file=sys.stderr)
             return 1
         print(json.dumps({"serving": scenario.name, "hub": hub, "control": f"astrodyn/{scenario.name}/@control/*",
-                          "out": str(out), "real_time_factor": rate, "foxglove": sup.viewer_url, "control_token": token,
+                          "out": str(out), "real_time_factor": rate, "roll_size": roll_size,
+                          "roll_interval_s": roll_interval, "foxglove": sup.viewer_url, "control_token": token,
                           "control_token_file": None if token_file is None else str(token_file)}), flush=True)
         stop_requests: list[bus.ControlRequest] = []
         try:

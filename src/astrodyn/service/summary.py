@@ -21,6 +21,7 @@ import numpy as np
 from astrodyn.analysis.invariants import own_state_arrays, recorded_invariants
 from astrodyn.messages import ATTITUDE_PROCESS_KINDS, MODEL_STATE_KINDS
 from astrodyn.scenario import Scenario, plan as make_plan
+from astrodyn.scenario.planning import state_kinds_text
 
 __all__ = ["file_summary", "propagator_rows", "print_summary"]
 
@@ -165,7 +166,8 @@ def print_summary(result: dict, rows: list[dict], scenario: Scenario, max_bodies
     print(f"\nscenario {scenario.name}: {result['out']}")
     print(f"  wall {result['wall_s']:.2f} s for {scenario.duration:.6g} s of sim time "
           f"(real-time factor {scenario.duration / max(result['wall_s'], 1e-9):.1f}x)")
-    print(f"  in the file: {states} state messages (orbit + attitude)"
+    kinds = state_kinds_text(sum(r.get("orbit_states", 0) for r in rows), sum(r.get("attitude_states", 0) for r in rows))
+    print(f"  in the file: {states} state messages ({kinds})"
           + (f" + {xchecks} cross-check messages" if xchecks else "")
           + (f" + {own} appendage / rolling / gimbal states" if own else "")
           + f"; logger: missing {log.get('missing', '?')}, malformed {log.get('malformed', '?')}, "
