@@ -14,6 +14,19 @@ Environment (set by ``astrodyn run/serve ... --controller CMD``):
 (this controller's name), and ``ASTRODYN_RUN_SECRET_FILE`` (the run secret: commands are
 signed with it).  An outside controller started by hand passes ``connect``, ``scenario``
 and ``name`` and the run's control token file instead (``ASTRODYN_CONTROL_TOKEN_FILE``).
+
+What the link believes (docs/control.md, "Trusting what you read"): any local process can
+put on the run's keys, so every sample is checked before the controller sees it.  With the
+run secret, a tick must be signed by the run's plant (HMAC-SHA256 of the run secret, the
+authenticator of docs/control.md, "Authentication"), with a counter above the last one seen
+(no replays) and a ``seq`` above the last tick's; the end of the run is the plant's signed
+``stop`` event; a sample on another key must be signed by one of the run's processes.  With
+only the control token the link cannot tell who sent a sample (the token authenticates the
+controller to the plant, not the plant to the controller): it says so once on stderr and
+checks the shape only.  Either way a sample larger than ``max_payload`` bytes, not JSON, not
+an object, or whose numbers are not finite, is dropped.  Dropped samples are counted per
+reason (``link.dropped``); the first is reported on stderr in one line and the counts when
+the link closes, never one line per sample, and the controller never sees them.
 """
 
 from __future__ import annotations
@@ -24,17 +37,70 @@ import json
 import os
 import queue
 import struct
+import sys
+import threading
 
 import zenoh
 
+#: Largest sample the link reads, bytes (larger ones are dropped unread).  A tick holds every
+#: state and sensor sample of its step, ~150-300 bytes each: raise it for scenes of more than
+#: ~50,000 of them.
+MAX_PAYLOAD = 16 * 1024 * 1024
+#: Ticks waiting for the controller before new ones are dropped (the plant sends one per
+#: control step; in lockstep it waits for the answer, so one is waiting at a time).
+MAX_WAITING_TICKS = 1024
+#: The numeric fields a controller reads from the messages of each kind (docs/control.md,
+#: "Keys and messages"): each must be a finite number or a non-empty list of them.
+NUMERIC_FIELDS = {
+    "orbit": ("t", "r", "v", "mu"),
+    "attitude": ("t", "q", "w"),
+    "gyro": ("t", "w"),
+    "star_tracker": ("t", "q"),
+    "gps": ("t", "r", "v"),
+    "tachometer": ("t", "speeds"),
+    "actuators": ("t", "torque"),
+}
+#: Longest list of numbers a message may hold (wheels, modal coordinates, ...).
+MAX_VECTOR = 4096
+_MAC_BYTES = 32  # HMAC-SHA256
+
+
+def finite_number(x) -> bool:
+    """A JSON number that is a finite float64: not a bool, NaN, an infinity, or an integer
+    beyond the float range (``json`` reads ``1e999`` as inf and keeps 400-digit integers)."""
+    return type(x) in (int, float) and abs(x) <= sys.float_info.max
+
+
+def numbers_problem(message: dict, kind: str) -> str | None:
+    """Why ``message`` (a JSON object on a ``<body>/<kind>`` key) does not hold the numbers
+    a controller reads from it (:data:`NUMERIC_FIELDS`; ``t`` for every kind), else None."""
+    for field in NUMERIC_FIELDS.get(kind, ("t",)):
+        value = message.get(field)
+        if isinstance(value, list):
+            if not 0 < len(value) <= MAX_VECTOR or not all(finite_number(x) for x in value):
+                return f"{kind}.{field}: expected 1..{MAX_VECTOR} finite numbers"
+        elif not finite_number(value):
+            return f"{kind}.{field}: expected a finite number"
+    return None
+
+
+class Dropped(Exception):
+    """A sample the link does not pass on; ``reason`` is the count's name, ``detail`` why."""
+
+    def __init__(self, reason: str, detail: str = ""):
+        super().__init__(reason)
+        self.reason, self.detail = reason, detail
+
 
 class Link:
-    def __init__(self, connect: str | None = None, scenario: str | None = None, name: str | None = None):
+    def __init__(self, connect: str | None = None, scenario: str | None = None, name: str | None = None,
+                 max_payload: int = MAX_PAYLOAD):
         env = os.environ
         self.scenario = scenario or env["ASTRODYN_SCENARIO"]
         self.name = name or env["ASTRODYN_CONTROLLER"]
         endpoint = connect or env["ASTRODYN_CONNECT"]
         self.base = f"astrodyn/{self.scenario}"
+        self.max_payload = int(max_payload)
         self._secret = None
         self._token = None
         if env.get("ASTRODYN_RUN_SECRET_FILE"):
@@ -43,12 +109,19 @@ class Link:
         elif env.get("ASTRODYN_CONTROL_TOKEN_FILE"):
             with open(env["ASTRODYN_CONTROL_TOKEN_FILE"], "rb") as fh:
                 self._token = fh.read().strip()
+            print("astrodyn_link: no run secret (control token only): samples are checked for shape, not for "
+                  "who sent them (docs/control.md)", file=sys.stderr, flush=True)
         self._instance = os.urandom(8)
         self._counters: dict[str, int] = {}
         self._seq: dict[str, int] = {}  # per body: this controller's command counter
         self._sent = 0  # commands sent since the last answer
         self._latest: dict[str, dict] = {}
         self._ticks: queue.Queue = queue.Queue()
+        self._tick_seq = -1  # seq of the last tick let through (ticks must come in increasing seq)
+        self._answerable: dict | None = None  # the tick wait_tick returned last, until answered
+        self._seen: dict[tuple[bytes, str], int] = {}  # (signer instance, key) -> last counter verified
+        self.dropped: dict[str, int] = {}  # reason -> samples dropped
+        self._dropped_lock = threading.Lock()
         conf = zenoh.Config()
         conf.insert_json5("mode", '"peer"')  # a peer on loopback: the plant's samples come straight, not via the hub
         conf.insert_json5("listen/endpoints", '["tcp/127.0.0.1:0"]')
@@ -62,15 +135,91 @@ class Link:
             self.session.declare_subscriber(f"{self.base}/@event", self._on_event),
         ]
 
+    # -- checking what arrives -------------------------------------------------------
+    def _drop(self, key: str, exc: Dropped) -> None:
+        with self._dropped_lock:
+            first = not self.dropped
+            self.dropped[exc.reason] = self.dropped.get(exc.reason, 0) + 1
+        if first:  # one line, not one per sample: a flood is counted, reported at close()
+            print(f"astrodyn_link: dropped a sample on {key[:200]!r}: {exc.reason}"
+                  f"{': ' + exc.detail[:200] if exc.detail else ''} (further ones are counted, reported at the end)",
+                  file=sys.stderr, flush=True)
+
+    def _signer(self, key: str, payload: bytes, attachment) -> str | None:
+        """The run process that signed this sample (docs/control.md, "Authentication"), None
+        without the run secret; :class:`Dropped` if it does not verify or is a replay."""
+        if self._secret is None:
+            return None
+        a = b"" if attachment is None else attachment.to_bytes()
+        if a[:4] != b"ADA1" or len(a) < 5 or len(a) != 5 + a[4] + 8 + 8 + _MAC_BYTES:
+            raise Dropped("unsigned", "no authenticator of the run")
+        header = a[:-_MAC_BYTES]  # magic, name length, name, instance (8), counter (u64 little-endian)
+        expected = hmac.new(self._secret, header + key.encode() + b"\0" + payload, hashlib.sha256).digest()
+        if not hmac.compare_digest(a[-_MAC_BYTES:], expected):
+            raise Dropped("bad-mac", "not signed with the run secret, or altered")
+        (counter,) = struct.unpack("<Q", header[-8:])
+        signer_key = (header[:-8], key)
+        if counter <= self._seen.get(signer_key, 0):
+            raise Dropped("replay", f"counter {counter} after {self._seen[signer_key]}")
+        self._seen[signer_key] = counter
+        return header[5:-16].decode("utf-8", "replace")
+
+    def _read(self, sample) -> tuple[str, str | None, dict]:
+        """``(key, signer, message)`` of a sample: at most ``max_payload`` bytes, signed by a
+        run process (with the run secret), a JSON object; :class:`Dropped` otherwise."""
+        key = str(sample.key_expr)
+        if len(sample.payload) > self.max_payload:
+            raise Dropped("too-large", f"{len(sample.payload)} bytes, more than {self.max_payload}")
+        payload = sample.payload.to_bytes()
+        signer = self._signer(key, payload, sample.attachment)
+        try:
+            message = json.loads(payload)
+        except (ValueError, RecursionError) as exc:  # not UTF-8, not JSON, nested too deep
+            raise Dropped("not-json", type(exc).__name__) from None
+        if not isinstance(message, dict):
+            raise Dropped("malformed", f"expected a JSON object, got {type(message).__name__}")
+        return key, signer, message
+
+    def _checked_tick(self, sample) -> dict:
+        key, signer, tick = self._read(sample)
+        if signer not in (None, "plant"):
+            raise Dropped("wrong-signer", f"a tick signed by {signer!r}, not by the plant")
+        seq, step, samples = tick.get("seq"), tick.get("step"), tick.get("samples")
+        if not (finite_number(tick.get("t")) and type(seq) is int and type(step) is int and 0 <= seq <= 2**53
+                and isinstance(samples, dict)):
+            raise Dropped("malformed", "expected a tick: t, seq, step numbers and samples {body/kind: message}")
+        if seq <= self._tick_seq:
+            raise Dropped("old-tick", f"tick {seq} after tick {self._tick_seq}")
+        for name, message in samples.items():
+            problem = "not a message object" if not isinstance(message, dict) else \
+                numbers_problem(message, name.rsplit("/", 1)[-1])
+            if problem:
+                raise Dropped("malformed", f"tick sample {name[:100]!r}: {problem}")
+        self._tick_seq = seq
+        return tick
+
     # -- receiving ------------------------------------------------------------------
     def _on_sample(self, sample) -> None:  # free mode: the newest sample of each key
-        message = json.loads(sample.payload.to_bytes())
-        key = str(sample.key_expr)
-        if key not in self._latest or message.get("t", 0) >= self._latest[key].get("t", 0):
+        try:
+            key, _, message = self._read(sample)
+            problem = numbers_problem(message, key.rsplit("/", 1)[-1])
+            if problem:
+                raise Dropped("malformed", problem)
+        except Dropped as exc:
+            self._drop(str(sample.key_expr), exc)
+            return
+        if key not in self._latest or message["t"] >= self._latest[key]["t"]:
             self._latest[key] = message
 
     def _on_tick(self, sample) -> None:
-        self._ticks.put(json.loads(sample.payload.to_bytes()))
+        try:
+            tick = self._checked_tick(sample)
+            if self._ticks.qsize() >= MAX_WAITING_TICKS:
+                raise Dropped("backlog", f"{MAX_WAITING_TICKS} ticks already wait for the controller")
+        except Dropped as exc:
+            self._drop(str(sample.key_expr), exc)
+            return
+        self._ticks.put(tick)
 
     def _take(self, tick: dict | None) -> dict | None:
         # the tick carries the step's states and sensor samples: read them from it, since
@@ -78,15 +227,22 @@ class Link:
         if tick is not None:
             for key, message in tick["samples"].items():
                 self._latest[f"{self.base}/{key}"] = message
+        self._answerable = tick
         return tick
 
     def _on_event(self, sample) -> None:
-        event = json.loads(sample.payload.to_bytes())
-        if event["process"] == "plant" and event["kind"] == "stop":
-            self._ticks.put(None)  # the run is over
+        try:
+            _, signer, event = self._read(sample)
+        except Dropped as exc:
+            self._drop(str(sample.key_expr), exc)
+            return
+        # the end of the run: the plant's own stop event (other processes' events are theirs)
+        if signer in (None, "plant") and event.get("process") == "plant" and event.get("kind") == "stop":
+            self._ticks.put(None)
 
     def wait_tick(self, timeout: float | None = None) -> dict | None:
-        """The next control step ``{"t", "seq", "step"}``, or None when the run has ended."""
+        """The next control step ``{"t", "seq", "step", "samples"}`` (checked: see the module
+        docstring), or None when the run has ended."""
         return self._take(self._ticks.get(timeout=timeout))
 
     def latest(self, body: str, kind: str) -> dict | None:
@@ -119,7 +275,11 @@ class Link:
         self._sent += 1
 
     def done(self, tick: dict) -> None:
-        """Answer control step ``tick``: every command for it has been sent."""
+        """Answer control step ``tick`` (the tick :meth:`wait_tick` returned last, once): every
+        command for it has been sent."""
+        if tick is None or tick is not self._answerable:
+            raise ValueError("done: expected the tick wait_tick returned last, not yet answered")
+        self._answerable = None
         self._put(f"{self.base}/@done/{self.name}",
                   {"t": tick["t"], "seq": tick["seq"], "sender": self.name, "commands": self._sent})
         self._sent = 0
@@ -128,6 +288,10 @@ class Link:
         for s in self._subs:
             s.undeclare()
         self.session.close()
+        if self.dropped:
+            counts = ", ".join(f"{n} {reason}" for reason, n in sorted(self.dropped.items()))
+            print(f"astrodyn_link: dropped {sum(self.dropped.values())} samples that were not the run's or not "
+                  f"well-formed ({counts})", file=sys.stderr, flush=True)
 
     # A process whose Zenoh session is still open when it exits waits for ever on Zenoh's
     # threads: use the link in a `with` block, so an exception or sys.exit closes it.

@@ -26,3 +26,25 @@ def wait_until(ready: Callable[[], object], timeout_s: float, what: str, poll_s:
     while not ready():
         assert time.monotonic() < deadline, what
         time.sleep(poll_s)
+
+
+def read_run_start(stderr, timeout_s: float = 120.0) -> dict:
+    """What the start lines of ``astrodyn run`` (without ``--quiet`` on stderr, read from the
+    text stream ``stderr`` line by line) say: ``{"hub": endpoint, "token": control token
+    file, "lines": the text read}``, read until both are seen; AssertionError with the lines
+    read if the run ends or ``timeout_s`` passes first."""
+    found: dict = {}
+    lines = []
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline and not ("hub" in found and "token" in found):
+        line = stderr.readline()
+        if not line:
+            break
+        lines.append(line)
+        if line.startswith("  bus "):
+            found["hub"] = line.split()[1].rstrip(":")
+        if line.startswith("  control token "):
+            found["token"] = line.split()[2].rstrip(":")
+    assert "hub" in found and "token" in found, "".join(lines)
+    found["lines"] = "".join(lines)
+    return found

@@ -22,6 +22,7 @@ import numpy as np
 import pytest
 import zenoh
 
+from _serve_control import read_run_start
 from astrodyn.recording import load
 from astrodyn.recording.stream import open_stream
 
@@ -184,20 +185,7 @@ def _start_run(args: list) -> tuple[subprocess.Popen, dict]:
     """A run in the background; returns it and what its start lines say (bus, token file)."""
     proc = subprocess.Popen([*RUN, *map(str, args)], stderr=subprocess.PIPE, stdout=subprocess.DEVNULL,
                             text=True, cwd=ROOT)
-    found: dict = {}
-    deadline = time.monotonic() + 120
-    lines = []
-    while time.monotonic() < deadline and not ("hub" in found and "token" in found):
-        line = proc.stderr.readline()
-        if not line:
-            break
-        lines.append(line)
-        if line.startswith("  bus "):
-            found["hub"] = line.split()[1].rstrip(":")
-        if line.startswith("  control token "):
-            found["token"] = line.split()[2].rstrip(":")
-    assert "hub" in found and "token" in found, "".join(lines)
-    return proc, found
+    return proc, read_run_start(proc.stderr)
 
 
 def _finish(proc: subprocess.Popen) -> str:

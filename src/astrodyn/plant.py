@@ -149,7 +149,7 @@ class PlantBody:
                  ("thrust", act.thrust is None, "no thrusters (actuators.thrust)"))
         for name, lacking, what in lacks:
             if lacking and name in cmd:
-                raise CommandRefused(f"body {self.name} has {what}")
+                raise CommandRefused(f"body {self.name} has {what}; it has {self.actuators_text()}")
         if "wheel_torque" in cmd and len(cmd["wheel_torque"]) != self.wheels.n:
             raise CommandRefused(f"wheel_torque: expected {self.wheels.n} values (one per wheel), got {len(cmd['wheel_torque'])}")
         if "thrust" in cmd and cmd.get("frame", "inertial") == "body" and not self.has_attitude:
@@ -170,6 +170,19 @@ class PlantBody:
             self.step_dv_t = float(cmd["t"] if at is None else at)
         self.step_applied.append(command_id(cmd["sender"], cmd["seq"]))
         self.step_applied_ids.append((cmd["sender"], cmd["seq"]))
+
+    def actuators_text(self) -> str:
+        """What this body can be commanded to do, with the command field of each and its
+        limit, e.g. ``3 reaction wheels (wheel_torque)`` (a refusal names it)."""
+        act = self.limits
+        have = [] if self.wheels is None else [f"{self.wheels.n} reaction wheel{'s' if self.wheels.n > 1 else ''} (wheel_torque)"]
+        if act is not None and act.torque is not None:
+            have.append(f"a torque actuator (torque, up to {act.torque:g} N m per axis)")
+        if act is not None and act.dv is not None:
+            have.append(f"impulsive dv (dv, up to {act.dv:g} m/s per command)")
+        if act is not None and act.thrust is not None:
+            have.append(f"thrusters (thrust, up to {act.thrust:g} N)")
+        return ", ".join(have) or "no actuators"
 
     def seize_wheel(self, k: int) -> None:
         """Wheel ``k``'s rotor seizes: from now on it turns with the body (relative speed 0).

@@ -27,10 +27,17 @@ Every output step ``k`` (``t = k / rate``), for the scene's actuated bodies
 Trust (docs/security.md): a command or an answer is taken only from a process of the run
 (authenticator of the run secret, signed by the process named in its ``sender``) or from
 an outside controller that presents the run's control token (``--control-token-file``).
-Everything else is counted per reason (``rejected`` in the end event and the summary),
-never applied, never fatal.  Free mode (``control.mode = "free"``): nothing waits; the
-plant paces sim time at the scenario's real-time factor and applies what has arrived;
-commands whose time has passed are applied at once and counted as ``late``.
+An answer is taken only from a controller of ``control.controllers``, for a tick the
+plant has published (its ``seq`` at most the last tick's), and once per controller and tick
+(above that controller's last answer): in lockstep that is the current control step.  An
+answer to a tick the plant never sent (``unsent-tick``, e.g. a controller fooled by a forged
+``@tick``), a second answer (``repeated-answer``) or one from another name
+(``unknown-controller``) is rejected.  Everything else is counted per reason (``rejected``
+in the end event and the summary, with examples), never applied, never fatal.
+
+Free mode (``control.mode = "free"``): nothing waits; the plant paces sim time at the
+scenario's real-time factor and applies what has arrived; commands whose time has passed
+are applied at once and counted as ``late``.
 
 ``--commands REC.mcap``: no controllers; the commands recorded in REC are applied at the
 steps where REC's actuator states say they were, and the faults at the times REC's
@@ -353,6 +360,8 @@ class PlantLoop:
         self.received: dict[str, int] = {}  # authenticated commands per sender
         self.promised: dict[str, int] = {}  # commands announced by the sender's answers
         self.answered: dict[str, int] = {}  # last control step each controller answered
+        self.controllers = frozenset(control.controllers)  # who may answer a tick
+        self.tick_seq = -1  # seq of the last tick published (the current control step)
         self.late = self.refused = self.applied = self.published = 0
         self.round_trips: list[float] = []  # lockstep: wall s from a tick to the last answer (the first MAX_ROUND_TRIPS)
         self.refusals: list[str] = []
@@ -427,12 +436,30 @@ class PlantLoop:
                     else:
                         self.pending[who].append((msg, None))  # applied: re-encoded (the same bytes for a canonical one)
                 elif kind == "done":
+                    problem = self.answer_problem(who, int(msg["seq"]))
+                    if problem is not None:
+                        intake.reject(*problem)
+                        continue
                     self.promised[who] = self.promised.get(who, 0) + int(msg["commands"])
                     self.answered[who] = max(self.answered.get(who, -1), int(msg["seq"]))
             try:
                 item = intake.queue.get_nowait()
             except queue.Empty:
                 return True
+
+    def answer_problem(self, who: str, seq: int) -> tuple[str, str] | None:
+        """``(reason, detail)`` if the authenticated answer of controller ``who`` to control
+        step ``seq`` is not taken (module docstring, "Trust"), else None."""
+        if who not in self.controllers:
+            return "unknown-controller", (f"answer of {who!r} to control step {seq}: not one of control.controllers "
+                                          f"({', '.join(sorted(self.controllers)) or 'none'})")
+        if seq > self.tick_seq:
+            return "unsent-tick", (f"answer of {who!r} to control step {seq}: the plant's last tick is control step "
+                                   f"{self.tick_seq}")
+        last = self.answered.get(who, -1)
+        if seq <= last:
+            return "repeated-answer", f"answer of {who!r} to control step {seq}: it already answered control step {last}"
+        return None
 
     # ------------------------------------------------------------------ one step
 
@@ -487,6 +514,7 @@ class PlantLoop:
         controller's answer and the commands it announced (ControllerTimeout after
         ``control.timeout``)."""
         j = k // self.control.every
+        self.tick_seq = j  # before the put: an answer can only come after it
         self.put(messages.tick_key(self.name), tick_payload(t, j, k, samples))
         sent_at = time.monotonic()
         self.flush(batch)  # the step's states and samples (in the tick already), while the controller works
