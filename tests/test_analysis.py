@@ -206,3 +206,25 @@ def test_many_bodies_numbers_for_all_figures_for_the_first_few(tmp_path):
     proc = subprocess.run([sys.executable, "-m", "astrodyn", "analyze", str(path), "--out", str(tmp_path / "cli"),
                            "--figures-for", "0", "--bodies", "geo,leo"], capture_output=True, text=True, timeout=120)
     assert proc.returncode == 0 and not list((tmp_path / "cli").glob("*.png")), proc.stderr
+
+
+def test_analyze_says_how_far_it_is_and_quiet_says_nothing(tmp_path):
+    """Long work shows progress (stderr): the file and its size, the messages read (as load
+    counts them) and the bodies to report, then the end; ``--quiet`` prints none of it."""
+    from astrodyn.recording import load
+
+    path = tmp_path / "p.mcap"
+    leo_recording(path, name="pg", duration="60 s", rate="1 Hz")
+    run = load(path)
+    proc = subprocess.run([sys.executable, "-m", "astrodyn", "analyze", str(path), "--out", str(tmp_path / "r"),
+                           "--figures-for", "0"], capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    lines = proc.stderr.splitlines()
+    assert lines[0] == f"analyze: reading {path} ({path.stat().st_size / 1e6:.1f} MB)", lines
+    assert lines[1].startswith(f"analyze: {run.messages} messages read in "), lines
+    assert lines[1].endswith(f"; {len(run.bodies)} bodies to report, figures for 0"), lines
+    assert lines[-1].startswith(f"analyze: {len(run.bodies)} bodies reported in "), lines
+    quiet = subprocess.run([sys.executable, "-m", "astrodyn", "analyze", str(path), "--out", str(tmp_path / "q"),
+                            "--figures-for", "0", "--quiet"], capture_output=True, text=True, timeout=120)
+    assert quiet.returncode == 0 and quiet.stderr == "", quiet.stderr
+    assert quiet.stdout.strip() == str(tmp_path / "q" / "report.html")

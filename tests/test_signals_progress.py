@@ -8,7 +8,7 @@ import io
 import os
 import signal
 
-from astrodyn.service.progress import Progress
+from astrodyn.progress import Progress
 from astrodyn.service.signals import StopFlag, catch_stop_signals
 
 

@@ -859,11 +859,11 @@ def run_cases(spec: SweepSpec, cases: Iterable[int], workers: int = 2, scheduler
 
 class CaseProgress:
     """The sweep's progress on stderr through the one progress printer
-    (:class:`astrodyn.service.progress.Progress`: in place on a terminal, every 5 s into a
+    (:class:`astrodyn.progress.Progress`: in place on a terminal, every 5 s into a
     log): cases done and failed, rate, elapsed and remaining time, and a bar."""
 
     def __init__(self, total: int, enabled: bool = True, stream=None):
-        from astrodyn.service.progress import Progress
+        from astrodyn.progress import Progress
 
         self.total = total
         self.done = self.failed = 0

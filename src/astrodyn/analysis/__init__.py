@@ -30,6 +30,7 @@ import html
 import json
 import os
 import sys
+import time
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -37,6 +38,7 @@ import numpy as np
 
 from astrodyn.analysis.closed_loop import CLOSED_LOOP_FIGURES, closed_loop_section
 from astrodyn.analysis.pointing import POINTING_FIGURES, pointing_section
+from astrodyn.progress import Progress
 from astrodyn.recording import RecordingError, load
 
 __all__ = ["analyze", "main", "FIGURES", "SEQ_NOT_COUNTED", "sequence_issues", "sequence_note"]
@@ -136,21 +138,31 @@ def sequence_note(issues: dict[str, dict], channels: int = 5) -> str:
 
 
 def analyze(path: str | os.PathLike, out: str | os.PathLike | None = None, seq: str = "321",
-            bodies: Sequence[str] | None = None, figures_for: int = FIGURE_BODIES) -> dict:
+            bodies: Sequence[str] | None = None, figures_for: int = FIGURE_BODIES,
+            progress: Progress | None = None) -> dict:
     """Write the report of ``path`` into ``out``; returns the numbers (as in report.json).
 
     ``bodies``: names or shell patterns of the bodies to report (default all);
     ``figures_for``: draw the figures of the first this many of them (by name; the numbers
     cover every one): a figure takes ~0.2-1 s to draw, so a scene of 1000 bodies with all of
-    them would take about an hour."""
+    them would take about an hour.  ``progress``: where to say how far it is (reading the
+    file, then body k of n; ``astrodyn analyze`` passes a :class:`~astrodyn.progress.Progress`
+    on stderr), None for nothing."""
     from astrodyn.analysis import figures as fg, metrics as mt
 
     if seq not in _SEQS:
         raise ValueError(f"seq: expected one of {', '.join(_SEQS)}, got {seq!r}")
     if type(figures_for) is not int or figures_for < 0:
         raise ValueError(f"--figures-for: expected an integer >= 0, got {figures_for!r}")
+    started = time.monotonic()
+    if progress is not None:
+        size = os.path.getsize(path) if os.path.isfile(path) else 0
+        progress.done(f"analyze: reading {os.fspath(path)} ({size / 1e6:.1f} MB)")
     run = load(path)
     names = select_bodies(run.bodies, bodies)
+    if progress is not None:
+        progress.done(f"analyze: {run.messages} messages read in {time.monotonic() - started:.1f} s; "
+                      f"{len(names)} bodies to report, figures for {min(figures_for, len(names))}")
     out = Path(out) if out is not None else Path(os.fspath(path)).with_suffix("").with_name(Path(path).stem + "-report")
     try:
         out.mkdir(parents=True, exist_ok=True)
@@ -167,12 +179,16 @@ def analyze(path: str | os.PathLike, out: str | os.PathLike | None = None, seq: 
         "sequence": sequence_issues(run),
     }
     for i, name in enumerate(names):
+        if progress is not None:
+            progress.show(lambda i=i, name=name: f"analyze: body {i + 1} of {len(names)}: {name}")
         with fg.drawing(i < figures_for):
             report["bodies"][name], report["figures"][name] = _body_report(run, name, run.bodies[name], out / name, seq,
                                                                            central, inertias, earth)
     _write_markdown(report, out / "report.md")
     _write_html(report, out / "report.html")
     (out / "report.json").write_text(json.dumps(report, indent=1, default=str))
+    if progress is not None:
+        progress.done(f"analyze: {len(names)} bodies reported in {time.monotonic() - started:.1f} s")
     return report
 
 
@@ -471,6 +487,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--figures-for", type=int, default=FIGURE_BODIES, metavar="N",
                     help=f"draw the figures of the first N reported bodies by name; the numbers cover all "
                          f"(default {FIGURE_BODIES}; 0: none)")
+    ap.add_argument("--quiet", action="store_true", help="no progress lines on stderr (warnings and errors stay)")
     args = ap.parse_args(argv)
     if Path(args.file).is_dir():
         if not (Path(args.file) / "summary.csv").is_file():
@@ -485,7 +502,7 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     try:
         report = analyze(args.file, args.out, args.seq, None if args.bodies is None else args.bodies.split(","),
-                         args.figures_for)
+                         args.figures_for, Progress(enabled=not args.quiet))
     except (RecordingError, ValueError) as exc:
         print(f"astrodyn analyze: error: {exc}", file=sys.stderr)
         return 1

@@ -55,10 +55,10 @@ from pathlib import Path
 from typing import Any
 
 from astrodyn import auth, bus, messages
+from astrodyn.progress import Progress
 from astrodyn.recording.stream import McapStream, RawMessage
 from astrodyn.recording.writer import RecordingError
 from astrodyn.service.children import Child
-from astrodyn.service.progress import Progress
 from astrodyn.service.signals import StopFlag
 from astrodyn.service.viewer import add_foxglove_argument, viewer_command
 

@@ -41,6 +41,7 @@ import time
 from pathlib import Path
 
 from astrodyn import auth, bus
+from astrodyn.progress import Progress
 from astrodyn.recording.writer import partial_path, standby_path
 from astrodyn.scenario import Scenario, ScenarioError, load, plan as make_plan
 from astrodyn.service.children import (
@@ -58,7 +59,6 @@ from astrodyn.service.children import (
     work_directory,
 )
 from astrodyn.service.output import check_output_path
-from astrodyn.service.progress import Progress
 from astrodyn.service.signals import catch_stop_signals
 from astrodyn.service.summary import file_summary, print_summary, propagator_rows
 from astrodyn.service.supervision import RestartBudget, next_event_seq, plan_logger_restart, wait_until_gone

@@ -1,4 +1,5 @@
-"""The one progress printer of the long commands (``run``, ``replay``): a line on stderr.
+"""The one progress printer of the long commands (``run``, ``replay``, ``sweep``, ``analyze``): a
+line on stderr (stdlib only: every layer above the scene may use it).
 
 On a terminal the line is rewritten in place twice a second (``\\r``); into a file or a
 pipe (CI logs) a new line every 5 s, so logs stay short and readable.
