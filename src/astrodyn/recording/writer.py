@@ -617,6 +617,7 @@ class McapRecorder:
             f"{self.writing_path}: write failed: {reason}; the file has no footer and holds what was "
             "flushed before the failure (astrodyn.recording.load reads it, marked truncated)"
         )
+        self._error.errno = exc.errno  # e.g. ENOSPC: the disk is full (the logger's exit status says so)
         try:
             self._stream.close()
         except OSError:

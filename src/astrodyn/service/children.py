@@ -44,7 +44,7 @@ from astrodyn import auth, bus
 
 __all__ = ["Child", "wait_ready", "children_of", "logger_command", "propagator_command", "plant_command", "controller_argv", "start_controller", "share_fate_with_supervisor",
            "stop_process", "work_directory", "SUPERVISOR_ENV", "ORPHAN_GRACE_S", "EXIT_ORPHANED", "LOGGED_WAIT_S",
-           "MODEL_ENDED_EXIT"]
+           "MODEL_ENDED_EXIT", "DISK_FULL_EXIT"]
 
 #: Environment variable that carries the supervisor's PID to each child.
 SUPERVISOR_ENV = "ASTRODYN_SUPERVISOR_PID"
@@ -56,6 +56,10 @@ EXIT_ORPHANED = 70
 #: state before that is published and logged; a supervisor (``run``, ``serve``) does not
 #: restart it (it would end there again) and the run fails naming the body and the time.
 MODEL_ENDED_EXIT = 4
+#: Exit status of a logger whose disk is full (ENOSPC, EDQUOT): its file holds what was
+#: flushed before (truncated, readable); a supervisor does not restart it (a new logger
+#: would fail the same way) and the run fails saying so.
+DISK_FULL_EXIT = 5
 #: Seconds a process waits, after its end-of-run event, for the logger's receipt of it
 #: (``astrodyn.service.propagator.wait_until_logged``) before it closes its session.
 LOGGED_WAIT_S = 60.0
@@ -240,6 +244,8 @@ class Child:
         """How it ended, for a failure message."""
         if self.stalled_s is not None:
             return f"stalled (no heartbeat for {self.stalled_s:.0f} s) and was killed"
+        if rc == DISK_FULL_EXIT:
+            return f"exited with status {rc} (its disk is full)"
         return f"killed by signal {-rc}" if rc < 0 else f"exited with status {rc}"
 
     def kill_if_stalled(self, beats, limit_s: float | None, now: float) -> bool:

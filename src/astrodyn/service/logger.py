@@ -42,6 +42,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import errno
 import json
 import os
 import sys
@@ -56,7 +57,7 @@ from astrodyn import auth, bus, messages
 from astrodyn.jit import service_threads, set_threads
 from astrodyn.recording import ingest
 from astrodyn.recording.writer import DUPLICATE, INGEST_GRAMMAR, BatchLayout, McapRecorder, RecordingError
-from astrodyn.service.children import share_fate_with_supervisor
+from astrodyn.service.children import DISK_FULL_EXIT, share_fate_with_supervisor
 from astrodyn.service.signals import catch_stop_signals
 
 __all__ = ["Logger", "main"]
@@ -866,8 +867,10 @@ def main(argv: list[str] | None = None) -> int:
             if args.prefill:
                 summary["prefilled"] = copied
     except (RecordingError, bus.BusError) as exc:
-        print(f"logger: {exc}", file=sys.stderr)
-        return 1
+        disk_full = getattr(exc, "errno", None) in (errno.ENOSPC, errno.EDQUOT)
+        with contextlib.suppress(OSError):  # stderr may be a file on the disk that is full
+            print(f"logger: {exc}", file=sys.stderr, flush=True)
+        return DISK_FULL_EXIT if disk_full else 1
     print(json.dumps(summary, separators=(",", ":")), flush=True)
     return 0
 

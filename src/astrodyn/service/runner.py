@@ -45,6 +45,7 @@ from astrodyn.progress import Progress
 from astrodyn.recording.writer import partial_path, standby_path
 from astrodyn.scenario import Scenario, ScenarioError, load, plan as make_plan
 from astrodyn.service.children import (
+    DISK_FULL_EXIT,
     LOGGED_WAIT_S,
     MODEL_ENDED_EXIT,
     STALL_S,
@@ -339,7 +340,16 @@ class ScenarioRun:
             return (f"{name} (pid {dead.pid}) {dead.how(rc)}: a closed-loop run is not restarted (its controllers' "
                     f"state lives outside astrodyn); the recording holds everything up to here: "
                     f"{dead.last_words(3)}")
-        return self.restart_logger(rc) if name == "logger" else self.restart_propagator(name, rc)
+        if name == "logger" and rc == DISK_FULL_EXIT:  # a new logger would fail the same way
+            dead = self.children[name]
+            return (f"logger (pid {dead.pid}) {dead.how(rc)}: not restarted; the recording holds what was written "
+                    f"before (free space beside {self.out}, then `astrodyn recover`): {dead.last_words(2)}")
+        try:
+            return self.restart_logger(rc) if name == "logger" else self.restart_propagator(name, rc)
+        except OSError as exc:  # the restart's own files (state, seqs) beside --out: e.g. the disk is full
+            dead = self.children[name]
+            return (f"{name} (pid {dead.pid}) {dead.how(rc)}: {dead.last_words(2)}; restarting it failed: "
+                    f"{exc.strerror or exc}{': ' + str(exc.filename) if exc.filename else ''}")
 
     def restart_logger(self, rc: int) -> str | None:
         """The logger died mid-run: a new one continues the file (astrodyn.service.supervision).

@@ -60,6 +60,7 @@ from astrodyn import auth, bus
 from astrodyn.recording.writer import standby_path
 from astrodyn.scenario import ScenarioError, load, plan as make_plan
 from astrodyn.service.children import (
+    DISK_FULL_EXIT,
     MODEL_ENDED_EXIT,
     STALL_S,
     Child,
@@ -283,6 +284,10 @@ class Supervisor:
                 # a closed loop is not restarted: its controllers' state lives outside astrodyn,
                 # and a plant cannot resume mid-run (docs/control.md, docs/reliability.md)
                 self.failures.append(msg + f" (the {name} of a closed-loop run is not restarted; docs/control.md)")
+                self.state = "failed"
+                continue
+            if name == "logger" and rc == DISK_FULL_EXIT:  # a new logger would fail the same way
+                self.failures.append(msg + f" (not restarted: free space beside {self.out}, then `astrodyn recover`)")
                 self.state = "failed"
                 continue
             if name == "logger" and self.state in ("running", "paused"):

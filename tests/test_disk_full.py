@@ -1,0 +1,48 @@
+"""A run whose disk fills up (ENOSPC): the logger stops writing, says so by its exit status,
+and is not restarted (a new logger would fail the same way); the run fails naming the
+cause, without a traceback, and what was written before stays readable
+(docs/reliability.md).  The disk is a real 2 MB tmpfs (the test needs root to mount one
+and is skipped where it cannot)."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from astrodyn.recording import load
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture
+def small_disk(tmp_path):
+    mount = tmp_path / "small"
+    mount.mkdir()
+    made = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=2M", "tmpfs", str(mount)], capture_output=True)
+    if made.returncode != 0:
+        pytest.skip(f"cannot mount a tmpfs here: {made.stderr.decode(errors='replace').strip()}")
+    try:
+        yield mount
+    finally:
+        subprocess.run(["umount", "-l", str(mount)], capture_output=True)
+
+
+@pytest.mark.network
+def test_a_full_disk_fails_the_run_naming_it_and_keeps_what_was_written(small_disk):
+    out = small_disk / "demo.mcap"  # the demo's recording needs ~2.5 MB; --force skips the free-space check
+    proc = subprocess.run([sys.executable, "-m", "astrodyn", "run", str(ROOT / "configs" / "demo.toml"), "--out", str(out),
+                           "--force", "--quiet"], capture_output=True, text=True, timeout=180, cwd=ROOT)
+    assert proc.returncode == 1, proc.stderr[-3000:]
+    assert "Traceback" not in proc.stderr, proc.stderr[-3000:]
+    assert "(its disk is full): not restarted" in proc.stderr, proc.stderr[-3000:]
+    partial = small_disk / "demo.partial.mcap"
+    assert not out.exists() and partial.exists()
+    run = load(partial)
+    assert run.truncated and run.invalid == 0
+    states = [c for c in run.channels.values() if c.kind in ("orbit", "attitude")]
+    assert states and sum(len(c) for c in states) > 1000  # ~2 MB of states were flushed before the disk filled
+    assert all(np.array_equal(c.seq, np.arange(len(c))) for c in states)  # each a gap-free prefix
