@@ -46,3 +46,37 @@ def test_a_full_disk_fails_the_run_naming_it_and_keeps_what_was_written(small_di
     states = [c for c in run.channels.values() if c.kind in ("orbit", "attitude")]
     assert states and sum(len(c) for c in states) > 1000  # ~2 MB of states were flushed before the disk filled
     assert all(np.array_equal(c.seq, np.arange(len(c))) for c in states)  # each a gap-free prefix
+
+
+def _fill(disk: Path) -> None:
+    """Write zeros into ``disk`` until it is full (ENOSPC)."""
+    with open(disk / "fill", "wb") as f:
+        try:
+            while True:
+                f.write(b"\0" * 65536)
+                f.flush()
+        except OSError:
+            pass
+
+
+def test_the_file_tools_on_a_full_disk_say_so_and_leave_nothing_half_written(small_disk, tmp_path):
+    from _recordings import leo_recording
+
+    rec = tmp_path / "in.mcap"
+    leo_recording(rec, name="full", duration="120 s", rate="2 Hz")
+    _fill(small_disk)
+    commands = {
+        "recover": (["recover", str(rec), "--out", str(small_disk / "r.mcap")], small_disk / "r.mcap"),
+        "merge": (["merge", str(rec), str(rec), "--out", str(small_disk / "m.mcap")], small_disk / "m.mcap"),
+        "export": (["export", str(rec), "--format", "csv", "--out", str(small_disk / "csv")], small_disk / "csv"),
+        "analyze": (["analyze", str(rec), "--out", str(small_disk / "rep"), "--quiet", "--figures-for", "1"], None),
+    }
+    for name, (argv, target) in commands.items():
+        proc = subprocess.run([sys.executable, "-m", "astrodyn", *argv], capture_output=True, text=True, timeout=120,
+                              cwd=ROOT)
+        assert proc.returncode == 1, (name, proc.stderr[-2000:])
+        assert "Traceback" not in proc.stderr and "No space left on device" in proc.stderr, (name, proc.stderr[-2000:])
+        assert len(proc.stderr.strip().splitlines()) == 1, (name, proc.stderr)  # one line that says it
+        if target is not None:
+            assert not target.exists(), name  # nothing half-written under the name asked for
+    assert sorted(p.name for p in small_disk.iterdir()) == ["fill", "rep"]  # the report dir says it is incomplete

@@ -506,6 +506,10 @@ def main(argv: list[str] | None = None) -> int:
     except (RecordingError, ValueError) as exc:
         print(f"astrodyn analyze: error: {exc}", file=sys.stderr)
         return 1
+    except OSError as exc:  # writing the report: e.g. the disk is full
+        print(f"astrodyn analyze: error: cannot write the report{' file ' + str(exc.filename) if exc.filename else ''}: "
+              f"{exc.strerror or exc}; the report directory holds what was written before (incomplete)", file=sys.stderr)
+        return 1
     out = Path(args.out) if args.out else Path(args.file).with_name(Path(args.file).stem + "-report")
     if not report["complete"]:
         print(f"astrodyn analyze: warning: {args.file}: {report['file_report']}; analysed what is complete", file=sys.stderr)

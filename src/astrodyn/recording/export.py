@@ -69,6 +69,7 @@ astropy (leap seconds included for UTC), written in calendar form
 from __future__ import annotations
 
 import argparse
+import contextlib
 import csv
 import hashlib
 import heapq
@@ -679,6 +680,7 @@ def export(path: str | os.PathLike, fmt: str, out: str | os.PathLike) -> list[Pa
         print(f"astrodyn export: warning: {run.path}: {run.truncation or 'invalid messages skipped'}; "
               f"exporting the {run.messages} complete, valid messages", file=sys.stderr)
     out = Path(out)
+    created = not out.exists()  # removed again (when empty) if the export fails
     try:
         out.mkdir(parents=True, exist_ok=True)
         work = Path(tempfile.mkdtemp(prefix=".export-", dir=out))
@@ -690,7 +692,8 @@ def export(path: str | os.PathLike, fmt: str, out: str | os.PathLike) -> list[Pa
         try:
             files = _WRITERS[fmt](run, work)
         except OSError as exc:
-            raise ExportError(f"{run.path}: --out {out}: cannot write {exc.filename or ''}: {exc.strerror or exc}; "
+            written = f" {Path(exc.filename).name}" if exc.filename else ""
+            raise ExportError(f"{run.path}: --out {out}: cannot write{written}: {exc.strerror or exc}; "
                               f"nothing in {out} was replaced") from None
         if not files:
             what = {"oem": "orbit", "aem": "attitude", "aem1": "attitude"}.get(fmt, "message")
@@ -708,6 +711,12 @@ def export(path: str | os.PathLike, fmt: str, out: str | os.PathLike) -> list[Pa
         except OSError as exc:
             raise ExportError(f"{run.path}: --out {out}: cannot write {target}: {exc.strerror or exc}") from None
         return placed
+    except ExportError:
+        shutil.rmtree(work, ignore_errors=True)
+        if created:
+            with contextlib.suppress(OSError):  # only if empty: a directory this export made and filled nothing in
+                out.rmdir()
+        raise
     finally:
         shutil.rmtree(work, ignore_errors=True)
 
