@@ -80,3 +80,24 @@ def test_the_file_tools_on_a_full_disk_say_so_and_leave_nothing_half_written(sma
         if target is not None:
             assert not target.exists(), name  # nothing half-written under the name asked for
     assert sorted(p.name for p in small_disk.iterdir()) == ["fill", "rep"]  # the report dir says it is incomplete
+
+
+@pytest.mark.network
+def test_run_and_serve_on_a_full_disk_refuse_to_start_in_one_line(small_disk, tmp_path):
+    _fill(small_disk)
+    demo = str(ROOT / "configs" / "demo.toml")
+    for argv in (["run", demo, "--out", str(small_disk / "d.mcap"), "--force", "--quiet"],
+                 ["serve", demo, "--out", str(small_disk / "s.mcap"), "--max-wall", "5"]):
+        proc = subprocess.run([sys.executable, "-m", "astrodyn", *argv], capture_output=True, text=True, timeout=120,
+                              cwd=ROOT)
+        assert proc.returncode == 1 and "Traceback" not in proc.stderr, proc.stderr[-2000:]
+        assert "work directory: No space left on device" in proc.stderr.strip().splitlines()[-1], proc.stderr[-2000:]
+    assert sorted(p.name for p in small_disk.iterdir()) == ["fill"]  # no work directory, no token, no recording left
+    # the run itself on another disk, only its --json result on the full one
+    proc = subprocess.run([sys.executable, "-m", "astrodyn", "run", str(ROOT / "configs" / "hohmann.toml"),
+                           "--out", str(tmp_path / "h.mcap"), "--json", str(small_disk / "r.json"), "--quiet",
+                           "--controller", f"python {ROOT / 'examples' / 'hohmann.py'}"],
+                          capture_output=True, text=True, timeout=300, cwd=ROOT)
+    assert proc.returncode == 1 and "Traceback" not in proc.stderr, proc.stderr[-2000:]
+    assert f"--json {small_disk / 'r.json'}: cannot write: No space left on device" in proc.stderr, proc.stderr[-2000:]
+    assert (tmp_path / "h.mcap").exists() and not (small_disk / "r.json").exists()

@@ -44,7 +44,7 @@ from astrodyn import auth, bus
 
 __all__ = ["Child", "wait_ready", "children_of", "logger_command", "propagator_command", "plant_command", "controller_argv", "start_controller", "share_fate_with_supervisor",
            "stop_process", "work_directory", "SUPERVISOR_ENV", "ORPHAN_GRACE_S", "EXIT_ORPHANED", "LOGGED_WAIT_S",
-           "MODEL_ENDED_EXIT", "DISK_FULL_EXIT"]
+           "MODEL_ENDED_EXIT", "DISK_FULL_EXIT", "StartError"]
 
 #: Environment variable that carries the supervisor's PID to each child.
 SUPERVISOR_ENV = "ASTRODYN_SUPERVISOR_PID"
@@ -98,15 +98,27 @@ def share_fate_with_supervisor(poll_s: float = 0.2) -> int | None:
     return supervisor
 
 
+class StartError(Exception):
+    """A run or serve cannot start (e.g. its work directory cannot be written: the disk is
+    full); the text names the path and why.  Nothing has been started."""
+
+
 @contextlib.contextmanager
 def work_directory(beside: Path, kind: str) -> Iterator[Path]:
     """A private directory ``.astrodyn-<kind>-XXXX`` beside ``beside`` (the recording), with
     the supervisor's PID in ``supervisor.pid``; removed on exit.  A killed supervisor's is
-    found by that PID and removed by ``astrodyn recover``."""
+    found by that PID and removed by ``astrodyn recover``.  :class:`StartError` if it
+    cannot be made."""
     folder = Path(beside).resolve().parent
-    path = Path(tempfile.mkdtemp(prefix=f".astrodyn-{kind}-", dir=folder))
     try:
-        (path / "supervisor.pid").write_text(str(os.getpid()))
+        path = Path(tempfile.mkdtemp(prefix=f".astrodyn-{kind}-", dir=folder))
+    except OSError as exc:
+        raise StartError(f"{folder}: cannot make the {kind}'s work directory there: {exc.strerror or exc}") from None
+    try:
+        try:
+            (path / "supervisor.pid").write_text(str(os.getpid()))
+        except OSError as exc:
+            raise StartError(f"{path}: cannot write the {kind}'s work directory: {exc.strerror or exc}") from None
         yield path
     finally:
         shutil.rmtree(path, ignore_errors=True)

@@ -28,6 +28,7 @@ but the logger rejected messages that were not the run's own (``--tolerate-rejec
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import math
 import os
@@ -50,6 +51,7 @@ from astrodyn.service.children import (
     MODEL_ENDED_EXIT,
     STALL_S,
     Child,
+    StartError,
     add_stall_argument,
     logger_command,
     plant_command,
@@ -624,11 +626,15 @@ def main(argv: list[str] | None = None) -> int:
         print(the_plan.text(), file=sys.stderr)
         if resume:
             print(f"  resuming from {args.resume} at step {resume['step']} (t = {resume['t']:.6g} s)", file=sys.stderr)
-        result = run_scenario(scenario, Path(args.config), out, cross_check=args.cross_check, connect=args.connect,
-                              progress=not args.quiet, timeout_s=args.timeout, extra_args=resume.get("extra_args"),
-                              logger_args=resume.get("logger_args"), zenoh_config=args.zenoh_config,
-                              controllers=args.controller, commands=Path(args.commands) if args.commands else None,
-                              loggers=args.loggers, stall_s=args.stall_timeout or None)
+        try:
+            result = run_scenario(scenario, Path(args.config), out, cross_check=args.cross_check, connect=args.connect,
+                                  progress=not args.quiet, timeout_s=args.timeout, extra_args=resume.get("extra_args"),
+                                  logger_args=resume.get("logger_args"), zenoh_config=args.zenoh_config,
+                                  controllers=args.controller, commands=Path(args.commands) if args.commands else None,
+                                  loggers=args.loggers, stall_s=args.stall_timeout or None)
+        except StartError as exc:  # nothing was started
+            print(f"astrodyn run: error: {exc}", file=sys.stderr)
+            return 1
     print("", file=sys.stderr)
     rows = None
     recording = result.get("file")
@@ -652,7 +658,14 @@ def main(argv: list[str] | None = None) -> int:
         if standby.get("exit") == 0:
             print(f"  standby {name}: {standby['file']}", file=sys.stderr)
     if args.json:
-        Path(args.json).write_text(json.dumps(result, indent=1, default=str))
+        try:
+            Path(args.json).write_text(json.dumps(result, indent=1, default=str))
+        except OSError as exc:
+            with contextlib.suppress(OSError):  # not a cut JSON file
+                Path(args.json).unlink()
+            print(f"astrodyn run: --json {args.json}: cannot write: {exc.strerror or exc} (the run's recording: "
+                  f"{result.get('file')})", file=sys.stderr)
+            return 1
     plant = (result.get("processes", {}).get("plant") or {}).get("summary") or {}
     if plant:  # also when the run failed: a refused command may be why
         print(f"astrodyn run: closed loop: {plant.get('applied', 0)} commands applied, {plant.get('refused', 0)} "

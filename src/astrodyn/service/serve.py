@@ -64,6 +64,7 @@ from astrodyn.service.children import (
     MODEL_ENDED_EXIT,
     STALL_S,
     Child,
+    StartError,
     add_stall_argument,
     start_controller,
     wait_ready,
@@ -645,47 +646,54 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     hub = bus.loopback_endpoint(args.port or bus.free_port())
     stop_signal = StopFlag()
-    with work_directory(out, "serve") as tmp, bus.open_session(listen=[hub], config_file=args.zenoh_config) as session:
-        token, token_file = None, None
-        if not args.open_control:
-            token, token_file = auth.new_token(), control_token_path(out)
-            token_file.unlink(missing_ok=True)  # a previous run's token: never valid again
-            auth.write_private_file(token_file, token.encode())
-        try:
-            sup = Supervisor(scenario, Path(args.config), out, session, hub, rate=rate, roll_size=roll_size,
-                             roll_interval=roll_interval, connect=args.connect, tmp=Path(tmp),
-                             zenoh_config=args.zenoh_config,
-                             foxglove_port=None if args.foxglove is None else (args.foxglove or bus.free_port()),
-                             controllers=args.controller, token_file=token_file, loggers=args.loggers,
-                             stall_s=args.stall_timeout or None)
-        except bus.BusError as exc:  # the logger could not start: nothing else was started
-            print(f"astrodyn serve: {exc}", file=sys.stderr)
-            return 1
-        print(json.dumps({"serving": scenario.name, "hub": hub, "control": f"astrodyn/{scenario.name}/@control/*",
-                          "out": str(out), "real_time_factor": rate, "roll_size": roll_size,
-                          "roll_interval_s": roll_interval, "foxglove": sup.viewer_url, "control_token": token,
-                          "control_token_file": None if token_file is None else str(token_file)}), flush=True)
-        stop_requests: list[bus.ControlRequest] = []
-        try:
-            with bus.ControlServer(session, scenario.name, sup.verbs, token=token) as control:
-                t_end = None if args.max_wall is None else time.monotonic() + args.max_wall
-                while True:
-                    stopping = False
-                    for req in control.poll():
-                        if sup.handle(req):
-                            stop_requests.append(req)
-                            stopping = True
-                    sup.check_children()
-                    if stop_signal.why or stopping or sup.state == "failed" or \
-                            (t_end is not None and time.monotonic() > t_end):
-                        break
-                    if all(sup.children[k].poll() is not None for k in sup.propagators):
-                        break
-                    time.sleep(0.02)
-                summary = sup.stop()
-                for req in stop_requests:
-                    req.reply(summary)
-        finally:
-            sup.close()
+    try:
+        with work_directory(out, "serve") as tmp, bus.open_session(listen=[hub], config_file=args.zenoh_config) as session:
+            token, token_file = None, None
+            if not args.open_control:
+                token, token_file = auth.new_token(), control_token_path(out)
+                token_file.unlink(missing_ok=True)  # a previous run's token: never valid again
+                try:
+                    auth.write_private_file(token_file, token.encode())
+                except OSError as exc:
+                    raise StartError(f"{token_file}: cannot write the control token: {exc.strerror or exc}") from None
+            try:
+                sup = Supervisor(scenario, Path(args.config), out, session, hub, rate=rate, roll_size=roll_size,
+                                 roll_interval=roll_interval, connect=args.connect, tmp=Path(tmp),
+                                 zenoh_config=args.zenoh_config,
+                                 foxglove_port=None if args.foxglove is None else (args.foxglove or bus.free_port()),
+                                 controllers=args.controller, token_file=token_file, loggers=args.loggers,
+                                 stall_s=args.stall_timeout or None)
+            except (bus.BusError, OSError) as exc:  # the logger could not start: nothing else was started
+                print(f"astrodyn serve: {exc}", file=sys.stderr)
+                return 1
+            print(json.dumps({"serving": scenario.name, "hub": hub, "control": f"astrodyn/{scenario.name}/@control/*",
+                              "out": str(out), "real_time_factor": rate, "roll_size": roll_size,
+                              "roll_interval_s": roll_interval, "foxglove": sup.viewer_url, "control_token": token,
+                              "control_token_file": None if token_file is None else str(token_file)}), flush=True)
+            stop_requests: list[bus.ControlRequest] = []
+            try:
+                with bus.ControlServer(session, scenario.name, sup.verbs, token=token) as control:
+                    t_end = None if args.max_wall is None else time.monotonic() + args.max_wall
+                    while True:
+                        stopping = False
+                        for req in control.poll():
+                            if sup.handle(req):
+                                stop_requests.append(req)
+                                stopping = True
+                        sup.check_children()
+                        if stop_signal.why or stopping or sup.state == "failed" or \
+                                (t_end is not None and time.monotonic() > t_end):
+                            break
+                        if all(sup.children[k].poll() is not None for k in sup.propagators):
+                            break
+                        time.sleep(0.02)
+                    summary = sup.stop()
+                    for req in stop_requests:
+                        req.reply(summary)
+            finally:
+                sup.close()
+    except StartError as exc:  # nothing was started
+        print(f"astrodyn serve: error: {exc}", file=sys.stderr)
+        return 1
     print(json.dumps(summary, default=str), flush=True)
     return 1 if summary["failures"] else 0
