@@ -47,7 +47,7 @@ from mcap.records import Channel, Chunk, Message, Metadata, Schema
 from astrodyn import __version__
 from astrodyn.recording.chunked_writer import ChunkedWriter
 from astrodyn.recording.reader import chunk_records, open_recording, parse_record, read_records
-from astrodyn.recording.writer import RecordingError
+from astrodyn.recording.writer import RecordingError, being_written
 
 __all__ = ["recover", "write_atomically", "main", "finished_name", "find_partials", "partials_of", "nothing_to_recover",
            "stale_work_dirs"]
@@ -114,6 +114,10 @@ def recover(path: str | os.PathLike, out: str | os.PathLike | None = None, *, ch
     src = os.fspath(path)
     dst = os.fspath(out) if out is not None else src
     t0 = time.monotonic()
+    if being_written(src):  # a live logger's file: recovering it would take it from under the logger
+        raise RecordingError(f"{src}: is being written by a running process (a logger of a run or serve that has "
+                             f"not ended); it is finished by that process when it ends: stop the run, or recover the "
+                             f"file once the process is gone")
     f, size = open_recording(src)
     with f:
         if os.path.exists(dst) and not os.path.isfile(dst):  # never rename over a device, fifo or directory

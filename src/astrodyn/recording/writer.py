@@ -35,6 +35,7 @@ not recorded: the first message with a seq wins).
 
 from __future__ import annotations
 
+import fcntl
 import json
 import operator
 import os
@@ -48,7 +49,7 @@ from astrodyn import __version__, messages
 from astrodyn.recording import ingest
 from astrodyn.recording.chunked_writer import ChunkedWriter
 
-__all__ = ["RecordingError", "McapRecorder", "partial_path", "part_path", "standby_path", "fsync_directory", "BatchLayout", "SeqTracker", "OK", "GAP", "LATE", "DUPLICATE"]
+__all__ = ["RecordingError", "McapRecorder", "being_written", "partial_path", "part_path", "standby_path", "fsync_directory", "BatchLayout", "SeqTracker", "OK", "GAP", "LATE", "DUPLICATE"]
 
 OK, GAP, LATE, DUPLICATE = 0, 1, 2, 3
 _STATUS_NAMES = ("ok", "gap", "late", "duplicate")
@@ -99,6 +100,26 @@ class _ChannelSeq:
 
     next = _tracker_slot("_next_view", "The next seq expected (int): the tracker's ``next_seq[slot]``.")
     count = _tracker_slot("_count_view", "Messages recorded (int): the tracker's ``counts[slot]``.")
+
+
+def being_written(path: str | os.PathLike) -> bool:
+    """Whether a live process is writing the recording ``path``: a :class:`McapRecorder`
+    holds an exclusive ``flock`` on each file it writes until it closes it or ends (killed
+    or not: the kernel releases it).  False for a missing or unreadable file; on a file
+    system without ``flock`` a recorder's file reads as not being written."""
+    try:
+        fd = os.open(os.fspath(path), os.O_RDONLY | os.O_NONBLOCK)
+    except OSError:
+        return False
+    try:
+        fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
+    except BlockingIOError:
+        return True
+    except OSError:
+        return False
+    finally:
+        os.close(fd)  # (closing the descriptor releases a lock taken here)
+    return False
 
 
 class SeqTracker:
@@ -408,6 +429,13 @@ class McapRecorder:
                                  f"`astrodyn recover {self.writing_path}` or remove it; it is never overwritten") from None
         except OSError as exc:
             raise RecordingError(f"{self.writing_path}: cannot open for writing: {exc.strerror or exc}") from None
+        # held while this process writes the file (released by the kernel when it ends, even
+        # killed): recover and the --out checks leave a file being written alone (being_written)
+        try:
+            fcntl.flock(self._stream.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            self._stream.close()
+            raise RecordingError(f"{self.writing_path}: is being written by another process") from None
         self.paths.append(self.path)
         self._opened_at = time.monotonic()
         try:

@@ -13,7 +13,7 @@ import os
 from pathlib import Path
 
 from astrodyn.recording.reader import MCAP_MAGIC
-from astrodyn.recording.writer import partial_path
+from astrodyn.recording.writer import being_written, partial_path
 from astrodyn.scenario import ScenarioError
 
 __all__ = ["check_output_path", "MCAP_MAGIC"]
@@ -54,6 +54,9 @@ def check_output_path(path: Path, inputs: tuple = ()) -> None:
             raise ScenarioError(f"--out {path}: exists and is not an MCAP recording; it is never overwritten "
                                 f"(expected a new path or an earlier recording to replace)")
     partial = Path(partial_path(path))
+    if being_written(partial):
+        raise ScenarioError(f"--out {path}: {partial} is being recorded right now by another run or serve (its "
+                            f"logger holds it); choose another --out, or stop that one first")
     if partial.exists():
         raise ScenarioError(f"--out {path}: {partial} exists, the partial recording of a killed run; finish it with "
                             f"`astrodyn recover {partial}` (or remove it) before recording to {path} again")
