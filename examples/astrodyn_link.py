@@ -13,20 +13,26 @@ Environment (set by ``astrodyn run/serve ... --controller CMD``):
 ``ASTRODYN_CONNECT`` the run's bus endpoint, ``ASTRODYN_SCENARIO``, ``ASTRODYN_CONTROLLER``
 (this controller's name), and ``ASTRODYN_RUN_SECRET_FILE`` (the run secret: commands are
 signed with it).  An outside controller started by hand passes ``connect``, ``scenario``
-and ``name`` and the run's control token file instead (``ASTRODYN_CONTROL_TOKEN_FILE``).
+and ``name`` (or sets the same variables) and the run's control token file instead
+(``ASTRODYN_CONTROL_TOKEN_FILE``): it presents the token with its commands and checks the
+plant's ticks with it.
 
 What the link believes (docs/control.md, "Trusting what you read"): any local process can
-put on the run's keys, so every sample is checked before the controller sees it.  With the
-run secret, a tick must be signed by the run's plant (HMAC-SHA256 of the run secret, the
-authenticator of docs/control.md, "Authentication"), with a counter above the last one seen
-(no replays) and a ``seq`` above the last tick's; the end of the run is the plant's signed
-``stop`` event; a sample on another key must be signed by one of the run's processes.  With
-only the control token the link cannot tell who sent a sample (the token authenticates the
-controller to the plant, not the plant to the controller): it says so once on stderr and
-checks the shape only.  Either way a sample larger than ``max_payload`` bytes, not JSON, not
-an object, or whose numbers are not finite, is dropped.  Dropped samples are counted per
-reason (``link.dropped``); the first is reported on stderr in one line and the counts when
-the link closes, never one line per sample, and the controller never sees them.
+put on the run's keys, so every sample is checked before the controller sees it.  A tick
+must be signed by the run's plant, with a counter above the last one seen (no replays) and a
+``seq`` above the last tick's; the end of the run is the plant's signed ``stop`` event.  With
+the run secret that is the plant's ``ADA1`` authenticator (HMAC-SHA256 of the run secret,
+docs/control.md, "Authentication"), and a sample on another key must be signed by one of the
+run's processes.  With only the control token it is the plant's ``ADP1`` part (HMAC-SHA256
+with a key derived from the token), and the link reads nothing but ticks and the plant's
+events: the tick carries the step's states and sensor samples, and samples on other keys
+cannot be authenticated with the token.  Either way a sample larger than ``max_payload``
+bytes, not JSON, not an object, or whose numbers are not finite, is dropped.  Dropped
+samples are counted per reason (``link.dropped``); the first is reported on stderr in one
+line and the counts when the link closes, never one line per sample, and the controller
+never sees them.  In lockstep the plant puts the current tick again every 0.5 s while it
+waits for the answers (for a controller that joined late): a signed tick with the last
+tick's ``seq`` is such a copy, ignored without a word (``link.repeats`` counts them).
 """
 
 from __future__ import annotations
@@ -63,6 +69,10 @@ NUMERIC_FIELDS = {
 #: Longest list of numbers a message may hold (wheels, modal coordinates, ...).
 MAX_VECTOR = 4096
 _MAC_BYTES = 32  # HMAC-SHA256
+#: The plant's part for control-token holders: b"ADP1", counter (u64 little-endian), MAC.
+_PART_BYTES = 4 + 8 + _MAC_BYTES
+#: The plant's key for token holders is HMAC-SHA256(token, this label) (docs/control.md).
+_PLANT_KEY_LABEL = b"ADP1 plant tick v1"
 
 
 def finite_number(x) -> bool:
@@ -102,15 +112,17 @@ class Link:
         self.base = f"astrodyn/{self.scenario}"
         self.max_payload = int(max_payload)
         self._secret = None
-        self._token = None
+        self._token = self._plant_key = None
         if env.get("ASTRODYN_RUN_SECRET_FILE"):
             with open(env["ASTRODYN_RUN_SECRET_FILE"], "rb") as fh:
                 self._secret = fh.read()
         elif env.get("ASTRODYN_CONTROL_TOKEN_FILE"):
             with open(env["ASTRODYN_CONTROL_TOKEN_FILE"], "rb") as fh:
                 self._token = fh.read().strip()
-            print("astrodyn_link: no run secret (control token only): samples are checked for shape, not for "
-                  "who sent them (docs/control.md)", file=sys.stderr, flush=True)
+            self._plant_key = hmac.new(self._token, _PLANT_KEY_LABEL, hashlib.sha256).digest()
+        else:
+            raise ValueError("astrodyn_link: expected ASTRODYN_RUN_SECRET_FILE (started by --controller) or "
+                             "ASTRODYN_CONTROL_TOKEN_FILE (an outside controller; docs/control.md)")
         self._instance = os.urandom(8)
         self._counters: dict[str, int] = {}
         self._seq: dict[str, int] = {}  # per body: this controller's command counter
@@ -118,6 +130,7 @@ class Link:
         self._latest: dict[str, dict] = {}
         self._ticks: queue.Queue = queue.Queue()
         self._tick_seq = -1  # seq of the last tick let through (ticks must come in increasing seq)
+        self.repeats = 0  # the plant's copies of a tick already let through (it repeats the tick while it waits)
         self._answerable: dict | None = None  # the tick wait_tick returned last, until answered
         self._seen: dict[tuple[bytes, str], int] = {}  # (signer instance, key) -> last counter verified
         self.dropped: dict[str, int] = {}  # reason -> samples dropped
@@ -129,8 +142,10 @@ class Link:
         conf.insert_json5("connect/endpoints", json.dumps([endpoint]))
         conf.insert_json5("scouting/multicast/enabled", "false")
         self.session = zenoh.open(conf)
-        self._subs = [
-            self.session.declare_subscriber(f"{self.base}/**", self._on_sample),
+        # with the token only, the ticks (which carry the step's samples) and the plant's events:
+        # nothing else can be authenticated with it
+        self._subs = [self.session.declare_subscriber(f"{self.base}/**", self._on_sample)] if self._secret else []
+        self._subs += [
             self.session.declare_subscriber(f"{self.base}/@tick", self._on_tick),
             self.session.declare_subscriber(f"{self.base}/@event", self._on_event),
         ]
@@ -145,28 +160,37 @@ class Link:
                   f"{': ' + exc.detail[:200] if exc.detail else ''} (further ones are counted, reported at the end)",
                   file=sys.stderr, flush=True)
 
-    def _signer(self, key: str, payload: bytes, attachment) -> str | None:
-        """The run process that signed this sample (docs/control.md, "Authentication"), None
-        without the run secret; :class:`Dropped` if it does not verify or is a replay."""
-        if self._secret is None:
-            return None
+    def _signer(self, key: str, payload: bytes, attachment) -> str:
+        """The run process that signed this sample (docs/control.md, "Authentication"): with
+        the run secret its ADA1 authenticator, with the token only the plant's ADP1 part;
+        :class:`Dropped` if it does not verify or is a replay."""
         a = b"" if attachment is None else attachment.to_bytes()
-        if a[:4] != b"ADA1" or len(a) < 5 or len(a) != 5 + a[4] + 8 + 8 + _MAC_BYTES:
-            raise Dropped("unsigned", "no authenticator of the run")
-        header = a[:-_MAC_BYTES]  # magic, name length, name, instance (8), counter (u64 little-endian)
-        expected = hmac.new(self._secret, header + key.encode() + b"\0" + payload, hashlib.sha256).digest()
-        if not hmac.compare_digest(a[-_MAC_BYTES:], expected):
-            raise Dropped("bad-mac", "not signed with the run secret, or altered")
+        if self._secret is None:  # the plant's part for token holders: the attachment's last 44 bytes
+            part = a[-_PART_BYTES:]
+            if len(part) != _PART_BYTES or part[:4] != b"ADP1":
+                raise Dropped("unsigned", "no plant authenticator for the control token")
+            header, mac, secret, signer = part[:12], part[12:], self._plant_key, "plant"
+        else:
+            n = a[4] if a[:4] == b"ADA1" and len(a) > 4 else 0
+            end = 5 + n + 8 + 8 + _MAC_BYTES  # the ADA1 authenticator; a plant's tick or event has its ADP1 part after it
+            if not n or (len(a) != end and (len(a) != end + _PART_BYTES or a[end:end + 4] != b"ADP1")):
+                raise Dropped("unsigned", "no authenticator of the run")
+            # magic, name length, name, instance (8), counter (u64 little-endian); then the MAC
+            header, mac, secret, signer = a[:end - _MAC_BYTES], a[end - _MAC_BYTES:end], self._secret, None
+        expected = hmac.new(secret, header + key.encode() + b"\0" + payload, hashlib.sha256).digest()
+        if not hmac.compare_digest(mac, expected):
+            raise Dropped("bad-mac", "not signed by the run's processes, or altered")
         (counter,) = struct.unpack("<Q", header[-8:])
         signer_key = (header[:-8], key)
         if counter <= self._seen.get(signer_key, 0):
             raise Dropped("replay", f"counter {counter} after {self._seen[signer_key]}")
         self._seen[signer_key] = counter
-        return header[5:-16].decode("utf-8", "replace")
+        return signer or header[5:-16].decode("utf-8", "replace")
 
-    def _read(self, sample) -> tuple[str, str | None, dict]:
+    def _read(self, sample) -> tuple[str, str, dict]:
         """``(key, signer, message)`` of a sample: at most ``max_payload`` bytes, signed by a
-        run process (with the run secret), a JSON object; :class:`Dropped` otherwise."""
+        run process (with the token only: by the plant), a JSON object; :class:`Dropped`
+        otherwise."""
         key = str(sample.key_expr)
         if len(sample.payload) > self.max_payload:
             raise Dropped("too-large", f"{len(sample.payload)} bytes, more than {self.max_payload}")
@@ -180,15 +204,19 @@ class Link:
             raise Dropped("malformed", f"expected a JSON object, got {type(message).__name__}")
         return key, signer, message
 
-    def _checked_tick(self, sample) -> dict:
+    def _checked_tick(self, sample) -> dict | None:
+        """The tick of ``sample``, checked; None for the plant's copy of the last tick."""
         key, signer, tick = self._read(sample)
-        if signer not in (None, "plant"):
+        if signer != "plant":
             raise Dropped("wrong-signer", f"a tick signed by {signer!r}, not by the plant")
         seq, step, samples = tick.get("seq"), tick.get("step"), tick.get("samples")
         if not (finite_number(tick.get("t")) and type(seq) is int and type(step) is int and 0 <= seq <= 2**53
                 and isinstance(samples, dict)):
             raise Dropped("malformed", "expected a tick: t, seq, step numbers and samples {body/kind: message}")
-        if seq <= self._tick_seq:
+        if seq == self._tick_seq:  # the plant's copy of the tick it waits on (signed, fresh counter)
+            self.repeats += 1
+            return None
+        if seq < self._tick_seq:
             raise Dropped("old-tick", f"tick {seq} after tick {self._tick_seq}")
         for name, message in samples.items():
             problem = "not a message object" if not isinstance(message, dict) else \
@@ -214,6 +242,8 @@ class Link:
     def _on_tick(self, sample) -> None:
         try:
             tick = self._checked_tick(sample)
+            if tick is None:
+                return
             if self._ticks.qsize() >= MAX_WAITING_TICKS:
                 raise Dropped("backlog", f"{MAX_WAITING_TICKS} ticks already wait for the controller")
         except Dropped as exc:
@@ -231,13 +261,16 @@ class Link:
         return tick
 
     def _on_event(self, sample) -> None:
+        a = sample.attachment
+        if self._secret is None and (a is None or a.to_bytes()[-_PART_BYTES:-_MAC_BYTES - 8] != b"ADP1"):
+            return  # with the token only: the other processes' events, which it can neither check nor needs
         try:
             _, signer, event = self._read(sample)
         except Dropped as exc:
             self._drop(str(sample.key_expr), exc)
             return
         # the end of the run: the plant's own stop event (other processes' events are theirs)
-        if signer in (None, "plant") and event.get("process") == "plant" and event.get("kind") == "stop":
+        if signer == "plant" and event.get("process") == "plant" and event.get("kind") == "stop":
             self._ticks.put(None)
 
     def wait_tick(self, timeout: float | None = None) -> dict | None:
@@ -247,7 +280,8 @@ class Link:
 
     def latest(self, body: str, kind: str) -> dict | None:
         """The newest message on ``astrodyn/<scenario>/<body>/<kind>`` (e.g. "attitude",
-        "orbit", "gyro", "star_tracker", "gps", "tachometer", "actuators")."""
+        "orbit", "gyro", "star_tracker", "gps", "tachometer", "actuators"); with the control
+        token only, the newest of those the ticks carry (states and sensor samples)."""
         return self._latest.get(f"{self.base}/{body}/{kind}")
 
     # -- sending --------------------------------------------------------------------

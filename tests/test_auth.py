@@ -1,4 +1,5 @@
-"""Run identity on the bus (astrodyn.auth): authenticators, secret files, control tokens.
+"""Run identity on the bus (astrodyn.auth): authenticators, secret files, control tokens, and
+the plant's ``ADP1`` part with which a holder of the control token checks ticks and events.
 
 The MAC is checked against an HMAC-SHA256 written out here from RFC 2104 (ipad / opad over
 hashlib.sha256), over the layout documented in astrodyn.auth, so the documented format,
@@ -143,6 +144,106 @@ def test_tokens():
     assert auth.token_from_attachment(b"ADA1" + t.encode()) is None
     assert auth.token_from_attachment(b"ADT1\xff\xfe") is None
     assert auth.token_from_attachment(b"ADT1" + b"x" * 10_000) is None
+
+
+# --------------------------------------------------------------------------- the plant's part for token holders
+
+TICK = "astrodyn/demo/@tick"
+
+
+def _reference_part(token: bytes, key: str, payload: bytes, counter: int) -> bytes:
+    """The ADP1 part as docs/control.md writes it out, from the RFC 2104 reference above."""
+    plant_key = rfc2104_hmac_sha256(token, b"ADP1 plant tick v1")
+    header = b"ADP1" + struct.pack("<Q", counter)
+    return header + rfc2104_hmac_sha256(plant_key, header + key.encode() + b"\0" + payload)
+
+
+def test_plant_part_layout_key_derivation_and_counters_follow_the_documented_format():
+    token = auth.new_token()
+    signer = auth.PlantSigner(token)
+    payload = b'{"t":0.0,"seq":0,"step":0,"samples":{}}'
+    parts = [signer.part(TICK, payload) for _ in range(3)]
+    for n, part in enumerate(parts, start=1):  # per key 1, 2, 3, ... (a tick put again gets the next)
+        assert len(part) == 44 == auth.PLANT_PART_BYTES
+        assert part == _reference_part(token.encode(), TICK, payload, n)
+    event = "astrodyn/demo/@event"
+    assert signer.part(event, b"{}") == _reference_part(token.encode(), event, b"{}", 1)  # its own counter
+    # the token file's text: surrounding whitespace is not part of the token
+    assert auth.PlantSigner(token + "\n").part(TICK, payload) == parts[0]
+    assert auth.plant_key(token.encode()) == rfc2104_hmac_sha256(token.encode(), b"ADP1 plant tick v1")
+
+
+def test_plant_part_verifies_with_the_token_and_nothing_else():
+    token = auth.new_token()
+    secret = auth.RunSecret.generate()
+    both = auth.WithPlantPart(auth.Signer(secret, "plant"), auth.PlantSigner(token))
+    payload = b'{"t":0.1,"seq":1,"step":1,"samples":{"sc/gyro":{"t":0.1,"seq":1,"w":[0,0,0]}}}'
+    a = both.attachment(TICK, payload)
+    assert len(a) == 5 + 5 + 8 + 8 + 32 + 44 and a[:10] == b"ADA1\x05plant" and a[58:62] == b"ADP1"
+    assert a[58:] == _reference_part(token.encode(), TICK, payload, 1)
+    assert auth.PlantVerifier(token).verify(TICK, payload, a) == 1
+    alone = auth.WithPlantPart(None, auth.PlantSigner(token)).attachment(TICK, payload)  # a plant without the secret
+    assert alone == a[58:] and auth.PlantVerifier(token).verify(TICK, payload, alone) == 1
+
+    def reason(v, key, data, att):
+        with pytest.raises(auth.AuthError) as e:
+            v.verify(key, data, att)
+        assert e.value.reason in auth.REJECT_REASONS
+        return e.value.reason
+
+    other = auth.new_token()
+    assert reason(auth.PlantVerifier(other), TICK, payload, a) == "bad-mac"  # another run's token
+    forged = _reference_part(other.encode(), TICK, payload, 7)  # well-formed, keyed by a token the forger made up
+    assert reason(auth.PlantVerifier(token), TICK, payload, forged) == "bad-mac"
+    assert reason(auth.PlantVerifier(token), "astrodyn/other/@tick", payload, a) == "bad-mac"  # the key is covered
+    for i in range(len(payload) * 8):  # every bit of the payload
+        bad = bytearray(payload)
+        bad[i // 8] ^= 1 << (i % 8)
+        assert reason(auth.PlantVerifier(token), TICK, bytes(bad), a) == "bad-mac"
+    for i in range(44 * 8):  # every bit of the part: magic, counter, MAC
+        bad = bytearray(a)
+        bad[58 + i // 8] ^= 1 << (i % 8)
+        assert reason(auth.PlantVerifier(token), TICK, payload, bytes(bad)) in ("unsigned", "bad-mac")
+    assert reason(auth.PlantVerifier(token), TICK, payload, a[:58]) == "unsigned"  # the ADA1 part alone
+    assert reason(auth.PlantVerifier(token), TICK, payload, None) == "unsigned"
+    assert reason(auth.PlantVerifier(token), TICK, payload, b"junk" + alone) == "malformed"
+    v = auth.PlantVerifier(token)  # replays: the same or an older counter
+    a2 = both.attachment(TICK, payload)
+    assert v.verify(TICK, payload, a2) == 2
+    assert reason(v, TICK, payload, a2) == "replay" and reason(v, TICK, payload, a) == "replay"
+    assert v.verify(TICK, payload, both.attachment(TICK, payload)) == 3
+
+
+def test_the_run_verifier_still_checks_the_ada1_part_and_takes_the_plant_part_only_on_ticks_and_events():
+    token, secret = auth.new_token(), auth.RunSecret.generate()
+    both = auth.WithPlantPart(auth.Signer(secret, "plant"), auth.PlantSigner(token))
+    for key in (TICK, "astrodyn/demo/@event"):
+        a = both.attachment(key, b"{}")
+        assert auth.Verifier(secret).verify(key, b"{}", a) == "plant"
+        for i in range(58 * 8):  # the ADA1 part is checked as before, bit for bit
+            bad = bytearray(a)
+            bad[i // 8] ^= 1 << (i % 8)
+            with pytest.raises(auth.AuthError):
+                auth.Verifier(secret).verify(key, b"{}", bytes(bad))
+        with pytest.raises(auth.AuthError) as e:  # 44 bytes after it that are not an ADP1 part
+            auth.Verifier(secret).verify(key, b"{}", a[:58] + b"XXXX" + a[62:])
+        assert e.value.reason == "malformed"
+        with pytest.raises(auth.AuthError) as e:
+            auth.Verifier(secret).verify(key, b"{}", a + b"x")
+        assert e.value.reason == "malformed"
+    state = "astrodyn/demo/sc/attitude"  # anywhere else an attachment is the ADA1 authenticator alone
+    with pytest.raises(auth.AuthError) as e:
+        auth.Verifier(secret).verify(state, b"{}", both.attachment(state, b"{}"))
+    assert e.value.reason == "malformed"
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.binary(max_size=200), st.binary(max_size=64))
+def test_arbitrary_attachments_on_a_tick_only_ever_raise_auth_error(attachment, payload):
+    for v in (auth.PlantVerifier(auth.new_token()), auth.Verifier(auth.RunSecret.generate())):
+        with pytest.raises(auth.AuthError) as e:
+            v.verify(TICK, payload, attachment)
+        assert e.value.reason in auth.REJECT_REASONS
 
 
 _PLAIN_CLIENT = textwrap.dedent("""

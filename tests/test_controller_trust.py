@@ -4,9 +4,12 @@ read"), with real processes.
 The forger is a separate process that imports only zenoh (what any local user has), joins
 the run's hub (the endpoint the run prints) and, while a lockstep loop runs, puts on the
 run's ``@tick``, ``@event`` and sensor keys: well-formed ticks of made-up samples (unsigned,
-with a forged authenticator, and replays of genuine signed ticks), the plant's ``stop``
-event in its name, payloads that are not JSON, not objects, hold NaN, 1e999 or a 400-digit
-integer, are nested 100,000 deep, or weigh 50 MB.  The controller is started through a
+with a forged ``ADA1`` authenticator, with an ``ADP1`` part signed with another control
+token, with both, with a genuine tick's authenticator, and replays of genuine signed ticks),
+the plant's ``stop`` event in its name (also with an ``ADP1`` part of another token),
+payloads that are not JSON, not objects, hold NaN, 1e999 or a 400-digit integer, are nested
+100,000 deep, or weigh 50 MB.  Controllers run with the run secret (``--controller``) and,
+started by hand, with only the control token: both must drop all of it.  The controller is started through a
 wrapper that only gates its first tick until the forger has begun (so the whole loop runs
 under the attack) and keeps its stderr.
 
@@ -46,9 +49,15 @@ FORGER = textwrap.dedent(r'''
     """python forger.py ENDPOINT SCENARIO BODY SIGNALS MODE: waits for SIGNALS/subscribed,
     puts forged traffic (MODE "full": everything; "malformed": only what no controller may
     parse), touches SIGNALS/gate after its first round, stops at SIGNALS/stop or after 15 s."""
-    import json, os, sys, time, zenoh
+    import hashlib, hmac, json, os, sys, time, zenoh
     endpoint, scenario, body, signals, mode = sys.argv[1:6]
     base = f"astrodyn/{scenario}"
+    other_key = hmac.new(b"not the run's token, 43 characters long....", b"ADP1 plant tick v1", hashlib.sha256).digest()
+
+    def adp1(key, payload, counter):  # the plant's part for token holders, keyed by another token
+        header = b"ADP1" + counter.to_bytes(8, "little")
+        return header + hmac.new(other_key, header + f"{base}/{key}".encode() + b"\0" + payload, hashlib.sha256).digest()
+
     conf = zenoh.Config()
     conf.insert_json5("mode", '"client"')
     conf.insert_json5("connect/endpoints", json.dumps([endpoint]))
@@ -102,13 +111,17 @@ FORGER = textwrap.dedent(r'''
                                                             "q": [0.0, 1.0, 0.0, 0.0], "w": [1.0, 1.0, 1.0]}}}
                 payload = json.dumps(made_up).encode()
                 put("@tick", payload, what="forged tick")
-                put("@tick", payload, b"ADA1\x05plant" + bytes(8) + rounds.to_bytes(8, "little") + bytes(32),
-                    what="forged authenticator")
+                forged_ada1 = b"ADA1\x05plant" + bytes(8) + rounds.to_bytes(8, "little") + bytes(32)
+                put("@tick", payload, forged_ada1, what="forged authenticator")
+                put("@tick", payload, adp1("@tick", payload, 2**40 + rounds), what="another token")
+                put("@tick", payload, forged_ada1 + adp1("@tick", payload, 2**40 + rounds), what="forged both")
                 for p, a in captured:
                     put("@tick", p, a, what="replayed tick")
+                    put("@tick", payload, a, what="genuine authenticator, made-up tick")
                 put(f"{body}/gyro", json.dumps({"t": 0.0, "seq": 0, "w": [1.0, 1.0, 1.0]}).encode(), what="forged sample")
-                stop = {"t": 0.0, "seq": 99, "process": "plant", "kind": "stop", "detail": "{}"}
-                put("@event", json.dumps(stop).encode(), what="forged stop")
+                stop = json.dumps({"t": 0.0, "seq": 99, "process": "plant", "kind": "stop", "detail": "{}"}).encode()
+                put("@event", stop, what="forged stop")
+                put("@event", stop, adp1("@event", stop, 2**40 + rounds), what="forged stop")
             if rounds == 1:
                 open(os.path.join(signals, "gate"), "w").close()
             time.sleep(0.02)
@@ -260,36 +273,51 @@ def test_the_example_link_drops_forged_ticks_and_malformed_samples_and_the_run_i
     assert sum(counts.values()) >= forged["sent"]["forged tick"], (counts, forged)
 
 
-def test_an_outside_controller_with_only_the_token_survives_malformed_samples(tmp_path, processes, slew_reference):
-    """Without the run secret the link cannot authenticate the plant; it still checks the
-    shape of what it reads: malformed samples never reach the controller, never crash it."""
+def test_an_outside_controller_with_only_the_token_drops_forged_ticks_and_the_run_is_unchanged(
+        tmp_path, processes, slew_reference):
+    """With only the control token the link checks the plant's ``ADP1`` part of each tick and
+    of the stop event (docs/control.md, "Authentication"): forged, wrongly signed, replayed
+    and malformed ticks never reach the controller, nor does the forged stop end it.  On the
+    code before that part existed, the forged well-formed ticks were answered and the run
+    failed."""
     signals = _signals(tmp_path, gate=False)
     rc, err, forged, outside_rc = _run(processes, _slew(tmp_path), tmp_path / "a.mcap", signals,
-                                       EXAMPLES / "slew_pd.py", "malformed",
+                                       EXAMPLES / "slew_pd.py", "full",
                                        outside_env={"ASTRODYN_SCENARIO": "slew", "ASTRODYN_CONTROLLER": "pd"})
-    assert forged["rounds"] >= 5, forged
+    assert forged["rounds"] >= 5 and forged["captured"] >= 1, forged  # the attack overlapped the loop
     assert outside_rc == 0 and rc == 3 and "ATTACKED" in err, err
     assert _payloads(tmp_path / "a.mcap") == slew_reference
     lines = _controller_report(signals)
-    assert lines[0].startswith("astrodyn_link: no run secret (control token only)"), lines
-    assert len(lines) == 3 and "malformed" in lines[2] and "not-json" in lines[2] and "too-large" in lines[2], lines
+    assert len(lines) == 2, lines  # the first drop and the counts at the end
+    # with the token it reads only ticks and the plant's events: nothing else can be checked
+    assert lines[0].startswith(("astrodyn_link: dropped a sample on 'astrodyn/slew/@tick'",
+                                "astrodyn_link: dropped a sample on 'astrodyn/slew/@event'")), lines
+    counts = dict((reason, int(n)) for n, reason in re.findall(r"(\d+) ([a-z-]+)", lines[1].split("(", 1)[1]))
+    assert {"unsigned", "bad-mac", "replay", "too-large"} <= set(counts), lines
+    assert sum(counts.values()) >= forged["sent"]["forged tick"], (counts, forged)
 
 
-def test_the_documented_controller_drops_forged_ticks_and_malformed_samples(tmp_path, processes):
-    """docs/control.md's self-contained controller, cut out of the page, under the forger.
-    Its law is the reference: one command per control step, ``torque = -5 w`` of the gyro
+@pytest.mark.parametrize("credential", ["secret", "token"])
+def test_the_documented_controller_drops_forged_ticks_and_malformed_samples(tmp_path, processes, credential):
+    """docs/control.md's self-contained controller, cut out of the page, under the forger,
+    started by ``--controller`` (run secret) or by hand with only the control token.  Its
+    law is the reference: one command per control step, ``torque = -5 w`` of the gyro
     sample of that step as the plant recorded it (a forged tick's gyro reads [1, 1, 1] and
     its time is not a step's), and it ends by itself."""
     block = re.search(r"## A complete controller.*?```python\n(.*?)```", (ROOT / "docs" / "control.md").read_text(),
                       re.S).group(1)
     signals = _signals(tmp_path, gate=False)
     (tmp_path / "ctl.py").write_text(block)
-    rc, err, forged, _ = _run(processes, _detumble(tmp_path), tmp_path / "d.mcap", signals, tmp_path / "ctl.py", "full")
+    outside = {"ASTRODYN_SCENARIO": "detumble", "ASTRODYN_CONTROLLER": "detumble"} if credential == "token" else None
+    rc, err, forged, outside_rc = _run(processes, _detumble(tmp_path), tmp_path / "d.mcap", signals,
+                                       tmp_path / "ctl.py", "full", outside_env=outside)
     assert forged["rounds"] >= 5 and forged["captured"] >= 1, forged
     assert rc == 3 and "ATTACKED" in err, err
+    assert outside_rc in (None, 0), outside_rc
     lines = _controller_report(signals)
     assert len(lines) == 2 and lines[0].startswith("controller: dropped a sample on 'astrodyn/detumble/"), lines
-    assert "'unsigned'" in lines[1] and "'bad MAC'" in lines[1] and "'too large'" in lines[1], lines
+    for reason in ("'unsigned'", "'bad MAC'", "'replayed'", "'too large'"):
+        assert reason in lines[1], lines
     recorded = _payloads(tmp_path / "d.mcap")
     gyro = {m["t"]: m["w"] for m in map(json.loads, recorded["astrodyn/detumble/sc/gyro"])}
     commands = [json.loads(p) for p in recorded["astrodyn/detumble/sc/command"]]

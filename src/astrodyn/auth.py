@@ -40,6 +40,26 @@ control explicitly (``--open-control``). The token is a random string (:func:`ne
 printed to the owner and stored in a 0600 file; a request carries it in its attachment
 (:func:`token_attachment`) and the server compares it in constant time
 (:func:`token_matches`).
+
+The plant's authenticator for token holders
+-------------------------------------------
+An outside controller of a closed loop holds the control token, not the run secret, so it
+cannot check an ``ADA1`` authenticator.  The plant (given the token) therefore appends a
+second part to the attachment of its ``@tick`` and ``@event`` samples, which any holder of
+the token checks (:class:`PlantSigner`, :class:`PlantVerifier`; docs/control.md,
+"Authentication")::
+
+    plant_key = HMAC-SHA256(token_bytes, b"ADP1 plant tick v1")
+                token_bytes: the control token file's text without surrounding whitespace
+    part      = b"ADP1" || counter (u64 LE; per key, 1, 2, 3, ... strictly increasing)
+                || HMAC-SHA256(plant_key, b"ADP1" || counter || key || 0x00 || payload)
+    attachment = ADA1 authenticator (above, when the plant has the run secret) || part
+
+The ``ADA1`` part keeps its length (``5 + name_len + 8 + 8 + 32``, read from its own
+header), so :class:`Verifier` checks it as before and, on a ``@tick`` or ``@event`` key
+only, accepts exactly one 44-byte ``ADP1`` part after it (which it does not check); on
+every other key an attachment must still be the ``ADA1`` authenticator alone.  A token
+holder reads the part from the attachment's last 44 bytes.
 """
 
 from __future__ import annotations
@@ -67,6 +87,14 @@ __all__ = [
     "token_from_attachment",
     "token_matches",
     "read_token_file",
+    "PLANT_MAGIC",
+    "PLANT_KEY_LABEL",
+    "PLANT_PART_BYTES",
+    "PLANT_PART_KEYS",
+    "plant_key",
+    "PlantSigner",
+    "PlantVerifier",
+    "WithPlantPart",
 ]
 
 #: Environment variable that holds the path of the run secret file in a run's children.
@@ -79,6 +107,14 @@ MAC_BYTES = 32
 _MAX_NAME = 128
 _COUNTER = struct.Struct("<Q")
 _TOKEN_MAGIC = b"ADT1"
+#: Magic of the plant's authenticator for holders of the control token.
+PLANT_MAGIC = b"ADP1"
+#: What the plant's key is derived with: ``HMAC-SHA256(token_bytes, PLANT_KEY_LABEL)``.
+PLANT_KEY_LABEL = b"ADP1 plant tick v1"
+#: Length of the ``ADP1`` part: magic, counter, MAC.
+PLANT_PART_BYTES = 4 + 8 + MAC_BYTES
+#: Keys (their last chunk) whose samples may carry an ``ADP1`` part after the ``ADA1`` one.
+PLANT_PART_KEYS = ("/@tick", "/@event")
 
 #: Why a sample was rejected (the logger counts rejections per reason).
 REJECT_REASONS: tuple[str, ...] = ("unsigned", "malformed", "bad-mac", "replay")
@@ -205,10 +241,13 @@ class Verifier:
             raise AuthError("malformed", f"{key}: not an astrodyn authenticator")
         n = a[4]
         header_len = 5 + n + 8 + 8
-        if not 1 <= n <= _MAX_NAME or len(a) != header_len + MAC_BYTES:
+        end = header_len + MAC_BYTES
+        # the plant's ticks and events may carry its part for token holders after ours: not checked here
+        if not 1 <= n <= _MAX_NAME or (len(a) != end and not (
+                len(a) == end + PLANT_PART_BYTES and a[end:end + 4] == PLANT_MAGIC and key.endswith(PLANT_PART_KEYS))):
             raise AuthError("malformed", f"{key}: authenticator of the wrong length")
         header = a[:header_len]
-        if not hmac.compare_digest(a[header_len:], _mac(self.secret.key, header, key, payload)):
+        if not hmac.compare_digest(a[header_len:end], _mac(self.secret.key, header, key, payload)):
             raise AuthError("bad-mac", key)
         try:
             process = header[5:5 + n].decode()
@@ -221,6 +260,82 @@ class Verifier:
             raise AuthError("replay", f"{key}: counter {counter} after {last}")
         self._last[(instance, key)] = counter
         return process
+
+
+# --------------------------------------------------------------------------- the plant, for token holders
+
+
+def plant_key(token: str | bytes) -> bytes:
+    """The key of the plant's ``ADP1`` parts for the control token ``token`` (the token
+    file's text without surrounding whitespace): ``HMAC-SHA256(token, PLANT_KEY_LABEL)``."""
+    raw = token.encode("ascii") if isinstance(token, str) else bytes(token)
+    return hmac.digest(raw.strip(), PLANT_KEY_LABEL, "sha256")
+
+
+class PlantSigner:
+    """Makes the plant's ``ADP1`` parts (module docstring) from the run's control token;
+    ``part(key, payload)``: the 44 bytes to append to the sample's attachment."""
+
+    def __init__(self, token: str | bytes):
+        self._key = plant_key(token)
+        self._counters: dict[str, int] = {}
+
+    def __repr__(self) -> str:
+        return "PlantSigner(<hidden>)"
+
+    def part(self, key: str, payload: bytes) -> bytes:
+        n = self._counters.get(key, 0) + 1
+        self._counters[key] = n
+        header = PLANT_MAGIC + _COUNTER.pack(n)
+        return header + _mac(self._key, header, key, payload)
+
+
+class WithPlantPart:
+    """The attachment of the plant's ticks and events: ``signer``'s ``ADA1`` authenticator
+    (none without the run secret) followed by ``plant``'s ``ADP1`` part.  Has the
+    ``attachment(key, payload)`` of a :class:`Signer`, so it signs wherever one does."""
+
+    def __init__(self, signer: Signer | None, plant: PlantSigner):
+        self.signer, self.plant = signer, plant
+
+    def attachment(self, key: str, payload: bytes) -> bytes:
+        first = b"" if self.signer is None else self.signer.attachment(key, payload)
+        return first + self.plant.part(key, payload)
+
+
+class PlantVerifier:
+    """Checks the plant's ``ADP1`` parts with the control token, as an outside controller
+    does (module docstring; ``examples/astrodyn_link.py`` is the same in plain Python).
+
+    ``verify(key, payload, attachment)`` returns the part's counter or raises
+    :class:`AuthError`: ``unsigned`` (no ``ADP1`` part), ``malformed`` (what precedes it is
+    neither nothing nor an ``ADA1`` authenticator of its length), ``bad-mac``, ``replay``
+    (a counter not above the last one verified on that key)."""
+
+    def __init__(self, token: str | bytes):
+        self._key = plant_key(token)
+        self._last: dict[str, int] = {}
+
+    def __repr__(self) -> str:
+        return "PlantVerifier(<hidden>)"
+
+    def verify(self, key: str, payload: bytes, attachment: bytes | None) -> int:
+        a = bytes(attachment or b"")
+        part = a[-PLANT_PART_BYTES:]
+        if len(part) != PLANT_PART_BYTES or part[:4] != PLANT_MAGIC:
+            raise AuthError("unsigned", f"{key}: no plant authenticator for the control token")
+        first = a[:-PLANT_PART_BYTES]
+        if first and not (first[:4] == MAGIC and len(first) > 4 and len(first) == 5 + first[4] + 8 + 8 + MAC_BYTES):
+            raise AuthError("malformed", f"{key}: unexpected bytes before the plant authenticator")
+        header = part[:12]
+        if not hmac.compare_digest(part[12:], _mac(self._key, header, key, payload)):
+            raise AuthError("bad-mac", key)
+        (counter,) = _COUNTER.unpack_from(header, 4)
+        last = self._last.get(key, 0)
+        if counter <= last:
+            raise AuthError("replay", f"{key}: counter {counter} after {last}")
+        self._last[key] = counter
+        return counter
 
 
 # --------------------------------------------------------------------------- control tokens

@@ -79,7 +79,12 @@ def main() -> int:
 
         batch_key = f"{base}/@batch/{name}"
         gc.freeze()  # what is loaded now stays: out of the cyclic collector's scans
+        last_tick = -1
         while raw := ticks.recv().payload.to_bytes():
+            tick_seq = _TICK.decode(raw).seq
+            if tick_seq <= last_tick:  # the plant's repeat of a tick already answered (late joiners' copy)
+                continue
+            last_tick = tick_seq
             commands, done = answer(raw, base, name, seqs)
             if commands:  # one envelope: the commands and the answer (docs/control.md)
                 put(batch_key, messages.encode_batch([*commands, (done_key, done)]))

@@ -15,14 +15,22 @@ Every output step ``k`` (``t = k / rate``), for the scene's actuated bodies
    across a client's subscribers, so a controller reads one consistent step from it) and, in
    lockstep mode, waits until every controller of ``control.controllers`` has answered
    the tick on ``@done/<controller>`` (with the number of commands it sent) and those
-   commands have arrived; a controller that does not answer within ``control.timeout``
-   ends the run with an error naming it (exit 1; the recording stays valid);
+   commands have arrived, putting the same tick again every :data:`TICK_REPEAT_S` s of
+   wall time while it waits (a controller started late, or whose subscriber was not yet
+   matched when the tick went out, gets it then; one that has it already drops the copy, its
+   ``seq`` not above the last tick's); a controller that does not answer within
+   ``control.timeout`` of the first put ends the run with an error naming it (exit 1; the
+   recording stays valid);
 4. commands with ``t <= t_k`` are applied at ``t_k``, in arrival order; commands with
    ``t_k < t < t_k+1`` (already received) at their own ``t``, inside the step (the body
    is advanced to it first): an impulse lands exactly when commanded.  Each applied
    command is re-published, signed by the plant, on its ``<body>/command`` key (that copy
    is what the logger records); ``<body>/actuators`` then says what the step applied;
 5. the bodies advance to ``t + 1 / rate`` with the held commands.
+
+The plant signs what it publishes with the run secret (``ADA1``, :mod:`astrodyn.auth`);
+given the control token it also appends to its ticks and events the ``ADP1`` part that an
+outside controller, holding only the token, checks (docs/control.md, "Authentication").
 
 Trust (docs/security.md): a command or an answer is taken only from a process of the run
 (authenticator of the run secret, signed by the process named in its ``sender``) or from
@@ -96,6 +104,8 @@ RUN_PROCESSES = frozenset(("plant", "orbit", "attitude", "logger", "serve", "run
 MAX_PENDING = 10_000
 #: Lockstep round trips kept for the summary's percentiles.
 MAX_ROUND_TRIPS = 1_000_000
+#: Lockstep: wall seconds between puts of the current tick while the plant waits for answers.
+TICK_REPEAT_S = 0.5
 
 
 class ControllerTimeout(RuntimeError):
@@ -337,6 +347,9 @@ class PlantLoop:
         self.lockstep = control.mode == "lockstep" and replay is None
         self.expected = control.controllers if self.lockstep else ()
         self.signer = bus.process_signer(PROCESS)
+        # ticks and events: with the control token, also the part its holders check (astrodyn.auth)
+        self.tick_signer = self.signer if token is None else auth.WithPlantPart(self.signer, auth.PlantSigner(token))
+        self.tick_repeats = 0  # lockstep: ticks put again while waiting for answers
         secret = auth.secret_from_environment()
         self.intake = Intake(self.name, plant.bodies, None if secret is None else auth.Verifier(secret), token)
         self.stopping: dict = {"why": None}
@@ -379,11 +392,11 @@ class PlantLoop:
 
     # ------------------------------------------------------------------ output
 
-    def put(self, key: str, payload: bytes) -> None:
+    def put(self, key: str, payload: bytes, signer=None) -> None:
         pub = self.pubs.get(key)
         if pub is None:
             pub = self.pubs[key] = bus.declare_state_publisher(self.session, key)
-        bus.signed_put(pub, key, payload, self.signer)
+        bus.signed_put(pub, key, payload, signer or self.signer)
 
     def flush(self, batch) -> None:
         for box in (self.held, self.outbox):  # the step before's actuator states first
@@ -515,8 +528,9 @@ class PlantLoop:
         ``control.timeout``)."""
         j = k // self.control.every
         self.tick_seq = j  # before the put: an answer can only come after it
-        self.put(messages.tick_key(self.name), tick_payload(t, j, k, samples))
-        sent_at = time.monotonic()
+        key, payload = messages.tick_key(self.name), tick_payload(t, j, k, samples)
+        self.put(key, payload, self.tick_signer)
+        sent_at = put_at = time.monotonic()
         self.flush(batch)  # the step's states and samples (in the tick already), while the controller works
         deadline = sent_at + self.control.timeout
         while True:
@@ -527,12 +541,17 @@ class PlantLoop:
                 if self.expected and len(self.round_trips) < MAX_ROUND_TRIPS:
                     self.round_trips.append(time.monotonic() - sent_at)
                 return
-            left = deadline - time.monotonic()
+            now = time.monotonic()
+            left = deadline - now
             if left <= 0:
                 raise ControllerTimeout(
                     f"controller {waiting[0]!r} did not answer control step {j} (t = {t:g} s) within "
                     f"{self.control.timeout:g} s" + (f" (also {', '.join(map(repr, waiting[1:]))})" if waiting[1:] else ""))
-            self.drain(min(left, 0.5))
+            if now - put_at >= TICK_REPEAT_S:  # the same tick again (fresh authenticators): for a late subscriber
+                self.put(key, payload, self.tick_signer)
+                self.tick_repeats += 1
+                put_at = now
+            self.drain(min(left, put_at + TICK_REPEAT_S - now))
             heartbeat.beat(t=t, step=k, waiting=waiting)
             obey_commands(supervisor, self.pacer, t, self.stopping, heartbeat, self.commands_from, self.verbs)
 
@@ -607,7 +626,7 @@ class PlantLoop:
         wall0 = time.monotonic()
         with bus.declare_alive(session, name, PROCESS), \
                 bus.Heartbeat(session, name, PROCESS, signer=self.signer) as heartbeat, \
-                bus.EventPublisher(session, name, PROCESS, signer=self.signer) as events, \
+                bus.EventPublisher(session, name, PROCESS, signer=self.tick_signer) as events, \
                 session.declare_subscriber(f"{messages.PREFIX}/{name}/*/command", self.intake.callback), \
                 session.declare_subscriber(f"{messages.PREFIX}/{name}/@done/*", self.intake.callback), \
                 session.declare_subscriber(f"{messages.PREFIX}/{name}/@batch/*", self.intake.callback), \
@@ -664,8 +683,8 @@ class PlantLoop:
 
     def summary(self, k: int, wall: float, extra: dict, failure: str | None) -> dict:
         summary = {"process": PROCESS, "bodies": len(self.plant.bodies), "steps": k, "messages": self.published,
-                   "t": self.t_reached, "wall_s": wall, **extra, "refusals": self.refusals,
-                   "rejected_examples": self.intake.examples}
+                   "t": self.t_reached, "wall_s": wall, **extra, "tick_repeats": self.tick_repeats,
+                   "refusals": self.refusals, "rejected_examples": self.intake.examples}
         if self.round_trips:
             rt = sorted(self.round_trips)
             summary["round_trip_us"] = {"n": len(rt), "p50": 1e6 * rt[len(rt) // 2],
