@@ -17,8 +17,20 @@ its work per second is bounded (transforms, trail points and raw messages per se
 ``1 / rate`` s of wall time (30 Hz by default) the viewer takes those samples, checks them
 (the run's HMAC when it runs under a supervisor, then the message definition) and sends
 view frames.  States between two frames are not shown (the recording has them all); a
-slow or vanished browser only loses view frames: foxglove-sdk drops what a client cannot
-take.
+slow or vanished browser only loses view frames: foxglove-sdk drops the oldest of what a
+client cannot take.
+
+Clients that misbehave (docs/foxglove.md): what foxglove-sdk 0.30 does not bound, the
+viewer does from outside it (:class:`ConnectionGuard`, every second, from the process's own
+sockets): a client that reads nothing for 15 s while data waits for it, a connection
+without a WebSocket handshake after 10 s, one that sends more than 4 MiB a second and the
+newest beyond 16 connections are cut (``--client-stall-timeout``, ``--handshake-timeout``,
+``--max-clients``, or ``ASTRODYN_VIEWER_STALL_S`` / ``_HANDSHAKE_S`` / ``_MAX_CLIENTS``); a
+server whose accept loop died (out of descriptors) is restarted on the same port; the
+SDK's log lines about clients (one per bad message) are limited to 20 a minute; a client's
+subscription to the scene makes it sent at most once a second; the stop waits at most 2 s
+for the server.  The viewer asks the kernel to end it first under memory pressure
+(``oom_score_adj``): the logger holds the record, ``serve`` restarts the view.
 
 Channels (timestamps: the scenario epoch + t, so Foxglove's clock is simulated time;
 the server also broadcasts that time):
@@ -53,11 +65,19 @@ The first JSON line on stdout says where it listens:
 from __future__ import annotations
 
 import argparse
+import array
 import collections
+import errno
+import fcntl
 import json
+import logging
 import math
 import os
+import resource
+import socket
+import struct
 import sys
+import termios
 import threading
 import time
 from pathlib import Path
@@ -81,7 +101,9 @@ from astrodyn.recording.foxglove_scene import (
 from astrodyn.service.children import share_fate_with_supervisor
 from astrodyn.service.signals import StopFlag
 
-__all__ = ["LatestSamples", "LiveScene", "add_foxglove_argument", "viewer_command", "main", "TF_TOPIC", "MAX_LIVE_SCENE_POINTS"]
+__all__ = ["LatestSamples", "LiveScene", "add_foxglove_argument", "viewer_command", "main", "TF_TOPIC", "MAX_LIVE_SCENE_POINTS",
+           "ConnectionGuard", "LineBudget", "route_sdk_log", "raise_descriptor_limit", "MAX_CLIENTS", "CLIENT_STALL_S",
+           "HANDSHAKE_S"]
 
 TF_TOPIC = "foxglove/tf"
 #: Most trail points of all bodies together in one scene update (a 1000-body constellation
@@ -94,6 +116,34 @@ MAX_TRANSFORMS_PER_S = 2000
 #: The viewer's CPU priority (``nice``): on a busy machine the simulation goes first.
 VIEWER_NICE = 10
 SCENE_PERIOD_S = 5.0
+#: A client's subscription to the scene makes the next frame send it, at most this often
+#: (a client that subscribed and unsubscribed in a loop had the view build and send its
+#: largest message, 1.8 MB for 200 bodies, at every frame, to every client).
+SCENE_REQUEST_MIN_S = 1.0
+
+# What the view allows a WebSocket client (:class:`ConnectionGuard`, docs/foxglove.md,
+# "Clients that misbehave"); the first three can be changed with the viewer's options or
+# the environment variables named there.
+#: Most connections at a time: the newest beyond are cut (a live view has a few clients).
+MAX_CLIENTS = 16
+#: A client that reads nothing for this long while data waits for it is cut, s.
+CLIENT_STALL_S = 15.0
+#: A connection that has not completed its WebSocket handshake after this long is cut, s.
+HANDSHAKE_S = 10.0
+#: A client that sends more than this many bytes a second is cut (requests are a few hundred bytes).
+MAX_CLIENT_INPUT_PER_S = 4 * 2**20
+#: How often the connections are looked at, s.
+GUARD_PERIOD_S = 1.0
+#: How long closing the server may take before the viewer exits without it, s.
+CLOSE_TIMEOUT_S = 2.0
+#: Most lines of foxglove-sdk's log (and of the guard's) per window; the rest are counted.
+LOG_LINES_PER_WINDOW = 20
+LOG_WINDOW_S = 60.0
+#: The soft limit of open descriptors the viewer raises itself to (at most its hard limit).
+MAX_DESCRIPTORS = 65536
+#: Restarts of a server that stopped accepting connections within a minute, before the
+#: viewer exits (status 1) and leaves it to ``serve``'s restart budget.
+MAX_SERVER_RESTARTS = 5
 
 
 def add_foxglove_argument(parser: argparse.ArgumentParser, what: str) -> None:
@@ -305,6 +355,7 @@ class _View:
 
         self.foxglove = foxglove
         self.scene_wanted = threading.Event()  # a client subscribed to the scene: send it at the next frame
+        self.scene_request_ok = 0.0  # monotonic s from which a subscription's scene request is served again
         view = self
 
         class Listener(foxglove.ServerListener):
@@ -317,10 +368,14 @@ class _View:
 
         capabilities = [foxglove.Capability.Time, *([foxglove.Capability.Services] if services else []),
                         *([foxglove.Capability.PlaybackControl] if playback is not None else [])]
-        self.server = foxglove.start_server(name=f"astrodyn {scenario}", host=host, port=port,
-                                            capabilities=capabilities, server_listener=Listener(),
-                                            supported_encodings=["json"] if services else None,
-                                            playback_time_range=None if playback is None else playback.time_range)
+        self._server_args = dict(name=f"astrodyn {scenario}", host=host, capabilities=capabilities,
+                                 server_listener=Listener(), supported_encodings=["json"] if services else None,
+                                 playback_time_range=None if playback is None else playback.time_range)
+        self.server = foxglove.start_server(port=port, **self._server_args)
+        self.port = self.server.port  # the one bound (port 0: a free one), kept by a restart
+        self.restarts = 0
+        self.restarted_at: collections.deque[float] = collections.deque(maxlen=MAX_SERVER_RESTARTS)  # monotonic s
+        self._services: list = []
         self.tf = foxglove.Channel(TF_TOPIC, schema=_schema("foxglove.FrameTransforms", FRAME_TRANSFORMS_SCHEMA),
                                    message_encoding="json")
         self.scene = foxglove.Channel(SCENE_TOPIC, schema=_schema("foxglove.SceneUpdate", SCENE_UPDATE_SCHEMA),
@@ -364,10 +419,397 @@ class _View:
             services.append(Service(name=verb, schema=ServiceSchema(name=f"astrodyn.control.{verb}", request=request,
                                                                     response=response),
                                     handler=lambda req, verb=verb: forward_control(session, scenario, verb, req.payload)))
+        self._services = services
         self.server.add_services(services)
 
-    def close(self) -> None:
-        self.server.stop()
+    def restart(self, guard: ConnectionGuard) -> None:
+        """A new server on the same port, for one that stopped accepting connections
+        (foxglove-sdk ends its accept loop at the first failed accept, e.g. out of file
+        descriptors): every connection of the old one is cut first, so their descriptors
+        are released, and the old one is stopped without waiting for it (:meth:`close`).
+        Raises what ``start_server`` raises (the port taken meanwhile, still no descriptor)."""
+        guard.disconnect_all("restart")
+        old, self.server = self.server, None
+        _stop_server(old, wait_s=0.0)
+        time.sleep(0.2)  # the old server's tasks end and close their sockets
+        self.server = self.foxglove.start_server(port=self.port, **self._server_args)
+        if self._services:
+            self.server.add_services(self._services)
+        self.restarts += 1
+        self.restarted_at.append(time.monotonic())
+
+    def close(self) -> str | None:
+        """Stop the server; at most :data:`CLOSE_TIMEOUT_S`: foxglove-sdk's stop waits for every
+        connection, and one that never finished its WebSocket handshake (a half-open TCP
+        connection) would hold it forever (SIGTERM then took ``serve`` 13 s: its 10 s wait,
+        then SIGKILL).  Returns what went wrong, or None."""
+        if self.server is None:
+            return None
+        server, self.server = self.server, None
+        if not _stop_server(server, CLOSE_TIMEOUT_S):
+            return (f"the Foxglove server did not stop within {CLOSE_TIMEOUT_S:g} s (a connection that never finished "
+                    f"its handshake?); exiting without it")
+        return None
+
+
+def _stop_server(server, wait_s: float) -> bool:
+    """``server.stop()`` in a daemon thread, waited for at most ``wait_s`` s; True if it returned."""
+    done = threading.Thread(target=server.stop, name="foxglove-stop", daemon=True)
+    done.start()
+    done.join(wait_s)
+    return not done.is_alive()
+
+
+class LineBudget:
+    """At most ``per_window`` lines to stderr per ``window_s`` s; the others are counted and
+    said in one line once the window is over (:meth:`flush`).  Thread-safe.  A client that
+    sends garbage makes foxglove-sdk log one line per message (measured: 5 MB/s of
+    ``Invalid message`` into the viewer's log, beside the recording); this bounds it."""
+
+    def __init__(self, per_window: int = LOG_LINES_PER_WINDOW, window_s: float = LOG_WINDOW_S,
+                 prefix: str = "astrodyn viewer: "):
+        self.per_window, self.window_s, self.prefix = per_window, window_s, prefix
+        self._lock = threading.Lock()
+        self._start = -math.inf
+        self._used = 0
+        self._held = 0  # lines suppressed in the current window
+        self.suppressed = 0  # in all
+
+    def say(self, line: str, now: float | None = None) -> bool:
+        """Print ``line`` if the budget allows; False if it was suppressed."""
+        now = time.monotonic() if now is None else now
+        with self._lock:
+            self._roll(now)
+            if self._used >= self.per_window:
+                self._held += 1
+                self.suppressed += 1
+                return False
+            self._used += 1
+        print(self.prefix + line, file=sys.stderr, flush=True)
+        return True
+
+    def flush(self, now: float | None = None, force: bool = False) -> None:
+        """Say how many lines were suppressed, once their window is over (or now: ``force``)."""
+        with self._lock:
+            if force:
+                self._start = -math.inf
+            self._roll(time.monotonic() if now is None else now)
+
+    def _roll(self, now: float) -> None:
+        if now - self._start < self.window_s:
+            return
+        if self._held:
+            print(f"{self.prefix}{self._held} more lines suppressed in the last {self.window_s:g} s (at most "
+                  f"{self.per_window} per {self.window_s:g} s)", file=sys.stderr, flush=True)
+        self._start, self._used, self._held = now, 0, 0
+
+
+class _SdkLogHandler(logging.Handler):
+    """foxglove-sdk's log records (Rust ``tracing`` through Python ``logging``) into a :class:`LineBudget`."""
+
+    def __init__(self, budget: LineBudget):
+        super().__init__(logging.WARNING)
+        self.budget = budget
+
+    def emit(self, record: logging.LogRecord) -> None:
+        try:
+            self.budget.say(f"foxglove: {record.getMessage()}")
+        except Exception:  # a log line must never take the view down
+            pass
+
+
+def route_sdk_log(budget: LineBudget) -> logging.Handler:
+    """Send foxglove-sdk's (and its WebSocket library's) warnings and errors through
+    ``budget`` instead of Python's last-resort handler (one stderr line per record)."""
+    handler = _SdkLogHandler(budget)
+    for name in ("foxglove", "tungstenite", "tokio_tungstenite"):
+        logger = logging.getLogger(name)
+        logger.addHandler(handler)
+        logger.setLevel(logging.WARNING)
+        logger.propagate = False
+    return handler
+
+
+class _Conn:
+    __slots__ = ("first", "acked", "progress", "received", "checked", "peer", "cut")
+
+    def __init__(self, now: float, acked: int, received: int, peer: str):
+        self.first = self.progress = self.checked = now
+        self.acked, self.received, self.peer = acked, received, peer
+        self.cut = False
+
+
+def _tcp_counters(sk: socket.socket) -> tuple[int, int, int, int]:
+    """(TCP state, bytes acked by the peer, bytes received from it, bytes waiting in the send
+    queue) of a connected TCP socket (Linux ``TCP_INFO``: ``tcpi_bytes_acked`` and
+    ``tcpi_bytes_received`` at offsets 120 and 128 since Linux 4.1; ``SIOCOUTQ``)."""
+    info = sk.getsockopt(socket.IPPROTO_TCP, socket.TCP_INFO, 256)
+    if len(info) < 136:
+        raise OSError("TCP_INFO without byte counters (Linux < 4.1)")
+    acked, received = struct.unpack_from("<QQ", info, 120)
+    outq = array.array("i", [0])
+    fcntl.ioctl(sk.fileno(), termios.TIOCOUTQ, outq)
+    return info[0], acked, received, outq[0]
+
+
+class ConnectionGuard:
+    """The limits foxglove-sdk (0.30) does not keep, kept from outside it: every
+    :data:`GUARD_PERIOD_S` the viewer looks at the TCP connections of its own WebSocket port
+    (its descriptors in ``/proc/self/fd``, each one's ``TCP_INFO``) and cuts
+    (``shutdown``, so the SDK ends that client and frees its queues):
+
+    - a connection that has not completed its WebSocket handshake within ``handshake_s``
+      (nothing sent to it yet): the SDK has no handshake timeout, so a half-open
+      connection held a task and a descriptor forever and made the server's stop hang;
+    - a client that reads nothing for ``stall_s`` while data waits for it: the SDK drops
+      the oldest of at most 1024 queued messages per client but never lets go of the
+      client, so each one that stopped reading pinned up to 1024 of the view's largest
+      messages (a 200-body scene: 60 KB transforms, 1.8 MB scenes);
+    - a client that sends more than ``max_input_per_s`` bytes a second (the SDK buffers
+      up to 64 MiB of one message before refusing it);
+    - the newest connections beyond ``max_clients``.
+
+    It also watches the listening socket: the SDK ends its accept loop at the first failed
+    ``accept`` (e.g. out of file descriptors), after which the port refused every client
+    while the viewer ran on; :attr:`listener_lost` then says why (the frame loop restarts
+    the server).  Linux only (``/proc``); elsewhere :attr:`available` is False and it does
+    nothing."""
+
+    def __init__(self, port: int, max_clients: int = MAX_CLIENTS, stall_s: float = CLIENT_STALL_S,
+                 handshake_s: float = HANDSHAKE_S, max_input_per_s: float = MAX_CLIENT_INPUT_PER_S,
+                 budget: LineBudget | None = None):
+        self.port = port
+        self.max_clients, self.stall_s, self.handshake_s = max_clients, stall_s, handshake_s
+        self.max_input_per_s = max_input_per_s
+        self.budget = budget or LineBudget()
+        self.flush_also: list[LineBudget] = []  # other budgets whose suppressed counts each check says when due
+        self.available = sys.platform.startswith("linux") and os.path.isdir("/proc/self/fd")
+        self.conns: dict[int, _Conn] = {}  # socket inode -> what was seen of that connection
+        self._other: set[int] = set()  # inodes of sockets that are not the view's port (Zenoh's, ...)
+        self.listener: int | None = None  # inode of the listening socket, once seen
+        self.listener_lost: str | None = None
+        self.cut = collections.Counter()  # reason -> connections cut
+        self._said: dict[str, list[str]] = {}  # what this check cut: why -> peers
+        self._lock = threading.Lock()
+        self._reserve: int | None = None  # a descriptor held back, to look at sockets when none is left
+        self._take_reserve()
+
+    def _take_reserve(self) -> None:
+        if self._reserve is None:
+            try:
+                self._reserve = os.open(os.devnull, os.O_RDONLY | os.O_CLOEXEC)
+            except OSError:
+                pass
+
+    def _spare(self, make):
+        """``make()``, and when the process is out of descriptors, ``make()`` again after
+        giving back the one held back for this (every use here closes its descriptor at
+        once, so that one slot serves them all in turn)."""
+        try:
+            return make()
+        except OSError as exc:
+            if exc.errno not in (errno.EMFILE, errno.ENFILE) or self._reserve is None:
+                raise
+            os.close(self._reserve)
+            self._reserve = None
+            return make()
+
+    def _sockets(self) -> list[tuple[int, int]]:
+        """(descriptor, inode) of every socket this process holds."""
+        out = []
+        for name in self._spare(lambda: os.listdir("/proc/self/fd")):
+            try:
+                link = os.readlink(f"/proc/self/fd/{name}")
+            except OSError:  # closed meanwhile
+                continue
+            if link.startswith("socket:["):
+                out.append((int(name), int(link[8:-1])))
+        return out
+
+    def _open(self, fd: int, inode: int) -> socket.socket | None:
+        """A duplicate of descriptor ``fd`` as a socket object, if it is still socket ``inode``."""
+        try:
+            dup = self._spare(lambda: os.dup(fd))
+        except OSError:
+            return None
+        try:
+            if os.fstat(dup).st_ino == inode:
+                return socket.socket(fileno=dup)
+        except OSError:
+            pass
+        os.close(dup)
+        return None
+
+    def _cut(self, fd: int, inode: int, conn: _Conn, reason: str, why: str) -> None:
+        sk = self._open(fd, inode)
+        if sk is None:  # gone meanwhile, or no descriptor to look at it: the next check tries again
+            return
+        with sk:
+            try:
+                sk.shutdown(socket.SHUT_RDWR)  # the SDK's reads end, its writes fail: it drops the client
+            except OSError:
+                pass
+        conn.cut = True
+        self.cut[reason] += 1
+        self._said.setdefault(why, []).append(conn.peer)
+
+    def check(self, now: float | None = None) -> None:
+        """One look at the connections (see the class)."""
+        if not self.available:
+            return
+        now = time.monotonic() if now is None else now
+        with self._lock:
+            self._said = {}
+            self._check(now)
+            self._take_reserve()
+            said, self._said = self._said, {}
+        for why, peers in said.items():  # one line per reason and check, however many were cut
+            more = f" and {len(peers) - 3} more" if len(peers) > 3 else ""
+            self.budget.say(f"disconnected WebSocket client{'s' if len(peers) > 1 else ''} {', '.join(peers[:3])}{more}: "
+                            f"{why}")
+        for budget in (self.budget, *self.flush_also):
+            budget.flush(now)
+
+    def _check(self, now: float) -> None:
+        present, live, listener_seen = set(), [], False
+        for fd, inode in self._sockets():
+            present.add(inode)
+            if inode == self.listener:
+                listener_seen = True
+                continue
+            if inode in self._other:
+                continue
+            looked = self._look(fd, inode, now)
+            if looked == "listener":
+                listener_seen = True
+            elif looked is not None:
+                live.append(looked)
+        self._other &= present
+        for inode in [i for i in self.conns if i not in present]:
+            del self.conns[inode]
+        if self.listener is not None and not listener_seen:
+            self.listener_lost = (f"the Foxglove server stopped accepting connections on port {self.port} "
+                                  f"({len(present)} sockets open, descriptor limit {_nofile_limit()})")
+        over = sorted(live, key=lambda item: (item[2].first, item[1]))[self.max_clients:]
+        for fd, inode, conn in over:
+            self._cut(fd, inode, conn, "too_many", f"more than {self.max_clients} connections")
+
+    def _look(self, fd: int, inode: int, now: float):
+        """None (not the view's port, or gone), "listener", or (fd, inode, conn) of a live
+        connection, after cutting it if it broke a limit."""
+        sk = self._open(fd, inode)
+        if sk is None:
+            return None
+        with sk:
+            try:
+                if sk.family not in (socket.AF_INET, socket.AF_INET6) or sk.type != socket.SOCK_STREAM \
+                        or sk.getsockname()[1] != self.port:
+                    self._other.add(inode)
+                    return None
+                if sk.getsockopt(socket.SOL_SOCKET, socket.SO_ACCEPTCONN):
+                    self.listener = inode
+                    return "listener"
+                state, acked, received, outq = _tcp_counters(sk)
+                host, port = sk.getpeername()[:2]
+                peer = f"{host}:{port}"
+            except OSError:  # closing, or not a TCP socket after all
+                return None
+        conn = self.conns.get(inode)
+        if conn is None:  # new since the last check: what it sent, it sent since then
+            conn = self.conns[inode] = _Conn(now, acked, 0, peer)
+            conn.checked = now - GUARD_PERIOD_S
+        if conn.cut or state != 1:  # cut already, or closing (not ESTABLISHED)
+            return None
+        if outq == 0 or acked > conn.acked:
+            conn.progress = now
+        rate = (received - conn.received) / max(now - conn.checked, GUARD_PERIOD_S)
+        conn.acked, conn.received, conn.checked = acked, received, now
+        if acked == 0 and now - conn.first >= self.handshake_s:
+            self._cut(fd, inode, conn, "no_handshake", f"no WebSocket handshake within {self.handshake_s:g} s")
+        elif now - conn.progress >= self.stall_s:
+            self._cut(fd, inode, conn, "not_reading", f"read nothing for {self.stall_s:g} s ({outq} bytes waiting)")
+        elif rate > self.max_input_per_s:
+            self._cut(fd, inode, conn, "too_much_input",
+                      f"sent {rate / 2**20:.1f} MiB/s (at most {self.max_input_per_s / 2**20:g} MiB/s)")
+        else:
+            return fd, inode, conn
+        return None
+
+    def disconnect_all(self, reason: str, stuck_only: bool = False) -> int:
+        """Cut every connection of the view's port (before a restart of the server), or only
+        the stuck ones (before a stop): those still in their handshake and those with data
+        waiting that they do not read.  foxglove-sdk's stop waits for each client's last
+        message, so for those it would wait forever; it closes the others properly.  How
+        many were cut, counted under ``reason``."""
+        if not self.available:
+            return 0
+        n = 0
+        with self._lock:
+            for fd, inode in self._sockets():
+                if inode in self._other or inode == self.listener:
+                    continue
+                sk = self._open(fd, inode)
+                if sk is None:
+                    continue
+                with sk:
+                    try:
+                        if sk.family not in (socket.AF_INET, socket.AF_INET6) or sk.getsockname()[1] != self.port \
+                                or sk.getsockopt(socket.SOL_SOCKET, socket.SO_ACCEPTCONN):
+                            continue
+                        if stuck_only:
+                            _, acked, _, outq = _tcp_counters(sk)
+                            if acked > 0 and outq == 0:  # handshake done, nothing waiting: the SDK closes it
+                                continue
+                        sk.shutdown(socket.SHUT_RDWR)
+                        n += 1
+                    except OSError:
+                        continue
+                if inode in self.conns:
+                    self.conns[inode].cut = True
+            if not stuck_only:
+                self.listener, self.listener_lost = None, None
+            self._take_reserve()
+        if n:
+            self.cut[reason] += n
+        return n
+
+    def run(self, stop: StopFlag) -> None:
+        """Check every :data:`GUARD_PERIOD_S` until ``stop`` (the body of a daemon thread)."""
+        while stop.why is None:
+            time.sleep(GUARD_PERIOD_S)
+            try:
+                self.check()
+            except Exception as exc:  # the guard must never take the view down
+                self.budget.say(f"connection guard: {type(exc).__name__}: {exc}")
+
+
+def _nofile_limit() -> int:
+    return resource.getrlimit(resource.RLIMIT_NOFILE)[0]
+
+
+def raise_descriptor_limit(cap: int = MAX_DESCRIPTORS) -> int:
+    """Raise this process's soft limit of open descriptors to its hard limit (at most
+    ``cap``): each WebSocket connection takes one, and foxglove-sdk stops accepting for
+    good at the first ``accept`` that fails (a typical soft limit is 1024).  The new limit."""
+    soft, hard = resource.getrlimit(resource.RLIMIT_NOFILE)
+    want = cap if hard == resource.RLIM_INFINITY else min(hard, cap)
+    if want > soft:
+        try:
+            resource.setrlimit(resource.RLIMIT_NOFILE, (want, hard))
+            soft = want
+        except (ValueError, OSError):
+            pass
+    return soft
+
+
+def expendable_under_memory_pressure() -> None:
+    """Ask the kernel to end this process first when the machine runs out of memory
+    (``oom_score_adj`` 1000): the view is restarted by ``serve`` and holds nothing that is
+    not in the recording, the logger does."""
+    try:
+        Path("/proc/self/oom_score_adj").write_text("1000")
+    except OSError:
+        pass
 
 
 class PlaybackBar:
@@ -504,7 +946,8 @@ def _scenario_metadata(path: str | None) -> tuple[int, dict, set[str] | None]:
 
 def main(argv: list[str] | None = None) -> int:
     """``python -m astrodyn.service.viewer --scenario NAME ...`` (module docstring): exit 0
-    when stopped, 1 when the server or the bus cannot start, 2 for bad arguments."""
+    when stopped, 1 when the server or the bus cannot start (or the server cannot be
+    restarted), 2 for bad arguments."""
     args = parse_viewer_arguments(argv)
     try:
         epoch_ns, central, orbiting, verbs = checked_viewer_arguments(args)
@@ -516,6 +959,11 @@ def main(argv: list[str] | None = None) -> int:
         os.nice(VIEWER_NICE)
     except OSError:
         pass
+    expendable_under_memory_pressure()
+    raise_descriptor_limit()
+    sdk_log = LineBudget()  # its own budget: the guard's lines are not crowded out by the SDK's
+    route_sdk_log(sdk_log)
+    budget = LineBudget()
     stop = StopFlag()
     secret = auth.secret_from_environment()
     samples = ViewerSamples(args.scenario, args.from_logger, auth.Verifier(secret) if secret is not None else None)
@@ -531,6 +979,12 @@ def main(argv: list[str] | None = None) -> int:
         print(f"astrodyn viewer: error: cannot start the Foxglove server on {args.host}:{args.port}: {exc}",
               file=sys.stderr)
         return 1
+    guard = ConnectionGuard(view.port, args.max_clients, args.client_stall_timeout, args.handshake_timeout,
+                            budget=budget)
+    guard.flush_also.append(sdk_log)
+    guard.check()  # finds the listening socket while descriptors are plenty
+    threading.Thread(target=guard.run, args=(stop,), name="view-guard", daemon=True).start()
+    failure = None
     try:
         with bus.session_from_args(args) as session:
             base = f"{messages.PREFIX}/{args.scenario}"
@@ -540,19 +994,32 @@ def main(argv: list[str] | None = None) -> int:
                 view.add_control_services(session, args.scenario, verbs)
             if playback is not None:
                 playback.session = session
-            print(json.dumps({"foxglove": f"ws://{args.host}:{view.server.port}", "scenario": args.scenario,
+            print(json.dumps({"foxglove": f"ws://{args.host}:{view.port}", "scenario": args.scenario,
                               "authenticated": samples.verifier is not None}), flush=True)
-            run_view_frames(session, 1.0 / args.rate, stop, samples, scene, view)
+            failure = run_view_frames(session, 1.0 / args.rate, stop, samples, scene, view, guard)
             for sub in subs:
                 sub.undeclare()
     except bus.BusError as exc:
         print(f"astrodyn viewer: error: {exc}", file=sys.stderr)
         return 1
     finally:
-        view.close()
-    print(json.dumps({"viewer": "stopped", "reason": stop.why, "received": samples.latest.received,
-                      "bodies": len(scene.bodies), "invalid": scene.invalid, "rejected": samples.rejected}), flush=True)
-    return 0
+        guard.disconnect_all("stop", stuck_only=True)  # the SDK's stop would wait for them forever
+        stuck = view.close()
+        if stuck:
+            print(f"astrodyn viewer: warning: {stuck}", file=sys.stderr, flush=True)
+        budget.flush(force=True)
+        sdk_log.flush(force=True)
+    if failure:
+        print(f"astrodyn viewer: error: {failure}", file=sys.stderr, flush=True)
+    print(json.dumps({"viewer": "stopped", "reason": stop.why or failure, "received": samples.latest.received,
+                      "bodies": len(scene.bodies), "invalid": scene.invalid, "rejected": samples.rejected,
+                      "disconnected": dict(guard.cut), "log_lines_suppressed": budget.suppressed + sdk_log.suppressed,
+                      "server_restarts": view.restarts}), flush=True)
+    return 1 if failure else 0
+
+
+def _env_default(name: str, fallback: float) -> str:
+    return os.environ.get(name) or repr(fallback)
 
 
 def parse_viewer_arguments(argv: list[str] | None) -> argparse.Namespace:
@@ -575,6 +1042,17 @@ def parse_viewer_arguments(argv: list[str] | None) -> argparse.Namespace:
                     help="the recording's span for the playback bar, ns since the Unix epoch")
     ap.add_argument("--raw-rate", type=float, default=1000.0,
                     help="raw state messages per second sent to Foxglove, all channels together (default 1000)")
+    ap.add_argument("--max-clients", type=int, default=_env_default("ASTRODYN_VIEWER_MAX_CLIENTS", MAX_CLIENTS),
+                    help=f"most WebSocket connections at a time; the newest beyond are cut (default {MAX_CLIENTS}, "
+                         "or $ASTRODYN_VIEWER_MAX_CLIENTS)")
+    ap.add_argument("--client-stall-timeout", type=float, metavar="S",
+                    default=_env_default("ASTRODYN_VIEWER_STALL_S", CLIENT_STALL_S),
+                    help=f"cut a client that reads nothing for S s while data waits for it (default {CLIENT_STALL_S:g}, "
+                         "or $ASTRODYN_VIEWER_STALL_S)")
+    ap.add_argument("--handshake-timeout", type=float, metavar="S",
+                    default=_env_default("ASTRODYN_VIEWER_HANDSHAKE_S", HANDSHAKE_S),
+                    help=f"cut a connection that has not completed its WebSocket handshake after S s (default "
+                         f"{HANDSHAKE_S:g}, or $ASTRODYN_VIEWER_HANDSHAKE_S)")
     bus.add_bus_arguments(ap)
     return ap.parse_args(argv)
 
@@ -592,6 +1070,12 @@ def checked_viewer_arguments(args: argparse.Namespace) -> tuple[int, dict, set[s
                              f"{1000 * (100 if name == 'raw_rate' else 1)}], got {value}")
     if not 0 <= args.port <= 65535:
         raise ValueError(f"--port: expected 0..65535, got {args.port}")
+    if not 1 <= args.max_clients <= 10_000:
+        raise ValueError(f"--max-clients ($ASTRODYN_VIEWER_MAX_CLIENTS): expected 1..10000, got {args.max_clients}")
+    for name, env in (("client_stall_timeout", "ASTRODYN_VIEWER_STALL_S"), ("handshake_timeout", "ASTRODYN_VIEWER_HANDSHAKE_S")):
+        value = getattr(args, name)
+        if not (math.isfinite(value) and 1.0 <= value <= 86400.0):
+            raise ValueError(f"--{name.replace('_', '-')} (${env}): expected seconds in [1, 86400], got {value}")
     epoch_ns, central, orbiting = _scenario_metadata(args.metadata)
     verbs = [v for v in args.services.split(",") if v]
     for verb in verbs:
@@ -649,12 +1133,23 @@ class ViewerSamples:
         return True
 
 
-def run_view_frames(session, period: float, stop: StopFlag, samples: ViewerSamples, scene: LiveScene, view: _View) -> None:
+def run_view_frames(session, period: float, stop: StopFlag, samples: ViewerSamples, scene: LiveScene, view: _View,
+                    guard: ConnectionGuard | None = None) -> str | None:
     """Until ``stop``: every ``period`` s of wall time (longer for scenes of more than
     :data:`MAX_TRANSFORMS_PER_S` ``* period`` bodies) take the newest samples into the scene
-    and send one view frame."""
+    and send one view frame.  When ``guard`` says the server stopped accepting connections,
+    restart it; returns why the view had to end (the restart failed), or None."""
     next_frame = next_scene = time.monotonic()
     while stop.why is None:
+        if guard is not None and guard.listener_lost:
+            lost = guard.listener_lost
+            if len(view.restarted_at) == MAX_SERVER_RESTARTS and time.monotonic() - view.restarted_at[0] < 60.0:
+                return f"{lost} again, after {MAX_SERVER_RESTARTS} restarts within a minute"  # serve restarts the process
+            try:
+                view.restart(guard)
+            except Exception as exc:  # the port taken meanwhile, still no descriptor: serve restarts the process
+                return f"{lost}; restarting it failed: {exc}"
+            print(f"astrodyn viewer: warning: {lost}; restarted it on the same port", file=sys.stderr, flush=True)
         now = time.monotonic()
         if now < next_frame:
             time.sleep(min(next_frame - now, 0.05))
@@ -664,6 +1159,7 @@ def run_view_frames(session, period: float, stop: StopFlag, samples: ViewerSampl
         take_samples(samples.newest(session), samples, scene, view)
         if scene.bodies:  # what no client subscribes to is not built (has_sinks)
             next_scene = send_view_frame(scene, view, frame_period, now, next_scene)
+    return None
 
 
 def take_samples(newest: dict[str, tuple[bytes, bytes | None]], samples: ViewerSamples, scene: LiveScene,
@@ -695,11 +1191,13 @@ def send_view_frame(scene: LiveScene, view: _View, frame_period: float, now: flo
         view.tf.log(_VIEW_JSON.encode(scene.transforms()), log_time=lt)  # 10x json.dumps
     view.server.broadcast_time(lt)
     view.forward(frame_period)
-    if view.scene.has_sinks() and (now >= next_scene or view.scene_wanted.is_set() or scene.changed):
+    wanted = view.scene_wanted.is_set() and now >= view.scene_request_ok  # at most once a SCENE_REQUEST_MIN_S
+    if view.scene.has_sinks() and (now >= next_scene or wanted or scene.changed):
         view.scene_wanted.clear()
         scene.changed = False
         view.scene.log(_VIEW_JSON.encode(scene.scene()), log_time=lt)
         next_scene = now + SCENE_PERIOD_S
+        view.scene_request_ok = now + SCENE_REQUEST_MIN_S
     return next_scene
 
 
