@@ -392,3 +392,38 @@ def test_without_the_flag_the_playback_bar_is_not_offered(tmp_path):
     finally:
         stop_process(replay)
     assert "playbackControl" not in got["server"]["capabilities"]
+
+
+def test_replay_restarts_a_live_view_that_dies(tmp_path):
+    """``replay --foxglove``: a viewer killed mid-replay is started again on the same port
+    (as ``serve`` does; before, the replay went on with no view and said nothing), and a
+    client connected afterwards receives the recorded states there."""
+    from astrodyn.service.children import children_of
+
+    rec = tmp_path / "rec.mcap"
+    leo_recording(rec, name="rv", duration="600 s", rate="2 Hz")
+    replay = subprocess.Popen([*ASTRODYN, "replay", str(rec), "--rate", "10", "--foxglove", "0", "--wait", "30",
+                               "--quiet"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        hello = json.loads(replay.stdout.readline())
+        deadline = time.monotonic() + 30
+        viewers: list[int] = []
+        while time.monotonic() < deadline and not viewers:
+            viewers = [pid for pid, argv in children_of(replay.pid).items() if "astrodyn.service.viewer" in argv]
+            time.sleep(0.1)
+        assert len(viewers) == 1
+        subprocess.run(["kill", "-9", str(viewers[0])], check=True)
+        deadline = time.monotonic() + 30
+        again: list[int] = []
+        while time.monotonic() < deadline and not again:
+            again = [pid for pid, argv in children_of(replay.pid).items()
+                     if "astrodyn.service.viewer" in argv and pid != viewers[0]]
+            time.sleep(0.1)
+        assert again, "no new viewer"
+        got = _received(_client(tmp_path, hello["foxglove"], messages.orbit_key("rv", "leo"), 4.0))
+    finally:
+        stop_process(replay)
+    err = replay.stderr.read()
+    assert f"the live view (pid {viewers[0]}) killed by signal 9" in err and f"restarted it (pid {again[0]})" in err, err
+    _check_view(got, "rv", "leo")
+    _check_states(got, rec, "leo")

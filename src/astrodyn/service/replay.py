@@ -60,9 +60,10 @@ from astrodyn.recording.stream import McapStream, RawMessage
 from astrodyn.recording.writer import RecordingError
 from astrodyn.service.children import Child
 from astrodyn.service.signals import StopFlag
+from astrodyn.service.supervision import RestartBudget
 from astrodyn.service.viewer import add_foxglove_argument, viewer_command
 
-__all__ = ["Replayer", "main", "build_parser", "open_recording", "start_viewer", "play", "REPLAY_VERBS",
+__all__ = ["Replayer", "main", "build_parser", "open_recording", "start_viewer", "play", "LiveView", "REPLAY_VERBS",
            "check_control_scenario"]
 
 REPLAY_VERBS = (*bus.CONTROL_VERBS, "seek")
@@ -441,7 +442,8 @@ def main(argv: list[str] | None = None) -> int:
                         if token is None:  # --open-control: the verbs need no token; the viewer sends an empty one
                             auth.write_private_file(token_dir / "control-token", b"")
                         playback = (token_dir / "control-token", rep.lo, rep.hi)
-                    viewer = start_viewer(stream, scenario, port, listen or args.connect or [], token_dir, playback)
+                    endpoints = listen or args.connect or []
+                    viewer = LiveView(lambda: start_viewer(stream, scenario, port, endpoints, token_dir, playback))
                     viewer_url = f"ws://127.0.0.1:{port}"
                 print(json.dumps({"replaying": stream.path, "scenario": scenario, "listen": listen,
                                   "connect": args.connect, "foxglove": viewer_url,
@@ -450,11 +452,10 @@ def main(argv: list[str] | None = None) -> int:
                                   "control_token": token,
                                   "control_token_file": None if token is None else str(token_dir / "control-token")}),
                       flush=True)
-                summary = play(rep, session, scenario, token, args, printer, stop_signal)
+                summary = play(rep, session, scenario, token, args, printer, stop_signal, viewer)
             finally:
                 rep.close()
                 if viewer is not None:
-                    viewer.stop()
                     viewer.close()
                 shutil.rmtree(token_dir, ignore_errors=True)
     printer.done(_progress_line(rep))
@@ -478,10 +479,50 @@ def start_viewer(stream: McapStream, scenario: str, port: int, endpoints: list[s
                  work)
 
 
+class LiveView:
+    """The replay's live view (``--foxglove``): the viewer child started by ``start`` (a
+    callable returning a :class:`Child`), watched by :meth:`check` and started again on
+    its port when it dies, within a :class:`RestartBudget` (as ``serve`` does); past the
+    budget the replay goes on without it and says so once.  The recording is never at
+    stake: the view only reads what the replay publishes."""
+
+    def __init__(self, start):
+        self.start = start
+        self.child: Child | None = start()
+        self.budget = RestartBudget("viewer")
+        self._next_check = 0.0
+
+    def check(self, now: float | None = None) -> None:
+        """Every half second at most: restart a dead viewer (or give up on it, once)."""
+        now = time.monotonic() if now is None else now
+        if self.child is None or now < self._next_check:
+            return
+        self._next_check = now + 0.5
+        rc = self.child.poll()
+        if rc is None:
+            return
+        old = self.child
+        why = f"the live view (pid {old.pid}) {old.how(rc)}: {old.last_words(2)}"
+        old.close()
+        if self.budget.allow(now):
+            self.child = self.start()
+            print(f"astrodyn replay: {why}; restarted it (pid {self.child.pid})", file=sys.stderr, flush=True)
+        else:
+            self.child = None
+            print(f"astrodyn replay: warning: {why}; {self.budget.refusal()}; the replay goes on without it",
+                  file=sys.stderr, flush=True)
+
+    def close(self) -> None:
+        if self.child is not None:
+            self.child.stop()
+            self.child.close()
+            self.child = None
+
+
 def play(rep: Replayer, session, scenario: str, token: str | None, args: argparse.Namespace,
-         printer: Progress, stop_signal: StopFlag) -> dict:
+         printer: Progress, stop_signal: StopFlag, view: LiveView | None = None) -> dict:
     """Publish until the end (or ``stop``, or a signal), answering control verbs on the
-    way; the final status, also the reply to each ``stop``."""
+    way (and keeping the live ``view`` up); the final status, also the reply to each ``stop``."""
     stop_requests: list[bus.ControlRequest] = []
     with bus.ControlServer(session, scenario, verbs=REPLAY_VERBS, token=token) as control:
         rep.wait_for_subscriber(args.wait)
@@ -491,6 +532,8 @@ def play(rep: Replayer, session, scenario: str, token: str | None, args: argpars
                     stop_requests.append(req)
             if rep.state == "stopped" or stop_signal.why:
                 break
+            if view is not None:
+                view.check()
             more = rep.step()
             if not more and rep.state == "finished" and not args.hold:
                 break
