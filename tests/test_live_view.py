@@ -175,11 +175,16 @@ def _check_states(got: dict, recording: Path, body: str) -> None:
         np.testing.assert_array_equal([tr["translation"][c] for c in "xyz"], by_time[ts])
 
 
-def test_replay_with_a_live_view(tmp_path):
+def _replay_with_view(tmp_path: Path, name: str, rate: str) -> tuple[Path, subprocess.Popen]:
+    """A 600 s LEO recording of scenario ``name`` and its ``replay --foxglove 0`` at ``rate``."""
     rec = tmp_path / "rec.mcap"
-    leo_recording(rec, name="rp", duration="600 s", rate="2 Hz")
-    replay = subprocess.Popen([*ASTRODYN, "replay", str(rec), "--rate", "20", "--foxglove", "0", "--wait", "30",
-                               "--quiet"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    leo_recording(rec, name=name, duration="600 s", rate="2 Hz")
+    return rec, subprocess.Popen([*ASTRODYN, "replay", str(rec), "--rate", rate, "--foxglove", "0", "--wait", "30",
+                                  "--quiet"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+
+
+def test_replay_with_a_live_view(tmp_path):
+    rec, replay = _replay_with_view(tmp_path, "rp", "20")
     try:
         hello = json.loads(replay.stdout.readline())
         got = _received(_client(tmp_path, hello["foxglove"], messages.orbit_key("rp", "leo"), 4.0))
@@ -400,10 +405,7 @@ def test_replay_restarts_a_live_view_that_dies(tmp_path):
     client connected afterwards receives the recorded states there."""
     from astrodyn.service.children import children_of
 
-    rec = tmp_path / "rec.mcap"
-    leo_recording(rec, name="rv", duration="600 s", rate="2 Hz")
-    replay = subprocess.Popen([*ASTRODYN, "replay", str(rec), "--rate", "10", "--foxglove", "0", "--wait", "30",
-                               "--quiet"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    rec, replay = _replay_with_view(tmp_path, "rv", "10")
     try:
         hello = json.loads(replay.stdout.readline())
         deadline = time.monotonic() + 30
