@@ -232,3 +232,43 @@ def test_a_70000_key_envelope_never_crashes_a_logger_and_the_file_stays_valid(tm
     else:
         assert logger.malformed >= 1  # the overflow is counted, with its reason
         assert any("channel limit" in e for e in logger.malformed_examples), logger.malformed_examples
+
+
+def test_a_replay_into_a_live_serve_is_rejected_and_serve_says_it_was_attacked(tmp_path):
+    """``astrodyn replay REC --connect <serve's hub>`` of a recording of the same scenario name:
+    every replayed state reaches serve's logger unsigned by the run's secret.  The file must
+    hold only serve's own states (each channel 0 .. N-1 once, as serve's summary counts them),
+    and serve, like run, must end with exit 3 and an ATTACKED line counting them (before:
+    exit 0 and nothing said; the counts were only in the JSON summary)."""
+    from _recordings import leo_recording, one_satellite_scene
+
+    rec = tmp_path / "other.mcap"
+    leo_recording(rec, name="tw", duration="120 s", rate="2 Hz")
+    cfg = tmp_path / "tw.toml"
+    cfg.write_text(one_satellite_scene("tw", "100000 s", "2 Hz"))
+    out = tmp_path / "served.mcap"
+    serve = subprocess.Popen([sys.executable, "-m", "astrodyn", "serve", str(cfg), "--out", str(out), "--rate", "20",
+                              "--max-wall", "60"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        hub = json.loads(serve.stdout.readline())["hub"]
+        replay = subprocess.run([sys.executable, "-m", "astrodyn", "replay", str(rec), "--connect", hub, "--rate", "inf",
+                                 "--quiet"], capture_output=True, text=True, timeout=60)
+        assert replay.returncode == 0, replay.stderr
+        replayed = json.loads(replay.stdout.strip().splitlines()[-1])
+        time.sleep(1.0)
+        serve.send_signal(15)
+        stdout, stderr = serve.communicate(timeout=90)
+    finally:
+        if serve.poll() is None:
+            serve.kill()
+            serve.communicate()
+    assert serve.returncode == 3, stderr
+    summary = json.loads(stdout.strip().splitlines()[-1])
+    unsigned = summary["logger"]["rejected"].get("unsigned", 0)
+    states = sum(len(v) for k, v in _channels(rec).items() if k.endswith(("/orbit", "/attitude")))
+    assert unsigned >= states > 0 and replayed["messages"] >= states, (summary["logger"]["rejected"], replayed)
+    assert f"astrodyn serve: ATTACKED: the logger and the plant rejected {sum(summary['logger']['rejected'].values())}" \
+        in stderr, stderr
+    for key, items in _channels(out).items():
+        if key.endswith(("/orbit", "/attitude")):
+            assert [json.loads(data)["seq"] for _, data in items] == list(range(len(items))), key  # serve's own, once each

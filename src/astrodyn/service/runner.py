@@ -66,7 +66,7 @@ from astrodyn.service.signals import catch_stop_signals
 from astrodyn.service.summary import file_summary, print_summary, propagator_rows
 from astrodyn.service.supervision import RestartBudget, next_event_seq, plan_logger_restart, wait_until_gone
 
-__all__ = ["main", "run_scenario", "ScenarioRun", "EXIT_REJECTED", "logger_base_argv", "propagator_argv"]
+__all__ = ["main", "run_scenario", "ScenarioRun", "EXIT_REJECTED", "attack_report", "logger_base_argv", "propagator_argv"]
 
 #: Most loggers of one run (``--loggers``): the main one and its hot standbys.
 MAX_LOGGERS = 8
@@ -676,19 +676,29 @@ def main(argv: list[str] | None = None) -> int:
         if result.get("interrupted"):  # shell convention: 128 + signal number
             return 128 + int(signal.Signals[result["interrupted"]])
         return 1
-    rejected = dict((result.get("logger") or {}).get("rejected") or {})
-    for reason, n in (plant.get("rejected") or {}).items():  # forged commands and answers, dropped by the plant
-        rejected[f"command {reason}"] = rejected.get(f"command {reason}", 0) + n
-    if rejected:
-        total = sum(rejected.values())
-        why = ", ".join(f"{n} {reason}" for reason, n in sorted(rejected.items()))
-        senders = (result.get("logger") or {}).get("rejected_by_sender") or {}
-        print(f"astrodyn run: ATTACKED: the logger and the plant rejected {total} messages that were not this run's own ({why}; "
-              f"senders: {', '.join(f'{s} x{n}' for s, n in senders.items())}); the recording holds only the run's "
-              f"authenticated states (counts in its 'rejected' metadata record)", file=sys.stderr)
+    attack = attack_report(result.get("logger"), plant)
+    if attack:
+        print(f"astrodyn run: ATTACKED: {attack}", file=sys.stderr)
         if not args.tolerate_rejected:
             return EXIT_REJECTED
     return 0
+
+
+def attack_report(logger: dict | None, plant: dict | None) -> str | None:
+    """What the logger's and the plant's summaries say was rejected as not the run's own
+    (forged, unsigned or replayed samples; forged commands and answers), for the
+    ``ATTACKED`` line of ``run`` and ``serve`` (docs/security.md); None when nothing was."""
+    rejected = dict((logger or {}).get("rejected") or {})
+    for reason, n in ((plant or {}).get("rejected") or {}).items():  # forged commands and answers, dropped by the plant
+        rejected[f"command {reason}"] = rejected.get(f"command {reason}", 0) + n
+    if not rejected:
+        return None
+    total = sum(rejected.values())
+    why = ", ".join(f"{n} {reason}" for reason, n in sorted(rejected.items()))
+    senders = (logger or {}).get("rejected_by_sender") or {}
+    return (f"the logger and the plant rejected {total} messages that were not this run's own ({why}; "
+            f"senders: {', '.join(f'{s} x{n}' for s, n in senders.items())}); the recording holds only the run's "
+            f"authenticated states (counts in its 'rejected' metadata record)")
 
 
 #: Largest ``--zenoh-config`` file, bytes: every process of a run parses it (Zenoh's JSON5

@@ -73,7 +73,9 @@ from astrodyn.service.children import (
 )
 from astrodyn.service.propagator import command_key
 from astrodyn.service.runner import (
+    EXIT_REJECTED,
     MAX_LOGGERS,
+    attack_report,
     check_bus_flags,
     check_closed_loop_arguments,
     checked_output_path,
@@ -498,6 +500,8 @@ class Supervisor:
         summary = self.status()
         summary["standbys"] = standbys
         summary["logger"] = log = logger.summary()
+        if "plant" in self.propagators:  # its rejected commands and answers (the ATTACKED line)
+            summary["plant"] = self.children["plant"].summary()
         summary["file"] = self.name_the_recording((log or {}).get("file"), bool(self.failures))
         if summary["file"] is None:  # the logger died, not restarted: its part stays partial
             summary["file"] = next((p for p in self._parts() if ".partial" in os.path.basename(p)), None)
@@ -617,6 +621,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--controller", action="append", default=None, metavar="CMD",
                     help="closed loop: start this controller program under serve (as with run; docs/control.md)")
     add_stall_argument(ap)
+    ap.add_argument("--tolerate-rejected", action="store_true",
+                    help="exit 0 even when the logger or the plant rejected messages that were not this run's own "
+                         "(default: exit 3, the record was attacked; docs/security.md)")
     args = ap.parse_args(argv)
     created: list[Path] = []
     try:
@@ -696,4 +703,11 @@ def main(argv: list[str] | None = None) -> int:
         print(f"astrodyn serve: error: {exc}", file=sys.stderr)
         return 1
     print(json.dumps(summary, default=str), flush=True)
-    return 1 if summary["failures"] else 0
+    if summary["failures"]:
+        return 1
+    attack = attack_report(summary.get("logger"), summary.get("plant"))
+    if attack:
+        print(f"astrodyn serve: ATTACKED: {attack}", file=sys.stderr, flush=True)
+        if not args.tolerate_rejected:
+            return EXIT_REJECTED
+    return 0
