@@ -3,6 +3,7 @@ and waiting (wall clock) until it reports what the test needs."""
 
 from __future__ import annotations
 
+import json
 import time
 from collections.abc import Callable
 
@@ -48,3 +49,20 @@ def read_run_start(stderr, timeout_s: float = 120.0) -> dict:
     assert "hub" in found and "token" in found, "".join(lines)
     found["lines"] = "".join(lines)
     return found
+
+
+def stop_serve(proc, settle_s: float = 1.0, timeout_s: float = 90.0) -> tuple[str, str, dict]:
+    """End a ``serve`` the test started (``subprocess.Popen`` with text pipes) as a user does:
+    after ``settle_s``, SIGTERM; returns ``(stdout, stderr, its final JSON summary)``.  It
+    is SIGKILLed (by PID) if it does not end within ``timeout_s``, and the test fails."""
+    import signal
+
+    time.sleep(settle_s)
+    proc.send_signal(signal.SIGTERM)
+    try:
+        stdout, stderr = proc.communicate(timeout=timeout_s)
+    except Exception:
+        proc.kill()
+        proc.communicate()
+        raise
+    return stdout, stderr, json.loads(stdout.strip().splitlines()[-1])

@@ -241,6 +241,7 @@ def test_a_replay_into_a_live_serve_is_rejected_and_serve_says_it_was_attacked(t
     and serve, like run, must end with exit 3 and an ATTACKED line counting them (before:
     exit 0 and nothing said; the counts were only in the JSON summary)."""
     from _recordings import leo_recording, one_satellite_scene
+    from _serve_control import stop_serve
 
     rec = tmp_path / "other.mcap"
     leo_recording(rec, name="tw", duration="120 s", rate="2 Hz")
@@ -255,15 +256,9 @@ def test_a_replay_into_a_live_serve_is_rejected_and_serve_says_it_was_attacked(t
                                  "--quiet"], capture_output=True, text=True, timeout=60)
         assert replay.returncode == 0, replay.stderr
         replayed = json.loads(replay.stdout.strip().splitlines()[-1])
-        time.sleep(1.0)
-        serve.send_signal(15)
-        stdout, stderr = serve.communicate(timeout=90)
     finally:
-        if serve.poll() is None:
-            serve.kill()
-            serve.communicate()
+        stdout, stderr, summary = stop_serve(serve)
     assert serve.returncode == 3, stderr
-    summary = json.loads(stdout.strip().splitlines()[-1])
     unsigned = summary["logger"]["rejected"].get("unsigned", 0)
     states = sum(len(v) for k, v in _channels(rec).items() if k.endswith(("/orbit", "/attitude")))
     assert unsigned >= states > 0 and replayed["messages"] >= states, (summary["logger"]["rejected"], replayed)

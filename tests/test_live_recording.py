@@ -10,9 +10,7 @@ that is held.
 
 from __future__ import annotations
 
-import json
 import os
-import signal
 import subprocess
 import sys
 import textwrap
@@ -22,6 +20,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from _serve_control import stop_serve
 from astrodyn.recording import McapRecorder, load
 from astrodyn.recording.writer import being_written
 
@@ -78,15 +77,9 @@ def test_recover_and_a_second_run_leave_a_live_recording_alone(tmp_path):
                                    [sys.executable, "-m", "astrodyn", command, str(cfg), "--out", str(out)],
                                    capture_output=True, text=True, timeout=60, cwd=ROOT)
             assert again.returncode == 2 and "is being recorded right now" in again.stderr, again.stderr
-        time.sleep(1.0)
-        serve.send_signal(signal.SIGTERM)
-        stdout, stderr = serve.communicate(timeout=90)
     finally:
-        if serve.poll() is None:
-            serve.kill()
-            serve.communicate()
+        stdout, stderr, summary = stop_serve(serve)
     assert serve.returncode == 0, stderr
-    summary = json.loads(stdout.strip().splitlines()[-1])
     assert summary["file"] == str(out) and not summary["failures"], summary
     run = load(out)
     assert not run.truncated and run.invalid == 0
