@@ -8,6 +8,7 @@ and every child process is stopped by its PID in a fixture finalizer.
 from __future__ import annotations
 
 import json
+import math
 import os
 import signal
 import subprocess
@@ -269,3 +270,42 @@ def test_logger_keeps_up_with_a_flood_without_loss(hub, spawn, tmp_path):
     run = load(out)
     assert run.complete and len(run.bodies) == 1000
     assert all(len(b.orbit) == steps and len(b.attitude) == steps for b in run.bodies.values())
+
+
+def test_a_rate_factor_is_a_json_number_in_range_or_inf():
+    """The ``rate`` verb's factor (serve, replay): numbers in RATE_BOUNDS and "inf" only.  A
+    bool is not a number, a numeric string is not a number, and an integer beyond float64
+    is refused with a short message (it once raised OverflowError and ended serve)."""
+    lo, hi = bus.RATE_BOUNDS
+    assert bus.parse_rate_factor(lo) == lo and bus.parse_rate_factor(hi) == hi and bus.parse_rate_factor(2) == 2.0
+    assert bus.parse_rate_factor("inf") == math.inf
+    for bad in (True, False, "5", "nan", math.nan, -1, 0, hi * 1.0001, lo * 0.9999, 10**400, [2], None, {"x": 1}):
+        with pytest.raises(ValueError, match="rate: expected") as err:
+            bus.parse_rate_factor(bad)
+        assert len(str(err.value)) < 160, err.value
+
+
+def test_a_handler_that_raises_answers_an_error_and_the_server_goes_on():
+    """``ControlRequest.handled_by``: whatever a verb's handler did not foresee becomes an
+    error reply naming the verb (serve and replay use it for every request), never an
+    exception out of the server's loop."""
+    class Query:
+        def __init__(self):
+            self.replies = []
+
+        def reply(self, key, payload):
+            self.replies.append((key, json.loads(payload)))
+
+        def drop(self):
+            pass
+
+    def explode(request):
+        raise OverflowError("int too large to convert to float")
+
+    query = Query()
+    request = bus.ControlRequest(verb="rate", args={"factor": 10**400}, key="astrodyn/s/@control/rate", _query=query)
+    assert request.handled_by(explode) is None and request.answered
+    assert query.replies == [("astrodyn/s/@control/rate",
+                              {"error": "rate: could not be handled: OverflowError: int too large to convert to float"})]
+    fine = bus.ControlRequest(verb="status", args={}, key="k", _query=Query())
+    assert fine.handled_by(lambda r: True) is True and not fine.answered  # the handler's own answer, not ours

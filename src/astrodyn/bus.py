@@ -50,6 +50,7 @@ together cover everything a scenario publishes.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import ipaddress
 import json
 import math
@@ -722,6 +723,18 @@ class ControlRequest:
         self._query.reply_err(json.dumps({"error": message}))
         self._finish()
 
+    def handled_by(self, handle) -> Any:
+        """``handle(self)``, answering with an error naming the verb if it raises (and the
+        request is still unanswered) instead of letting a request end the server; returns
+        what ``handle`` returns, None after an error."""
+        try:
+            return handle(self)
+        except Exception as exc:  # a request the handler did not foresee: its sender learns, the server goes on
+            if not self.answered:
+                with contextlib.suppress(Exception):
+                    self.reply({"error": f"{self.verb}: could not be handled: {type(exc).__name__}: {str(exc)[:200]}"})
+            return None
+
     def _finish(self) -> None:
         self.answered = True
         self._query.drop()
@@ -751,14 +764,20 @@ RATE_BOUNDS = (1e-3, 1e6)
 def parse_rate_factor(raw: Any) -> float:
     """The real-time factor of a ``rate`` verb: a number within :data:`RATE_BOUNDS` or
     ``"inf"`` (as fast as possible); ``ValueError`` naming the allowed range otherwise."""
-    try:
-        factor = float(raw)
-    except (TypeError, ValueError):
-        factor = math.nan
-    if factor == math.inf or RATE_BOUNDS[0] <= factor <= RATE_BOUNDS[1]:
+    if raw == "inf" or raw == math.inf:
+        return math.inf
+    factor = math.nan
+    if type(raw) in (int, float):  # a JSON number (not a bool, not a numeric string)
+        try:
+            factor = float(raw)
+        except OverflowError:  # an integer beyond float64
+            pass
+    if RATE_BOUNDS[0] <= factor <= RATE_BOUNDS[1]:
         return factor
+    shown = repr(raw)
+    shown = shown if len(shown) <= 40 else shown[:37] + "..."
     raise ValueError(f'rate: expected {{"factor": x}} with {RATE_BOUNDS[0]:g} <= x <= {RATE_BOUNDS[1]:g} '
-                     f'or "inf", got {raw!r}')
+                     f'or "inf", got {shown}')
 
 
 class ControlServer(_Declared):

@@ -71,6 +71,15 @@ _BATCH_PROCESS = {"orbit": "orbit", "crosscheck": "orbit", "attitude": "attitude
 _POLL_S = 0.02  # control queries are answered within about this long
 
 
+def cli_number(text: str) -> float | str:
+    """A command-line value as the number it spells (``"2"``, ``"1e3"``), else the text
+    itself ("inf", or something for the check that follows to refuse by name)."""
+    try:
+        return text if text.strip() == "inf" else float(text)
+    except ValueError:
+        return text
+
+
 def parse_rate(raw: Any, what: str = "rate") -> float:
     """A real-time factor within :data:`astrodyn.bus.RATE_BOUNDS`, or "inf" (as fast as
     possible); ``ValueError`` naming ``what`` and the allowed range otherwise."""
@@ -78,7 +87,8 @@ def parse_rate(raw: Any, what: str = "rate") -> float:
         return bus.parse_rate_factor(raw)
     except ValueError:
         lo, hi = bus.RATE_BOUNDS
-        raise ValueError(f'{what}: expected a real-time factor with {lo:g} <= x <= {hi:g} or "inf", got {raw!r}') from None
+        shown = repr(raw) if len(repr(raw)) <= 40 else repr(raw)[:37] + "..."
+        raise ValueError(f'{what}: expected a real-time factor with {lo:g} <= x <= {hi:g} or "inf", got {shown}') from None
 
 
 def scenario_of(stream: McapStream) -> str:
@@ -381,7 +391,7 @@ def build_parser() -> argparse.ArgumentParser:
 def open_recording(args: argparse.Namespace) -> tuple[float, McapStream]:
     """The replay rate and the stream of ``args.file``; ValueError for a bad flag,
     RecordingError for a file with nothing to replay."""
-    rate = parse_rate(args.rate, "--rate")
+    rate = parse_rate(cli_number(args.rate), "--rate")
     if args.wait < 0 or not math.isfinite(args.wait):
         raise ValueError(f"--wait: expected a finite number of seconds >= 0, got {args.wait}")
     for name in ("start", "end"):
@@ -528,7 +538,7 @@ def play(rep: Replayer, session, scenario: str, token: str | None, args: argpars
         rep.wait_for_subscriber(args.wait)
         while True:
             for req in control.poll():
-                if rep.handle(req):
+                if req.handled_by(rep.handle):
                     stop_requests.append(req)
             if rep.state == "stopped" or stop_signal.why:
                 break

@@ -684,7 +684,7 @@ def main(argv: list[str] | None = None) -> int:
                     while True:
                         stopping = False
                         for req in control.poll():
-                            if sup.handle(req):
+                            if req.handled_by(sup.handle):
                                 stop_requests.append(req)
                                 stopping = True
                         sup.check_children()
