@@ -361,3 +361,38 @@ def test_a_restarted_propagator_with_no_step_left_ends_when_the_logger_has_finis
     left = subprocess.run([sys.executable, "-m", "astrodyn.service.propagator", "orbit", str(CONFIGS / "demo.toml"),
                            "--start-step", str(n - 10), "--wait-logger", "2"], capture_output=True, text=True, timeout=120)
     assert left.returncode != 0 and "logger" in left.stderr, left.stderr[-2000:]
+
+
+def test_a_pause_and_a_stop_sent_while_the_propagators_start_still_reach_them(tmp_path):
+    """Serve's commands are plain puts: a propagator that subscribes after one was sent (it
+    is still loading its kernels or waiting for the logger) missed it, and ran on while
+    serve said ``paused``, or never heard ``stop`` (serve then waited its 60 s).  Serve now
+    sends pause / resume again while a propagator's heartbeat disagrees, and stop until each
+    propagator has ended.  Checked against serve's own status: paused means no propagator's
+    sim time moves; stop is answered within seconds."""
+    out = tmp_path / "early.mcap"
+    serve = subprocess.Popen([*ASTRODYN, "serve", str(ROOT / "configs" / "demo.toml"), "--out", str(out), "--rate", "20",
+                              "--max-wall", "120"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        hello = json.loads(serve.stdout.readline())
+        token = hello["control_token"]
+        with bus.open_session(connect=[hello["hub"]]) as s:
+            assert bus.send_control(s, "demo", "pause", token=token)[0]["state"] == "paused"  # at once: before they listen
+            deadline = time.monotonic() + 60
+            while time.monotonic() < deadline:  # until both have started (sent a heartbeat with a time)
+                procs = bus.send_control(s, "demo", "status", token=token)[0]["processes"]
+                if all(procs[k]["t"] is not None for k in ("orbit", "attitude")):
+                    break
+                time.sleep(0.2)
+            time.sleep(2.5)  # a re-sent pause takes at most ~1.5 s to land
+            before = bus.send_control(s, "demo", "status", token=token)[0]["processes"]
+            time.sleep(2.0)  # 40 s of sim time at x20 if they ran
+            after = bus.send_control(s, "demo", "status", token=token)[0]["processes"]
+            assert [after[k]["t"] for k in ("orbit", "attitude")] == [before[k]["t"] for k in ("orbit", "attitude")]
+            started = time.monotonic()
+            (stopped,) = bus.send_control(s, "demo", "stop", token=token, timeout_s=60)
+            assert stopped["state"] == "stopped" and time.monotonic() - started < 15, stopped
+        serve.wait(timeout=60)
+    finally:
+        stop_process(serve)
+    assert serve.returncode == 0, serve.stderr.read()[-3000:]

@@ -151,6 +151,7 @@ class Supervisor:
         if "plant" in self._argv and token_file is not None:  # outside controllers present serve's token
             self._argv["plant"] += ["--control-token-file", str(token_file)]
         self.schedule: tuple[float, float] | None = None  # (wall, t): sim t due at that monotonic wall time
+        self.pause_reasserted = 0.0  # monotonic time pause / resume was last sent again (reassert_pause)
         for kind in self.propagators:
             self.children[kind] = Child(kind, [*self._argv[kind], "--real-time-factor", str(self.rate)], tmp, env=self.child_env)
         self.verbs = (*bus.CONTROL_VERBS, "fault") if "plant" in self.propagators else bus.CONTROL_VERBS
@@ -178,6 +179,17 @@ class Supervisor:
     def command(self, verb: str, **args) -> None:
         bus.signed_put(self.commands, command_key(self.scenario.name), json.dumps({"verb": verb, **args}).encode(),
                        self.signer)
+
+    def reassert_pause(self, now: float) -> None:
+        """Send ``pause`` (or ``resume``) again, at most once a second, while a propagator's
+        heartbeat says the opposite of serve's state: one that subscribed to the commands
+        after they were sent (still starting) would otherwise run while serve is paused."""
+        if self.state not in ("running", "paused") or now - self.pause_reasserted < 1.0:
+            return
+        paused = self.state == "paused"
+        if any(self.beats.last.get(k, {}).get("paused", paused) != paused for k in self.propagators):
+            self.pause_reasserted = now
+            self.command("pause" if paused else "resume")
 
     def status(self) -> dict:
         self.beats.poll()
@@ -247,6 +259,7 @@ class Supervisor:
             if self.state in ("running", "paused") and ch.kill_if_stalled(self.beats, self.stall_s, now):
                 print(f"astrodyn serve: process {name} (pid {ch.pid}) has sent no heartbeat for {ch.stalled_s:.0f} s: "
                       f"killed as hung", file=sys.stderr, flush=True)
+        self.reassert_pause(now)
         if self.schedule is None and self.state == "running":  # the pace the propagators keep, once they do
             ts = [self.beats.last.get(k, {}).get("t") for k in self.propagators]
             if ts and all(t is not None and t > 0 for t in ts):
@@ -462,9 +475,12 @@ class Supervisor:
         deadline = time.monotonic() + timeout_s
         for kind in self.propagators:
             ch = self.children[kind]
-            try:
-                ch.proc.wait(timeout=max(0.1, deadline - time.monotonic()))
-            except Exception:
+            while ch.proc.poll() is None and time.monotonic() < deadline:
+                try:
+                    ch.proc.wait(timeout=min(0.5, max(0.01, deadline - time.monotonic())))
+                except subprocess.TimeoutExpired:  # one that subscribed to the commands after the first stop
+                    self.command("stop")  # (still starting: compiling, waiting for the logger) missed it
+            if ch.proc.poll() is None:
                 ch.stop()
         logger = self.children["logger"]
         if any(self.children[kind].poll() != 0 for kind in self.propagators):
