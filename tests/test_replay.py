@@ -229,6 +229,9 @@ def test_replay_pause_resume_rate_seek_stop_over_zenoh(hub, spawn, recording):
     _wait(lambda: col.drain() and False or len(col.got) > n_paused, 5, "messages after resume")
     assert "error" in _control(session, "rate", {"factor": "fast"}, token=token)
     assert "error" in _control(session, "seek", {"t": 1e6}, token=token)
+    for t in (10**400, 1e308, -1e308, True, "40", [40]):  # the first three once ended in OverflowError
+        assert "seek.t: expected a number of seconds" in _control(session, "seek", {"t": t}, token=token)["error"]
+    assert _control(session, "status", token=token)["state"] == "running"  # and the replay goes on
     status = _control(session, "rate", {"factor": "inf"}, token=token)
     assert status["real_time_factor"] == "inf"
     _wait(lambda: _control(session, "status", token=token)["state"] == "finished", 20, "the end of the replay")

@@ -47,7 +47,12 @@ from mcap.records import Channel, Chunk, Message, Metadata, Schema
 from astrodyn.recording.reader import chunk_limits, chunk_records, open_recording, scan_records
 from astrodyn.recording.writer import RecordingError
 
-__all__ = ["RawMessage", "McapStream", "open_stream", "topic_matcher"]
+__all__ = ["RawMessage", "McapStream", "open_stream", "topic_matcher", "MAX_T_S"]
+
+#: Largest |t| (s from the scenario epoch) a time given to a stream may have: 1e12 s
+#: (~31,700 years) is beyond any recording (scenarios are capped at 250 years) and keeps
+#: ``t * 1e9`` ns exact enough and finite.
+MAX_T_S = 1e12
 
 _HEADER = struct.Struct("<BQ")
 _CHUNK_HEAD = struct.Struct("<QQ")  # message_start_time, message_end_time
@@ -180,8 +185,10 @@ class McapStream:
         epoch = self.epoch_ns
         if epoch is None:
             raise RecordingError(f"{self.path}: {what}: the file has no epoch_unix_ns metadata, give log times in ns instead")
-        if not isinstance(t, (int, float)) or t != t or t in (float("inf"), float("-inf")):
-            raise ValueError(f"{what}: expected a finite number of seconds since the scenario epoch, got {t!r}")
+        if type(t) not in (int, float) or not abs(t) <= MAX_T_S:  # (not a bool; NaN fails the comparison)
+            shown = repr(t) if len(repr(t)) <= 40 else repr(t)[:37] + "..."
+            raise ValueError(f"{what}: expected a number of seconds since the scenario epoch within +-{MAX_T_S:g}, "
+                             f"got {shown}")
         return epoch + round(t * 1e9)
 
     def ns_to_t(self, ns: int) -> float:

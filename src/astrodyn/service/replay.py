@@ -312,7 +312,7 @@ class Replayer:
         self._anchor(int(v) if math.isfinite(v) else (self.last_ns or self._anchor_ns))
 
     def seek(self, t: Any) -> None:
-        ns = self.stream.t_to_ns(float(t) if isinstance(t, (int, float, str)) else t, "seek.t")
+        ns = self.stream.t_to_ns(t, "seek.t")
         ns = max(ns, self.lo) if self.lo is not None else ns
         if self.hi is not None and ns > self.hi:
             raise ValueError(f"seek.t: expected t <= end ({self.stream.ns_to_t(self.hi)} s), got {t!r}")
