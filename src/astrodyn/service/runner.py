@@ -482,7 +482,7 @@ def progress_line(last: dict, propagators: list[str], duration: float, dt: float
     line = (f"  sim t {t_min:10.1f} / {duration:.1f} s  ({100 * t_min / max(duration, 1e-300):5.1f} %)"
             f"  logged {msgs:>9d}  {rate:9.0f} msg/s")
     if preparing:
-        line += f"  [{', '.join(preparing)}: compiling numeric kernels; first run only, cached afterwards]"
+        line += f"  [{', '.join(preparing)}: loading numeric kernels (compiled on the first run only, cached afterwards)]"
     return line
 
 
@@ -558,8 +558,9 @@ def _watch(scenario: Scenario, p, children: dict, beats, alive, progress: bool, 
                         now):
             last_msgs, last_time = beats.last.get("logger", {}).get("messages", 0), now
         if interrupted is not None and interrupted["signal"]:
-            ts = [beats.last.get(k, {}).get("t", 0.0) for k in propagators]
-            return f"interrupted by {interrupted['signal']} at sim t {min(ts) if ts else 0.0:.6g} s of {duration:.6g} s"
+            ts = [t for k in propagators if (t := beats.last.get(k, {}).get("t")) is not None]  # those heard from
+            ts = ts or [beats.last.get("logger", {}).get("t", 0.0)]  # (a propagator that has ended beats no more)
+            return f"interrupted by {interrupted['signal']} at sim t {min(ts):.6g} s of {duration:.6g} s"
         if timeout_s is not None and now - t0 > timeout_s:
             return f"timeout: the run took longer than {timeout_s} s"
         time.sleep(0.05)
