@@ -368,8 +368,9 @@ def test_a_pause_and_a_stop_sent_while_the_propagators_start_still_reach_them(tm
     is still loading its kernels or waiting for the logger) missed it, and ran on while
     serve said ``paused``, or never heard ``stop`` (serve then waited its 60 s).  Serve now
     sends pause / resume again while a propagator's heartbeat disagrees, and stop until each
-    propagator has ended.  Checked against serve's own status: paused means no propagator's
-    sim time moves; stop is answered within seconds."""
+    propagator has ended; the rate likewise.  Checked against serve's own status: paused
+    means no propagator's sim time moves, then each moves at the rate set; stop is answered
+    within seconds."""
     out = tmp_path / "early.mcap"
     serve = subprocess.Popen([*ASTRODYN, "serve", str(ROOT / "configs" / "demo.toml"), "--out", str(out), "--rate", "20",
                               "--max-wall", "120"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
@@ -378,6 +379,7 @@ def test_a_pause_and_a_stop_sent_while_the_propagators_start_still_reach_them(tm
         token = hello["control_token"]
         with bus.open_session(connect=[hello["hub"]]) as s:
             assert bus.send_control(s, "demo", "pause", token=token)[0]["state"] == "paused"  # at once: before they listen
+            assert bus.send_control(s, "demo", "rate", {"factor": 5}, token=token)[0]["real_time_factor"] == 5
             deadline = time.monotonic() + 60
             while time.monotonic() < deadline:  # until both have started (sent a heartbeat with a time)
                 procs = bus.send_control(s, "demo", "status", token=token)[0]["processes"]
@@ -389,6 +391,13 @@ def test_a_pause_and_a_stop_sent_while_the_propagators_start_still_reach_them(tm
             time.sleep(2.0)  # 40 s of sim time at x20 if they ran
             after = bus.send_control(s, "demo", "status", token=token)[0]["processes"]
             assert [after[k]["t"] for k in ("orbit", "attitude")] == [before[k]["t"] for k in ("orbit", "attitude")]
+            assert bus.send_control(s, "demo", "resume", token=token)[0]["state"] == "running"
+            time.sleep(1.5)  # re-anchored at the resume, then paced at x5 (x20 if the rate had been missed)
+            first = bus.send_control(s, "demo", "status", token=token)[0]["processes"]
+            time.sleep(4.0)
+            last = bus.send_control(s, "demo", "status", token=token)[0]["processes"]
+            for k in ("orbit", "attitude"):  # 20 s of sim time at x5 (+- heartbeat periods); x20 would give ~80 s
+                assert 10 <= last[k]["t"] - first[k]["t"] <= 40, (k, first[k]["t"], last[k]["t"])
             started = time.monotonic()
             (stopped,) = bus.send_control(s, "demo", "stop", token=token, timeout_s=60)
             assert stopped["state"] == "stopped" and time.monotonic() - started < 15, stopped

@@ -470,7 +470,8 @@ def pace_to(t: float, pacer: Pacer, supervisor, stopping: dict, heartbeat, comma
         time.sleep(min(wait, 0.05) if wait > 0 else 0.05)
         if while_waiting is not None:
             while_waiting()
-        heartbeat.beat(t=t_reached, paused=pacer.paused)
+        heartbeat.beat(t=t_reached, paused=pacer.paused,  # (the state a supervisor checks its commands against)
+                       rate=pacer.factor if math.isfinite(pacer.factor) else "inf")
         obey_commands(supervisor, pacer, t, stopping, heartbeat, commands_from, more_verbs)
         wait = pacer.wait_time(t)
 

@@ -181,15 +181,21 @@ class Supervisor:
                        self.signer)
 
     def reassert_pause(self, now: float) -> None:
-        """Send ``pause`` (or ``resume``) again, at most once a second, while a propagator's
-        heartbeat says the opposite of serve's state: one that subscribed to the commands
-        after they were sent (still starting) would otherwise run while serve is paused."""
+        """Send ``pause`` / ``resume`` and ``rate`` again, at most once a second, while a
+        propagator's heartbeat (those it sends while it paces) says otherwise than serve's
+        state: one that subscribed to the commands after they were sent (still starting)
+        would otherwise run while serve is paused, or at the old rate."""
         if self.state not in ("running", "paused") or now - self.pause_reasserted < 1.0:
             return
         paused = self.state == "paused"
-        if any(self.beats.last.get(k, {}).get("paused", paused) != paused for k in self.propagators):
+        rate = "inf" if math.isinf(self.rate) else self.rate
+        beats = [self.beats.last.get(k, {}) for k in self.propagators]
+        if any(hb.get("paused", paused) != paused for hb in beats):
             self.pause_reasserted = now
             self.command("pause" if paused else "resume")
+        if any(hb.get("rate", rate) != rate for hb in beats):
+            self.pause_reasserted = now
+            self.command("rate", factor=self.rate)
 
     def status(self) -> dict:
         self.beats.poll()
