@@ -812,6 +812,10 @@ def expendable_under_memory_pressure() -> None:
         pass
 
 
+#: Seconds a playback request that comes before the viewer's bus session is open waits for it.
+SESSION_WAIT_S = 20.0
+
+
 class PlaybackBar:
     """Foxglove's playback bar (play, pause, speed, seek) wired to a replay's control verbs
     (``replay --foxglove PORT --foxglove-playback``): each PlaybackControlRequest becomes
@@ -822,8 +826,15 @@ class PlaybackBar:
 
     def __init__(self, scenario: str, token: str, time_range: tuple[int, int], epoch_ns: int):
         self.scenario, self.token, self.time_range, self.epoch_ns = scenario, token, time_range, epoch_ns
-        self.session = None  # set once the bus session is open
+        self.session = None  # set once the bus session is open (open_on)
+        self.opened = threading.Event()
         self.speed = 1.0
+
+    def open_on(self, session) -> None:
+        """The bus session the requests go out on: the WebSocket server starts first, so a
+        request that comes before it waits for it (:data:`SESSION_WAIT_S`), not refused."""
+        self.session = session
+        self.opened.set()
 
     def _send(self, verb: str, args: dict | None = None) -> dict:
         replies = bus.send_control(self.session, self.scenario, verb, args, timeout_s=5.0, token=self.token)
@@ -839,8 +850,8 @@ class PlaybackBar:
         did_seek = request.seek_time is not None
         reply: dict = {}
         try:
-            if self.session is None:
-                raise ValueError("the viewer's bus session is not open yet")
+            if not self.opened.wait(SESSION_WAIT_S):
+                raise ValueError(f"the viewer's bus session did not open within {SESSION_WAIT_S:g} s")
             if did_seek:
                 reply = self._send("seek", {"t": (int(request.seek_time) - self.epoch_ns) / 1e9})
             speed = float(request.playback_speed)
@@ -993,7 +1004,7 @@ def main(argv: list[str] | None = None) -> int:
             if verbs:
                 view.add_control_services(session, args.scenario, verbs)
             if playback is not None:
-                playback.session = session
+                playback.open_on(session)
             print(json.dumps({"foxglove": f"ws://{args.host}:{view.port}", "scenario": args.scenario,
                               "authenticated": samples.verifier is not None}), flush=True)
             failure = run_view_frames(session, 1.0 / args.rate, stop, samples, scene, view, guard)
