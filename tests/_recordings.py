@@ -98,3 +98,16 @@ q = [1, 0, 0, 0]
 w = [0.01, 0.2, 0.01]
 inertia = [1.0, 2.0, 3.0]
 {extra}"""
+
+
+def payloads_by_topic(path: Path, suffixes: tuple[str, ...]) -> dict[str, list[bytes]]:
+    """topic -> the payloads recorded on it, in file order, for the topics ending with one of
+    ``suffixes`` (read with astrodyn's crash-tolerant stream reader)."""
+    from astrodyn.recording.stream import open_stream
+
+    out: dict[str, list[bytes]] = {}
+    with open_stream(path) as s:
+        for m in s.messages():
+            if m.topic.endswith(suffixes):
+                out.setdefault(m.topic, []).append(bytes(m.data))
+    return out

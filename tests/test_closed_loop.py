@@ -22,9 +22,9 @@ import numpy as np
 import pytest
 import zenoh
 
+from _recordings import payloads_by_topic
 from _serve_control import read_run_start
 from astrodyn.recording import load
-from astrodyn.recording.stream import open_stream
 
 pytestmark = pytest.mark.network
 ROOT = Path(__file__).resolve().parents[1]
@@ -44,15 +44,6 @@ def _config(name: str, tmp_path: Path, **replace: str) -> Path:
 
 def _run(args: list, timeout: float = 240) -> subprocess.CompletedProcess:
     return subprocess.run([*RUN, *map(str, args), "--quiet"], capture_output=True, text=True, timeout=timeout, cwd=ROOT)
-
-
-def _payloads(path: Path, suffixes: tuple[str, ...]) -> dict[str, list[bytes]]:
-    out: dict[str, list[bytes]] = {}
-    with open_stream(path) as s:
-        for m in s.messages():
-            if m.topic.endswith(suffixes):
-                out.setdefault(m.topic, []).append(bytes(m.data))
-    return out
 
 
 def test_hohmann_example_reaches_the_circular_target_orbit_with_vallados_delta_v(tmp_path):
@@ -109,7 +100,7 @@ def test_lockstep_is_deterministic_and_commands_resimulate_bit_for_bit(tmp_path)
     proc = _run([cfg, "--out", c, "--commands", a])
     assert proc.returncode == 0, proc.stderr
     kinds = ("/attitude", "/gyro", "/star_tracker", "/tachometer", "/actuators", "/command")
-    pa, pb, pc = (_payloads(p, kinds) for p in (a, b, c))
+    pa, pb, pc = (payloads_by_topic(p, kinds) for p in (a, b, c))
     assert set(pa) == {f"astrodyn/slew/sc{k}" for k in kinds}
     assert len(pa["astrodyn/slew/sc/attitude"]) == 201
     assert pa == pb  # two lockstep runs, same deterministic controller: identical payloads
@@ -371,7 +362,7 @@ def test_serve_runs_a_free_closed_loop_with_its_controller_and_stops_cleanly(tmp
     proc = _run([cfg, "--out", again, "--commands", summary["file"]])
     assert proc.returncode == 0, proc.stderr
     kinds = ("/attitude", "/gyro", "/actuators", "/command")
-    first, second = _payloads(Path(summary["file"]), kinds), _payloads(again, kinds)
+    first, second = payloads_by_topic(Path(summary["file"]), kinds), payloads_by_topic(again, kinds)
     for key, payloads in first.items():
         assert second[key][:len(payloads)] == payloads, key
 

@@ -35,9 +35,9 @@ from pathlib import Path
 
 import pytest
 
+from _recordings import payloads_by_topic
 from _serve_control import read_run_start
 from astrodyn.plant import CommandRefused, Plant
-from astrodyn.recording.stream import open_stream
 from astrodyn.scenario import load
 
 pytestmark = pytest.mark.network
@@ -218,12 +218,7 @@ def _run(start, cfg: Path, out: Path, signals: Path, controller: Path | None, fo
 
 
 def _payloads(path: Path) -> dict[str, list[bytes]]:
-    out: dict[str, list[bytes]] = {}
-    with open_stream(path) as s:
-        for m in s.messages():
-            if m.topic.endswith(KINDS):
-                out.setdefault(m.topic, []).append(bytes(m.data))
-    return out
+    return payloads_by_topic(path, KINDS)
 
 
 def _controller_report(signals: Path) -> list[str]:

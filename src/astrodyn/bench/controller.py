@@ -34,10 +34,11 @@ _GYRO = msgspec.json.Decoder(_Gyro)
 _encode = msgspec.json.Encoder().encode
 
 
-def answer(raw: bytes, base: str, name: str, seqs: dict[str, int]) -> tuple[list[tuple[str, bytes]], bytes]:
-    """The commands ``(key, payload)`` for the tick ``raw`` (one per body with a gyro
-    sample; ``seqs`` the per-body command counters, updated) and the answer's payload."""
-    tick = _TICK.decode(raw)
+def answer(raw: bytes | _Tick, base: str, name: str, seqs: dict[str, int]) -> tuple[list[tuple[str, bytes]], bytes]:
+    """The commands ``(key, payload)`` for the tick ``raw`` (its payload, or already
+    decoded; one command per body with a gyro sample; ``seqs`` the per-body command
+    counters, updated) and the answer's payload."""
+    tick = raw if isinstance(raw, _Tick) else _TICK.decode(raw)
     commands = []
     for key, msg in tick.samples.items():
         body, _, kind = key.partition("/")
@@ -81,11 +82,11 @@ def main() -> int:
         gc.freeze()  # what is loaded now stays: out of the cyclic collector's scans
         last_tick = -1
         while raw := ticks.recv().payload.to_bytes():
-            tick_seq = _TICK.decode(raw).seq
-            if tick_seq <= last_tick:  # the plant's repeat of a tick already answered (late joiners' copy)
+            tick = _TICK.decode(raw)  # once: the seq check and the answer share it
+            if tick.seq <= last_tick:  # the plant's repeat of a tick already answered (late joiners' copy)
                 continue
-            last_tick = tick_seq
-            commands, done = answer(raw, base, name, seqs)
+            last_tick = tick.seq
+            commands, done = answer(tick, base, name, seqs)
             if commands:  # one envelope: the commands and the answer (docs/control.md)
                 put(batch_key, messages.encode_batch([*commands, (done_key, done)]))
             else:
