@@ -10,6 +10,8 @@ from __future__ import annotations
 import importlib
 import sys
 
+from astrodyn.console import keep_working_when_output_closes
+
 # sub-command -> (module, one-line help)
 COMMANDS: dict[str, tuple[str, str]] = {
     "demo": ("astrodyn.demo", "run the demo scene (the README's main job)"),
@@ -37,6 +39,7 @@ def _usage() -> str:
 
 def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
+    keep_working_when_output_closes()  # a closed pipe on stdout / stderr never ends a run (astrodyn.console)
     if not argv or argv[0] in ("-h", "--help", "help"):
         print(_usage())
         return 0
