@@ -294,6 +294,7 @@ def test_serve_restarts_a_killed_or_hung_propagator_from_the_last_state(tmp_path
     port = bus.free_port()
     out = tmp_path / "serve.mcap"
     cfg = _config(tmp_path, "30 d")
+    scn = load_scenario(cfg)  # the scene serve starts with
     proc = subprocess.Popen([*ASTRODYN, "serve", str(cfg), "--out", str(out), "--rate", "300", "--port", str(port),
                              "--max-wall", "150", "--stall-timeout", "3"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             text=True)
@@ -301,6 +302,9 @@ def test_serve_restarts_a_killed_or_hung_propagator_from_the_last_state(tmp_path
     try:
         hello = json.loads(proc.stdout.readline())
         assert hello["serving"] == "demo"
+        # the user edits the config while serve runs: the restarted propagator must still run
+        # the scene serve checked at its start (before: it read the edited file, a 7000 km ISS)
+        cfg.write_text(cfg.read_text().replace('a = "6795 km"', 'a = "7000 km"'))
         token = hello["control_token"]
         with bus.open_session(connect=[bus.loopback_endpoint(port)]) as s, bus.AliveWatcher(s, "demo") as alive:
             status = serve_status(s, "demo", token)
@@ -346,7 +350,6 @@ def test_serve_restarts_a_killed_or_hung_propagator_from_the_last_state(tmp_path
     detail = json.loads(ev["detail"])
     assert ev["process"] == "serve" and detail["process"] == "orbit" and detail["from_step"] == restart["from_step"] > 0
     assert detail["from_step"] - 1 == round(ev["t"] * 1.0)  # rate 1 Hz: the step of the state it continued from
-    scn = load_scenario(cfg)
     engine = OrbitEngine(scn)
     for name, b in run.bodies.items():
         track = b.orbit

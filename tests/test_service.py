@@ -174,6 +174,47 @@ def test_unwritable_output_is_a_clear_error(tmp_path):
     assert proc.returncode == 2 and "--out" in proc.stderr and "directory" in proc.stderr
 
 
+def test_a_config_read_from_a_pipe_runs(tmp_path):
+    """``astrodyn run <(generate-config)``: the config is a pipe, readable once.  The run reads
+    it once and hands its processes a copy (before: each process opened the pipe again, the
+    logger died 5 times and the run failed)."""
+    import threading
+
+    fifo = tmp_path / "generated.toml"
+    os.mkfifo(fifo)
+    text = (CONFIGS / "demo.toml").read_text().replace('duration = "93 min"', 'duration = "10 min"')
+
+    def generate() -> None:
+        with open(fifo, "w") as f:  # waits for the run to open it (the test's wait below bounds it)
+            f.write(text)
+
+    writer = threading.Thread(target=generate, daemon=True)
+    writer.start()
+    out = tmp_path / "piped.mcap"
+    proc = subprocess.run([*ASTRODYN, "run", str(fifo), "--out", str(out), "--quiet"], capture_output=True, text=True,
+                          timeout=300)
+    writer.join(timeout=5)
+    assert proc.returncode == 0, proc.stderr
+    scenario = load(CONFIGS / "demo.toml")
+    steps = int(10 * 60 * scenario.rate) + 1
+    channels, _, _, _ = _read_plain(out)
+    states = {topic: msgs for topic, msgs in channels.items() if topic.endswith(("/orbit", "/attitude"))}
+    assert len(states) == 5  # iss, cubesat: orbit + attitude; molniya: orbit
+    for topic, msgs in states.items():
+        assert [payload["seq"] for _, _, payload in msgs] == list(range(steps)), topic
+
+
+@pytest.mark.parametrize("command", ["run", "serve"])
+def test_a_fifo_out_is_refused_at_once(tmp_path, command):
+    fifo = tmp_path / "x.mcap"
+    os.mkfifo(fifo)  # nobody writes it: reading it blocks (the check used to, forever)
+    proc = subprocess.run([*ASTRODYN, command, str(CONFIGS / "demo.toml"), "--out", str(fifo)], capture_output=True,
+                          text=True, timeout=60)
+    assert proc.returncode == 2
+    assert f"--out {fifo}: exists and is not an MCAP recording (expected a regular file, got a FIFO)" in proc.stderr
+    assert stat.S_ISFIFO(os.stat(fifo).st_mode)
+
+
 def _long_config(tmp_path: Path, duration: str = "30 d") -> Path:
     text = (CONFIGS / "demo.toml").read_text().replace('duration = "93 min"', f'duration = "{duration}"')
     cfg = tmp_path / "long.toml"

@@ -45,7 +45,7 @@ def one(n_bodies: int, steps: int, work: Path, wheels: bool) -> dict:
     cfg = work / f"c{n_bodies}{'w' if wheels else ''}.toml"
     cfg.write_text(scene(n_bodies, steps, wheels=wheels))
     out = work / f"c{n_bodies}{'w' if wheels else ''}.mcap"
-    result = run_scenario(load(cfg), cfg, out, progress=False, timeout_s=1800,
+    result = run_scenario(load(cfg), out, progress=False, timeout_s=1800,
                           controllers=[f"{sys.executable} -m astrodyn.bench.controller"])
     plant = (result["processes"].get("plant") or {}).get("summary") or {}
     if not result.get("ok") or not plant:

@@ -221,7 +221,7 @@ def run_scene(scene: Scene, workdir: Path, template: str, keep: bool = False) ->
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.monotonic()
     with ProcSampler() as sampler:
-        result = run_scenario(scenario, config, out, real_time_factor=scene.real_time_factor, progress=False,
+        result = run_scenario(scenario, out, real_time_factor=scene.real_time_factor, progress=False,
                               authenticate=scene.authenticate)
     wall = time.monotonic() - t0
     after = resource.getrusage(resource.RUSAGE_CHILDREN)

@@ -355,7 +355,10 @@ class Scenario:
     ``epoch_unix_ns`` the same instant as integer ns since 1970-01-01T00:00:00 UTC
     (POSIX, leap seconds not counted; MCAP ``log_time = epoch_unix_ns + round(t * 1e9)``).
     ``duration`` s, ``rate`` Hz (outputs at ``t = k / rate``, k = 0 .. ``n_steps - 1``).
-    ``config`` is the parsed TOML (JSON-safe) as given, ``source`` the file it came from.
+    ``config`` is the parsed TOML (JSON-safe) as given, ``source`` the file it came from,
+    ``text`` the TOML text itself when it was loaded from text (:func:`load`, :func:`loads`;
+    None from :func:`load_dict`): what a run hands its processes, so that every process
+    runs the scene its supervisor checked (:func:`astrodyn.service.children.config_snapshot`).
     """
 
     name: str
@@ -376,6 +379,7 @@ class Scenario:
     control: Control | None = None  #: the closed loop's [control] table (docs/control.md)
     source: str = "<string>"
     config: dict[str, Any] = field(default_factory=dict)
+    text: str | None = field(default=None, repr=False)
 
     @property
     def n_steps(self) -> int:
@@ -992,7 +996,7 @@ def loads(text: str, source: str = "<string>", base_dir: str | Path | None = Non
         raise ctx.error("toml", "valid TOML", str(exc), raw=True) from None
     except RecursionError:
         raise ctx.error("toml", "valid TOML", "nesting too deep", raw=True) from None
-    return load_dict(data, source=source, base_dir=base_dir)
+    return dataclasses.replace(load_dict(data, source=source, base_dir=base_dir), text=text)
 
 
 def load_dict(data: dict[str, Any], source: str = "<dict>", base_dir: str | Path | None = None) -> Scenario:

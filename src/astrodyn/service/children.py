@@ -39,10 +39,14 @@ import threading
 import time
 from collections.abc import Iterator
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from astrodyn import auth, bus
 
-__all__ = ["Child", "wait_ready", "children_of", "logger_command", "propagator_command", "plant_command", "controller_argv", "start_controller", "share_fate_with_supervisor",
+if TYPE_CHECKING:
+    from astrodyn.scenario import Scenario
+
+__all__ = ["Child", "config_snapshot", "wait_ready", "children_of", "logger_command", "propagator_command", "plant_command", "controller_argv", "start_controller", "share_fate_with_supervisor",
            "stop_process", "work_directory", "SUPERVISOR_ENV", "ORPHAN_GRACE_S", "EXIT_ORPHANED", "LOGGED_WAIT_S",
            "MODEL_ENDED_EXIT", "DISK_FULL_EXIT", "StartError"]
 
@@ -122,6 +126,27 @@ def work_directory(beside: Path, kind: str) -> Iterator[Path]:
         yield path
     finally:
         shutil.rmtree(path, ignore_errors=True)
+
+
+def config_snapshot(scenario: Scenario, work: Path) -> Path:
+    """Write the TOML text ``scenario`` was loaded from to ``work/config.toml`` (readable by
+    the user only) and return its path: the config every process of the run loads.
+
+    The supervisor reads the file the user named once: a process started or restarted later
+    (a crash, hours into ``serve``) must not run a file edited since, and a config given as a
+    pipe (``astrodyn run <(generate)``) can be read only once.  StartError for a scenario
+    without text (built with ``load_dict``) or a work directory that cannot take the file."""
+    if scenario.text is None:
+        raise StartError(f"scenario {scenario.name!r} ({scenario.source}) has no config text to hand to its "
+                         f"processes; load it with astrodyn.scenario.load() or loads()")
+    path = Path(work) / "config.toml"
+    try:
+        fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
+        with os.fdopen(fd, "w", encoding="utf-8") as f:
+            f.write(scenario.text)
+    except OSError as exc:
+        raise StartError(f"{path}: cannot write the run's copy of its config: {exc.strerror or exc}") from None
+    return path
 
 
 def children_of(parent: int) -> dict[int, list[str]]:

@@ -758,7 +758,7 @@ def scenario_metadata(args: argparse.Namespace) -> dict:
     if args.config:
         with open(args.config, encoding="utf-8") as f:
             meta["config"] = f.read()
-        meta["config_path"] = args.config
+        meta["config_path"] = meta.get("source", args.config)  # the file the user named (--config is the run's copy)
     return meta
 
 

@@ -12,13 +12,11 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from astrodyn.recording.reader import MCAP_MAGIC
+from astrodyn.recording.reader import MCAP_MAGIC, RecordingError, open_recording
 from astrodyn.recording.writer import being_written, partial_path
 from astrodyn.scenario import ScenarioError
 
-__all__ = ["check_output_path", "MCAP_MAGIC"]
-
-#: The first 8 bytes of every MCAP file.
+__all__ = ["check_output_path"]
 
 
 def _same_file(a: Path, b: Path) -> bool:
@@ -45,11 +43,14 @@ def check_output_path(path: Path, inputs: tuple = ()) -> None:
         if given is not None and (_same_file(path, Path(given)) or path.resolve() == Path(given).resolve()):
             raise ScenarioError(f"--out {path}: names an input of the run ({given}); expected a new .mcap path")
     if path.exists():
-        try:
-            with open(path, "rb") as f:
-                head = f.read(len(MCAP_MAGIC))
-        except OSError as exc:
-            raise ScenarioError(f"--out {path}: exists and cannot be read ({exc.strerror or exc})") from None
+        try:  # non-blocking (a FIFO would hang the read), regular files only (a device is never a recording)
+            f, _ = open_recording(str(path))
+        except RecordingError as exc:  # "<path>: cannot open: <why>"
+            why = str(exc).rpartition(": cannot open: ")[2]
+            raise ScenarioError(f"--out {path}: exists and is not an MCAP recording ({why}); it is never written "
+                                f"to (expected a new path or an earlier recording to replace)") from None
+        with f:
+            head = f.read(len(MCAP_MAGIC))
         if head != MCAP_MAGIC:
             raise ScenarioError(f"--out {path}: exists and is not an MCAP recording; it is never overwritten "
                                 f"(expected a new path or an earlier recording to replace)")

@@ -53,6 +53,7 @@ from astrodyn.service.children import (
     Child,
     StartError,
     add_stall_argument,
+    config_snapshot,
     logger_command,
     plant_command,
     propagator_command,
@@ -95,13 +96,17 @@ def propagator_argv(kind: str, config_path: Path, connect_args: list[str], *opti
             *connect_args]
 
 
-def run_scenario(scenario: Scenario, config_path: Path, out: Path, *, cross_check: bool = False,
+def run_scenario(scenario: Scenario, out: Path, *, cross_check: bool = False,
                  real_time_factor: float = math.inf, connect: list[str] | None = None,
                  progress: bool = True, timeout_s: float | None = None, extra_args: dict | None = None,
                  logger_args: list[str] | None = None, zenoh_config: str | None = None,
                  authenticate: bool = True, controllers: list[str] | None = None,
                  commands: Path | None = None, loggers: int = 1, stall_s: float | None = STALL_S) -> dict:
     """Run ``scenario`` with real processes; return the result dict (see :func:`main`).
+
+    The processes load the config text ``scenario`` was loaded from (``scenario.text``),
+    copied into the run's work directory (:func:`~astrodyn.service.children.config_snapshot`),
+    never the file the user named: an edit made while the run goes on changes nothing.
 
     ``zenoh_config``: a Zenoh JSON5 file (TLS, access control) every process starts from.
     ``controllers``: command lines of the closed loop's controllers (``--controller``),
@@ -121,7 +126,7 @@ def run_scenario(scenario: Scenario, config_path: Path, out: Path, *, cross_chec
     (summary, indexes, footer, and an "end" metadata record with the sim time reached);
     ``result["interrupted"]`` names the signal.
     """
-    return ScenarioRun(scenario, config_path, out, cross_check=cross_check, real_time_factor=real_time_factor,
+    return ScenarioRun(scenario, out, cross_check=cross_check, real_time_factor=real_time_factor,
                        connect=connect, progress=progress, timeout_s=timeout_s, extra_args=extra_args,
                        logger_args=logger_args, zenoh_config=zenoh_config, authenticate=authenticate,
                        controllers=controllers, commands=commands, loggers=loggers, stall_s=stall_s).run()
@@ -131,12 +136,13 @@ class ScenarioRun:
     """One ``astrodyn run``: the module docstring's steps, one method each (start the
     logger, the propagators and the controllers, watch, restart what dies, finish)."""
 
-    def __init__(self, scenario: Scenario, config_path: Path, out: Path, *, cross_check: bool,
+    def __init__(self, scenario: Scenario, out: Path, *, cross_check: bool,
                  real_time_factor: float, connect: list[str] | None, progress: bool, timeout_s: float | None,
                  extra_args: dict | None, logger_args: list[str] | None, zenoh_config: str | None,
                  authenticate: bool, controllers: list[str] | None, commands: Path | None, loggers: int = 1,
                  stall_s: float | None = STALL_S):
-        self.scenario, self.config_path, self.out = scenario, config_path, out
+        self.scenario, self.out = scenario, out
+        self.config_path: Path | None = None  # the run's copy of the config (run())
         self.stall_s = stall_s
         self.cross_check, self.real_time_factor = cross_check, real_time_factor
         self.progress, self.timeout_s = progress, timeout_s
@@ -174,6 +180,7 @@ class ScenarioRun:
                 bus.HeartbeatMonitor(session, scenario.name, verifier=secret and auth.Verifier(secret)) as beats, \
                 bus.AliveWatcher(session, scenario.name) as alive:
             self.session, self.tmpd = session, Path(tmp)
+            self.config_path = config_snapshot(scenario, self.tmpd)
             # the run's identity: children sign what they publish (docs/security.md)
             self.child_env = {auth.SECRET_ENV: str(secret.save(self.tmpd))} if secret is not None else None
             if "plant" in self.propagators and secret is not None:  # outside controllers join with this token
@@ -628,7 +635,7 @@ def main(argv: list[str] | None = None) -> int:
         if resume:
             print(f"  resuming from {args.resume} at step {resume['step']} (t = {resume['t']:.6g} s)", file=sys.stderr)
         try:
-            result = run_scenario(scenario, Path(args.config), out, cross_check=args.cross_check, connect=args.connect,
+            result = run_scenario(scenario, out, cross_check=args.cross_check, connect=args.connect,
                                   progress=not args.quiet, timeout_s=args.timeout, extra_args=resume.get("extra_args"),
                                   logger_args=resume.get("logger_args"), zenoh_config=args.zenoh_config,
                                   controllers=args.controller, commands=Path(args.commands) if args.commands else None,

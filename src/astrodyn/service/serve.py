@@ -66,6 +66,7 @@ from astrodyn.service.children import (
     Child,
     StartError,
     add_stall_argument,
+    config_snapshot,
     start_controller,
     wait_ready,
     wall_seconds,
@@ -98,7 +99,7 @@ __all__ = ["main", "Supervisor", "roll_settings", "check_serve_flags", "ROLL_INT
 class Supervisor:
     """Starts the processes of one scenario and answers the control verbs (module docstring)."""
 
-    def __init__(self, scenario, config_path: Path, out: Path, session, hub: str, *, rate: float,
+    def __init__(self, scenario, out: Path, session, hub: str, *, rate: float,
                  roll_size: int | None = None, roll_interval: float | None = None, connect=(), tmp: Path,
                  max_restarts: int = 5, zenoh_config: str | None = None, foxglove_port: int | None = None,
                  controllers: list[str] | None = None, token_file: Path | None = None, loggers: int = 1,
@@ -123,6 +124,8 @@ class Supervisor:
             connect_args += ["--zenoh-config", str(zenoh_config)]
         meta = tmp / "scenario.json"
         meta.write_text(json.dumps(scenario.to_metadata()))
+        # every process, restarted ones too, runs the text checked at the start, not the file as it is now
+        config_path = config_snapshot(scenario, tmp)
         # the run's identity: children sign what they publish, commands are signed by us
         secret = auth.RunSecret.generate()
         self.child_env = {auth.SECRET_ENV: str(secret.save(tmp))}
@@ -686,7 +689,7 @@ def main(argv: list[str] | None = None) -> int:
                 except OSError as exc:
                     raise StartError(f"{token_file}: cannot write the control token: {exc.strerror or exc}") from None
             try:
-                sup = Supervisor(scenario, Path(args.config), out, session, hub, rate=rate, roll_size=roll_size,
+                sup = Supervisor(scenario, out, session, hub, rate=rate, roll_size=roll_size,
                                  roll_interval=roll_interval, connect=args.connect, tmp=Path(tmp),
                                  zenoh_config=args.zenoh_config,
                                  foxglove_port=None if args.foxglove is None else (args.foxglove or bus.free_port()),
