@@ -202,11 +202,21 @@ def _reference_run(tmp_path: Path, duration: str) -> tuple[Path, Path]:
     return cfg, reference
 
 
-def test_a_killed_logger_under_run_is_restarted_and_no_state_is_lost(tmp_path, processes):
+@pytest.fixture(scope="module")
+def reference(tmp_path_factory) -> tuple[Path, dict]:
+    """``(config, states)``: the one-satellite scene at 20 Hz for 3000 s (60,001 steps, ~5 s of
+    wall time uninterrupted) and the states of one uninterrupted run of it (:func:`_states`;
+    read only), shared by the tests that kill processes of runs of that config and compare
+    what they recorded with it."""
+    cfg, recording = _reference_run(tmp_path_factory.mktemp("reference"), "3000 s")
+    return cfg, _states(recording)
+
+
+def test_a_killed_logger_under_run_is_restarted_and_no_state_is_lost(tmp_path, processes, reference):
     """SIGKILL of the logger twice during `astrodyn run`: the run restarts it each time,
     exits 0, and the file holds exactly the states of an uninterrupted run of the same
     config (same seqs, payloads byte for byte), each once."""
-    cfg, reference = _reference_run(tmp_path, "6000 s")
+    cfg, expected = reference
     out = tmp_path / "killed.mcap"
     sup = processes([*ASTRODYN, "run", cfg, "--out", out, "--json", tmp_path / "result.json"],
                     stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
@@ -225,7 +235,7 @@ def test_a_killed_logger_under_run_is_restarted_and_no_state_is_lost(tmp_path, p
     assert sup.returncode == 0, err[-3000:]
     result = json.loads((tmp_path / "result.json").read_text())
     assert [r["old_pid"] for r in result["restarts"]] == kills
-    assert _states(out) == _states(reference)
+    assert _states(out) == expected
     assert not list(tmp_path.glob("*.partial*.mcap"))  # the dead loggers' files were copied, then removed
 
 
@@ -254,11 +264,11 @@ def _merged_states(tmp_path: Path, inputs: list[Path]) -> dict:
     return _states(merged)
 
 
-def test_a_standby_logger_records_the_whole_run_when_the_main_one_is_killed(tmp_path, processes):
+def test_a_standby_logger_records_the_whole_run_when_the_main_one_is_killed(tmp_path, processes, reference):
     """`run --loggers 2` with the main logger SIGKILLed: both files hold exactly the states
     of an uninterrupted run (byte for byte, each once): the standby's on its own, without
     the restart's help; `astrodyn merge` of the two is the same again."""
-    cfg, reference = _reference_run(tmp_path, "6000 s")
+    cfg, expected = reference
     out = tmp_path / "main.mcap"
     rc, err, result, killed = _run_killing(tmp_path, processes, cfg, out, "logger", tmp_path / "main.partial.mcap",
                                            300_000)
@@ -266,26 +276,24 @@ def test_a_standby_logger_records_the_whole_run_when_the_main_one_is_killed(tmp_
     assert [r["old_pid"] for r in result["restarts"]] == [killed]
     standby = tmp_path / "main.logger-2.mcap"
     assert result["standbys"]["logger-2"]["exit"] == 0 and result["standbys"]["logger-2"]["file"] == str(standby)
-    expected = _states(reference)
     assert _states(out) == expected
     assert _states(standby) == expected
     assert _merged_states(tmp_path, [out, standby]) == expected
     assert not list(tmp_path.glob("*.partial*.mcap"))
 
 
-def test_a_killed_standby_logger_is_a_warning_and_its_partial_file_is_kept(tmp_path, processes):
+def test_a_killed_standby_logger_is_a_warning_and_its_partial_file_is_kept(tmp_path, processes, reference):
     """SIGKILL of the standby: the run still ends 0 with the main file complete, warns
     naming the standby and where its partial file stays; merging that partial file with
     the main one adds nothing and loses nothing; `recover` finishes it as a gap-free prefix
     of the run."""
-    cfg, reference = _reference_run(tmp_path, "6000 s")
+    cfg, expected = reference
     out = tmp_path / "main.mcap"
     rc, err, result, killed = _run_killing(tmp_path, processes, cfg, out, "logger-2",
                                            tmp_path / "main.logger-2.partial.mcap", 300_000)
     assert killed is not None and rc == 0, err[-3000:]
     partial = tmp_path / "main.logger-2.partial.mcap"
     assert "standby logger-2" in err and str(partial) in err
-    expected = _states(reference)
     assert _states(out) == expected
     assert _merged_states(tmp_path, [out, partial]) == expected
     recovered = subprocess.run([*ASTRODYN, "recover", partial], capture_output=True, text=True, timeout=300)
@@ -479,28 +487,28 @@ def _random_fault_trial(tmp_path: Path, processes, rng, reference_states: dict, 
     return record
 
 
-def _random_faults(tmp_path, processes, trials: int, seed: int, trial=None) -> list[dict]:
-    """``trials`` seeded trials of ``trial`` (default :func:`_random_fault_trial`, `run`)."""
+def _random_faults(tmp_path, processes, reference, trials: int, seed: int, trial=None) -> list[dict]:
+    """``trials`` seeded trials of ``trial`` (default :func:`_random_fault_trial`, `run`) on
+    the ``reference`` fixture's config."""
     import random
 
-    cfg, reference = _reference_run(tmp_path, "3000 s")
-    reference_states = _states(reference)
+    cfg, reference_states = reference
     rng = random.Random(seed)
     trial = trial or _random_fault_trial
     return [trial(tmp_path, processes, rng, reference_states, cfg, k) for k in range(trials)]
 
 
-def test_random_faults_fast_subset(tmp_path, processes):
+def test_random_faults_fast_subset(tmp_path, processes, reference):
     """Three seeded random trials (the series below has twenty)."""
-    records = _random_faults(tmp_path, processes, trials=3, seed=20261125)
+    records = _random_faults(tmp_path, processes, reference, trials=3, seed=20261125)
     assert len(records) == 3 and any(r["killed"] for r in records)  # faults did happen
 
 
 @pytest.mark.slow
-def test_random_faults_series(tmp_path, processes):
+def test_random_faults_series(tmp_path, processes, reference):
     """Twenty seeded random trials: each process of `run` (supervisor included) SIGKILLed
     at a random moment; docs/reliability.md reports the series."""
-    records = _random_faults(tmp_path, processes, trials=20, seed=13)
+    records = _random_faults(tmp_path, processes, reference, trials=20, seed=13)
     print(json.dumps(records))
     assert sum(r["killed"] for r in records) >= 15  # the run lasts longer than most delays: real faults
 
@@ -556,17 +564,17 @@ def _serve_fault_trial(tmp_path: Path, processes, rng, reference_states: dict, c
     return record
 
 
-def test_serve_random_faults_fast_subset(tmp_path, processes):
+def test_serve_random_faults_fast_subset(tmp_path, processes, reference):
     """Four seeded random trials against `serve` (the series below has twenty)."""
-    records = _random_faults(tmp_path, processes, trials=4, seed=20261126, trial=_serve_fault_trial)
+    records = _random_faults(tmp_path, processes, reference, trials=4, seed=20261126, trial=_serve_fault_trial)
     assert len(records) == 4 and sum(r["killed"] for r in records) >= 3
 
 
 @pytest.mark.slow
-def test_serve_random_faults_series(tmp_path, processes):
+def test_serve_random_faults_series(tmp_path, processes, reference):
     """Twenty seeded random trials: each process of `serve` (serve included) SIGKILLed at a
     random moment; docs/reliability.md reports the series."""
-    records = _random_faults(tmp_path, processes, trials=20, seed=7, trial=_serve_fault_trial)
+    records = _random_faults(tmp_path, processes, reference, trials=20, seed=7, trial=_serve_fault_trial)
     print(json.dumps(records))
     assert sum(r["killed"] for r in records) >= 18
 
