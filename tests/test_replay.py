@@ -251,6 +251,30 @@ def test_replay_pause_resume_rate_seek_stop_over_zenoh(hub, spawn, recording):
     col.close()
 
 
+def test_a_replay_waiting_for_a_subscriber_answers_and_stops_at_once(hub, spawn, recording):
+    """While replay waits (``--wait``) for a subscriber, it answers its control verbs and a
+    ``stop`` or SIGTERM ends it at once (before: nothing was answered and SIGTERM waited the
+    whole ``--wait``, 59 s of 60)."""
+    import signal
+
+    session, endpoint = hub
+    path, _, _ = recording
+    for how in ("stop", "SIGTERM"):
+        proc = spawn(path, "--connect", endpoint, "--wait", "120", "--quiet")
+        token = json.loads(proc.stdout.readline())["control_token"]
+        time.sleep(0.5)  # nobody subscribes: the replay is waiting
+        status = _control(session, "status", token=token)
+        assert status["messages"] == 0 and status["t"] == 0.0, status
+        asked = time.monotonic()
+        if how == "stop":
+            assert _control(session, "stop", token=token)["state"] == "stopped"
+        else:
+            proc.send_signal(signal.SIGTERM)
+        proc.wait(timeout=20)
+        assert time.monotonic() - asked < 10, how
+        assert proc.returncode == 0, (how, proc.stderr.read())
+
+
 def test_replay_of_a_cut_file_sends_what_is_complete_and_says_so(hub, spawn, recording, tmp_path):
     session, endpoint = hub
     path, _, _ = recording

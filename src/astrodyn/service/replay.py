@@ -51,6 +51,7 @@ import shutil
 import sys
 import tempfile
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -232,14 +233,17 @@ class Replayer:
         self.published += 1
         self.last_ns = msg.log_time
 
-    def wait_for_subscriber(self, timeout_s: float) -> bool:
-        """Wait up to ``timeout_s`` until the first topic to replay has a subscriber."""
+    def wait_for_subscriber(self, timeout_s: float, keep_waiting: Callable[[], bool] = lambda: True) -> bool:
+        """Wait up to ``timeout_s`` until the first topic to replay has a subscriber; returns
+        whether one came.  ``keep_waiting()`` is called every 10 ms (the owner's control
+        verbs, signals and live view: a ``stop`` or SIGTERM must not wait for ``--wait``) and
+        ends the wait when it returns False."""
         if self._next is None or timeout_s <= 0:
             return False
         key = self._batch_key(self._next.topic) or self._next.topic
         pub = self._publisher(key)
         deadline = time.monotonic() + timeout_s
-        while pub is not None and time.monotonic() < deadline:
+        while pub is not None and time.monotonic() < deadline and keep_waiting():
             if pub.matching_status.matching:
                 self._anchor(self._anchor_ns)
                 return True
@@ -535,15 +539,20 @@ def play(rep: Replayer, session, scenario: str, token: str | None, args: argpars
     way (and keeping the live ``view`` up); the final status, also the reply to each ``stop``."""
     stop_requests: list[bus.ControlRequest] = []
     with bus.ControlServer(session, scenario, verbs=REPLAY_VERBS, token=token) as control:
-        rep.wait_for_subscriber(args.wait)
-        while True:
+
+        def keep_up() -> bool:
+            """Answer the control verbs and keep the live view up; False once told to stop."""
             for req in control.poll():
                 if req.handled_by(rep.handle):
                     stop_requests.append(req)
-            if rep.state == "stopped" or stop_signal.why:
-                break
             if view is not None:
                 view.check()
+            return rep.state != "stopped" and not stop_signal.why
+
+        rep.wait_for_subscriber(args.wait, keep_up)
+        while True:
+            if not keep_up():
+                break
             more = rep.step()
             if not more and rep.state == "finished" and not args.hold:
                 break
