@@ -3,8 +3,12 @@
 Every compiled kernel in the numeric core is decorated with :func:`jit` (serial)
 or :func:`pjit` (``parallel=True`` for ``prange`` loops over many states).
 
-* ``cache=True``: compiled machine code is stored next to the sources, so only
-  the first import on a machine pays the compile time.
+* ``cache=True``: compiled machine code is stored next to the sources (or, where
+  they are read-only, in numba's user cache directory, ``$NUMBA_CACHE_DIR`` or
+  ``~/.cache``), so only the first import on a machine pays the compile time.  Where
+  neither is writable (a read-only install run with a read-only home: a locked-down
+  container, a service account) the kernels are compiled without a cache, in every
+  process, and :func:`compile_kernel` says so once on stderr instead of failing at import.
 * ``fastmath=False`` (numba's default, stated explicitly): fast-math lets LLVM
   reassociate and contract floating-point operations, which breaks the
   compensated / cancellation-free formulas the error analysis relies on.
@@ -33,6 +37,7 @@ Thread policy (docs/benchmarks.md, "Threads"), decided here and nowhere else:
 from __future__ import annotations
 
 import os
+import sys
 import types
 
 # Idle OpenMP threads sleep instead of spinning (libgomp reads this when numba first
@@ -46,21 +51,54 @@ import numba
 
 _COMMON = dict(cache=True, fastmath=False, error_model="numpy", nogil=True)
 
+#: Whether a kernel of this process could not be cached (:func:`compile_kernel` said so).
+_UNCACHED_NOTICE = {"said": False}
+
+
+def kernels_uncached() -> bool:
+    """Whether a kernel compiled in this process found no writable cache (so every process
+    compiles its kernels again: a progress note should not promise "cached afterwards")."""
+    return _UNCACHED_NOTICE["said"]
+
+
+def compile_kernel(fn, **opts):
+    """``numba.njit(**opts)(fn)``; when ``opts`` asks for ``cache=True`` and numba finds no
+    writable place for the cache (its "no locator available" RuntimeError), ``fn`` is
+    compiled without one and a one-line notice goes to stderr, once per process."""
+    try:
+        return numba.njit(**opts)(fn)
+    except RuntimeError as exc:
+        if not opts.get("cache") or "no locator available" not in str(exc):
+            raise
+    if not _UNCACHED_NOTICE["said"]:
+        _UNCACHED_NOTICE["said"] = True
+        print(f"astrodyn: numba cannot cache compiled kernels here (neither {os.path.dirname(fn.__code__.co_filename)} "
+              f"nor numba's user cache directory is writable): they are compiled in every process, which takes a "
+              f"while; set NUMBA_CACHE_DIR to a private writable directory to keep them", file=sys.stderr, flush=True)
+    return numba.njit(**{**opts, "cache": False})(fn)
+
 
 def jit(*args, **kwargs):
     """``numba.njit`` with astrodyn's settings (serial kernel)."""
     opts = {**_COMMON, **kwargs}
     if args and callable(args[0]):
-        return numba.njit(**opts)(args[0])
-    return numba.njit(*args, **opts)
+        return compile_kernel(args[0], **opts)
+    _keywords_only(args)
+    return lambda fn: compile_kernel(fn, **opts)
 
 
 def pjit(*args, **kwargs):
     """``numba.njit(parallel=True)`` with astrodyn's settings (use ``numba.prange``)."""
     opts = {**_COMMON, "parallel": True, **kwargs}
     if args and callable(args[0]):
-        return numba.njit(**opts)(args[0])
-    return numba.njit(*args, **opts)
+        return compile_kernel(args[0], **opts)
+    _keywords_only(args)
+    return lambda fn: compile_kernel(fn, **opts)
+
+
+def _keywords_only(args: tuple) -> None:
+    if args:
+        raise TypeError("astrodyn.jit: options are keywords only (kernels compile lazily from the types of their calls)")
 
 
 prange = numba.prange
@@ -82,8 +120,8 @@ class ParallelKernel:
         twin.__qualname__ = fn.__qualname__ + "_serial"
         twin.__module__ = fn.__module__
         self.name = name
-        self.serial = numba.njit(**_COMMON)(twin)
-        self.parallel = numba.njit(**{**_COMMON, "parallel": True})(fn)
+        self.serial = compile_kernel(twin, **_COMMON)
+        self.parallel = compile_kernel(fn, **_COMMON, parallel=True)
         self.__doc__ = fn.__doc__
 
     def __call__(self, work: int, *args):

@@ -42,6 +42,7 @@ import time
 from pathlib import Path
 
 from astrodyn import auth, bus
+from astrodyn.jit import kernels_uncached
 from astrodyn.progress import Progress
 from astrodyn.recording.writer import partial_path, standby_path
 from astrodyn.scenario import Scenario, ScenarioError, load, plan as make_plan
@@ -489,7 +490,9 @@ def progress_line(last: dict, propagators: list[str], duration: float, dt: float
     line = (f"  sim t {t_min:10.1f} / {duration:.1f} s  ({100 * t_min / max(duration, 1e-300):5.1f} %)"
             f"  logged {msgs:>9d}  {rate:9.0f} msg/s")
     if preparing:
-        line += f"  [{', '.join(preparing)}: loading numeric kernels (compiled on the first run only, cached afterwards)]"
+        how = "compiled in every run: no writable cache" if kernels_uncached() else \
+            "compiled on the first run only, cached afterwards"
+        line += f"  [{', '.join(preparing)}: loading numeric kernels ({how})]"
     return line
 
 
