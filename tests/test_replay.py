@@ -317,12 +317,22 @@ def test_replay_of_a_non_mcap_file_is_a_clear_error(spawn, tmp_path, content):
 
 
 def test_replay_bad_arguments_name_the_option(spawn, recording):
+    import socket
+
     path, _, _ = recording
-    for args, needle in [(["--rate", "0"], "--rate: expected a real-time factor with 0.001 <= x <= 1e+06"),
-                         (["--rate", "1e-300"], "--rate: expected a real-time factor with 0.001"),
-                         (["--rate", "x"], "--rate: expected"),
-                         (["--start", "30", "--end", "10"], "end: expected end >= start"),
-                         (["--start", "nan"], "--start: expected a finite number")]:
-        proc = spawn(path, *args, "--wait", "0")
-        _, err = proc.communicate(timeout=30)
-        assert proc.returncode == 2 and needle in err and "Traceback" not in err, (args, err)
+    taken = socket.socket()  # a port another process listens on (before: zenoh's error, with its source paths)
+    taken.bind(("127.0.0.1", 0))
+    taken.listen()
+    port = taken.getsockname()[1]
+    cases = [(["--rate", "0"], "--rate: expected a real-time factor with 0.001 <= x <= 1e+06"),
+             (["--rate", "1e-300"], "--rate: expected a real-time factor with 0.001"),
+             (["--rate", "x"], "--rate: expected"),
+             (["--start", "30", "--end", "10"], "end: expected end >= start"),
+             (["--start", "nan"], "--start: expected a finite number"),
+             (["--port", str(port)], f"--port: expected a free port on 127.0.0.1, got {port} (Address already in use)"),
+             (["--port", "65536"], "--port: expected a port 0..65535 (0: a free one), got 65536")]
+    with taken:
+        for args, needle in cases:
+            proc = spawn(path, *args, "--wait", "0")
+            _, err = proc.communicate(timeout=30)
+            assert proc.returncode == 2 and needle in err and "Traceback" not in err, (args, err)

@@ -96,6 +96,8 @@ __all__ = [
     "wait_for_process",
     "wait_for_logger",
     "port_taken",
+    "local_port",
+    "local_port_problem",
     "AliveWatcher",
     "Heartbeat",
     "HeartbeatMonitor",
@@ -140,6 +142,29 @@ def port_taken(port: int, host: str = DEFAULT_HOST) -> str | None:
     except OSError as exc:
         return exc.strerror or str(exc)
     return None
+
+
+def local_port_problem(port: int) -> str | None:
+    """What is wrong with ``port`` for a server of this machine's loopback (a ``--port`` or
+    ``--foxglove`` option: 0..65535, 0 meaning a free one, and nothing listening on it now,
+    so that a taken port is refused by name at the command line, not later in a server's
+    own process), as "expected ..., got ..."; None if it will do."""
+    if not 0 <= port <= 65535:
+        return f"expected a port 0..65535 (0: a free one), got {port}"
+    if port and (why := port_taken(port)):
+        return f"expected a free port on {DEFAULT_HOST}, got {port} ({why})"
+    return None
+
+
+def local_port(text: str) -> int:
+    """argparse type of a port option (:func:`local_port_problem`)."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a port 0..65535 (0: a free one), got {str(text)[:40]!r}") from None
+    if problem := local_port_problem(value):
+        raise argparse.ArgumentTypeError(problem)
+    return value
 
 
 def loopback_endpoint(port: int | None = None) -> str:

@@ -398,6 +398,8 @@ def open_recording(args: argparse.Namespace) -> tuple[float, McapStream]:
     rate = parse_rate(cli_number(args.rate), "--rate")
     if args.wait < 0 or not math.isfinite(args.wait):
         raise ValueError(f"--wait: expected a finite number of seconds >= 0, got {args.wait}")
+    if args.port is not None and (problem := bus.local_port_problem(args.port)):
+        raise ValueError(f"--port: {problem}")
     for name in ("start", "end"):
         value = getattr(args, name)
         if value is not None and not math.isfinite(value):
@@ -422,7 +424,7 @@ def main(argv: list[str] | None = None) -> int:
         return 1 if isinstance(exc, RecordingError) else 2
     listen = args.listen
     if listen is None and args.mode != "client":
-        listen = [bus.loopback_endpoint(args.port)]
+        listen = [bus.loopback_endpoint(args.port or None)]  # 0: a free one, named in the hello line
     stop_signal = StopFlag()
     printer = Progress(enabled=not args.quiet)
     with stream:

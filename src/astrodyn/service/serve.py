@@ -601,10 +601,8 @@ def check_serve_flags(args: argparse.Namespace) -> None:
     lo, hi = ROLL_INTERVAL_BOUNDS
     if args.roll_interval is not None and not lo <= args.roll_interval <= hi:  # nan fails too
         raise ScenarioError(f"--roll-interval: expected wall seconds {lo:g} <= S <= {hi:g}, got {args.roll_interval}")
-    if args.port is not None and not 0 <= args.port <= 65535:
-        raise ScenarioError(f"--port: expected a port 0..65535 (0: a free one), got {args.port}")
-    if args.port and (why := bus.port_taken(args.port)):
-        raise ScenarioError(f"--port: expected a free port on {bus.DEFAULT_HOST}, got {args.port} ({why})")
+    if args.port is not None and (problem := bus.local_port_problem(args.port)):
+        raise ScenarioError(f"--port: {problem}")
     check_bus_flags(args.connect, args.zenoh_config)
 
 

@@ -148,18 +148,7 @@ MAX_SERVER_RESTARTS = 5
 
 def add_foxglove_argument(parser: argparse.ArgumentParser, what: str) -> None:
     """The ``--foxglove PORT`` option of ``serve`` and ``replay`` (a port 0..65535; 0: a free one)."""
-    def port(text: str) -> int:
-        try:
-            value = int(text)
-        except ValueError:
-            value = -1
-        if not 0 <= value <= 65535:
-            raise argparse.ArgumentTypeError(f"expected a port 0..65535 (0: a free one), got {text!r}")
-        if value and (why := bus.port_taken(value)):  # the view would fail in its own process, unseen
-            raise argparse.ArgumentTypeError(f"expected a free port on {bus.DEFAULT_HOST}, got {value} ({why})")
-        return value
-
-    parser.add_argument("--foxglove", type=port, default=None, metavar="PORT",
+    parser.add_argument("--foxglove", type=bus.local_port, default=None, metavar="PORT",
                         help=f"live 3D view of {what}: a Foxglove WebSocket server on ws://127.0.0.1:PORT (0: a free "
                              "port); open it in the Foxglove app (docs/foxglove.md)")
 
