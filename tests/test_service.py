@@ -215,6 +215,29 @@ def test_a_fifo_out_is_refused_at_once(tmp_path, command):
     assert stat.S_ISFIFO(os.stat(fifo).st_mode)
 
 
+def test_too_low_an_open_file_limit_is_raised_or_refused_by_name(tmp_path):
+    """``ulimit -n 20``: run raises its soft limit to what the hard limit allows and runs; with
+    the hard limit at 20 too it refuses in one line, exit 1, nothing left behind (before: an
+    OSError traceback from os.pipe, or a panic inside zenoh, and a stale work directory)."""
+    import resource
+
+    cfg = tmp_path / "fd.toml"
+    cfg.write_text((CONFIGS / "demo.toml").read_text().replace('duration = "93 min"', 'duration = "5 min"'))
+    _, hard = resource.getrlimit(resource.RLIMIT_NOFILE)
+    if hard != resource.RLIM_INFINITY and hard < 1024:
+        pytest.skip(f"the hard open-file limit here is {hard}")
+    for case, (limits, rc) in enumerate((((20, hard), 0), ((20, 20), 1))):
+        out = tmp_path / f"fd{case}.mcap"
+        proc = subprocess.run([*ASTRODYN, "run", str(cfg), "--out", str(out), "--quiet"], capture_output=True, text=True,
+                              timeout=300, preexec_fn=lambda limits=limits: resource.setrlimit(resource.RLIMIT_NOFILE, limits))
+        assert proc.returncode == rc, proc.stderr[-2000:]
+        assert "Traceback" not in proc.stderr and "panicked" not in proc.stderr
+        if rc:
+            assert "open-file limit: expected at least 64 (ulimit -n), got 20" in proc.stderr
+        assert out.exists() == (rc == 0) and not list(tmp_path.glob(f"fd{case}.partial*"))
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".astrodyn-")]
+
+
 def _long_config(tmp_path: Path, duration: str = "30 d") -> Path:
     text = (CONFIGS / "demo.toml").read_text().replace('duration = "93 min"', f'duration = "{duration}"')
     cfg = tmp_path / "long.toml"
@@ -347,6 +370,7 @@ def test_serve_control_over_zenoh(tmp_path):
         assert proc.returncode == 0
     finally:
         _stop(proc)
+    assert not token_file.exists()  # the token is never valid again: its file goes with serve
     channels, _, _, _ = _read_plain(out)
     for topic, msgs in channels.items():
         if topic.endswith(("/orbit", "/attitude")):

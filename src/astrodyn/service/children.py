@@ -46,7 +46,7 @@ from astrodyn import auth, bus
 if TYPE_CHECKING:
     from astrodyn.scenario import Scenario
 
-__all__ = ["Child", "config_snapshot", "wait_ready", "children_of", "logger_command", "propagator_command", "plant_command", "controller_argv", "start_controller", "share_fate_with_supervisor",
+__all__ = ["Child", "config_snapshot", "ensure_open_file_limit", "MIN_OPEN_FILES", "wait_ready", "children_of", "logger_command", "propagator_command", "plant_command", "controller_argv", "start_controller", "share_fate_with_supervisor",
            "stop_process", "work_directory", "SUPERVISOR_ENV", "ORPHAN_GRACE_S", "EXIT_ORPHANED", "LOGGED_WAIT_S",
            "MODEL_ENDED_EXIT", "DISK_FULL_EXIT", "StartError"]
 
@@ -105,6 +105,33 @@ def share_fate_with_supervisor(poll_s: float = 0.2) -> int | None:
 class StartError(Exception):
     """A run or serve cannot start (e.g. its work directory cannot be written: the disk is
     full); the text names the path and why.  Nothing has been started."""
+
+
+#: Open files a supervisor and its children need at the least (each child: its two log
+#: files, pipes, zenoh's sockets; a supervisor with 8 loggers and a live view: ~40).
+MIN_OPEN_FILES = 64
+#: The soft open-file limit a supervisor raises itself to when the hard limit allows.
+WANTED_OPEN_FILES = 1024
+
+
+def ensure_open_file_limit() -> int:
+    """Raise this process's soft open-file limit (``ulimit -n``; children inherit it) to
+    :data:`WANTED_OPEN_FILES` when it is lower and the hard limit allows; return the limit.
+    StartError naming the limit when even :data:`MIN_OPEN_FILES` cannot be had: with too few
+    descriptors a start fails half-way, in a traceback or a panic inside zenoh."""
+    import resource
+
+    soft, hard = resource.getrlimit(resource.RLIMIT_NOFILE)
+    if soft != resource.RLIM_INFINITY and soft < WANTED_OPEN_FILES:
+        wanted = WANTED_OPEN_FILES if hard == resource.RLIM_INFINITY else min(WANTED_OPEN_FILES, hard)
+        if wanted > soft:
+            with contextlib.suppress(ValueError, OSError):
+                resource.setrlimit(resource.RLIMIT_NOFILE, (wanted, hard))
+                soft = wanted
+    if soft != resource.RLIM_INFINITY and soft < MIN_OPEN_FILES:
+        raise StartError(f"open-file limit: expected at least {MIN_OPEN_FILES} (ulimit -n), got {soft} and the hard "
+                         f"limit is {hard}; raise it (ulimit -n {MIN_OPEN_FILES}) and start again")
+    return soft
 
 
 @contextlib.contextmanager

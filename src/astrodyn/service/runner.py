@@ -55,6 +55,7 @@ from astrodyn.service.children import (
     StartError,
     add_stall_argument,
     config_snapshot,
+    ensure_open_file_limit,
     logger_command,
     plant_command,
     propagator_command,
@@ -173,6 +174,7 @@ class ScenarioRun:
 
     def run(self) -> dict:
         scenario, result = self.scenario, self.result
+        ensure_open_file_limit()
         started = time.monotonic()
         restore_signals = catch_stop_signals(lambda why: self.interrupted.update(signal=why))
         secret = auth.RunSecret.generate() if self.authenticate else None

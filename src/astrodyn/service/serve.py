@@ -54,6 +54,7 @@ import signal
 import subprocess
 import sys
 import time
+from collections.abc import Iterator
 from pathlib import Path
 
 from astrodyn import auth, bus
@@ -67,6 +68,7 @@ from astrodyn.service.children import (
     StartError,
     add_stall_argument,
     config_snapshot,
+    ensure_open_file_limit,
     start_controller,
     wait_ready,
     wall_seconds,
@@ -593,6 +595,27 @@ def roll_settings(args: argparse.Namespace, scenario) -> tuple[int | None, float
     return size, (interval if interval is not None else ROLL_INTERVAL_DEFAULT_S)
 
 
+@contextlib.contextmanager
+def control_token(out: Path, open_control: bool) -> Iterator[tuple[str | None, Path | None]]:
+    """``(token, file)``: serve's control token (docs/security.md) and its 0600 file
+    ``.<name>.control-token`` beside ``out``, which a previous serve's file is replaced by
+    and which is removed when serve ends (the token is never valid again); ``(None, None)``
+    with ``--open-control``.  StartError if the file cannot be written."""
+    if open_control:
+        yield None, None
+        return
+    token, path = auth.new_token(), control_token_path(out)
+    path.unlink(missing_ok=True)  # a previous run's token: never valid again
+    try:
+        auth.write_private_file(path, token.encode())
+    except OSError as exc:
+        raise StartError(f"{path}: cannot write the control token: {exc.strerror or exc}") from None
+    try:
+        yield token, path
+    finally:
+        path.unlink(missing_ok=True)
+
+
 def check_serve_flags(args: argparse.Namespace) -> None:
     """The numeric flags of ``serve`` argparse does not bound; ScenarioError naming the flag."""
     lo, hi = ROLL_SIZE_BOUNDS
@@ -677,15 +700,9 @@ def main(argv: list[str] | None = None) -> int:
     hub = bus.loopback_endpoint(args.port or bus.free_port())
     stop_signal = StopFlag()
     try:
-        with work_directory(out, "serve") as tmp, bus.open_session(listen=[hub], config_file=args.zenoh_config) as session:
-            token, token_file = None, None
-            if not args.open_control:
-                token, token_file = auth.new_token(), control_token_path(out)
-                token_file.unlink(missing_ok=True)  # a previous run's token: never valid again
-                try:
-                    auth.write_private_file(token_file, token.encode())
-                except OSError as exc:
-                    raise StartError(f"{token_file}: cannot write the control token: {exc.strerror or exc}") from None
+        ensure_open_file_limit()
+        with work_directory(out, "serve") as tmp, bus.open_session(listen=[hub], config_file=args.zenoh_config) as session, \
+                control_token(out, args.open_control) as (token, token_file):
             try:
                 sup = Supervisor(scenario, out, session, hub, rate=rate, roll_size=roll_size,
                                  roll_interval=roll_interval, connect=args.connect, tmp=Path(tmp),
