@@ -108,17 +108,18 @@ def _seeking_count(path: Path) -> int:
 # ----------------------------------------------------------------------------- signals
 
 
-def test_sigterm_to_run_finishes_the_file_and_says_how_far(tmp_path):
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGHUP])  # SIGHUP: the terminal closed (it killed run at once)
+def test_sigterm_to_run_finishes_the_file_and_says_how_far(tmp_path, sig):
     out = tmp_path / "term.mcap"
     proc, _ = _start_run(_config(tmp_path, "30 d"), out)
     try:
         _wait_states(out, 300)
-        os.kill(proc.pid, signal.SIGTERM)
+        os.kill(proc.pid, sig)
         stdout, stderr = proc.communicate(timeout=90)
     finally:
         _stop(proc)
-    assert proc.returncode == 128 + signal.SIGTERM, stderr[-2000:]
-    assert "interrupted by SIGTERM" in stderr and "sim t reached" in stdout
+    assert proc.returncode == 128 + sig, stderr[-2000:]
+    assert f"interrupted by {sig.name}" in stderr and "sim t reached" in stdout
     # an interrupted run is not finished: its (complete) file keeps the partial name and
     # does not replace --out; `astrodyn recover` names it (docs/reliability.md)
     partial = Path(partial_path(out))

@@ -58,7 +58,7 @@ from astrodyn.jit import service_threads, set_threads
 from astrodyn.recording import ingest
 from astrodyn.recording.writer import DUPLICATE, INGEST_GRAMMAR, BatchLayout, McapRecorder, RecordingError
 from astrodyn.service.children import DISK_FULL_EXIT, share_fate_with_supervisor
-from astrodyn.service.signals import catch_stop_signals
+from astrodyn.service.signals import STOP_SIGNAL_NAMES, catch_stop_signals
 
 __all__ = ["Logger", "main"]
 
@@ -695,10 +695,10 @@ class Logger:
                     "total": sum(self.rejected.values()), "by_reason": self.rejected,
                     "by_sender": self.rejected_by_sender, "examples": self.rejected_examples})
             # the file takes its name when it was stopped as it should: the end of the run, a
-            # stop request, or SIGTERM / SIGINT to a logger run by hand (docs/reliability.md);
+            # stop request, or SIGTERM / SIGINT / SIGHUP to a logger run by hand (docs/reliability.md);
             # a supervisor's logger leaves that to the supervisor, who knows how the run ended
             finished = self.rename_at_end and (
-                self.reason in ("end of run: every expected message recorded", "stop requested", "SIGTERM", "SIGINT")
+                self.reason in ("end of run: every expected message recorded", "stop requested", *STOP_SIGNAL_NAMES)
                 or self.reason.startswith("max_seconds"))
             stats = self.recorder.close(rename=finished)
             summary["file_complete"] = True
