@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 import os
+import shlex
 import signal
 import subprocess
 import sys
@@ -365,6 +366,23 @@ def test_serve_runs_a_free_closed_loop_with_its_controller_and_stops_cleanly(tmp
     first, second = payloads_by_topic(Path(summary["file"]), kinds), payloads_by_topic(again, kinds)
     for key, payloads in first.items():
         assert second[key][:len(payloads)] == payloads, key
+
+
+def test_what_a_controller_started_ends_with_the_run(tmp_path):
+    """``--controller "sh -c '...'"`` may start more programs (a helper, a logger of its
+    own): when the run ends, its whole session is stopped, not only the shell's PID (before:
+    the background process outlived the run).  Checked by the PID it wrote."""
+    cfg = _config("slew", tmp_path, **{'duration = "180 s"': 'duration = "20 s"'})
+    pid_file = tmp_path / "helper.pid"
+    line = f"sleep 600 & echo $! > {pid_file}; exec {sys.executable} {EXAMPLES / 'slew_pd.py'}"
+    done = subprocess.run([*RUN, str(cfg), "--out", str(tmp_path / "h.mcap"), "--quiet", "--controller",
+                           f"sh -c {shlex.quote(line)}"], capture_output=True, text=True, timeout=300, cwd=ROOT)
+    assert done.returncode == 0, done.stderr[-2000:]
+    helper = int(pid_file.read_text())
+    gone = not Path(f"/proc/{helper}").exists() or Path(f"/proc/{helper}/stat").read_text().split()[2] == "Z"
+    if not gone:
+        os.kill(helper, signal.SIGKILL)  # the process this test started, by the PID it wrote
+    assert gone, f"the controller's background process {helper} outlived the run"
 
 
 def test_no_controller_outlives_a_killed_run_supervisor(tmp_path):

@@ -47,7 +47,7 @@ if TYPE_CHECKING:
     from astrodyn.scenario import Scenario
 
 __all__ = ["Child", "config_snapshot", "ensure_open_file_limit", "MIN_OPEN_FILES", "wait_ready", "children_of", "logger_command", "propagator_command", "plant_command", "controller_argv", "start_controller", "share_fate_with_supervisor",
-           "stop_process", "work_directory", "SUPERVISOR_ENV", "ORPHAN_GRACE_S", "EXIT_ORPHANED", "LOGGED_WAIT_S",
+           "stop_process", "stop_process_group", "work_directory", "SUPERVISOR_ENV", "ORPHAN_GRACE_S", "EXIT_ORPHANED", "LOGGED_WAIT_S",
            "MODEL_ENDED_EXIT", "DISK_FULL_EXIT", "StartError"]
 
 #: Environment variable that carries the supervisor's PID to each child.
@@ -211,6 +211,34 @@ def stop_process(proc: subprocess.Popen, sig: int = signal.SIGTERM, timeout: flo
     return proc.returncode
 
 
+def stop_process_group(proc: subprocess.Popen, sig: int = signal.SIGTERM, timeout: float = 10.0) -> int | None:
+    """Stop ``proc``, a process this program started as the leader of a new session
+    (``start_new_session=True``: its process group is its PID), and every process of that
+    group: ``sig`` to the group, up to ``timeout`` s for the leader, then SIGKILL to what is
+    left of the group (a grandchild that ignored ``sig`` or was still ending).  A process
+    that left the group (``setsid`` of its own) is out of reach.  Returns the leader's
+    exit status."""
+    def signal_group(s: int) -> bool:
+        try:
+            os.killpg(proc.pid, s)  # the group outlives its reaped leader while members are left
+        except (ProcessLookupError, PermissionError):
+            return False
+        return True
+
+    signal_group(sig)
+    try:
+        proc.wait(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        pass
+    deadline = time.monotonic() + min(timeout, 2.0)
+    while signal_group(0) and time.monotonic() < deadline:  # members still ending after the signal
+        time.sleep(0.05)
+    signal_group(signal.SIGKILL)
+    if proc.poll() is None:
+        proc.wait(timeout=5)
+    return proc.returncode
+
+
 def logger_command() -> list[str]:
     """The command line that starts a logger process with this interpreter; arguments follow."""
     return [sys.executable, "-m", "astrodyn.service.logger"]
@@ -294,6 +322,7 @@ class Child:
     def __init__(self, name: str, argv: list[str], log_dir: Path, env: dict[str, str] | None = None,
                  foreign: bool = False):
         self.name = name
+        self.foreign = foreign
         self.stdout_path = log_dir / f"{name}.out"
         self.stderr_path = log_dir / f"{name}.err"
         self._out = open(self.stdout_path, "wb")
@@ -338,7 +367,11 @@ class Child:
         return self.proc.poll()
 
     def stop(self, sig=signal.SIGTERM, timeout: float = 10.0) -> int | None:
-        """Signal this child by PID, wait, SIGKILL if it does not go."""
+        """Signal this child by PID, wait, SIGKILL if it does not go.  A foreign child (a
+        controller: a shell line may start more programs) is stopped with everything it
+        started in its session (:func:`stop_process_group`), even after it ended itself."""
+        if self.foreign:
+            return stop_process_group(self.proc, sig, timeout)
         return stop_process(self.proc, sig, timeout)
 
     def close(self) -> None:
