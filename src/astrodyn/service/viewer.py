@@ -103,7 +103,7 @@ from astrodyn.service.signals import StopFlag
 
 __all__ = ["LatestSamples", "LiveScene", "add_foxglove_argument", "viewer_command", "main", "TF_TOPIC", "MAX_LIVE_SCENE_POINTS",
            "ConnectionGuard", "LineBudget", "route_sdk_log", "raise_descriptor_limit", "MAX_CLIENTS", "CLIENT_STALL_S",
-           "HANDSHAKE_S"]
+           "HANDSHAKE_S", "TrailRing", "RecentAttitudes"]
 
 TF_TOPIC = "foxglove/tf"
 #: Most trail points of all bodies together in one scene update (a 1000-body constellation
@@ -183,9 +183,152 @@ class LatestSamples:
         return out
 
 
+#: Rows a trail first allocates; it doubles up to its capacity as points come.
+TRAIL_FIRST_ROWS = 32
+#: Distinct log times of a body's newest attitudes kept, so that a position is shown turned
+#: by the attitude of its own instant (orbit and attitude states arrive separately).
+RECENT_ATTITUDES = 64
+
+
+class TrailRing:
+    """One body's orbit trail: its newest ``capacity`` positions in a float64 ring buffer.
+
+    A point is a position ``(x, y, z)`` in km in the inertial frame of the body's orbit
+    states (the view draws the whole trail in the body's newest ``frame``); one is appended
+    per orbit state the view takes, and the points are kept in the order they were appended
+    (time order for a stream of states).  Once ``capacity`` points are held, each new one
+    replaces the oldest.  :meth:`points` and :meth:`take` give them oldest first, as the
+    ``deque(maxlen=capacity)`` of tuples this replaces did.
+
+    Storage: ``capacity * 3`` float64, :attr:`nbytes` = 24 bytes a point, once full (a deque
+    of tuples took about 150: a tuple, three float objects and its slot); until then it
+    grows by doubling from :data:`TRAIL_FIRST_ROWS` rows, so a short trail holds little.
+    """
+
+    __slots__ = ("capacity", "_flat", "_rows", "_writer", "_count", "_next")
+
+    def __init__(self, capacity: int = MAX_LINE_POINTS):
+        if not (isinstance(capacity, (int, np.integer)) and not isinstance(capacity, bool) and capacity >= 1):
+            raise ValueError(f"capacity: expected an integer >= 1, got {capacity!r}")
+        self.capacity = int(capacity)
+        self._count = 0  # points held
+        self._next = 0  # row the next point goes to; once full, the row of the oldest point
+        self._allocate(min(self.capacity, TRAIL_FIRST_ROWS))
+
+    def _allocate(self, rows: int) -> None:
+        """Storage for ``rows`` points, the points held copied into it (rows 0 .. count-1)."""
+        flat = np.empty(3 * rows, dtype=np.float64)
+        if self._count:
+            flat[:3 * self._count] = self._flat[:3 * self._count]
+        self._flat = flat  # x0, y0, z0, x1, ...
+        self._rows = flat.reshape(rows, 3)  # the same memory, one row a point
+        self._writer = memoryview(flat)  # item assignment: 4x faster than a numpy row assignment
+
+    def __len__(self) -> int:
+        return self._count
+
+    @property
+    def nbytes(self) -> int:
+        """Bytes of the point storage (24 a row allocated; ``capacity * 24`` once full)."""
+        return self._flat.nbytes
+
+    def append(self, point_km) -> None:
+        """Add the newest point ``(x, y, z)``, km; the oldest goes once ``capacity`` are held."""
+        x, y, z = map(float, point_km)  # TypeError/ValueError before anything changes
+        row = self._next
+        if row == len(self._rows):  # only while filling: the storage is full, not the ring
+            self._allocate(min(2 * row, self.capacity))
+        k = 3 * row
+        writer = self._writer
+        writer[k] = x
+        writer[k + 1] = y
+        writer[k + 2] = z
+        if self._count < self.capacity:
+            self._count += 1
+        self._next = row + 1 if row + 1 < self.capacity else 0
+
+    def take(self, indices) -> np.ndarray:
+        """The points at ``indices`` in time order (0: the oldest held, ``len - 1``: the
+        newest), shape ``(len(indices), 3)``, km, a copy; IndexError outside ``0 .. len - 1``."""
+        indices = np.asarray(indices, dtype=np.intp)
+        if indices.size and (int(indices.min()) < 0 or int(indices.max()) >= self._count):
+            raise IndexError(f"trail indices: expected 0 .. {self._count - 1}, got {indices.min()} .. {indices.max()}")
+        if self._count < self.capacity:  # not wrapped: row i holds point i
+            return self._rows[indices]
+        return self._rows[(indices + self._next) % self.capacity]
+
+    def points(self) -> np.ndarray:
+        """All points held, oldest first, shape ``(len, 3)``, km, a copy."""
+        return self.take(np.arange(self._count))
+
+
+class RecentAttitudes:
+    """One body's attitudes at its newest ``capacity`` distinct log times.
+
+    A log time is in ns since the Unix epoch (an int of any size); an attitude is a unit
+    quaternion in Foxglove order ``(x, y, z, w)``, scalar last.  :meth:`put` of a time
+    already held replaces its attitude in place; of a new time, once ``capacity`` are held,
+    drops the time that was put first: the same as the ``OrderedDict`` (log time -> tuple)
+    capped at ``capacity`` it replaces, in a list of the times and ``4 * capacity`` float64
+    (about 4.6 KB for 64 instead of about 24 KB).
+    """
+
+    __slots__ = ("capacity", "_times", "_xyzw", "_next", "_latest")
+
+    def __init__(self, capacity: int = RECENT_ATTITUDES):
+        if not (isinstance(capacity, int) and not isinstance(capacity, bool) and capacity >= 1):
+            raise ValueError(f"capacity: expected an integer >= 1, got {capacity!r}")
+        self.capacity = capacity
+        self._times: list[int] = []  # slot -> log time, slots in the order they were first put
+        self._xyzw = array.array("d", bytes(8 * 4 * capacity))  # slot i: x, y, z, w at 4 i
+        self._next = 0  # once full: the slot of the time put first, replaced by the next new time
+        self._latest = 0  # no time held is later (when any is held): a later one needs no search
+
+    def __len__(self) -> int:
+        return len(self._times)
+
+    def _slot(self, log_time: int) -> int:
+        """The slot holding ``log_time``, or -1."""
+        times = self._times
+        if not times or log_time > self._latest:  # the usual case for a new state: no search
+            return -1
+        newest = self._next - 1  # the slot of the time put last (-1: the last slot)
+        if times[newest] == log_time:
+            return newest % len(times)
+        return times.index(log_time) if log_time in times else -1
+
+    def put(self, log_time: int, xyzw) -> None:
+        """The attitude ``xyzw`` (x, y, z, w) at ``log_time`` (ns since the Unix epoch)."""
+        x, y, z, w = map(float, xyzw)  # TypeError/ValueError before anything changes
+        times, stored = self._times, self._xyzw
+        slot = self._slot(log_time)
+        if slot >= 0:  # a time held: its newer attitude, in place
+            k = 4 * slot
+            stored[k], stored[k + 1], stored[k + 2], stored[k + 3] = x, y, z, w
+            return
+        if not times or log_time > self._latest:
+            self._latest = log_time  # an upper bound: it may stay when its time is dropped
+        if len(times) < self.capacity:
+            slot = len(times)
+            times.append(log_time)
+        else:
+            slot = self._next
+            times[slot] = log_time
+            self._next = slot + 1 if slot + 1 < self.capacity else 0
+        k = 4 * slot
+        stored[k], stored[k + 1], stored[k + 2], stored[k + 3] = x, y, z, w
+
+    def get(self, log_time: int, default=None):
+        """The attitude ``(x, y, z, w)`` at ``log_time``, or ``default`` when it is not held."""
+        slot = self._slot(log_time)
+        if slot < 0:
+            return default
+        return tuple(self._xyzw[4 * slot:4 * slot + 4])
+
+
 class _Body:
-    __slots__ = ("name", "index", "frame", "r_km", "r_time", "xyzw", "q_time", "recent_q", "trail", "samples",
-                 "has_orbit")
+    __slots__ = ("name", "index", "frame", "r_km", "r_time", "xyzw", "q_time", "recent_attitudes", "trail",
+                 "samples", "has_orbit")
 
     def __init__(self, name: str, index: int, has_orbit: bool | None):
         self.name, self.index = name, index
@@ -194,9 +337,9 @@ class _Body:
         self.r_time = 0
         self.xyzw: tuple | None = None  # newest attitude (Foxglove order, scalar last) and its log time
         self.q_time = 0
-        self.recent_q: collections.OrderedDict[int, tuple] = collections.OrderedDict()  # log time -> xyzw
-        self.trail: collections.deque = collections.deque(maxlen=MAX_LINE_POINTS)
-        self.samples = 0
+        self.recent_attitudes = RecentAttitudes()  # log time -> xyzw, the newest RECENT_ATTITUDES times
+        self.trail = TrailRing(MAX_LINE_POINTS)  # positions at the view frames, km, oldest first
+        self.samples = 0  # orbit states taken (the trail's metadata)
         self.has_orbit = has_orbit  # from the config; None: unknown (then: once an orbit state came)
 
 
@@ -283,9 +426,7 @@ class LiveScene:
             self.changed |= body.xyzw is None
             if log_time >= body.q_time:
                 body.xyzw, body.q_time = xyzw, log_time
-            body.recent_q[log_time] = xyzw
-            while len(body.recent_q) > 64:
-                body.recent_q.popitem(last=False)
+            body.recent_attitudes.put(log_time, xyzw)
         self.t = max(self.t, float(msg["t"]))
         return log_time
 
@@ -300,7 +441,8 @@ class LiveScene:
         for b in self.bodies.values():
             if b.r_km is not None:
                 if b.xyzw is not None:
-                    q = b.recent_q.get(b.r_time, b.xyzw)
+                    # the attitude at the position's instant; the newest is it when their times agree
+                    q = b.xyzw if b.q_time == b.r_time else b.recent_attitudes.get(b.r_time, b.xyzw)
                     out.append(frame_transform(stamp(b.r_time), b.frame, b.name, b.r_km, q))
                 else:
                     out.append(frame_transform(stamp(b.r_time), b.frame, f"{b.name}/position", b.r_km,
@@ -312,18 +454,17 @@ class LiveScene:
     def scene(self) -> dict:
         """The ``foxglove.SceneUpdate`` message: central body, trails, axes."""
         ts = stamp(self.log_time())
-        orbiting = [b for b in self.bodies.values() if b.trail]
+        orbiting = [b for b in self.bodies.values() if len(b.trail)]
         entities = []
         if orbiting and self.radius_km > 0:
             entities.append(central_body_entity(ts, orbiting[0].frame, self.central_name, self.radius_km))
         per_body = max(2, MAX_LIVE_SCENE_POINTS // max(1, len(orbiting)))
         axis_km = 0.1 * self.radius_km if orbiting and self.radius_km > 0 else 1.0
         for b in self.bodies.values():
-            if b.trail:
-                trail = np.asarray(b.trail)
-                keep = np.unique(np.rint(np.linspace(0, len(trail) - 1, min(per_body, len(trail)))).astype(int))
-                entities.append(orbit_line_entity(ts, b.frame, b.name, trail[keep], BODY_COLORS[b.index % len(BODY_COLORS)],
-                                                  b.samples))
+            if n := len(b.trail):  # evenly spread over the trail, oldest first, the first and newest kept
+                keep = np.unique(np.rint(np.linspace(0, n - 1, min(per_body, n))).astype(int))
+                entities.append(orbit_line_entity(ts, b.frame, b.name, b.trail.take(keep),
+                                                  BODY_COLORS[b.index % len(BODY_COLORS)], b.samples))
             if b.xyzw is not None:
                 entities.append(axes_entity(ts, b.name, axis_km))
         return {"deletions": [], "entities": entities}
