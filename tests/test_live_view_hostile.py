@@ -559,3 +559,33 @@ def test_a_view_whose_listener_died_of_descriptor_exhaustion_is_restarted(tmp_pa
     assert alive and status == "serverInfo", err[-2000:]
     assert "stopped accepting connections" in err and "restarted it on the same port" in err, err[-2000:]
     assert json.loads(viewer.stdout.read().strip().splitlines()[-1])["server_restarts"] >= 1
+
+
+def test_valid_states_at_times_no_view_can_show_are_counted_not_fatal():
+    """An orbit or attitude state is valid at any finite t, but the view stamps it at
+    epoch + t (ns, an unsigned 64-bit time for Foxglove): t = 1e300 raised OverflowError in
+    the viewer's loop (from a hostile recording under ``replay --foxglove``, each restart
+    died the same way); t before 1970 gave a negative stamp.  They are counted as invalid,
+    the good states around them still shown."""
+    from astrodyn.service.viewer import LiveScene
+
+    epoch_ns = 1_774_008_000_000_000_000  # 2026-03-20T12:00:00 UTC
+    scene = LiveScene(epoch_ns, {"name": "earth", "radius": 6378137.0})
+
+    def orbit(t: float) -> bytes:
+        return messages.encode(messages.orbit_message(t, 0, "kepler", [7e6, 0.0, 0.0], [0.0, 7.5e3, 0.0], 3.986e14), "orbit")
+
+    def attitude(t: float) -> bytes:
+        return messages.encode(messages.attitude_message(t, 0, "torque_free", [1.0, 0.0, 0.0, 0.0], [0.0, 0.0, 0.1]),
+                               "attitude")
+
+    hostile = [1e300, -1e300, 1.7976931348623157e308, 1e13, -epoch_ns / 1e9 - 1.0, 2**64 / 1e9]
+    for t in hostile:
+        assert scene.update("astrodyn/x/sat/orbit", orbit(t)) is None
+        assert scene.update("astrodyn/x/sat/attitude", attitude(t)) is None
+    assert scene.invalid == 2 * len(hostile)
+    assert scene.update("astrodyn/x/sat/orbit", orbit(2.5)) == epoch_ns + 2_500_000_000
+    assert scene.update("astrodyn/x/sat/attitude", attitude(2.5)) == epoch_ns + 2_500_000_000
+    (tf,) = scene.transforms()["transforms"]
+    assert tf["timestamp"] == {"sec": epoch_ns // 10**9 + 2, "nsec": 500_000_000}
+    json.dumps(scene.scene(), allow_nan=False)

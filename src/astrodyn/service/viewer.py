@@ -98,6 +98,7 @@ from astrodyn.recording.foxglove_scene import (
     orbit_line_entity,
     stamp,
 )
+from astrodyn.recording.stream import MAX_T_S
 from astrodyn.service.children import share_fate_with_supervisor
 from astrodyn.service.signals import StopFlag
 
@@ -404,12 +405,16 @@ class LiveScene:
         except messages.MessageError:
             self.invalid += 1
             return None
+        t = float(msg["t"])
+        log_time = self.epoch_ns + int(round(t * 1e9)) if -MAX_T_S <= t <= MAX_T_S else -1
+        if not 0 <= log_time < 2**64:  # a valid message, but no time the view (or Foxglove) can show
+            self.invalid += 1
+            return None
         body = self.bodies.get(name)
         if body is None:
             has_orbit = None if self.orbit_bodies is None else name in self.orbit_bodies
             body = self.bodies[name] = _Body(name, len(self.bodies), has_orbit)
             self.changed = True
-        log_time = self.epoch_ns + int(round(float(msg["t"]) * 1e9))
         if kind == "orbit":  # plain floats: this runs for every body at every view frame
             r = msg["r"]
             r_km = (r[0] / 1e3, r[1] / 1e3, r[2] / 1e3)
@@ -427,7 +432,7 @@ class LiveScene:
             if log_time >= body.q_time:
                 body.xyzw, body.q_time = xyzw, log_time
             body.recent_attitudes.put(log_time, xyzw)
-        self.t = max(self.t, float(msg["t"]))
+        self.t = max(self.t, t)
         return log_time
 
     def transforms(self) -> dict:
