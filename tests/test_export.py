@@ -332,3 +332,49 @@ def test_export_errors_are_clear(tmp_path, recording):
         export(only_orbits, "aem", tmp_path / "aem")
     with pytest.raises(ExportError, match="format: expected one of"):
         export(recording[0], "xlsx", tmp_path)
+
+
+def _recording_with_one_time(path: Path, step: int, t_at_step: float) -> None:
+    """The LEO pair of LEO_TWO_BODIES for 20 s at 1 Hz, written as the logger would, except
+    that the states of ``step`` say ``t = t_at_step`` (a hostile or corrupt file: the
+    payloads are valid messages, the log times those of the real steps)."""
+    from astrodyn import messages
+    from astrodyn.recording import McapRecorder
+    from astrodyn.scenario import loads
+    from astrodyn.simulate import simulate
+
+    sc = loads(LEO_TWO_BODIES.format(name="ht", duration="20 s", rate="1 Hz"))
+    res = simulate(sc)
+    with McapRecorder(path, sc.to_metadata(), epoch_ns=sc.epoch_unix_ns) as rec:
+        for k, t in enumerate(res.t):
+            t = float(t)
+            said = t_at_step if k == step else t
+            for i, name in enumerate(res.orbit_names):
+                msg = messages.orbit_message(said, k, "kepler", res.r[k, i], res.v[k, i], sc.central_body.mu, sc.frame)
+                rec.write_encoded(messages.orbit_key(sc.name, name), messages.encode(msg), t, k, log_time=rec.log_time(t))
+            for i, name in enumerate(res.attitude_names):
+                msg = messages.attitude_message(said, k, "torque_free", res.q[k, i], res.w[k, i])
+                rec.write_encoded(messages.attitude_key(sc.name, name), messages.encode(msg), t, k,
+                                  log_time=rec.log_time(t))
+
+
+@pytest.mark.parametrize("fmt", ["oem", "aem"])
+@pytest.mark.parametrize("t_at_step,says", [
+    (1e13, "seq 10: t = 1e+13 s is 318913-08-08T05:46:40.000000: expected a date of the years 0001-9999"),
+    (-7e10, "seq 10: t = -7e+10 s is "),  # before year 1
+    (5.0, "seq 10: t = 5 s after t = 9 s (seq 9): expected times that increase with seq"),
+])
+def test_ccsds_export_refuses_times_no_ccsds_file_can_hold(tmp_path, fmt, t_at_step, says):
+    """One state of a (hostile) recording at t = 1e13 s was written as the epoch
+    318913-08-08T05:46:40 (CCSDS epochs have four-digit years), and one at t = 5 s between
+    9 and 11 s as an out-of-order data line; a CCSDS reader rejects both files.  Now the
+    export fails naming the channel, the seq and the time, and writes nothing."""
+    src = tmp_path / "odd.mcap"
+    _recording_with_one_time(src, 10, t_at_step)
+    out = tmp_path / fmt
+    with pytest.raises(ExportError) as info:
+        export(src, fmt, out)
+    message = str(info.value)
+    kind = "orbit" if fmt == "oem" else "attitude"
+    assert f"astrodyn/ht/leo/{kind}: {says}" in message, message
+    assert not out.exists() or not any(out.iterdir())

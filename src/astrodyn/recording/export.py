@@ -301,6 +301,10 @@ def write_parquet(run: Run, out: Path) -> list[Path]:
 # ------------------------------------------------------------------------------ CCSDS
 
 
+#: A CCSDS calendar epoch as :func:`ccsds_epochs` writes it: four-digit year 0001-9999.
+_CCSDS_EPOCH = re.compile(r"(?!0000)\d{4}-\d{2}-\d{2}T\d{2}:\d{2}:\d{2}(\.\d+)?$")
+
+
 def ccsds_epochs(run: Run, t: np.ndarray, log_time: np.ndarray) -> tuple[list[str], str]:
     """Calendar epochs ``YYYY-MM-DDThh:mm:ss.ffffff`` of ``epoch + t`` and the CCSDS TIME_SYSTEM."""
     from astropy.time import Time, TimeDelta
@@ -408,6 +412,16 @@ def _ccsds_tracks(run: Run, kind: str):
         except ValueError as exc:  # erfa's "unacceptable date": a hostile t (1e300 s) beyond any calendar
             raise ExportError(f"{run.path}: {tr.topic}: t from {float(np.min(tr.t)):g} to {float(np.max(tr.t)):g} s: "
                               f"expected times a calendar date can show ({type(exc).__name__}: {exc})") from None
+        for k, epoch in enumerate(epochs):  # CCSDS ASCII time: a four-digit year, 0001 to 9999
+            if not _CCSDS_EPOCH.match(epoch):
+                raise ExportError(f"{run.path}: {tr.topic}: seq {int(tr.seq[k])}: t = {float(tr.t[k]):g} s is "
+                                  f"{epoch}: expected a date of the years 0001-9999 (a CCSDS epoch)")
+        steps = np.diff(np.asarray(tr.t, dtype=np.float64))
+        if steps.size and not np.all(steps > 0):  # OEM and AEM data lines: epochs in increasing order
+            k = int(np.argmin(steps > 0))
+            raise ExportError(f"{run.path}: {tr.topic}: seq {int(tr.seq[k + 1])}: t = {float(tr.t[k + 1]):g} s after "
+                              f"t = {float(tr.t[k]):g} s (seq {int(tr.seq[k])}): expected times that increase with "
+                              f"seq (CCSDS data lines are in time order)")
         yield name, body, tr, epochs, system
 
 
