@@ -275,6 +275,30 @@ def test_a_replay_waiting_for_a_subscriber_answers_and_stops_at_once(hub, spawn,
         assert proc.returncode == 0, (how, proc.stderr.read())
 
 
+def test_replay_starts_from_its_zenoh_config(spawn, recording, tmp_path):
+    """``--zenoh-config`` (TLS, access control) was accepted and silently ignored by replay:
+    it opened a plain session.  A file Zenoh cannot parse, or a FIFO (whose read would block
+    for good), must now stop it with the option named; a valid one is used."""
+    import os
+
+    path, _, _ = recording
+    broken = tmp_path / "broken.json5"
+    broken.write_text("{ transport: { unicast: { max_sessions: } }")
+    fifo = tmp_path / "zenoh.fifo"
+    os.mkfifo(fifo)
+    for given, says in ((broken, "expected a readable Zenoh JSON5 configuration"),
+                        (fifo, "expected a regular file, got a FIFO")):
+        proc = spawn(path, "--zenoh-config", str(given), "--wait", "0", "--rate", "inf", "--quiet")
+        _, err = proc.communicate(timeout=30)
+        assert proc.returncode == 1 and f"--zenoh-config {given}: {says}" in err and "Traceback" not in err, err
+    good = tmp_path / "good.json5"
+    good.write_text("{ transport: { unicast: { max_sessions: 64 } } }")
+    proc = spawn(path, "--zenoh-config", str(good), "--wait", "0", "--rate", "inf", "--quiet")
+    out, err = proc.communicate(timeout=60)
+    assert proc.returncode == 0, err
+    assert json.loads(out.strip().splitlines()[-1])["messages"] == 303
+
+
 def test_replay_of_a_cut_file_sends_what_is_complete_and_says_so(hub, spawn, recording, tmp_path):
     session, endpoint = hub
     path, _, _ = recording

@@ -64,6 +64,7 @@ from typing import Any
 import zenoh
 
 from astrodyn import auth, messages
+from astrodyn.files import regular_file_problem
 
 __all__ = [
     "SchemaServer",
@@ -282,6 +283,8 @@ def make_config(
     if listen is None and mode != "client":
         listen_list = [loopback_endpoint()]
     if config_file is not None:
+        if problem := regular_file_problem(config_file):  # a FIFO would block zenoh's read for good
+            raise BusError(f"--zenoh-config {config_file}: {problem}")
         try:
             config = zenoh.Config.from_file(str(config_file))
         except (zenoh.ZError, OSError, ValueError) as exc:

@@ -38,6 +38,7 @@ from mcap.opcode import Opcode
 from mcap.records import Channel, Chunk, Message, Metadata, Schema
 
 from astrodyn import messages
+from astrodyn.files import file_kind
 from astrodyn.recording.chunked_writer import MAGIC
 from astrodyn.recording.writer import RecordingError
 
@@ -186,9 +187,7 @@ def open_recording(path: str) -> tuple[BinaryIO, int]:
     st = os.fstat(fd)
     if not stat.S_ISREG(st.st_mode):
         os.close(fd)
-        what = "a directory" if stat.S_ISDIR(st.st_mode) else "a FIFO" if stat.S_ISFIFO(st.st_mode) else \
-            "a device or socket"
-        raise RecordingError(f"{path}: cannot open: expected a regular file, got {what}")
+        raise RecordingError(f"{path}: cannot open: expected a regular file, got {file_kind(st.st_mode)}")
     return os.fdopen(fd, "rb"), st.st_size
 
 

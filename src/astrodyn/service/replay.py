@@ -431,7 +431,8 @@ def main(argv: list[str] | None = None) -> int:
         try:
             scenario = args.control_scenario or scenario_of(stream)
             check_control_scenario(scenario, stream.path, given=args.control_scenario is not None)
-            session = bus.open_session(listen=listen, connect=args.connect, mode=args.mode)
+            session = bus.open_session(listen=listen, connect=args.connect, mode=args.mode,
+                                       config_file=args.zenoh_config)
         except (RecordingError, messages.MessageError, bus.BusError) as exc:
             print(f"astrodyn replay: error: {exc}", file=sys.stderr)
             return 1
@@ -459,7 +460,8 @@ def main(argv: list[str] | None = None) -> int:
                             auth.write_private_file(token_dir / "control-token", b"")
                         playback = (token_dir / "control-token", rep.lo, rep.hi)
                     endpoints = listen or args.connect or []
-                    viewer = LiveView(lambda: start_viewer(stream, scenario, port, endpoints, token_dir, playback))
+                    viewer = LiveView(lambda: start_viewer(stream, scenario, port, endpoints, token_dir, playback,
+                                                           args.zenoh_config))
                     viewer_url = f"ws://127.0.0.1:{port}"
                 print(json.dumps({"replaying": stream.path, "scenario": scenario, "listen": listen,
                                   "connect": args.connect, "foxglove": viewer_url,
@@ -483,15 +485,17 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def start_viewer(stream: McapStream, scenario: str, port: int, endpoints: list[str], work: Path,
-                 playback: tuple[Path, int, int] | None = None) -> Child:
+                 playback: tuple[Path, int, int] | None = None, zenoh_config: str | None = None) -> Child:
     """The live view (``--foxglove``): a child process subscribing to what the replay publishes;
-    ``playback`` = (token file, first ns, last ns) wires Foxglove's playback bar to the replay."""
+    ``playback`` = (token file, first ns, last ns) wires Foxglove's playback bar to the replay;
+    ``zenoh_config``: the replay's ``--zenoh-config`` (TLS, access control), the viewer's too."""
     meta = work / "scenario.json"
     meta.write_text(json.dumps(stream.metadata.get("scenario", {})))
     bar = [] if playback is None else ["--playback-token-file", str(playback[0]),
                                        "--playback-range", f"{playback[1]},{playback[2]}"]
     return Child("viewer", [*viewer_command(), "--scenario", scenario, "--port", str(port), "--metadata", str(meta),
-                            "--services", ",".join(REPLAY_VERBS), *bar, *sum((["--connect", e] for e in endpoints), [])],
+                            "--services", ",".join(REPLAY_VERBS), *bar, *sum((["--connect", e] for e in endpoints), []),
+                            *(["--zenoh-config", str(zenoh_config)] if zenoh_config else [])],
                  work)
 
 

@@ -52,6 +52,10 @@ def open_router(listen: list[str], connect: list[str] | None = None, config_file
         return bus.open_session(listen=listen, connect=connect or None, mode="router")
     import zenoh
 
+    from astrodyn.files import regular_file_problem
+
+    if problem := regular_file_problem(config_file):  # a FIFO would block zenoh's read for good
+        raise bus.BusError(f"--config {config_file}: {problem}")
     try:
         config = zenoh.Config.from_file(config_file)
         config.insert_json5("mode", json.dumps("router"))

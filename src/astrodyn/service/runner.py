@@ -42,6 +42,7 @@ import time
 from pathlib import Path
 
 from astrodyn import auth, bus
+from astrodyn.files import regular_file_problem
 from astrodyn.jit import kernels_uncached
 from astrodyn.progress import Progress
 from astrodyn.recording.writer import partial_path, standby_path
@@ -766,6 +767,8 @@ def check_json_path(path: Path, inputs: tuple) -> None:
             raise ScenarioError(f"--json {shown}: expected a file in an existing, writable directory, got {parent}")
         if path.is_dir():
             raise ScenarioError(f"--json {shown}: expected a file path, got a directory")
+        if problem := regular_file_problem(path, missing_ok=True):  # a FIFO would block the read below
+            raise ScenarioError(f"--json {shown}: {problem}; it is never written to")
         if path.exists():
             with open(path, "rb") as f:
                 head = f.read(64).lstrip()
