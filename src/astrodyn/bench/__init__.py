@@ -2,7 +2,9 @@
 
 Each benchmark module exposes ``main(argv) -> int``, prints a table of ns per
 state (or step) and max error, and reports ratios against REBOUND / scipy
-measured in the same process.
+measured in the same process; and ``parse_args(argv)``, its options checked with the
+types of :mod:`astrodyn.bench.flags` (a bad value: argparse's one-line error naming the
+flag, exit 2).
 """
 
 from __future__ import annotations
@@ -51,6 +53,15 @@ def print_table(header: Sequence[str], rows: Iterable[Sequence[object]], align: 
     print("| " + " | ".join("---:" if a == "r" else "---" for a in (align or "l" * len(header))) + " |")
     for row in rows:
         print("| " + " | ".join(str(cell) for cell in row) + " |")
+
+
+def walker_planes(satellites: int, most: int) -> int:
+    """Planes of a Walker constellation of ``satellites``: the largest divisor of it (the
+    scenario wants equal planes) at most ``most`` and at most a tenth of it (at least 1)."""
+    planes = max(1, min(most, satellites // 10))
+    while satellites % planes:
+        planes -= 1
+    return planes
 
 
 def env_for_source(src: str | None, **extra: str) -> dict:
@@ -102,6 +113,9 @@ def main(argv: list[str] | None = None) -> int:
         if n not in SUITES:
             print(f"astrodyn bench: unknown suite {n!r}; expected one of: {', '.join(SUITES)}, all", file=sys.stderr)
             return 2
+    if name == "all":  # every suite's options checked before the first runs (an error exits 2 here, not an hour in)
+        for n in names:
+            importlib.import_module(SUITES[n]).parse_args(rest)
     rc = 0
     for n in names:
         rc |= int(importlib.import_module(SUITES[n]).main(rest) or 0)

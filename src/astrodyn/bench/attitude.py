@@ -28,6 +28,8 @@ import time
 
 import numpy as np
 
+from astrodyn.bench.flags import int_in, output_dir
+
 CASES = {
     # name: (inertia kg m^2, w0 rad/s, span s, mp reference affordable)
     "triaxial": ((1.0, 2.0, 3.0), (0.3, 0.1, 0.6), 20.0, True),
@@ -171,12 +173,19 @@ def _plot(results, path):
     plt.close(fig)
 
 
-def main(argv=None) -> int:
+def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
+    """The options of ``astrodyn bench attitude``, checked (argparse's usage error, exit 2)."""
     p = argparse.ArgumentParser(prog="astrodyn bench attitude", description=__doc__.split("\n\n")[0])
-    p.add_argument("--out", default="docs", help="directory for bench-attitude.md and bench-attitude.png (default: docs)")
+    p.add_argument("--out", type=output_dir, default="docs",
+                   help="directory for bench-attitude.md and bench-attitude.png, created if missing (default: docs)")
     p.add_argument("--quick", action="store_true", help="fewer steps/tolerances, no mpmath reference (a smoke run)")
-    p.add_argument("--repeats", type=int, default=None, help="timing repeats, best kept (default 5, quick 2)")
-    args = p.parse_args(argv)
+    p.add_argument("--repeats", type=int_in(1, 20), default=None,
+                   help="timing repeats, best kept, 1..20 (each repeats every case; default 5, quick 2)")
+    return p.parse_args(argv)
+
+
+def main(argv=None) -> int:
+    args = parse_args(argv)
     repeats = args.repeats or (2 if args.quick else 5)
     os.makedirs(args.out, exist_ok=True)
 

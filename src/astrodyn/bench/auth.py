@@ -22,6 +22,7 @@ import numpy as np
 
 from astrodyn import auth, messages
 from astrodyn.bench import best_seconds_per_call, print_table
+from astrodyn.bench.flags import int_in
 
 
 def _best(fn, repeat: int, number: int) -> float:
@@ -69,15 +70,18 @@ def measure(bodies: int = 1000, repeat: int = 5) -> list[dict]:
     return rows
 
 
-def main(argv: list[str] | None = None) -> int:
+def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
+    """The options of ``astrodyn bench auth``, checked (argparse's usage error, exit 2)."""
     ap = argparse.ArgumentParser(prog="astrodyn bench auth", description=__doc__.split("\n\n")[0])
-    ap.add_argument("--bodies", type=int, default=1000, help="states per envelope (default 1000)")
-    ap.add_argument("--repeat", type=int, default=5, help="best of this many timings (default 5)")
-    args = ap.parse_args(argv)
-    if not 1 <= args.bodies <= 100_000:
-        print(f"astrodyn bench auth: --bodies: expected 1 .. 100000, got {args.bodies}", file=sys.stderr)
-        return 2
-    rows = measure(args.bodies, max(1, args.repeat))
+    ap.add_argument("--bodies", type=int_in(1, 100_000), default=1000,
+                    help="states per envelope, 1..100000 (an envelope of 100000 is about 23 MB; default 1000)")
+    ap.add_argument("--repeat", type=int_in(1, 100), default=5, help="best of this many timings, 1..100 (default 5)")
+    return ap.parse_args(argv)
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = parse_args(argv)
+    rows = measure(args.bodies, args.repeat)
     print_table(["case", "encode (us)", "sign (us)", "verify (us)", "per", "sign / encode"],
                 ([row["case"], f"{row['encode_us']:.3f}", f"{row['sign_us']:.3f}", f"{row['verify_us']:.3f}", row["per"],
                   f"{row['sign_us'] / row['encode_us']:.2f}"] for row in rows), align="lrrrlr")

@@ -28,6 +28,7 @@ import time
 import numpy as np
 
 from astrodyn.bench import best_seconds_per_call, call_in_tree, env_for_source, print_table
+from astrodyn.bench.flags import float_in, int_in, problem, source_tree
 
 DZHANIBEKOV = (np.array([1.0, 2.0, 3.0]), np.array([1e-3, 1.0, 1e-3]))
 
@@ -359,26 +360,30 @@ def _fmt(s) -> str:
     return f"{s * 1e3:.3f} ms" if s >= 1e-3 else f"{s * 1e6:.2f} us"
 
 
-def main(argv: list[str] | None = None) -> int:
+def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
+    """The options of ``astrodyn bench calls``, checked (argparse's usage error, exit 2);
+    ``--baseline`` is checked by :func:`main` (one line, exit status 2)."""
     ap = argparse.ArgumentParser(prog="astrodyn bench calls", description=__doc__.split("\n\n")[0])
     ap.add_argument("--load", action="store_true", help="also measure while one astrodyn kernel loop per core runs")
-    ap.add_argument("--repeat", type=int, default=5, help="best of this many timings (default 5)")
-    ap.add_argument("--load-threads", type=int, default=1,
-                    help="numba threads of each load process (default 1, the service default; 2: as before issue 15)")
+    ap.add_argument("--repeat", type=int_in(1, 100), default=5, help="best of this many timings, 1..100 (default 5)")
+    ap.add_argument("--load-threads", type=int_in(1, 64), default=1,
+                    help="numba threads of each load process, 1..64 (default 1, the service default; 2: as before issue 15)")
     ap.add_argument("--sweep", action="store_true",
                     help="only the serial/parallel sweep of batch sizes behind astrodyn.jit.PARALLEL_MIN")
     ap.add_argument("--baseline", default=None, metavar="SRC",
                     help="also compare with an older source tree (e.g. git archive of a commit, its src/ directory)")
-    ap.add_argument("--load-worker", type=float, default=None, help=argparse.SUPPRESS)
-    args = ap.parse_args(argv)
+    # one background load process (Load starts it): its wall seconds, at most a day
+    ap.add_argument("--load-worker", type=float_in(1.0, 86_400.0), default=None, help=argparse.SUPPRESS)
+    return ap.parse_args(argv)
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = parse_args(argv)
     if args.load_worker is not None:
         load_worker(args.load_worker)
         return 0
-    if args.repeat < 1:
-        print(f"astrodyn bench calls: --repeat: expected an integer >= 1, got {args.repeat}", file=sys.stderr)
-        return 2
-    if not 1 <= args.load_threads <= 64:
-        print(f"astrodyn bench calls: --load-threads: expected an integer 1..64, got {args.load_threads}", file=sys.stderr)
+    if args.baseline is not None and (why := problem(source_tree, args.baseline)):
+        print(f"astrodyn bench calls: --baseline: {why}", file=sys.stderr)
         return 2
     if args.sweep:
         regimes = {"idle": sweep()}
@@ -392,10 +397,6 @@ def main(argv: list[str] | None = None) -> int:
                     align="lrlrrr")
         return 0
     if args.baseline is not None:
-        if not os.path.isfile(os.path.join(args.baseline, "astrodyn", "__init__.py")):
-            print(f"astrodyn bench calls: --baseline: expected a source tree holding astrodyn/, got {args.baseline!r}",
-                  file=sys.stderr)
-            return 2
         table = compare(os.path.abspath(args.baseline), args.repeat)
         cols = ["before 1 thr", "after 1 thr", "before 2 thr", "after 2 thr"]
         print(f"load average at the end: {os.getloadavg()[0]:.2f}")

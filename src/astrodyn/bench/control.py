@@ -18,6 +18,7 @@ import tempfile
 from pathlib import Path
 
 from astrodyn.bench import cpu_model, print_table
+from astrodyn.bench.flags import int_in, int_list_in
 
 __all__ = ["main", "scene"]
 
@@ -109,13 +110,21 @@ def zenoh_floor(n: int = 2000) -> dict:
     return {"p50_us": 1e6 * times[n // 2], "p99_us": 1e6 * times[int(0.99 * (n - 1))]}
 
 
-def main(argv: list[str] | None = None) -> int:
+def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
+    """The options of ``astrodyn bench control``, checked (argparse's usage error, exit 2)."""
     ap = argparse.ArgumentParser(prog="astrodyn bench control", description=__doc__.splitlines()[0])
-    ap.add_argument("--bodies", default="1,100,1000", help="comma-separated scene sizes (default 1,100,1000)")
-    ap.add_argument("--steps", type=int, default=2000, help="control steps per run (default 2000; fewer for big scenes)")
+    ap.add_argument("--bodies", type=int_list_in(1, 10_000, most=10), default="1,100,1000",
+                    help="comma-separated scene sizes, each 1..10000, at most 10 (default 1,100,1000)")
+    ap.add_argument("--steps", type=int_in(50, 1_000_000), default=2000,
+                    help="control steps per run, 50..1000000 (default 2000; fewer for big scenes: "
+                         "at most 200000 / bodies, at least 50)")
     ap.add_argument("--wheels", action="store_true", help="three reaction wheels per body as well")
-    args = ap.parse_args(argv)
-    sizes = [int(x) for x in args.bodies.split(",")]
+    return ap.parse_args(argv)
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = parse_args(argv)
+    sizes = args.bodies
     rows = []
     with tempfile.TemporaryDirectory(prefix="astrodyn-bench-control-") as work:
         for n in sizes:

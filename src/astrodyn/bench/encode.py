@@ -23,12 +23,12 @@ from __future__ import annotations
 import argparse
 import os
 import statistics
-import sys
 
 import numpy as np
 
 from astrodyn import messages as m
 from astrodyn.bench import best_seconds_per_call, call_in_tree, cpu_model
+from astrodyn.bench.flags import int_in, source_tree
 from astrodyn.messages import shortest
 
 MU_EARTH = 3.986004418e14
@@ -137,18 +137,25 @@ def single_message_cases(repeat: int) -> dict[str, float]:
     return out
 
 
-def main(argv: list[str] | None = None) -> int:
+BODIES_MAX = 1_000_000
+"""Largest ``--bodies``: about 1.7 kB per body at the peak (the states, keys and the encoded
+payloads of the before and after encoders side by side), 1.7 GB here."""
+
+
+def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
+    """The options of ``astrodyn bench encode``, checked (argparse's usage error, exit 2)."""
     ap = argparse.ArgumentParser(prog="astrodyn bench encode", description=__doc__.splitlines()[0])
-    ap.add_argument("--bodies", type=int, default=1000, help="bodies per batch (default 1000)")
-    ap.add_argument("--repeat", type=int, default=7, help="repeats; the best is reported (default 7)")
-    ap.add_argument("--baseline", default=None, metavar="SRC",
+    ap.add_argument("--bodies", type=int_in(1, BODIES_MAX), default=1000,
+                    help=f"bodies per batch, 1..{BODIES_MAX} (about 1.7 kB per body; default 1000)")
+    ap.add_argument("--repeat", type=int_in(1, 100), default=7, help="repeats; the best is reported, 1..100 (default 7)")
+    ap.add_argument("--baseline", default=None, metavar="SRC", type=source_tree,
                     help="also time the single-message calls with astrodyn imported from this source tree (before/after "
                          "in one run, alternated, in child processes)")
-    args = ap.parse_args(argv)
-    if args.baseline is not None and not os.path.isfile(os.path.join(args.baseline, "astrodyn", "__init__.py")):
-        print(f"astrodyn bench encode: --baseline: expected a source tree holding astrodyn/, got {args.baseline!r}",
-              file=sys.stderr)
-        return 2
+    return ap.parse_args(argv)
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = parse_args(argv)
     print(f"# encode benchmark on {cpu_model()}, load average {os.getloadavg()[0]:.1f} (best of {args.repeat})")
     print("\n| values | compiled ns/float | repr ns/float | ratio |\n|---|---|---|---|")
     for name, compiled, python in float_rows(args.repeat):

@@ -43,6 +43,8 @@ import time
 
 import numpy as np
 
+from astrodyn.bench.flags import int_in
+
 __all__ = ["main", "explorer_spacecraft", "run"]
 
 SPIN = 2.0 * math.pi  # rad/s: one turn per second
@@ -394,11 +396,17 @@ def table(result: dict, repeats: int) -> str:
     return "\n".join(lines)
 
 
-def main(argv=None) -> int:
+def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
+    """The options of ``astrodyn bench flexible``, checked (argparse's usage error, exit 2)."""
     p = argparse.ArgumentParser(prog="astrodyn bench flexible", description=__doc__.split("\n\n")[0])
-    p.add_argument("--repeats", type=int, default=3, help="timing repeats, best kept (default 3; half for rtol 1e-12)")
+    p.add_argument("--repeats", type=int_in(1, 20), default=3,
+                   help="timing repeats, best kept, 1..20 (the tight runs take seconds each; default 3; half for rtol 1e-12)")
     p.add_argument("--quick", action="store_true", help="rtol 1e-6 and 1e-9 only, one repeat (a smoke run)")
-    args = p.parse_args(argv)
+    return p.parse_args(argv)
+
+
+def main(argv=None) -> int:
+    args = parse_args(argv)
     repeats = 1 if args.quick else args.repeats
     result = run(repeats, args.quick)
     print(table(result, repeats))

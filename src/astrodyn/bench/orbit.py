@@ -53,6 +53,8 @@ import time
 
 import numpy as np
 
+from astrodyn.bench.flags import int_in, int_list_in, output_file
+
 MU_EARTH = 3.986004418e14
 """Earth's gravitational parameter [m^3/s^2] (WGS-84 / EGM96 value)."""
 
@@ -283,27 +285,31 @@ def _print_branches(args) -> int:
     return 0
 
 
-def _parse(argv):
+SIZE_MAX = 4_000_000
+"""Largest batch size of ``--sizes``: about 250 B per state at the peak (the states, their
+generation and the result), 1 GB here."""
+
+
+def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
+    """The options of ``astrodyn bench orbit``, checked (argparse's usage error, exit 2)."""
     ap = argparse.ArgumentParser(prog="astrodyn bench orbit", description=__doc__.split("\n\n")[0])
-    ap.add_argument("--sizes", default="1,1000,1000000", help="comma-separated batch sizes (default 1,1000,1000000)")
-    ap.add_argument("--sample", type=int, default=200, help="states checked against the mpmath reference (default 200)")
-    ap.add_argument("--compare", type=int, default=40, help="of those, states run through REBOUND and DOP853 (default 40)")
-    ap.add_argument("--seed", type=int, default=20240601, help="random seed of the states")
-    ap.add_argument("--repeats", type=int, default=7, help="timing repeats, best is reported (default 7)")
+    ap.add_argument("--sizes", type=int_list_in(1, SIZE_MAX), default="1,1000,1000000",
+                    help=f"comma-separated batch sizes, each 1..{SIZE_MAX} (about 250 B per state; at most 20 sizes; "
+                         "default 1,1000,1000000)")
+    ap.add_argument("--sample", type=int_in(1, 10_000), default=200,
+                    help="states checked against the mpmath reference, 1..10000 (default 200)")
+    ap.add_argument("--compare", type=int_in(0, 1000), default=40,
+                    help="of those, states run through REBOUND and DOP853, 0..1000 (at most --sample; default 40)")
+    ap.add_argument("--seed", type=int_in(0, 2**64 - 1), default=20240601,
+                    help="random seed of the states, 0..2^64-1 (default 20240601)")
+    ap.add_argument("--repeats", type=int_in(1, 100), default=7, help="timing repeats, best is reported, 1..100 (default 7)")
     ap.add_argument("--quick", action="store_true", help="smoke test: sizes 1,1000, sample 8, compare 4, repeats 2")
     ap.add_argument("--branches", action="store_true", help="only the serial CPU ns/state of each branch (ellipse, hyperbola, near-parabolic, mixed) on the largest size")
-    ap.add_argument("--markdown", metavar="FILE", help="also write the table (markdown) with the machine description")
+    ap.add_argument("--markdown", metavar="FILE", type=output_file,
+                    help="also write the table (markdown) with the machine description")
     args = ap.parse_args(argv)
     if args.quick:
-        args.sizes, args.sample, args.compare, args.repeats = "1,1000", 8, 4, 2
-    try:
-        args.sizes = [int(float(s)) for s in args.sizes.split(",") if s.strip()]
-    except ValueError:
-        ap.error(f"--sizes: expected comma-separated integers, got {args.sizes!r}")
-    if not args.sizes or min(args.sizes) < 1:
-        ap.error("--sizes: every size must be >= 1")
-    if args.sample < 1 or args.compare < 0 or args.repeats < 1:
-        ap.error("--sample and --repeats must be >= 1, --compare >= 0")
+        args.sizes, args.sample, args.compare, args.repeats = [1, 1000], 8, 4, 2
     args.compare = min(args.compare, args.sample)
     return args
 
@@ -311,7 +317,7 @@ def _parse(argv):
 def main(argv: list[str] | None = None) -> int:
     """``astrodyn bench orbit`` (module docstring): 0 when astrodyn's error on the sample
     is within :data:`ACCURACY_TARGET`, else 1."""
-    args = _parse(list(sys.argv[1:] if argv is None else argv))
+    args = parse_args(list(sys.argv[1:] if argv is None else argv))
     if args.branches:
         return _print_branches(args)
     mu = MU_EARTH

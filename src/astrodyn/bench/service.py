@@ -48,6 +48,9 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from astrodyn.bench import walker_planes
+from astrodyn.bench.flags import float_in, int_in, int_list_in, output_dir, output_file
+
 __all__ = ["Scene", "main", "run_scene", "check_recording", "ProcSampler"]
 
 _CLK_TCK = os.sysconf("SC_CLK_TCK")
@@ -77,10 +80,12 @@ class Scene:
 
 def scene_config(scene: Scene, template: str) -> str:
     """The TOML of ``scene``: ``configs/constellation-1000.toml`` with its name, size and
-    duration replaced (everything else -- orbit, attitude, rate -- as shipped)."""
+    duration replaced (everything else -- orbit, attitude, rate -- as shipped; the phasing
+    ``f`` 0 in a single plane, where the Walker pattern has no other)."""
     out = template
     for key, value in (("name", f'"{scene.name}"'), ("duration", f'"{scene.duration_s:g} s"'),
-                       ("rate", f'"{scene.rate_hz:g} Hz"'), ("t", str(scene.bodies)), ("p", str(scene.planes))):
+                       ("rate", f'"{scene.rate_hz:g} Hz"'), ("t", str(scene.bodies)), ("p", str(scene.planes)),
+                       *((("f", "0"),) if scene.planes == 1 else ())):
         out, n = re.subn(rf"(?m)^{key} = .*$", f"{key} = {value}", out, count=1)
         if n != 1:
             raise ValueError(f"constellation template: expected one '{key} = ...' line")
@@ -400,41 +405,66 @@ def table(rows: list[dict]) -> list[str]:
 
 def default_scenes(duration: float | None, load_duration: float, small: int) -> list[Scene]:
     return [
-        Scene(f"constellation-{small}", small, max(1, small // 10), duration or 120.0),
+        Scene(f"constellation-{small}", small, walker_planes(small, small), duration or 120.0),
         Scene("constellation-1000", 1000, 20, duration or 120.0),
         Scene("constellation-1000-unauthenticated", 1000, 20, duration or 120.0, authenticate=False),
         Scene("load-10x", 1000, 20, load_duration, real_time_factor=10.0),
     ]
 
 
-def main(argv: list[str] | None = None) -> int:
+FLOOD_STEPS_MAX = 1000
+"""Largest ``--flood-steps``: the publisher holds every envelope in memory before it puts
+them (about 0.47 MB per instant of 1000 bodies x 2 kinds), and so may a logger with a big
+queue: 470 MB each here."""
+
+
+def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
+    """The options of ``astrodyn bench service``, checked (argparse's usage error, exit 2)."""
     ap = argparse.ArgumentParser(prog="astrodyn bench service", description=__doc__.split("\n\n")[0])
-    ap.add_argument("--duration", type=float, default=None,
-                    help="simulated seconds of the as-fast-as-possible scenes (default 120, as in the config)")
-    ap.add_argument("--load-duration", type=float, default=20.0, help="simulated seconds of the 10x load case (default 20)")
-    ap.add_argument("--small", type=int, default=100, help="satellites of the small scene (default 100)")
-    ap.add_argument("--bodies", type=int, default=None, help="run one scene of this many satellites only (smoke runs)")
+    ap.add_argument("--duration", type=float_in(1.0, 3600.0), default=None,
+                    help="simulated seconds of the as-fast-as-possible scenes, 1..3600 (20000 messages per simulated "
+                         "second for 1000 bodies; default 120, as in the config)")
+    ap.add_argument("--load-duration", type=float_in(1.0, 3600.0), default=20.0,
+                    help="simulated seconds of the 10x load case, 1..3600 (default 20)")
+    ap.add_argument("--small", type=int_in(1, 1000), default=100, help="satellites of the small scene, 1..1000 (default 100)")
+    ap.add_argument("--bodies", type=int_in(1, 10_000), default=None,
+                    help="run one scene of this many satellites only, 1..10000 (smoke runs)")
     ap.add_argument("--no-load", action="store_true", help="skip the 10x load case")
-    ap.add_argument("--flood-steps", type=int, default=200,
-                    help="instants of the flood case (1000 bodies x 2 kinds each; default 200 = 400k messages; 0 skips it)")
-    ap.add_argument("--flood-queues", default="65536,64",
-                    help="logger --queue values (samples) to run the flood case with (default 65536,64)")
-    ap.add_argument("--md", metavar="FILE", help="write the results as Markdown (e.g. docs/bench-service.md)")
-    ap.add_argument("--json", metavar="FILE", help="write the results as JSON")
-    ap.add_argument("--keep", metavar="DIR", help="keep configs and MCAP files in DIR")
-    if argv and argv[0] == "--flood-publisher" or argv is None and sys.argv[1:2] == ["--flood-publisher"]:
-        rest = (argv if argv is not None else sys.argv[1:])[1:]
-        flood_publisher(rest[0], rest[1], int(rest[2]), int(rest[3]))
-        return 0
+    ap.add_argument("--flood-steps", type=int_in(0, FLOOD_STEPS_MAX), default=200,
+                    help=f"instants of the flood case (1000 bodies x 2 kinds each), 0..{FLOOD_STEPS_MAX} (held in "
+                         "memory, about 0.47 MB each; default 200 = 400k messages; 0 skips it)")
+    ap.add_argument("--flood-queues", type=int_list_in(1, 65_536, most=10), default="65536,64",
+                    help="logger --queue values (samples) to run the flood case with, each 1..65536, at most 10 "
+                         "(default 65536,64)")
+    ap.add_argument("--md", metavar="FILE", type=output_file, help="write the results as Markdown (e.g. docs/bench-service.md)")
+    ap.add_argument("--json", metavar="FILE", type=output_file, help="write the results as JSON")
+    ap.add_argument("--keep", metavar="DIR", type=output_dir, help="keep configs and MCAP files in DIR (created if missing)")
+    return ap.parse_args(argv)
+
+
+def _flood_publisher_main(argv: list[str]) -> int:
+    """``--flood-publisher HUB SCENARIO STEPS BODIES``: the child process of :func:`run_flood`."""
+    from astrodyn.bus import endpoint_argument
+
+    ap = argparse.ArgumentParser(prog="astrodyn bench service --flood-publisher")
+    ap.add_argument("connect", type=endpoint_argument)
+    ap.add_argument("scenario")
+    ap.add_argument("steps", type=int_in(1, FLOOD_STEPS_MAX))
+    ap.add_argument("bodies", type=int_in(1, 10_000))
     args = ap.parse_args(argv)
+    flood_publisher(args.connect, args.scenario, args.steps, args.bodies)
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    if argv and argv[0] == "--flood-publisher" or argv is None and sys.argv[1:2] == ["--flood-publisher"]:
+        return _flood_publisher_main((argv if argv is not None else sys.argv[1:])[1:])
+    args = parse_args(argv)
     from astrodyn.scenario.catalogue import config_path
 
     template = config_path("constellation-1000").read_text()
     if args.bodies:
-        planes = max(1, min(20, args.bodies // 10))
-        while args.bodies % planes:
-            planes -= 1
-        scenes = [Scene(f"constellation-{args.bodies}", args.bodies, planes, args.duration or 2.0)]
+        scenes = [Scene(f"constellation-{args.bodies}", args.bodies, walker_planes(args.bodies, 20), args.duration or 2.0)]
     else:
         scenes = default_scenes(args.duration, args.load_duration, args.small)
         if args.no_load:
@@ -450,7 +480,7 @@ def main(argv: list[str] | None = None) -> int:
             rows.append(run_scene(scene, workdir, template, keep=bool(args.keep)))
         floods = []
         if args.flood_steps and not args.bodies and not args.no_load:
-            for queue in [int(x) for x in args.flood_queues.split(",") if x.strip()]:
+            for queue in args.flood_queues:
                 print(f"[bench service] flood: {args.flood_steps} instants x 2000 messages, logger queue {queue} ...",
                       file=sys.stderr, flush=True)
                 floods.append(run_flood(args.flood_steps, 1000, queue, workdir))

@@ -26,6 +26,8 @@ import time
 from pathlib import Path
 
 from astrodyn import bus
+from astrodyn.bench import walker_planes
+from astrodyn.bench.flags import float_in, int_in, output_dir
 from astrodyn.scenario.catalogue import config_path
 from astrodyn.service.children import stop_process
 
@@ -48,22 +50,35 @@ def _proc(pid: int) -> tuple[float, float]:
 def _scene(out: Path, satellites: int) -> Path:
     text = config_path("constellation-1000").read_text()
     text = text.replace('name = "constellation-1000"', 'name = "soak"').replace("t = 1000", f"t = {satellites}")
-    text = text.replace("p = 20", "p = 10")
+    planes = walker_planes(satellites, 10)
+    text = text.replace("p = 20", f"p = {planes}")
+    if planes == 1:  # a single plane has no phasing but 0 (the template's f = 1 needs two planes)
+        text = text.replace("\nf = 1\n", "\nf = 0\n")
     path = out / "soak.toml"
     path.write_text(text)
     return path
 
 
-def main(argv: list[str] | None = None) -> int:
+def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
+    """The options of ``astrodyn bench soak``, checked (argparse's usage error, exit 2)."""
     ap = argparse.ArgumentParser(prog="astrodyn bench soak", description=__doc__.split("\n\n")[0])
-    ap.add_argument("--minutes", type=float, default=60.0, help="length of the soak (default 60)")
-    ap.add_argument("--sample", type=float, default=60.0, help="seconds between samples (default 60)")
-    ap.add_argument("--satellites", type=int, default=100, help="Walker satellites (10 Hz, orbit + attitude)")
-    ap.add_argument("--out", default="soak", help="directory for the config, MCAP files and the report")
-    ap.add_argument("--kill-logger-every", type=float, default=None, metavar="S",
-                    help="SIGKILL the logger every S seconds (issue 13's fault soak): serve must restart it with no "
-                         "state lost; the restart delay of each kill is measured")
-    args = ap.parse_args(argv)
+    ap.add_argument("--minutes", type=float_in(0.5, 1440.0), default=60.0,
+                    help="length of the soak, 0.5..1440 (a day; MCAP on disk: about 330 MB an hour per 100 satellites; "
+                         "default 60)")
+    ap.add_argument("--sample", type=float_in(1.0, 3600.0), default=60.0,
+                    help="seconds between samples, 1..3600 (default 60)")
+    ap.add_argument("--satellites", type=int_in(1, 2000), default=100,
+                    help="Walker satellites (10 Hz, orbit + attitude), 1..2000 (real time on a laptop; default 100)")
+    ap.add_argument("--out", type=output_dir, default="soak",
+                    help="directory for the config, MCAP files and the report, created if missing (default soak)")
+    ap.add_argument("--kill-logger-every", type=float_in(5.0, 86_400.0), default=None, metavar="S",
+                    help="SIGKILL the logger every S seconds, 5..86400 (issue 13's fault soak): serve must restart it "
+                         "with no state lost; the restart delay of each kill is measured")
+    return ap.parse_args(argv)
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = parse_args(argv)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     config = _scene(out, args.satellites)

@@ -22,6 +22,7 @@ import tempfile
 import time
 from pathlib import Path
 
+from astrodyn.bench.flags import int_in, output_file
 from astrodyn.sweep import local_cluster, make_spec, run_cases
 
 ORBIT_ONLY = """
@@ -79,11 +80,17 @@ def measure(config: Path, varies: list[str], n: int, workers: int, chunk: int = 
     return {"cases_per_s": rate, "startup_s": startup, "failed": failed}
 
 
-def main(argv: list[str] | None = None) -> int:
+def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
+    """The options of ``astrodyn bench sweep``, checked (argparse's usage error, exit 2)."""
     ap = argparse.ArgumentParser(prog="astrodyn bench sweep", description=__doc__.split("\n\n")[0])
-    ap.add_argument("--repeat", type=int, default=2)
-    ap.add_argument("--out", default=None, help="Markdown file for the table (default: print only)")
-    args = ap.parse_args(argv)
+    ap.add_argument("--repeat", type=int_in(1, 10), default=2,
+                    help="runs of each configuration, best kept, 1..10 (each starts its Dask clusters; default 2)")
+    ap.add_argument("--out", default=None, type=output_file, help="Markdown file for the table (default: print only)")
+    return ap.parse_args(argv)
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = parse_args(argv)
     from astrodyn.scenario.catalogue import config_path
 
     results: dict[tuple[str, int], dict] = {}

@@ -24,6 +24,7 @@ from pathlib import Path
 
 from astrodyn import bus
 from astrodyn.bench import cpu_model
+from astrodyn.bench.flags import float_in, int_in, scenario_file
 from astrodyn.scenario.catalogue import config_path
 from astrodyn.service.children import stop_process
 
@@ -98,15 +99,23 @@ def one_run(config: Path, wall_s: float, viewer: bool, work: Path, subscribe: st
             "load": os.getloadavg()[0]}
 
 
-def main(argv: list[str] | None = None) -> int:
+def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
+    """The options of ``astrodyn bench view``, checked (argparse's usage error, exit 2)."""
     ap = argparse.ArgumentParser(prog="astrodyn bench view", description=__doc__.splitlines()[0])
-    ap.add_argument("--config", default=None, help="scene (default configs/constellation-1000.toml)")
-    ap.add_argument("--wall", type=float, default=20.0, help="wall seconds measured per run (default 20)")
-    ap.add_argument("--rounds", type=int, default=3, help="alternated pairs (default 3)")
+    ap.add_argument("--config", default=None, type=scenario_file,
+                    help="scene, a scenario config that loads (default configs/constellation-1000.toml)")
+    ap.add_argument("--wall", type=float_in(1.0, 3600.0), default=20.0,
+                    help="wall seconds measured per run, 1..3600 (default 20)")
+    ap.add_argument("--rounds", type=int_in(1, 20), default=3,
+                    help="alternated pairs, 1..20 (each two runs of --wall seconds; default 3)")
     ap.add_argument("--subscribe", choices=("3d", "all"), default="3d",
                     help="what the client subscribes to: '3d' the transforms and the scene plus one raw channel (a 3D "
                          "panel and one plot), 'all' every channel (the worst case)")
-    args = ap.parse_args(argv)
+    return ap.parse_args(argv)
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = parse_args(argv)
     config = Path(args.config) if args.config else config_path("constellation-1000")
     rows = []
     with tempfile.TemporaryDirectory(prefix="astrodyn-bench-view-") as work:
