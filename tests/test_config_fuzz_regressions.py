@@ -151,6 +151,7 @@ def test_run_timeout_must_be_positive_wall_seconds(short, capsys, value):
     (["--connect", "garbage"], "--connect: expected Zenoh endpoints like 'tcp/127.0.0.1:7447', got 'garbage'"),
     (["--out", "x" * 300 + ".mcap"], ": expected a usable file path, got File name too long"),
     (["--out", ""], "--out: expected a file path, got an empty string"),
+    (["--resume", ""], "--resume: expected the MCAP recording to continue, got an empty string"),  # was: ignored
 ])
 def test_run_flags_refused_before_anything_starts(short, capsys, monkeypatch, argv, says):
     """A bad --connect restarted the logger 5 times for 20 s (exit 1); a 300-character --out
@@ -181,6 +182,17 @@ def test_serve_flags_refused_before_anything_starts(short, capsys, monkeypatch, 
     err = capsys.readouterr().err
     assert says in err, err
     assert list(short.parent.iterdir()) == [short], "a refused serve wrote something"
+
+
+@pytest.mark.parametrize("value", ["1e400", "nan", "0", "Infinity"])
+def test_serve_rate_is_a_real_time_factor_or_the_word_inf(short, capsys, value):
+    """``--rate 1e400`` (float() gives inf) ran as fast as possible, while 1e12 was refused."""
+    with pytest.raises(SystemExit) as info:
+        serve.main([str(short), "--out", str(short.parent / "o.mcap"), "--rate", value])
+    assert info.value.code == 2
+    assert f'argument --rate: expected a real-time factor with 0.001 <= x <= 1e+06 or "inf", got {value!r}' in \
+        capsys.readouterr().err
+    assert list(short.parent.iterdir()) == [short]
 
 
 @pytest.mark.parametrize("value", ["nan", "-1"])

@@ -286,11 +286,11 @@ def test_replay_starts_from_its_zenoh_config(spawn, recording, tmp_path):
     broken.write_text("{ transport: { unicast: { max_sessions: } }")
     fifo = tmp_path / "zenoh.fifo"
     os.mkfifo(fifo)
-    for given, says in ((broken, "expected a readable Zenoh JSON5 configuration"),
-                        (fifo, "expected a regular file, got a FIFO")):
+    for given, says, rc in ((broken, "expected a readable Zenoh JSON5 configuration", 1),
+                            (fifo, "expected a regular file, got a FIFO", 2)):
         proc = spawn(path, "--zenoh-config", str(given), "--wait", "0", "--rate", "inf", "--quiet")
         _, err = proc.communicate(timeout=30)
-        assert proc.returncode == 1 and f"--zenoh-config {given}: {says}" in err and "Traceback" not in err, err
+        assert proc.returncode == rc and f"--zenoh-config {given}: {says}" in err and "Traceback" not in err, err
     good = tmp_path / "good.json5"
     good.write_text("{ transport: { unicast: { max_sessions: 64 } } }")
     proc = spawn(path, "--zenoh-config", str(good), "--wait", "0", "--rate", "inf", "--quiet")
@@ -354,9 +354,14 @@ def test_replay_bad_arguments_name_the_option(spawn, recording):
              (["--start", "30", "--end", "10"], "end: expected end >= start"),
              (["--start", "nan"], "--start: expected a finite number"),
              (["--port", str(port)], f"--port: expected a free port on 127.0.0.1, got {port} (Address already in use)"),
-             (["--port", "65536"], "--port: expected a port 0..65535 (0: a free one), got 65536")]
+             (["--port", "65536"], "--port: expected a port 0..65535 (0: a free one), got 65536"),
+             (["--rate", "1e400"], "--rate: expected a real-time factor"),  # was: taken as inf
+             (["--wait", "1e11"], "--wait: expected wall seconds 0 <= S <= 86400 (a day)"),  # was: 3000 years
+             (["--control-scenario", ""], "--control-scenario: expected a name matching"),  # was: the recorded one
+             (["--topics", "["], "--topics '[': matches no topic of"),  # was: nothing replayed, exit 0
+             (["--zenoh-config", "/dev/zero"], "expected a regular file, got a character device")]
     with taken:
         for args, needle in cases:
-            proc = spawn(path, *args, "--wait", "0")
+            proc = spawn(path, "--wait", "0", *args)  # the case's own flags come last and win
             _, err = proc.communicate(timeout=30)
             assert proc.returncode == 2 and needle in err and "Traceback" not in err, (args, err)

@@ -192,3 +192,14 @@ def test_three_clients_through_a_router_across_two_namespaces(tmp_path):
     finally:
         for ns in (ns_a, ns_b):  # deleting a namespace deletes its end of the veth pair
             subprocess.run(["ip", "netns", "del", ns], capture_output=True)
+
+
+@pytest.mark.parametrize("argv,says", [
+    (["--connect", ""], "argument --connect: expected Zenoh endpoints"),  # was: named "listen:"
+    (["--status-interval", "-1"], "argument --status-interval: expected wall seconds"),  # was: silently never
+    (["--status-interval", "nan"], "argument --status-interval: expected wall seconds"),
+    (["--config", "/dev/zero"], "--config /dev/zero: expected a regular file, got a character device"),  # was: read to OOM
+])
+def test_router_flags_are_refused_by_name(argv, says):
+    done = subprocess.run([sys.executable, "-m", "astrodyn", "router", *argv], capture_output=True, text=True, timeout=60)
+    assert done.returncode == 2 and says in done.stderr and "Traceback" not in done.stderr, done.stderr

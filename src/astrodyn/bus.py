@@ -73,6 +73,7 @@ __all__ = [
     "signed_put",
     "RATE_BOUNDS",
     "parse_rate_factor",
+    "rate_argument",
     "CONTROL_VERBS",
     "BusError",
     "free_port",
@@ -98,6 +99,7 @@ __all__ = [
     "wait_for_logger",
     "port_taken",
     "local_port",
+    "zenoh_error_text",
     "local_port_problem",
     "AliveWatcher",
     "Heartbeat",
@@ -243,6 +245,15 @@ def check_endpoint(endpoint: Any, what: str) -> str:
     return endpoint
 
 
+_RUST_SOURCE = re.compile(r" at /\S+?\.rs:\d+\.?")
+
+
+def zenoh_error_text(exc: BaseException | None) -> str:
+    """The text of a Zenoh error without the Rust source locations it carries (`` at
+    /root/.cargo/git/checkouts/zenoh-.../src/lib.rs:147``): what went wrong, for a user."""
+    return _RUST_SOURCE.sub("", str(exc)).strip()
+
+
 def endpoint_argument(value: str) -> str:
     """The argparse ``type`` of an endpoint flag (``--connect``, ``--listen``): the value, or
     argparse's usage error (exit 2) naming the flag, with :func:`check_endpoint`'s text."""
@@ -288,7 +299,8 @@ def make_config(
         try:
             config = zenoh.Config.from_file(str(config_file))
         except (zenoh.ZError, OSError, ValueError) as exc:
-            raise BusError(f"--zenoh-config {config_file}: expected a readable Zenoh JSON5 configuration: {exc}") from None
+            raise BusError(f"--zenoh-config {config_file}: expected a readable Zenoh JSON5 configuration: "
+                           f"{zenoh_error_text(exc)}") from None
     else:
         config = zenoh.Config()
     config.insert_json5("mode", json.dumps(mode))
@@ -324,7 +336,7 @@ def open_session(
         except zenoh.ZError as exc:
             last = exc
     raise BusError(
-        f"cannot open a Zenoh session (mode={mode}, listen={listen!r}, connect={connect!r}): {last}"
+        f"cannot open a Zenoh session (mode={mode}, listen={listen!r}, connect={connect!r}): {zenoh_error_text(last)}"
     )
 
 
@@ -806,6 +818,23 @@ def parse_rate_factor(raw: Any) -> float:
     shown = shown if len(shown) <= 40 else shown[:37] + "..."
     raise ValueError(f'rate: expected {{"factor": x}} with {RATE_BOUNDS[0]:g} <= x <= {RATE_BOUNDS[1]:g} '
                      f'or "inf", got {shown}')
+
+
+def rate_argument(text: str) -> float:
+    """argparse ``type`` of a ``--rate`` option: the word ``inf`` (as fast as possible) or a
+    number spelled within :data:`RATE_BOUNDS` (``1e400``, which float() reads as inf, and
+    ``nan`` are refused like any number outside them)."""
+    if str(text).strip() == "inf":
+        return math.inf
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not RATE_BOUNDS[0] <= value <= RATE_BOUNDS[1]:  # nan and the overflowed inf fail too
+        shown = repr(text) if len(repr(text)) <= 40 else repr(text)[:37] + "..."
+        raise argparse.ArgumentTypeError(f"expected a real-time factor with {RATE_BOUNDS[0]:g} <= x <= "
+                                         f'{RATE_BOUNDS[1]:g} or "inf", got {shown}')
+    return value
 
 
 class ControlServer(_Declared):

@@ -56,8 +56,9 @@ from pathlib import Path
 from typing import Any
 
 from astrodyn import auth, bus, messages
+from astrodyn.files import regular_file_problem
 from astrodyn.progress import Progress
-from astrodyn.recording.stream import McapStream, RawMessage
+from astrodyn.recording.stream import McapStream, RawMessage, topic_matcher
 from astrodyn.recording.writer import RecordingError
 from astrodyn.service.children import Child
 from astrodyn.service.signals import StopFlag
@@ -70,15 +71,6 @@ __all__ = ["Replayer", "main", "build_parser", "open_recording", "start_viewer",
 REPLAY_VERBS = (*bus.CONTROL_VERBS, "seek")
 _BATCH_PROCESS = {"orbit": "orbit", "crosscheck": "orbit", "attitude": "attitude"}
 _POLL_S = 0.02  # control queries are answered within about this long
-
-
-def cli_number(text: str) -> float | str:
-    """A command-line value as the number it spells (``"2"``, ``"1e3"``), else the text
-    itself ("inf", or something for the check that follows to refuse by name)."""
-    try:
-        return text if text.strip() == "inf" else float(text)
-    except ValueError:
-        return text
 
 
 def parse_rate(raw: Any, what: str = "rate") -> float:
@@ -370,12 +362,14 @@ def _progress_line(rep: Replayer) -> str:
 def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog="astrodyn replay", description="Republish a recorded MCAP file on Zenoh.")
     ap.add_argument("file", help="MCAP file recorded by astrodyn (or any MCAP whose topics are Zenoh keys)")
-    ap.add_argument("--rate", default="1", help='real-time factor (default 1; "inf" = as fast as possible)')
+    ap.add_argument("--rate", type=bus.rate_argument, default=1.0,
+                    help='real-time factor (default 1; "inf" = as fast as possible)')
     ap.add_argument("--start", type=float, default=None, help="start at this t (s since the scenario epoch)")
     ap.add_argument("--end", type=float, default=None, help="end at this t (s since the scenario epoch, inclusive)")
     ap.add_argument("--topics", action="append", default=None, metavar="GLOB", help="only topics matching (repeatable)")
     ap.add_argument("--batch", action="store_true", help="send states as batch envelopes on @batch/<process> like the propagators")
-    ap.add_argument("--wait", type=float, default=5.0, help="wait up to this many s for a subscriber before starting (default 5)")
+    ap.add_argument("--wait", type=float, default=5.0,
+                    help="wait up to this many wall s (at most a day) for a subscriber before starting (default 5)")
     ap.add_argument("--hold", action="store_true", help="after the end, keep answering control queries until stop")
     ap.add_argument("--control-scenario", default=None, help="scenario name of the control keys (default: the recorded one)")
     ap.add_argument("--port", type=int, default=None, help="loopback port to listen on (default: a free one)")
@@ -395,9 +389,16 @@ def build_parser() -> argparse.ArgumentParser:
 def open_recording(args: argparse.Namespace) -> tuple[float, McapStream]:
     """The replay rate and the stream of ``args.file``; ValueError for a bad flag,
     RecordingError for a file with nothing to replay."""
-    rate = parse_rate(cli_number(args.rate), "--rate")
-    if args.wait < 0 or not math.isfinite(args.wait):
-        raise ValueError(f"--wait: expected a finite number of seconds >= 0, got {args.wait}")
+    rate = args.rate
+    if not 0 <= args.wait <= MAX_WAIT_S:  # nan fails too
+        raise ValueError(f"--wait: expected wall seconds 0 <= S <= {MAX_WAIT_S:g} (a day), got {args.wait}")
+    if args.zenoh_config is not None and (problem := regular_file_problem(args.zenoh_config)):
+        raise ValueError(f"--zenoh-config {args.zenoh_config}: {problem}")
+    if args.control_scenario is not None:
+        try:
+            check_control_scenario(args.control_scenario, args.file, given=True)
+        except messages.MessageError as exc:
+            raise ValueError(str(exc)) from None
     if args.port is not None and (problem := bus.local_port_problem(args.port)):
         raise ValueError(f"--port: {problem}")
     for name in ("start", "end"):
@@ -408,7 +409,21 @@ def open_recording(args: argparse.Namespace) -> tuple[float, McapStream]:
     if not stream.chunks:
         stream.close()
         raise RecordingError(f"{stream.path}: nothing to replay ({stream.truncation if stream.truncated else 'no messages'})")
+    if args.topics is not None:
+        try:
+            wanted = topic_matcher(args.topics)
+        except ValueError as exc:
+            stream.close()
+            raise ValueError(f"--{exc}") from None
+        if not any(wanted(topic) for topic in stream.topics()):
+            stream.close()
+            raise ValueError(f"--topics {' '.join(args.topics)[:200]!r}: matches no topic of {stream.path} (shell-style "
+                             f"globs, * matches across /, e.g. 'astrodyn/demo/*/orbit')")
     return rate, stream
+
+
+#: Longest ``--wait`` for a first subscriber, wall seconds (a day).
+MAX_WAIT_S = 86400.0
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -65,26 +65,31 @@ def open_router(listen: list[str], connect: list[str] | None = None, config_file
             config.insert_json5("connect/endpoints", json.dumps(connect))
         return zenoh.open(config)
     except zenoh.ZError as exc:
-        raise bus.BusError(f"cannot open a Zenoh router (config {config_file}, listen={listen}, connect={connect}): {exc}") from None
+        raise bus.BusError(f"cannot open a Zenoh router (config {config_file}, listen={listen}, connect={connect}): "
+                           f"{bus.zenoh_error_text(exc)}") from None
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="astrodyn router", description=__doc__.split("\n\n")[0])
-    ap.add_argument("--listen", action="append", default=None, metavar="ENDPOINT",
-                    help=f"endpoint to listen on (repeatable; default {DEFAULT_LISTEN}); tcp/0.0.0.0:7447 opens it to the network")
-    ap.add_argument("--connect", action="append", default=None, metavar="ENDPOINT",
-                    help="another router to join (repeatable), for a mesh of routers")
-    ap.add_argument("--config", metavar="FILE", help="a Zenoh JSON5 config (TLS, access control); --listen/--connect are added")
-    ap.add_argument("--status-interval", type=float, default=0.0, metavar="S",
-                    help="print the connected routers and peers every S seconds (0: never)")
-    args = ap.parse_args(argv)
     from astrodyn import bus
+    from astrodyn.files import regular_file_problem
+    from astrodyn.service.children import wall_seconds
     from astrodyn.service.signals import catch_stop_signals
 
+    ap = argparse.ArgumentParser(prog="astrodyn router", description=__doc__.split("\n\n")[0])
+    ap.add_argument("--listen", action="append", default=None, metavar="ENDPOINT", type=bus.endpoint_argument,
+                    help=f"endpoint to listen on (repeatable; default {DEFAULT_LISTEN}); tcp/0.0.0.0:7447 opens it to the network")
+    ap.add_argument("--connect", action="append", default=None, metavar="ENDPOINT", type=bus.endpoint_argument,
+                    help="another router to join (repeatable), for a mesh of routers")
+    ap.add_argument("--config", metavar="FILE", help="a Zenoh JSON5 config (TLS, access control); --listen/--connect are added")
+    ap.add_argument("--status-interval", type=lambda text: wall_seconds(text, zero=True), default=0.0, metavar="S",
+                    help="print the connected routers and peers every S wall seconds (0, the default: never)")
+    args = ap.parse_args(argv)
+    if args.config is not None and (problem := regular_file_problem(args.config)):
+        ap.error(f"--config {args.config}: {problem}")
     listen = args.listen or ([] if args.config else [DEFAULT_LISTEN])
     try:
-        for e in listen + (args.connect or []):
-            bus.make_config(listen=[e], mode="router")  # validates the endpoint syntax
+        for e in listen:
+            bus.make_config(listen=[e], mode="router")  # the endpoints together, as zenoh takes them
     except bus.BusError as exc:
         print(f"astrodyn router: {exc}", file=sys.stderr)
         return 2

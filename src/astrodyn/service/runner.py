@@ -612,6 +612,8 @@ def main(argv: list[str] | None = None) -> int:
         try:
             if args.out == "":
                 raise ScenarioError("--out: expected a file path, got an empty string")
+            if args.resume == "":  # not "no --resume": a path that came out empty (a shell variable)
+                raise ScenarioError("--resume: expected the MCAP recording to continue, got an empty string")
             scenario = load(args.config)
             out = Path(args.out) if args.out else (scenario.output_path or Path(f"{scenario.name}.mcap"))
             if not 1 <= args.loggers <= MAX_LOGGERS:

@@ -645,7 +645,8 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="astrodyn serve", description="Long-running real-time service controlled over Zenoh.")
     ap.add_argument("config", help="scenario TOML file")
     ap.add_argument("--out", help="MCAP file (default out/<scenario>.mcap; rolled files get -0001, -0002, ...)")
-    ap.add_argument("--rate", type=float, default=None, help="real-time factor (default: the scenario's real_time_factor)")
+    ap.add_argument("--rate", type=bus.rate_argument, default=None,
+                    help='real-time factor, or "inf" (default: the scenario\'s real_time_factor)')
     ap.add_argument("--roll-size", type=int, default=None,
                     help="start a new MCAP file after this many bytes (default: the config's [output] roll_size, "
                          "else no size limit)")
