@@ -428,6 +428,44 @@ def test_a_restarted_propagator_with_no_step_left_ends_when_the_logger_has_finis
     assert left.returncode != 0 and "logger" in left.stderr, left.stderr[-2000:]
 
 
+def _wait_until_the_propagators_started(session, token: str, timeout_s: float = 60.0) -> None:
+    """Until the demo's orbit and attitude propagators have each sent a heartbeat with a sim
+    time (serve's status through ``session``, with the control ``token``)."""
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        procs = bus.send_control(session, "demo", "status", token=token)[0]["processes"]
+        if all(procs[k]["t"] is not None for k in ("orbit", "attitude")):
+            return
+        time.sleep(0.2)
+
+
+def test_a_pause_sent_while_the_propagators_start_holds_at_rate_inf(tmp_path):
+    """At ``--rate inf`` a propagator never waits, so it sent no heartbeat saying its pause
+    state and serve never saw that a propagator had missed its early ``pause``: serve said
+    ``paused`` while the propagators ran on (55,000 s of sim time in 9 s).  Every heartbeat
+    now says it."""
+    out = tmp_path / "inf.mcap"
+    serve = subprocess.Popen([*ASTRODYN, "serve", str(ROOT / "configs" / "demo.toml"), "--out", str(out), "--rate", "inf",
+                              "--max-wall", "120"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        hello = json.loads(serve.stdout.readline())
+        token = hello["control_token"]
+        with bus.open_session(connect=[hello["hub"]]) as s:
+            assert bus.send_control(s, "demo", "pause", token=token)[0]["state"] == "paused"  # before they listen
+            _wait_until_the_propagators_started(s, token)
+            time.sleep(2.5)  # a re-sent pause takes at most ~1.5 s to land
+            before = bus.send_control(s, "demo", "status", token=token)[0]["processes"]
+            time.sleep(2.0)  # thousands of sim seconds at rate inf if they ran
+            after = bus.send_control(s, "demo", "status", token=token)[0]["processes"]
+            assert [after[k]["t"] for k in ("orbit", "attitude")] == [before[k]["t"] for k in ("orbit", "attitude")]
+            (stopped,) = bus.send_control(s, "demo", "stop", token=token, timeout_s=60)
+            assert stopped["state"] == "stopped"
+        serve.wait(timeout=60)
+    finally:
+        stop_process(serve)
+    assert serve.returncode == 0, serve.stderr.read()[-3000:]
+
+
 def test_a_pause_and_a_stop_sent_while_the_propagators_start_still_reach_them(tmp_path):
     """Serve's commands are plain puts: a propagator that subscribes after one was sent (it
     is still loading its kernels or waiting for the logger) missed it, and ran on while
@@ -445,12 +483,7 @@ def test_a_pause_and_a_stop_sent_while_the_propagators_start_still_reach_them(tm
         with bus.open_session(connect=[hello["hub"]]) as s:
             assert bus.send_control(s, "demo", "pause", token=token)[0]["state"] == "paused"  # at once: before they listen
             assert bus.send_control(s, "demo", "rate", {"factor": 5}, token=token)[0]["real_time_factor"] == 5
-            deadline = time.monotonic() + 60
-            while time.monotonic() < deadline:  # until both have started (sent a heartbeat with a time)
-                procs = bus.send_control(s, "demo", "status", token=token)[0]["processes"]
-                if all(procs[k]["t"] is not None for k in ("orbit", "attitude")):
-                    break
-                time.sleep(0.2)
+            _wait_until_the_propagators_started(s, token)
             time.sleep(2.5)  # a re-sent pause takes at most ~1.5 s to land
             before = bus.send_control(s, "demo", "status", token=token)[0]["processes"]
             time.sleep(2.0)  # 40 s of sim time at x20 if they ran

@@ -665,7 +665,7 @@ class PlantLoop:
                         self.flush(batch)
                     self.t_reached = t
                     k += 1
-                    heartbeat.beat(t=t, step=k)
+                    heartbeat.beat(t=t, step=k, **self.pacer.state())
             except ControllerTimeout as exc:
                 failure = str(exc)
                 events.emit("error", self.t_reached, failure)

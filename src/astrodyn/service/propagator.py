@@ -91,6 +91,12 @@ class Pacer:
         self.paused = False
         self._reanchor(t_sim)
 
+    def state(self) -> dict:
+        """``{"paused": bool, "rate": factor or "inf"}``: what every heartbeat says, so that a
+        supervisor sees a process that missed its ``pause`` or ``rate`` (it subscribed late)
+        and sends it again, whether the process paces or runs as fast as it can."""
+        return {"paused": self.paused, "rate": self.factor if math.isfinite(self.factor) else "inf"}
+
     def wait_time(self, t_sim: float) -> float:
         """Wall seconds to wait before publishing the instant ``t_sim`` (0 if due)."""
         if math.isinf(self.factor):
@@ -232,7 +238,7 @@ def run_propagator(scenario: Scenario, session, opts: PropagatorOptions, log=pri
                     rows_done = j + 1
                     t_reached = t
                     k += 1
-                    heartbeat.beat(t=t_reached, step=k)
+                    heartbeat.beat(t=t_reached, step=k, **pacer.state())
                 conservation.update(a, b)
                 if model_ended is not None:
                     events.emit("error", float(t_reached), f"model ended: {model_ended}")
@@ -470,8 +476,7 @@ def pace_to(t: float, pacer: Pacer, supervisor, stopping: dict, heartbeat, comma
         time.sleep(min(wait, 0.05) if wait > 0 else 0.05)
         if while_waiting is not None:
             while_waiting()
-        heartbeat.beat(t=t_reached, paused=pacer.paused,  # (the state a supervisor checks its commands against)
-                       rate=pacer.factor if math.isfinite(pacer.factor) else "inf")
+        heartbeat.beat(t=t_reached, **pacer.state())
         obey_commands(supervisor, pacer, t, stopping, heartbeat, commands_from, more_verbs)
         wait = pacer.wait_time(t)
 

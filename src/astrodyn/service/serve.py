@@ -187,9 +187,10 @@ class Supervisor:
 
     def reassert_pause(self, now: float) -> None:
         """Send ``pause`` / ``resume`` and ``rate`` again, at most once a second, while a
-        propagator's heartbeat (those it sends while it paces) says otherwise than serve's
-        state: one that subscribed to the commands after they were sent (still starting)
-        would otherwise run while serve is paused, or at the old rate."""
+        propagator's heartbeat (each says its pacer's state, paced or not) says otherwise than
+        serve's state: one that subscribed to the commands after they were sent (still
+        starting) would otherwise run while serve is paused, or at the old rate (at
+        ``--rate inf`` it ran on: only the heartbeats sent while pacing said their state)."""
         if self.state not in ("running", "paused") or now - self.pause_reasserted < 1.0:
             return
         paused = self.state == "paused"
