@@ -9,7 +9,7 @@ import os
 import signal
 
 from astrodyn.progress import Progress
-from astrodyn.service.signals import StopFlag, catch_stop_signals
+from astrodyn.signals import StopFlag, catch_stop_signals
 
 
 def test_a_real_sigterm_is_recorded_and_the_old_handler_restored():

@@ -52,8 +52,12 @@ def main(argv: list[str] | None = None) -> int:
     if name not in COMMANDS:
         print(f"astrodyn: unknown command {name!r}; expected one of: {', '.join(COMMANDS)}", file=sys.stderr)
         return 2
-    module = importlib.import_module(COMMANDS[name][0])
-    return int(module.main(rest) or 0)
+    try:
+        module = importlib.import_module(COMMANDS[name][0])
+        return int(module.main(rest) or 0)
+    except KeyboardInterrupt:  # Ctrl-C before a command set up its own handling (or one that has none)
+        print(f"astrodyn {name}: interrupted by SIGINT", file=sys.stderr)
+        return 130
 
 
 if __name__ == "__main__":

@@ -74,12 +74,13 @@ per case.  ``--case K`` (repeatable) reruns those cases serially and updates the
 in ``DIR``.  ``astrodyn analyze DIR`` plots the table (:mod:`astrodyn.analysis.sweep`).
 
 Exit status: 0 every case ran, 1 some cases failed, 2 bad arguments, spec or config,
-130 interrupted (the finished cases are written).
+130 interrupted by Ctrl-C, 143 by SIGTERM (the finished cases are written).
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import copy
 import csv
 import itertools
@@ -87,7 +88,9 @@ import json
 import math
 import os
 import re
+import signal
 import sys
+import threading
 import time
 import traceback
 from collections.abc import Iterable, Iterator
@@ -96,6 +99,9 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+from astrodyn.recording.outputs import written_atomically
+from astrodyn.signals import deferred_interrupts, interruptible
 
 __all__ = [
     "SweepError",
@@ -741,7 +747,10 @@ def write_case_mcap(path: Path, scenario, result, draws: dict, k: int) -> None:
     ogroups = _index_groups([orbit_models[n] for n in result.orbit_names])
     agroups = _index_groups([att_models[n] for n in result.attitude_names])
     mu, frame = scenario.central_body.mu, scenario.frame
-    with McapRecorder(path, meta, epoch_ns=scenario.epoch_unix_ns, flush_interval_s=3600.0) as rec:
+    # written as case-K.mcap.tmp, renamed once finished: an interrupted case leaves no
+    # half-written (or cut but finished-looking) file under its name, nor replaces an earlier one
+    with written_atomically(path) as tmp, McapRecorder(tmp, meta, epoch_ns=scenario.epoch_unix_ns,
+                                                       flush_interval_s=3600.0) as rec:
         for s, t in enumerate(result.t):
             t = float(t)
             for model, ix in ogroups:
@@ -777,7 +786,9 @@ def _failed_row(k: int, spec: SweepSpec, exc: BaseException) -> dict[str, Any]:
 
 def local_cluster(workers: int):
     """A Dask ``LocalCluster`` of ``workers`` processes, one thread and one numba thread each
-    (the workers are the parallelism), no dashboard, quiet logs."""
+    (the workers are the parallelism), no dashboard, no log lines but critical ones: a case's
+    failure is its row (a dead worker's too, ``KilledWorker``), and closing the cluster on an
+    interrupt while workers still run cases made them log errors with tracebacks."""
     import logging
 
     from distributed import LocalCluster
@@ -789,7 +800,7 @@ def local_cluster(workers: int):
     environ = dict(os.environ)
     try:
         return LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                            dashboard_address=None, silence_logs=logging.ERROR)
+                            dashboard_address=None, silence_logs=logging.CRITICAL)
     finally:  # the nannies also write PYTHONHASHSEED into this process's environment
         os.environ.clear()
         os.environ.update(environ)
@@ -824,16 +835,17 @@ def run_cases(spec: SweepSpec, cases: Iterable[int], workers: int = 2, scheduler
     except ImportError:
         raise SweepError("Dask is not installed: `pip install 'astrodyn[sweep]'` (or --workers 0 to run serially)") from None
 
-    cluster = None
-    if scheduler is None:
-        cluster = local_cluster(workers)
-        client = Client(cluster)
-    else:
-        try:
-            client = Client(scheduler, timeout=f"{SCHEDULER_TIMEOUT_S}s")
-        except (OSError, TimeoutError) as exc:
-            raise SweepError(f"--scheduler {scheduler}: cannot reach a Dask scheduler ({exc})") from None
+    cluster = client = None
     try:
+        if scheduler is None:
+            with _workers_ignore_ctrl_c():
+                cluster = local_cluster(workers)
+            client = Client(cluster)
+        else:
+            try:
+                client = Client(scheduler, timeout=f"{SCHEDULER_TIMEOUT_S}s")
+            except (OSError, TimeoutError) as exc:
+                raise SweepError(f"--scheduler {scheduler}: cannot reach a Dask scheduler ({exc})") from None
         spec_future = client.scatter(spec, broadcast=True)
         token = f"{os.getpid()}-{time.time_ns()}"
         groups = [cases[i:i + chunk] for i in range(0, len(cases), chunk)]
@@ -852,9 +864,31 @@ def run_cases(spec: SweepSpec, cases: Iterable[int], workers: int = 2, scheduler
             client.cancel(futures)
             raise
     finally:
-        client.close()
+        if client is not None:
+            client.close()
         if cluster is not None:
             cluster.close()
+            if spec.mcap_dir:  # what a worker stopped by the close was writing (write_case_mcap)
+                for tmp in Path(spec.mcap_dir).glob("case-*.mcap.tmp"):
+                    tmp.unlink(missing_ok=True)
+
+
+@contextlib.contextmanager
+def _workers_ignore_ctrl_c() -> Iterator[None]:
+    """Start a LocalCluster with SIGINT ignored, which its worker processes inherit: a
+    Ctrl-C, which a terminal sends to the whole process group, then reaches this process
+    only, which cancels the cases and closes the cluster (before, every worker died of it
+    printing a traceback).  A SIGTERM meanwhile takes effect once the cluster is up (so it
+    is closed); a Ctrl-C in that second or so is not seen."""
+    if threading.current_thread() is not threading.main_thread():  # signals are the main thread's
+        yield
+        return
+    with deferred_interrupts():
+        previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+        try:
+            yield
+        finally:
+            signal.signal(signal.SIGINT, signal.SIG_DFL if previous is None else previous)
 
 
 class CaseProgress:
@@ -1137,6 +1171,10 @@ def max_local_workers() -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
+    return interruptible("astrodyn sweep", lambda: _main(argv))
+
+
+def _main(argv: list[str] | None) -> int:
     args = _parser().parse_args(argv)
     from astrodyn.scenario import ScenarioError
 
@@ -1195,9 +1233,10 @@ def main(argv: list[str] | None = None) -> int:
     except SweepError as exc:
         print(f"astrodyn sweep: {exc}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
-        interrupted = True
-        print(f"\nastrodyn sweep: interrupted; writing the {len(rows)} finished cases", file=sys.stderr)
+    except KeyboardInterrupt as exc:  # Ctrl-C or SIGTERM (astrodyn.signals.interruptible)
+        interrupted = getattr(exc, "signum", signal.SIGINT)
+        print(f"\nastrodyn sweep: interrupted by {signal.Signals(interrupted).name}; writing the {len(rows)} finished "
+              f"cases", file=sys.stderr)
     wall = time.monotonic() - started
     all_rows = _merge(out, rows) if rerun else rows
     versions = {"astrodyn": _version(), "numpy": np.__version__}
@@ -1208,7 +1247,7 @@ def main(argv: list[str] | None = None) -> int:
     except ImportError:
         pass
     extra = {"wall_s": wall, "workers": workers, "scheduler": scheduler, "versions": versions,
-             "cases_per_s": len(rows) / wall if wall > 0 else None, "interrupted": interrupted}
+             "cases_per_s": len(rows) / wall if wall > 0 else None, "interrupted": bool(interrupted)}
     if rerun and (out / "sweep.json").exists():  # keep the full run's record, note the rerun
         try:
             previous = json.loads((out / "sweep.json").read_text(encoding="utf-8"))
@@ -1229,7 +1268,7 @@ def main(argv: list[str] | None = None) -> int:
         if failed:
             print("  rerun one with the same command and --case K", file=sys.stderr)
     if interrupted:
-        return 130
+        return 128 + interrupted
     return 1 if failed else 0
 
 

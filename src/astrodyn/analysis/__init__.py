@@ -40,6 +40,8 @@ from astrodyn.analysis.closed_loop import CLOSED_LOOP_FIGURES, closed_loop_secti
 from astrodyn.analysis.pointing import POINTING_FIGURES, pointing_section
 from astrodyn.progress import Progress
 from astrodyn.recording import RecordingError, load
+from astrodyn.recording.outputs import WorkDirectory
+from astrodyn.signals import deferred_interrupts, interruptible
 
 __all__ = ["analyze", "main", "FIGURES", "SEQ_NOT_COUNTED", "sequence_issues", "sequence_note"]
 
@@ -148,8 +150,6 @@ def analyze(path: str | os.PathLike, out: str | os.PathLike | None = None, seq: 
     them would take about an hour.  ``progress``: where to say how far it is (reading the
     file, then body k of n; ``astrodyn analyze`` passes a :class:`~astrodyn.progress.Progress`
     on stderr), None for nothing."""
-    from astrodyn.analysis import figures as fg, metrics as mt
-
     if seq not in _SEQS:
         raise ValueError(f"seq: expected one of {', '.join(_SEQS)}, got {seq!r}")
     if type(figures_for) is not int or figures_for < 0:
@@ -164,10 +164,24 @@ def analyze(path: str | os.PathLike, out: str | os.PathLike | None = None, seq: 
         progress.done(f"analyze: {run.messages} messages read in {time.monotonic() - started:.1f} s; "
                       f"{len(names)} bodies to report, figures for {min(figures_for, len(names))}")
     out = Path(out) if out is not None else Path(os.fspath(path)).with_suffix("").with_name(Path(path).stem + "-report")
-    try:
-        out.mkdir(parents=True, exist_ok=True)
+    try:  # written in a work directory inside out, moved into place once complete (astrodyn.recording.outputs)
+        stage = WorkDirectory(out, "analyze")
     except OSError as exc:
         raise RecordingError(f"{out}: cannot create the report directory: {exc.strerror or exc}") from None
+    with stage as work:
+        report = _write_report(run, names, work, seq, figures_for, progress)
+        with deferred_interrupts():  # the whole report or, on a signal before this, nothing of it
+            for f in sorted(work.iterdir(), key=lambda f: (f.name.startswith("report."), f.name)):  # pages last
+                os.replace(f, out / f.name)
+    if progress is not None:
+        progress.done(f"analyze: {len(names)} bodies reported in {time.monotonic() - started:.1f} s")
+    return report
+
+
+def _write_report(run, names: list[str], out: Path, seq: str, figures_for: int, progress: Progress | None) -> dict:
+    """Write the figures and report.md / .html / .json of ``names`` into ``out``; the numbers."""
+    from astrodyn.analysis import figures as fg, metrics as mt
+
     central = mt.central_body_from_scenario(run.scenario)
     inertias = mt.inertia_from_scenario(run.scenario)
     earth = str(central.get("name", "")).lower() == "earth"
@@ -187,8 +201,6 @@ def analyze(path: str | os.PathLike, out: str | os.PathLike | None = None, seq: 
     _write_markdown(report, out / "report.md")
     _write_html(report, out / "report.html")
     (out / "report.json").write_text(json.dumps(report, indent=1, default=str))
-    if progress is not None:
-        progress.done(f"analyze: {len(names)} bodies reported in {time.monotonic() - started:.1f} s")
     return report
 
 
@@ -478,6 +490,10 @@ def _write_html(report: dict, path: Path) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
+    return interruptible("astrodyn analyze", lambda: _main(argv))
+
+
+def _main(argv: list[str] | None) -> int:
     ap = argparse.ArgumentParser(prog="astrodyn analyze", description="Report (Markdown, HTML, PNG) from an MCAP recording.")
     ap.add_argument("file", help="MCAP file recorded by astrodyn, or a sweep directory (with summary.csv)")
     ap.add_argument("--out", default=None, help="report directory (default <file>-report)")
@@ -508,7 +524,7 @@ def main(argv: list[str] | None = None) -> int:
         return 1
     except OSError as exc:  # writing the report: e.g. the disk is full
         print(f"astrodyn analyze: error: cannot write the report{' file ' + str(exc.filename) if exc.filename else ''}: "
-              f"{exc.strerror or exc}; the report directory holds what was written before (incomplete)", file=sys.stderr)
+              f"{exc.strerror or exc}; nothing in the report directory was replaced", file=sys.stderr)
         return 1
     out = Path(args.out) if args.out else Path(args.file).with_name(Path(args.file).stem + "-report")
     if not report["complete"]:

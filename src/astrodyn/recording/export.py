@@ -69,16 +69,13 @@ astropy (leap seconds included for UTC), written in calendar form
 from __future__ import annotations
 
 import argparse
-import contextlib
 import csv
 import hashlib
 import heapq
 import json
 import os
 import re
-import shutil
 import sys
-import tempfile
 from datetime import UTC, datetime
 from pathlib import Path
 
@@ -100,9 +97,11 @@ from astrodyn.recording.foxglove_scene import (
     orbit_line_entity,
     stamp,
 )
+from astrodyn.recording.outputs import WorkDirectory
 from astrodyn.recording.reader import Run, Track, load
 from astrodyn.recording.writer import McapRecorder, RecordingError
 from astrodyn.rotation import quat_to_scalar_last
+from astrodyn.signals import deferred_interrupts, interruptible
 
 __all__ = [
     "FORMATS", "FIELD_UNITS", "channel_file_stems", "column_units", "channel_header", "ExportError", "export", "write_csv", "write_parquet", "write_oem", "write_aem", "write_aem_v1",
@@ -694,15 +693,14 @@ def export(path: str | os.PathLike, fmt: str, out: str | os.PathLike) -> list[Pa
         print(f"astrodyn export: warning: {run.path}: {run.truncation or 'invalid messages skipped'}; "
               f"exporting the {run.messages} complete, valid messages", file=sys.stderr)
     out = Path(out)
-    created = not out.exists()  # removed again (when empty) if the export fails
+    # every file is written in a work directory inside --out and moved into place only when
+    # all of them are complete: a failed or interrupted export leaves the files already in
+    # --out as they were (astrodyn.recording.outputs)
     try:
-        out.mkdir(parents=True, exist_ok=True)
-        work = Path(tempfile.mkdtemp(prefix=".export-", dir=out))
+        stage = WorkDirectory(out, "export")
     except OSError as exc:
         raise ExportError(f"--out: cannot create directory {out}: {exc.strerror or exc}") from None
-    # every file is written in a work directory inside --out and moved into place only when
-    # all of them are complete: a failed export leaves the files already in --out as they were
-    try:
+    with stage as work:
         try:
             files = _WRITERS[fmt](run, work)
         except OSError as exc:
@@ -720,22 +718,19 @@ def export(path: str | os.PathLike, fmt: str, out: str | os.PathLike) -> list[Pa
                                   f"it is never replaced (nothing was written)")
             placed.append(target)
         try:
-            for f, target in zip(files, placed):
-                os.replace(f, target)
+            with deferred_interrupts():  # all of them or, on a signal before this, none
+                for f, target in zip(files, placed):
+                    os.replace(f, target)
         except OSError as exc:
             raise ExportError(f"{run.path}: --out {out}: cannot write {target}: {exc.strerror or exc}") from None
         return placed
-    except ExportError:
-        shutil.rmtree(work, ignore_errors=True)
-        if created:
-            with contextlib.suppress(OSError):  # only if empty: a directory this export made and filled nothing in
-                out.rmdir()
-        raise
-    finally:
-        shutil.rmtree(work, ignore_errors=True)
 
 
 def main(argv: list[str] | None = None) -> int:
+    return interruptible("astrodyn export", lambda: _main(argv))
+
+
+def _main(argv: list[str] | None) -> int:
     ap = argparse.ArgumentParser(prog="astrodyn export", description="Export an MCAP recording to other formats.")
     ap.add_argument("file", help="MCAP file recorded by astrodyn")
     ap.add_argument("--format", required=True, choices=FORMATS, help="csv | parquet | oem | aem | aem1 (CCSDS ADM version 1) | foxglove")

@@ -33,6 +33,7 @@ from mcap.writer import CompressionType, Writer
 from astrodyn.messages import STATE_KINDS
 from astrodyn.recording.stream import open_stream
 from astrodyn.recording.writer import RecordingError
+from astrodyn.signals import interruptible
 
 __all__ = ["MergeReport", "merge"]
 
@@ -164,6 +165,10 @@ def _register(stream, writer: Writer, m, schema_ids: dict) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
+    return interruptible("astrodyn merge", lambda: _main(argv))
+
+
+def _main(argv: list[str] | None) -> int:
     import argparse
     import json
     import sys

@@ -46,8 +46,10 @@ from mcap.records import Channel, Chunk, Message, Metadata, Schema
 
 from astrodyn import __version__
 from astrodyn.recording.chunked_writer import ChunkedWriter
+from astrodyn.recording.outputs import write_atomically
 from astrodyn.recording.reader import chunk_records, open_recording, parse_record, read_records
 from astrodyn.recording.writer import RecordingError, being_written
+from astrodyn.signals import interruptible
 
 __all__ = ["recover", "write_atomically", "main", "finished_name", "find_partials", "partials_of", "nothing_to_recover",
            "stale_work_dirs"]
@@ -127,33 +129,6 @@ def recover(path: str | os.PathLike, out: str | os.PathLike | None = None, *, ch
     summary["output_bytes"] = os.path.getsize(dst)
     summary["seconds"] = round(time.monotonic() - t0, 3)
     return summary
-
-
-def write_atomically(dst: str, write):
-    """Call ``write(stream)`` on ``dst + ".recover-tmp"``, make it durable (fsync) and
-    rename it over ``dst``; returns what ``write`` returned.  On any failure the temporary
-    file is removed and ``dst`` is untouched (RecordingError for an OSError)."""
-    tmp = dst + ".recover-tmp"
-    try:
-        try:
-            stream = open(tmp, "wb")
-        except OSError as exc:
-            raise RecordingError(f"{dst}: cannot write: {exc.strerror or exc}") from None
-        try:
-            with stream:
-                result = write(stream)
-                stream.flush()
-                os.fsync(stream.fileno())
-        except OSError as exc:
-            raise RecordingError(f"{dst}: write failed: {exc.strerror or exc}; nothing was replaced") from None
-        os.replace(tmp, dst)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except OSError:
-            pass
-        raise
-    return result
 
 
 def _rewrite(f, size: int, src: str, dst: str, stream, chunk_size: int) -> dict:
@@ -281,6 +256,10 @@ def stale_work_dirs(folder: str) -> list[str]:
 
 
 def main(argv: list[str] | None = None) -> int:
+    return interruptible("astrodyn recover", lambda: _main(argv))
+
+
+def _main(argv: list[str] | None) -> int:
     ap = argparse.ArgumentParser(prog="astrodyn recover",
                                  description="Rewrite a crashed writer's MCAP file with a proper summary and index.")
     ap.add_argument("file", help="MCAP file (typically cut by a killed logger): a NAME.partial.mcap left by a killed "

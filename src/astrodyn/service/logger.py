@@ -58,7 +58,7 @@ from astrodyn.jit import service_threads, set_threads
 from astrodyn.recording import ingest
 from astrodyn.recording.writer import DUPLICATE, INGEST_GRAMMAR, BatchLayout, McapRecorder, RecordingError
 from astrodyn.service.children import DISK_FULL_EXIT, share_fate_with_supervisor
-from astrodyn.service.signals import STOP_SIGNAL_NAMES, catch_stop_signals
+from astrodyn.signals import STOP_SIGNAL_NAMES, catch_stop_signals
 
 __all__ = ["Logger", "main"]
 

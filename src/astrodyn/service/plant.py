@@ -82,7 +82,7 @@ from astrodyn.service.propagator import (
     pace_to,
     wait_until_logged,
 )
-from astrodyn.service.signals import catch_stop_signals
+from astrodyn.signals import catch_stop_signals
 
 __all__ = ["main", "run_plant", "PlantLoop", "recorded_commands", "recorded_faults", "tick_payload", "encode_stamped",
            "ControllerTimeout", "PROCESS"]

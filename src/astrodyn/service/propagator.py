@@ -38,7 +38,7 @@ from astrodyn import bus, messages
 from astrodyn.jit import service_threads, set_threads
 from astrodyn.scenario import Scenario, plan as make_plan
 from astrodyn.service.children import LOGGED_WAIT_S, MODEL_ENDED_EXIT, share_fate_with_supervisor
-from astrodyn.service.signals import catch_stop_signals
+from astrodyn.signals import catch_stop_signals
 from astrodyn.simulate import AttitudeEngine, ModelEnded, OrbitEngine
 
 __all__ = ["Pacer", "PropagatorOptions", "run_propagator", "command_key", "CommandVerifier", "obey_commands", "pace_to",

@@ -61,9 +61,9 @@ from astrodyn.progress import Progress
 from astrodyn.recording.stream import McapStream, RawMessage, topic_matcher
 from astrodyn.recording.writer import RecordingError
 from astrodyn.service.children import Child
-from astrodyn.service.signals import StopFlag
 from astrodyn.service.supervision import RestartBudget
 from astrodyn.service.viewer import add_foxglove_argument, viewer_command
+from astrodyn.signals import StopFlag
 
 __all__ = ["Replayer", "main", "build_parser", "open_recording", "start_viewer", "play", "LiveView", "REPLAY_VERBS",
            "check_control_scenario"]

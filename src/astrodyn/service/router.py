@@ -73,7 +73,7 @@ def main(argv: list[str] | None = None) -> int:
     from astrodyn import bus
     from astrodyn.files import regular_file_problem
     from astrodyn.service.children import wall_seconds
-    from astrodyn.service.signals import catch_stop_signals
+    from astrodyn.signals import catch_stop_signals
 
     ap = argparse.ArgumentParser(prog="astrodyn router", description=__doc__.split("\n\n")[0])
     ap.add_argument("--listen", action="append", default=None, metavar="ENDPOINT", type=bus.endpoint_argument,

@@ -66,9 +66,9 @@ from astrodyn.service.children import (
     work_directory,
 )
 from astrodyn.service.output import check_output_path
-from astrodyn.service.signals import catch_stop_signals
 from astrodyn.service.summary import file_summary, print_summary, propagator_rows
 from astrodyn.service.supervision import RestartBudget, next_event_seq, plan_logger_restart, wait_until_gone
+from astrodyn.signals import catch_stop_signals
 
 __all__ = ["main", "run_scenario", "ScenarioRun", "EXIT_REJECTED", "attack_report", "logger_base_argv", "propagator_argv"]
 

@@ -85,7 +85,6 @@ from astrodyn.service.runner import (
     logger_base_argv,
     propagator_argv,
 )
-from astrodyn.service.signals import StopFlag
 from astrodyn.service.supervision import (
     RestartBudget,
     next_event_seq,
@@ -94,6 +93,7 @@ from astrodyn.service.supervision import (
     wait_until_gone,
 )
 from astrodyn.service.viewer import add_foxglove_argument, viewer_command
+from astrodyn.signals import StopFlag
 
 __all__ = ["main", "Supervisor", "roll_settings", "check_serve_flags", "ROLL_INTERVAL_DEFAULT_S"]
 

@@ -100,7 +100,7 @@ from astrodyn.recording.foxglove_scene import (
 )
 from astrodyn.recording.stream import MAX_T_S
 from astrodyn.service.children import share_fate_with_supervisor
-from astrodyn.service.signals import StopFlag
+from astrodyn.signals import StopFlag
 
 __all__ = ["LatestSamples", "LiveScene", "add_foxglove_argument", "viewer_command", "main", "TF_TOPIC", "MAX_LIVE_SCENE_POINTS",
            "ConnectionGuard", "LineBudget", "route_sdk_log", "raise_descriptor_limit", "MAX_CLIENTS", "CLIENT_STALL_S",

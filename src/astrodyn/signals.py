@@ -1,0 +1,133 @@
+"""How every astrodyn process stops: SIGTERM, SIGINT (Ctrl-C) and SIGHUP (the terminal or
+SSH session closed), :data:`STOP_SIGNALS`, each a request to stop cleanly.  Two ways, one
+per kind of program:
+
+* **Services** (logger, propagators, plant, viewer, run, serve, replay, router) run a loop:
+  :func:`catch_stop_signals` / :class:`StopFlag` only record the signal's name, and the
+  loop sees it and stops cleanly (a logger finishes its file, a propagator sends its
+  end-of-run event).
+* **File tools** (``recover``, ``merge``, ``export``, ``analyze``, ``sweep``) run straight
+  through: :func:`interruptible` turns the signal into :class:`Interrupted` (a
+  :class:`KeyboardInterrupt`), so their ``finally`` / ``except BaseException`` cleanups run
+  (Python's default for SIGTERM and SIGHUP is to die at once, which left temporary files
+  behind); the command ends with one line and exit 128 + the signal (130, 143, 129).
+  :func:`deferred_interrupts` holds a signal back over steps that must not be cut (moving
+  a set of finished files into place).
+
+>>> stop = StopFlag()                    # doctest: +SKIP
+>>> while not stop.why: ...              # "SIGTERM" / "SIGINT" / "SIGHUP" once one arrived
+>>> stop.restore()                       # the previous handlers back (tests, in-process runs)
+
+>>> def main(argv=None) -> int:                       # doctest: +SKIP
+...     return interruptible("astrodyn export", lambda: _main(argv))
+"""
+
+from __future__ import annotations
+
+import contextlib
+import signal
+import sys
+import threading
+from collections.abc import Callable, Iterator
+
+__all__ = ["STOP_SIGNALS", "STOP_SIGNAL_NAMES", "catch_stop_signals", "StopFlag", "Interrupted", "interruptible",
+           "deferred_interrupts"]
+
+#: SIGHUP too: without a handler it ended ``serve`` at once, in the middle of a recording
+#: (a partial file, its work directory left), when the terminal that started it closed.
+STOP_SIGNALS = (signal.SIGTERM, signal.SIGINT, signal.SIGHUP)
+STOP_SIGNAL_NAMES = tuple(sig.name for sig in STOP_SIGNALS)
+
+
+def catch_stop_signals(callback: Callable[[str], None]) -> Callable[[], None]:
+    """Call ``callback(name)`` ("SIGTERM", "SIGINT" or "SIGHUP") when one of :data:`STOP_SIGNALS`
+    arrives; return a function that puts the previous handlers back.  Python handles
+    signals in the main thread only: elsewhere nothing is installed and the returned
+    function does nothing."""
+    if threading.current_thread() is not threading.main_thread():
+        return lambda: None
+    previous = {sig: signal.signal(sig, lambda s, f: callback(signal.Signals(s).name)) for sig in STOP_SIGNALS}
+
+    def restore() -> None:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+
+    return restore
+
+
+class StopFlag:
+    """The common case of :func:`catch_stop_signals`: ``why`` holds the name of the last
+    stop signal received (None before any); :meth:`restore` uninstalls."""
+
+    def __init__(self) -> None:
+        self.why: str | None = None
+        self.restore = catch_stop_signals(self.set)
+
+    def set(self, why: str) -> None:
+        self.why = why
+
+
+# --------------------------------------------------------------------------- file tools
+
+
+class Interrupted(KeyboardInterrupt):
+    """One of :data:`STOP_SIGNALS` received under :func:`interruptible`; ``signum`` says which."""
+
+    def __init__(self, signum: int):
+        self.signum = int(signum)
+        super().__init__(signal.Signals(self.signum).name)
+
+
+class _State:
+    raised = False  # an Interrupted is on its way: later signals are ignored
+    deferring = 0  # inside deferred_interrupts
+    pending: int | None = None  # a signal that arrived while deferring
+
+
+def _on_signal(signum: int, frame) -> None:
+    if _State.raised:
+        return
+    if _State.deferring:
+        _State.pending = _State.pending or signum
+        return
+    _State.raised = True
+    raise Interrupted(signum)
+
+
+def interruptible(prog: str, run: Callable[[], int]) -> int:
+    """``run()`` with :data:`STOP_SIGNALS` raising :class:`Interrupted`; its exit status, or
+    128 + the signal after one line on stderr naming it.  A signal the parent made this
+    process ignore (``nohup``, a background job) stays ignored.  Outside the main thread
+    (where Python cannot handle signals) ``run()`` alone."""
+    if threading.current_thread() is not threading.main_thread():
+        return run()
+    _State.raised, _State.deferring, _State.pending = False, 0, None
+    previous = {sig: signal.getsignal(sig) for sig in STOP_SIGNALS}
+    for sig, handler in previous.items():
+        if handler is not signal.SIG_IGN:
+            signal.signal(sig, _on_signal)
+    try:
+        return run()
+    except KeyboardInterrupt as exc:  # Interrupted, or a Ctrl-C that came before the handler
+        signum = getattr(exc, "signum", signal.SIGINT)
+        print(f"{prog}: interrupted by {signal.Signals(signum).name}; no output was left half-written",
+              file=sys.stderr)
+        return 128 + signum
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+
+
+@contextlib.contextmanager
+def deferred_interrupts() -> Iterator[None]:
+    """A stop signal arriving inside the block raises :class:`Interrupted` only once
+    the block is done (under :func:`interruptible`; elsewhere nothing changes)."""
+    _State.deferring += 1
+    try:
+        yield
+    finally:
+        _State.deferring -= 1
+    if not _State.deferring and _State.pending is not None and not _State.raised:
+        signum, _State.pending = _State.pending, None
+        _State.raised = True
+        raise Interrupted(signum)

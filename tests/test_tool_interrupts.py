@@ -1,0 +1,297 @@
+"""The file tools interrupted at a chosen moment by a real signal (docs/reliability.md).
+
+Each test starts the command as its own process group (as a shell runs a foreground job),
+waits until it is writing its output (its temporary file exists, or its earlier output
+starts to change), then sends the signal: SIGINT to the group, as Ctrl-C from a terminal
+does, SIGTERM / SIGHUP / SIGKILL to the PID.  Afterwards: exit 128 + signal with one line saying so
+and no traceback, the input byte-identical, no half-written output under its final name,
+an earlier output untouched, no temporary file left, no process of the group alive.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+#: the command with Ctrl-C at its default (a test run in the background inherits it ignored)
+ASTRODYN = [sys.executable, "-c", "import os, signal, sys; signal.signal(signal.SIGINT, signal.SIG_DFL); "
+            "os.execv(sys.executable, [sys.executable, '-m', 'astrodyn', *sys.argv[1:]])"]
+
+WALKER = """
+[scenario]
+name = "walker"
+epoch = "2026-03-20T12:00:00 UTC"
+duration = "20 s"
+rate = "10 Hz"
+
+[central_body]
+name = "earth"
+
+[walker]
+prefix = "sat"
+i = "53 deg"
+t = 300
+p = 10
+f = 1
+altitude = "550 km"
+model = "kepler"
+
+[walker.attitude]
+model = "torque_free"
+q = [1, 0, 0, 0]
+w = ["0.002 rad/s", "0.0005 rad/s", "0.001 rad/s"]
+inertia = ["12 kg m2", "10 kg m2", "4 kg m2"]
+"""
+
+
+def _record(path: Path, text: str) -> Path:
+    from astrodyn.scenario import loads
+    from astrodyn.simulate import simulate
+    from astrodyn.sweep import write_case_mcap
+
+    scenario = loads(text)
+    write_case_mcap(path, scenario, simulate(scenario), {}, 0)
+    return path
+
+
+@pytest.fixture(scope="module")
+def data(tmp_path_factory) -> Path:
+    """walker.toml; walker.mcap (300 bodies, orbit and attitude, 201 steps: 120,600 messages,
+    about 6 MB); short.mcap (the same scene for 2 s)."""
+    d = tmp_path_factory.mktemp("interrupts")
+    (d / "walker.toml").write_text(WALKER)
+    _record(d / "walker.mcap", WALKER)
+    _record(d / "short.mcap", WALKER.replace('duration = "20 s"', 'duration = "2 s"'))
+    return d
+
+
+def _sha(path: Path) -> str:
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+def _tree(d: Path) -> dict[str, str]:
+    """Every file under ``d`` (hidden ones too) -> its sha256."""
+    return {str(p.relative_to(d)): _sha(p) if p.is_file() else "dir" for p in sorted(d.rglob("*"))}
+
+
+def _start(processes, *argv, cwd: Path | None = None) -> subprocess.Popen:
+    return processes([*ASTRODYN, *argv], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                     start_new_session=True, cwd=cwd)
+
+
+def _wait_for(proc: subprocess.Popen, condition, timeout: float = 60.0) -> None:
+    deadline = time.monotonic() + timeout
+    while not condition():
+        if proc.poll() is not None:
+            pytest.fail(f"the command ended (status {proc.returncode}) before the moment to interrupt it: "
+                        f"{proc.stderr.read()[-2000:]}")
+        if time.monotonic() > deadline:
+            pytest.fail("the moment to interrupt never came")
+        time.sleep(0.002)
+
+
+def _interrupt(proc: subprocess.Popen, sig: int) -> str:
+    """Send ``sig`` (SIGINT to the process group, as a terminal does); wait for the end; stderr."""
+    if sig == signal.SIGINT:
+        os.killpg(proc.pid, sig)
+    else:
+        os.kill(proc.pid, sig)
+    return proc.communicate(timeout=60)[1]
+
+
+def _ended_by(proc: subprocess.Popen, sig: int, err: str) -> None:
+    """Exit 128 + signal, the last line of stderr saying so, no traceback."""
+    assert "Traceback" not in err, err
+    assert proc.returncode == 128 + sig, (proc.returncode, err)
+    assert f"interrupted by {signal.Signals(sig).name}" in err.strip().splitlines()[-1], err
+
+
+def _hidden_dirs(d: Path, prefix: str) -> list[Path]:
+    return [p for p in d.iterdir() if p.name.startswith(prefix)] if d.is_dir() else []
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
+def test_an_interrupted_recover_leaves_its_input_as_it_was_and_no_temporary_file(tmp_path, data, processes, sig):
+    """Before: SIGTERM left ``cut.mcap.recover-tmp`` (Python died without its cleanup) and
+    Ctrl-C ended in a KeyboardInterrupt traceback."""
+    cut = tmp_path / "cut.mcap"
+    whole = (data / "walker.mcap").read_bytes()
+    cut.write_bytes(whole[: len(whole) * 9 // 10])
+    before = _sha(cut)
+    tmp = tmp_path / "cut.mcap.recover-tmp"
+    proc = _start(processes, "recover", cut)  # in place
+    _wait_for(proc, tmp.exists)
+    err = _interrupt(proc, sig)
+    assert _sha(cut) == before and sorted(p.name for p in tmp_path.iterdir()) == ["cut.mcap"]
+    _ended_by(proc, sig, err)
+
+
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGHUP], ids=["SIGTERM", "SIGHUP"])
+def test_a_merge_stopped_by_sigterm_or_a_closed_terminal_leaves_no_temporary_file(tmp_path, data, processes, sig):
+    """Before: ``.m.mcap.merging`` stayed behind, exit -15 (-1 for SIGHUP)."""
+    inputs = [data / "walker.mcap", data / "short.mcap"]
+    before = [_sha(p) for p in inputs]
+    proc = _start(processes, "merge", *inputs, "--out", tmp_path / "m.mcap")
+    _wait_for(proc, (tmp_path / ".m.mcap.merging").exists)
+    err = _interrupt(proc, sig)
+    assert [_sha(p) for p in inputs] == before and list(tmp_path.iterdir()) == []
+    _ended_by(proc, sig, err)
+
+
+def test_an_export_interrupted_by_ctrl_c_leaves_no_new_directory(tmp_path, data, processes):
+    """Before: a KeyboardInterrupt traceback, and the new --out directory stayed, empty."""
+    out = tmp_path / "new"
+    proc = _start(processes, "export", data / "walker.mcap", "--format", "csv", "--out", out)
+    _wait_for(proc, lambda: bool(_hidden_dirs(out, ".export-")))
+    err = _interrupt(proc, signal.SIGINT)
+    assert not out.exists()
+    _ended_by(proc, signal.SIGINT, err)
+
+
+def test_an_export_stopped_by_sigterm_keeps_the_earlier_export_and_leaves_no_work_directory(tmp_path, data,
+                                                                                           processes):
+    """Before: the work directory ``.export-*`` with the partial files stayed in --out."""
+    from astrodyn.recording.export import export
+
+    out = tmp_path / "out"
+    export(data / "short.mcap", "csv", out)  # the earlier export: same file names, other content
+    before = _tree(out)
+    proc = _start(processes, "export", data / "walker.mcap", "--format", "csv", "--out", out)
+    _wait_for(proc, lambda: any(any(w.iterdir()) for w in _hidden_dirs(out, ".export-")))
+    err = _interrupt(proc, signal.SIGTERM)
+    assert _tree(out) == before
+    _ended_by(proc, signal.SIGTERM, err)
+
+
+def test_a_signal_while_an_export_moves_its_files_into_place_leaves_all_or_none(tmp_path, data, processes):
+    """The files of an export go into --out one rename at a time; a SIGTERM among them
+    left part of the earlier export and part of the new one.  A signal there now takes
+    effect once every file is in place."""
+    from astrodyn.recording.export import export
+
+    out = tmp_path / "out"
+    export(data / "short.mcap", "csv", out)
+    before = _tree(out)
+    proc = _start(processes, "export", data / "walker.mcap", "--format", "csv", "--out", out)
+    _wait_for(proc, lambda: len(_hidden_dirs(out, ".export-")) == 1)
+    work, most = _hidden_dirs(out, ".export-")[0], 0
+
+    def moving() -> bool:  # files leave the work directory: the moves have begun
+        nonlocal most
+        try:
+            n = len(os.listdir(work))
+        except FileNotFoundError:
+            return True
+        most = max(most, n)
+        return n < most
+
+    _wait_for(proc, moving)
+    err = _interrupt(proc, signal.SIGTERM)
+    after = _tree(out)
+    replaced = [name for name in before if after.get(name) != before[name]]
+    assert replaced == [] or len(replaced) == len(before), f"{len(replaced)} of {len(before)} files replaced"
+    assert after.keys() == before.keys()  # no work directory left
+    _ended_by(proc, signal.SIGTERM, err)
+
+
+def test_the_work_directory_of_a_killed_export_is_removed_by_the_next_export(tmp_path, data, processes):
+    """SIGKILL cannot be caught: the work directory stays (hidden, never under a final name);
+    the next export into that directory removes it.  Before: it stayed for good."""
+    from astrodyn.recording.export import export
+
+    out = tmp_path / "out"
+    proc = _start(processes, "export", data / "walker.mcap", "--format", "csv", "--out", out)
+    _wait_for(proc, lambda: any(any(w.iterdir()) for w in _hidden_dirs(out, ".export-")))
+    _interrupt(proc, signal.SIGKILL)
+    assert proc.returncode == -signal.SIGKILL and _hidden_dirs(out, ".export-")  # what SIGKILL leaves
+    export(data / "short.mcap", "oem", out)
+    assert not _hidden_dirs(out, ".export-") and len(list(out.iterdir())) == len(list(out.glob("sat-*.oem"))) == 300
+
+
+def test_an_analyze_stopped_by_sigterm_keeps_the_earlier_report_whole(tmp_path, data, processes):
+    """Before: the figures were written straight into the report directory, so an earlier
+    report there had some figures replaced by the new run's and kept its old pages."""
+    out = tmp_path / "report"
+    out.mkdir()
+    earlier = ["report.md", "report.html", "report.json", "sat-0-00-orbit3d.png", "sat-0-00-elements.png"]
+    for name in earlier:
+        (out / name).write_text(f"earlier {name}")
+    before = _tree(out)
+
+    def writing() -> bool:
+        return _tree(out) != before or any(any(w.glob("*.png")) for w in _hidden_dirs(out, ".analyze-"))
+
+    proc = _start(processes, "analyze", data / "walker.mcap", "--out", out, "--bodies", "sat-0-00", "--quiet")
+    _wait_for(proc, writing)
+    err = _interrupt(proc, signal.SIGTERM)
+    assert _tree(out) == before
+    _ended_by(proc, signal.SIGTERM, err)
+
+
+@pytest.fixture(scope="module")
+def earlier_sweep(data) -> Path:
+    """A finished one-case sweep of walker.toml with its case MCAP (6 MB), run in-process."""
+    from astrodyn import sweep
+
+    out = data / "sweep"
+    assert sweep.main([str(data / "walker.toml"), "--vary", "walker.altitude=550 km", "-n", "1", "--workers", "0",
+                       "--mcap", "--out", str(out), "--quiet"]) == 0
+    return out
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
+def test_an_interrupted_case_rerun_keeps_the_earlier_case_recording(tmp_path, data, earlier_sweep, processes, sig):
+    """``sweep --case K --mcap`` rewrote ``mcap/case-K.mcap`` in place: Ctrl-C left it cut
+    but finished (footer and summary: it looked complete), SIGTERM cut without a footer;
+    either way the earlier recording of the case was gone."""
+    import shutil
+
+    out = tmp_path / "sweep"
+    shutil.copytree(earlier_sweep, out)
+    case = out / "mcap" / "case-000000.mcap"
+    before, stat = _tree(out), case.stat()
+
+    def writing() -> bool:
+        now = case.stat()
+        return (now.st_size, now.st_mtime_ns) != (stat.st_size, stat.st_mtime_ns) or len(list(case.parent.iterdir())) > 1
+
+    proc = _start(processes, "sweep", data / "walker.toml", "--vary", "walker.altitude=550 km", "-n", "1",
+                  "--mcap", "--out", out, "--quiet", "--case", "0")
+    _wait_for(proc, writing)
+    err = _interrupt(proc, sig)
+    after = _tree(out)  # sweep.json notes the rerun; the tables keep the case's row
+    assert {k: v for k, v in after.items() if k != "sweep.json"} == {k: v for k, v in before.items() if k != "sweep.json"}
+    _ended_by(proc, sig, err)
+
+
+def test_ctrl_c_to_a_dask_sweep_ends_it_without_tracebacks_or_leftovers(tmp_path, data, processes):
+    """Ctrl-C reaches every process of the group: before, each Dask worker died of it
+    printing a traceback (and a case file being written was cut under its name).  Now the
+    workers ignore it, the sweep cancels the cases, closes the cluster, writes the finished
+    cases' tables and exits 130; no process of the group is left."""
+    out = tmp_path / "sweep"
+    proc = _start(processes, "sweep", data / "walker.toml", "--vary", "walker.altitude=uniform(540, 560) km",
+                  "-n", "6", "--workers", "2", "--mcap", "--out", out, "--quiet")
+    _wait_for(proc, lambda: (out / "mcap").is_dir() and any((out / "mcap").iterdir()))
+    err = _interrupt(proc, signal.SIGINT)
+    _ended_by(proc, signal.SIGINT, err)
+    from astrodyn.recording import load
+
+    assert not list((out / "mcap").glob("*.tmp"))
+    for path in (out / "mcap").iterdir():  # only finished cases are left
+        assert load(path).complete, path
+    deadline = time.monotonic() + 10
+    while True:
+        try:
+            os.killpg(proc.pid, 0)  # the group of the sweep: its workers, resource tracker
+        except ProcessLookupError:
+            break
+        assert time.monotonic() < deadline, "a process of the sweep outlived it"
+        time.sleep(0.05)
