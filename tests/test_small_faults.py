@@ -383,3 +383,43 @@ def test_an_invariant_row_from_zero_is_absolute_not_inf():
     rows = {r.name: r for r in attitude_invariants("torque_free", q, w, np.diag([4.0, 3.0, 2.0]))}
     assert rows["T"].drift == pytest.approx(0.5 * 4.0 * 1e-18, rel=1e-12) and rows["T"].scale == "absolute (|T0| = 0)"
     assert rows["H_i"].drift == pytest.approx(4e-9, rel=1e-12) and rows["H_i"].scale == "absolute (|H0| = 0)"
+
+
+@pytest.mark.parametrize("command,argv,says", [
+    ("recover", ["REC", "--out", ""], "argument --out: expected a path, got an empty string"),  # was: a traceback
+    ("recover", ["REC", "--chunk-size", "100000000000", "--out", "x.mcap"],
+     "--chunk-size: expected bytes 1 <= N <= 67108864 (64 MiB), got 100000000000"),  # was: a 93 GiB buffer
+    ("merge", ["REC", "--out", ""], "argument --out: expected a path, got an empty string"),  # was: ". exists"
+    ("export", ["REC", "--format", "csv", "--out", ""], "argument --out: expected a path, got an empty string"),
+    ("analyze", ["REC", "--out", ""], "argument --out: expected a path, got an empty string"),  # was: the default
+    ("sweep", ["CFG", "--cases", "/dev/zero", "--out", "sw"],
+     "--cases /dev/zero: expected a regular file, got a character device"),  # was: read until MemoryError
+    ("sweep", ["CFG", "-n", "2", "--vary", "bodies.leo.orbit.e=0.1", "--out", ""],
+     "argument --out: expected a path, got an empty string"),  # was: the sweep written into the cwd
+])
+def test_file_tool_flags_that_wrote_into_the_cwd_or_filled_the_memory_are_refused(tmp_path, monkeypatch, capsys,
+                                                                                  command, argv, says):
+    """From the session-13 fuzz of every command's flags: an empty ``--out`` (a shell variable
+    that came out empty) meant the current directory for export and sweep, a traceback for
+    recover; ``recover --chunk-size 1e11`` allocated its buffer; ``sweep --cases /dev/zero``
+    read until the memory ran out.  Each is a usage error now (exit 2), nothing written."""
+    import importlib
+
+    from _recordings import LEO_TWO_BODIES, leo_recording
+
+    rec, cfg = tmp_path / "in.mcap", tmp_path / "in.toml"
+    leo_recording(rec, name="ft", duration="10 s", rate="1 Hz")
+    cfg.write_text(LEO_TWO_BODIES.format(name="ft", duration="10 s", rate="1 Hz"))
+    before = sorted(p.name for p in tmp_path.iterdir())
+    monkeypatch.chdir(tmp_path)
+    module = {"recover": "astrodyn.recording.recover", "merge": "astrodyn.recording.merge",
+              "export": "astrodyn.recording.export", "analyze": "astrodyn.analysis", "sweep": "astrodyn.sweep"}[command]
+    args = [{"REC": str(rec), "CFG": str(cfg)}.get(a, a) for a in argv]
+    try:
+        rc = importlib.import_module(module).main(args)
+    except SystemExit as exc:  # argparse's usage error
+        rc = exc.code
+    assert rc == 2
+    err = capsys.readouterr().err
+    assert says in err and "Traceback" not in err, err
+    assert sorted(p.name for p in tmp_path.iterdir()) == before

@@ -19,7 +19,11 @@ from __future__ import annotations
 import os
 import stat
 
-__all__ = ["file_kind", "regular_file_problem"]
+__all__ = ["file_kind", "regular_file_problem", "path_argument", "MAX_TEXT_INPUT_BYTES"]
+
+#: Largest text file a command reads whole (a sweep's ``--cases`` CSV): 4 MiB, as for a
+#: scenario config; ``/dev/zero`` or a huge file is refused instead of filling the memory.
+MAX_TEXT_INPUT_BYTES = 4 * 2**20
 
 _KINDS = ((stat.S_ISREG, "a regular file"), (stat.S_ISDIR, "a directory"), (stat.S_ISFIFO, "a FIFO"),
           (stat.S_ISCHR, "a character device"), (stat.S_ISBLK, "a block device"), (stat.S_ISSOCK, "a socket"))
@@ -44,3 +48,14 @@ def regular_file_problem(path: str | os.PathLike, missing_ok: bool = False) -> s
     except OSError as exc:
         return f"expected a regular file, got an unreadable path ({exc.strerror or exc})"
     return None if stat.S_ISREG(mode) else f"expected a regular file, got {file_kind(mode)}"
+
+
+def path_argument(text: str) -> str:
+    """argparse ``type`` of a path option (``--out``): any path but the empty string, which
+    a shell variable that came out empty gives, and which meant "the current directory" to
+    some commands (an export or a sweep written there) and a traceback to others."""
+    if text == "":
+        import argparse
+
+        raise argparse.ArgumentTypeError("expected a path, got an empty string")
+    return text

@@ -100,6 +100,7 @@ from typing import Any
 
 import numpy as np
 
+from astrodyn.files import path_argument
 from astrodyn.recording.outputs import written_atomically
 from astrodyn.signals import deferred_interrupts, interruptible
 
@@ -428,8 +429,17 @@ def _build_vary(text: str, path: str, segments: tuple, kind: str, args: list, un
 
 
 def read_cases_csv(path: str | os.PathLike) -> tuple[list[str], list[dict[str, Any]]]:
-    """Header (key paths) and rows (path -> parsed value; empty cells omitted) of a cases CSV."""
+    """Header (key paths) and rows (path -> parsed value; empty cells omitted) of a cases CSV:
+    a regular file of at most :data:`astrodyn.files.MAX_TEXT_INPUT_BYTES`."""
+    from astrodyn.files import MAX_TEXT_INPUT_BYTES, regular_file_problem
+
+    if problem := regular_file_problem(path):  # /dev/zero was read until the memory ran out
+        raise SweepError(f"--cases {path}: {problem}")
     try:
+        size = os.path.getsize(path)
+        if size > MAX_TEXT_INPUT_BYTES:
+            raise SweepError(f"--cases {path}: expected a CSV of at most {MAX_TEXT_INPUT_BYTES} bytes (4 MiB), got "
+                             f"{size} bytes")
         with open(path, newline="", encoding="utf-8") as fh:
             reader = csv.reader(fh)
             header = next(reader, None)
@@ -1060,7 +1070,7 @@ def _parser() -> argparse.ArgumentParser:
     ap.add_argument("--case", action="append", type=int, default=None, metavar="K",
                     help="rerun only case K (repeatable), serially, updating the tables in --out")
     ap.add_argument("--mcap", action="store_true", help="also write one MCAP per case into OUT/mcap/")
-    ap.add_argument("--out", required=True, metavar="DIR",
+    ap.add_argument("--out", required=True, metavar="DIR", type=path_argument,
                     help="output directory; one holding an earlier sweep's results is refused (a new directory, "
                          "--case K to rerun cases of that sweep, or --overwrite)")
     ap.add_argument("--overwrite", action="store_true",

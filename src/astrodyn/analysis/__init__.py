@@ -38,9 +38,10 @@ import numpy as np
 
 from astrodyn.analysis.closed_loop import CLOSED_LOOP_FIGURES, closed_loop_section
 from astrodyn.analysis.pointing import POINTING_FIGURES, pointing_section
+from astrodyn.files import path_argument
 from astrodyn.progress import Progress
 from astrodyn.recording import RecordingError, load
-from astrodyn.recording.outputs import WorkDirectory
+from astrodyn.recording.outputs import staging_directory
 from astrodyn.signals import deferred_interrupts, interruptible
 
 __all__ = ["analyze", "main", "FIGURES", "SEQ_NOT_COUNTED", "sequence_issues", "sequence_note"]
@@ -164,11 +165,9 @@ def analyze(path: str | os.PathLike, out: str | os.PathLike | None = None, seq: 
         progress.done(f"analyze: {run.messages} messages read in {time.monotonic() - started:.1f} s; "
                       f"{len(names)} bodies to report, figures for {min(figures_for, len(names))}")
     out = Path(out) if out is not None else Path(os.fspath(path)).with_suffix("").with_name(Path(path).stem + "-report")
-    try:  # written in a work directory inside out, moved into place once complete (astrodyn.recording.outputs)
-        stage = WorkDirectory(out, "analyze")
-    except OSError as exc:
-        raise RecordingError(f"{out}: cannot create the report directory: {exc.strerror or exc}") from None
-    with stage as work:
+    # written in a work directory inside out, moved into place once complete (astrodyn.recording.outputs)
+    with staging_directory(out, "analyze", cannot=lambda exc: RecordingError(
+            f"{out}: cannot create the report directory: {exc.strerror or exc}")) as work:
         report = _write_report(run, names, work, seq, figures_for, progress)
         with deferred_interrupts():  # the whole report or, on a signal before this, nothing of it
             for f in sorted(work.iterdir(), key=lambda f: (f.name.startswith("report."), f.name)):  # pages last
@@ -496,7 +495,7 @@ def main(argv: list[str] | None = None) -> int:
 def _main(argv: list[str] | None) -> int:
     ap = argparse.ArgumentParser(prog="astrodyn analyze", description="Report (Markdown, HTML, PNG) from an MCAP recording.")
     ap.add_argument("file", help="MCAP file recorded by astrodyn, or a sweep directory (with summary.csv)")
-    ap.add_argument("--out", default=None, help="report directory (default <file>-report)")
+    ap.add_argument("--out", default=None, type=path_argument, help="report directory (default <file>-report)")
     ap.add_argument("--seq", default="321", help="Euler angle sequence for the attitude plots (default 321)")
     ap.add_argument("--bodies", default=None, metavar="NAMES",
                     help="comma-separated body names or shell patterns to report, e.g. 'sat-00*,leo' (default: all)")

@@ -82,6 +82,7 @@ from pathlib import Path
 import numpy as np
 
 from astrodyn import __version__, messages
+from astrodyn.files import path_argument
 from astrodyn.recording.foxglove_scene import (
     BODY_COLORS,
     FRAME_TRANSFORM_SCHEMA,
@@ -97,7 +98,7 @@ from astrodyn.recording.foxglove_scene import (
     orbit_line_entity,
     stamp,
 )
-from astrodyn.recording.outputs import WorkDirectory
+from astrodyn.recording.outputs import staging_directory
 from astrodyn.recording.reader import Run, Track, load
 from astrodyn.recording.writer import McapRecorder, RecordingError
 from astrodyn.rotation import quat_to_scalar_last
@@ -696,11 +697,8 @@ def export(path: str | os.PathLike, fmt: str, out: str | os.PathLike) -> list[Pa
     # every file is written in a work directory inside --out and moved into place only when
     # all of them are complete: a failed or interrupted export leaves the files already in
     # --out as they were (astrodyn.recording.outputs)
-    try:
-        stage = WorkDirectory(out, "export")
-    except OSError as exc:
-        raise ExportError(f"--out: cannot create directory {out}: {exc.strerror or exc}") from None
-    with stage as work:
+    with staging_directory(out, "export", cannot=lambda exc: ExportError(
+            f"--out: cannot create directory {out}: {exc.strerror or exc}")) as work:
         try:
             files = _WRITERS[fmt](run, work)
         except OSError as exc:
@@ -734,7 +732,7 @@ def _main(argv: list[str] | None) -> int:
     ap = argparse.ArgumentParser(prog="astrodyn export", description="Export an MCAP recording to other formats.")
     ap.add_argument("file", help="MCAP file recorded by astrodyn")
     ap.add_argument("--format", required=True, choices=FORMATS, help="csv | parquet | oem | aem | aem1 (CCSDS ADM version 1) | foxglove")
-    ap.add_argument("--out", required=True, help="output directory (created if missing)")
+    ap.add_argument("--out", required=True, type=path_argument, help="output directory (created if missing)")
     args = ap.parse_args(argv)
     try:
         run_files = export(args.file, args.format, args.out)

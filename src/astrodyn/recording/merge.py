@@ -30,6 +30,7 @@ from pathlib import Path
 
 from mcap.writer import CompressionType, Writer
 
+from astrodyn.files import path_argument
 from astrodyn.messages import STATE_KINDS
 from astrodyn.recording.stream import open_stream
 from astrodyn.recording.writer import RecordingError
@@ -177,7 +178,7 @@ def _main(argv: list[str] | None) -> int:
                                  description="Merge partial recordings of one run (standby loggers, restarted "
                                              "loggers' parts) into one file without duplicates.")
     ap.add_argument("inputs", nargs="+", help="MCAP recordings of the same run (complete or cut)")
-    ap.add_argument("--out", required=True, help="the merged MCAP file to write (must not exist)")
+    ap.add_argument("--out", required=True, type=path_argument, help="the merged MCAP file to write (must not exist)")
     args = ap.parse_args(argv)
     try:
         report = merge(args.inputs, args.out)

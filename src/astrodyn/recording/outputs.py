@@ -4,7 +4,7 @@ outputs.
 A file is written under a temporary name beside its final one and renamed over it only once
 complete (:func:`written_atomically`, :func:`write_atomically`); a set of files (an export,
 a report) is written in a work directory inside the output directory and moved into place
-only once every file is complete (:class:`WorkDirectory`; the move runs under
+only once every file is complete (:func:`staging_directory`; the move runs under
 :func:`astrodyn.signals.deferred_interrupts`).  So a failure or an interrupt
 (:func:`astrodyn.signals.interruptible`) never leaves a half-written file under a final
 name, and an earlier output there is replaced by a complete one or not at all.  A SIGKILL
@@ -19,12 +19,12 @@ import os
 import re
 import shutil
 import tempfile
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 from astrodyn.recording.writer import RecordingError
 
-__all__ = ["written_atomically", "write_atomically", "WorkDirectory"]
+__all__ = ["written_atomically", "write_atomically", "staging_directory"]
 
 
 @contextlib.contextmanager
@@ -62,36 +62,40 @@ def write_atomically(dst: str, write):
     return result
 
 
-class WorkDirectory:
+@contextlib.contextmanager
+def staging_directory(out: str | os.PathLike, prefix: str,
+                      cannot: Callable[[OSError], Exception] | None = None) -> Iterator[Path]:
     """A new directory ``out/.<prefix>-<pid>-XXXXXXXX`` to write a set of output files in
-    before they are moved into ``out`` (created if missing; OSError if it cannot be).  Used
-    as a context manager it is removed at the end, whatever happens; when the block fails
-    or is interrupted, ``out`` is removed too if this made it and it is still empty.  Work
-    directories of ``prefix`` whose process is gone (killed) are removed on creation."""
+    before they are moved into ``out`` (created if missing); removed at the end, whatever
+    happens.  When the block fails or is interrupted, ``out`` is removed too if this made it
+    and it is still empty.  Work directories of ``prefix`` whose process is gone (killed)
+    are removed first.  ``cannot(exc)``: the exception to raise when the directories cannot
+    be made (default: the OSError itself).
 
-    def __init__(self, out: str | os.PathLike, prefix: str):
-        self.out = Path(out)
-        self.created = not self.out.exists()
-        self.out.mkdir(parents=True, exist_ok=True)
+    A generator: the directories are made inside it, so an interrupt that lands while they
+    are made, or before the caller's ``with`` has taken them, still removes them (the
+    generator's ``finally``, at the latest when it is collected)."""
+    out = Path(out)
+    created = not out.exists()
+    path: Path | None = None
+    failed = True
+    try:
         try:
-            _remove_stale(self.out, prefix)
-            self.path = Path(tempfile.mkdtemp(prefix=f".{prefix}-{os.getpid()}-", dir=self.out))
-        except BaseException:
-            self._remove_out()
-            raise
-
-    def _remove_out(self) -> None:
-        if self.created:
+            out.mkdir(parents=True, exist_ok=True)
+            _remove_stale(out, prefix)
+            path = Path(tempfile.mkdtemp(prefix=f".{prefix}-{os.getpid()}-", dir=out))
+        except OSError as exc:
+            if cannot is None:
+                raise
+            raise cannot(exc) from None
+        yield path
+        failed = False
+    finally:
+        if path is not None:
+            shutil.rmtree(path, ignore_errors=True)
+        if failed and created:
             with contextlib.suppress(OSError):  # only when empty
-                self.out.rmdir()
-
-    def __enter__(self) -> Path:
-        return self.path
-
-    def __exit__(self, exc_type, exc, tb) -> None:
-        shutil.rmtree(self.path, ignore_errors=True)
-        if exc_type is not None:
-            self._remove_out()
+                out.rmdir()
 
 
 def _remove_stale(out: Path, prefix: str) -> None:

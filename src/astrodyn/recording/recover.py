@@ -45,6 +45,7 @@ import time
 from mcap.records import Channel, Chunk, Message, Metadata, Schema
 
 from astrodyn import __version__
+from astrodyn.files import path_argument
 from astrodyn.recording.chunked_writer import ChunkedWriter
 from astrodyn.recording.outputs import write_atomically
 from astrodyn.recording.reader import chunk_records, open_recording, parse_record, read_records
@@ -255,6 +256,10 @@ def stale_work_dirs(folder: str) -> list[str]:
     return out
 
 
+#: Largest ``--chunk-size`` (bytes): the writer holds a chunk in one buffer of that size.
+MAX_CHUNK_SIZE = 64 * 2**20
+
+
 def main(argv: list[str] | None = None) -> int:
     return interruptible("astrodyn recover", lambda: _main(argv))
 
@@ -265,13 +270,15 @@ def _main(argv: list[str] | None) -> int:
     ap.add_argument("file", help="MCAP file (typically cut by a killed logger): a NAME.partial.mcap left by a killed "
                     "run, the --out path of that run (its partial file is found), or a directory (every partial "
                     "file in it)")
-    ap.add_argument("--out", default=None, help="write the recovered file here (default: NAME.mcap for "
+    ap.add_argument("--out", default=None, type=path_argument, help="write the recovered file here (default: NAME.mcap for "
                     "NAME.partial.mcap when no NAME.mcap exists, NAME.recovered.mcap when it does; other files "
                     "are rewritten in place)")
-    ap.add_argument("--chunk-size", type=int, default=1 << 20, help="uncompressed bytes per zstd chunk of the new file")
+    ap.add_argument("--chunk-size", type=int, default=1 << 20,
+                    help=f"uncompressed bytes per zstd chunk of the new file (1 .. {MAX_CHUNK_SIZE}, default 1 MiB)")
     args = ap.parse_args(argv)
-    if args.chunk_size <= 0:
-        print(f"astrodyn recover: --chunk-size: expected a positive number of bytes, got {args.chunk_size}", file=sys.stderr)
+    if not 0 < args.chunk_size <= MAX_CHUNK_SIZE:  # the chunk is a buffer of this size: 1e11 asked for 93 GiB
+        print(f"astrodyn recover: --chunk-size: expected bytes 1 <= N <= {MAX_CHUNK_SIZE} (64 MiB), got "
+              f"{args.chunk_size}", file=sys.stderr)
         return 2
     if args.out is not None and os.path.isdir(args.out):
         print(f"astrodyn recover: --out {args.out}: expected a file path, got a directory", file=sys.stderr)
