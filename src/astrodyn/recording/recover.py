@@ -48,7 +48,7 @@ from astrodyn import __version__
 from astrodyn.files import path_argument
 from astrodyn.recording.chunked_writer import ChunkedWriter
 from astrodyn.recording.outputs import write_atomically
-from astrodyn.recording.reader import chunk_records, open_recording, parse_record, read_records
+from astrodyn.recording.reader import MAX_CHUNK_BYTES, chunk_records, open_recording, parse_record, read_records
 from astrodyn.recording.writer import RecordingError, being_written
 from astrodyn.signals import interruptible
 
@@ -256,8 +256,9 @@ def stale_work_dirs(folder: str) -> list[str]:
     return out
 
 
-#: Largest ``--chunk-size`` (bytes): the writer holds a chunk in one buffer of that size.
-MAX_CHUNK_SIZE = 64 * 2**20
+#: Largest ``--chunk-size`` (bytes): the writer holds a chunk in one buffer of that size, and
+#: astrodyn's reader decompresses no larger chunk (:data:`astrodyn.recording.reader.MAX_CHUNK_BYTES`).
+MAX_CHUNK_SIZE = MAX_CHUNK_BYTES
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -118,6 +118,7 @@ from typing import Any
 
 import numpy as np
 
+from astrodyn.files import MAX_TEXT_INPUT_BYTES
 from astrodyn.messages import ACTUATED_MODEL, ATTITUDE_MODELS, ORBIT_MODELS
 from astrodyn.orbit.perturbations import (
     EARTH_EGM2008 as _EARTH,
@@ -201,8 +202,9 @@ MAX_BODIES = 100_000
 #: with the size (about 0.8 s per MiB for an array of small numbers on this machine; a
 #: 16 MiB array took 12-33 s).  The largest legitimate config, constellation-1000 written
 #: out body by body (1000 [[bodies]] tables with r, v, q, w, inertia: 346 kB), fits 12
-#: times; a [walker] table describes 100,000 bodies in a few lines.
-MAX_FILE_BYTES = 4 * 2**20
+#: times; a [walker] table describes 100,000 bodies in a few lines.  The cap of every text
+#: file a command reads whole (:data:`astrodyn.files.MAX_TEXT_INPUT_BYTES`).
+MAX_FILE_BYTES = MAX_TEXT_INPUT_BYTES
 TRIANGLE_RTOL = 1e-12  #: I3 <= I1 + I2 (1 + rtol): a flat plate (equality) is allowed
 SYMMETRY_RTOL = 1e-12  #: |I - I^T| <= rtol max|I| for a full tensor
 #: MCAP channel ids are 16-bit: channels of one recording, all bodies and kinds together.
