@@ -16,13 +16,16 @@ from astrodyn.scenario import load
 
 ROOT = Path(__file__).resolve().parents[1]
 CONFIGS = sorted(p for p in (ROOT / "configs").glob("*.toml") if p.stem != "demo")
+#: run in `make test-all` only: constellation-1000 (minutes); explorer-1 (15 s) is also run
+#: by test_flexible_service.py::test_explorer_1_run_drifts_to_a_flat_spin_and_the_oblate_twin_stays_put
+SLOW_CONFIGS = ("constellation-1000", "explorer-1")
 
 pytestmark = pytest.mark.network
 
 
 @pytest.mark.parametrize(
     "config",
-    [pytest.param(p, id=p.stem, marks=[pytest.mark.slow] if p.stem == "constellation-1000" else []) for p in CONFIGS],
+    [pytest.param(p, id=p.stem, marks=[pytest.mark.slow] if p.stem in SLOW_CONFIGS else []) for p in CONFIGS],
 )
 def test_config_runs_with_nothing_lost(config, tmp_path):
     out, res = tmp_path / "run.mcap", tmp_path / "result.json"

@@ -264,6 +264,7 @@ def _merged_states(tmp_path: Path, inputs: list[Path]) -> dict:
     return _states(merged)
 
 
+@pytest.mark.slow  # 21 s; by default the standby across a main-logger kill runs under serve (8 s, below)
 def test_a_standby_logger_records_the_whole_run_when_the_main_one_is_killed(tmp_path, processes, reference):
     """`run --loggers 2` with the main logger SIGKILLed: both files hold exactly the states
     of an uninterrupted run (byte for byte, each once): the standby's on its own, without
@@ -499,9 +500,9 @@ def _random_faults(tmp_path, processes, reference, trials: int, seed: int, trial
 
 
 def test_random_faults_fast_subset(tmp_path, processes, reference):
-    """Three seeded random trials (the series below has twenty)."""
-    records = _random_faults(tmp_path, processes, reference, trials=3, seed=20261125)
-    assert len(records) == 3 and any(r["killed"] for r in records)  # faults did happen
+    """Two seeded random trials (the series below has twenty)."""
+    records = _random_faults(tmp_path, processes, reference, trials=2, seed=20261125)
+    assert len(records) == 2 and any(r["killed"] for r in records)  # faults did happen
 
 
 @pytest.mark.slow
@@ -565,9 +566,9 @@ def _serve_fault_trial(tmp_path: Path, processes, rng, reference_states: dict, c
 
 
 def test_serve_random_faults_fast_subset(tmp_path, processes, reference):
-    """Four seeded random trials against `serve` (the series below has twenty)."""
-    records = _random_faults(tmp_path, processes, reference, trials=4, seed=20261126, trial=_serve_fault_trial)
-    assert len(records) == 4 and sum(r["killed"] for r in records) >= 3
+    """Two seeded random trials against `serve` (the series below has twenty)."""
+    records = _random_faults(tmp_path, processes, reference, trials=2, seed=20261126, trial=_serve_fault_trial)
+    assert len(records) == 2 and sum(r["killed"] for r in records) >= 1
 
 
 @pytest.mark.slow
