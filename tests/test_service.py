@@ -428,15 +428,22 @@ def test_a_restarted_propagator_with_no_step_left_ends_when_the_logger_has_finis
     assert left.returncode != 0 and "logger" in left.stderr, left.stderr[-2000:]
 
 
-def _wait_until_the_propagators_started(session, token: str, timeout_s: float = 60.0) -> None:
-    """Until the demo's orbit and attitude propagators have each sent a heartbeat with a sim
-    time (serve's status through ``session``, with the control ``token``)."""
+def _assert_the_propagators_stay_paused(session, token: str, timeout_s: float = 60.0) -> None:
+    """Once the demo's orbit and attitude propagators have each sent a heartbeat with a sim
+    time (serve's status through ``session``, with the control ``token``) and a re-sent
+    pause has had time to land (~1.5 s), neither one's sim time moves for 2 s (40 s of sim
+    time at x20, thousands at rate inf, if they ran)."""
     deadline = time.monotonic() + timeout_s
     while time.monotonic() < deadline:
         procs = bus.send_control(session, "demo", "status", token=token)[0]["processes"]
         if all(procs[k]["t"] is not None for k in ("orbit", "attitude")):
-            return
+            break
         time.sleep(0.2)
+    time.sleep(2.5)
+    before = bus.send_control(session, "demo", "status", token=token)[0]["processes"]
+    time.sleep(2.0)
+    after = bus.send_control(session, "demo", "status", token=token)[0]["processes"]
+    assert [after[k]["t"] for k in ("orbit", "attitude")] == [before[k]["t"] for k in ("orbit", "attitude")]
 
 
 def test_a_pause_sent_while_the_propagators_start_holds_at_rate_inf(tmp_path):
@@ -452,12 +459,7 @@ def test_a_pause_sent_while_the_propagators_start_holds_at_rate_inf(tmp_path):
         token = hello["control_token"]
         with bus.open_session(connect=[hello["hub"]]) as s:
             assert bus.send_control(s, "demo", "pause", token=token)[0]["state"] == "paused"  # before they listen
-            _wait_until_the_propagators_started(s, token)
-            time.sleep(2.5)  # a re-sent pause takes at most ~1.5 s to land
-            before = bus.send_control(s, "demo", "status", token=token)[0]["processes"]
-            time.sleep(2.0)  # thousands of sim seconds at rate inf if they ran
-            after = bus.send_control(s, "demo", "status", token=token)[0]["processes"]
-            assert [after[k]["t"] for k in ("orbit", "attitude")] == [before[k]["t"] for k in ("orbit", "attitude")]
+            _assert_the_propagators_stay_paused(s, token)
             (stopped,) = bus.send_control(s, "demo", "stop", token=token, timeout_s=60)
             assert stopped["state"] == "stopped"
         serve.wait(timeout=60)
@@ -483,12 +485,7 @@ def test_a_pause_and_a_stop_sent_while_the_propagators_start_still_reach_them(tm
         with bus.open_session(connect=[hello["hub"]]) as s:
             assert bus.send_control(s, "demo", "pause", token=token)[0]["state"] == "paused"  # at once: before they listen
             assert bus.send_control(s, "demo", "rate", {"factor": 5}, token=token)[0]["real_time_factor"] == 5
-            _wait_until_the_propagators_started(s, token)
-            time.sleep(2.5)  # a re-sent pause takes at most ~1.5 s to land
-            before = bus.send_control(s, "demo", "status", token=token)[0]["processes"]
-            time.sleep(2.0)  # 40 s of sim time at x20 if they ran
-            after = bus.send_control(s, "demo", "status", token=token)[0]["processes"]
-            assert [after[k]["t"] for k in ("orbit", "attitude")] == [before[k]["t"] for k in ("orbit", "attitude")]
+            _assert_the_propagators_stay_paused(s, token)
             assert bus.send_control(s, "demo", "resume", token=token)[0]["state"] == "running"
             time.sleep(1.5)  # re-anchored at the resume, then paced at x5 (x20 if the rate had been missed)
             first = bus.send_control(s, "demo", "status", token=token)[0]["processes"]
