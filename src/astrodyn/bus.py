@@ -824,17 +824,19 @@ def rate_argument(text: str) -> float:
     """argparse ``type`` of a ``--rate`` option: the word ``inf`` (as fast as possible) or a
     number spelled within :data:`RATE_BOUNDS` (``1e400``, which float() reads as inf, and
     ``nan`` are refused like any number outside them)."""
-    if str(text).strip() == "inf":
-        return math.inf
-    try:
-        value = float(text)
+    text = str(text)
+    try:  # the number spelled; "inf" only as the word (float() also reads 1e400 as inf)
+        value = math.inf if text.strip() == "inf" else float(text)
     except ValueError:
         value = math.nan
-    if not RATE_BOUNDS[0] <= value <= RATE_BOUNDS[1]:  # nan and the overflowed inf fail too
+    if math.isinf(value) and text.strip() != "inf":
+        value = math.nan
+    try:
+        return parse_rate_factor(value)  # the one check of the bounds
+    except ValueError:
         shown = repr(text) if len(repr(text)) <= 40 else repr(text)[:37] + "..."
         raise argparse.ArgumentTypeError(f"expected a real-time factor with {RATE_BOUNDS[0]:g} <= x <= "
-                                         f'{RATE_BOUNDS[1]:g} or "inf", got {shown}')
-    return value
+                                         f'{RATE_BOUNDS[1]:g} or "inf", got {shown}') from None
 
 
 class ControlServer(_Declared):

@@ -16,6 +16,7 @@ blocks).  A scenario config is the exception: read once, it may be a pipe
 
 from __future__ import annotations
 
+import argparse
 import os
 import stat
 
@@ -55,7 +56,5 @@ def path_argument(text: str) -> str:
     a shell variable that came out empty gives, and which meant "the current directory" to
     some commands (an export or a sweep written there) and a traceback to others."""
     if text == "":
-        import argparse
-
         raise argparse.ArgumentTypeError("expected a path, got an empty string")
     return text
