@@ -68,6 +68,7 @@ from astrodyn.files import regular_file_problem
 
 __all__ = [
     "SchemaServer",
+    "LISTENING_GAP_S",
     "DEFAULT_HOST",
     "process_signer",
     "signed_put",
@@ -691,6 +692,14 @@ class Heartbeat(_Declared):
 
 
 
+#: Longest interval between two :meth:`HeartbeatMonitor.poll` calls that counts in full as
+#: time spent listening, s.  A longer one (the owner was stopped: Ctrl-Z, SIGSTOP, a paused
+#: VM; zenoh's threads in it stopped too, so heartbeats sent meanwhile were never heard)
+#: counts as this much only, so a supervisor never judges silence it could not hear.  An
+#: owner merely slow (loaded cores) still hears every heartbeat: they wait in the channel.
+LISTENING_GAP_S = 1.0
+
+
 class HeartbeatMonitor(_Declared):
     """Watches the heartbeats of a scenario; :meth:`stale` lists processes silent too long.
 
@@ -698,6 +707,12 @@ class HeartbeatMonitor(_Declared):
     the monotonic time it arrived.  Call :meth:`poll` from the owner's loop.  With a
     ``verifier`` (a supervisor's, :mod:`astrodyn.auth`) a heartbeat counts only when it
     carries a valid authenticator of the process it names; ``rejected`` counts the others.
+
+    ``listening_s`` is the owner's listening clock: seconds of monotonic time between
+    polls, each interval capped at :data:`LISTENING_GAP_S`; ``heard[process]`` is its
+    value at the process's last heartbeat.  Silence measured on it
+    (:meth:`astrodyn.service.children.Child.kill_if_stalled`) excludes the time the owner
+    itself was stopped (docs/reliability.md: a stopped supervisor).
     """
 
     def __init__(self, session: zenoh.Session, scenario: str, timeout_s: float = 2.0, *,
@@ -707,10 +722,16 @@ class HeartbeatMonitor(_Declared):
         self.timeout_s = float(timeout_s)
         self.last: dict[str, dict] = {}
         self.seen: dict[str, float] = {}
+        self.heard: dict[str, float] = {}
+        self.listening_s = 0.0
+        self._polled = time.monotonic()
         pattern = heartbeat_key(scenario, "x").rsplit("/", 1)[0] + "/*"
         self._entity = session.declare_subscriber(pattern, zenoh.handlers.FifoChannel(1024))
 
     def poll(self) -> None:
+        now = time.monotonic()
+        self.listening_s += min(now - self._polled, LISTENING_GAP_S)
+        self._polled = now
         while (sample := self._entity.try_recv()) is not None:
             key = str(sample.key_expr)
             process = key.rsplit("/", 1)[-1]
@@ -727,7 +748,8 @@ class HeartbeatMonitor(_Declared):
             except ValueError:
                 continue
             self.last[process] = body if isinstance(body, dict) else {}
-            self.seen[process] = time.monotonic()
+            self.seen[process] = now
+            self.heard[process] = self.listening_s
 
     def stale(self, now: float | None = None) -> list[str]:
         """Processes whose last heartbeat is older than ``timeout_s`` (sorted)."""

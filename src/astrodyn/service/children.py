@@ -331,6 +331,7 @@ class Child:
                                      start_new_session=True, preexec_fn=_die_with_parent if foreign else None,
                                      env={**os.environ, **(env or {}), SUPERVISOR_ENV: str(os.getpid())})
         self.started = time.monotonic()
+        self.started_listening: float | None = None  # the supervisor's listening clock at the start
         self.stalled_s: float | None = None  # set when kill_if_stalled ended it
 
     def how(self, rc: int) -> str:
@@ -347,15 +348,22 @@ class Child:
         ``limit_s`` wall seconds since its last one or since it started; ten times that
         while its last heartbeat says ``preparing`` (the numeric kernels compile).  A hung
         process (deadlock, SIGSTOP, an endless loop) thus ends like a crash and takes the
-        same path: restarted, or the run fails naming it (:meth:`how`).  None or 0: never."""
+        same path: restarted, or the run fails naming it (:meth:`how`).  None or 0: never.
+
+        Silence is counted on the supervisor's listening clock (``beats.listening_s``), not
+        on the wall clock: while the supervisor itself was stopped (Ctrl-Z, SIGSTOP, a paused
+        VM) it heard nothing, and a healthy child must not be killed for that."""
         if not limit_s or self.stalled_s is not None or self.proc.poll() is not None:
             return False
-        seen = beats.seen.get(self.name, 0.0)
-        since = max(seen, self.started)
-        preparing = seen > self.started and beats.last.get(self.name, {}).get("preparing")
-        if now - since <= (10 * limit_s if preparing else limit_s):
+        if self.started_listening is None:  # the first look since the start (one loop later)
+            self.started_listening = beats.listening_s - min(now - self.started, bus.LISTENING_GAP_S)
+        heard_since_start = beats.seen.get(self.name, 0.0) > self.started  # not its predecessor's
+        since = beats.heard[self.name] if heard_since_start else self.started_listening
+        silent_s = beats.listening_s - since
+        preparing = heard_since_start and beats.last.get(self.name, {}).get("preparing")
+        if silent_s <= (10 * limit_s if preparing else limit_s):
             return False
-        self.stalled_s = now - since
+        self.stalled_s = silent_s
         self.proc.kill()
         return True
 
