@@ -286,7 +286,7 @@ def test_replay_starts_from_its_zenoh_config(spawn, recording, tmp_path):
     broken.write_text("{ transport: { unicast: { max_sessions: } }")
     fifo = tmp_path / "zenoh.fifo"
     os.mkfifo(fifo)
-    for given, says, rc in ((broken, "expected a readable Zenoh JSON5 configuration", 1),
+    for given, says, rc in ((broken, "expected a readable Zenoh JSON5 configuration", 2),
                             (fifo, "expected a regular file, got a FIFO", 2)):
         proc = spawn(path, "--zenoh-config", str(given), "--wait", "0", "--rate", "inf", "--quiet")
         _, err = proc.communicate(timeout=30)

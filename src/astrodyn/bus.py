@@ -54,17 +54,21 @@ import contextlib
 import ipaddress
 import json
 import math
+import os
 import re
 import socket
+import stat
+import tempfile
 import time
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import zenoh
 
 from astrodyn import auth, messages
-from astrodyn.files import regular_file_problem
+from astrodyn.files import file_kind, regular_file_problem
 
 __all__ = [
     "SchemaServer",
@@ -84,6 +88,11 @@ __all__ = [
     "endpoint_problem",
     "check_endpoint",
     "endpoint_argument",
+    "ZENOH_CONFIG_MAX_BYTES",
+    "zenoh_config_problem",
+    "zenoh_config_error_text",
+    "ZenohConfigText",
+    "read_zenoh_config",
     "make_config",
     "open_session",
     "add_bus_arguments",
@@ -273,11 +282,169 @@ def _endpoint_list(name: str, value: str | Sequence[str] | None) -> list[str]:
     return items
 
 
+#: Largest Zenoh configuration file astrodyn reads (``--zenoh-config`` of every command,
+#: ``router --config``), bytes: every process of a run parses it with Zenoh's JSON5 parser,
+#: and a config with TLS paths and access-control rules is a few kB.
+ZENOH_CONFIG_MAX_BYTES = 2**20
+
+#: The settings of a Zenoh configuration file that decide who can reach a session and that
+#: astrodyn sets itself on top of it (:func:`make_config`): a file that sets them gets a warning.
+_SETTINGS_ASTRODYN_SETS = ("listen/endpoints", "connect/endpoints", "scouting/multicast/enabled")
+
+
+def _zenoh_config_size_problem(size: int) -> str | None:
+    """The one comparison with :data:`ZENOH_CONFIG_MAX_BYTES`."""
+    if size > ZENOH_CONFIG_MAX_BYTES:
+        return (f"expected a Zenoh JSON5 configuration of at most {ZENOH_CONFIG_MAX_BYTES // 2**20} MiB "
+                f"({ZENOH_CONFIG_MAX_BYTES} bytes), got {size} bytes")
+    return None
+
+
+def _zenoh_config_stat_problem(status: os.stat_result) -> str | None:
+    if not stat.S_ISREG(status.st_mode):  # a FIFO would block Zenoh's read for good, a device never ends
+        return f"expected a regular file, got {file_kind(status.st_mode)}"
+    return _zenoh_config_size_problem(status.st_size)
+
+
+def zenoh_config_problem(path: str | os.PathLike) -> str | None:
+    """What is wrong with ``path`` as a Zenoh configuration file, judged from ``os.stat``
+    before anything opens it (which never blocks): not a regular file (a FIFO, a directory,
+    a device, no such file), or larger than :data:`ZENOH_CONFIG_MAX_BYTES`; None if it will do.
+    The one check of every Zenoh config astrodyn reads (:func:`make_config`,
+    :func:`read_zenoh_config`)."""
+    if problem := regular_file_problem(path):
+        return problem
+    try:
+        return _zenoh_config_stat_problem(os.stat(path))
+    except OSError as exc:
+        return f"expected a regular file, got an unreadable path ({exc.strerror or exc})"
+
+
+#: Zenoh's JSON5 syntax errors (pest): `` --> 2:26``, the line quoted, ``= expected ...``.
+_PEST_ERROR = re.compile(r"^\s*-->\s*(\d+):(\d+)\n.*\n\s*= ([^\n]*)$", re.S)
+#: Zenoh's type errors: ``JSON error: Message { msg: "...", location: Some(Location { line: 1, column: 9 }) }``.
+_SERDE_ERROR = re.compile(r'^JSON error: Message \{ msg: "(.*)", location: '
+                          r'(?:Some\(Location \{ line: (\d+), column: (\d+) \}\)|None) \}$', re.S)
+#: Longest part of a Zenoh parse error shown (its "expected one of" lists the 23 top-level keys).
+_ZENOH_ERROR_MAX_CHARS = 600
+
+
+def zenoh_config_error_text(exc: BaseException) -> str:
+    """Zenoh's refusal of a configuration file as one line, for a user: ``line L, column C:``
+    and what it expected, without the quoted source lines and carets of its JSON5 parser or
+    the Rust structure around its type errors, and without Rust source paths
+    (:func:`zenoh_error_text`)."""
+    text = zenoh_error_text(exc)
+    if pest := _PEST_ERROR.match(text):
+        text = f"line {pest[1]}, column {pest[2]}: {pest[3]}"
+    elif serde := _SERDE_ERROR.match(text):
+        where = f"line {serde[2]}, column {serde[3]}: " if serde[2] else ""
+        text = where + serde[1].replace('\\"', '"').replace("\\\\", "\\")
+    elif text.lower().startswith("empty config file"):
+        text = "got an empty file"
+    text = " ".join(text.split())  # whatever else zenoh says, on one line
+    return text if len(text) <= _ZENOH_ERROR_MAX_CHARS else text[:_ZENOH_ERROR_MAX_CHARS - 3] + "..."
+
+
+def _shown_path(path: str | os.PathLike) -> str:
+    """``path`` for a one-line message: as given, or quoted when it holds a newline or another
+    unprintable character."""
+    text = os.fspath(path)
+    return text if text.isprintable() else repr(text)
+
+
+def _load_zenoh_config(path: str | os.PathLike, label: str) -> zenoh.Config:
+    """Zenoh's configuration from the file ``path`` (checked first by
+    :func:`zenoh_config_problem`); BusError ``"<label>: ..."`` in one line."""
+    if problem := zenoh_config_problem(path):
+        raise BusError(f"{label}: {problem}")
+    try:
+        return zenoh.Config.from_file(os.fspath(path))
+    except (zenoh.ZError, OSError, ValueError) as exc:
+        raise BusError(f"{label}: expected a readable Zenoh JSON5 configuration: {zenoh_config_error_text(exc)}") from None
+
+
+@dataclass(frozen=True)
+class ZenohConfigText:
+    """A Zenoh configuration file as astrodyn read it, once, and checked
+    (:func:`read_zenoh_config`).
+
+    A supervisor (``run``, ``serve``, ``replay`` with its live view) writes this text into its
+    private work directory (:meth:`write`) and hands every process it starts, and every one
+    it restarts, that copy: an edit, a deletion or a FIFO put in place of the user's file
+    while the run goes on reaches no process.  ``label`` names the flag and the file in
+    messages (``--zenoh-config router.json5``); ``suffix`` is the file's extension, from
+    which Zenoh picks the format (.json5, .json, .yaml); ``replaced`` lists the settings of
+    the file astrodyn sets itself (:func:`make_config`), for a warning.
+    """
+
+    label: str
+    suffix: str
+    data: bytes = field(repr=False)
+    replaced: tuple[str, ...] = ()
+
+    def write(self, folder: str | os.PathLike, name: str = "zenoh-config") -> Path:
+        """Write the text to ``folder/<name><suffix>`` (a new file, readable by the user only)
+        and return its path; OSError if it cannot be written."""
+        path = Path(folder) / f"{name}{self.suffix}"
+        fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_CLOEXEC, 0o600)
+        with os.fdopen(fd, "wb") as f:
+            f.write(self.data)
+        return path
+
+    def warning(self) -> str | None:
+        """One line saying which of the file's settings astrodyn replaces, or None."""
+        if not self.replaced:
+            return None
+        return (f"{self.label}: sets {', '.join(self.replaced)}, which astrodyn replaces with its own (mode, endpoints "
+                f"and multicast scouting come from the command's flags; docs/security.md)")
+
+
+def read_zenoh_config(path: str | os.PathLike, flag: str = "--zenoh-config", *, shared: bool = False) -> ZenohConfigText:
+    """Read the Zenoh configuration file ``path`` (given with ``flag``) once and check it:
+    :func:`zenoh_config_problem` (a regular file of at most :data:`ZENOH_CONFIG_MAX_BYTES`,
+    checked again on the open file, so a FIFO put there after the check does not block),
+    then Zenoh's own parser on a private copy of the bytes read, the way every process
+    parses its copy.  ``shared``: the file is handed to several processes (``run``,
+    ``serve``, ``replay``'s live view), so it must not set Zenoh's ``id`` (processes with
+    one id never link: a run waited a minute for its logger, then failed).
+
+    BusError ``"<flag> <path>: ..."`` in one line for anything wrong (a bad flag value:
+    exit 2 in every command)."""
+    label = f"{flag} {_shown_path(path)}"
+    if problem := regular_file_problem(path):
+        raise BusError(f"{label}: {problem}")
+    try:
+        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | os.O_CLOEXEC)  # O_NONBLOCK: a FIFO swapped in opens at once
+        with os.fdopen(fd, "rb") as f:
+            if problem := _zenoh_config_stat_problem(os.fstat(f.fileno())):
+                raise BusError(f"{label}: {problem}")
+            data = f.read(ZENOH_CONFIG_MAX_BYTES + 1)
+    except OSError as exc:
+        raise BusError(f"{label}: expected a readable file, got {exc.strerror or exc}") from None
+    if problem := _zenoh_config_size_problem(len(data)):  # it grew after the fstat
+        raise BusError(f"{label}: {problem}")
+    text = ZenohConfigText(label, Path(path).suffix, data)
+    try:
+        with tempfile.TemporaryDirectory(prefix="astrodyn-zenoh-config-") as folder:
+            config = _load_zenoh_config(text.write(folder), label)
+    except OSError as exc:
+        raise BusError(f"{label}: cannot check it: no private temporary directory ({exc.strerror or exc})") from None
+    if shared and config.get_json("id") != "null":
+        raise BusError(f"{label}: sets id {config.get_json('id')}, which every process this command starts would "
+                       f"share (Zenoh never links two sessions of one id); remove it")
+    default = zenoh.Config()
+    replaced = tuple(f"{key.replace('/', '.')} {config.get_json(key)}" for key in _SETTINGS_ASTRODYN_SETS
+                     if config.get_json(key) != default.get_json(key)
+                     and not (key == "scouting/multicast/enabled" and config.get_json(key) == "false"))
+    return ZenohConfigText(label, text.suffix, data, replaced)
+
+
 def make_config(
     listen: str | Sequence[str] | None = None,
     connect: str | Sequence[str] | None = None,
     mode: str = "peer",
-    config_file: str | None = None,
+    config_file: str | os.PathLike | None = None,
 ) -> zenoh.Config:
     """The Zenoh configuration astrodyn uses (see the module docstring for the defaults).
 
@@ -285,8 +452,10 @@ def make_config(
     where a session never listens); ``connect`` lists endpoints to join (a router, the
     runner's hub).  Endpoints are Zenoh locators, e.g. ``tcp/127.0.0.1:7447``.
     ``config_file``: a Zenoh JSON5 configuration to start from (TLS certificates under
-    ``transport/link/tls``, ``access_control``, ...); mode, endpoints and scouting are
-    still set from the arguments above, so multicast scouting stays off.
+    ``transport/link/tls``, ``access_control``, ...), checked by :func:`zenoh_config_problem`
+    (BusError naming ``--zenoh-config`` and the file, in one line); mode, endpoints and
+    scouting are still set from the arguments above, so a session listens only where its
+    command says (loopback by default) and multicast scouting stays off whatever the file says.
     """
     if mode not in _MODES:
         raise BusError(f"mode: expected one of {', '.join(_MODES)}, got {mode!r}")
@@ -295,13 +464,7 @@ def make_config(
     if listen is None and mode != "client":
         listen_list = [loopback_endpoint()]
     if config_file is not None:
-        if problem := regular_file_problem(config_file):  # a FIFO would block zenoh's read for good
-            raise BusError(f"--zenoh-config {config_file}: {problem}")
-        try:
-            config = zenoh.Config.from_file(str(config_file))
-        except (zenoh.ZError, OSError, ValueError) as exc:
-            raise BusError(f"--zenoh-config {config_file}: expected a readable Zenoh JSON5 configuration: "
-                           f"{zenoh_error_text(exc)}") from None
+        config = _load_zenoh_config(config_file, f"--zenoh-config {_shown_path(config_file)}")
     else:
         config = zenoh.Config()
     config.insert_json5("mode", json.dumps(mode))

@@ -46,7 +46,7 @@ from astrodyn import auth, bus
 if TYPE_CHECKING:
     from astrodyn.scenario import Scenario
 
-__all__ = ["Child", "config_snapshot", "ensure_open_file_limit", "MIN_OPEN_FILES", "wait_ready", "children_of", "logger_command", "propagator_command", "plant_command", "controller_argv", "start_controller", "share_fate_with_supervisor",
+__all__ = ["Child", "config_snapshot", "zenoh_config_snapshot", "child_bus_arguments", "ensure_open_file_limit", "MIN_OPEN_FILES", "wait_ready", "children_of", "logger_command", "propagator_command", "plant_command", "controller_argv", "start_controller", "share_fate_with_supervisor",
            "stop_process", "stop_process_group", "work_directory", "SUPERVISOR_ENV", "ORPHAN_GRACE_S", "EXIT_ORPHANED", "LOGGED_WAIT_S",
            "MODEL_ENDED_EXIT", "DISK_FULL_EXIT", "StartError"]
 
@@ -174,6 +174,31 @@ def config_snapshot(scenario: Scenario, work: Path) -> Path:
     except OSError as exc:
         raise StartError(f"{path}: cannot write the run's copy of its config: {exc.strerror or exc}") from None
     return path
+
+
+def zenoh_config_snapshot(zenoh_config: bus.ZenohConfigText | None, work: Path) -> Path | None:
+    """Write the ``--zenoh-config`` text the supervisor read and checked at the start
+    (:func:`astrodyn.bus.read_zenoh_config`) to ``work/zenoh-config.<ext>`` (readable by the
+    user only) and return its path: the Zenoh config of the supervisor's own session and of
+    every process it starts or restarts; None without one.
+
+    As for :func:`config_snapshot`: the user's file is read once, so a process restarted
+    hours later does not load a file edited, deleted or replaced (by a FIFO, which blocked
+    its read for good) since.  StartError if the work directory cannot take the file."""
+    if zenoh_config is None:
+        return None
+    try:
+        return zenoh_config.write(work)
+    except OSError as exc:
+        raise StartError(f"{work}: cannot write the run's copy of {zenoh_config.label}: {exc.strerror or exc}") from None
+
+
+def child_bus_arguments(hub: str, connect: list[str] | tuple[str, ...], zenoh_config_copy: Path | None) -> list[str]:
+    """The bus flags of every process a supervisor starts: ``--connect`` to its ``hub`` and to
+    each of ``connect`` (a router), and ``--zenoh-config`` naming the supervisor's copy
+    (:func:`zenoh_config_snapshot`), never the user's file."""
+    argv = sum((["--connect", e] for e in [hub, *connect]), [])
+    return argv + (["--zenoh-config", str(zenoh_config_copy)] if zenoh_config_copy is not None else [])
 
 
 def children_of(parent: int) -> dict[int, list[str]]:

@@ -47,7 +47,6 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import shutil
 import sys
 import tempfile
 import time
@@ -56,11 +55,10 @@ from pathlib import Path
 from typing import Any
 
 from astrodyn import auth, bus, messages
-from astrodyn.files import regular_file_problem
 from astrodyn.progress import Progress
 from astrodyn.recording.stream import McapStream, RawMessage, topic_matcher
 from astrodyn.recording.writer import RecordingError
-from astrodyn.service.children import Child
+from astrodyn.service.children import Child, StartError, zenoh_config_snapshot
 from astrodyn.service.supervision import RestartBudget
 from astrodyn.service.viewer import add_foxglove_argument, viewer_command
 from astrodyn.signals import StopFlag
@@ -392,8 +390,6 @@ def open_recording(args: argparse.Namespace) -> tuple[float, McapStream]:
     rate = args.rate
     if not 0 <= args.wait <= MAX_WAIT_S:  # nan fails too
         raise ValueError(f"--wait: expected wall seconds 0 <= S <= {MAX_WAIT_S:g} (a day), got {args.wait}")
-    if args.zenoh_config is not None and (problem := regular_file_problem(args.zenoh_config)):
-        raise ValueError(f"--zenoh-config {args.zenoh_config}: {problem}")
     if args.control_scenario is not None:
         try:
             check_control_scenario(args.control_scenario, args.file, given=True)
@@ -432,23 +428,29 @@ def main(argv: list[str] | None = None) -> int:
         print("astrodyn replay: error: --foxglove-playback: expected --foxglove PORT as well (the bar is the "
               "view's)", file=sys.stderr)
         return 2
-    try:
+    try:  # read once: the session and the live view (restarts too) get the replay's private copy
+        zenoh_config = None if args.zenoh_config is None else \
+            bus.read_zenoh_config(args.zenoh_config, shared=args.foxglove is not None)
         rate, stream = open_recording(args)
-    except (ValueError, RecordingError) as exc:
+    except (ValueError, RecordingError, bus.BusError) as exc:
         print(f"astrodyn replay: error: {exc}", file=sys.stderr)
         return 1 if isinstance(exc, RecordingError) else 2
+    if zenoh_config is not None and (warning := zenoh_config.warning()):
+        print(f"astrodyn replay: warning: {warning}", file=sys.stderr)
     listen = args.listen
     if listen is None and args.mode != "client":
         listen = [bus.loopback_endpoint(args.port or None)]  # 0: a free one, named in the hello line
     stop_signal = StopFlag()
     printer = Progress(enabled=not args.quiet)
-    with stream:
+    with stream, tempfile.TemporaryDirectory(prefix="astrodyn-replay-") as work:  # private: the token, the copies
+        token_dir = Path(work)
         try:
             scenario = args.control_scenario or scenario_of(stream)
             check_control_scenario(scenario, stream.path, given=args.control_scenario is not None)
+            zenoh_config_copy = zenoh_config_snapshot(zenoh_config, token_dir)
             session = bus.open_session(listen=listen, connect=args.connect, mode=args.mode,
-                                       config_file=args.zenoh_config)
-        except (RecordingError, messages.MessageError, bus.BusError) as exc:
+                                       config_file=zenoh_config_copy)
+        except (RecordingError, messages.MessageError, bus.BusError, StartError) as exc:
             print(f"astrodyn replay: error: {exc}", file=sys.stderr)
             return 1
         with session:
@@ -460,7 +462,6 @@ def main(argv: list[str] | None = None) -> int:
                 return 2
             if stream.truncated or stream.corrupt_chunks:
                 print(f"astrodyn replay: warning: {stream.path}: {stream.report()}", file=sys.stderr, flush=True)
-            token_dir = Path(tempfile.mkdtemp(prefix="astrodyn-replay-"))
             token, viewer = None, None
             try:
                 if not args.open_control:
@@ -476,7 +477,7 @@ def main(argv: list[str] | None = None) -> int:
                         playback = (token_dir / "control-token", rep.lo, rep.hi)
                     endpoints = listen or args.connect or []
                     viewer = LiveView(lambda: start_viewer(stream, scenario, port, endpoints, token_dir, playback,
-                                                           args.zenoh_config))
+                                                           zenoh_config_copy))
                     viewer_url = f"ws://127.0.0.1:{port}"
                 print(json.dumps({"replaying": stream.path, "scenario": scenario, "listen": listen,
                                   "connect": args.connect, "foxglove": viewer_url,
@@ -490,7 +491,6 @@ def main(argv: list[str] | None = None) -> int:
                 rep.close()
                 if viewer is not None:
                     viewer.close()
-                shutil.rmtree(token_dir, ignore_errors=True)
     printer.done(_progress_line(rep))
     if not args.quiet and not summary["complete"]:
         print(f"astrodyn replay: {stream.path} is incomplete ({summary['file_report']}); "
@@ -500,10 +500,11 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def start_viewer(stream: McapStream, scenario: str, port: int, endpoints: list[str], work: Path,
-                 playback: tuple[Path, int, int] | None = None, zenoh_config: str | None = None) -> Child:
+                 playback: tuple[Path, int, int] | None = None, zenoh_config: Path | None = None) -> Child:
     """The live view (``--foxglove``): a child process subscribing to what the replay publishes;
     ``playback`` = (token file, first ns, last ns) wires Foxglove's playback bar to the replay;
-    ``zenoh_config``: the replay's ``--zenoh-config`` (TLS, access control), the viewer's too."""
+    ``zenoh_config``: the replay's copy of its ``--zenoh-config`` (TLS, access control), the
+    viewer's too (a restarted viewer loads that copy, not the user's file as it is by then)."""
     meta = work / "scenario.json"
     meta.write_text(json.dumps(stream.metadata.get("scenario", {})))
     bar = [] if playback is None else ["--playback-token-file", str(playback[0]),

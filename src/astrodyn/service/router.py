@@ -14,11 +14,17 @@ services (``services/orbit.py`` ... with ``--mode client --connect tcp/HOST:7447
 The default endpoint is loopback; listening on every interface (``0.0.0.0``, ``[::]``)
 happens only when asked and prints a warning, because Zenoh traffic is neither encrypted
 nor authenticated unless TLS and access control are configured (``--config`` takes a
-Zenoh JSON5 config file for that; the endpoints given here are added to it).
+Zenoh JSON5 config file for that, at most :data:`astrodyn.bus.ZENOH_CONFIG_MAX_BYTES`).
+As for every astrodyn session, the endpoints and scouting come from the flags, never from
+the file: a file's ``listen`` / ``connect`` endpoints or multicast scouting are replaced
+(with a warning naming them).  Before, ``--config`` without ``--listen`` left the file's
+endpoints, or Zenoh's default ``tcp/[::]:7447`` on every interface, and multicast
+scouting on.
 
 It runs until SIGTERM or Ctrl-C (exit 0); with ``--status-interval S`` it prints the
-routers and peers connected every S seconds.  Exit 2 on bad arguments, 1 if the session
-cannot be opened (port taken, unreadable config).
+routers and peers connected every S seconds.  Exit 2 on bad arguments (a ``--config``
+that is not a regular file, is too large or is not a Zenoh configuration included), 1 if the
+session cannot be opened (port taken, a TLS file the config names cannot be read).
 """
 
 from __future__ import annotations
@@ -44,34 +50,32 @@ def is_wildcard(endpoint: str) -> bool:
     return host in _WILDCARD_HOSTS
 
 
-def open_router(listen: list[str], connect: list[str] | None = None, config_file: str | None = None):
-    """Open a Zenoh session in router mode with astrodyn's defaults (or ``config_file``)."""
+def open_router(listen: list[str], connect: list[str] | None = None, config=None):
+    """Open a Zenoh session in router mode with astrodyn's defaults: ``listen`` endpoints only
+    (never the file's, nor Zenoh's default ``tcp/[::]:7447``, which binds every interface),
+    ``connect`` ones, multicast scouting off (:func:`astrodyn.bus.make_config`), on top of
+    ``config`` (a :class:`astrodyn.bus.ZenohConfigText`, the ``--config`` file as read and
+    checked once, or None).  BusError if the session cannot be opened (port taken, a TLS file
+    the config names cannot be read)."""
+    import tempfile
+
     from astrodyn import bus
 
-    if config_file is None:
+    if config is None:
         return bus.open_session(listen=listen, connect=connect or None, mode="router")
-    import zenoh
-
-    from astrodyn.files import regular_file_problem
-
-    if problem := regular_file_problem(config_file):  # a FIFO would block zenoh's read for good
-        raise bus.BusError(f"--config {config_file}: {problem}")
-    try:
-        config = zenoh.Config.from_file(config_file)
-        config.insert_json5("mode", json.dumps("router"))
-        if listen:
-            config.insert_json5("listen/endpoints", json.dumps(listen))
-        if connect:
-            config.insert_json5("connect/endpoints", json.dumps(connect))
-        return zenoh.open(config)
-    except zenoh.ZError as exc:
-        raise bus.BusError(f"cannot open a Zenoh router (config {config_file}, listen={listen}, connect={connect}): "
-                           f"{bus.zenoh_error_text(exc)}") from None
+    with tempfile.TemporaryDirectory(prefix="astrodyn-router-") as folder:  # Zenoh reads its config from a file
+        try:
+            copy = config.write(folder)
+        except OSError as exc:
+            raise bus.BusError(f"{config.label}: cannot copy it for Zenoh: {exc.strerror or exc}") from None
+        try:
+            return bus.open_session(listen=listen, connect=connect or None, mode="router", config_file=copy)
+        except bus.BusError as exc:  # named after the file the user gave, not the private copy
+            raise bus.BusError(f"{exc} ({config.label})") from None
 
 
 def main(argv: list[str] | None = None) -> int:
     from astrodyn import bus
-    from astrodyn.files import regular_file_problem
     from astrodyn.service.children import wall_seconds
     from astrodyn.signals import catch_stop_signals
 
@@ -80,19 +84,22 @@ def main(argv: list[str] | None = None) -> int:
                     help=f"endpoint to listen on (repeatable; default {DEFAULT_LISTEN}); tcp/0.0.0.0:7447 opens it to the network")
     ap.add_argument("--connect", action="append", default=None, metavar="ENDPOINT", type=bus.endpoint_argument,
                     help="another router to join (repeatable), for a mesh of routers")
-    ap.add_argument("--config", metavar="FILE", help="a Zenoh JSON5 config (TLS, access control); --listen/--connect are added")
+    ap.add_argument("--config", metavar="FILE",
+                    help="a Zenoh JSON5 config (TLS, access control), at most 1 MiB; endpoints come from --listen / "
+                         "--connect and multicast scouting stays off whatever it says (docs/multihost.md)")
     ap.add_argument("--status-interval", type=lambda text: wall_seconds(text, zero=True), default=0.0, metavar="S",
                     help="print the connected routers and peers every S wall seconds (0, the default: never)")
     args = ap.parse_args(argv)
-    if args.config is not None and (problem := regular_file_problem(args.config)):
-        ap.error(f"--config {args.config}: {problem}")
-    listen = args.listen or ([] if args.config else [DEFAULT_LISTEN])
+    listen = args.listen or [DEFAULT_LISTEN]
     try:
         for e in listen:
             bus.make_config(listen=[e], mode="router")  # the endpoints together, as zenoh takes them
-    except bus.BusError as exc:
+        config = None if args.config is None else bus.read_zenoh_config(args.config, "--config")
+    except bus.BusError as exc:  # a bad flag value: exit 2, as argparse's own refusals
         print(f"astrodyn router: {exc}", file=sys.stderr)
         return 2
+    if config is not None and (warning := config.warning()):
+        print(f"astrodyn router: warning: {warning}", file=sys.stderr)
     for e in listen:
         if is_wildcard(e):
             print(f"astrodyn router: WARNING: {e} listens on every network interface; Zenoh traffic is not encrypted or "
@@ -100,7 +107,7 @@ def main(argv: list[str] | None = None) -> int:
     stop = threading.Event()
     catch_stop_signals(lambda why: stop.set())
     try:
-        session = open_router(listen, args.connect, args.config)
+        session = open_router(listen, args.connect, config)
     except bus.BusError as exc:
         print(f"astrodyn router: {exc}", file=sys.stderr)
         return 1

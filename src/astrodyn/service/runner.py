@@ -55,6 +55,7 @@ from astrodyn.service.children import (
     Child,
     StartError,
     add_stall_argument,
+    child_bus_arguments,
     config_snapshot,
     ensure_open_file_limit,
     logger_command,
@@ -64,6 +65,7 @@ from astrodyn.service.children import (
     wait_ready,
     wall_seconds,
     work_directory,
+    zenoh_config_snapshot,
 )
 from astrodyn.service.output import check_output_path
 from astrodyn.service.summary import file_summary, print_summary, propagator_rows
@@ -102,7 +104,7 @@ def propagator_argv(kind: str, config_path: Path, connect_args: list[str], *opti
 def run_scenario(scenario: Scenario, out: Path, *, cross_check: bool = False,
                  real_time_factor: float = math.inf, connect: list[str] | None = None,
                  progress: bool = True, timeout_s: float | None = None, extra_args: dict | None = None,
-                 logger_args: list[str] | None = None, zenoh_config: str | None = None,
+                 logger_args: list[str] | None = None, zenoh_config: bus.ZenohConfigText | str | None = None,
                  authenticate: bool = True, controllers: list[str] | None = None,
                  commands: Path | None = None, loggers: int = 1, stall_s: float | None = STALL_S) -> dict:
     """Run ``scenario`` with real processes; return the result dict (see :func:`main`).
@@ -111,7 +113,11 @@ def run_scenario(scenario: Scenario, out: Path, *, cross_check: bool = False,
     copied into the run's work directory (:func:`~astrodyn.service.children.config_snapshot`),
     never the file the user named: an edit made while the run goes on changes nothing.
 
-    ``zenoh_config``: a Zenoh JSON5 file (TLS, access control) every process starts from.
+    ``zenoh_config``: a Zenoh JSON5 file (TLS, access control) every process starts from: the
+    text :func:`astrodyn.bus.read_zenoh_config` read and checked (a path is read here), copied
+    into the work directory like the scene config
+    (:func:`~astrodyn.service.children.zenoh_config_snapshot`): a restarted process loads
+    that copy, never the user's file as it is by then.
     ``controllers``: command lines of the closed loop's controllers (``--controller``),
     started once the plant is up, named after ``control.controllers`` in order, with the
     run's bus and secret in their environment (docs/control.md); ``commands``: a recording
@@ -141,7 +147,8 @@ class ScenarioRun:
 
     def __init__(self, scenario: Scenario, out: Path, *, cross_check: bool,
                  real_time_factor: float, connect: list[str] | None, progress: bool, timeout_s: float | None,
-                 extra_args: dict | None, logger_args: list[str] | None, zenoh_config: str | None,
+                 extra_args: dict | None, logger_args: list[str] | None,
+                 zenoh_config: bus.ZenohConfigText | str | None,
                  authenticate: bool, controllers: list[str] | None, commands: Path | None, loggers: int = 1,
                  stall_s: float | None = STALL_S):
         self.scenario, self.out = scenario, out
@@ -150,14 +157,15 @@ class ScenarioRun:
         self.cross_check, self.real_time_factor = cross_check, real_time_factor
         self.progress, self.timeout_s = progress, timeout_s
         self.extra_args, self.logger_args = extra_args or {}, logger_args or []
+        if zenoh_config is not None and not isinstance(zenoh_config, bus.ZenohConfigText):
+            zenoh_config = bus.read_zenoh_config(zenoh_config, shared=True)
         self.zenoh_config, self.authenticate = zenoh_config, authenticate
         self.controller_commands, self.commands = controllers or [], commands
         self.plan = make_plan(scenario)
         self.propagators = [k for k in self.plan.processes if k != "logger"]
         self.hub = bus.loopback_endpoint(bus.free_port())
-        self.connect_args = sum((["--connect", e] for e in [self.hub, *(connect or [])]), [])
-        if zenoh_config:
-            self.connect_args += ["--zenoh-config", str(zenoh_config)]
+        self.connect = list(connect or [])
+        self.connect_args: list[str] = []  # every child's bus flags (bus_config_copy)
         self.result: dict = {"scenario": scenario.name, "out": str(out), "processes": {}, "ok": False}
         self.restarts: list[dict] = self.result.setdefault("restarts", [])
         self.interrupted: dict = {"signal": None}
@@ -168,6 +176,14 @@ class ScenarioRun:
         self.token_file: Path | None = None
         self.loggers = int(loggers)
         self.standbys: dict[str, Child] = {}  # hot standby loggers: logger-2, ... (not restarted)
+
+    def bus_config_copy(self, work: Path) -> Path | None:
+        """Write the run's copy of its ``--zenoh-config`` into the work directory ``work`` and
+        set the bus flags of every child to name it; return its path (None without one), the
+        config of the hub's session too."""
+        copy = zenoh_config_snapshot(self.zenoh_config, work)
+        self.connect_args = child_bus_arguments(self.hub, self.connect, copy)
+        return copy
 
     def say(self, text: str) -> None:
         if self.progress:
@@ -180,7 +196,7 @@ class ScenarioRun:
         restore_signals = catch_stop_signals(lambda why: self.interrupted.update(signal=why))
         secret = auth.RunSecret.generate() if self.authenticate else None
         with work_directory(self.out, "run") as tmp, \
-                bus.open_session(listen=[self.hub], config_file=self.zenoh_config) as session, \
+                bus.open_session(listen=[self.hub], config_file=self.bus_config_copy(Path(tmp))) as session, \
                 bus.HeartbeatMonitor(session, scenario.name, verifier=secret and auth.Verifier(secret)) as beats, \
                 bus.AliveWatcher(session, scenario.name) as alive:
             self.session, self.tmpd = session, Path(tmp)
@@ -624,14 +640,14 @@ def main(argv: list[str] | None = None) -> int:
                 checked_output_path(path, inputs)
             if args.json is not None:
                 check_json_path(Path(args.json), (args.config, args.resume, args.zenoh_config, args.commands, *outputs))
-            check_bus_flags(args.connect, args.zenoh_config)
+            zenoh_config = check_bus_flags(args.connect, args.zenoh_config)
             resume = resume_plan(Path(args.resume), scenario, out, Path(work)) if args.resume else {}
             check_closed_loop_arguments(scenario, args.controller or [], args.commands, out)
         except ScenarioError as exc:
             print(f"astrodyn run: {exc}", file=sys.stderr)
             return 2
         the_plan = make_plan(scenario, cross_check_all=args.cross_check)
-        for w in the_plan.warnings:
+        for w in filter(None, [*the_plan.warnings, zenoh_config and zenoh_config.warning()]):
             print(f"astrodyn run: warning: {w}", file=sys.stderr)
         free = shutil.disk_usage(out.resolve().parent).free
         if the_plan.estimated_file_bytes > free and not args.force:
@@ -645,10 +661,10 @@ def main(argv: list[str] | None = None) -> int:
         try:
             result = run_scenario(scenario, out, cross_check=args.cross_check, connect=args.connect,
                                   progress=not args.quiet, timeout_s=args.timeout, extra_args=resume.get("extra_args"),
-                                  logger_args=resume.get("logger_args"), zenoh_config=args.zenoh_config,
+                                  logger_args=resume.get("logger_args"), zenoh_config=zenoh_config,
                                   controllers=args.controller, commands=Path(args.commands) if args.commands else None,
                                   loggers=args.loggers, stall_s=args.stall_timeout or None)
-        except StartError as exc:  # nothing was started
+        except (StartError, bus.BusError) as exc:  # nothing was started (the hub's session did not open)
             print(f"astrodyn run: error: {exc}", file=sys.stderr)
             return 1
     print("", file=sys.stderr)
@@ -717,26 +733,20 @@ def attack_report(logger: dict | None, plant: dict | None) -> str | None:
             f"authenticated states (counts in its 'rejected' metadata record)")
 
 
-#: Largest ``--zenoh-config`` file, bytes: every process of a run parses it (Zenoh's JSON5
-#: parser); a config with TLS paths and access-control rules is a few kB.
-ZENOH_CONFIG_MAX_BYTES = 2**20
-
-
-def check_bus_flags(connect: list[str] | None, zenoh_config: str | None) -> None:
+def check_bus_flags(connect: list[str] | None, zenoh_config: str | None) -> bus.ZenohConfigText | None:
     """``--connect`` endpoints (:func:`astrodyn.bus.check_endpoint`: protocol, host, port
-    1..65535) and the ``--zenoh-config`` file (at most :data:`ZENOH_CONFIG_MAX_BYTES`, and
-    one Zenoh can read), checked before anything starts (a bad endpoint made every child fail at
-    start-up, or was accepted and never connected); ScenarioError naming the flag."""
-    if zenoh_config:
+    1..65535) and the ``--zenoh-config`` file, checked before anything starts (a bad endpoint
+    made every child fail at start-up, or was accepted and never connected); ScenarioError
+    naming the flag.  Returns the Zenoh config as read, once, and checked
+    (:func:`astrodyn.bus.read_zenoh_config`: a regular file of at most
+    :data:`astrodyn.bus.ZENOH_CONFIG_MAX_BYTES` that Zenoh parses, without an ``id`` every
+    process would share): the text every process of the run is given a copy of (None
+    without the flag); its :meth:`~astrodyn.bus.ZenohConfigText.warning` is for the caller
+    to print."""
+    text = None
+    if zenoh_config is not None:
         try:
-            size = os.path.getsize(zenoh_config)
-        except OSError:
-            size = 0  # missing or unreadable: Zenoh's own refusal below names it
-        if size > ZENOH_CONFIG_MAX_BYTES:
-            raise ScenarioError(f"--zenoh-config {zenoh_config}: expected a Zenoh JSON5 configuration of at most "
-                                f"{ZENOH_CONFIG_MAX_BYTES // 2**20} MiB ({ZENOH_CONFIG_MAX_BYTES} bytes), got {size} bytes")
-        try:
-            bus.make_config(mode="peer", config_file=zenoh_config)
+            text = bus.read_zenoh_config(zenoh_config, shared=True)
         except bus.BusError as exc:
             raise ScenarioError(str(exc)) from None
     if connect:
@@ -744,6 +754,7 @@ def check_bus_flags(connect: list[str] | None, zenoh_config: str | None) -> None
             bus.make_config(mode="peer", connect=connect)
         except bus.BusError as exc:  # "connect: expected Zenoh endpoints like ..."
             raise ScenarioError(f"--{exc}") from None
+    return text
 
 
 def checked_output_path(path: Path, inputs: tuple) -> None:

@@ -67,12 +67,14 @@ from astrodyn.service.children import (
     Child,
     StartError,
     add_stall_argument,
+    child_bus_arguments,
     config_snapshot,
     ensure_open_file_limit,
     start_controller,
     wait_ready,
     wall_seconds,
     work_directory,
+    zenoh_config_snapshot,
 )
 from astrodyn.service.propagator import command_key
 from astrodyn.service.runner import (
@@ -99,11 +101,15 @@ __all__ = ["main", "Supervisor", "roll_settings", "check_serve_flags", "ROLL_INT
 
 
 class Supervisor:
-    """Starts the processes of one scenario and answers the control verbs (module docstring)."""
+    """Starts the processes of one scenario and answers the control verbs (module docstring).
+
+    ``zenoh_config``: serve's copy of its ``--zenoh-config`` in the work directory ``tmp``
+    (:func:`~astrodyn.service.children.zenoh_config_snapshot`), which every process it starts
+    or restarts is given, never the user's file."""
 
     def __init__(self, scenario, out: Path, session, hub: str, *, rate: float,
                  roll_size: int | None = None, roll_interval: float | None = None, connect=(), tmp: Path,
-                 max_restarts: int = 5, zenoh_config: str | None = None, foxglove_port: int | None = None,
+                 max_restarts: int = 5, zenoh_config: Path | None = None, foxglove_port: int | None = None,
                  controllers: list[str] | None = None, token_file: Path | None = None, loggers: int = 1,
                  stall_s: float | None = STALL_S):
         self.scenario = scenario
@@ -121,9 +127,7 @@ class Supervisor:
         p = make_plan(scenario)
         self.propagators = [k for k in p.processes if k != "logger"]
         self.budgets = {k: RestartBudget(k) for k in p.processes}
-        connect_args = sum((["--connect", e] for e in [hub, *connect]), [])
-        if zenoh_config:
-            connect_args += ["--zenoh-config", str(zenoh_config)]
+        connect_args = child_bus_arguments(hub, connect, zenoh_config)
         meta = tmp / "scenario.json"
         meta.write_text(json.dumps(scenario.to_metadata()))
         # every process, restarted ones too, runs the text checked at the start, not the file as it is now
@@ -617,8 +621,10 @@ def control_token(out: Path, open_control: bool) -> Iterator[tuple[str | None, P
         path.unlink(missing_ok=True)
 
 
-def check_serve_flags(args: argparse.Namespace) -> None:
-    """The numeric flags of ``serve`` argparse does not bound; ScenarioError naming the flag."""
+def check_serve_flags(args: argparse.Namespace) -> bus.ZenohConfigText | None:
+    """The numeric flags of ``serve`` argparse does not bound, and the bus flags
+    (:func:`~astrodyn.service.runner.check_bus_flags`); ScenarioError naming the flag.
+    Returns the ``--zenoh-config`` text as read, once, and checked (None without one)."""
     lo, hi = ROLL_SIZE_BOUNDS
     if args.roll_size is not None and not lo <= args.roll_size <= hi:
         raise ScenarioError(f"--roll-size: expected bytes {lo} (1 MiB) <= N <= {hi} (1 PiB), got {args.roll_size}")
@@ -627,7 +633,7 @@ def check_serve_flags(args: argparse.Namespace) -> None:
         raise ScenarioError(f"--roll-interval: expected wall seconds {lo:g} <= S <= {hi:g}, got {args.roll_interval}")
     if args.port is not None and (problem := bus.local_port_problem(args.port)):
         raise ScenarioError(f"--port: {problem}")
-    check_bus_flags(args.connect, args.zenoh_config)
+    return check_bus_flags(args.connect, args.zenoh_config)
 
 
 def make_parents(out: Path) -> list[Path]:
@@ -681,7 +687,7 @@ def main(argv: list[str] | None = None) -> int:
         out = Path(args.out) if args.out else (scenario.output_path or Path("out") / f"{scenario.name}.mcap")
         if not 1 <= args.loggers <= MAX_LOGGERS:
             raise ScenarioError(f"--loggers: expected 1 <= N <= {MAX_LOGGERS}, got {args.loggers}")
-        check_serve_flags(args)
+        zenoh_config = check_serve_flags(args)
         roll_size, roll_interval = roll_settings(args, scenario)
         check_closed_loop_arguments(scenario, args.controller or [], None, out)
         created = make_parents(out)  # the last step before the output checks: nothing is created for a refused flag
@@ -699,16 +705,20 @@ def main(argv: list[str] | None = None) -> int:
                 d.rmdir()
         print(f"astrodyn serve: {exc}", file=sys.stderr)
         return 2
+    if zenoh_config is not None and (warning := zenoh_config.warning()):
+        print(f"astrodyn serve: warning: {warning}", file=sys.stderr)
     hub = bus.loopback_endpoint(args.port or bus.free_port())
     stop_signal = StopFlag()
     try:
         ensure_open_file_limit()
-        with work_directory(out, "serve") as tmp, bus.open_session(listen=[hub], config_file=args.zenoh_config) as session, \
+        with work_directory(out, "serve") as tmp, \
+                bus.open_session(listen=[hub], config_file=(zenoh_config_copy := zenoh_config_snapshot(zenoh_config, tmp))) \
+                as session, \
                 control_token(out, args.open_control) as (token, token_file):
             try:
                 sup = Supervisor(scenario, out, session, hub, rate=rate, roll_size=roll_size,
                                  roll_interval=roll_interval, connect=args.connect, tmp=Path(tmp),
-                                 zenoh_config=args.zenoh_config,
+                                 zenoh_config=zenoh_config_copy,
                                  foxglove_port=None if args.foxglove is None else (args.foxglove or bus.free_port()),
                                  controllers=args.controller, token_file=token_file, loggers=args.loggers,
                                  stall_s=args.stall_timeout or None)
@@ -741,7 +751,7 @@ def main(argv: list[str] | None = None) -> int:
                         req.reply(summary)
             finally:
                 sup.close()
-    except StartError as exc:  # nothing was started
+    except (StartError, bus.BusError) as exc:  # nothing was started (the hub's session did not open)
         print(f"astrodyn serve: error: {exc}", file=sys.stderr)
         return 1
     print(json.dumps(summary, default=str), flush=True)
