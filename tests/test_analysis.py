@@ -118,10 +118,11 @@ def test_heavy_top_gets_precession_and_nutation(tmp_path):
 def test_analyze_bad_files_and_options_are_clear(tmp_path):
     bad = tmp_path / "x.mcap"
     bad.write_bytes(b"\x00" * 100)
-    for args, needle in [([str(bad)], "not an MCAP file"), ([str(bad), "--seq", "345"], "seq: expected one of")]:
+    # a bad input: exit 1; a bad flag value (judged before the input is read): exit 2
+    for args, needle, code in [([str(bad)], "not an MCAP file", 1), ([str(bad), "--seq", "345"], "seq: expected one of", 2)]:
         proc = subprocess.run([sys.executable, "-m", "astrodyn", "analyze", *args, "--out", str(tmp_path / "r")],
                               capture_output=True, text=True, timeout=120)
-        assert proc.returncode == 1 and needle in proc.stderr and "Traceback" not in proc.stderr
+        assert proc.returncode == code and needle in proc.stderr and "Traceback" not in proc.stderr
     # a cut file: analysed up to the cut, said so in the report
     good = tmp_path / "g.mcap"
     record(good, LEO_TWO_BODIES.format(name="cut", duration="100 s", rate="1 Hz"), chunk_size=4096)

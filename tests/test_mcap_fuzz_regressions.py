@@ -149,7 +149,9 @@ def test_a_failed_export_replaces_nothing_already_in_out(tmp_path):
     assert earlier.read_text() == "an earlier export\n"
     assert sorted(p.name for p in out.iterdir()) == ["events.csv", "sat.orbit.csv"]  # no work directory left
     proc = _cli("export", str(path), "--format", "oem", "--out", str(tmp_path / "rec.mcap" / "sub"))
-    assert proc.returncode == 1 and "Traceback" not in proc.stderr and "cannot create directory" in proc.stderr
+    # an --out that cannot be a directory is the command line's fault: exit 2 (docs/exports.md, exit status)
+    assert proc.returncode == 2 and "Traceback" not in proc.stderr, proc.stderr
+    assert "expected a directory that can be created" in proc.stderr
 
 
 def test_recover_never_writes_over_an_existing_out(tmp_path):
@@ -159,8 +161,8 @@ def test_recover_never_writes_over_an_existing_out(tmp_path):
     before = path.read_bytes()
     precious = tmp_path / "other-run.mcap"
     precious.write_bytes(b"someone else's recording")
-    proc = _cli("recover", str(path), "--out", str(precious))
-    assert proc.returncode == 1 and "exists already" in proc.stderr and str(path) in proc.stderr, proc.stderr
+    proc = _cli("recover", str(path), "--out", str(precious))  # the command line's fault: exit 2
+    assert proc.returncode == 2 and "exists already" in proc.stderr and str(path) in proc.stderr, proc.stderr
     assert precious.read_bytes() == b"someone else's recording" and path.read_bytes() == before
     assert not list(tmp_path.glob("*.recover-tmp"))
 
@@ -171,8 +173,8 @@ def test_merge_into_an_unwritable_place_is_a_clear_error(tmp_path):
     path = _orbit_file(tmp_path / "rec.mcap")
     with pytest.raises(RecordingError, match="cannot write the merged file"):
         merge([path], tmp_path / "no" / "such" / "dir.mcap")
-    proc = _cli("merge", str(path), "--out", str(tmp_path / "missing" / "m.mcap"))
-    assert proc.returncode == 1 and "Traceback" not in proc.stderr and "--out" in proc.stderr, proc.stderr
+    proc = _cli("merge", str(path), "--out", str(tmp_path / "missing" / "m.mcap"))  # the command line's fault: exit 2
+    assert proc.returncode == 2 and "Traceback" not in proc.stderr and "--out" in proc.stderr, proc.stderr
     assert not list(tmp_path.rglob("*.merging"))
 
 

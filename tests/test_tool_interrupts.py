@@ -250,7 +250,9 @@ def earlier_sweep(data) -> Path:
 def test_an_interrupted_case_rerun_keeps_the_earlier_case_recording(tmp_path, data, earlier_sweep, processes, sig):
     """``sweep --case K --mcap`` rewrote ``mcap/case-K.mcap`` in place: Ctrl-C left it cut
     but finished (footer and summary: it looked complete), SIGTERM cut without a footer;
-    either way the earlier recording of the case was gone."""
+    either way the earlier recording of the case was gone.  And sweep.json listed the
+    interrupted rerun under ``reruns`` as if it had been done: a rerun is listed once its
+    cases are written, so with none finished the whole directory stays as it was."""
     import shutil
 
     out = tmp_path / "sweep"
@@ -266,8 +268,7 @@ def test_an_interrupted_case_rerun_keeps_the_earlier_case_recording(tmp_path, da
                   "--mcap", "--out", out, "--quiet", "--case", "0")
     _wait_for(proc, writing)
     err = _interrupt(proc, sig)
-    after = _tree(out)  # sweep.json notes the rerun; the tables keep the case's row
-    assert {k: v for k, v in after.items() if k != "sweep.json"} == {k: v for k, v in before.items() if k != "sweep.json"}
+    assert _tree(out) == before  # the tables, the case's recording and sweep.json (no "reruns" entry)
     _ended_by(proc, sig, err)
 
 
@@ -295,3 +296,95 @@ def test_ctrl_c_to_a_dask_sweep_ends_it_without_tracebacks_or_leftovers(tmp_path
             break
         assert time.monotonic() < deadline, "a process of the sweep outlived it"
         time.sleep(0.05)
+
+
+def _group(pgid: int) -> list[int]:
+    """PIDs of the processes in process group ``pgid`` (its leader excluded), from /proc."""
+    found = []
+    for entry in os.listdir("/proc"):
+        if entry.isdigit() and int(entry) != pgid:
+            try:
+                with open(f"/proc/{entry}/stat") as f:
+                    fields = f.read().rsplit(")", 1)[1].split()
+            except OSError:
+                continue
+            if int(fields[2]) == pgid:
+                found.append(int(entry))
+    return found
+
+
+def _no_process_left(pgid: int, within: float = 10.0) -> None:
+    deadline = time.monotonic() + within
+    while True:
+        try:
+            os.killpg(pgid, 0)
+        except ProcessLookupError:
+            return
+        assert time.monotonic() < deadline, "a process of the sweep outlived it"
+        time.sleep(0.05)
+
+
+def test_ctrl_c_while_the_dask_cluster_starts_ends_the_sweep_at_once_with_nothing_written(tmp_path, data, processes):
+    """The LocalCluster was started with SIGINT ignored by the whole sweep (so its workers
+    would inherit that), and a Ctrl-C in that second or so was lost: the sweep ran all its
+    cases and exited 0.  Now only the workers are kept from it (a blocked signal mask); the
+    sweep sees it at once, closes the cluster, writes nothing (no case had finished: no
+    --out directory) and exits 130; no process of the group is left."""
+    out = tmp_path / "sweep"
+    proc = _start(processes, "sweep", data / "walker.toml", "--vary", "walker.altitude=uniform(540, 560) km",
+                  "-n", "4", "--workers", "2", "--out", out, "--quiet")
+    _wait_for(proc, lambda: bool(_group(proc.pid)))  # the cluster's first process: it is starting
+    sent = time.monotonic()
+    err = _interrupt(proc, signal.SIGINT)
+    _ended_by(proc, signal.SIGINT, err)
+    assert time.monotonic() - sent < 30, "the Ctrl-C was not seen while the cluster started"
+    assert "nothing was written" in err and not out.exists()
+    _no_process_left(proc.pid)
+
+
+#: a sweep's table with 48 metric columns over 40 cases: 3 pages of histograms, 1 scatter figure
+_METRICS = 48
+
+
+@pytest.fixture(scope="module")
+def sweep_table(data) -> Path:
+    """A sweep directory as ``astrodyn sweep`` writes it (summary.csv, sweep.json): one
+    dispersed parameter and 48 metrics that vary, so its report takes a few seconds."""
+    import json
+
+    import numpy as np
+
+    d = data / "table"
+    d.mkdir()
+    rng = np.random.default_rng(3)
+    columns = ["case", "status", "p", *[f"sat.m{k}" for k in range(_METRICS)], "wall_s"]
+    lines = [",".join(columns)]
+    for case in range(40):
+        p = rng.uniform()
+        lines.append(",".join([str(case), "ok", repr(p), *[repr(p * k + rng.normal()) for k in range(_METRICS)],
+                               "0.01"]))
+    (d / "summary.csv").write_text("\n".join(lines) + "\n")
+    (d / "sweep.json").write_text(json.dumps({"seed": 0, "varies": [{"path": "p", "text": "p=uniform(0, 1)"}],
+                                              "columns": {"p": "1", "wall_s": "s"}}))
+    return d
+
+
+def test_an_analyze_of_a_sweep_stopped_by_sigterm_keeps_the_earlier_report_whole(tmp_path, sweep_table, processes):
+    """``astrodyn analyze SWEEP_DIR`` drew its figures straight into the report directory:
+    a SIGTERM while it drew left an earlier report with some figures replaced and its old
+    pages.  Now the report is made in a work directory and moved in once complete."""
+    out = tmp_path / "report"
+    out.mkdir()
+    earlier = ["report.md", "report.json", "metrics-hist.png", "metrics-hist-2.png", "scatter-p.png"]
+    for name in earlier:
+        (out / name).write_text(f"earlier {name}")
+    before = _tree(out)
+
+    def drawing() -> bool:
+        return _tree(out) != before or any(any(w.glob("*.png")) for w in _hidden_dirs(out, ".analyze-"))
+
+    proc = _start(processes, "analyze", sweep_table, "--out", out)
+    _wait_for(proc, drawing)
+    err = _interrupt(proc, signal.SIGTERM)
+    assert _tree(out) == before
+    _ended_by(proc, signal.SIGTERM, err)

@@ -20,7 +20,7 @@ import argparse
 import os
 import stat
 
-__all__ = ["file_kind", "regular_file_problem", "path_argument", "MAX_TEXT_INPUT_BYTES"]
+__all__ = ["file_kind", "regular_file_problem", "path_argument", "output_path_problem", "MAX_TEXT_INPUT_BYTES"]
 
 #: Largest text file a command reads whole (a sweep's ``--cases`` CSV): 4 MiB, as for a
 #: scenario config; ``/dev/zero`` or a huge file is refused instead of filling the memory.
@@ -58,3 +58,41 @@ def path_argument(text: str) -> str:
     if text == "":
         raise argparse.ArgumentTypeError("expected a path, got an empty string")
     return text
+
+
+def output_path_problem(path: str | os.PathLike, directory: bool = False) -> str | None:
+    """None when ``path`` can be an output: with ``directory``, an existing directory or one
+    that can be made (its nearest existing ancestor a writable directory); else a file path
+    (a regular file, or nothing yet) in an existing, writable directory.  Otherwise what is
+    wrong, "expected a directory, got a regular file", "expected a file path, got a FIFO",
+    ...: judged from ``os.stat`` before anything is read or written, so a command refuses an
+    output of the wrong kind at once rather than after reading its input."""
+    want = "a directory" if directory else "a file path"
+    path = os.path.abspath(os.fspath(path))
+    mode = _mode(path)
+    if mode is not None and (stat.S_ISDIR(mode) != directory or not (directory or stat.S_ISREG(mode))):
+        return f"expected {want}, got {file_kind(mode)}"
+    if mode is not None and directory:
+        place = path
+    else:
+        place = os.path.dirname(path)
+        while directory and _mode(place) is None and os.path.dirname(place) != place:  # made with its parents
+            place = os.path.dirname(place)
+    place_mode = _mode(place)
+    if place_mode is None:
+        return f"expected {want} in an existing directory, got the missing directory {place}"
+    if not stat.S_ISDIR(place_mode):
+        return f"expected {want} {'that can be created' if directory else 'in a directory'}, got a path inside " \
+               f"{file_kind(place_mode)} ({place})"
+    if not os.access(place, os.W_OK | os.X_OK):
+        return f"expected {want} {'that can be created' if directory else 'in a writable directory'}, got a path " \
+               f"in {place}, which is not writable"
+    return None
+
+
+def _mode(path: str) -> int | None:
+    """``st_mode`` of ``path`` (symlinks followed), None when nothing can be found there."""
+    try:
+        return os.stat(path).st_mode
+    except (OSError, ValueError):  # missing, a file on the way (ENOTDIR), unreachable; a NUL byte
+        return None

@@ -73,8 +73,9 @@ seed, n, column units, versions, counts) and with ``--mcap`` one ``mcap/case-K.m
 per case.  ``--case K`` (repeatable) reruns those cases serially and updates the tables
 in ``DIR``.  ``astrodyn analyze DIR`` plots the table (:mod:`astrodyn.analysis.sweep`).
 
-Exit status: 0 every case ran, 1 some cases failed, 2 bad arguments, spec or config,
-130 interrupted by Ctrl-C, 143 by SIGTERM (the finished cases are written).
+Exit status: 0 every case ran, 1 some cases failed, 2 bad arguments, spec, config or
+``--out`` (nothing is created), 130 interrupted by Ctrl-C, 143 by SIGTERM (the finished
+cases are written; nothing when none had finished).
 """
 
 from __future__ import annotations
@@ -100,9 +101,9 @@ from typing import Any
 
 import numpy as np
 
-from astrodyn.files import path_argument
+from astrodyn.files import file_kind, path_argument
 from astrodyn.recording.outputs import written_atomically
-from astrodyn.signals import deferred_interrupts, interruptible
+from astrodyn.signals import interruptible
 
 __all__ = [
     "SweepError",
@@ -116,6 +117,7 @@ __all__ = [
     "run_case",
     "run_chunk",
     "local_cluster",
+    "start_local_cluster",
     "case_metrics",
     "run_cases",
     "write_tables",
@@ -848,8 +850,7 @@ def run_cases(spec: SweepSpec, cases: Iterable[int], workers: int = 2, scheduler
     cluster = client = None
     try:
         if scheduler is None:
-            with _workers_ignore_ctrl_c():
-                cluster = local_cluster(workers)
+            cluster = start_local_cluster(workers)
             client = Client(cluster)
         else:
             try:
@@ -883,22 +884,46 @@ def run_cases(spec: SweepSpec, cases: Iterable[int], workers: int = 2, scheduler
                     tmp.unlink(missing_ok=True)
 
 
-@contextlib.contextmanager
-def _workers_ignore_ctrl_c() -> Iterator[None]:
-    """Start a LocalCluster with SIGINT ignored, which its worker processes inherit: a
-    Ctrl-C, which a terminal sends to the whole process group, then reaches this process
-    only, which cancels the cases and closes the cluster (before, every worker died of it
-    printing a traceback).  A SIGTERM meanwhile takes effect once the cluster is up (so it
-    is closed); a Ctrl-C in that second or so is not seen."""
-    if threading.current_thread() is not threading.main_thread():  # signals are the main thread's
-        yield
-        return
-    with deferred_interrupts():
-        previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+def start_local_cluster(workers: int):
+    """:func:`local_cluster` started so that a Ctrl-C, which a terminal sends to the whole
+    process group, reaches this process only, at any moment: the cluster is started from a
+    helper thread that blocks SIGINT, and the worker processes it spawns inherit that
+    signal mask (a process keeps it across fork and exec), so they never act on it; this
+    process's main thread keeps its handler (:func:`astrodyn.signals.interruptible`), so a
+    Ctrl-C or SIGTERM while the cluster starts is seen at once: the start is let finish,
+    the cluster is closed and the interrupt goes on (no worker left).  Before, SIGINT was
+    ignored by the whole process while the cluster started (the workers inherited that),
+    so a Ctrl-C in that second or so was lost and the sweep ran on."""
+    started: dict[str, Any] = {}
+    done = threading.Event()
+
+    def start() -> None:
+        from multiprocessing import resource_tracker
+
         try:
-            yield
+            # the tracker first: starting it unblocks SIGINT in the thread that starts it (CPython)
+            resource_tracker.ensure_running()
+            signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+            started["cluster"] = local_cluster(workers)
+        except BaseException as exc:  # handed to the caller's thread
+            started["error"] = exc
         finally:
-            signal.signal(signal.SIGINT, signal.SIG_DFL if previous is None else previous)
+            done.set()
+
+    threading.Thread(target=start, name="astrodyn-cluster-start", daemon=True).start()
+    try:
+        # a stop signal's handler runs here, in the main thread (not Thread.join: on Python 3.11
+        # a join cut by an exception marks the thread as ended while it still runs)
+        while not done.wait(0.05):
+            pass
+    except BaseException:
+        done.wait()
+        if "cluster" in started:
+            started["cluster"].close()
+        raise
+    if "error" in started:
+        raise started["error"]
+    return started["cluster"]
 
 
 class CaseProgress:
@@ -1054,12 +1079,12 @@ def _parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog="astrodyn sweep", description="Monte Carlo dispersions / parameter sweeps of a "
                                  "scenario on Dask (a LocalCluster by default).",
                                  epilog="Dispersion syntax and output files: docs/sweeps.md.")
-    ap.add_argument("config", help="scenario TOML file (the nominal case)")
+    ap.add_argument("config", type=path_argument, help="scenario TOML file (the nominal case)")
     ap.add_argument("--vary", action="append", default=[], metavar="PATH=DIST",
                     help="a dispersion, e.g. 'bodies.sat1.orbit.e=uniform(0.1, 0.9)' (repeatable): uniform(lo, hi), "
                          "normal(mean, sigma), choice(a, b, ...), grid(lo, hi, n) or grid([a, b, ...]), a plain value; "
                          "optional unit after it")
-    ap.add_argument("--cases", metavar="FILE.csv", help="a CSV of cases: header = key paths, one row per case")
+    ap.add_argument("--cases", metavar="FILE.csv", type=path_argument, help="a CSV of cases: header = key paths, one row per case")
     ap.add_argument("-n", type=int, default=None, help="number of cases (default: the grid size or the CSV rows)")
     ap.add_argument("--seed", type=int, default=0, help="random seed (default 0); case k uses default_rng([seed, k])")
     ap.add_argument("--scheduler", metavar="ADDRESS", help="a running Dask scheduler, e.g. tcp://10.0.0.5:8786")
@@ -1203,9 +1228,10 @@ def _main(argv: list[str] | None) -> int:
             if not 0 <= k < spec.n:
                 raise SweepError(f"--case: expected 0 <= K < {spec.n} (the sweep's -n), got {k}")
         out = Path(args.out)
+        created = not out.exists()
         try:  # the last check: a refused sweep creates nothing
-            if out.exists() and not out.is_dir():
-                raise SweepError(f"--out {out}: expected a directory, got a file")
+            if not created and not out.is_dir():
+                raise SweepError(f"--out {out}: expected a directory, got {file_kind(os.stat(out).st_mode)}")
             check_out_directory(out, spec, rerun=args.case is not None, overwrite=args.overwrite)
             out.mkdir(parents=True, exist_ok=True)
         except OSError as exc:
@@ -1241,10 +1267,16 @@ def _main(argv: list[str] | None) -> int:
                 shown = {k: v for k, v in row.items() if k != "traceback"}
                 print(json.dumps(shown, default=str), flush=True)
     except SweepError as exc:
+        _remove_if_empty(out, created)
         print(f"astrodyn sweep: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt as exc:  # Ctrl-C or SIGTERM (astrodyn.signals.interruptible)
         interrupted = getattr(exc, "signum", signal.SIGINT)
+        if not rows:  # nothing finished (the cluster was starting, say): nothing is written, --out as it was
+            _remove_if_empty(out, created)
+            print(f"\nastrodyn sweep: interrupted by {signal.Signals(interrupted).name}; no case had finished, "
+                  f"nothing was written", file=sys.stderr)
+            return 128 + interrupted
         print(f"\nastrodyn sweep: interrupted by {signal.Signals(interrupted).name}; writing the {len(rows)} finished "
               f"cases", file=sys.stderr)
     wall = time.monotonic() - started
@@ -1264,7 +1296,9 @@ def _main(argv: list[str] | None) -> int:
         except ValueError:
             previous = {}
         keep = ("wall_s", "workers", "scheduler", "versions", "cases_per_s", "interrupted")
-        extra = {k: previous[k] for k in keep if k in previous} | {"reruns": previous.get("reruns", []) + [cases]}
+        # a rerun is listed once its cases are written: an interrupted one lists those that finished
+        finished = sorted({int(r["case"]) for r in rows})
+        extra = {k: previous[k] for k in keep if k in previous} | {"reruns": previous.get("reruns", []) + [finished]}
     write_tables(out, all_rows, spec, extra=extra)
     failed = [r for r in rows if r.get("status") != "ok"]
     if not args.quiet:
@@ -1280,6 +1314,13 @@ def _main(argv: list[str] | None) -> int:
     if interrupted:
         return 128 + interrupted
     return 1 if failed else 0
+
+
+def _remove_if_empty(out: Path, created: bool) -> None:
+    """Remove ``out`` when this sweep made it and wrote nothing into it."""
+    if created:
+        with contextlib.suppress(OSError):
+            out.rmdir()
 
 
 def _version() -> str:

@@ -38,13 +38,13 @@ import numpy as np
 
 from astrodyn.analysis.closed_loop import CLOSED_LOOP_FIGURES, closed_loop_section
 from astrodyn.analysis.pointing import POINTING_FIGURES, pointing_section
-from astrodyn.files import path_argument
+from astrodyn.files import output_path_problem, path_argument
 from astrodyn.progress import Progress
 from astrodyn.recording import RecordingError, load
 from astrodyn.recording.outputs import staging_directory
 from astrodyn.signals import deferred_interrupts, interruptible
 
-__all__ = ["analyze", "main", "FIGURES", "SEQ_NOT_COUNTED", "sequence_issues", "sequence_note"]
+__all__ = ["analyze", "main", "FIGURES", "SEQ_NOT_COUNTED", "sequence_issues", "sequence_note", "check_report_options"]
 
 #: figure name -> what it shows (report captions)
 FIGURES = {
@@ -79,6 +79,21 @@ def _fmt(x) -> str:
 
 #: Bodies whose figures a report draws by default (the first by name); the numbers cover all.
 FIGURE_BODIES = 12
+
+
+def check_report_options(seq: str, bodies: Sequence[str] | None, figures_for: int) -> None:
+    """ValueError naming the flag (``--seq``, ``--bodies``, ``--figures-for``) and what it
+    allows, for a value wrong whatever the recording: judged before the file is read
+    (``astrodyn analyze`` exits 2 for these).  A ``--bodies`` pattern that matches no body
+    of the recording is the recording's matter (:func:`select_bodies`, exit 1)."""
+    if seq not in _SEQS:
+        raise ValueError(f"--seq: expected one of {', '.join(_SEQS)} (the Euler angle sequence), got {seq!r}")
+    if bodies is not None and (isinstance(bodies, str) or not all(isinstance(p, str) and p.strip() for p in bodies)):
+        shown = bodies if isinstance(bodies, str) else ",".join(map(str, bodies))
+        raise ValueError(f"--bodies: expected comma-separated body names or shell patterns, none empty (e.g. "
+                         f"'sat-00*,leo'), got {shown!r}")
+    if type(figures_for) is not int or figures_for < 0:
+        raise ValueError(f"--figures-for: expected an integer >= 0, got {figures_for!r}")
 
 
 def select_bodies(names, patterns: Sequence[str] | None) -> list[str]:
@@ -151,10 +166,7 @@ def analyze(path: str | os.PathLike, out: str | os.PathLike | None = None, seq: 
     them would take about an hour.  ``progress``: where to say how far it is (reading the
     file, then body k of n; ``astrodyn analyze`` passes a :class:`~astrodyn.progress.Progress`
     on stderr), None for nothing."""
-    if seq not in _SEQS:
-        raise ValueError(f"seq: expected one of {', '.join(_SEQS)}, got {seq!r}")
-    if type(figures_for) is not int or figures_for < 0:
-        raise ValueError(f"--figures-for: expected an integer >= 0, got {figures_for!r}")
+    check_report_options(seq, bodies, figures_for)
     started = time.monotonic()
     if progress is not None:
         size = os.path.getsize(path) if os.path.isfile(path) else 0
@@ -493,8 +505,13 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _main(argv: list[str] | None) -> int:
-    ap = argparse.ArgumentParser(prog="astrodyn analyze", description="Report (Markdown, HTML, PNG) from an MCAP recording.")
-    ap.add_argument("file", help="MCAP file recorded by astrodyn, or a sweep directory (with summary.csv)")
+    ap = argparse.ArgumentParser(prog="astrodyn analyze", description="Report (Markdown, HTML, PNG) from an MCAP recording.",
+                                 epilog="Exit status: 0 written; 1 the input cannot be analysed or the report not "
+                                        "written (a --bodies pattern matching no body of this recording included); "
+                                        "2 a bad flag value or an --out that is not a directory that can be made; "
+                                        "128 + the signal when interrupted.")
+    ap.add_argument("file", type=path_argument,
+                    help="MCAP file recorded by astrodyn, or a sweep directory (with summary.csv)")
     ap.add_argument("--out", default=None, type=path_argument, help="report directory (default <file>-report)")
     ap.add_argument("--seq", default="321", help="Euler angle sequence for the attitude plots (default 321)")
     ap.add_argument("--bodies", default=None, metavar="NAMES",
@@ -504,6 +521,15 @@ def _main(argv: list[str] | None) -> int:
                          f"(default {FIGURE_BODIES}; 0: none)")
     ap.add_argument("--quiet", action="store_true", help="no progress lines on stderr (warnings and errors stay)")
     args = ap.parse_args(argv)
+    bodies = None if args.bodies is None else [p.strip() for p in args.bodies.split(",")]
+    try:  # the command line alone: exit 2, before the input is read
+        check_report_options(args.seq, bodies, args.figures_for)
+        problem = None if args.out is None else output_path_problem(args.out, directory=True)
+        if problem is not None:
+            raise ValueError(f"--out {args.out}: {problem}")
+    except ValueError as exc:
+        print(f"astrodyn analyze: error: {exc}", file=sys.stderr)
+        return 2
     if Path(args.file).is_dir():
         if not (Path(args.file) / "summary.csv").is_file():
             print(f"astrodyn analyze: error: {args.file}: expected an MCAP file or a sweep directory with summary.csv",
@@ -512,12 +538,20 @@ def _main(argv: list[str] | None) -> int:
         from astrodyn.analysis.sweep import sweep_report
 
         out = Path(args.out) if args.out else Path(args.file) / "report"
-        sweep_report(args.file, out)
+        try:
+            sweep_report(args.file, out)
+        except (RecordingError, ValueError) as exc:
+            print(f"astrodyn analyze: error: {exc}", file=sys.stderr)
+            return 1
+        except OSError as exc:
+            print(f"astrodyn analyze: error: {args.file}: cannot make the sweep report"
+                  f"{' (' + str(exc.filename) + ')' if exc.filename else ''}: {exc.strerror or exc}; nothing in "
+                  f"{out} was replaced", file=sys.stderr)
+            return 1
         print(out / "report.md")
         return 0
     try:
-        report = analyze(args.file, args.out, args.seq, None if args.bodies is None else args.bodies.split(","),
-                         args.figures_for, Progress(enabled=not args.quiet))
+        report = analyze(args.file, args.out, args.seq, bodies, args.figures_for, Progress(enabled=not args.quiet))
     except (RecordingError, ValueError) as exc:
         print(f"astrodyn analyze: error: {exc}", file=sys.stderr)
         return 1

@@ -14,6 +14,10 @@ Writes into ``out`` (default ``<dir>/report``):
   max of every numeric column), the first failures, and the figures;
 * ``report.json`` -- the same numbers.
 
+The files are written in a work directory inside ``out`` and moved into place only once
+every one is complete (pages last), so an interrupted or failed report leaves an earlier one
+there whole (:func:`astrodyn.recording.outputs.staging_directory`).
+
 Units come from ``sweep.json`` (``columns``: column -> SI unit); plots show lengths in km,
 angles in deg and rates in deg/s (axis labels say so); the tables keep SI.  matplotlib
 with the Agg backend (no display needed).
@@ -30,6 +34,9 @@ from pathlib import Path
 
 import numpy as np
 
+from astrodyn.recording.outputs import staging_directory
+from astrodyn.signals import deferred_interrupts
+
 __all__ = ["sweep_report", "is_sweep_dir", "MAX_PANELS"]
 
 MAX_PANELS = 16  #: histogram panels per figure
@@ -45,15 +52,18 @@ def is_sweep_dir(path: str | os.PathLike) -> bool:
 
 
 def _load(dir_: Path) -> tuple[list[dict], dict]:
-    with open(dir_ / "summary.csv", newline="", encoding="utf-8") as fh:
-        rows = list(csv.DictReader(fh))
+    try:
+        with open(dir_ / "summary.csv", newline="", encoding="utf-8") as fh:
+            rows = list(csv.DictReader(fh))
+    except (UnicodeDecodeError, csv.Error) as exc:
+        raise ValueError(f"{dir_ / 'summary.csv'}: expected the table of a sweep (UTF-8 CSV), got {exc}") from None
     spec = {}
     if (dir_ / "sweep.json").is_file():
         try:
             spec = json.loads((dir_ / "sweep.json").read_text(encoding="utf-8"))
-        except ValueError:
+        except (ValueError, RecursionError):
             spec = {}
-    return rows, spec
+    return rows, spec if isinstance(spec, dict) else {}
 
 
 def _numeric_columns(rows: list[dict]) -> dict[str, np.ndarray]:
@@ -125,11 +135,26 @@ def sweep_report(dir: str | os.PathLike, out: str | os.PathLike | None = None) -
     dir_ = Path(dir)
     if not is_sweep_dir(dir_):
         raise ValueError(f"dir: expected a sweep output directory with summary.csv, got {dir_}")
-    out_ = Path(out) if out is not None else dir_ / "report"
-    out_.mkdir(parents=True, exist_ok=True)
+    final = Path(out) if out is not None else dir_ / "report"
     rows, spec = _load(dir_)
-    units: dict[str, str] = spec.get("columns", {})
-    varied = {v.get("path") for v in spec.get("varies", [])} | set(spec.get("cases_csv_columns", []))
+    # written in a work directory inside the report directory and moved into place once
+    # complete, pages last: an interrupt or a failure leaves an earlier report whole
+    # (astrodyn.recording.outputs, as for the report of a recording)
+    with staging_directory(final, "analyze") as out_:
+        result = _write_report(dir_, out_, final, rows, spec, plt)
+        with deferred_interrupts():
+            for f in sorted(out_.iterdir(), key=lambda f: (f.name.startswith("report."), f.name)):
+                os.replace(f, final / f.name)
+    return result
+
+
+def _write_report(dir_: Path, out_: Path, final: Path, rows: list[dict], spec: dict, plt) -> dict:
+    """Write the figures, report.md and report.json of the sweep in ``dir_`` into ``out_``
+    (the paths they name: in ``final``, where they are moved)."""
+    units: dict[str, str] = spec.get("columns") if isinstance(spec.get("columns"), dict) else {}
+    varies = [v for v in spec.get("varies", []) if isinstance(v, dict)] if isinstance(spec.get("varies"), list) else []
+    csv_columns = spec.get("cases_csv_columns") if isinstance(spec.get("cases_csv_columns"), list) else []
+    varied = {v.get("path") for v in varies} | {str(c) for c in csv_columns}
     status = np.array([r.get("status") == "ok" for r in rows], dtype=bool)
     cols = _numeric_columns(rows)
     is_param = {c: re.sub(r"\[\d+\]$", "", re.sub(r" \[[^\[\]]*\]$", "", c)) in varied for c in cols}
@@ -208,8 +233,8 @@ def sweep_report(dir: str | os.PathLike, out: str | os.PathLike | None = None) -
     lines = [f"# Sweep report: {dir_}", "",
              f"{len(rows)} cases, {int(status.sum())} ok, {len(failures)} failed; seed {spec.get('seed', '?')}, "
              f"config {spec.get('source', '?')}.", ""]
-    if spec.get("varies"):
-        lines += ["Dispersions:", ""] + [f"- `{v.get('text')}`" for v in spec["varies"]] + [""]
+    if varies:
+        lines += ["Dispersions:", ""] + [f"- `{v.get('text')}`" for v in varies] + [""]
     lines += ["| column | unit | n | mean | std | min | 5 % | median | 95 % | max |", "|---|---|---|---|---|---|---|---|---|---|"]
     for c, s in stats.items():
         if s.get("n"):
@@ -224,9 +249,9 @@ def sweep_report(dir: str | os.PathLike, out: str | os.PathLike | None = None) -
         if len(failures) > 20:
             lines.append(f"- ... {len(failures) - 20} more in failures.csv")
     lines += ["", "## Figures", ""] + [f"![{p.stem}]({p.name})" for p in figures]
-    report_path = out_ / "report.md"
-    report_path.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    (out_ / "report.md").write_text("\n".join(lines) + "\n", encoding="utf-8")
     result = {"cases": len(rows), "ok": int(status.sum()), "failed": len(failures), "stats": stats, "constant": constant,
-              "correlations": correlations, "figures": [str(p) for p in figures], "report": str(report_path)}
+              "correlations": correlations, "figures": [str(final / p.name) for p in figures],
+              "report": str(final / "report.md")}
     (out_ / "report.json").write_text(json.dumps(result, indent=1), encoding="utf-8")
     return result

@@ -82,7 +82,7 @@ from pathlib import Path
 import numpy as np
 
 from astrodyn import __version__, messages
-from astrodyn.files import path_argument
+from astrodyn.files import output_path_problem, path_argument
 from astrodyn.recording.foxglove_scene import (
     BODY_COLORS,
     FRAME_TRANSFORM_SCHEMA,
@@ -729,11 +729,17 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _main(argv: list[str] | None) -> int:
-    ap = argparse.ArgumentParser(prog="astrodyn export", description="Export an MCAP recording to other formats.")
-    ap.add_argument("file", help="MCAP file recorded by astrodyn")
+    ap = argparse.ArgumentParser(prog="astrodyn export", description="Export an MCAP recording to other formats.",
+                                 epilog="Exit status: 0 exported; 1 the input cannot be read or has nothing to export, "
+                                        "or the files cannot be written; 2 a bad flag value or an --out that is not a "
+                                        "directory that can be made; 128 + the signal when interrupted.")
+    ap.add_argument("file", type=path_argument, help="MCAP file recorded by astrodyn")
     ap.add_argument("--format", required=True, choices=FORMATS, help="csv | parquet | oem | aem | aem1 (CCSDS ADM version 1) | foxglove")
     ap.add_argument("--out", required=True, type=path_argument, help="output directory (created if missing)")
     args = ap.parse_args(argv)
+    if problem := output_path_problem(args.out, directory=True):  # the command line alone: before the input is read
+        print(f"astrodyn export: error: --out {args.out}: {problem}", file=sys.stderr)
+        return 2
     try:
         run_files = export(args.file, args.format, args.out)
     except (RecordingError, ExportError) as exc:

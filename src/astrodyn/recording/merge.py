@@ -30,13 +30,13 @@ from pathlib import Path
 
 from mcap.writer import CompressionType, Writer
 
-from astrodyn.files import path_argument
+from astrodyn.files import output_path_problem, path_argument
 from astrodyn.messages import STATE_KINDS
 from astrodyn.recording.stream import open_stream
 from astrodyn.recording.writer import RecordingError
 from astrodyn.signals import interruptible
 
-__all__ = ["MergeReport", "merge"]
+__all__ = ["MergeReport", "merge", "taken_output_problem"]
 
 
 
@@ -62,6 +62,17 @@ def _seq_of(topic: str, sequence: int) -> int | None:
     return sequence if kind in STATE_KINDS and "/@" not in topic else None
 
 
+def taken_output_problem(inputs: list[str | os.PathLike], out: str | os.PathLike) -> str | None:
+    """Why ``out`` is no place for a merge: it exists already (a merge writes a new file,
+    it never replaces one) or it is one of ``inputs``; None when it is free."""
+    out = Path(out)
+    if os.path.lexists(out):
+        return "exists already; merge writes a new file (nothing is overwritten)"
+    if any(Path(p).resolve() == out.resolve() for p in inputs):
+        return "is one of the inputs"
+    return None
+
+
 def merge(inputs: list[str | os.PathLike], out: str | os.PathLike, *, chunk_size: int = 1 << 20) -> MergeReport:
     """Merge the recordings ``inputs`` (paths) into ``out`` (a new file; see the module
     docstring).  :class:`RecordingError` for an unreadable input, inputs of different
@@ -70,10 +81,8 @@ def merge(inputs: list[str | os.PathLike], out: str | os.PathLike, *, chunk_size
     out = Path(out)
     if len(paths) < 1:
         raise RecordingError("merge: expected at least one input recording")
-    if out.exists():
-        raise RecordingError(f"--out {out}: exists already; merge writes a new file (nothing is overwritten)")
-    if any(p.resolve() == out.resolve() for p in paths):
-        raise RecordingError(f"--out {out}: is one of the inputs")
+    if problem := taken_output_problem(paths, out):
+        raise RecordingError(f"--out {out}: {problem}")
     streams = [open_stream(p) for p in paths]
     try:
         names = {p: s.metadata.get("scenario", {}).get("name") for p, s in zip(paths, streams)}
@@ -176,10 +185,18 @@ def _main(argv: list[str] | None) -> int:
 
     ap = argparse.ArgumentParser(prog="astrodyn merge",
                                  description="Merge partial recordings of one run (standby loggers, restarted "
-                                             "loggers' parts) into one file without duplicates.")
-    ap.add_argument("inputs", nargs="+", help="MCAP recordings of the same run (complete or cut)")
+                                             "loggers' parts) into one file without duplicates.",
+                                 epilog="Exit status: 0 merged; 1 an input cannot be read or the inputs are not of "
+                                        "one run, or the file cannot be written; 2 a bad flag value or an --out that "
+                                        "exists, is an input or is not a file path in a writable directory; 128 + "
+                                        "the signal when interrupted.")
+    ap.add_argument("inputs", nargs="+", type=path_argument, help="MCAP recordings of the same run (complete or cut)")
     ap.add_argument("--out", required=True, type=path_argument, help="the merged MCAP file to write (must not exist)")
     args = ap.parse_args(argv)
+    # the command line alone, before any input is read: exit 2 (an input that cannot be merged: 1)
+    if problem := output_path_problem(args.out) or taken_output_problem(args.inputs, args.out):
+        print(f"astrodyn merge: --out {args.out}: {problem}", file=sys.stderr)
+        return 2
     try:
         report = merge(args.inputs, args.out)
     except RecordingError as exc:

@@ -28,8 +28,11 @@ removed too.
 For any other file, without ``--out`` the file is rewritten in place; either way the new file is first
 written beside the target as ``<target>.recover-tmp`` and renamed over it only once it is
 finished, so a failure (disk full, unwritable directory) never leaves a half-written file
-under the final name.  Exit status: 0 recovered, 1 unreadable input or write failure,
-2 bad arguments.
+under the final name.  Exit status: 0 recovered; 1 unreadable input or write failure (or both
+``NAME.mcap`` and ``NAME.recovered.mcap`` exist: give ``--out``); 2 bad arguments, judged
+before any input is read: a ``--chunk-size`` out of range, an ``--out`` that exists (other
+than the input itself), is not a file path (a directory, a FIFO, a device) or is in a
+missing or unwritable directory.
 """
 
 from __future__ import annotations
@@ -45,7 +48,7 @@ import time
 from mcap.records import Channel, Chunk, Message, Metadata, Schema
 
 from astrodyn import __version__
-from astrodyn.files import path_argument
+from astrodyn.files import output_path_problem, path_argument
 from astrodyn.recording.chunked_writer import ChunkedWriter
 from astrodyn.recording.outputs import write_atomically
 from astrodyn.recording.reader import MAX_CHUNK_BYTES, chunk_records, open_recording, parse_record, read_records
@@ -256,6 +259,13 @@ def stale_work_dirs(folder: str) -> list[str]:
     return out
 
 
+def _same_file(a: str, b: str) -> bool:
+    try:
+        return os.path.samefile(a, b)
+    except OSError:
+        return False
+
+
 #: Largest ``--chunk-size`` (bytes): the writer holds a chunk in one buffer of that size, and
 #: astrodyn's reader decompresses no larger chunk (:data:`astrodyn.recording.reader.MAX_CHUNK_BYTES`).
 MAX_CHUNK_SIZE = MAX_CHUNK_BYTES
@@ -268,7 +278,7 @@ def main(argv: list[str] | None = None) -> int:
 def _main(argv: list[str] | None) -> int:
     ap = argparse.ArgumentParser(prog="astrodyn recover",
                                  description="Rewrite a crashed writer's MCAP file with a proper summary and index.")
-    ap.add_argument("file", help="MCAP file (typically cut by a killed logger): a NAME.partial.mcap left by a killed "
+    ap.add_argument("file", type=path_argument, help="MCAP file (typically cut by a killed logger): a NAME.partial.mcap left by a killed "
                     "run, the --out path of that run (its partial file is found), or a directory (every partial "
                     "file in it)")
     ap.add_argument("--out", default=None, type=path_argument, help="write the recovered file here (default: NAME.mcap for "
@@ -281,8 +291,8 @@ def _main(argv: list[str] | None) -> int:
         print(f"astrodyn recover: --chunk-size: expected bytes 1 <= N <= {MAX_CHUNK_SIZE} (64 MiB), got "
               f"{args.chunk_size}", file=sys.stderr)
         return 2
-    if args.out is not None and os.path.isdir(args.out):
-        print(f"astrodyn recover: --out {args.out}: expected a file path, got a directory", file=sys.stderr)
+    if args.out is not None and (problem := output_path_problem(args.out)):  # a directory, a FIFO, no such folder
+        print(f"astrodyn recover: --out {args.out}: {problem}", file=sys.stderr)
         return 2
     sources = find_partials(args.file)
     if not sources and os.path.isdir(args.file):
@@ -293,6 +303,10 @@ def _main(argv: list[str] | None) -> int:
     if args.out is not None and len(sources) > 1:
         print(f"astrodyn recover: --out: {len(sources)} partial files found ({', '.join(sources)}); recover them one "
               f"at a time to choose each --out", file=sys.stderr)
+        return 2
+    if args.out is not None and sources and os.path.lexists(args.out) and not _same_file(sources[0], args.out):
+        print(f"astrodyn recover: {sources[0]}: --out {args.out} exists already; recover writes a new file (nothing "
+              f"is overwritten; only the input itself is rewritten in place)", file=sys.stderr)
         return 2
     status = 0
     for src in sources:
@@ -306,11 +320,6 @@ def _main(argv: list[str] | None) -> int:
                 status = 1
                 continue
             remove_source = True
-        elif dst is not None and os.path.lexists(dst) and not (os.path.exists(src) and os.path.samefile(src, dst)):
-            print(f"astrodyn recover: error: {src}: --out {dst} exists already; recover writes a new file "
-                  f"(nothing is overwritten; only the input itself is rewritten in place)", file=sys.stderr)
-            status = 1
-            continue
         try:
             summary = recover(src, dst, chunk_size=args.chunk_size)
         except RecordingError as exc:
