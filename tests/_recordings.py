@@ -9,6 +9,7 @@ compare what comes back out of the file with what went in.
 
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 
 from astrodyn import messages
@@ -111,3 +112,44 @@ def payloads_by_topic(path: Path, suffixes: tuple[str, ...]) -> dict[str, list[b
             if m.topic.endswith(suffixes):
                 out.setdefault(m.topic, []).append(bytes(m.data))
     return out
+
+
+def children_by_kind(pid: int) -> dict[int, str]:
+    """PID -> process kind (logger, orbit, attitude, ...) of the astrodyn processes that the
+    supervisor ``pid`` (``run``, ``serve``) started, from their command lines."""
+    import psutil
+
+    out = {}
+    for child in psutil.Process(pid).children():
+        try:
+            cmd = child.cmdline()
+        except psutil.NoSuchProcess:
+            continue
+        module = next((c for c in cmd if c.startswith("astrodyn.service.")), "")
+        if module:
+            out[child.pid] = "logger" if module.endswith("logger") else cmd[cmd.index(module) + 1]
+    return out
+
+
+def run_while(argv: list[str], partial: Path, min_bytes: int, act, timeout_s: float = 180.0) -> tuple[int, str]:
+    """Start ``astrodyn run`` with ``argv``, wait (at most 120 s) until its logger's file
+    ``partial`` holds ``min_bytes`` (the recording is under way), call ``act(pid)`` with the
+    supervisor's PID, and wait for the run to end; returns its exit status and stderr.  A run
+    still alive at the end (a failed assertion in ``act``) is killed by its PID."""
+    import subprocess
+    import time
+
+    proc = subprocess.Popen([sys.executable, "-m", "astrodyn", "run", *argv], stdout=subprocess.DEVNULL,
+                            stderr=subprocess.PIPE)
+    try:
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline and not (partial.exists() and partial.stat().st_size > min_bytes):
+            assert proc.poll() is None, proc.stderr.read().decode()
+            time.sleep(0.05)
+        act(proc.pid)
+        _, err = proc.communicate(timeout=timeout_s)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    return proc.returncode, err.decode()

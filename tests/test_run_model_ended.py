@@ -22,9 +22,16 @@ class FakeChild:
     def __init__(self, pid: int, rc: int | None):
         self.pid, self.rc = pid, rc
         self.stalled_s = None
+        self.lost_to_logger = None
 
     def poll(self) -> int | None:
         return self.rc
+
+    def kill_if_lost_to_logger(self, beats, holes: bool = True) -> bool:
+        return False  # (these tests give the logger nothing to report)
+
+    def ended_cut_off_from_logger(self, beats) -> bool:
+        return False
 
     def last_words(self, n: int = 3) -> str:
         return TAIL

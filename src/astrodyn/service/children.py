@@ -338,6 +338,16 @@ def add_stall_argument(ap: argparse.ArgumentParser) -> None:
                          f"like a crashed one (default {STALL_S:g}; 0: never; docs/reliability.md)")
 
 
+#: Seconds of a child's life (on its supervisor's listening clock) before what the logger
+#: says of it is taken into account (:meth:`Child.kill_if_lost_to_logger`).
+REACH_GRACE_S = 10.0
+#: Seconds a gap in a child's state channels must stay open before it counts as lost (late
+#: arrivals fill short ones).
+HOLE_GRACE_S = 3.0
+#: Seconds within which the supervisor must have heard both the logger and the child.
+FRESH_S = 2.0
+
+
 class Child:
     """One child process: ``argv`` started in its own session, stdout / stderr to
     ``log_dir/<name>.out|.err``; ``env`` adds variables to the supervisor's environment
@@ -358,11 +368,15 @@ class Child:
         self.started = time.monotonic()
         self.started_listening: float | None = None  # the supervisor's listening clock at the start
         self.stalled_s: float | None = None  # set when kill_if_stalled ended it
+        self.lost_to_logger: str | None = None  # why kill_if_lost_to_logger ended it
+        self._hole: tuple[int, float] | None = None  # (first missing step, listening_s when first reported)
 
     def how(self, rc: int) -> str:
         """How it ended, for a failure message."""
         if self.stalled_s is not None:
             return f"stalled (no heartbeat for {self.stalled_s:.0f} s) and was killed"
+        if self.lost_to_logger is not None:
+            return f"was cut off from the logger{'' if rc == 0 else ' and killed'}: {self.lost_to_logger}"
         if rc == DISK_FULL_EXIT:
             return f"exited with status {rc} (its disk is full)"
         return f"killed by signal {-rc}" if rc < 0 else f"exited with status {rc}"
@@ -380,8 +394,7 @@ class Child:
         VM) it heard nothing, and a healthy child must not be killed for that."""
         if not limit_s or self.stalled_s is not None or self.proc.poll() is not None:
             return False
-        if self.started_listening is None:  # the first look since the start (one loop later)
-            self.started_listening = beats.listening_s - min(now - self.started, bus.LISTENING_GAP_S)
+        self.listened_since_start(beats, now)
         heard_since_start = beats.seen.get(self.name, 0.0) > self.started  # not its predecessor's
         since = beats.heard[self.name] if heard_since_start else self.started_listening
         silent_s = beats.listening_s - since
@@ -391,6 +404,74 @@ class Child:
         self.stalled_s = silent_s
         self.proc.kill()
         return True
+
+    def listened_since_start(self, beats, now: float) -> float:
+        """Seconds of the supervisor's listening clock (``beats.listening_s``) since this child
+        started; ``now``: the monotonic time (the first call, one loop after the start, fixes
+        the start on that clock)."""
+        if self.started_listening is None:
+            self.started_listening = beats.listening_s - min(now - self.started, bus.LISTENING_GAP_S)
+        return beats.listening_s - self.started_listening
+
+    def kill_if_lost_to_logger(self, beats, holes: bool = True) -> bool:
+        """SIGKILL this child (by PID) when it runs and beats but what it publishes no longer
+        reaches the logger: the logger's heartbeat (:meth:`astrodyn.service.logger.Logger.reach_report`)
+        says it has not heard this child for seconds (``unheard``) or, with ``holes``, that
+        its state channels have had a gap for :data:`HOLE_GRACE_S` (``holes``).  The bus
+        link between the two was lost while both ran (docs/reliability.md: the logger
+        stopped for more than 5 s, the whole run paused for more than 10 s) and Zenoh does
+        not always link them again, so the states published meanwhile are gone.  Killed, it
+        takes the crash path: restarted from the last step the logger holds without a hole,
+        which it publishes again.  Judged only on fresh news from both (heard within
+        :data:`FRESH_S` of the supervisor's listening clock) and after :data:`REACH_GRACE_S`
+        of this child's life (the logger may still speak of its predecessor)."""
+        if self.lost_to_logger is not None or self.stalled_s is not None or self.proc.poll() is not None:
+            return False
+        if self.listened_since_start(beats, time.monotonic()) < REACH_GRACE_S:
+            return False
+        now = beats.listening_s
+        fresh = [now - beats.heard.get(p, -math.inf) <= FRESH_S and beats.seen.get(p, 0.0) > self.started
+                 for p in ("logger", self.name)]
+        if not all(fresh):
+            return False
+        report = beats.last.get("logger", {})
+        why = None
+        silent = (report.get("unheard") or {}).get(self.name)
+        if isinstance(silent, (int, float)):
+            why = f"the logger had not heard it for {silent:g} s, so its states were lost (their bus link was lost)"
+        first = (report.get("holes") or {}).get(self.name) if holes else None
+        if isinstance(first, int) and not isinstance(first, bool):
+            if self._hole is None or self._hole[0] != first:
+                self._hole = (first, now)
+            elif now - self._hole[1] >= HOLE_GRACE_S and why is None:
+                why = f"its states from step {first} on never reached the logger (their bus link was lost)"
+        else:
+            self._hole = None
+        if why is None:
+            return False
+        self.lost_to_logger = why
+        self.proc.kill()
+        return True
+
+    def ended_cut_off_from_logger(self, beats) -> bool:
+        """This child ended (exit 0) but the logger, still running and heard within
+        :data:`FRESH_S`, lists it as ``unheard`` (its end of run never arrived) or reports a
+        gap in its state channels: states it published went out over a lost bus link (a
+        propagator whose logger does not answer ends without waiting for it).  Marks it
+        (:meth:`how`) for a restart by the caller, which publishes them again."""
+        if self.proc.poll() != 0 or self.lost_to_logger is not None:
+            return False
+        if beats.listening_s - beats.heard.get("logger", -math.inf) > FRESH_S:
+            return False
+        report = beats.last.get("logger", {})
+        silent = (report.get("unheard") or {}).get(self.name)
+        first = (report.get("holes") or {}).get(self.name)
+        if isinstance(silent, (int, float)):
+            self.lost_to_logger = (f"the logger had not heard it for {silent:g} s when it ended, so its last states "
+                                   f"and its end of run never reached the file (their bus link was lost)")
+        elif isinstance(first, int) and not isinstance(first, bool):
+            self.lost_to_logger = f"its states from step {first} on never reached the logger (their bus link was lost)"
+        return self.lost_to_logger is not None
 
     @property
     def pid(self) -> int:

@@ -141,6 +141,10 @@ def _claimed_process(attachment: bytes | None) -> str:
     return "malformed"
 
 
+#: Seconds between two refreshes of the logger's :meth:`Logger.reach_report` (sent with its
+#: heartbeat).
+REACH_REPORT_S = 0.5
+
 class Logger:
     """Subscribe to one scenario and record it with ``recorder`` (see the module docstring).
 
@@ -201,7 +205,12 @@ class Logger:
         self.states = 0  # valid, non-duplicate state messages written
         self.malformed = 0
         self.malformed_examples: list[str] = []
-        self.heartbeats: dict[str, float] = {}
+        self.heartbeats: dict[str, float] = {}  # process -> listening_s at its last heartbeat
+        # the logger's listening clock (bus.LISTENING_GAP_S): time the logger was stopped
+        # itself (SIGSTOP, a paused container) is not silence of the processes it watches
+        self.listening_s, self._listened_at = 0.0, time.monotonic()
+        self._reach: dict[str, dict] = {}  # reach_report(), refreshed every REACH_REPORT_S
+        self._next_reach_report = 0.0
         #: newest authenticated sample of each state key (per-body keys and @batch envelopes),
         #: served on @latest to views that must not take the full-rate streams
         self.latest: dict[str, bytes] = {}
@@ -437,7 +446,7 @@ class Logger:
             self.latest[key] = payload
             self._record_batch(key, payload, now_ns, sender)
         elif rest is not None and rest.startswith("@heartbeat/"):
-            self.heartbeats[rest[len("@heartbeat/"):]] = time.monotonic()
+            self.heartbeats[rest[len("@heartbeat/"):]] = self.listening_s
         else:
             if key.endswith(_LATEST_SUFFIXES):
                 self.latest[key] = payload
@@ -509,6 +518,32 @@ class Logger:
         if not self.expect or any(self.ended.get(p) is None for p in self.expect):
             return None
         return sum(self.ended[p] for p in self.expect)  # type: ignore[misc]
+
+    def reach_report(self) -> dict[str, dict]:
+        """What the logger misses of processes that have not ended, for its supervisor's
+        heartbeat watch (:meth:`astrodyn.service.children.Child.kill_if_lost_to_logger`):
+
+        * ``unheard``: ``{process: seconds}``, processes whose heartbeat the logger has not
+          heard for more than ``stall_timeout_s`` of its listening clock;
+        * ``holes``: ``{process: step}``, the first output step missing in the state channels
+          of each process whose channels have a gap (ended processes too).
+
+        Both happen when the bus link between a process and the logger was lost while both
+        ran (the logger stopped longer than Zenoh waits on a blocked link, 5 s; the whole run
+        paused longer than the 10 s lease): Zenoh drops what is published meanwhile and does
+        not always link the two again.  The supervisor, which still hears the process,
+        restarts it from the last step the logger holds (docs/reliability.md)."""
+        unheard = {p: round(self.listening_s - heard, 1) for p, heard in self.heartbeats.items()
+                   if p != self.name and p not in self.ended and self.listening_s - heard > self.stall_timeout_s}
+        holes: dict[str, int] = {}
+        seq = self.recorder.seq
+        if seq.totals()["missing"]:
+            for channel, c in seq.channels.items():
+                if c.missing and c.gaps and not c.gaps_expected:
+                    process = self._publisher_of_state(channel)
+                    if process is not None:
+                        holes[process] = min(holes.get(process, c.gaps[0][0]), c.gaps[0][0])
+        return {k: v for k, v in (("unheard", unheard), ("holes", holes)) if v}
 
     def is_complete(self) -> bool:
         """Every expected process ended and every state it announced is recorded, no gaps.
@@ -585,12 +620,16 @@ class Logger:
                 self.died[process] = f"liveliness lost at sim t = {self.max_t!r} s"
                 self._own_event("error", f"process {process} died (liveliness token lost) before its end-of-run event; "
                                 f"{self.states} states recorded so far, sim t reached {self.max_t!r} s")
-        for process, seen in self.heartbeats.items():
-            if (now - seen > self.stall_timeout_s and process in alive.alive and process not in self.ended
+        for process, heard in self.heartbeats.items():
+            silent_s = self.listening_s - heard
+            if (silent_s > self.stall_timeout_s and process in alive.alive and process not in self.ended
                     and process not in self.stalled and process != self.name):
                 self.stalled.add(process)
-                self._own_event("error", f"process {process} stalled: alive but no heartbeat for {now - seen:.1f} s")
-        heartbeat.beat(messages=self.recorder.message_count, t=self.max_t)
+                self._own_event("error", f"process {process} stalled: alive but no heartbeat for {silent_s:.1f} s")
+        if now >= self._next_reach_report:
+            self._next_reach_report = now + REACH_REPORT_S
+            self._reach = self.reach_report()
+        heartbeat.beat(messages=self.recorder.message_count, t=self.max_t, **self._reach)
         self.recorder.maybe_flush()
 
         idle = now - self._last_sample_at
@@ -608,7 +647,10 @@ class Logger:
             if self.is_complete():
                 self.reason = "end of run: every expected message recorded"
                 return True
-            if idle >= self.drain_idle_s or now - self._all_ended_at > self.drain_timeout_s:
+            # under a supervisor a gap in a state channel (states lost on the bus) is refilled by
+            # restarting its process (Child.ended_cut_off_from_logger): wait for that, bounded
+            refill = not self.control and bool(self._reach.get("holes"))
+            if (idle >= self.drain_idle_s and not refill) or now - self._all_ended_at > self.drain_timeout_s:
                 self.reason = "end of run: expected processes ended or died; bus quiet"
                 return True
         return False
@@ -670,6 +712,8 @@ class Logger:
                                None if attachment is None else attachment.to_bytes())
                         n += 1
                 now = time.monotonic()
+                self.listening_s += min(now - self._listened_at, bus.LISTENING_GAP_S)
+                self._listened_at = now
                 if n:
                     self._last_sample_at = now
                 else:

@@ -418,7 +418,7 @@ class ScenarioRun:
         """A propagator died: start it again after the last step of its own that the
         logger's file holds; steps it publishes twice are recorded once (first copy)."""
         from astrodyn.recording import RecordingError, load as load_run
-        from astrodyn.service.resume import last_common_step, propagator_resume_args, state_topics
+        from astrodyn.service.resume import contiguous_steps, last_common_step, propagator_resume_args, state_topics
 
         scenario = self.scenario
         dead = self.children[kind]
@@ -430,7 +430,11 @@ class ScenarioRun:
         args, step = dict(self.extra_args.get(kind, {})), None
         try:
             run = load_run(partial_path(self.out, len(self.restarts_of("logger"))))  # up to its last flushed chunk
-            step = last_common_step(run, list(state_topics(scenario, kind).values()))
+            topics = list(state_topics(scenario, kind).values())
+            step = last_common_step(run, topics)
+            held = contiguous_steps(run, topics)  # steps 0 .. held-1 without a hole
+            if step is not None and held <= step:  # a hole (states lost on the bus): fill it
+                step = held - 1 if held else None
             if step is not None:
                 args = propagator_resume_args(run, scenario, kind, step, self.tmpd)
         except (RecordingError, OSError):
@@ -515,6 +519,14 @@ def progress_line(last: dict, propagators: list[str], duration: float, dt: float
     return line
 
 
+#: Wall seconds ``run`` keeps watching after every propagator exited 0 while the logger
+#: runs: long enough for the logger to say one of them never reached it (it lists a
+#: process it has not heard for its 5 s stall time), so that one is restarted
+#: (:meth:`astrodyn.service.children.Child.ended_cut_off_from_logger`).  A logger that
+#: finishes ends the wait at once.
+END_REACH_S = 8.0
+
+
 def _watch(scenario: Scenario, p, children: dict, beats, alive, progress: bool, timeout_s: float | None,
            interrupted: dict | None = None, on_death=None, controllers: dict | None = None,
            stall_s: float | None = None) -> str | None:
@@ -532,12 +544,15 @@ def _watch(scenario: Scenario, p, children: dict, beats, alive, progress: bool, 
     printer = Progress(enabled=progress)
     t0 = time.monotonic()
     last_msgs, last_time = 0, t0
+    ended_at = None  # when every propagator had exited 0
     while True:
         now = time.monotonic()
         beats.poll()
         alive.poll()
-        for ch in children.values():
+        for name, ch in children.items():
             ch.kill_if_stalled(beats, stall_s, now)
+            if name in propagators and name != "plant":  # (a plant is not restarted: docs/control.md)
+                ch.kill_if_lost_to_logger(beats)
         for name, ch in list(children.items()):
             rc = ch.poll()
             ended = name in propagators and rc == MODEL_ENDED_EXIT  # not restarted: it would end there again
@@ -570,7 +585,17 @@ def _watch(scenario: Scenario, p, children: dict, beats, alive, progress: bool, 
                 who = f" (bodies: {', '.join(bodies[:5])}{', ...' if len(bodies) > 5 else ''})" if name != "logger" else ""
                 return f"process {name} (pid {ch.pid}) {ch.how(rc)}{who}{where}: {ch.last_words(3)}"
         if all(children[k].poll() == 0 for k in propagators):
-            return None
+            cut_off = [k for k in propagators if k != "plant" and children["logger"].poll() is None
+                       and on_death is not None and children[k].ended_cut_off_from_logger(beats)]
+            for name in cut_off:  # restarted: each publishes its lost states again
+                failure = on_death(name, 0)
+                if failure:
+                    return failure
+            if cut_off:
+                continue
+            if children["logger"].poll() is not None or ended_at is not None and now - ended_at > END_REACH_S:
+                return None
+            ended_at = now if ended_at is None else ended_at
         for cname, ch in (controllers or {}).items():
             rc = ch.poll()
             if rc is not None and lockstep and "plant" in children and children["plant"].poll() is None:

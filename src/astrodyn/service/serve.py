@@ -275,6 +275,12 @@ class Supervisor:
             if self.state in ("running", "paused") and ch.kill_if_stalled(self.beats, self.stall_s, now):
                 print(f"astrodyn serve: process {name} (pid {ch.pid}) has sent no heartbeat for {ch.stalled_s:.0f} s: "
                       f"killed as hung", file=sys.stderr, flush=True)
+            # a propagator the logger no longer hears (its bus link lost): restarted from the
+            # file's tail, which holds everything before the loss (a gap in the middle of a
+            # part is not refilled by serve: the logger reports it as missing)
+            elif (self.state in ("running", "paused") and name not in ("logger", "plant")
+                    and ch.kill_if_lost_to_logger(self.beats, holes=False)):
+                print(f"astrodyn serve: process {name} (pid {ch.pid}) {ch.how(-9)}", file=sys.stderr, flush=True)
         self.reassert_pause(now)
         if self.schedule is None and self.state == "running":  # the pace the propagators keep, once they do
             ts = [self.beats.last.get(k, {}).get("t") for k in self.propagators]
