@@ -17,6 +17,17 @@ and ``name`` (or sets the same variables) and the run's control token file inste
 (``ASTRODYN_CONTROL_TOKEN_FILE``): it presents the token with its commands and checks the
 plant's ticks with it.
 
+Started by hand, the link checks what it is given before it waits (a mistyped endpoint made
+it wait for ever: Zenoh accepts it and never connects): ``ASTRODYN_CONNECT`` must be a Zenoh
+endpoint, ``PROTOCOL/HOST:PORT`` as the run's ``bus`` line prints it (e.g.
+``tcp/127.0.0.1:7447``, without the ``:`` that ends that line), and with the control
+token only (not under ``--controller``) the first tick must come within
+:data:`FIRST_TICK_TIMEOUT_S` of connecting (``ASTRODYN_FIRST_TICK_TIMEOUT``, seconds; 0
+waits for ever): a wrong endpoint or scenario, or a run that has ended, is then one line
+on stderr and exit status 1 (:class:`LinkError`), not a controller waiting for ever.
+Under ``run`` / ``serve --controller`` (the run secret) the link waits as long as the
+plant does: the supervisor ends the controller with the run.
+
 What the link believes (docs/control.md, "Trusting what you read"): any local process can
 put on the run's keys, so every sample is checked before the controller sees it.  A tick
 must be signed by the run's plant, with a counter above the last one seen (no replays) and a
@@ -42,9 +53,11 @@ import hmac
 import json
 import os
 import queue
+import re
 import struct
 import sys
 import threading
+import time
 
 import zenoh
 
@@ -73,6 +86,63 @@ _MAC_BYTES = 32  # HMAC-SHA256
 _PART_BYTES = 4 + 8 + _MAC_BYTES
 #: The plant's key for token holders is HMAC-SHA256(token, this label) (docs/control.md).
 _PLANT_KEY_LABEL = b"ADP1 plant tick v1"
+#: Wall seconds a controller started by hand (the control token, not ``--controller``) waits
+#: for its first tick before it gives up (:class:`LinkError`); ``ASTRODYN_FIRST_TICK_TIMEOUT``
+#: overrides it, 0 waits for ever.  In lockstep the plant repeats its tick every 0.5 s, in
+#: free mode it ticks every control period of sim time: raise it for a long period at a slow rate.
+FIRST_TICK_TIMEOUT_S = 60.0
+#: The protocols of a Zenoh endpoint ``PROTOCOL/HOST:PORT`` (plus ``unixsock-stream/PATH``).
+ENDPOINT_PROTOCOLS = ("tcp", "udp", "tls", "quic", "ws")
+
+
+class LinkError(SystemExit):
+    """The link cannot work: a malformed endpoint, no first tick in time (module docstring).
+    A :class:`SystemExit` with the reason: uncaught, the process ends with that one line on
+    stderr and exit status 1, no traceback."""
+
+
+def endpoint_problem(endpoint) -> str | None:
+    """Why ``endpoint`` is not a Zenoh endpoint -- ``PROTOCOL/HOST:PORT[?metadata][#config]``
+    with PROTOCOL one of :data:`ENDPOINT_PROTOCOLS`, HOST an IPv4 address, ``[IPv6]`` or a
+    host name, PORT 1..65535, or ``unixsock-stream/PATH`` -- or None when it is (the rules of
+    astrodyn's own check, ``astrodyn.bus.endpoint_problem``, which this file does not import)."""
+    if not isinstance(endpoint, str) or not endpoint:
+        return "empty"
+    protocol, slash, rest = endpoint.partition("/")
+    if not slash:
+        return "no PROTOCOL/ before the address"
+    address = re.split(r"[?#]", rest, maxsplit=1)[0]
+    if protocol == "unixsock-stream":
+        return None if address and "\0" not in address else "no socket path after unixsock-stream/"
+    if protocol not in ENDPOINT_PROTOCOLS:
+        return f"protocol {protocol[:40]!r} is not one of {', '.join(ENDPOINT_PROTOCOLS)}, unixsock-stream"
+    host, colon, port = address.rpartition(":")
+    if not colon or not host:
+        return "expected HOST:PORT after the protocol"
+    if not (port.isascii() and port.isdigit()):
+        hint = " (the ':' that ends the run's `bus tcp/...:` line is not part of the endpoint)" if not port else ""
+        return f"port {port[:20]!r} is not an integer{hint}"
+    if len(port) > 5 or not 1 <= int(port) <= 65535:
+        return f"port {port[:20]} is not in 1..65535"
+    if ":" in host and not (host.startswith("[") and host.endswith("]")):
+        return f"host {host[:60]!r}: an IPv6 address goes in brackets, [::1]"
+    return None
+
+
+def first_tick_timeout(text: str | None) -> float | None:
+    """Wall seconds to wait for the first tick from ``ASTRODYN_FIRST_TICK_TIMEOUT`` (None:
+    :data:`FIRST_TICK_TIMEOUT_S`); None for 0 (wait for ever); :class:`LinkError` for
+    anything but a number >= 0."""
+    if text is None or not text.strip():
+        return FIRST_TICK_TIMEOUT_S
+    try:
+        seconds = float(text)
+    except ValueError:
+        seconds = float("nan")
+    if not 0 <= seconds < float("inf"):
+        raise LinkError(f"astrodyn_link: ASTRODYN_FIRST_TICK_TIMEOUT: expected wall seconds >= 0 (0: wait for "
+                        f"ever), got {text[:40]!r}")
+    return seconds or None
 
 
 def finite_number(x) -> bool:
@@ -109,6 +179,11 @@ class Link:
         self.scenario = scenario or env["ASTRODYN_SCENARIO"]
         self.name = name or env["ASTRODYN_CONTROLLER"]
         endpoint = connect or env["ASTRODYN_CONNECT"]
+        problem = endpoint_problem(endpoint)
+        if problem is not None:  # Zenoh would take it and never connect: the controller would wait for ever
+            raise LinkError(f"astrodyn_link: {'connect' if connect else 'ASTRODYN_CONNECT'}: expected a Zenoh "
+                            f"endpoint like 'tcp/127.0.0.1:7447', got {endpoint[:200]!r}: {problem}")
+        self.endpoint = endpoint
         self.base = f"astrodyn/{self.scenario}"
         self.max_payload = int(max_payload)
         self._secret = None
@@ -123,6 +198,8 @@ class Link:
         else:
             raise ValueError("astrodyn_link: expected ASTRODYN_RUN_SECRET_FILE (started by --controller) or "
                              "ASTRODYN_CONTROL_TOKEN_FILE (an outside controller; docs/control.md)")
+        # by hand (the token only), the first tick must come in time; under --controller the supervisor decides
+        self.first_tick_timeout = None if self._secret else first_tick_timeout(env.get("ASTRODYN_FIRST_TICK_TIMEOUT"))
         self._instance = os.urandom(8)
         self._counters: dict[str, int] = {}
         self._seq: dict[str, int] = {}  # per body: this controller's command counter
@@ -142,6 +219,8 @@ class Link:
         conf.insert_json5("connect/endpoints", json.dumps([endpoint]))
         conf.insert_json5("scouting/multicast/enabled", "false")
         self.session = zenoh.open(conf)
+        self._first_tick_deadline = None if self.first_tick_timeout is None else \
+            time.monotonic() + self.first_tick_timeout
         # with the token only, the ticks (which carry the step's samples) and the plant's events:
         # nothing else can be authenticated with it
         self._subs = [self.session.declare_subscriber(f"{self.base}/**", self._on_sample)] if self._secret else []
@@ -275,7 +354,18 @@ class Link:
 
     def wait_tick(self, timeout: float | None = None) -> dict | None:
         """The next control step ``{"t", "seq", "step", "samples"}`` (checked: see the module
-        docstring), or None when the run has ended."""
+        docstring), or None when the run has ended.  ``timeout`` (wall s): :class:`queue.Empty`
+        when none came by then.  Without it, a controller started by hand gives up with
+        :class:`LinkError` when its first tick has not come within :attr:`first_tick_timeout`
+        s of connecting."""
+        if timeout is None and self._first_tick_deadline is not None and self._tick_seq < 0:
+            try:
+                return self._take(self._ticks.get(timeout=max(0.0, self._first_tick_deadline - time.monotonic())))
+            except queue.Empty:
+                raise LinkError(
+                    f"astrodyn_link: no tick from the plant of scenario {self.scenario!r} at {self.endpoint} within "
+                    f"{self.first_tick_timeout:g} s of connecting: is that the run's `bus` endpoint and scenario, and "
+                    f"is the run still going? (ASTRODYN_FIRST_TICK_TIMEOUT=S to wait longer, 0 for ever)") from None
         return self._take(self._ticks.get(timeout=timeout))
 
     def latest(self, body: str, kind: str) -> dict | None:

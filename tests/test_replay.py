@@ -275,6 +275,30 @@ def test_a_replay_waiting_for_a_subscriber_answers_and_stops_at_once(hub, spawn,
         assert proc.returncode == 0, (how, proc.stderr.read())
 
 
+def test_a_waiting_replay_stays_at_its_start_time_until_playback(hub, spawn, recording):
+    """While replay waits for its first subscriber nothing is published, so ``t`` is the
+    start time in every reply: ``pause`` and ``rate`` answered ``t`` = rate x wall time
+    since launch (10.3 s after about 1 s at ``--rate 10``, with ``messages`` 0)
+    (docs walk, code problem 2).  A ``seek`` meanwhile moves the start point."""
+    session, endpoint = hub
+    path, _, _ = recording
+    proc = spawn(path, "--connect", endpoint, "--rate", "10", "--wait", "120", "--quiet")
+    token = json.loads(proc.stdout.readline())["control_token"]
+    time.sleep(1.0)  # nobody subscribes: the replay is waiting; its clock must not run
+    for verb, args in (("status", None), ("rate", {"factor": 20}), ("pause", None), ("status", None),
+                       ("resume", None)):
+        reply = _control(session, verb, args, token=token)
+        assert reply["messages"] == 0 and reply["t"] == reply["t_start"] == 0.0, (verb, reply)
+        time.sleep(0.3)
+    assert _control(session, "seek", {"t": 20.0}, token=token)["t"] == 20.0
+    time.sleep(0.5)
+    reply = _control(session, "pause", token=token)
+    assert reply["messages"] == 0 and reply["t"] == 20.0, reply
+    assert _control(session, "stop", token=token)["state"] == "stopped"
+    proc.wait(timeout=20)
+    assert proc.returncode == 0, proc.stderr.read()
+
+
 def test_replay_starts_from_its_zenoh_config(spawn, recording, tmp_path):
     """``--zenoh-config`` (TLS, access control) was accepted and silently ignored by replay:
     it opened a plain session.  A file Zenoh cannot parse, or a FIFO (whose read would block

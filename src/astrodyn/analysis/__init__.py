@@ -16,7 +16,12 @@ Writes into ``DIR`` (default ``<file>-report``):
   for flexible spacecraft ``appendages`` and ``flexible-drift`` instead of the rigid two,
   for rolling disks ``contact-path`` and ``rolling-angles``; with gyroscopes on board ``gyros``.
 
-Definitions of every number: :mod:`astrodyn.analysis.metrics`.  A cut or damaged file is
+Definitions of every number: :mod:`astrodyn.analysis.metrics`.  An orbit that burns moved
+(a closed loop's impulses or thrust, read from its ``<body>/actuators`` and applied
+``<body>/command`` channels: :class:`astrodyn.analysis.closed_loop.OrbitActuation`) has
+its energy and angular momentum judged between burns: drifts over each coast arc
+(``energy_coast_drift_max``, the rows ``... between burns``), the burns' changes listed
+in its closed-loop section.  A cut or damaged file is
 analysed up to what is complete and the report says so at the top; so does a channel with
 duplicated or missing sequence numbers (count, channel, the missing seqs;
 :func:`sequence_issues`), which ``astrodyn analyze`` also prints as a warning.
@@ -36,7 +41,7 @@ from pathlib import Path
 
 import numpy as np
 
-from astrodyn.analysis.closed_loop import CLOSED_LOOP_FIGURES, closed_loop_section
+from astrodyn.analysis.closed_loop import CLOSED_LOOP_FIGURES, OrbitActuation, closed_loop_section
 from astrodyn.analysis.pointing import POINTING_FIGURES, pointing_section
 from astrodyn.files import output_path_problem, path_argument
 from astrodyn.progress import Progress
@@ -44,7 +49,7 @@ from astrodyn.recording import RecordingError, load
 from astrodyn.recording.outputs import staging_directory
 from astrodyn.signals import deferred_interrupts, interruptible
 
-__all__ = ["analyze", "main", "FIGURES", "SEQ_NOT_COUNTED", "sequence_issues", "sequence_note", "check_report_options"]
+__all__ = ["analyze", "main", "FIGURES", "orbit_arc_starts", "SEQ_NOT_COUNTED", "sequence_issues", "sequence_note", "check_report_options"]
 
 #: figure name -> what it shows (report captions)
 FIGURES = {
@@ -166,6 +171,8 @@ def analyze(path: str | os.PathLike, out: str | os.PathLike | None = None, seq: 
     them would take about an hour.  ``progress``: where to say how far it is (reading the
     file, then body k of n; ``astrodyn analyze`` passes a :class:`~astrodyn.progress.Progress`
     on stderr), None for nothing."""
+    from astrodyn.scenario.planning import counted  # the progress lines' numbers (scenario: not needed before)
+
     check_report_options(seq, bodies, figures_for)
     started = time.monotonic()
     if progress is not None:
@@ -175,7 +182,7 @@ def analyze(path: str | os.PathLike, out: str | os.PathLike | None = None, seq: 
     names = select_bodies(run.bodies, bodies)
     if progress is not None:
         progress.done(f"analyze: {run.messages} messages read in {time.monotonic() - started:.1f} s; "
-                      f"{len(names)} bodies to report, figures for {min(figures_for, len(names))}")
+                      f"{counted(len(names), 'body', 'bodies')} to report, figures for {min(figures_for, len(names))}")
     out = Path(out) if out is not None else Path(os.fspath(path)).with_suffix("").with_name(Path(path).stem + "-report")
     # written in a work directory inside out, moved into place once complete (astrodyn.recording.outputs)
     with staging_directory(out, "analyze", cannot=lambda exc: RecordingError(
@@ -185,7 +192,7 @@ def analyze(path: str | os.PathLike, out: str | os.PathLike | None = None, seq: 
             for f in sorted(work.iterdir(), key=lambda f: (f.name.startswith("report."), f.name)):  # pages last
                 os.replace(f, out / f.name)
     if progress is not None:
-        progress.done(f"analyze: {len(names)} bodies reported in {time.monotonic() - started:.1f} s")
+        progress.done(f"analyze: {counted(len(names), 'body', 'bodies')} reported in {time.monotonic() - started:.1f} s")
     return report
 
 
@@ -223,10 +230,11 @@ def _body_report(run, name: str, body, stem: Path, seq: str, central: dict, iner
 
     numbers: dict = {}
     figs: list[tuple[str, Path]] = []
+    arc_starts = orbit_arc_starts(run, name, body)
     if body.orbit is not None and len(body.orbit) > 0:
         tr = body.orbit
         mu = float(tr.mu[0])
-        om = mt.orbit_metrics(tr.t, tr.r, tr.v, mu)
+        om = mt.orbit_metrics(tr.t, tr.r, tr.v, mu, arc_starts)
         numbers["orbit"] = {**om["summary"], "models": sorted(set(tr.model)), "frame": sorted(set(tr.frame))[0]}
         figs.append(("orbit3d", fg.orbit_3d(name, tr.r, central.get("radius"), Path(f"{stem}-orbit3d.png"))))
         if earth:
@@ -267,8 +275,8 @@ def _body_report(run, name: str, body, stem: Path, seq: str, central: dict, iner
         section, more = _gyro_section(run, name, body, stem)
         numbers.update(section)
         figs += more
-    numbers.update(_conserved(run.scenario, name, body))
-    section, more = closed_loop_section(run, name, stem)  # commands, actuators, momentum, pointing, dv
+    numbers.update(_conserved(run.scenario, name, body, arc_starts))
+    section, more = closed_loop_section(run, name, stem)  # commands, actuators, momentum, pointing, dv, burns
     numbers.update(section)
     figs += more
     section, more = pointing_section(run, name, stem)  # against the config's target, if it names one
@@ -366,9 +374,23 @@ def _rolling_section(body, stem: Path) -> tuple[dict, list[tuple[str, Path]]]:
     return section, figs
 
 
-def _conserved(scenario: dict, name: str, body) -> dict:
+def orbit_arc_starts(run, name: str, body) -> np.ndarray | None:
+    """The coast arcs of body ``name``'s recorded orbit when burns moved it (True at each
+    state that begins one: :meth:`astrodyn.analysis.closed_loop.OrbitActuation.arc_starts`,
+    from the body's ``actuators`` and applied ``command`` channels); None without an orbit
+    or a burn."""
+    if body.orbit is None or not len(body.orbit):
+        return None
+    prefix = f"astrodyn/{run.scenario.get('name', '')}/{name}/"
+    actuation = OrbitActuation()
+    actuation.add(run.channels.get(prefix + "actuators"), run.channels.get(prefix + "command"))
+    return actuation.arc_starts(body.orbit.t) if actuation else None
+
+
+def _conserved(scenario: dict, name: str, body, orbit_arc_starts: np.ndarray | None = None) -> dict:
     """The section "conserved quantities": each invariant of the body's model
-    (:mod:`astrodyn.analysis.invariants`), the same rows as ``astrodyn run``'s summary."""
+    (:mod:`astrodyn.analysis.invariants`), the same rows as ``astrodyn run``'s summary;
+    an orbit that burns moved (``orbit_arc_starts``) judged between its burns."""
     from astrodyn.analysis.invariants import own_state_arrays, recorded_invariants
     from astrodyn.messages import MODEL_STATE_KINDS
 
@@ -386,7 +408,7 @@ def _conserved(scenario: dict, name: str, body) -> dict:
             kinds["own"] = {k: a[ie] for k, a in arrays.items()}
     if not kinds:
         return {}
-    rows = recorded_invariants(scenario, name, **kinds)
+    rows = recorded_invariants(scenario, name, **kinds, orbit_arc_starts=orbit_arc_starts if "orbit" in kinds else None)
     section = {}
     for kind, invs in rows.items():
         for inv in invs:
@@ -399,7 +421,14 @@ def _conserved(scenario: dict, name: str, body) -> dict:
 
 _LABELS = {
     "states": "states", "t_span_s": "time span (s)", "energy_drift_max": "max |E - E0| / |E0|",
-    "h_drift_max": "max |h - h0| / |h0|", "r_min_m": "min radius (m)", "r_max_m": "max radius (m)",
+    "h_drift_max": "max |h - h0| / |h0|",
+    # an orbit that burns moved: the drift over each coast arc, from its first state (E0, h0)
+    "coast_arcs": "coast arcs between burns (2 states or more)",
+    "energy_coast_drift_max": "max |E - E0| / |E0| over each coast arc (burns change E by design)",
+    "h_coast_drift_max": "max |h - h0| / |h0| over each coast arc (burns change h by design)",
+    "energy_coast_drift_max_abs": "max |E - E0| over each coast arc (J/kg; an arc with E0 = 0, so absolute)",
+    "h_coast_drift_max_abs": "max |h - h0| over each coast arc (m^2/s; an arc with h0 = 0, so absolute)",
+    "r_min_m": "min radius (m)", "r_max_m": "max radius (m)",
     "models": "models", "frame": "frame", "dr_max_m": "max |dr| to REBOUND (m)", "dv_max_m_s": "max |dv| to REBOUND (m/s)",
     "reference": "reference", "quat_norm_error_max": "max ||q| - 1|", "rate_max_rad_s": "max |w| (rad/s)",
     "kinetic_energy_drift_max": "max |T - T0| / |T0|", "h_inertial_drift_max": "max |Hi - Hi0| / |Hi0|",
@@ -446,7 +475,7 @@ def figures_note(report: dict) -> str:
     n, shown, drawn = report["bodies_in_file"], len(report["bodies"]), report["figures_drawn_for"]
     if drawn == shown == n:
         return ""
-    which = f"{shown} of the {n} bodies (`--bodies`)" if shown < n else f"all {n} bodies"
+    which = f"{shown} of the {n} bodies (`--bodies`)" if shown < n else ("the one body" if n == 1 else f"all {n} bodies")
     return (f"Numbers for {which}; figures for the first {drawn} of them by name (`--figures-for N`: a figure "
             f"takes about a second to draw).")
 

@@ -11,7 +11,11 @@ For each actuated body (one with a ``<body>/actuators`` or ``<body>/command`` ch
   internal (wheel) torques cannot change: its drift is the check of a wheels-only loop;
 * pointing knowledge: the angle between the true attitude and the star tracker's
   (``2 acos |q_true . q_meas|``, deg);
-* delta-v: the budget spent (``dv_total``), each impulse.
+* delta-v: the budget spent (``dv_total``), each impulse;
+* orbit across burns: the coast arcs of the orbit between its burns
+  (:class:`OrbitActuation`) and how much each burn changed the specific energy ``E`` (J/kg)
+  and angular momentum ``h`` (m^2/s), from the states on either side (an impulse: by
+  ``v.dv + |dv|^2/2``).
 
 Everything from the file is hostile: a channel that is missing, short or holds other
 fields leaves its part of the section out, never a traceback.
@@ -26,7 +30,7 @@ import numpy as np
 from astrodyn.analysis.recorded_scenario import recorded_body
 from astrodyn.rotation import dcm_from_quat
 
-__all__ = ["closed_loop_section", "CLOSED_LOOP_FIGURES"]
+__all__ = ["closed_loop_section", "CLOSED_LOOP_FIGURES", "OrbitActuation", "burn_changes"]
 
 CLOSED_LOOP_FIGURES = {
     "wheel-torque": "wheel torque commanded (held) and applied, per wheel",
@@ -35,6 +39,136 @@ CLOSED_LOOP_FIGURES = {
     "pointing": "pointing knowledge: star tracker vs truth",
     "delta-v": "delta-v spent",
 }
+
+
+def _finite_rows(track, field: str) -> np.ndarray | None:
+    """A 3-vector field of a recorded track as an (n, 3) float array (a message without the
+    field: a NaN row), or None when the track has no such field."""
+    if track is None or field not in getattr(track, "fields", {}):
+        return None
+    try:
+        rows = np.asarray(getattr(track, field), dtype=np.float64)
+    except (TypeError, ValueError):
+        return None
+    return rows if rows.ndim == 2 and rows.shape[1] == 3 and rows.shape[0] == len(track) else None
+
+
+class OrbitActuation:
+    """When burns moved a body's orbit, gathered from its recorded closed-loop channels
+    (docs/control.md): the impulses (sim times, s) and the intervals of held thrust
+    (``[start, end)`` s, ``end`` inf while held), from both the actuator states
+    (``<body>/actuators``: ``dv`` with its ``dv_t``, and ``thrust`` over the output step
+    starting at ``t``) and the applied commands (``<body>/command``, the plant's copies: a
+    ``dv`` at ``t``, a ``thrust`` held from ``t`` until a command changes it).  Both are
+    kept (a thrust command inside a step shows in the actuator state only from the next
+    step; a late command of free mode applies after its ``t``): more breaks only shorten
+    the coast arcs.  Fed block by block (:meth:`add`, in log-time order, as
+    :func:`astrodyn.recording.load_blocks` gives them); memory grows with the number of
+    burns, not of steps.  Everything from the file is hostile: a field that is missing or
+    not a number is left out."""
+
+    def __init__(self):
+        self.impulses: list[float] = []  #: sim times of the impulses, s
+        self.thrust: list[list[float]] = []  #: [start, end) of thrust, s, from both channels
+        self._held_by_actuators: list[float] | None = None  # the open interval of each source
+        self._held_by_commands: list[float] | None = None
+        self._command_thrust: tuple[float, bool] | None = None  # (t, on) of the last thrust command seen
+
+    def __bool__(self) -> bool:
+        return bool(self.impulses or self.thrust)
+
+    def add(self, actuators=None, commands=None) -> None:
+        """Fold one block of the body's ``actuators`` and applied ``commands`` tracks (either None)."""
+        if actuators is not None and len(actuators):
+            t = np.asarray(actuators.t, dtype=np.float64)
+            dv = _finite_rows(actuators, "dv")
+            if dv is not None:
+                hit = np.isfinite(dv).all(axis=1)
+                at = np.asarray(actuators.dv_t, dtype=np.float64) if "dv_t" in actuators.fields else np.full(t.shape, np.nan)
+                self.impulses += [float(a if np.isfinite(a) else s) for s, a in zip(t[hit], at[hit])]
+            thrust = _finite_rows(actuators, "thrust")
+            if thrust is not None:
+                on = np.isfinite(thrust).all(axis=1) & np.any(thrust != 0, axis=1)
+                for tk, is_on in zip(t, on):
+                    self._held_by_actuators = self._hold(self._held_by_actuators, float(tk), bool(is_on))
+        if commands is not None and len(commands):
+            t = np.asarray(commands.t, dtype=np.float64)
+            order = np.argsort(t, kind="stable")
+            dv = _finite_rows(commands, "dv")
+            if dv is not None:
+                self.impulses += [float(x) for x in t[np.isfinite(dv).all(axis=1)]]
+            thrust = _finite_rows(commands, "thrust")
+            if thrust is not None:
+                for k in order:
+                    if np.isfinite(thrust[k]).all() and np.isfinite(t[k]):
+                        self._held_by_commands = self._hold(self._held_by_commands, float(t[k]), bool(np.any(thrust[k] != 0)))
+        self.impulses = sorted(set(x for x in self.impulses if np.isfinite(x)))
+
+    def _hold(self, held: list[float] | None, t: float, on: bool) -> list[float] | None:
+        """One source's thrust from ``t`` on: opens an interval (end inf) or closes the open one at ``t``."""
+        if on and held is None:
+            held = [t, np.inf]
+            self.thrust.append(held)
+        elif not on and held is not None:
+            held[1] = max(t, held[0])
+            held = None
+        return held
+
+    def arc_starts(self, t: np.ndarray, t_before: float | None = None) -> np.ndarray:
+        """(n,) bool for states at sim times ``t`` (s, increasing): True where a coast arc
+        begins, i.e. where a burn lies between the state and the one before it (the state at
+        ``t_before`` for the first; None: the first state of the orbit, which begins one).
+        An impulse at ``tau`` separates states at ``a <= tau <= b`` (the state at ``tau``
+        itself, before or after the impulse by the plant's order of work, is an arc of its
+        own), thrust over ``[s, e)`` separates ``a`` and ``b`` when it overlaps ``(a, b)``."""
+        t = np.asarray(t, dtype=np.float64).reshape(-1)
+        before = np.concatenate([[np.nan if t_before is None else t_before], t[:-1]])
+        starts = np.zeros(t.shape, dtype=bool)
+        if self.impulses:
+            tau = np.asarray(self.impulses)
+            starts |= np.searchsorted(tau, t, side="right") > np.searchsorted(tau, before, side="left")
+        if self.thrust:
+            spans = sorted((s, e) for s, e in self.thrust)
+            merged: list[list[float]] = []
+            for s, e in spans:  # disjoint, sorted: ends increase with starts
+                if merged and s <= merged[-1][1]:
+                    merged[-1][1] = max(merged[-1][1], e)
+                else:
+                    merged.append([s, e])
+            lo, hi = np.array([m[0] for m in merged]), np.array([m[1] for m in merged])
+            k = np.searchsorted(lo, t, side="left") - 1  # the last interval starting before b
+            starts |= (k >= 0) & (hi[np.maximum(k, 0)] > before)
+        if t_before is None and t.size:
+            starts[0] = True
+        return starts
+
+
+def burn_changes(t: np.ndarray, r: np.ndarray, v: np.ndarray, mu: float, arc_starts: np.ndarray,
+                 limit: int = 100) -> list[dict]:
+    """What each burn changed, from the recorded states on either side of it: per run of
+    consecutive coast-arc starts (``arc_starts``, :meth:`OrbitActuation.arc_starts`; states
+    within a burn are arcs of one state each) the times of the states before and after,
+    the change of the specific energy ``E = |v|^2/2 - mu/|r|`` (J/kg) and of
+    ``h = r x v`` (m^2/s, the norm of the vector change).  For an impulse ``dv`` applied
+    at velocity ``v`` the energy changes by ``v.dv + |dv|^2/2`` (vis-viva); the first
+    ``limit`` burns."""
+    t, r, v = np.asarray(t, dtype=np.float64), np.asarray(r, dtype=np.float64), np.asarray(v, dtype=np.float64)
+    energy = 0.5 * np.einsum("ij,ij->i", v, v) - mu / np.linalg.norm(r, axis=1)
+    h = np.cross(r, v)
+    breaks = np.flatnonzero(np.asarray(arc_starts, dtype=bool)[1:]) + 1
+    out = []
+    k = 0
+    while k < breaks.size and len(out) < limit:
+        first = last = breaks[k]
+        while k + 1 < breaks.size and breaks[k + 1] == last + 1:
+            k += 1
+            last = breaks[k]
+        before, after = first - 1, last
+        out.append({"from t (s)": float(t[before]), "to t (s)": float(t[after]),
+                    "E change (J/kg)": float(energy[after] - energy[before]),
+                    "|h change| (m^2/s)": float(np.linalg.norm(h[after] - h[before]))})
+        k += 1
+    return out
 
 
 def _wheels(scenario_meta: dict, name: str):
@@ -108,6 +242,13 @@ def closed_loop_section(run, name: str, stem: Path) -> tuple[dict, list[tuple[st
     if cmd is not None and len(cmd):
         numbers["commands"] = len(cmd)
         numbers["senders"] = sorted({str(s) for s in getattr(cmd, "sender", [])})
+    orbit = run.channels.get(prefix + "orbit")
+    if orbit is not None and len(orbit) > 1 and "mu" in orbit.fields:
+        actuation = OrbitActuation()
+        actuation.add(act, cmd)
+        if actuation:
+            numbers["orbit change across each burn"] = burn_changes(orbit.t, orbit.r, orbit.v, float(orbit.mu[0]),
+                                                                   actuation.arc_starts(orbit.t))
     if act is None or len(act) == 0:
         return {"closed loop": numbers}, figs
     t = np.asarray(act.t, dtype=np.float64)

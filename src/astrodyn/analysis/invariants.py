@@ -34,6 +34,13 @@ Attitude (H. Baruh, *Analytical Dynamics*, ch. 8-10; ``C(q)`` with ``v_body = C 
   only fall, and the row is its largest rise above ``E_0`` (0 when it fell monotonically
   from the first state).
 
+An actuated orbit (a closed loop's impulses or thrust, docs/control.md) keeps its model's
+quantities only between burns: given the coast arcs (``arc_starts``, from the recorded
+actuators and applied commands, :class:`astrodyn.analysis.closed_loop.OrbitActuation`),
+its rows are named ``... between burns`` and their drift is taken over each coast arc from
+that arc's first state (:func:`astrodyn.analysis.metrics.drift_over_arcs`), the largest
+over the arcs; what a burn changes (by ``v.dv + |dv|^2/2`` for an impulse) is not drift.
+
 Every attitude row list ends with ``|q| - 1`` (absolute).  Drifts are
 ``max_k |x_k - x_0| / scale`` with ``scale = |x_0|`` (vectors: Euclidean norms), except
 where ``|x_0|`` is not the size of the terms: orbit energies use ``mu / |r_0|`` when
@@ -51,11 +58,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from astrodyn.analysis.metrics import drift_against
+from astrodyn.analysis.metrics import drift_against, drift_over_arcs
 from astrodyn.orbit import zonal_potential
 from astrodyn.rotation import dcm_from_quat
 
-__all__ = ["Invariant", "orbit_invariants", "attitude_invariants", "flexible_invariants", "rolling_invariants",
+__all__ = ["Invariant", "BETWEEN_BURNS", "orbit_invariants", "attitude_invariants", "flexible_invariants", "rolling_invariants",
            "recorded_invariants", "appendage_arrays", "own_state_arrays", "recorded_spacecraft", "recorded_rolling_disk",
            "flexible_states"]
 
@@ -98,14 +105,38 @@ def _energy_row(name: str, energy: np.ndarray, mu: float, r0: float) -> Invarian
     return _row(name, "J/kg", e0, energy, abs(e0), "|E0|")
 
 
+#: What the rows of an actuated orbit are named after (module docstring): their quantity holds between burns.
+BETWEEN_BURNS = "between burns"
+
+
+def _arc_rows(energy_name: str, energy: np.ndarray, momentum_name: str, momentum: np.ndarray, h_norm: np.ndarray,
+              rn: np.ndarray, mu: float, arc_starts: np.ndarray) -> list[Invariant]:
+    """The energy and momentum rows of an actuated orbit: each drift over every coast arc
+    from its first state (:func:`~astrodyn.analysis.metrics.drift_over_arcs`), relative to
+    that state's ``|E|`` (``mu/|r|`` where ``|E| < 1e-6 mu/|r|``, near parabolic) and ``|h|``."""
+    terms = mu / rn
+    e_scale = np.where(np.abs(energy) < 1e-6 * terms, terms, np.abs(energy))
+    rows = []
+    for name, unit, x, initial, scales, scale_name in (
+            (energy_name, "J/kg", energy, float(energy[0]), e_scale, "|E0| of its coast arc"),
+            (momentum_name, "m^2/s", momentum, float(np.linalg.norm(momentum[0])), h_norm, "|h0| of its coast arc")):
+        drift, relative = drift_over_arcs(x, arc_starts, scales)
+        rows.append(Invariant(f"{name} {BETWEEN_BURNS}", unit, initial, drift,
+                              scale_name if relative else f"absolute ({scale_name.split()[0]} = 0 on a coast arc)"))
+    return rows
+
+
 def orbit_invariants(model: str, r: np.ndarray, v: np.ndarray, mu: float, *, radius: float | None = None,
                      j: tuple[float, ...] | list[float] = (), degree: int = 0,
-                     third_body: bool = False) -> list[Invariant]:
+                     third_body: bool = False, arc_starts: np.ndarray | None = None) -> list[Invariant]:
     """The invariants of orbit ``model`` over states ``r`` (m), ``v`` (m/s), shape (n, 3).
 
     ``mu`` m^3/s^2; for zonal models ``radius`` (m, the J's reference radius), ``j`` the
     coefficients J2, J3, ... and ``degree`` the highest degree the run used (2 for
     ``j2``).  ``third_body``: the orbit had a third-body perturbation (no invariant).
+    ``arc_starts`` (n,) bool, for an orbit that burns moved: True at each state that begins
+    a coast arc; the rows are then ``... between burns``, their drift over each arc from
+    its first state (module docstring).  None: one arc, no burn.
     """
     r = np.asarray(r, dtype=np.float64)
     v = np.asarray(v, dtype=np.float64)
@@ -117,14 +148,21 @@ def orbit_invariants(model: str, r: np.ndarray, v: np.ndarray, mu: float, *, rad
     if third_body or model == "third_body":
         return [Invariant("none (a third body moves: no orbit invariant)", "-", float("nan"), float("nan"), "-",
                           conserved=False)]
+    if arc_starts is not None and np.shape(arc_starts) != rn.shape:
+        raise ValueError(f"arc_starts: expected one flag per state, shape {rn.shape}, got {np.shape(arc_starts)}")
     if model == "kepler" or degree < 2:
+        if arc_starts is not None:
+            return _arc_rows("E (two-body)", kinetic - mu / rn, "h", h, np.linalg.norm(h, axis=-1), rn, mu, arc_starts)
         return [_energy_row("E (two-body)", kinetic - mu / rn, mu, float(rn[0])),
                 _row("h", "m^2/s", _norm0(h), h, _norm0(h), "|h0|")]
     if radius is None or len(j) < degree - 1:
         raise ValueError(f"orbit_invariants({model!r}): expected radius and J2..J{degree}, got radius={radius}, j={j}")
     potential = mu / rn + zonal_potential(r, mu, radius, tuple(j[: degree - 1]))
-    return [_energy_row(f"E (with J2..J{degree})" if degree > 2 else "E (with J2)", kinetic - potential, mu,
-                        float(rn[0])),
+    energy_name = f"E (with J2..J{degree})" if degree > 2 else "E (with J2)"
+    if arc_starts is not None:
+        return _arc_rows(energy_name, kinetic - potential, "h_z", h[:, 2], np.linalg.norm(h, axis=-1), rn, mu,
+                         arc_starts)
+    return [_energy_row(energy_name, kinetic - potential, mu, float(rn[0])),
             _row("h_z", "m^2/s", float(h[0, 2]), h[:, 2], _norm0(h), "|h0|")]
 
 
@@ -256,13 +294,15 @@ def own_state_arrays(model: str, track) -> dict[str, np.ndarray] | None:
 
 
 def recorded_invariants(scenario: dict, body: str, *, orbit: tuple | None = None,
-                        attitude: tuple | None = None, own: dict | None = None) -> dict[str, list[Invariant]]:
+                        attitude: tuple | None = None, own: dict | None = None,
+                        orbit_arc_starts: np.ndarray | None = None) -> dict[str, list[Invariant]]:
     """The invariant rows of one recorded body, its models and constants taken from the
     recording's ``scenario`` metadata (``load(path).scenario``: the config as run).
 
     ``orbit = (model, r, v)``, ``attitude = (model, q, w)`` (arrays as recorded), for a
     flexible or rolling body ``own`` the arrays of its own key at the same samples
-    (:func:`own_state_arrays`);
+    (:func:`own_state_arrays`); ``orbit_arc_starts``: the coast arcs of an orbit that
+    burns moved (:func:`orbit_invariants`, ``arc_starts``);
     returns ``{"orbit": [...], "attitude": [...]}`` for the kinds given.  Constants missing
     from the metadata (a recording of another tool) leave only the rows that need none."""
     text = scenario.get("json") or "{}"
@@ -279,7 +319,7 @@ def recorded_invariants(scenario: dict, body: str, *, orbit: tuple | None = None
             if degree >= 2 and (central.get("radius") is None or len(j) < degree - 1):
                 degree = 0  # constants not recorded: two-body rows only
             out["orbit"] = orbit_invariants(model, r, v, float(mu), radius=central.get("radius"), j=j, degree=degree,
-                                            third_body=bool(om.get("perturbers")))
+                                            third_body=bool(om.get("perturbers")), arc_starts=orbit_arc_starts)
     if attitude is not None:
         model, q, w = attitude
         am = bm.get("attitude") if isinstance(bm.get("attitude"), dict) else {}

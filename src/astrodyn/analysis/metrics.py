@@ -35,7 +35,8 @@ from astrodyn.orbit import elements_from_state
 from astrodyn.rotation import dcm_from_quat, euler_from_quat
 
 __all__ = [
-    "relative_drift", "drift_against", "drift_summary", "orbit_metrics", "attitude_metrics", "gmst_rad",
+    "relative_drift", "drift_against", "drift_summary", "coast_arc_first", "drift_over_arcs", "relative_drift_over_arcs",
+    "orbit_metrics", "attitude_metrics", "gmst_rad",
     "ground_track", "BodyInertia", "inertia_from_scenario", "central_body_from_scenario",
 ]
 
@@ -79,22 +80,87 @@ def drift_summary(name: str, x: np.ndarray) -> dict[str, float]:
     return {f"{name}_drift_max" if relative else f"{name}_drift_max_abs": value}
 
 
-def orbit_metrics(t: np.ndarray, r: np.ndarray, v: np.ndarray, mu: float) -> dict:
-    """Energy, angular momentum (and their drifts), elements over time."""
+def coast_arc_first(arc_starts: np.ndarray) -> np.ndarray:
+    """For each sample, the index of the first sample of its coast arc.  ``arc_starts``
+    (n,) bool: True where an arc begins (an orbit's states between two burns,
+    :class:`astrodyn.analysis.closed_loop.OrbitActuation`); the first sample always
+    begins one, whatever ``arc_starts[0]`` says."""
+    starts = np.asarray(arc_starts, dtype=bool).copy()
+    if starts.size:
+        starts[0] = True
+    index = np.where(starts, np.arange(starts.size), 0)
+    return np.maximum.accumulate(index) if starts.size else index
+
+
+def drift_over_arcs(x: np.ndarray, arc_starts: np.ndarray, scales: np.ndarray | None = None) -> tuple[float, bool]:
+    """:func:`drift_against` on each coast arc on its own, the largest over the arcs: the
+    drift of a quantity that only burns change (an actuated orbit's energy and angular
+    momentum), ``max_k |x_k - x_a(k)| / scale_a(k)`` with ``a(k)`` the first sample of the
+    arc of sample ``k`` (:func:`coast_arc_first`) and ``scale_a`` that arc's scale
+    (``scales``: one per sample, read at each arc's first sample; default ``|x_a|``).
+    ``(drift, True)``, or ``(max_k |x_k - x_a(k)|, False)`` in the unit of ``x`` when
+    some arc's scale is 0 (as :func:`drift_against` for a single arc)."""
+    x = np.asarray(x, dtype=np.float64)
+    if not x.shape[0]:
+        return 0.0, True
+    first = coast_arc_first(arc_starts)
+    d = x - x[first]
+    dev = np.linalg.norm(d, axis=-1) if x.ndim > 1 else np.abs(d)
+    scale = (np.linalg.norm(x, axis=-1) if x.ndim > 1 else np.abs(x)) if scales is None \
+        else np.asarray(scales, dtype=np.float64)
+    scale = scale[first]
+    if np.any(scale == 0):
+        return float(np.max(dev)), False
+    return float(np.max(dev / scale)), True
+
+
+def relative_drift_over_arcs(x: np.ndarray, arc_starts: np.ndarray) -> np.ndarray:
+    """:func:`relative_drift` per sample with ``x_0`` the first sample of its coast arc
+    (:func:`coast_arc_first`): ``|x_k - x_a(k)| / |x_a(k)|``, 0/0 -> 0, inf where x moved
+    from 0."""
+    x = np.asarray(x, dtype=np.float64)
+    first = coast_arc_first(arc_starts)
+    d = x - x[first]
+    num = np.linalg.norm(d, axis=-1) if x.ndim > 1 else np.abs(d)
+    den = (np.linalg.norm(x, axis=-1) if x.ndim > 1 else np.abs(x))[first]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(den == 0, np.where(num == 0, 0.0, np.inf), num / np.where(den == 0, 1.0, den))
+
+
+def orbit_metrics(t: np.ndarray, r: np.ndarray, v: np.ndarray, mu: float, arc_starts: np.ndarray | None = None) -> dict:
+    """Energy, angular momentum (and their drifts), elements over time.
+
+    ``arc_starts`` (n,) bool, for an orbit that burns moved (impulses, thrust: True where a
+    coast arc begins, :class:`astrodyn.analysis.closed_loop.OrbitActuation`): the drifts
+    are taken over each coast arc from its own first state (:func:`drift_over_arcs`) and
+    the summary's keys say so (``energy_coast_drift_max``, ``h_coast_drift_max``; the
+    ``_abs`` variants when an arc starts at 0), with the number of ``coast_arcs`` of two
+    states or more (a state alone is at or inside a burn): the changes the burns make are
+    not drift."""
     rn = np.linalg.norm(r, axis=-1)
     energy = 0.5 * np.einsum("ij,ij->i", v, v) - mu / rn
     h = np.cross(r, v)
     el = elements_from_state(r, v, mu)
-    e_drift = relative_drift(energy)
-    h_drift = relative_drift(h)
+    if arc_starts is None:
+        e_drift = relative_drift(energy)
+        h_drift = relative_drift(h)
+        drifts = {**(drift_summary("energy", energy) if t.size else {"energy_drift_max": 0.0}),
+                  **(drift_summary("h", h) if t.size else {"h_drift_max": 0.0})}
+    else:
+        e_drift = relative_drift_over_arcs(energy, arc_starts)
+        h_drift = relative_drift_over_arcs(h, arc_starts)
+        arcs = np.bincount(coast_arc_first(arc_starts), minlength=t.size) if t.size else np.zeros(0, dtype=int)
+        drifts = {"coast_arcs": int(np.count_nonzero(arcs >= 2))}  # a state alone is at or inside a burn
+        for name, x in (("energy", energy), ("h", h)):
+            value, relative = drift_over_arcs(x, arc_starts)
+            drifts[f"{name}_coast_drift_max" if relative else f"{name}_coast_drift_max_abs"] = value
     return {
         "t": t, "energy": energy, "h": h, "energy_drift": e_drift, "h_drift": h_drift, "elements": el,
         "radius": rn,
         "summary": {
             "states": int(t.size),
             "t_span_s": float(t[-1] - t[0]) if t.size else 0.0,
-            **(drift_summary("energy", energy) if t.size else {"energy_drift_max": 0.0}),
-            **(drift_summary("h", h) if t.size else {"h_drift_max": 0.0}),
+            **drifts,
             "r_min_m": float(rn.min()) if t.size else 0.0,
             "r_max_m": float(rn.max()) if t.size else 0.0,
         },

@@ -192,16 +192,23 @@ def _nested_numbers(column: np.ndarray) -> np.ndarray | None:
     return out if out.ndim == 3 else None
 
 
-#: Unit of each message field as exported (SI; "1" for dimensionless, "" for text).
+#: Unit of each message field as exported (SI; "1" for dimensionless, "" for text), keyed
+#: by the field's name in its message definition (:data:`astrodyn.messages.MESSAGE_TYPES`);
+#: a field missing here is shown as ``?``, the mark of a foreign channel's field.
 FIELD_UNITS = {
     "t": "s", "seq": "1", "log_time_ns": "ns", "r": "m", "v": "m/s", "mu": "m^3/s^2", "q": "1", "w": "rad/s",
     "dr": "m", "dv": "m/s", "dr_norm": "m", "dv_norm": "m/s", "model": "", "frame": "", "reference": "",
-    "process": "", "event": "", "detail": "", "json": "",
+    # events (astrodyn.Event): which process, what happened, why
+    "process": "", "kind": "", "detail": "", "json": "",
     # the closed loop's (docs/control.md): commands, actuator states, sensor samples
     "torque": "N m", "wheel_torque": "N m", "wheel_speed": "rad/s", "clipped": "", "thrust": "N", "mass": "kg",
-    "dv_total": "m/s", "applied": "", "sender": "", "speeds": "rad/s", "step": "1", "commands": "1",
+    "dv_total": "m/s", "dv_t": "s", "applied": "", "sender": "", "speeds": "rad/s", "step": "1", "commands": "1",
     # a flexible spacecraft's appendages: modal coordinates, their rates, tip displacements
     "eta": "m", "eta_dot": "m/s", "tip": "m",
+    # a rolling disk (astrodyn.RollingState): contact point, centre, angles, generalized speeds
+    "contact": "m", "center": "m", "heading": "rad", "lean": "rad", "spin_angle": "rad", "u": "rad/s",
+    # single-axis gyroscopes (astrodyn.GimbalState); "indicated" is rad/s or rad by gyro type: no one unit
+    "angle": "rad", "angle_rate": "rad/s",
 }
 
 

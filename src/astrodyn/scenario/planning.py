@@ -18,7 +18,7 @@ from astrodyn.messages import ACTUATED_MODEL, GIMBALS_KIND, MODEL_STATE_KINDS
 if TYPE_CHECKING:
     from astrodyn.scenario import OrbitSpec, Scenario
 
-__all__ = ["BodyPlan", "Plan", "plan", "state_kinds_text", "BYTES_PER_STATE", "ORBIT_METHODS", "ATTITUDE_METHODS",
+__all__ = ["BodyPlan", "Plan", "plan", "state_kinds_text", "counted", "BYTES_PER_STATE", "ORBIT_METHODS", "ATTITUDE_METHODS",
            "EXACT_ATTITUDE_MODEL", "periapsis_radius"]
 
 #: The exact attitude model a torque that is zero for the body falls back to.
@@ -71,8 +71,8 @@ class Plan:
                if self.model_state_messages else "")
         kinds = state_kinds_text(sum(bp.orbit_model is not None for bp in self.bodies),
                                  sum(bp.attitude_model is not None for bp in self.bodies))
-        lines = [f"scenario {self.scenario}: {len(self.bodies)} bodies, {self.n_steps} output steps, "
-                 f"{self.state_messages} state messages ({kinds}){xc}",
+        lines = [f"scenario {self.scenario}: {counted(len(self.bodies), 'body', 'bodies')}, "
+                 f"{counted(self.n_steps, 'output step')}, {counted(self.state_messages, 'state message')} ({kinds}){xc}",
                  f"expected recording: about {_human_bytes(size)} ({BYTES_PER_STATE} bytes per state message after zstd)",
                  f"processes: {', '.join(self.processes)}"]
         groups: dict[tuple, list[str]] = {}
@@ -81,7 +81,7 @@ class Plan:
         shown = 0
         for (om, ometh, am, ameth, notes), names in groups.items():
             if shown >= max_bodies:
-                lines.append(f"  ... {len(self.bodies) - shown} more bodies")
+                lines.append(f"  ... {counted(len(self.bodies) - shown, 'more body', 'more bodies')}")
                 break
             who = ", ".join(names) if len(names) <= 3 else f"{names[0]}, {names[1]}, ..., {names[-1]} ({len(names)} bodies)"
             lines.append(f"  {who}:")
@@ -90,6 +90,13 @@ class Plan:
             lines += [f"    note: {n}" for n in notes]
             shown += len(names)
         return "\n".join(lines)
+
+
+def counted(n: int, singular: str, plural: str | None = None) -> str:
+    """``n`` and the noun in the number it takes: ``counted(1, "body", "bodies")`` is
+    "1 body", ``counted(3, "output step")`` is "3 output steps" (``plural`` defaults to the
+    singular + "s")."""
+    return f"{n} {singular if n == 1 else (plural or singular + 's')}"
 
 
 def state_kinds_text(orbits: int, attitudes: int) -> str:

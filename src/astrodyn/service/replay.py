@@ -34,7 +34,10 @@ stop       --                                  the final summary
 
 Pacing: the message with log time ``L`` goes out at wall time ``w0 + (L - L0) / rate``
 where ``(w0, L0)`` is the anchor set at start, resume, rate change and seek; messages
-with the same log time go out together.  A seek back in time republishes earlier seqs
+with the same log time go out together.  The clock starts with playback (the first
+:meth:`Replayer.step`, after the ``--wait`` for a subscriber), not at launch: until then
+``t`` stays at the start time (``--start``, or the point of a ``seek``), whatever
+``status``, ``pause`` or ``rate`` is asked meanwhile.  A seek back in time republishes earlier seqs
 (a consumer sees them again, as it would from a new run).
 
 Bad files: a file that is not MCAP is an error (exit 1, nothing published); a cut file
@@ -144,6 +147,9 @@ class Replayer:
         self._publishers: dict[str, Any] = {}
         self._pending: dict[str, list[tuple[str, bytes]]] = {}
         self._pending_ns: int | None = None
+        # the pacing clock runs from the first step() (playback), not from here: a replay
+        # waiting for its first subscriber stays at its start time (module docstring, Pacing)
+        self.clock_started = False
         self._seek(self.lo)
         self.started = time.monotonic()
 
@@ -161,8 +167,9 @@ class Replayer:
         self._anchor_wall = time.monotonic()
 
     def virtual_ns(self, now: float | None = None) -> float:
-        """The replay clock: log time (ns) that corresponds to the wall time ``now``."""
-        if self.state != "running":
+        """The replay clock: log time (ns) that corresponds to the wall time ``now``
+        (the anchor's log time while paused, or before playback has begun)."""
+        if self.state != "running" or not self.clock_started:
             return float(self._anchor_ns)
         if math.isinf(self.rate):
             return math.inf
@@ -245,6 +252,9 @@ class Replayer:
         """Publish what is due within the next ``budget_s`` of wall time; False when done."""
         if self.state in ("stopped",):
             return False
+        if not self.clock_started:  # playback begins: the clock runs from the anchor's log time, now
+            self.clock_started = True
+            self._anchor(self._anchor_ns)
         deadline = time.monotonic() + budget_s
         while self.state == "running" and self._next is not None:
             wait = self.wait_time()

@@ -744,18 +744,25 @@ def main(argv: list[str] | None = None) -> int:
 def attack_report(logger: dict | None, plant: dict | None) -> str | None:
     """What the logger's and the plant's summaries say was rejected as not the run's own
     (forged, unsigned or replayed samples; forged commands and answers), for the
-    ``ATTACKED`` line of ``run`` and ``serve`` (docs/security.md); None when nothing was."""
-    rejected = dict((logger or {}).get("rejected") or {})
-    for reason, n in ((plant or {}).get("rejected") or {}).items():  # forged commands and answers, dropped by the plant
-        rejected[f"command {reason}"] = rejected.get(f"command {reason}", 0) + n
+    ``ATTACKED`` line of ``run`` and ``serve`` (docs/security.md); None when nothing was.
+    The line names only the processes whose summary counts a rejection: a scene without
+    ``[control]`` has no plant (``plant`` None or empty), and then the line is the logger's
+    alone (before, it said "the logger and the plant" in every scene)."""
+    by_logger = {reason: n for reason, n in ((logger or {}).get("rejected") or {}).items() if n}
+    by_plant = {f"command {reason}": n  # forged commands and answers, dropped by the plant
+                for reason, n in ((plant or {}).get("rejected") or {}).items() if n}
+    rejected = dict(by_logger)
+    for reason, n in by_plant.items():
+        rejected[reason] = rejected.get(reason, 0) + n
     if not rejected:
         return None
+    who = " and ".join(name for name, counts in (("the logger", by_logger), ("the plant", by_plant)) if counts)
     total = sum(rejected.values())
     why = ", ".join(f"{n} {reason}" for reason, n in sorted(rejected.items()))
     senders = (logger or {}).get("rejected_by_sender") or {}
-    return (f"the logger and the plant rejected {total} messages that were not this run's own ({why}; "
-            f"senders: {', '.join(f'{s} x{n}' for s, n in senders.items())}); the recording holds only the run's "
-            f"authenticated states (counts in its 'rejected' metadata record)")
+    from_whom = f"; senders: {', '.join(f'{s} x{n}' for s, n in senders.items())}" if senders else ""
+    return (f"{who} rejected {total} messages that were not this run's own ({why}{from_whom}); the recording "
+            f"holds only the run's authenticated states (counts in its 'rejected' metadata record)")
 
 
 def check_bus_flags(connect: list[str] | None, zenoh_config: str | None) -> bus.ZenohConfigText | None:

@@ -7,7 +7,11 @@ states recorded, and the drift of each quantity the model conserves
 (:mod:`astrodyn.analysis.invariants`: two-body energy and h for Kepler orbits, energy
 with the zonal potential and h_z for J2 / zonal orbits, T and H_i for torque-free
 bodies, ...), with its unit and what the drift is relative to; the REBOUND cross-check
-difference in metres.  :func:`propagator_rows` gives what the propagators measured on
+difference in metres.  An orbit that burns moved (a closed loop's impulses or thrust,
+docs/control.md) is judged between its burns: its rows are ``... between burns``, their
+drift taken over each coast arc from that arc's first state
+(:class:`astrodyn.analysis.closed_loop.OrbitActuation`), not across a burn, which changes
+the energy and angular momentum by design.  :func:`propagator_rows` gives what the propagators measured on
 what they published, for comparison.
 """
 
@@ -18,10 +22,12 @@ from pathlib import Path
 
 import numpy as np
 
+from astrodyn.analysis.closed_loop import OrbitActuation
 from astrodyn.analysis.invariants import own_state_arrays, recorded_invariants
+from astrodyn.analysis.metrics import coast_arc_first
 from astrodyn.messages import ATTITUDE_PROCESS_KINDS, MODEL_STATE_KINDS
 from astrodyn.scenario import Scenario, plan as make_plan
-from astrodyn.scenario.planning import state_kinds_text
+from astrodyn.scenario.planning import counted, state_kinds_text
 
 __all__ = ["file_summary", "propagator_rows", "print_summary"]
 
@@ -63,19 +69,27 @@ def file_summary(path: Path, scenario: Scenario, block_messages: int = 50_000) -
     The file is read in blocks of ``block_messages`` (:func:`astrodyn.recording.load_blocks`),
     so memory does not grow with the recording: every drift is a largest deviation from the
     first recorded state, so each block is evaluated with that state put in front of it and
-    the blocks' maxima combined (a NaN anywhere stays NaN)."""
+    the blocks' maxima combined (a NaN anywhere stays NaN).  An orbit that burns moved:
+    from the first state of its current coast arc, the arcs found from the burns recorded
+    so far (:class:`~astrodyn.analysis.closed_loop.OrbitActuation`, fed each block's
+    actuator states and applied commands before its states)."""
     from astrodyn.recording import load_blocks
 
     plan = {bp.name: bp for bp in make_plan(scenario).bodies}
     rows = {b.name: {"body": b.name, "orbit_model": plan[b.name].orbit_model,
                      "attitude_model": plan[b.name].attitude_model} for b in scenario.bodies}
-    first: dict[tuple[str, str], tuple[np.ndarray, np.ndarray]] = {}
+    first: dict[tuple[str, str], tuple] = {}
+    actuations = {b.name: OrbitActuation() for b in scenario.bodies if b.actuators is not None and b.orbit is not None}
     for run in load_blocks(path, block_messages):
         for b in scenario.bodies:
+            if b.name in actuations:
+                prefix = f"astrodyn/{scenario.name}/{b.name}/"
+                actuations[b.name].add(run.channels.get(prefix + "actuators"), run.channels.get(prefix + "command"))
             rec = run.bodies.get(b.name)
             if rec is None:
                 continue
-            _add_block(rows[b.name], rec, run.scenario, plan[b.name], scenario.central_body.mu, first)
+            _add_block(rows[b.name], rec, run.scenario, plan[b.name], scenario.central_body.mu, first,
+                       actuations.get(b.name))
     return list(rows.values())
 
 
@@ -86,9 +100,42 @@ def _max_nan(a: float | None, b: float) -> float:
 
 
 def _merge_invariants(old: list[dict] | None, new: list[dict]) -> list[dict]:
+    """The rows of the blocks so far and of one more: the larger drift, the first block's
+    ``initial`` (the first recorded state's), the newest name and scale (an orbit's rows
+    become ``... between burns`` from the block of its first burn on)."""
     if old is None:
         return new
-    return [{**n, "drift": _max_nan(o["drift"], n["drift"])} for o, n in zip(old, new, strict=True)]
+    return [{**n, "initial": o["initial"], "drift": _max_nan(o["drift"], n["drift"])}
+            for o, n in zip(old, new, strict=True)]
+
+
+def _add_orbit_block(row: dict, orbit, recorded_scenario: dict, bp, mu: float, first: dict,
+                     actuation: OrbitActuation | None) -> None:
+    """Fold one block of a body's orbit track into its summary row, led by the first state
+    of the coast arc the block starts in (the body's first state unless a burn moved the
+    orbit: :class:`~astrodyn.analysis.closed_loop.OrbitActuation`); what is carried to the
+    next block, in ``first``, is the time of the block's last state and the first state of
+    its arc."""
+    t = np.asarray(orbit.t, dtype=np.float64)
+    t_last, r0, v0 = first.get((bp.name, "orbit"), (None, orbit.r[:1].copy(), orbit.v[:1].copy()))
+    r, v = np.concatenate([r0, orbit.r]), np.concatenate([v0, orbit.v])
+    arc_starts = np.concatenate([[True], actuation.arc_starts(t, t_last)]) if actuation else None
+    inv = recorded_invariants(recorded_scenario, bp.name, orbit=(bp.orbit_model, r, v),
+                              orbit_arc_starts=arc_starts)["orbit"]
+    arc_first = coast_arc_first(arc_starts) if arc_starts is not None else np.zeros(len(r), dtype=int)
+    first[(bp.name, "orbit")] = (float(t[-1]), r[arc_first[-1:]].copy(), v[arc_first[-1:]].copy())
+    rn = np.linalg.norm(r, axis=1)
+    energy = 0.5 * np.einsum("ij,ij->i", v, v) - mu / rn
+    h = np.linalg.norm(np.cross(r, v), axis=1)
+    h_first = h[arc_first]
+    row["orbit_states"] = row.get("orbit_states", 0) + len(orbit)
+    row["orbit_last_seq"] = max(row.get("orbit_last_seq", -1), int(orbit.seq[-1]))
+    row["orbit_invariants"] = _merge_invariants(row.get("orbit_invariants"), [i.as_dict() for i in inv])
+    row["energy_drift"] = _max_nan(row.get("energy_drift"),
+                                   float(np.max(np.abs(energy - energy[arc_first]) * rn[arc_first] / mu)))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        h_drift = np.where(h_first != 0, np.abs(h - h_first) / np.where(h_first != 0, h_first, 1.0), 0.0)
+    row["momentum_drift"] = _max_nan(row.get("momentum_drift"), float(np.max(h_drift)))
 
 
 def _attitude_block(rec, bp, first: dict) -> tuple[np.ndarray, np.ndarray, dict | None]:
@@ -117,21 +164,12 @@ def _attitude_block(rec, bp, first: dict) -> tuple[np.ndarray, np.ndarray, dict 
             {k: np.concatenate([own0[k], a[ie]]) for k, a in arrays.items()})
 
 
-def _add_block(row: dict, rec, recorded_scenario: dict, bp, mu: float, first: dict) -> None:
-    """Fold one block of a body's tracks into its summary row (see :func:`file_summary`)."""
+def _add_block(row: dict, rec, recorded_scenario: dict, bp, mu: float, first: dict,
+               actuation: OrbitActuation | None = None) -> None:
+    """Fold one block of a body's tracks into its summary row (see :func:`file_summary`);
+    ``actuation``: the burns recorded so far of a body with actuators."""
     if rec.orbit is not None and len(rec.orbit):
-        r0, v0 = first.setdefault((bp.name, "orbit"), (rec.orbit.r[:1].copy(), rec.orbit.v[:1].copy()))
-        r, v = np.concatenate([r0, rec.orbit.r]), np.concatenate([v0, rec.orbit.v])
-        inv = recorded_invariants(recorded_scenario, bp.name, orbit=(bp.orbit_model, r, v))["orbit"]
-        rn = np.linalg.norm(r, axis=1)
-        energy = 0.5 * np.einsum("ij,ij->i", v, v) - mu / rn
-        h = np.linalg.norm(np.cross(r, v), axis=1)
-        row["orbit_states"] = row.get("orbit_states", 0) + len(rec.orbit)
-        row["orbit_last_seq"] = max(row.get("orbit_last_seq", -1), int(rec.orbit.seq[-1]))
-        row["orbit_invariants"] = _merge_invariants(row.get("orbit_invariants"), [i.as_dict() for i in inv])
-        row["energy_drift"] = _max_nan(row.get("energy_drift"), float(np.max(np.abs(energy - energy[0])) * rn[0] / mu))
-        row["momentum_drift"] = _max_nan(row.get("momentum_drift"),
-                                         float(np.max(np.abs(h - h[0])) / h[0]) if h[0] else 0.0)
+        _add_orbit_block(row, rec.orbit, recorded_scenario, bp, mu, first, actuation)
     if rec.attitude is not None and len(rec.attitude):
         row["attitude_states"] = row.get("attitude_states", 0) + len(rec.attitude)
         q, w, own = _attitude_block(rec, bp, first)
@@ -194,7 +232,8 @@ def print_summary(result: dict, rows: list[dict], scenario: Scenario, max_bodies
             print(f"  {'':<14} {'x-check':<9} {'rebound-ias15':<17} {r.get('crosscheck_states', 0):>7}  "
                   f"{'max |r - r_REBOUND|':<26} {'m':<6} {_fmt(r['crosscheck_max_dr'], '.2e'):>9}  absolute")
     if len(rows) > len(shown):
-        print(f"  ... {len(rows) - len(shown)} more bodies (all in the --json summary); worst drift per quantity:")
+        print(f"  ... {counted(len(rows) - len(shown), 'more body', 'more bodies')} (all in the --json summary); "
+              f"worst drift per quantity:")
         worst: dict[tuple, float] = {}
         for r in rows:
             for kind in ("orbit", "attitude"):
