@@ -21,6 +21,7 @@ from __future__ import annotations
 import json
 import os
 import signal
+import subprocess
 import sys
 import time
 from pathlib import Path
@@ -28,7 +29,7 @@ from pathlib import Path
 import pytest
 from mcap.reader import make_reader
 
-from astrodyn import messages
+from astrodyn import bus, messages
 from astrodyn.scenario import loads
 from astrodyn.simulate import simulate
 
@@ -37,6 +38,7 @@ from _recordings import children_by_kind, one_satellite_scene, run_while
 
 pytestmark = pytest.mark.network
 
+ASTRODYN = [sys.executable, "-m", "astrodyn"]
 SCENE = one_satellite_scene("linkloss", "6000 s", "10 Hz")
 STEPS = 60_001
 SHORT_TIMES = "{ transport: { link: { tx: { lease: 2000, queue: { congestion_control: { block: { " \
@@ -54,6 +56,24 @@ def _recorded_by_seq(path: Path) -> dict[str, list[bytes]]:
                 assert seq not in by_topic.setdefault(channel.topic, {}), (channel.topic, seq)
                 by_topic[channel.topic][seq] = message.data
     return {topic: [seqs[k] for k in sorted(seqs)] for topic, seqs in by_topic.items()}
+
+
+def _assert_the_numeric_cores(recorded: dict[str, list[bytes]]) -> tuple[int, int]:
+    """Each recorded state payload of body ``sat`` (seq order, from 0) is byte for byte the
+    message of the state the numeric core computes for that step; returns the counts."""
+    orbit, attitude = recorded[messages.orbit_key("linkloss", "sat")], recorded[messages.attitude_key("linkloss", "sat")]
+    n = max(len(orbit), len(attitude))
+    sc = loads(one_satellite_scene("linkloss", f"{(n - 1) / 10} s", "10 Hz"))
+    res = simulate(sc)
+    (orbit_model, attitude_model), = [(bp.orbit_model, bp.attitude_model) for bp in res.plan.bodies]
+    for k, payload in enumerate(orbit):
+        expected = messages.orbit_message(float(res.t[k]), k, orbit_model, res.r[k, 0], res.v[k, 0],
+                                          sc.central_body.mu, sc.frame)
+        assert payload == messages.encode(expected), k
+    for k, payload in enumerate(attitude):
+        expected = messages.attitude_message(float(res.t[k]), k, attitude_model, res.q[k, 0], res.w[k, 0])
+        assert payload == messages.encode(expected), k
+    return len(orbit), len(attitude)
 
 
 @pytest.mark.parametrize("stopped, stopped_s", [
@@ -84,15 +104,49 @@ def test_states_lost_on_a_broken_bus_link_are_published_again(tmp_path, stopped,
     assert run["logger"]["missing"] == 0, run["logger"]
     assert run["restarts"] and all("cut off from the logger" in r["why"] for r in run["restarts"]), run["restarts"]
     # every step once, and each payload the one the numeric core gives for that step
-    recorded = _recorded_by_seq(out)
-    sc = loads(SCENE)
-    res = simulate(sc)
-    (orbit_model, attitude_model), = [(bp.orbit_model, bp.attitude_model) for bp in res.plan.bodies]
-    orbit, attitude = recorded[messages.orbit_key("linkloss", "sat")], recorded[messages.attitude_key("linkloss", "sat")]
-    assert len(orbit) == len(attitude) == STEPS
-    for k in range(STEPS):
-        expected = messages.orbit_message(float(res.t[k]), k, orbit_model, res.r[k, 0], res.v[k, 0],
-                                          sc.central_body.mu, sc.frame)
-        assert orbit[k] == messages.encode(expected), k
-        expected = messages.attitude_message(float(res.t[k]), k, attitude_model, res.q[k, 0], res.w[k, 0])
-        assert attitude[k] == messages.encode(expected), k
+    assert _assert_the_numeric_cores(_recorded_by_seq(out)) == (STEPS, STEPS)
+
+
+def test_serve_publishes_again_the_states_a_broken_link_lost(tmp_path):
+    """`serve` (real time x100) with its logger stopped 3 s: the gap it leaves in the part
+    being written is refilled (the propagator restarted just before the first missing
+    step, `Supervisor.refill_args`).  Before: 1,167 states missing and no restart."""
+    from _serve_control import serve_status, stop_serve, wait_until
+
+    config, zenoh_config = tmp_path / "linkloss.toml", tmp_path / "short.json5"
+    config.write_text(one_satellite_scene("linkloss", "100000 s", "10 Hz"))
+    zenoh_config.write_text(SHORT_TIMES)
+    out, partial = tmp_path / "linkloss.mcap", tmp_path / "linkloss.partial.mcap"
+    serve = subprocess.Popen([*ASTRODYN, "serve", str(config), "--out", str(out), "--rate", "100",
+                              "--zenoh-config", str(zenoh_config)], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                             text=True)
+    try:
+        started = json.loads(serve.stdout.readline())
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline and not (partial.exists() and partial.stat().st_size > 100_000):
+            assert serve.poll() is None, serve.stderr.read()
+            time.sleep(0.05)
+        logger, = [p for p, kind in children_by_kind(serve.pid).items() if kind == "logger"]
+        os.kill(logger, signal.SIGSTOP)
+        time.sleep(3.0)
+        os.kill(logger, signal.SIGCONT)
+        with bus.open_session(connect=started["hub"], config_file=str(zenoh_config)) as session:
+            status = serve_status(session, "linkloss", started["control_token"])
+            beats = bus.HeartbeatMonitor(session, "linkloss")  # (the logger's report of what it misses)
+
+            def healed() -> bool:
+                beats.poll()
+                now = status()
+                return (bool(now["restarts"]) and all(p["running"] for p in now["processes"].values())
+                        and "logger" in beats.last and not ({"holes", "unheard"} & beats.last["logger"].keys()))
+
+            wait_until(healed, 60.0, "a restart, every process running, and the logger missing nothing")
+        _, stderr, summary = stop_serve(serve, settle_s=2.0)
+    finally:
+        if serve.poll() is None:
+            serve.kill()
+            serve.wait()
+    assert serve.returncode == 0, stderr
+    assert summary["logger"]["missing"] == 0, summary["logger"]
+    assert all("cut off from the logger" in r["why"] for r in summary["restarts"]), summary["restarts"]
+    _assert_the_numeric_cores(_recorded_by_seq(out))  # (each seq once)

@@ -370,6 +370,7 @@ class Child:
         self.stalled_s: float | None = None  # set when kill_if_stalled ended it
         self.lost_to_logger: str | None = None  # why kill_if_lost_to_logger ended it
         self._hole: tuple[int, float] | None = None  # (first missing step, listening_s when first reported)
+        self.refill_from: int | None = None  # the first step the logger misses, when that is why it was killed
 
     def how(self, rc: int) -> str:
         """How it ended, for a failure message."""
@@ -445,6 +446,7 @@ class Child:
                 self._hole = (first, now)
             elif now - self._hole[1] >= HOLE_GRACE_S and why is None:
                 why = f"its states from step {first} on never reached the logger (their bus link was lost)"
+                self.refill_from = first
         else:
             self._hole = None
         if why is None:
@@ -471,6 +473,7 @@ class Child:
                                    f"and its end of run never reached the file (their bus link was lost)")
         elif isinstance(first, int) and not isinstance(first, bool):
             self.lost_to_logger = f"its states from step {first} on never reached the logger (their bus link was lost)"
+            self.refill_from = first
         return self.lost_to_logger is not None
 
     @property

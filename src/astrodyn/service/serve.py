@@ -275,11 +275,11 @@ class Supervisor:
             if self.state in ("running", "paused") and ch.kill_if_stalled(self.beats, self.stall_s, now):
                 print(f"astrodyn serve: process {name} (pid {ch.pid}) has sent no heartbeat for {ch.stalled_s:.0f} s: "
                       f"killed as hung", file=sys.stderr, flush=True)
-            # a propagator the logger no longer hears (its bus link lost): restarted from the
-            # file's tail, which holds everything before the loss (a gap in the middle of a
-            # part is not refilled by serve: the logger reports it as missing)
+            # a propagator whose states no longer reach the logger (its bus link lost): restarted
+            # from the file's tail (the logger no longer hears it) or from just before the first
+            # step the logger misses (a gap: refilled, Supervisor.restart)
             elif (self.state in ("running", "paused") and name not in ("logger", "plant")
-                    and ch.kill_if_lost_to_logger(self.beats, holes=False)):
+                    and ch.kill_if_lost_to_logger(self.beats)):
                 print(f"astrodyn serve: process {name} (pid {ch.pid}) {ch.how(-9)}", file=sys.stderr, flush=True)
         self.reassert_pause(now)
         if self.schedule is None and self.state == "running":  # the pace the propagators keep, once they do
@@ -406,6 +406,22 @@ class Supervisor:
             print(f"astrodyn serve: logger (pid {child.pid}) killed by signal {-rc} while starting: starting another",
                   file=sys.stderr, flush=True)
 
+    def refill_args(self, kind: str, first_missing: int) -> tuple[dict | None, str | None]:
+        """The arguments that restart ``kind`` just before ``first_missing``, the first step
+        the logger misses in its channels (states lost on a broken bus link,
+        :meth:`~astrodyn.service.children.Child.kill_if_lost_to_logger`), from the part being
+        written (read up to its last flushed chunk), and that part's name; ``(None, None)``
+        when the step before it is not in that part (the gap began with the part: the
+        parts' tails decide then)."""
+        from astrodyn.recording import RecordingError, load as load_run
+        from astrodyn.service.resume import ResumeError, propagator_resume_args
+
+        part = self._parts()[0]
+        try:
+            return propagator_resume_args(load_run(part), self.scenario, kind, first_missing - 1, self.tmp), part
+        except (RecordingError, ResumeError, OSError):
+            return None, None
+
     def _parts(self) -> list[str]:
         """The files the (main) logger has written so far, newest first: the part being
         written (``NAME[-000k].partial[-n].mcap``), then the finished rolled parts; never a
@@ -470,9 +486,11 @@ class Supervisor:
     def restart(self, kind: str, why: str, n: int) -> None:
         """Start ``kind`` again after the last step every one of its channels has in the
         newest part that holds one (read from the parts' tails: a cost independent of their size)."""
-        args, source = resume_from_parts(self.scenario, kind, self._parts(), self.tmp)
-        step = args["--start-step"] - 1 if source is not None else None
         old = self.children[kind]
+        args, source = self.refill_args(kind, old.refill_from) if old.refill_from else (None, None)
+        if args is None:
+            args, source = resume_from_parts(self.scenario, kind, self._parts(), self.tmp)
+        step = args["--start-step"] - 1 if source is not None else None
         old.close()
         wait_until_gone(self.session, self.scenario.name, kind)
         event_seq = next_event_seq(self.session, self.scenario.name, kind, n + 1)
