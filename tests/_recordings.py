@@ -153,3 +153,20 @@ def run_while(argv: list[str], partial: Path, min_bytes: int, act, timeout_s: fl
             proc.kill()
             proc.wait()
     return proc.returncode, err.decode()
+
+
+def assert_one_satellite_payloads(name: str, orbit: list[bytes], attitude: list[bytes]) -> None:
+    """Each state payload recorded for body ``sat`` of :func:`one_satellite_scene` ``name``
+    at 10 Hz (lists in seq order, from 0) is byte for byte the message of the state the
+    numeric core computes for that step (:func:`astrodyn.simulate.simulate`)."""
+    n = max(len(orbit), len(attitude))
+    sc = loads(one_satellite_scene(name, f"{(n - 1) / 10} s", "10 Hz"))
+    res = simulate(sc)
+    (orbit_model, attitude_model), = [(bp.orbit_model, bp.attitude_model) for bp in res.plan.bodies]
+    for k, payload in enumerate(orbit):
+        expected = messages.orbit_message(float(res.t[k]), k, orbit_model, res.r[k, 0], res.v[k, 0],
+                                          sc.central_body.mu, sc.frame)
+        assert payload == messages.encode(expected), k
+    for k, payload in enumerate(attitude):
+        expected = messages.attitude_message(float(res.t[k]), k, attitude_model, res.q[k, 0], res.w[k, 0])
+        assert payload == messages.encode(expected), k

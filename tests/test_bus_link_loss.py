@@ -30,11 +30,9 @@ import pytest
 from mcap.reader import make_reader
 
 from astrodyn import bus, messages
-from astrodyn.scenario import loads
-from astrodyn.simulate import simulate
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _recordings import children_by_kind, one_satellite_scene, run_while
+from _recordings import assert_one_satellite_payloads, children_by_kind, one_satellite_scene, run_while
 
 pytestmark = pytest.mark.network
 
@@ -59,20 +57,9 @@ def _recorded_by_seq(path: Path) -> dict[str, list[bytes]]:
 
 
 def _assert_the_numeric_cores(recorded: dict[str, list[bytes]]) -> tuple[int, int]:
-    """Each recorded state payload of body ``sat`` (seq order, from 0) is byte for byte the
-    message of the state the numeric core computes for that step; returns the counts."""
+    """The payloads of body ``sat`` are the numeric core's (each seq once); their counts."""
     orbit, attitude = recorded[messages.orbit_key("linkloss", "sat")], recorded[messages.attitude_key("linkloss", "sat")]
-    n = max(len(orbit), len(attitude))
-    sc = loads(one_satellite_scene("linkloss", f"{(n - 1) / 10} s", "10 Hz"))
-    res = simulate(sc)
-    (orbit_model, attitude_model), = [(bp.orbit_model, bp.attitude_model) for bp in res.plan.bodies]
-    for k, payload in enumerate(orbit):
-        expected = messages.orbit_message(float(res.t[k]), k, orbit_model, res.r[k, 0], res.v[k, 0],
-                                          sc.central_body.mu, sc.frame)
-        assert payload == messages.encode(expected), k
-    for k, payload in enumerate(attitude):
-        expected = messages.attitude_message(float(res.t[k]), k, attitude_model, res.q[k, 0], res.w[k, 0])
-        assert payload == messages.encode(expected), k
+    assert_one_satellite_payloads("linkloss", orbit, attitude)
     return len(orbit), len(attitude)
 
 
