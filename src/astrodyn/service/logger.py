@@ -141,6 +141,11 @@ def _claimed_process(attachment: bytes | None) -> str:
     return "malformed"
 
 
+#: How an end event's ``reason`` begins when its process went to the end of the scene (or
+#: as far as its model goes): any other reason (a signal name, "stop requested") is a
+#: process stopped early (``Logger.stopped_early``).
+FULL_RUN_END_REASONS = ("end of scenario", "model ended", "every step already recorded")
+
 #: Seconds between two refreshes of the logger's :meth:`Logger.reach_report` (sent with its
 #: heartbeat).
 REACH_REPORT_S = 0.5
@@ -215,6 +220,10 @@ class Logger:
         #: served on @latest to views that must not take the full-rate streams
         self.latest: dict[str, bytes] = {}
         self.ended: dict[str, int | None] = {}
+        #: processes whose end event says they stopped before the end of the scene (a signal,
+        #: a stop): reason, sim t and last step; a recording can be complete (every state they
+        #: published is in it) and still end early (status "stopped_early")
+        self.stopped_early: dict[str, dict] = {}
         #: the last output step each ended process announced (its end event's ``last_step``)
         self.last_step: dict[str, int] = {}
         self._channel_process: dict[str, str | None] = {}  # state channel -> its publisher (cache)
@@ -402,6 +411,11 @@ class Logger:
                 if isinstance(last, int) and not isinstance(last, bool) and 0 <= last <= messages.MAX_SEQ:
                     self.last_step[process] = last
                 self._fold_refusals(process, detail.get("rejected"))
+                reason = detail.get("reason")
+                if isinstance(reason, str) and not reason.startswith(FULL_RUN_END_REASONS):
+                    self.stopped_early[process] = {"reason": reason[:200], "t": msg["t"], "last_step": last}
+                else:
+                    self.stopped_early.pop(process, None)  # (a restarted process that went on to the end)
             self.ended[process] = count
 
     def _fold_refusals(self, process: str, rejected: Any) -> None:
@@ -501,6 +515,7 @@ class Logger:
             "liveliness_ignored": self.liveliness_ignored,
             "expected_states": expected,
             "complete": self.is_complete(),
+            "stopped_early": dict(self.stopped_early),
             "t": self.max_t,
             "elapsed_s": round(elapsed, 3),
             "rate_msg_s": round(self.received / elapsed, 1) if elapsed > 0 else 0.0,
@@ -731,7 +746,7 @@ class Logger:
             summary["reason"] = self.reason
             # how far the run got, in the file itself (read back by load().metadata["end"])
             self.recorder.add_metadata("end", {k: summary[k] for k in (
-                "reason", "t", "states", "missing", "duplicates", "malformed", "ended", "died", "stalled", "complete")})
+                "reason", "t", "states", "missing", "duplicates", "malformed", "ended", "died", "stalled", "complete", "stopped_early")})
             if self.verifier is not None or self.scene_keys is not None:
                 # what was refused, in the file itself (read back by load().metadata["rejected"])
                 self.recorder.add_metadata("rejected", {

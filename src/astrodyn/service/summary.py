@@ -211,7 +211,11 @@ def print_summary(result: dict, rows: list[dict], scenario: Scenario, max_bodies
           + f"; logger: missing {log.get('missing', '?')}, malformed {log.get('malformed', '?')}, "
           f"rejected {sum((log.get('rejected') or {}).values())}")
     if log.get("t") is not None and log.get("reason"):
-        print(f"  sim t reached {log['t']:.6g} s of {scenario.duration:.6g} s; logger stopped: {log['reason']}")
+        early = {p: e for p, e in (log.get("stopped_early") or {}).items() if isinstance(e, dict)}
+        reached = min([log["t"], *(e["t"] for e in early.values() if isinstance(e.get("t"), (int, float)))])
+        print(f"  sim t reached {reached:.6g} s of {scenario.duration:.6g} s; logger stopped: {log['reason']}"
+              + "".join(f"; {p} stopped early at sim t {e.get('t', 0):.6g} s ({e.get('reason')})"
+                        for p, e in sorted(early.items())))
     print(f"  {'body':<14} {'kind':<9} {'model':<17} {'states':>7}  {'conserved quantity':<26} {'unit':<6} "
           f"{'max drift':>9}  relative to")
     shown = rows if len(rows) <= max_bodies else rows[: max_bodies - 5]
