@@ -37,8 +37,8 @@ from _recordings import assert_one_satellite_payloads, children_by_kind, one_sat
 pytestmark = pytest.mark.network
 
 ASTRODYN = [sys.executable, "-m", "astrodyn"]
-SCENE = one_satellite_scene("linkloss", "6000 s", "10 Hz")
-STEPS = 60_001
+SCENE = one_satellite_scene("linkloss", "3000 s", "10 Hz")
+STEPS = 30_001
 SHORT_TIMES = "{ transport: { link: { tx: { lease: 2000, queue: { congestion_control: { block: { " \
               "wait_before_close: 1000000 } } } } } } }"  # lease 2 s (ms); blocked-link wait 1 s (us)
 
@@ -85,7 +85,7 @@ def test_states_lost_on_a_broken_bus_link_are_published_again(tmp_path, stopped,
             os.kill(pid, signal.SIGCONT)
 
     rc, err = run_while([str(config), "--out", str(out), "--json", str(result), "--quiet", "--zenoh-config",
-                         str(zenoh_config)], partial, 500_000, stop_and_continue)
+                         str(zenoh_config)], partial, 300_000, stop_and_continue)
     assert rc == 0, err
     run = json.loads(result.read_text())
     assert run["logger"]["missing"] == 0, run["logger"]

@@ -17,8 +17,9 @@ from astrodyn.scenario import load
 ROOT = Path(__file__).resolve().parents[1]
 CONFIGS = sorted(p for p in (ROOT / "configs").glob("*.toml") if p.stem != "demo")
 #: run in `make test-all` only: constellation-1000 (minutes); explorer-1 (15 s) is also run
-#: by test_flexible_service.py::test_explorer_1_run_drifts_to_a_flat_spin_and_the_oblate_twin_stays_put
-SLOW_CONFIGS = ("constellation-1000", "explorer-1")
+#: by test_flexible_service.py::test_explorer_1_run_drifts_to_a_flat_spin_and_the_oblate_twin_stays_put,
+#: flexible-slew (12 s) as it is, with its controller, by test_plant_flexible.py's `slew` fixture
+SLOW_CONFIGS = ("constellation-1000", "explorer-1", "flexible-slew")
 
 pytestmark = pytest.mark.network
 
