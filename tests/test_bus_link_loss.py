@@ -137,3 +137,72 @@ def test_serve_publishes_again_the_states_a_broken_link_lost(tmp_path):
     assert summary["logger"]["missing"] == 0, summary["logger"]
     assert all("cut off from the logger" in r["why"] for r in summary["restarts"]), summary["restarts"]
     _assert_the_numeric_cores(_recorded_by_seq(out))  # (each seq once)
+
+
+def test_a_logger_report_counts_only_when_the_logger_signed_it(tmp_path, monkeypatch):
+    """The logger's report (`unheard`, `holes`) makes a supervisor kill and restart a
+    process, so a forged one would steer a run.  On a real bus, a supervisor's heartbeat
+    watch (with the run's verifier) and a running child: a report in the logger's name put
+    by anyone without the run's secret (20 a second for 2 s) kills nothing and is counted
+    as rejected; the same report signed with the logger's key does kill it (the check has
+    teeth)."""
+    from contextlib import ExitStack
+
+    from astrodyn import auth
+    from astrodyn.service import children
+    from astrodyn.service.children import Child
+
+    monkeypatch.setattr(children, "REACH_GRACE_S", 0.0)  # judge at once (not 10 s after the start)
+    secret, hub = auth.RunSecret.generate(), bus.loopback_endpoint(bus.free_port())
+    report = {"unheard": {"orbit": 30.0}, "holes": {"orbit": 1}}
+    child = Child("orbit", [sys.executable, "-c", "import time; time.sleep(60)"], tmp_path)
+    try:
+        with ExitStack() as stack:
+            supervisor = stack.enter_context(bus.open_session(listen=[hub]))
+            beats = stack.enter_context(bus.HeartbeatMonitor(supervisor, "forge", verifier=auth.Verifier(secret)))
+            other = stack.enter_context(bus.open_session(connect=hub))
+            orbit = stack.enter_context(bus.Heartbeat(other, "forge", "orbit", period_s=0.05,
+                                                      signer=auth.Signer(secret, "orbit")))
+            forger = stack.enter_context(bus.Heartbeat(other, "forge", "logger", period_s=0.05))
+            logger = stack.enter_context(bus.Heartbeat(other, "forge", "logger", period_s=0.05,
+                                                       signer=auth.Signer(secret, "logger")))
+            deadline = time.monotonic() + 2.0
+            while time.monotonic() < deadline:
+                orbit.beat(force=True)
+                forger.beat(force=True, **report)
+                time.sleep(0.05)
+                beats.poll()
+                assert not child.kill_if_lost_to_logger(beats)
+            assert child.poll() is None and beats.rejected >= 20 and "logger" not in beats.last
+            deadline, killed = time.monotonic() + 10.0, False
+            while not killed and time.monotonic() < deadline:
+                orbit.beat(force=True)
+                logger.beat(force=True, **report)
+                time.sleep(0.05)
+                beats.poll()
+                killed = child.kill_if_lost_to_logger(beats)
+            assert killed and "had not heard it for 30 s" in child.how(-9), child.lost_to_logger
+    finally:
+        child.stop(timeout=5)
+        child.close()
+
+
+@pytest.mark.parametrize("report, said", [
+    ({"unheard": {"orbit": 6.5}, "holes": {"orbit": 120}}, (6.5, 120)),
+    ({"unheard": {"attitude": 6.5}}, (None, None)),  # another process
+    ({"unheard": [6.5], "holes": "orbit"}, (None, None)),
+    ({"unheard": {"orbit": "6.5"}, "holes": {"orbit": 1.5}}, (None, None)),
+    ({"unheard": {"orbit": float("nan")}, "holes": {"orbit": -1}}, (None, None)),
+    ({"unheard": {"orbit": True}, "holes": {"orbit": True}}, (None, None)),
+    ({"unheard": {"orbit": float("inf")}, "holes": {"orbit": 2**53}}, (None, None)),  # past MAX_SEQ
+    ([], (None, None)),
+    (None, (None, None)),
+])
+def test_what_the_logger_report_says_of_a_process_is_read_defensively(report, said):
+    """A logger report of any shape gives a number and a step or nothing, never an exception
+    in the supervisor's loop (`children.logger_report_on`)."""
+    from types import SimpleNamespace
+
+    from astrodyn.service.children import logger_report_on
+
+    assert logger_report_on(SimpleNamespace(last={"logger": report}), "orbit") == said

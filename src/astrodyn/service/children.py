@@ -41,7 +41,7 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from astrodyn import auth, bus
+from astrodyn import auth, bus, messages
 
 if TYPE_CHECKING:
     from astrodyn.scenario import Scenario
@@ -348,6 +348,24 @@ HOLE_GRACE_S = 3.0
 FRESH_S = 2.0
 
 
+def logger_report_on(beats, process: str) -> tuple[float | None, int | None]:
+    """What the logger's last heartbeat on ``beats`` (its
+    :meth:`~astrodyn.service.logger.Logger.reach_report`) says of ``process``: the seconds
+    it has not heard it (``unheard``) and the first step missing in its state channels
+    (``holes``), each None when not said or not a finite number / an output step (0 ..
+    :data:`astrodyn.messages.MAX_SEQ`)."""
+    report = beats.last.get("logger")
+    report = report if isinstance(report, dict) else {}
+    unheard, holes = report.get("unheard"), report.get("holes")
+    silent = unheard.get(process) if isinstance(unheard, dict) else None
+    first = holes.get(process) if isinstance(holes, dict) else None
+    if isinstance(silent, bool) or not isinstance(silent, (int, float)) or not math.isfinite(silent):
+        silent = None
+    if isinstance(first, bool) or not isinstance(first, int) or not 0 <= first <= messages.MAX_SEQ:
+        first = None
+    return silent, first
+
+
 class Child:
     """One child process: ``argv`` started in its own session, stdout / stderr to
     ``log_dir/<name>.out|.err``; ``env`` adds variables to the supervisor's environment
@@ -435,13 +453,12 @@ class Child:
                  for p in ("logger", self.name)]
         if not all(fresh):
             return False
-        report = beats.last.get("logger", {})
+        silent, first = logger_report_on(beats, self.name)
         why = None
-        silent = (report.get("unheard") or {}).get(self.name)
-        if isinstance(silent, (int, float)):
+        if silent is not None:
             why = f"the logger had not heard it for {silent:g} s, so its states were lost (their bus link was lost)"
-        first = (report.get("holes") or {}).get(self.name) if holes else None
-        if isinstance(first, int) and not isinstance(first, bool):
+        first = first if holes else None
+        if first is not None:
             if self._hole is None or self._hole[0] != first:
                 self._hole = (first, now)
             elif now - self._hole[1] >= HOLE_GRACE_S and why is None:
@@ -465,13 +482,11 @@ class Child:
             return False
         if beats.listening_s - beats.heard.get("logger", -math.inf) > FRESH_S:
             return False
-        report = beats.last.get("logger", {})
-        silent = (report.get("unheard") or {}).get(self.name)
-        first = (report.get("holes") or {}).get(self.name)
-        if isinstance(silent, (int, float)):
+        silent, first = logger_report_on(beats, self.name)
+        if silent is not None:
             self.lost_to_logger = (f"the logger had not heard it for {silent:g} s when it ended, so its last states "
                                    f"and its end of run never reached the file (their bus link was lost)")
-        elif isinstance(first, int) and not isinstance(first, bool):
+        elif first is not None:
             self.lost_to_logger = f"its states from step {first} on never reached the logger (their bus link was lost)"
             self.refill_from = first
         return self.lost_to_logger is not None

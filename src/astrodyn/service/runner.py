@@ -418,7 +418,7 @@ class ScenarioRun:
         """A propagator died: start it again after the last step of its own that the
         logger's file holds; steps it publishes twice are recorded once (first copy)."""
         from astrodyn.recording import RecordingError, load as load_run
-        from astrodyn.service.resume import contiguous_steps, last_common_step, propagator_resume_args, state_topics
+        from astrodyn.service.resume import contiguous_steps, propagator_resume_args, state_topics
 
         scenario = self.scenario
         dead = self.children[kind]
@@ -430,11 +430,10 @@ class ScenarioRun:
         args, step = dict(self.extra_args.get(kind, {})), None
         try:
             run = load_run(partial_path(self.out, len(self.restarts_of("logger"))))  # up to its last flushed chunk
-            topics = list(state_topics(scenario, kind).values())
-            step = last_common_step(run, topics)
-            held = contiguous_steps(run, topics)  # steps 0 .. held-1 without a hole
-            if step is not None and held <= step:  # a hole (states lost on the bus): fill it
-                step = held - 1 if held else None
+            # the last step before the first hole of any of its channels: its last common step
+            # after a crash, and the refill of states lost on the bus (kill_if_lost_to_logger)
+            held = contiguous_steps(run, list(state_topics(scenario, kind).values()))
+            step = held - 1 if held else None
             if step is not None:
                 args = propagator_resume_args(run, scenario, kind, step, self.tmpd)
         except (RecordingError, OSError):
