@@ -73,6 +73,7 @@ from astrodyn.files import file_kind, regular_file_problem
 __all__ = [
     "SchemaServer",
     "LISTENING_GAP_S",
+    "ListeningClock",
     "DEFAULT_HOST",
     "process_signer",
     "signed_put",
@@ -863,6 +864,31 @@ class Heartbeat(_Declared):
 LISTENING_GAP_S = 1.0
 
 
+class ListeningClock:
+    """Time spent awake, s: monotonic time between reads (:meth:`tick`), each interval
+    capped at :data:`LISTENING_GAP_S`.  A process stopped for a while (Ctrl-Z, SIGSTOP, a
+    paused container or VM) finds its wall clock far ahead when it resumes, though nothing
+    it waits for could have reached it meanwhile (its peers were often stopped with it);
+    on this clock the stop counts as :data:`LISTENING_GAP_S` at most.  Deadlines that judge
+    another process (silence, an answer due) are measured on it; read it at least once a
+    :data:`LISTENING_GAP_S` while waiting, or the waits themselves are undercounted.
+
+    >>> clock = ListeningClock()
+    >>> waited = clock.tick()        # seconds awake since the clock was made
+    """
+
+    def __init__(self) -> None:
+        self.s = 0.0
+        self._at = time.monotonic()
+
+    def tick(self, now: float | None = None) -> float:
+        """Advance to ``now`` (``time.monotonic()`` by default) and return :attr:`s`."""
+        now = time.monotonic() if now is None else now
+        self.s += min(max(0.0, now - self._at), LISTENING_GAP_S)
+        self._at = now
+        return self.s
+
+
 class HeartbeatMonitor(_Declared):
     """Watches the heartbeats of a scenario; :meth:`stale` lists processes silent too long.
 
@@ -886,15 +912,13 @@ class HeartbeatMonitor(_Declared):
         self.last: dict[str, dict] = {}
         self.seen: dict[str, float] = {}
         self.heard: dict[str, float] = {}
-        self.listening_s = 0.0
-        self._polled = time.monotonic()
+        self.clock = ListeningClock()
         pattern = heartbeat_key(scenario, "x").rsplit("/", 1)[0] + "/*"
         self._entity = session.declare_subscriber(pattern, zenoh.handlers.FifoChannel(1024))
 
     def poll(self) -> None:
         now = time.monotonic()
-        self.listening_s += min(now - self._polled, LISTENING_GAP_S)
-        self._polled = now
+        self.clock.tick(now)
         while (sample := self._entity.try_recv()) is not None:
             key = str(sample.key_expr)
             process = key.rsplit("/", 1)[-1]
@@ -913,6 +937,11 @@ class HeartbeatMonitor(_Declared):
             self.last[process] = body if isinstance(body, dict) else {}
             self.seen[process] = now
             self.heard[process] = self.listening_s
+
+    @property
+    def listening_s(self) -> float:
+        """The owner's listening clock (:class:`ListeningClock`) at the last :meth:`poll`."""
+        return self.clock.s
 
     def stale(self, now: float | None = None) -> list[str]:
         """Processes whose last heartbeat is older than ``timeout_s`` (sorted)."""

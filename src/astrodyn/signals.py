@@ -14,6 +14,10 @@ per kind of program:
   :func:`deferred_interrupts` holds a signal back over steps that must not be cut (moving
   a set of finished files into place).
 
+A third kind of signal is Ctrl-Z (SIGTSTP): :func:`catch_job_control` makes a process take
+part in it (a supervisor stops its children first; a paced propagator counts the time
+stopped, :func:`suspended_s`, and keeps its real-time schedule after ``fg``).
+
 >>> stop = StopFlag()                    # doctest: +SKIP
 >>> while not stop.why: ...              # "SIGTERM" / "SIGINT" / "SIGHUP" once one arrived
 >>> stop.restore()                       # the previous handlers back (tests, in-process runs)
@@ -25,13 +29,15 @@ per kind of program:
 from __future__ import annotations
 
 import contextlib
+import os
 import signal
 import sys
 import threading
+import time
 from collections.abc import Callable, Iterator
 
 __all__ = ["STOP_SIGNALS", "STOP_SIGNAL_NAMES", "catch_stop_signals", "StopFlag", "Interrupted", "interruptible",
-           "deferred_interrupts"]
+           "deferred_interrupts", "catch_job_control", "suspended_s"]
 
 #: SIGHUP too: without a handler it ended ``serve`` at once, in the middle of a recording
 #: (a partial file, its work directory left), when the terminal that started it closed.
@@ -131,3 +137,55 @@ def deferred_interrupts() -> Iterator[None]:
         signum, _State.pending = _State.pending, None
         _State.raised = True
         raise Interrupted(signum)
+
+
+# --------------------------------------------------------------------------- Ctrl-Z
+
+
+class _Suspension:
+    total_s = 0.0  # time spent stopped by handled SIGTSTPs, s
+    since: float | None = None  # monotonic time of the current stop
+
+
+def suspended_s() -> float:
+    """Seconds this process has spent stopped by the SIGTSTPs it handled
+    (:func:`catch_job_control`): a real-time schedule moves on by as much
+    (:class:`astrodyn.service.propagator.Pacer`)."""
+    return _Suspension.total_s
+
+
+def catch_job_control(before_stop: Callable[[], None] | None = None,
+                      after_continue: Callable[[float], None] | None = None) -> Callable[[], None]:
+    """Take part in Ctrl-Z: on SIGTSTP call ``before_stop()``, then stop this process
+    (SIGSTOP: a supervisor's children run in process groups with no parent in their session,
+    where the kernel discards SIGTSTP's own stop); on the SIGCONT that continues it add the
+    time stopped to :func:`suspended_s` and call ``after_continue(seconds)``.  Returns a
+    function that puts the previous handlers back.  Main thread only (elsewhere nothing is
+    installed); a SIGTSTP this process was made to ignore stays ignored."""
+    if threading.current_thread() is not threading.main_thread() or \
+            signal.getsignal(signal.SIGTSTP) is signal.SIG_IGN:
+        return lambda: None
+
+    def on_stop(signum, frame) -> None:
+        if before_stop is not None:
+            before_stop()
+        _Suspension.since = time.monotonic()
+        os.kill(os.getpid(), signal.SIGSTOP)  # the SIGCONT handler runs once continued
+
+    def on_continue(signum, frame) -> None:
+        if _Suspension.since is None:  # not a stop of ours (a SIGSTOP from outside): nothing to count
+            return
+        seconds = time.monotonic() - _Suspension.since
+        _Suspension.total_s += seconds
+        _Suspension.since = None
+        if after_continue is not None:
+            after_continue(seconds)
+
+    previous = {signal.SIGCONT: signal.signal(signal.SIGCONT, on_continue),
+                signal.SIGTSTP: signal.signal(signal.SIGTSTP, on_stop)}
+
+    def restore() -> None:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+
+    return restore

@@ -37,18 +37,20 @@ import sys
 import tempfile
 import threading
 import time
+import weakref
 from collections.abc import Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 from astrodyn import auth, bus, messages
+from astrodyn.signals import catch_job_control, suspended_s
 
 if TYPE_CHECKING:
     from astrodyn.scenario import Scenario
 
 __all__ = ["Child", "config_snapshot", "zenoh_config_snapshot", "child_bus_arguments", "ensure_open_file_limit", "MIN_OPEN_FILES", "wait_ready", "children_of", "logger_command", "propagator_command", "plant_command", "controller_argv", "start_controller", "share_fate_with_supervisor",
            "stop_process", "stop_process_group", "work_directory", "SUPERVISOR_ENV", "ORPHAN_GRACE_S", "EXIT_ORPHANED", "LOGGED_WAIT_S",
-           "MODEL_ENDED_EXIT", "DISK_FULL_EXIT", "StartError"]
+           "MODEL_ENDED_EXIT", "DISK_FULL_EXIT", "StartError", "JobControl", "JOB_STOP_WAIT_S", "catches_signal", "is_stopped"]
 
 #: Environment variable that carries the supervisor's PID to each child.
 SUPERVISOR_ENV = "ASTRODYN_SUPERVISOR_PID"
@@ -383,6 +385,7 @@ class Child:
         self.proc = subprocess.Popen(argv, stdout=self._out, stderr=self._err, stdin=subprocess.DEVNULL,
                                      start_new_session=True, preexec_fn=_die_with_parent if foreign else None,
                                      env={**os.environ, **(env or {}), SUPERVISOR_ENV: str(os.getpid())})
+        _STARTED.add(self)
         self.started = time.monotonic()
         self.started_listening: float | None = None  # the supervisor's listening clock at the start
         self.stalled_s: float | None = None  # set when kill_if_stalled ended it
@@ -534,6 +537,97 @@ class Child:
     def last_words(self, n: int = 3) -> str:
         """The last ``n`` lines of stderr, for a failure message ("no output on stderr" if none)."""
         return self.stderr_tail(n) or "no output on stderr"
+
+
+#: Every :class:`Child` this process started (weakly held): :class:`JobControl` stops and
+#: continues those still running.
+_STARTED: weakref.WeakSet[Child] = weakref.WeakSet()
+
+
+def catches_signal(pid: int, sig: int) -> bool:
+    """Whether process ``pid`` has a handler for ``sig`` installed (Linux: ``SigCgt`` in
+    ``/proc/PID/status``); False when that cannot be read."""
+    try:
+        with open(f"/proc/{pid}/status") as f:
+            mask = next((int(line.split()[1], 16) for line in f if line.startswith("SigCgt:")), 0)
+    except (OSError, ValueError, IndexError):
+        return False
+    return bool(mask >> (int(sig) - 1) & 1)
+
+
+def is_stopped(pid: int) -> bool:
+    """Whether process ``pid`` is stopped (state ``T`` or ``t`` in ``/proc/PID/stat``);
+    False when that cannot be read (it has gone)."""
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            return f.read().rsplit(")", 1)[1].split()[0] in ("T", "t")
+    except (OSError, IndexError):
+        return False
+
+
+#: Seconds the supervisor waits, on Ctrl-Z, for its children to stop themselves (each at
+#: the end of the numeric call it is in) before it stops them with SIGSTOP.
+JOB_STOP_WAIT_S = 2.0
+
+
+class JobControl:
+    """Ctrl-Z pauses a whole run (``astrodyn run``, ``astrodyn serve``), not its supervisor alone.
+
+    Each child runs in its own session, so the terminal's SIGTSTP (Ctrl-Z) reaches only the
+    supervisor.  Made in the supervisor's main thread, this object handles it
+    (:func:`astrodyn.signals.catch_job_control`): it sends SIGTSTP to each child this
+    process started that still runs and handles it (the propagators and the plant count the
+    time stopped and keep their real-time schedule after it: ``Pacer``), SIGSTOP to the
+    process group of every other (the logger, a controller with the programs it started),
+    waits until all are stopped, then stops itself.  SIGCONT (``fg``, ``bg``, ``kill
+    -CONT``) continues them.  Deadlines that judge another process are measured on
+    listening clocks (:class:`astrodyn.bus.ListeningClock`), so the pause counts against
+    none of them; a pause longer than Zenoh's 10 s lease loses bus links, which the
+    supervisor heals as for any whole-run pause (docs/reliability.md).
+
+    :attr:`suspended_s` is the time spent stopped so far (wall-clock limits such as ``run
+    --timeout`` leave it out); :meth:`take_resumed` gives the length of the last pause once
+    after each continue (``serve`` moves its schedule on by as much).  A SIGSTOP, which
+    cannot be caught, stops the supervisor alone; its children go on.
+    """
+
+    def __init__(self) -> None:
+        self._stopped: list[Child] = []
+        self._resumed_s: float | None = None
+        self.restore = catch_job_control(self._stop_children, self._continue_children)
+
+    @property
+    def suspended_s(self) -> float:
+        return suspended_s()
+
+    def _stop_children(self) -> None:
+        self._stopped = [child for child in list(_STARTED) if child.poll() is None]
+        for child in self._stopped:  # unreaped, so the PID is still this child's
+            with contextlib.suppress(ProcessLookupError, PermissionError):
+                if not child.foreign and catches_signal(child.pid, signal.SIGTSTP):
+                    os.kill(child.pid, signal.SIGTSTP)
+                else:  # its group: PGID = PID (start_new_session)
+                    os.killpg(child.pid, signal.SIGSTOP)
+        deadline = time.monotonic() + JOB_STOP_WAIT_S
+        while time.monotonic() < deadline and not all(is_stopped(c.pid) or c.poll() is not None
+                                                       for c in self._stopped):
+            time.sleep(0.01)
+        for child in self._stopped:
+            if child.poll() is None and not is_stopped(child.pid):
+                with contextlib.suppress(ProcessLookupError, PermissionError):
+                    os.killpg(child.pid, signal.SIGSTOP)
+
+    def _continue_children(self, seconds: float) -> None:
+        stopped, self._stopped = self._stopped, []
+        for child in stopped:
+            with contextlib.suppress(ProcessLookupError, PermissionError):
+                os.killpg(child.pid, signal.SIGCONT)
+        self._resumed_s = (self._resumed_s or 0.0) + seconds
+
+    def take_resumed(self) -> float | None:
+        """Seconds the run was paused by Ctrl-Z since the last call; None if it was not."""
+        resumed, self._resumed_s = self._resumed_s, None
+        return resumed
 
 
 def wait_ready(session, scenario: str, child: Child, timeout_s: float, interrupted: dict) -> str | None:

@@ -210,10 +210,10 @@ class Logger:
         self.states = 0  # valid, non-duplicate state messages written
         self.malformed = 0
         self.malformed_examples: list[str] = []
-        self.heartbeats: dict[str, float] = {}  # process -> listening_s at its last heartbeat
+        self.heartbeats: dict[str, float] = {}  # process -> self.clock.s at its last heartbeat
         # the logger's listening clock (bus.LISTENING_GAP_S): time the logger was stopped
         # itself (SIGSTOP, a paused container) is not silence of the processes it watches
-        self.listening_s, self._listened_at = 0.0, time.monotonic()
+        self.clock = bus.ListeningClock()
         self._reach: dict[str, dict] = {}  # reach_report(), refreshed every REACH_REPORT_S
         self._next_reach_report = 0.0
         #: newest authenticated sample of each state key (per-body keys and @batch envelopes),
@@ -460,7 +460,7 @@ class Logger:
             self.latest[key] = payload
             self._record_batch(key, payload, now_ns, sender)
         elif rest is not None and rest.startswith("@heartbeat/"):
-            self.heartbeats[rest[len("@heartbeat/"):]] = self.listening_s
+            self.heartbeats[rest[len("@heartbeat/"):]] = self.clock.s
         else:
             if key.endswith(_LATEST_SUFFIXES):
                 self.latest[key] = payload
@@ -548,8 +548,8 @@ class Logger:
         paused longer than the 10 s lease): Zenoh drops what is published meanwhile and does
         not always link the two again.  The supervisor, which still hears the process,
         restarts it from the last step the logger holds (docs/reliability.md)."""
-        unheard = {p: round(self.listening_s - heard, 1) for p, heard in self.heartbeats.items()
-                   if p != self.name and p not in self.ended and self.listening_s - heard > self.stall_timeout_s}
+        unheard = {p: round(self.clock.s - heard, 1) for p, heard in self.heartbeats.items()
+                   if p != self.name and p not in self.ended and self.clock.s - heard > self.stall_timeout_s}
         holes: dict[str, int] = {}
         seq = self.recorder.seq
         if seq.totals()["missing"]:
@@ -636,7 +636,7 @@ class Logger:
                 self._own_event("error", f"process {process} died (liveliness token lost) before its end-of-run event; "
                                 f"{self.states} states recorded so far, sim t reached {self.max_t!r} s")
         for process, heard in self.heartbeats.items():
-            silent_s = self.listening_s - heard
+            silent_s = self.clock.s - heard
             if (silent_s > self.stall_timeout_s and process in alive.alive and process not in self.ended
                     and process not in self.stalled and process != self.name):
                 self.stalled.add(process)
@@ -727,8 +727,7 @@ class Logger:
                                None if attachment is None else attachment.to_bytes())
                         n += 1
                 now = time.monotonic()
-                self.listening_s += min(now - self._listened_at, bus.LISTENING_GAP_S)
-                self._listened_at = now
+                self.clock.tick(now)
                 if n:
                     self._last_sample_at = now
                 else:

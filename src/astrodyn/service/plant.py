@@ -82,7 +82,7 @@ from astrodyn.service.propagator import (
     pace_to,
     wait_until_logged,
 )
-from astrodyn.signals import catch_stop_signals
+from astrodyn.signals import catch_job_control, catch_stop_signals
 
 __all__ = ["main", "run_plant", "PlantLoop", "recorded_commands", "recorded_faults", "tick_payload", "encode_stamped",
            "ControllerTimeout", "PROCESS"]
@@ -354,6 +354,7 @@ class PlantLoop:
         self.intake = Intake(self.name, plant.bodies, None if secret is None else auth.Verifier(secret), token)
         self.stopping: dict = {"why": None}
         catch_stop_signals(lambda why: self.stopping.update(why=why))
+        catch_job_control()  # Ctrl-Z of a paced run: the pacer keeps its schedule after it
         self.pubs: dict[str, object] = {}
         # the step's messages go out together: per key for small scenes, one envelope on
         # @batch/plant above BATCH_THRESHOLD bodies (as the propagators do; docs/clients.md)
@@ -525,14 +526,15 @@ class PlantLoop:
     def exchange(self, k: int, t: float, samples, supervisor, heartbeat, batch) -> None:
         """A control step: publish the tick, then the outbox; in lockstep, wait for every
         controller's answer and the commands it announced (ControllerTimeout after
-        ``control.timeout``)."""
+        ``control.timeout``, on the plant's listening clock: a pause of the whole run, which
+        stops the controllers too, is not counted against them)."""
         j = k // self.control.every
         self.tick_seq = j  # before the put: an answer can only come after it
         key, payload = messages.tick_key(self.name), tick_payload(t, j, k, samples)
         self.put(key, payload, self.tick_signer)
         sent_at = put_at = time.monotonic()
         self.flush(batch)  # the step's states and samples (in the tick already), while the controller works
-        deadline = sent_at + self.control.timeout
+        waited = bus.ListeningClock()
         while True:
             self.drain(None)
             waiting = [c for c in self.expected
@@ -542,7 +544,7 @@ class PlantLoop:
                     self.round_trips.append(time.monotonic() - sent_at)
                 return
             now = time.monotonic()
-            left = deadline - now
+            left = self.control.timeout - waited.tick(now)
             if left <= 0:
                 raise ControllerTimeout(
                     f"controller {waiting[0]!r} did not answer control step {j} (t = {t:g} s) within "

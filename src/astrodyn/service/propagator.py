@@ -38,7 +38,7 @@ from astrodyn import bus, messages
 from astrodyn.jit import service_threads, set_threads
 from astrodyn.scenario import Scenario, plan as make_plan
 from astrodyn.service.children import LOGGED_WAIT_S, MODEL_ENDED_EXIT, share_fate_with_supervisor
-from astrodyn.signals import catch_stop_signals
+from astrodyn.signals import catch_job_control, catch_stop_signals, suspended_s
 from astrodyn.simulate import AttitudeEngine, ModelEnded, OrbitEngine
 
 __all__ = ["Pacer", "PropagatorOptions", "run_propagator", "command_key", "CommandVerifier", "obey_commands", "pace_to",
@@ -61,7 +61,10 @@ class Pacer:
     """Paces sim time against the wall clock at ``factor`` sim seconds per wall second.
 
     ``factor = inf``: never waits.  :meth:`set_factor` and :meth:`pause` / :meth:`resume`
-    re-anchor the clock, so a rate change applies from the current instant on.
+    re-anchor the clock, so a rate change applies from the current instant on.  Time this
+    process spent stopped by Ctrl-Z (:func:`astrodyn.signals.suspended_s`) moves the
+    schedule on by as much: after ``fg`` it goes on from where it was, not racing through the
+    sim time the pause would have covered.
     """
 
     def __init__(self, factor: float = math.inf, anchor: tuple[float, float] | None = None):
@@ -73,10 +76,12 @@ class Pacer:
         self.paused = False
         self._anchor_wall = time.monotonic() if anchor is None else float(anchor[0])
         self._anchor_sim: float | None = None if anchor is None else float(anchor[1])
+        self._suspended_at_anchor = suspended_s()
 
     def _reanchor(self, t_sim: float | None) -> None:
         self._anchor_wall = time.monotonic()
         self._anchor_sim = t_sim
+        self._suspended_at_anchor = suspended_s()
 
     def set_factor(self, factor: float, t_sim: float | None) -> None:
         if not (factor > 0):
@@ -103,7 +108,7 @@ class Pacer:
             return 0.0
         if self._anchor_sim is None:
             self._reanchor(t_sim)
-        due = self._anchor_wall + (t_sim - self._anchor_sim) / self.factor
+        due = self._anchor_wall + (suspended_s() - self._suspended_at_anchor) + (t_sim - self._anchor_sim) / self.factor
         return max(0.0, due - time.monotonic())
 
 
@@ -179,6 +184,7 @@ def run_propagator(scenario: Scenario, session, opts: PropagatorOptions, log=pri
     stopping = {"why": None}
     conservation = _Conservation(opts.kind, scenario, engine)
     catch_stop_signals(lambda why: stopping.update(why=why))
+    catch_job_control()  # Ctrl-Z of a paced run: the pacer keeps its schedule after it
 
     published = 0
     t_reached = start / rate

@@ -53,6 +53,7 @@ from astrodyn.service.children import (
     MODEL_ENDED_EXIT,
     STALL_S,
     Child,
+    JobControl,
     StartError,
     add_stall_argument,
     child_bus_arguments,
@@ -194,6 +195,7 @@ class ScenarioRun:
         ensure_open_file_limit()
         started = time.monotonic()
         restore_signals = catch_stop_signals(lambda why: self.interrupted.update(signal=why))
+        self.job = JobControl()  # Ctrl-Z pauses every process of the run
         secret = auth.RunSecret.generate() if self.authenticate else None
         with work_directory(self.out, "run") as tmp, \
                 bus.open_session(listen=[self.hub], config_file=self.bus_config_copy(Path(tmp))) as session, \
@@ -232,6 +234,7 @@ class ScenarioRun:
                     standby.stop()
                     standby.close()
                 restore_signals()
+                self.job.restore()
         result["interrupted"] = self.interrupted["signal"]
         result["wall_s"] = time.monotonic() - started
         log = (result["processes"].get("logger") or {}).get("summary") or {}
@@ -356,7 +359,7 @@ class ScenarioRun:
         self.say("  started " + ", ".join(f"{n} (pid {c.pid})" for n, c in self.children.items()))
         return failure or _watch(scenario, self.plan, self.children, beats, alive, self.progress, self.timeout_s,
                                  self.interrupted, on_death=self.restart, controllers=self.controllers,
-                                 stall_s=self.stall_s)
+                                 stall_s=self.stall_s, job=self.job)
 
     # ------------------------------------------------------------------ restarts
 
@@ -528,7 +531,7 @@ END_REACH_S = 8.0
 
 def _watch(scenario: Scenario, p, children: dict, beats, alive, progress: bool, timeout_s: float | None,
            interrupted: dict | None = None, on_death=None, controllers: dict | None = None,
-           stall_s: float | None = None) -> str | None:
+           stall_s: float | None = None, job: JobControl | None = None) -> str | None:
     """Wait for the propagators to finish; return a failure description or None.
 
     ``on_death(name, rc)``: called when a child dies before the end; it restarts it (and
@@ -536,7 +539,9 @@ def _watch(scenario: Scenario, p, children: dict, beats, alive, progress: bool, 
     and returns None, or a failure description when it cannot.  ``controllers``: the closed
     loop's controller processes; in lockstep one that exits before the plant is a failure
     named after it (it would never answer again).  ``stall_s``: a child silent that long
-    is killed first, so that it takes the same path (:meth:`Child.kill_if_stalled`)."""
+    is killed first, so that it takes the same path (:meth:`Child.kill_if_stalled`).
+    ``job``: the run's :class:`JobControl`; time spent suspended (Ctrl-Z) is not counted
+    against ``timeout_s``."""
     lockstep = scenario.control is not None and scenario.control.mode == "lockstep"
     propagators = [k for k in children if k != "logger"]
     duration = (scenario.n_steps - 1) / scenario.rate if scenario.n_steps else 0.0  # last output instant, no array
@@ -601,8 +606,9 @@ def _watch(scenario: Scenario, p, children: dict, beats, alive, progress: bool, 
                 deadline = time.monotonic() + 3.0  # the plant may be ending with its own reason (a timeout)
                 while time.monotonic() < deadline and children["plant"].poll() is None:
                     time.sleep(0.05)
-                if children["plant"].poll() is not None:
-                    break  # look again: the plant's exit says what happened
+                beats.poll()
+                if children["plant"].poll() is not None or beats.last.get("plant", {}).get("done"):
+                    break  # look again: the plant's exit says what happened (it may first wait for the logger)
                 how = ch.how(rc)
                 t = beats.last.get("plant", {}).get("t")
                 return (f"controller {cname} (pid {ch.pid}) {how} before the end of the run"
@@ -614,7 +620,7 @@ def _watch(scenario: Scenario, p, children: dict, beats, alive, progress: bool, 
             ts = [t for k in propagators if (t := beats.last.get(k, {}).get("t")) is not None]  # those heard from
             ts = ts or [beats.last.get("logger", {}).get("t", 0.0)]  # (a propagator that has ended beats no more)
             return f"interrupted by {interrupted['signal']} at sim t {min(ts):.6g} s of {duration:.6g} s"
-        if timeout_s is not None and now - t0 > timeout_s:
+        if timeout_s is not None and now - t0 - (job.suspended_s if job is not None else 0.0) > timeout_s:
             return f"timeout: the run took longer than {timeout_s} s"
         time.sleep(0.05)
 

@@ -65,6 +65,7 @@ from astrodyn.service.children import (
     MODEL_ENDED_EXIT,
     STALL_S,
     Child,
+    JobControl,
     StartError,
     add_stall_argument,
     child_bus_arguments,
@@ -206,6 +207,14 @@ class Supervisor:
         if any(hb.get("rate", rate) != rate for hb in beats):
             self.pause_reasserted = now
             self.command("rate", factor=self.rate)
+
+    def resume_schedule(self, paused_s: float) -> None:
+        """After a Ctrl-Z of ``paused_s`` seconds (:class:`~astrodyn.service.children.JobControl`):
+        the schedule moves on by as much, as the propagators' own do (``Pacer``), so a
+        process restarted later keeps pace with them instead of racing through the sim time
+        the pause would have covered."""
+        if self.schedule is not None:
+            self.schedule = (self.schedule[0] + paused_s, self.schedule[1])
 
     def status(self) -> dict:
         self.beats.poll()
@@ -733,6 +742,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"astrodyn serve: warning: {warning}", file=sys.stderr)
     hub = bus.loopback_endpoint(args.port or bus.free_port())
     stop_signal = StopFlag()
+    job = JobControl()  # Ctrl-Z pauses every process of the service
     try:
         ensure_open_file_limit()
         with work_directory(out, "serve") as tmp, \
@@ -763,9 +773,11 @@ def main(argv: list[str] | None = None) -> int:
                             if req.handled_by(sup.handle):
                                 stop_requests.append(req)
                                 stopping = True
+                        if (paused_s := job.take_resumed()) is not None:
+                            sup.resume_schedule(paused_s)
                         sup.check_children()
                         if stop_signal.why or stopping or sup.state == "failed" or \
-                                (t_end is not None and time.monotonic() > t_end):
+                                (t_end is not None and time.monotonic() - job.suspended_s > t_end):
                             break
                         if all(sup.children[k].poll() is not None for k in sup.propagators):
                             break
