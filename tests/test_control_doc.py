@@ -48,3 +48,29 @@ def test_the_documented_controller_damps_the_rates(tmp_path):
     # monotone: each step's rise bounded by the noise's work, |K sigma w| dt ~ 5e-5 * 0.05 * 0.1 J
     assert np.all(np.diff(energy) <= 1e-6), np.max(np.diff(energy))
     assert energy[-1] < 1e-3 * energy[0]
+
+
+def test_the_documented_controller_started_by_hand_gives_up_without_a_run(tmp_path):
+    """Started by hand (the control token) at an endpoint where no run is (a wrong port, a
+    run that has ended), it says so in one line and exits 1 after ASTRODYN_FIRST_TICK_TIMEOUT,
+    instead of waiting for ever."""
+    import os
+    import time
+
+    from astrodyn import bus
+
+    text = DOC.read_text()
+    script = tmp_path / "ctl.py"
+    script.write_text(re.search(r"## A complete controller.*?```python\n(.*?)```", text, re.S).group(1))
+    token = tmp_path / "token"
+    token.write_text("0" * 64)
+    endpoint = bus.loopback_endpoint(bus.free_port())  # nothing listens there
+    env = {**os.environ, "ASTRODYN_CONTROL_TOKEN_FILE": str(token), "ASTRODYN_CONNECT": endpoint,
+           "ASTRODYN_SCENARIO": "detumble", "ASTRODYN_CONTROLLER": "pd", "ASTRODYN_FIRST_TICK_TIMEOUT": "2"}
+    env.pop("ASTRODYN_RUN_SECRET_FILE", None)
+    started = time.monotonic()
+    proc = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=60, env=env)
+    assert proc.returncode == 1, proc.stderr
+    assert f"no tick from astrodyn/detumble at {endpoint} within 2 s" in proc.stderr, proc.stderr
+    assert len(proc.stderr.strip().splitlines()) == 1, proc.stderr  # one line, no traceback
+    assert time.monotonic() - started < 30

@@ -241,7 +241,8 @@ def _body_report(run, name: str, body, stem: Path, seq: str, central: dict, iner
             lon, lat = mt.ground_track(tr.r, tr.log_time)
             figs.append(("groundtrack", fg.ground_track(name, lon, lat, Path(f"{stem}-groundtrack.png"))))
         figs.append(("elements", fg.elements(name, tr.t, om["elements"], Path(f"{stem}-elements.png"))))
-        figs.append(("orbit-drift", fg.orbit_drift(name, tr.t, om["energy_drift"], om["h_drift"], Path(f"{stem}-orbit-drift.png"))))
+        figs.append(("orbit-drift", fg.orbit_drift(name, tr.t, om["energy_drift"], om["h_drift"], Path(f"{stem}-orbit-drift.png"),
+                                                     between_burns=arc_starts is not None)))
     if body.crosscheck is not None and len(body.crosscheck) > 0:
         cc = body.crosscheck
         numbers["crosscheck"] = {"dr_max_m": float(np.max(cc.dr_norm)), "dv_max_m_s": float(np.max(cc.dv_norm)),

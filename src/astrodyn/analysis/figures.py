@@ -137,10 +137,16 @@ def elements(name: str, t: np.ndarray, el, path: Path) -> Path:
     return _stacked(t, series, labels, f"{name}: osculating elements", path, dots=(5,))
 
 
-def orbit_drift(name: str, t: np.ndarray, energy_drift, h_drift, path: Path) -> Path:
-    """Relative energy and angular-momentum drift (dimensionless)."""
-    return _stacked(t, [energy_drift, h_drift], ["|E - E0| / |E0| (-)", "|h - h0| / |h0| (-)"],
-                    f"{name}: specific energy and angular momentum drift (log scale)", path, log=True)
+def orbit_drift(name: str, t: np.ndarray, energy_drift, h_drift, path: Path, between_burns: bool = False) -> Path:
+    """Relative energy and angular-momentum drift (dimensionless); ``between_burns``: the
+    drifts were taken over each coast arc from its own first state (E0, h0), as
+    :func:`astrodyn.analysis.metrics.orbit_metrics` does for an orbit that burns moved, and
+    the labels say so."""
+    arcs = "; {} at each coast arc's start" if between_burns else ""
+    return _stacked(t, [energy_drift, h_drift],
+                    [f"|E - E0| / |E0| (-{arcs.format('E0')})", f"|h - h0| / |h0| (-{arcs.format('h0')})"],
+                    f"{name}: specific energy and angular momentum drift{' between burns' if between_burns else ''} "
+                    f"(log scale)", path, log=True)
 
 
 def crosscheck(name: str, t: np.ndarray, dr_norm, dv_norm, path: Path) -> Path:
