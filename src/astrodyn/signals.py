@@ -10,7 +10,8 @@ per kind of program:
   through: :func:`interruptible` turns the signal into :class:`Interrupted` (a
   :class:`KeyboardInterrupt`), so their ``finally`` / ``except BaseException`` cleanups run
   (Python's default for SIGTERM and SIGHUP is to die at once, which left temporary files
-  behind); the command ends with one line and exit 128 + the signal (130, 143, 129).
+  behind); the command ends with one line and exit 128 + the signal (130, 143, 129).  A
+  :class:`MemoryError` (a memory limit) likewise ends it with one line and exit 1.
   :func:`deferred_interrupts` holds a signal back over steps that must not be cut (moving
   a set of finished files into place).
 
@@ -119,6 +120,16 @@ def interruptible(prog: str, run: Callable[[], int]) -> int:
         print(f"{prog}: interrupted by {signal.Signals(signum).name}; no output was left half-written",
               file=sys.stderr)
         return 128 + signum
+    except MemoryError as exc:  # a memory limit (ulimit -v, a container's): one line, not a traceback
+        detail = " ".join(str(exc).split())
+        print(f"{prog}: out of memory{f' ({detail})' if detail else ''}; no output was left half-written",
+              file=sys.stderr)
+        # the command's cleanups ran as the error unwound; what an allocation failure inside a C++
+        # extension left behind may not be freed safely (matplotlib's Agg renderer: SIGSEGV at
+        # exit under a 700 MB limit), so the process ends here, without the interpreter's teardown
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(1)
     finally:
         for sig, handler in previous.items():
             signal.signal(sig, handler)
