@@ -204,6 +204,37 @@ def test_replay_paces_at_the_requested_rate(hub, spawn, recording):
     col.close()
 
 
+def test_ctrl_z_pauses_a_replay_and_fg_goes_on_at_its_rate(hub, spawn, recording):
+    """Ctrl-Z (SIGTSTP) stops the replay, nothing is published while it is stopped, and after
+    fg (SIGCONT) it goes on at x10 from where it was: before, it raced through the log time
+    the pause would have covered (20 s of it in a burst after a 2 s pause)."""
+    import os
+    import signal
+
+    session, endpoint = hub
+    path, _, _ = recording
+    col = Collector(session, "rp")
+    proc = spawn(path, "--rate", "10", "--connect", endpoint, "--wait", "10", "--quiet")
+    _wait(lambda: col.drain() or col.got, 30, "first replayed message")
+    time.sleep(1.0)
+    os.kill(proc.pid, signal.SIGTSTP)
+    time.sleep(0.3)  # in-flight puts arrive
+    col.drain()
+    n_stopped = len(col.got)
+    time.sleep(2.0)
+    col.drain()
+    assert len(col.got) == n_stopped, "messages arrived while stopped"
+    resumed = time.monotonic()
+    os.kill(proc.pid, signal.SIGCONT)
+    col.until_exit(proc, 60)
+    assert proc.returncode == 0 and len(col.got) == 303
+    after = [(a, json.loads(p)["t"]) for a, _, p in col.got[n_stopped:]]
+    first = min(t for _, t in after)
+    covered = max(t for a, t in after if a < resumed + 1.0) - first
+    assert covered < 15.0, covered  # ~10 s of log time in the first second at x10
+    col.close()
+
+
 def test_replay_pause_resume_rate_seek_stop_over_zenoh(hub, spawn, recording):
     session, endpoint = hub
     path, _, _ = recording

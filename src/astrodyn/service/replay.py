@@ -61,10 +61,10 @@ from astrodyn import auth, bus, messages
 from astrodyn.progress import Progress
 from astrodyn.recording.stream import McapStream, RawMessage, topic_matcher
 from astrodyn.recording.writer import RecordingError
-from astrodyn.service.children import Child, StartError, zenoh_config_snapshot
+from astrodyn.service.children import Child, JobControl, StartError, zenoh_config_snapshot
 from astrodyn.service.supervision import RestartBudget
 from astrodyn.service.viewer import add_foxglove_argument, viewer_command
-from astrodyn.signals import StopFlag
+from astrodyn.signals import StopFlag, suspended_s
 
 __all__ = ["Replayer", "main", "build_parser", "open_recording", "start_viewer", "play", "LiveView", "REPLAY_VERBS",
            "check_control_scenario"]
@@ -165,6 +165,13 @@ class Replayer:
     def _anchor(self, ns: int) -> None:
         self._anchor_ns = ns
         self._anchor_wall = time.monotonic()
+        self._suspended_at_anchor = suspended_s()
+
+    def _playing_s(self, now: float) -> float:
+        """Wall seconds of playback since the anchor at monotonic time ``now``: time the
+        replay spent stopped by Ctrl-Z is left out, so after ``fg`` it goes on from where it
+        was instead of racing through what the pause would have covered."""
+        return now - self._anchor_wall - (suspended_s() - self._suspended_at_anchor)
 
     def virtual_ns(self, now: float | None = None) -> float:
         """The replay clock: log time (ns) that corresponds to the wall time ``now``
@@ -174,7 +181,7 @@ class Replayer:
         if math.isinf(self.rate):
             return math.inf
         now = time.monotonic() if now is None else now
-        return self._anchor_ns + (now - self._anchor_wall) * self.rate * 1e9
+        return self._anchor_ns + self._playing_s(now) * self.rate * 1e9
 
     def wait_time(self) -> float:
         """Seconds until the next message is due (0 when due, inf when paused or done)."""
@@ -182,7 +189,7 @@ class Replayer:
             return math.inf
         if math.isinf(self.rate):
             return 0.0
-        return max(0.0, (self._next.log_time - self._anchor_ns) / (self.rate * 1e9) - (time.monotonic() - self._anchor_wall))
+        return max(0.0, (self._next.log_time - self._anchor_ns) / (self.rate * 1e9) - self._playing_s(time.monotonic()))
 
     # ------------------------------------------------------------------ publishing
 
@@ -451,6 +458,7 @@ def main(argv: list[str] | None = None) -> int:
     if listen is None and args.mode != "client":
         listen = [bus.loopback_endpoint(args.port or None)]  # 0: a free one, named in the hello line
     stop_signal = StopFlag()
+    JobControl()  # Ctrl-Z stops the replay with its viewer; the pacing leaves the pause out
     printer = Progress(enabled=not args.quiet)
     with stream, tempfile.TemporaryDirectory(prefix="astrodyn-replay-") as work:  # private: the token, the copies
         token_dir = Path(work)
