@@ -931,7 +931,7 @@ class HeartbeatMonitor(_Declared):
                     self.rejected += 1
                     continue
             try:
-                body = json.loads(payload)
+                body = messages.parse_json(payload)
             except ValueError:
                 continue
             self.last[process] = body if isinstance(body, dict) else {}
@@ -1001,7 +1001,7 @@ def _parse_query_args(query: Any) -> dict:
     payload = query.payload
     if payload is not None and len(payload):
         try:
-            body = json.loads(payload.to_bytes())
+            body = messages.parse_json(payload.to_bytes(), finite=True)
         except ValueError as exc:
             raise ValueError(f"payload: expected a JSON object, got invalid JSON ({exc})") from None
         if not isinstance(body, dict):
@@ -1153,9 +1153,9 @@ def query_json(
         sample = reply.ok
         raw = sample.payload.to_bytes() if sample is not None else reply.err.payload.to_bytes()
         try:
-            body = json.loads(raw)
+            body = messages.parse_json(raw)
         except ValueError:
-            body = {"error": raw.decode("utf-8", "replace")}
+            body = {"error": raw.decode("utf-8", "replace")[:200]}
         if sample is None and not (isinstance(body, dict) and "error" in body):
             body = {"error": body}
         replies.append(body if isinstance(body, dict) else {"value": body})

@@ -1292,7 +1292,9 @@ def _main(argv: list[str] | None) -> int:
              "cases_per_s": len(rows) / wall if wall > 0 else None, "interrupted": bool(interrupted)}
     if rerun and (out / "sweep.json").exists():  # keep the full run's record, note the rerun
         try:
-            previous = json.loads((out / "sweep.json").read_text(encoding="utf-8"))
+            from astrodyn.messages import parse_json
+
+            previous = parse_json((out / "sweep.json").read_text(encoding="utf-8"))
         except ValueError:
             previous = {}
         keep = ("wall_s", "workers", "scheduler", "versions", "cases_per_s", "interrupted")

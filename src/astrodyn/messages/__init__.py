@@ -119,6 +119,7 @@ from astrodyn.messages.codec import (
     event_message,
     is_valid,
     orbit_message,
+    parse_json,
     status_message,
     validate,
 )
@@ -251,6 +252,7 @@ __all__ = [
     "check_state",
     "FAST_CHECKS",
     "validate",
+    "parse_json",
     "is_valid",
     "orbit_message",
     "attitude_message",

@@ -258,6 +258,34 @@ def _reject_constant(name: str) -> Any:
     raise MessageError(f"payload: expected JSON numbers, got {name}")
 
 
+def _finite_float(text: str) -> float:
+    x = float(text)
+    if not math.isfinite(x):
+        raise ValueError(f"expected finite numbers, got {text[:40]} (beyond float64)")
+    return x
+
+
+def _no_constant(name: str) -> Any:
+    raise ValueError(f"expected finite numbers, got {name} (not JSON)")
+
+
+def parse_json(data: bytes | bytearray | str, finite: bool = False) -> Any:
+    """``json.loads`` of text from outside (a bus payload, a child's output line, a file),
+    with one error for every way it can fail: ``ValueError`` also for JSON nested past the
+    parser's depth (``"[" * 100000`` raised RecursionError, which the callers' ``except
+    ValueError`` let through: one such query ended the logger or ``serve``) and for bad UTF-8.
+    ``finite``: numbers that are not finite floats (``NaN``, ``Infinity``, which JSON does
+    not have, and ``1e999``, which overflows) are a ``ValueError`` too."""
+    try:
+        if finite:
+            return json.loads(data, parse_float=_finite_float, parse_constant=_no_constant)
+        return json.loads(data)
+    except RecursionError:
+        raise ValueError("expected JSON, got values nested past the parser's depth") from None
+    except TypeError as exc:  # not text at all
+        raise ValueError(f"expected JSON text, got {type(data).__name__}") from exc
+
+
 def decode(data: bytes | bytearray | memoryview, key_or_kind: str) -> dict:
     """Parse a payload and validate it against its message type; return it as a dict (fields
     in definition order; optional fields of a Status only when present).

@@ -26,7 +26,6 @@ from __future__ import annotations
 import argparse
 import contextlib
 import ctypes
-import json
 import math
 import os
 import shlex
@@ -521,7 +520,7 @@ class Child:
             return None
         for line in reversed(lines):
             try:
-                obj = json.loads(line)
+                obj = messages.parse_json(line)  # a controller's output is anything
             except ValueError:
                 continue
             if isinstance(obj, dict):
