@@ -94,6 +94,32 @@ def test_states_lost_on_a_broken_bus_link_are_published_again(tmp_path, stopped,
     assert _assert_the_numeric_cores(_recorded_by_seq(out)) == (STEPS, STEPS)
 
 
+def test_a_propagator_silent_for_a_while_is_not_taken_for_cut_off_when_it_beats_again(tmp_path):
+    """A propagator silent longer than the logger's 5 s (its kernels compiling on a cold
+    numba cache of a loaded machine took 30-50 s; here a SIGSTOP of 7 s) beats again: the
+    supervisor heard it again before the logger's next report, which still said "not heard
+    for 7 s", and killed it as cut off from the logger; restarted, it published its states
+    again (fresh-clone `make test` on a loaded machine: 1,200 duplicates in
+    test_batched_propagator_encoding).  The logger's word now counts only after the
+    supervisor has heard the child for REACH_STREAK_S without a break."""
+    config = tmp_path / "linkloss.toml"
+    config.write_text(SCENE)
+    out, result, partial = tmp_path / "linkloss.mcap", tmp_path / "result.json", tmp_path / "linkloss.partial.mcap"
+
+    def silence_orbit(supervisor: int) -> None:
+        orbit = next(p for p, kind in children_by_kind(supervisor).items() if kind == "orbit")
+        os.kill(orbit, signal.SIGSTOP)
+        time.sleep(7.0)
+        os.kill(orbit, signal.SIGCONT)
+
+    rc, err = run_while([str(config), "--out", str(out), "--json", str(result), "--quiet"], partial, 300_000,
+                        silence_orbit)
+    assert rc == 0, err
+    run = json.loads(result.read_text())
+    assert run["restarts"] == [], run["restarts"]
+    assert run["logger"]["missing"] == 0 and run["logger"]["duplicates"] == 0, run["logger"]
+
+
 def test_serve_publishes_again_the_states_a_broken_link_lost(tmp_path):
     """`serve` (real time x100) with its logger stopped 3 s: the gap it leaves in the part
     being written is refilled (the propagator restarted just before the first missing

@@ -347,6 +347,13 @@ REACH_GRACE_S = 10.0
 HOLE_GRACE_S = 3.0
 #: Seconds within which the supervisor must have heard both the logger and the child.
 FRESH_S = 2.0
+#: Seconds the supervisor must have heard a child without a break (no silence over
+#: :data:`FRESH_S`) before the logger's word that it does not hear the child counts.  A child
+#: that was silent for a while (its numeric kernels compiling on a cold cache of a loaded
+#: machine: 30-50 s; a stop) and beats again is heard by the logger too within a report or
+#: two (every 0.5 s), while its last report still speaks of the silence: without the wait the
+#: child was killed and restarted for it, and its states recorded twice.
+REACH_STREAK_S = 3.0
 
 
 def logger_report_on(beats, process: str) -> tuple[float | None, int | None]:
@@ -390,6 +397,7 @@ class Child:
         self.stalled_s: float | None = None  # set when kill_if_stalled ended it
         self.lost_to_logger: str | None = None  # why kill_if_lost_to_logger ended it
         self._hole: tuple[int, float] | None = None  # (first missing step, listening_s when first reported)
+        self._heard_since: float | None = None  # listening_s since which the supervisor hears it without a break
         self.refill_from: int | None = None  # the first step the logger misses, when that is why it was killed
 
     def how(self, rc: int) -> str:
@@ -444,16 +452,21 @@ class Child:
         not always link them again, so the states published meanwhile are gone.  Killed, it
         takes the crash path: restarted from the last step the logger holds without a hole,
         which it publishes again.  Judged only on fresh news from both (heard within
-        :data:`FRESH_S` of the supervisor's listening clock) and after :data:`REACH_GRACE_S`
+        :data:`FRESH_S` of the supervisor's listening clock), once the supervisor has heard
+        this child without a break for :data:`REACH_STREAK_S`, and after :data:`REACH_GRACE_S`
         of this child's life (the logger may still speak of its predecessor)."""
         if self.lost_to_logger is not None or self.stalled_s is not None or self.proc.poll() is not None:
-            return False
-        if self.listened_since_start(beats, time.monotonic()) < REACH_GRACE_S:
             return False
         now = beats.listening_s
         fresh = [now - beats.heard.get(p, -math.inf) <= FRESH_S and beats.seen.get(p, 0.0) > self.started
                  for p in ("logger", self.name)]
-        if not all(fresh):
+        if not fresh[1]:
+            self._heard_since = None  # silent: the logger's word on it waits for a streak of beats again
+        elif self._heard_since is None:
+            self._heard_since = now
+        if self.listened_since_start(beats, time.monotonic()) < REACH_GRACE_S:
+            return False
+        if not all(fresh) or now - self._heard_since < REACH_STREAK_S:
             return False
         silent, first = logger_report_on(beats, self.name)
         why = None
