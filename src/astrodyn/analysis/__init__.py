@@ -46,7 +46,7 @@ from astrodyn.analysis.pointing import POINTING_FIGURES, pointing_section
 from astrodyn.files import output_path_problem, path_argument
 from astrodyn.progress import Progress
 from astrodyn.recording import RecordingError, load
-from astrodyn.recording.outputs import staging_directory
+from astrodyn.recording.outputs import staging_directory, warn_incomplete_input
 from astrodyn.signals import deferred_interrupts, interruptible
 
 __all__ = ["analyze", "main", "FIGURES", "orbit_arc_starts", "SEQ_NOT_COUNTED", "sequence_issues", "sequence_note", "check_report_options"]
@@ -591,7 +591,7 @@ def _main(argv: list[str] | None) -> int:
         return 1
     out = Path(args.out) if args.out else Path(args.file).with_name(Path(args.file).stem + "-report")
     if not report["complete"]:
-        print(f"astrodyn analyze: warning: {args.file}: {report['file_report']}; analysed what is complete", file=sys.stderr)
+        warn_incomplete_input("analyze", args.file, report["file_report"], "analysed what is complete")
     if report["sequence"]:
         print(f"astrodyn analyze: warning: {args.file}: {sequence_note(report['sequence'])}", file=sys.stderr)
     print(out / "report.html")

@@ -98,7 +98,7 @@ from astrodyn.recording.foxglove_scene import (
     orbit_line_entity,
     stamp,
 )
-from astrodyn.recording.outputs import staging_directory
+from astrodyn.recording.outputs import staging_directory, warn_incomplete_input
 from astrodyn.recording.reader import Run, Track, load
 from astrodyn.recording.writer import McapRecorder, RecordingError
 from astrodyn.rotation import quat_to_scalar_last
@@ -698,8 +698,8 @@ def export(path: str | os.PathLike, fmt: str, out: str | os.PathLike) -> list[Pa
         raise ExportError(f"format: expected one of {', '.join(FORMATS)}, got {fmt!r}")
     run = load(path)
     if not run.complete:
-        print(f"astrodyn export: warning: {run.path}: {run.truncation or 'invalid messages skipped'}; "
-              f"exporting the {run.messages} complete, valid messages", file=sys.stderr)
+        warn_incomplete_input("export", run.path, run.truncation or "invalid messages skipped",
+                              f"exporting the {run.messages} complete, valid messages")
     out = Path(out)
     # every file is written in a work directory inside --out and moved into place only when
     # all of them are complete: a failed or interrupted export leaves the files already in

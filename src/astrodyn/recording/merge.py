@@ -18,6 +18,11 @@ Inputs of different scenarios are refused (their ``scenario`` records disagree).
 
 Writing uses the ``mcap`` package's own :class:`mcap.writer.Writer` (zstd chunks, full
 summary): merging is not a hot path, and a writer this project did not write checks ours.
+The file is written as ``.NAME.<pid>-<random>.mcap.merging`` beside ``--out`` and takes
+that name only if it is still free once finished (:mod:`astrodyn.recording.outputs`): two
+merges (or a merge and a recover) into one ``--out`` at once leave one complete file there,
+and the later one ends with exit 1 saying its result was dropped.  An input its writer did
+not finish (a live or killed logger's file) is merged up to where it ends, with a warning.
 """
 
 from __future__ import annotations
@@ -32,6 +37,7 @@ from mcap.writer import CompressionType, Writer
 
 from astrodyn.files import output_path_problem, path_argument
 from astrodyn.messages import STATE_KINDS
+from astrodyn.recording.outputs import OutputTaken, warn_incomplete_input, write_atomically
 from astrodyn.recording.stream import open_stream
 from astrodyn.recording.writer import RecordingError
 from astrodyn.signals import interruptible
@@ -76,7 +82,9 @@ def taken_output_problem(inputs: list[str | os.PathLike], out: str | os.PathLike
 def merge(inputs: list[str | os.PathLike], out: str | os.PathLike, *, chunk_size: int = 1 << 20) -> MergeReport:
     """Merge the recordings ``inputs`` (paths) into ``out`` (a new file; see the module
     docstring).  :class:`RecordingError` for an unreadable input, inputs of different
-    scenarios, or an ``out`` that is one of the inputs or exists already."""
+    scenarios, or an ``out`` that is one of the inputs or exists already;
+    :class:`astrodyn.recording.outputs.OutputTaken` (one) when another process wrote
+    ``out`` while this merge ran (its file is left as it was, this result dropped)."""
     paths = [Path(p) for p in inputs]
     out = Path(out)
     if len(paths) < 1:
@@ -90,30 +98,36 @@ def merge(inputs: list[str | os.PathLike], out: str | os.PathLike, *, chunk_size
             shown = ", ".join(f"{p}: {name}" for p, name in names.items() if name is not None)
             raise RecordingError(f"merge: the inputs record different scenarios ({shown}); expected parts of one run")
         report = MergeReport(str(out))
-        tmp = out.with_name(f".{out.name}.merging")
-        try:
-            with open(tmp, "wb") as f:
-                writer = Writer(f, chunk_size=chunk_size, compression=CompressionType.ZSTD)
-                writer.start(profile="", library="astrodyn merge")
-                _copy(streams, writer, report)
-                seen_meta: set[str] = set()
-                for s in streams:
-                    for name, data in s.metadata.items():
-                        if name not in seen_meta:
-                            writer.add_metadata(name, {str(k): str(v) for k, v in data.items()})
-                            seen_meta.add(name)
-                writer.add_metadata("merged_from", {"files": ";".join(str(p) for p in paths),
-                                                    "duplicates": str(report.duplicates), "conflicts": str(report.conflicts)})
-                writer.finish()
-            os.replace(tmp, out)
-        except (OSError, struct.error) as exc:  # --out unwritable, disk full, more channels than MCAP's 65,535 ids
-            raise RecordingError(f"--out {out}: cannot write the merged file: "
-                                 f"{getattr(exc, 'strerror', None) or exc}; nothing was written") from None
-        finally:
+
+        def write(f) -> None:
             try:
-                os.unlink(tmp)
-            except OSError:
-                pass
+                write_merged(f)
+            except struct.error as exc:  # more channels than MCAP's 65,535 ids
+                raise RecordingError(f"--out {out}: cannot write the merged file: {exc}; nothing was written") from None
+
+        def write_merged(f) -> None:
+            writer = Writer(f, chunk_size=chunk_size, compression=CompressionType.ZSTD)
+            writer.start(profile="", library="astrodyn merge")
+            _copy(streams, writer, report)
+            seen_meta: set[str] = set()
+            for s in streams:
+                for name, data in s.metadata.items():
+                    if name not in seen_meta:
+                        writer.add_metadata(name, {str(k): str(v) for k, v in data.items()})
+                        seen_meta.add(name)
+            writer.add_metadata("merged_from", {"files": ";".join(str(p) for p in paths),
+                                                "duplicates": str(report.duplicates), "conflicts": str(report.conflicts)})
+            writer.finish()
+
+        # a temporary file of its own (.NAME.<pid>-<random>.mcap.merging), named --out only while
+        # that name is free: a merge never replaces a file, another merge's or recover's included
+        try:
+            write_atomically(out, write, suffix=".merging", hidden=True, replace=False, cannot=lambda exc: RecordingError(
+                f"--out {out}: cannot write the merged file: {exc.strerror or exc}; nothing was written"))
+        except OutputTaken:
+            raise OutputTaken(f"--out {out}: another process wrote this file while the merge ran; it holds that "
+                              f"process's complete output and was left as it was; this merge's result was dropped "
+                              f"(merge into a new --out)") from None
         for p, s in zip(paths, streams):
             report.inputs[str(p)] = s.report()
         return report
@@ -187,7 +201,7 @@ def _main(argv: list[str] | None) -> int:
                                  description="Merge partial recordings of one run (standby loggers, restarted "
                                              "loggers' parts) into one file without duplicates.",
                                  epilog="Exit status: 0 merged; 1 an input cannot be read or the inputs are not of "
-                                        "one run, or the file cannot be written; 2 a bad flag value or an --out that "
+                                        "one run, or the file cannot be written (or another process wrote --out meanwhile); 2 a bad flag value or an --out that "
                                         "exists, is an input or is not a file path in a writable directory; 128 + "
                                         "the signal when interrupted.")
     ap.add_argument("inputs", nargs="+", type=path_argument, help="MCAP recordings of the same run (complete or cut)")
@@ -202,5 +216,8 @@ def _main(argv: list[str] | None) -> int:
     except RecordingError as exc:
         print(f"astrodyn merge: {exc}", file=sys.stderr)
         return 1
+    for path, state in report.inputs.items():  # a file its writer has not finished (a live or killed logger's)
+        if state != "complete":
+            warn_incomplete_input("merge", path, state, "merged the complete messages it holds")
     print(json.dumps(report.as_dict()))
     return 0

@@ -23,21 +23,29 @@ and renames the finished file to ``NAME.mcap``): ``astrodyn recover NAME.partial
 (``NAME.recovered.mcap`` if a ``NAME.mcap`` exists: an earlier recording is never
 replaced) and removes the partial file.  The work directories a killed supervisor left
 in that directory (``.astrodyn-run-*``: its children's logs and the run secret) are
-removed too.
+removed too, and so are the temporary files of killed ``merge`` / ``recover`` runs there
+(``*.<pid>-<random>[.mcap].merging`` / ``.recover-tmp`` whose process is gone).
 
 For any other file, without ``--out`` the file is rewritten in place; either way the new file is first
-written beside the target as ``<target>.recover-tmp`` and renamed over it only once it is
-finished, so a failure (disk full, unwritable directory) never leaves a half-written file
-under the final name.  Exit status: 0 recovered; 1 unreadable input or write failure (or both
-``NAME.mcap`` and ``NAME.recovered.mcap`` exist: give ``--out``); 2 bad arguments, judged
-before any input is read: a ``--chunk-size`` out of range, an ``--out`` that exists (other
-than the input itself), is not a file path (a directory, a FIFO, a device) or is in a
-missing or unwritable directory.
+written beside the target as ``<root>.<pid>-<random><ext>.recover-tmp`` (a name of its own,
+created with ``O_EXCL``) and given the final name only once it is finished, so a failure
+(disk full, unwritable directory) never leaves a half-written file under the final name.
+A new file takes its name only while the name is still free: when another ``recover`` or
+``merge`` wrote it meanwhile, that complete file stays and this result is dropped (exit 1,
+one line; this run removes no partial file).  The temporary files of the target left by
+killed tools are removed by the next recover writing that target.
+
+Exit status: 0 recovered; 1 unreadable input or write failure (or both ``NAME.mcap`` and
+``NAME.recovered.mcap`` exist: give ``--out``; or another process wrote the target
+meanwhile); 2 bad arguments, judged before any input is read: a ``--chunk-size`` out of
+range, an ``--out`` that exists (other than the input itself), is not a file path (a
+directory, a FIFO, a device) or is in a missing or unwritable directory.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import os
 import re
@@ -50,7 +58,7 @@ from mcap.records import Channel, Chunk, Message, Metadata, Schema
 from astrodyn import __version__
 from astrodyn.files import output_path_problem, path_argument
 from astrodyn.recording.chunked_writer import ChunkedWriter
-from astrodyn.recording.outputs import write_atomically
+from astrodyn.recording.outputs import OutputTaken, stale_temporaries, write_atomically
 from astrodyn.recording.reader import MAX_CHUNK_BYTES, chunk_records, open_recording, parse_record, read_records
 from astrodyn.recording.writer import RecordingError, being_written
 from astrodyn.signals import interruptible
@@ -114,8 +122,11 @@ def recover(path: str | os.PathLike, out: str | os.PathLike | None = None, *, ch
     """Rewrite the MCAP file ``path`` (complete or cut) as a complete file at ``out``
     (default: in place).  Returns a summary dict (see the module docstring).
 
-    Raises :class:`RecordingError` naming the file for a non-MCAP or unreadable input and
-    for a failed write (the temporary file is removed; the target is untouched).
+    Raises :class:`RecordingError` naming the file for a non-MCAP or unreadable input, an
+    ``out`` that exists (other than the input itself: nothing is overwritten) and for a
+    failed write (the temporary file is removed; the target is untouched);
+    :class:`astrodyn.recording.outputs.OutputTaken` (one) when another process wrote ``out``
+    while this ran (its file is left as it was; this result is dropped).
     """
     src = os.fspath(path)
     dst = os.fspath(out) if out is not None else src
@@ -128,9 +139,25 @@ def recover(path: str | os.PathLike, out: str | os.PathLike | None = None, *, ch
     with f:
         if os.path.exists(dst) and not os.path.isfile(dst):  # never rename over a device, fifo or directory
             raise RecordingError(f"{dst}: expected a regular file to write, got a special file or directory")
-        summary = write_atomically(dst, lambda stream: _rewrite(f, size, src, dst, stream, chunk_size))
+        in_place = dst == src or _same_file(src, dst)
+        if not in_place and os.path.lexists(dst):
+            raise RecordingError(f"{dst}: exists already; recover writes a new file (nothing is overwritten; only "
+                                 f"the input itself is rewritten in place)")
+
+        def write(stream) -> dict:
+            summary = _rewrite(f, size, src, dst, stream, chunk_size)
+            summary["output_bytes"] = stream.tell()
+            return summary
+
+        # a temporary file of its own (NAME.<pid>-<random>.mcap.recover-tmp); a new file takes
+        # its name only while that name is free, the input itself is replaced in one step
+        try:
+            summary = write_atomically(dst, write, replace=in_place)
+        except OutputTaken:
+            raise OutputTaken(f"{dst}: another process wrote this file while the recovery ran; it holds that "
+                              f"process's complete output and was left as it was; this recovery's result was "
+                              f"dropped") from None
     summary["input_bytes"] = size
-    summary["output_bytes"] = os.path.getsize(dst)
     summary["seconds"] = round(time.monotonic() - t0, 3)
     return summary
 
@@ -259,6 +286,17 @@ def stale_work_dirs(folder: str) -> list[str]:
     return out
 
 
+def _still(path: str, read: os.stat_result) -> bool:
+    """Whether ``path`` is still the file that was read (``read``: its stat then) and no
+    process writes it: only then may it be removed (a new run may have started a new
+    partial file of that name meanwhile)."""
+    try:
+        now = os.stat(path)
+    except OSError:
+        return False
+    return (now.st_dev, now.st_ino) == (read.st_dev, read.st_ino) and not being_written(path)
+
+
 def _same_file(a: str, b: str) -> bool:
     try:
         return os.path.samefile(a, b)
@@ -321,19 +359,29 @@ def _main(argv: list[str] | None) -> int:
                 continue
             remove_source = True
         try:
+            read = os.stat(src)
             summary = recover(src, dst, chunk_size=args.chunk_size)
+        except OSError as exc:  # gone meanwhile (another recover of it finished)
+            print(f"astrodyn recover: error: {src}: {exc.strerror or exc}", file=sys.stderr)
+            status = 1
+            continue
         except RecordingError as exc:
             print(f"astrodyn recover: error: {exc}", file=sys.stderr)
             status = 1
             continue
-        if remove_source and os.path.abspath(src) != os.path.abspath(summary["out"]):
-            os.unlink(src)  # everything it held is in the finished file
-            summary["removed"] = src
+        if remove_source and os.path.abspath(src) != os.path.abspath(summary["out"]) and _still(src, read):
+            with contextlib.suppress(FileNotFoundError):  # (another recover of it may have removed it)
+                os.unlink(src)  # everything it held is in the finished file
+                summary["removed"] = src
         print(json.dumps(summary, separators=(",", ":")), flush=True)
     folder = args.file if os.path.isdir(args.file) else (os.path.dirname(args.file) or ".")
     for work in stale_work_dirs(folder):
         shutil.rmtree(work, ignore_errors=True)
         print(json.dumps({"removed_work_directory": work}), flush=True)
+    for tmp in stale_temporaries(folder):  # what a killed merge or recover left
+        with contextlib.suppress(FileNotFoundError):
+            os.unlink(tmp)
+            print(json.dumps({"removed_temporary_file": tmp}), flush=True)
     return status
 
 

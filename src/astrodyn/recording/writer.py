@@ -35,6 +35,7 @@ not recorded: the first message with a seq wins).
 
 from __future__ import annotations
 
+import errno
 import fcntl
 import json
 import operator
@@ -49,7 +50,7 @@ from astrodyn import __version__, messages
 from astrodyn.recording import ingest
 from astrodyn.recording.chunked_writer import ChunkedWriter
 
-__all__ = ["RecordingError", "McapRecorder", "being_written", "partial_path", "part_path", "standby_path", "fsync_directory", "BatchLayout", "SeqTracker", "OK", "GAP", "LATE", "DUPLICATE"]
+__all__ = ["RecordingError", "McapRecorder", "being_written", "partial_path", "part_path", "standby_path", "fsync_directory", "link_new", "clash_name", "BatchLayout", "SeqTracker", "OK", "GAP", "LATE", "DUPLICATE"]
 
 OK, GAP, LATE, DUPLICATE = 0, 1, 2, 3
 _STATUS_NAMES = ("ok", "gap", "late", "duplicate")
@@ -285,6 +286,47 @@ def fsync_directory(path: str | os.PathLike) -> None:
         os.close(fd)
 
 
+#: errnos of a file system that cannot make hard links (FAT, some network and FUSE ones)
+_NO_HARD_LINKS = {errno.EPERM, errno.EOPNOTSUPP, errno.ENOTSUP, errno.ENOSYS, errno.EMLINK, errno.EXDEV}
+
+
+def link_new(src: str | os.PathLike, dst: str | os.PathLike) -> bool:
+    """Give the finished file ``src`` the name ``dst`` unless ``dst`` exists (any file,
+    a dangling link included): True when ``src`` now has the name ``dst`` (``src`` itself
+    is then gone), False when ``dst`` was taken (both untouched).  Never replaces what is
+    at ``dst``: a hard link, which the kernel makes only if the name is free, then the
+    unlink of ``src``; the directory is fsynced.  On a file system without hard links
+    the name is checked just before a rename (a narrow window remains there).  An
+    OSError for anything else (the directory gone, no permission)."""
+    src, dst = os.fspath(src), os.fspath(dst)
+    try:
+        os.link(src, dst)
+    except FileExistsError:
+        return False
+    except OSError as exc:
+        if exc.errno not in _NO_HARD_LINKS:
+            raise
+        if os.path.lexists(dst):
+            return False
+        os.rename(src, dst)
+    else:
+        os.unlink(src)
+    fsync_directory(dst)
+    return True
+
+
+def clash_name(path: str | os.PathLike, n: int) -> str:
+    """Where a finished file goes when its own name ``path`` is taken by a file that must
+    not be replaced: ``NAME.clash-<n>.mcap`` beside ``NAME.mcap`` (a name no part,
+    partial or standby pattern matches)."""
+    root, ext = os.path.splitext(os.fspath(path))
+    return f"{root}.clash-{n}{ext or '.mcap'}"
+
+
+#: how many ``clash_name`` numbers are tried before a part keeps its partial name
+MAX_CLASH_NAMES = 100
+
+
 def _metadata_strings(name: str, data: Mapping[str, Any]) -> dict[str, str]:
     if not isinstance(data, Mapping):
         raise TypeError(f"{name}: expected a dict of metadata, got {type(data).__name__}")
@@ -346,7 +388,11 @@ class McapRecorder:
         continue in ``<stem>-0001.mcap``, ``<stem>-0002.mcap``, ... once it holds
         ``roll_size`` bytes or is ``roll_interval_s`` old (checked at each flush).  Every
         finished part is a complete MCAP with both metadata records; seq accounting spans
-        all parts; ``paths`` lists them.
+        all parts; ``paths`` lists them.  A part never replaces a file of its name (an
+        earlier session's part): it is kept as ``NAME-000k.clash-1.mcap`` instead
+        (:func:`clash_name`; its partial name when 100 such names are taken) and
+        :attr:`parts_kept_aside` (``stats()["parts_kept_aside"]``) lists it, so that the
+        caller can say so; the earlier file is untouched.
     atomic : write each file as :func:`partial_path` (``NAME.partial.mcap``) and rename it
         to its name only once it is finished, so a failed or killed run never destroys
         the previous recording of that name (the logger of ``run`` / ``serve`` does this).
@@ -401,6 +447,9 @@ class McapRecorder:
         self.flushes = 0
         self.closed = False
         self.paths: list[str] = []  # every file written, in order (more than one when rolling)
+        #: rolled parts whose own name was taken by an existing file (an earlier session's
+        #: part), which was left as it was: [{"part": its name, "file": where it is, "why"}]
+        self.parts_kept_aside: list[dict[str, str]] = []
         self._error: RecordingError | None = None
         self._scenario = _metadata_strings("scenario_metadata", scenario_metadata)
         # write_batch's t cache: the text of the last t, its float and its log_time
@@ -422,6 +471,8 @@ class McapRecorder:
         try:
             if self.atomic:
                 self._stream = open(self.writing_path, "xb")
+            elif path != self._base:  # a rolled part written in place: never over an existing file
+                self._stream = self._open_new_part(path)
             else:
                 self._stream = open(self.path, "wb")
         except FileExistsError:
@@ -458,6 +509,44 @@ class McapRecorder:
 
     def _roll_path(self, n: int) -> str:
         return part_path(self._base, n)
+
+    def _open_new_part(self, path: str):
+        """Open rolled part ``path`` (not atomic) as a new file; when that name is taken (an
+        earlier recording's part), a :func:`clash_name` beside it, reported in
+        :attr:`parts_kept_aside`."""
+        try:
+            return open(path, "xb")
+        except FileExistsError:
+            pass
+        for n in range(1, MAX_CLASH_NAMES + 1):
+            try:
+                stream = open(clash_name(path, n), "xb")
+            except FileExistsError:
+                continue
+            self.path = self.writing_path = clash_name(path, n)
+            self.parts_kept_aside.append({"part": path, "file": self.path,
+                                          "why": f"{path} exists (another recording's part); it was not replaced"})
+            return stream
+        raise RecordingError(f"{path}: exists (another recording's part), and so do {clash_name(path, 1)} .. "
+                             f"{MAX_CLASH_NAMES}; none is replaced: move them away")
+
+    def _name_finished_part(self) -> None:
+        """Give the finished rolled part (``writing_path``, atomic) its name ``path`` without
+        ever replacing a file there: an earlier serve session's part of that name stays as
+        it was and this one takes a :func:`clash_name`, or when none is free keeps its
+        partial name; either way :attr:`parts_kept_aside` says where it is."""
+        if link_new(self.writing_path, self.path):
+            return
+        taken = self.path
+        for n in range(1, MAX_CLASH_NAMES + 1):
+            if link_new(self.writing_path, clash_name(taken, n)):
+                self.path = clash_name(taken, n)
+                break
+        else:
+            self.path = self.writing_path
+        self.paths[-1] = self.path
+        self.parts_kept_aside.append({"part": taken, "file": self.path,
+                                      "why": f"{taken} exists (another recording's part); it was not replaced"})
 
     def _maybe_roll(self) -> None:
         """Finish this file and start the next one when it is over ``roll_size`` bytes or
@@ -659,9 +748,13 @@ class McapRecorder:
             self._stream.flush()
             os.fsync(self._stream.fileno())
             self._stream.close()
-            if rename and self.writing_path != self.path:  # atomic: the finished file takes its name in one step
+            if rename and self.writing_path != self.path and self.path == self._base:
+                # atomic: the finished file takes its name in one step (replacing an earlier
+                # recording of that name: a run's --out)
                 os.replace(self.writing_path, self.path)
                 fsync_directory(self.path)
+            elif rename and self.writing_path != self.path:  # a rolled part: never over another one
+                self._name_finished_part()
         except OSError as exc:
             self._fail(exc)
 
@@ -687,6 +780,7 @@ class McapRecorder:
             "paths": list(self.paths),
             "writing": None if self.closed else self.writing_path,
             "file": getattr(self, "final_file", None),
+            "parts_kept_aside": [dict(k) for k in self.parts_kept_aside],
             "messages": self.message_count,
             "channels": len(self._channels),
             "flushes": self.flushes,
