@@ -91,6 +91,8 @@ _PLANT_KEY_LABEL = b"ADP1 plant tick v1"
 #: overrides it, 0 waits for ever.  In lockstep the plant repeats its tick every 0.5 s, in
 #: free mode it ticks every control period of sim time: raise it for a long period at a slow rate.
 FIRST_TICK_TIMEOUT_S = 60.0
+#: The largest ``seq`` a message may carry (2**53 - 1: exact in every JSON reader's doubles).
+MAX_SEQ = 2**53 - 1
 #: The protocols of a Zenoh endpoint ``PROTOCOL/HOST:PORT`` (plus ``unixsock-stream/PATH``).
 ENDPOINT_PROTOCOLS = ("tcp", "udp", "tls", "quic", "ws")
 
@@ -202,7 +204,7 @@ class Link:
         self.first_tick_timeout = None if self._secret else first_tick_timeout(env.get("ASTRODYN_FIRST_TICK_TIMEOUT"))
         self._instance = os.urandom(8)
         self._counters: dict[str, int] = {}
-        self._seq: dict[str, int] = {}  # per body: this controller's command counter
+        self._seq: dict[str, int] = {}  # per body: this controller's next command seq (docs/control.md, Commands)
         self._sent = 0  # commands sent since the last answer
         self._latest: dict[str, dict] = {}
         self._ticks: queue.Queue = queue.Queue()
@@ -393,10 +395,36 @@ class Link:
     def command(self, body: str, t: float, **fields) -> None:
         """Command ``body`` from sim time ``t`` (s): any of torque=[3] N m (body axes),
         wheel_torque=[n] N m, dv=[3] m/s (inertial), thrust=[3] N with frame="inertial"|"body"."""
-        seq = self._seq.get(body, 0)
+        seq = self._seq.get(body)
+        if seq is None:  # where this sender's commands to the body stopped, if it ran before (a restart)
+            seq = self.recorded_next_seq(body)
         self._seq[body] = seq + 1
         self._put(f"{self.base}/{body}/command", {"t": t, "seq": seq, "sender": self.name, **fields})
         self._sent += 1
+
+    def recorded_next_seq(self, body: str, timeout: float = 2.0) -> int:
+        """The seq this controller's next command to ``body`` takes: one past the last the
+        logger recorded from this sender (``@status`` with ``{"channels": true}``, its
+        ``event_next_seq`` table; docs/control.md, Commands), so that a restarted controller
+        goes on above the numbers it used (the plant refuses a seq not above the last it took);
+        0 when the logger has none (a fresh run) or does not answer within ``timeout`` s."""
+        track = f"{self.base}/{body}/command#{self.name}"
+        best = 0
+        try:
+            for reply in self.session.get(f"{self.base}/@status", payload=json.dumps({"channels": True}),
+                                          timeout=timeout):
+                if reply.ok is None:
+                    continue
+                try:
+                    table = json.loads(reply.ok.payload.to_bytes()).get("event_next_seq")
+                    value = table.get(track) if isinstance(table, dict) else None
+                except (ValueError, RecursionError, AttributeError):
+                    continue
+                if type(value) is int and 0 <= value <= MAX_SEQ // 2:  # (a forged answer cannot exhaust the range)
+                    best = max(best, value)
+        except zenoh.ZError:
+            return best
+        return best
 
     def done(self, tick: dict) -> None:
         """Answer control step ``tick`` (the tick :meth:`wait_tick` returned last, once): every

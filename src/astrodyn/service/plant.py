@@ -372,6 +372,7 @@ class PlantLoop:
         self.keys: dict[tuple[str, str], str] = {}  # (body, kind) -> its key
         self.pending: dict[str, list[tuple[dict, bytes | None]]] = {b: [] for b in plant.bodies}
         self.received: dict[str, int] = {}  # authenticated commands per sender
+        self.last_command_seq: dict[tuple[str, str], int] = {}  # (sender, body) -> seq of its last command taken
         self.promised: dict[str, int] = {}  # commands announced by the sender's answers
         self.answered: dict[str, int] = {}  # last control step each controller answered
         self.controllers = frozenset(control.controllers)  # who may answer a tick
@@ -445,6 +446,13 @@ class PlantLoop:
                                    [j for j in (intake.judge(*item),) if j is not None]):
                 if kind == "command":
                     self.received[msg["sender"]] = self.received.get(msg["sender"], 0) + 1
+                    last = self.last_command_seq.get((msg["sender"], who), -1)
+                    if msg["seq"] <= last:  # its copy would be recorded as a duplicate, not as applied
+                        self.refuse(who, msg, f"seq {msg['seq']} is not above {msg['sender']}'s last command to "
+                                              f"{who} (seq {last}): a sender numbers its commands to a body upward, "
+                                              f"across its restarts too (docs/control.md)")
+                        continue
+                    self.last_command_seq[msg["sender"], who] = msg["seq"]
                     if len(self.pending[who]) >= MAX_PENDING:
                         self.refuse(who, msg, f"more than {MAX_PENDING} commands waiting for their time")
                     else:
