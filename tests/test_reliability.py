@@ -412,7 +412,8 @@ def test_full_disk_mid_run_is_a_clear_failure_and_no_complete_looking_file(tmp_p
     proc = subprocess.run(["prlimit", f"--fsize={limit}", *ASTRODYN, "run", str(_config(tmp_path, "30 d")),
                            "--out", str(out), "--quiet"], capture_output=True, text=True, timeout=300)
     assert proc.returncode == 1, proc.stderr[-2000:]
-    assert "process logger" in proc.stderr and "File too large" in proc.stderr
+    # EFBIG counts as a full disk: the logger exits DISK_FULL_EXIT and is not restarted
+    assert "logger (pid" in proc.stderr and "its disk is full" in proc.stderr and "File too large" in proc.stderr
     assert "Traceback" not in proc.stderr.split("astrodyn run: FAILED")[-1]
     assert not out.exists()  # a failed run leaves NAME.partial.mcap, never a complete-looking NAME.mcap
     out = Path(partial_path(out))

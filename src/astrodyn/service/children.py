@@ -49,7 +49,7 @@ if TYPE_CHECKING:
 
 __all__ = ["Child", "config_snapshot", "zenoh_config_snapshot", "child_bus_arguments", "ensure_open_file_limit", "MIN_OPEN_FILES", "wait_ready", "children_of", "logger_command", "propagator_command", "plant_command", "controller_argv", "start_controller", "share_fate_with_supervisor",
            "stop_process", "stop_process_group", "work_directory", "SUPERVISOR_ENV", "ORPHAN_GRACE_S", "EXIT_ORPHANED", "LOGGED_WAIT_S",
-           "MODEL_ENDED_EXIT", "DISK_FULL_EXIT", "StartError", "JobControl", "JOB_STOP_WAIT_S", "catches_signal", "is_stopped"]
+           "MODEL_ENDED_EXIT", "DISK_FULL_EXIT", "OUT_IN_THE_WAY_EXIT", "StartError", "JobControl", "JOB_STOP_WAIT_S", "catches_signal", "is_stopped"]
 
 #: Environment variable that carries the supervisor's PID to each child.
 SUPERVISOR_ENV = "ASTRODYN_SUPERVISOR_PID"
@@ -65,6 +65,11 @@ MODEL_ENDED_EXIT = 4
 #: flushed before (truncated, readable); a supervisor does not restart it (a new logger
 #: would fail the same way) and the run fails saying so.
 DISK_FULL_EXIT = 5
+#: Exit status of a logger that cannot create its file because something is in its place
+#: (another run's or serve's live recording, a killed run's partial file, a symbolic
+#: link): a supervisor never starts another logger for it (it would take the other
+#: recorder's file, or fail the same way) and the run fails with the logger's words.
+OUT_IN_THE_WAY_EXIT = 6
 #: Seconds a process waits, after its end-of-run event, for the logger's receipt of it
 #: (``astrodyn.service.propagator.wait_until_logged``) before it closes its session.
 LOGGED_WAIT_S = 60.0

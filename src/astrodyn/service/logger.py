@@ -56,8 +56,17 @@ import zenoh
 from astrodyn import auth, bus, messages
 from astrodyn.jit import service_threads, set_threads
 from astrodyn.recording import ingest
-from astrodyn.recording.writer import DUPLICATE, INGEST_GRAMMAR, BatchLayout, McapRecorder, RecordingError
-from astrodyn.service.children import DISK_FULL_EXIT, share_fate_with_supervisor
+from astrodyn.recording.writer import (
+    DUPLICATE,
+    INGEST_GRAMMAR,
+    BatchLayout,
+    McapRecorder,
+    RecordingError,
+    being_written,
+    part_path,
+    partial_path,
+)
+from astrodyn.service.children import DISK_FULL_EXIT, OUT_IN_THE_WAY_EXIT, share_fate_with_supervisor
 from astrodyn.signals import STOP_SIGNAL_NAMES, catch_stop_signals
 
 __all__ = ["Logger", "main"]
@@ -401,7 +410,7 @@ class Logger:
         if msg["kind"] == bus.END_EVENT:
             count = None
             try:
-                detail = json.loads(msg["detail"]) if msg["detail"] else {}
+                detail = messages.parse_json(msg["detail"]) if msg["detail"] else {}
             except ValueError:
                 detail = None
             if isinstance(detail, dict):
@@ -925,11 +934,63 @@ def main(argv: list[str] | None = None) -> int:
             if args.prefill:
                 summary["prefilled"] = copied
     except (RecordingError, bus.BusError) as exc:
-        disk_full = getattr(exc, "errno", None) in (errno.ENOSPC, errno.EDQUOT)
+        writing = None if args.in_place else writing_path(args)
+        if writing is not None and isinstance(exc.__context__, FileExistsError):  # O_EXCL: something is there
+            with contextlib.suppress(OSError):
+                print(f"logger: {in_the_way(writing)}", file=sys.stderr, flush=True)
+            return OUT_IN_THE_WAY_EXIT
+        disk_full = getattr(exc, "errno", None) in DISK_FULL_ERRNOS
         with contextlib.suppress(OSError):  # stderr may be a file on the disk that is full
             print(f"logger: {exc}", file=sys.stderr, flush=True)
         return DISK_FULL_EXIT if disk_full else 1
-    print(json.dumps(summary, separators=(",", ":")), flush=True)
+    return print_summary_line(summary)
+
+
+#: errno values of a write that failed because the logger's disk, or its share of it, is
+#: full: ENOSPC, EDQUOT (quota), EFBIG (``File too large``: RLIMIT_FSIZE, or the largest
+#: file the file system takes).  A logger that meets one exits :data:`DISK_FULL_EXIT` and
+#: is not restarted (a new one would fail the same way).
+DISK_FULL_ERRNOS = (errno.ENOSPC, errno.EDQUOT, errno.EFBIG)
+
+
+def writing_path(args: argparse.Namespace) -> str:
+    """The file the logger of ``args`` creates first (``NAME[-000k].partial[-n].mcap``)."""
+    first = part_path(args.out, args.first_part) if args.first_part else args.out
+    return partial_path(first, args.attempt)
+
+
+def in_the_way(path: str) -> str:
+    """Why the logger could not create ``path`` (``O_EXCL``: something is there), in one
+    line for the supervisor to pass on: another recorder's live file (it holds its
+    ``flock``), a symbolic link, or a file left there (a killed run's partial recording)."""
+    if os.path.islink(path):
+        return (f"{path}: is a symbolic link, in the way of the recording; it is never written through, replaced or "
+                f"removed: remove it or choose another --out")
+    for _ in range(5):  # a recorder that won a race for the name takes its lock right after creating the file
+        if being_written(path):
+            return (f"{path}: is being recorded right now by another run or serve (its logger holds it); it is never "
+                    f"touched: choose another --out, or stop that one first")
+        time.sleep(0.05)
+    return (f"{path}: is in the way (another run or serve started recording to the same --out, or a killed run left "
+            f"its partial recording there): finish it with `astrodyn recover {path}` or remove it; it is never "
+            f"overwritten")
+
+
+def print_summary_line(summary: dict) -> int:
+    """Print the one-line JSON summary on stdout (a file in the supervisor's work directory);
+    the logger's exit status: 0, or :data:`DISK_FULL_EXIT` / 1 when the line cannot be
+    written (its disk is full: the recording itself is finished)."""
+    try:
+        print(json.dumps(summary, separators=(",", ":")), flush=True)
+    except OSError as exc:
+        with contextlib.suppress(OSError):  # what is left in stdout's buffer goes nowhere, not into a failed exit
+            fd = os.open(os.devnull, os.O_WRONLY)
+            os.dup2(fd, sys.stdout.fileno())
+            os.close(fd)
+        with contextlib.suppress(OSError):
+            print(f"logger: the recording is finished ({summary.get('file')}), but its summary could not be "
+                  f"written: {exc.strerror or exc}", file=sys.stderr, flush=True)
+        return DISK_FULL_EXIT if exc.errno in DISK_FULL_ERRNOS else 1
     return 0
 
 

@@ -70,7 +70,14 @@ from astrodyn.service.children import (
 )
 from astrodyn.service.output import check_output_path
 from astrodyn.service.summary import file_summary, print_summary, propagator_rows
-from astrodyn.service.supervision import RestartBudget, next_event_seq, plan_logger_restart, wait_until_gone
+from astrodyn.service.supervision import (
+    LoggerFile,
+    RestartBudget,
+    next_event_seq,
+    plan_logger_restart,
+    restarts_after_start_up_death,
+    wait_until_gone,
+)
 from astrodyn.signals import catch_stop_signals
 
 __all__ = ["main", "run_scenario", "ScenarioRun", "EXIT_REJECTED", "attack_report", "logger_base_argv", "propagator_argv"]
@@ -177,6 +184,32 @@ class ScenarioRun:
         self.token_file: Path | None = None
         self.loggers = int(loggers)
         self.standbys: dict[str, Child] = {}  # hot standby loggers: logger-2, ... (not restarted)
+        self.logger_files: dict[int, LoggerFile] = {}  # attempt -> the file that logger created (LoggerFile)
+        self.logger_attempt = 0  # the attempt number of the logger running now
+
+    def start_logger(self, attempt: int, extra: list[str], announce=None) -> str | None:
+        """Start logger number ``attempt`` (0: the first; ``--attempt N`` writes
+        ``NAME.partial-N.mcap``) and wait until it is ready; the failure text if it is not.
+        The file it created is recorded as this run's (:class:`LoggerFile`): only such a file
+        is ever renamed or removed by the run, never one another run or the user put at
+        that path.  ``announce(child)`` is called once it is started."""
+        path = partial_path(self.out, attempt)
+        existed_before = os.path.lexists(path)
+        argv = [*self.logger_argv, *(["--attempt", str(attempt)] if attempt else []), *extra]
+        child = self.children["logger"] = Child("logger" if not attempt else f"logger-r{attempt}", argv, self.tmpd,
+                                                env=self.child_env)
+        child.name = "logger"
+        self.logger_attempt = attempt
+        if announce is not None:
+            announce(child)
+        failure = wait_ready(self.session, self.scenario.name, child, 60.0, self.interrupted)
+        if failure is None:
+            owned = LoggerFile.of_ready_logger(path)
+        else:  # one that died may have created its file (headers only) before it was killed
+            owned = LoggerFile.of_dead_logger(path, existed_before) if child.poll() is not None else None
+        if owned is not None:
+            self.logger_files[attempt] = owned
+        return failure
 
     def bus_config_copy(self, work: Path) -> Path | None:
         """Write the run's copy of its ``--zenoh-config`` into the work directory ``work`` and
@@ -212,10 +245,9 @@ class ScenarioRun:
             meta_path.write_text(json.dumps(scenario.to_metadata()))
             try:
                 common = logger_base_argv(scenario, meta_path, self.config_path, self.propagators, self.connect_args)
-                self.logger_argv = [*common, "--out", str(self.out), "--leave-partial"]
-                self.children["logger"] = Child("logger", [*self.logger_argv, *self.logger_args], self.tmpd,
-                                                 env=self.child_env)
-                failure = wait_ready(session, scenario.name, self.children["logger"], 60.0, self.interrupted)
+                # "--out=": a path that starts with "-" is not taken for an option
+                self.logger_argv = [*common, f"--out={self.out}", "--leave-partial"]
+                failure = self.start_logger(0, self.logger_args)
                 failure = self.replace_logger_dead_while_starting(failure)
                 if failure is None:
                     failure = self.start_standbys(common)
@@ -238,12 +270,22 @@ class ScenarioRun:
         result["interrupted"] = self.interrupted["signal"]
         result["wall_s"] = time.monotonic() - started
         log = (result["processes"].get("logger") or {}).get("summary") or {}
+        if not isinstance(log, dict):
+            log = {}
         result["logger"] = log
-        lost = log.get("missing", 0) if isinstance(log, dict) else 0
-        result["ok"] = not result.get("failure") and bool(log) and not lost
+        lost = log.get("missing", 0)
         if not result.get("failure") and lost:
             result["failure"] = f"{lost} messages missing in the recording"
-        result["file"] = _name_the_recording(log.get("file") if isinstance(log, dict) else None, self.out, result)
+        try:
+            result["file"] = _name_the_recording(log.get("file"), self.out, result, self.logger_files,
+                                                 self.logger_attempt)
+        finally:
+            for owned in self.logger_files.values():
+                owned.close()
+        if not result.get("failure") and not log:  # its summary (in the work directory) is gone: say so
+            result["failure"] = (f"the logger ended without its summary (its output in {self.tmpd} is gone); the "
+                                 f"recording is {result['file'] or 'not found'}")
+        result["ok"] = not result.get("failure") and bool(log) and not lost
         return result
 
     # ------------------------------------------------------------------ starting
@@ -255,7 +297,7 @@ class ScenarioRun:
             if self.token_file is not None:
                 argv += ["--control-token-file", str(self.token_file)]
             if self.commands is not None:
-                argv += ["--commands", str(self.commands)]
+                argv.append(f"--commands={self.commands}")  # "=": a path may start with "-"
             children[kind] = Child(kind, argv, self.tmpd, env=self.child_env)
             return
         argv = propagator_argv(kind, self.config_path, self.connect_args)
@@ -283,25 +325,31 @@ class ScenarioRun:
         return None
 
     def replace_logger_dead_while_starting(self, failure: str | None) -> str | None:
-        """The logger died while starting (a kill at a random moment can land there): nothing
-        is recorded yet, so a new one starts afresh (its predecessor's partial is removed at
-        the end like every dead logger's), within the restart budget."""
+        """The logger was killed by a signal while starting (a kill at a random moment can
+        land there, a crash): nothing is recorded yet, so a new one starts afresh (its
+        predecessor's partial is removed at the end like every dead logger's), within the
+        restart budget.  One that exited on its own (its file is in the way: another run
+        records to it, a killed run left it; it cannot be written; its disk is full; a bad
+        argument) is not replaced: the run fails at once with its words
+        (:func:`~astrodyn.service.supervision.restarts_after_start_up_death`)."""
         children, scenario = self.children, self.scenario
-        while failure is not None and children["logger"].poll() not in (None, 0) and not self.interrupted["signal"]:
+        while failure is not None and restarts_after_start_up_death(children["logger"].poll()) \
+                and not self.interrupted["signal"]:
             dead, rc = children["logger"], children["logger"].poll()
             if not self.logger_budget.allow():
                 return f"{self.logger_budget.refusal()}; last: {failure}"
             dead.close()
             wait_until_gone(self.session, scenario.name, "logger")
             attempt = len(self.restarts_of("logger")) + 1
-            children["logger"] = Child(f"logger-r{attempt}", [*self.logger_argv, "--attempt", str(attempt),
-                                                              *self.logger_args], self.tmpd, env=self.child_env)
-            children["logger"].name = "logger"
             how = dead.how(rc)
-            self.restarts.append({"process": "logger", "old_pid": dead.pid, "new_pid": children["logger"].pid,
-                                  "why": f"{how} while starting", "from_step": 0, "state_from": None})
-            self.say(f"  logger (pid {dead.pid}) {how} while starting: restarted (pid {children['logger'].pid})")
-            failure = wait_ready(self.session, scenario.name, children["logger"], 60.0, self.interrupted)
+            record = {"process": "logger", "old_pid": dead.pid, "new_pid": None, "why": f"{how} while starting",
+                      "from_step": 0, "state_from": None}
+            self.restarts.append(record)
+
+            def announce(child, dead=dead, how=how, record=record):
+                record["new_pid"] = child.pid
+                self.say(f"  logger (pid {dead.pid}) {how} while starting: restarted (pid {child.pid})")
+            failure = self.start_logger(attempt, self.logger_args, announce)
         return failure
 
     def start_standbys(self, common: list[str]) -> str | None:
@@ -311,7 +359,7 @@ class ScenarioRun:
         (for ``recover`` or ``merge``) and a warning; the run goes on with the others."""
         for k in range(2, self.loggers + 1):
             name = f"logger-{k}"
-            child = self.standbys[name] = Child(name, [*common, "--name", name, "--out", standby_path(self.out, k)],
+            child = self.standbys[name] = Child(name, [*common, "--name", name, f"--out={standby_path(self.out, k)}"],
                                                 self.tmpd, env=self.child_env)
             failure = wait_ready(self.session, self.scenario.name, child, 60.0, self.interrupted)
             if failure is not None:
@@ -400,18 +448,21 @@ class ScenarioRun:
             attempt = len(self.restarts_of("logger")) + 1
             plan = plan_logger_restart(scenario, self.out, attempt, self.propagators, self.tmpd, self.logger_args,
                                        self.extra_args)
-            children["logger"] = Child(f"logger-r{attempt}", [*self.logger_argv, "--attempt", str(attempt),
-                                                              *plan.logger_args], self.tmpd, env=self.child_env)
-            children["logger"].name = "logger"
-            self.restarts.append({"process": "logger", "old_pid": dead.pid, "new_pid": children["logger"].pid,
-                                  "why": how, "from_step": plan.steps, "state_from": plan.source})
-            self.say(f"\n  logger (pid {dead.pid}) {how}: restarted (pid {children['logger'].pid}), "
-                     f"{plan.steps} steps copied from {plan.source or '-'}")
-            why = wait_ready(self.session, scenario.name, children["logger"], 60.0, self.interrupted)
+            record = {"process": "logger", "old_pid": dead.pid, "new_pid": None, "why": how, "from_step": plan.steps,
+                      "state_from": plan.source}
+            self.restarts.append(record)
+
+            def announce(child, dead=dead, how=how, record=record, plan=plan):
+                record["new_pid"] = child.pid
+                self.say(f"\n  logger (pid {dead.pid}) {how}: restarted (pid {child.pid}), {plan.steps} steps copied "
+                         f"from {plan.source or '-'}")
+            why = self.start_logger(attempt, plan.logger_args, announce)
             if why is None:
                 break
             rc = children["logger"].poll()
-            if rc is None or self.interrupted["signal"]:
+            # only a new logger killed by a signal while starting is replaced again; one that exits on its own
+            # (its disk is full, its file is in the way) would fail the same way
+            if not restarts_after_start_up_death(rc) or self.interrupted["signal"]:
                 return f"logger (pid {dead.pid}) {how}; its restart failed: {why}"
         for kind in self.propagators:  # a new file: their events number from 0 again
             self.start_propagator(kind, plan.propagator_args.get(kind, {}), attempt)
@@ -432,7 +483,7 @@ class ScenarioRun:
         wait_until_gone(self.session, scenario.name, kind)
         args, step = dict(self.extra_args.get(kind, {})), None
         try:
-            run = load_run(partial_path(self.out, len(self.restarts_of("logger"))))  # up to its last flushed chunk
+            run = load_run(partial_path(self.out, self.logger_attempt))  # up to its last flushed chunk
             # the last step before the first hole of any of its channels: its last common step
             # after a crash, and the refill of states lost on the bus (kill_if_lost_to_logger)
             held = contiguous_steps(run, list(state_topics(scenario, kind).values()))
@@ -483,22 +534,50 @@ class ScenarioRun:
         return failure
 
 
-def _name_the_recording(written: str | None, out: Path, result: dict) -> str | None:
+def _fail(result: dict, why: str) -> None:
+    """Add ``why`` to the run's failure (the run fails: exit 1)."""
+    result["failure"] = f"{result['failure']}; {why}" if result.get("failure") else why
+
+
+def _name_the_recording(written: str | None, out: Path, result: dict, files: dict[int, LoggerFile],
+                        attempt: int) -> str | None:
     """Give the finished file its name: the logger left it as ``NAME.partial.mcap``; a run
     that succeeded renames it over ``out`` (an earlier recording of that name is replaced
     only now), a failed or interrupted one leaves it there for ``astrodyn recover``
-    (docs/reliability.md).  Returns the path that holds the recording."""
-    from astrodyn.recording.writer import fsync_directory, partial_path
+    (docs/reliability.md).  Returns the path that holds the recording (None: not known).
 
+    ``files`` are the files this run's loggers created, by attempt (``attempt``: the
+    logger that ran last): a path is renamed or removed only while it still names such a
+    file, never a file another run (or the user) put there.  A recording no longer where
+    its logger wrote it (its directory renamed or removed, the file moved) fails the run,
+    saying where it is when that can be told; nothing is renamed or removed then."""
+    from astrodyn.recording.writer import fsync_directory
+
+    mine = files.get(attempt)
+    if mine is not None and not mine.here():
+        where = mine.where()
+        _fail(result, f"the recording is not at {mine.path} (nor at {out}): " + (
+            f"it was moved while the run recorded and is now {where}; nothing was renamed or removed "
+            f"(`astrodyn recover {where}` finishes it)" if where else
+            "it was moved or removed while the run recorded (its directory renamed or deleted?) and cannot be found"))
+        return where
     if written is None:  # the logger died: its partial file (no footer) is all there is
-        partial = Path(partial_path(out))
-        return str(partial) if partial.exists() else None
+        return mine.path if mine is not None else None
     if result.get("failure") or Path(written) == Path(out):
         return written
-    os.replace(written, out)
+    if mine is None or Path(mine.path) != Path(written):
+        _fail(result, f"the logger says its recording is {written}, which is not the file this run's logger created; "
+                      f"{out} is not replaced")
+        return written if os.path.exists(written) else None
+    try:
+        os.replace(written, out)
+    except OSError as exc:
+        _fail(result, f"cannot name the recording {out}: {exc.strerror or exc}; it stays at {written}")
+        return written if mine.here() else None
     fsync_directory(out)
-    for n in range(sum(r["process"] == "logger" for r in result.get("restarts", []))):  # dead loggers' files: copied
-        Path(partial_path(out, n)).unlink(missing_ok=True)
+    for n, dead in files.items():  # dead loggers' files (copied by their successors): only if still theirs
+        if n != attempt:
+            dead.unlink_if_here()
     return str(out)
 
 
@@ -897,4 +976,4 @@ def resume_plan(path: Path, scenario: Scenario, out: Path, work: Path) -> dict:
         raise ScenarioError(f"--resume {path}: the recording already holds all {scenario.n_steps} steps; nothing to resume")
     extra = {kind: propagator_resume_args(run, scenario, kind, k - 1, work) for kind in kinds}
     return {"step": k, "t": k / scenario.rate, "extra_args": extra,
-            "logger_args": ["--prefill", str(path), "--prefill-steps", str(k)]}
+            "logger_args": [f"--prefill={path}", "--prefill-steps", str(k)]}

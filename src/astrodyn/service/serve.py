@@ -54,7 +54,7 @@ import signal
 import subprocess
 import sys
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 from astrodyn import auth, bus
@@ -77,6 +77,7 @@ from astrodyn.service.children import (
     work_directory,
     zenoh_config_snapshot,
 )
+from astrodyn.service.output import OutputDirectory, series_parts_problem
 from astrodyn.service.propagator import command_key
 from astrodyn.service.runner import (
     EXIT_REJECTED,
@@ -89,6 +90,7 @@ from astrodyn.service.runner import (
     propagator_argv,
 )
 from astrodyn.service.supervision import (
+    LoggerFile,
     RestartBudget,
     next_event_seq,
     plan_part_restart,
@@ -106,13 +108,17 @@ class Supervisor:
 
     ``zenoh_config``: serve's copy of its ``--zenoh-config`` in the work directory ``tmp``
     (:func:`~astrodyn.service.children.zenoh_config_snapshot`), which every process it starts
-    or restarts is given, never the user's file."""
+    or restarts is given, never the user's file.
+
+    ``own_output()`` is called once its loggers are ready, i.e. once this serve holds its
+    output (another run or serve recording to it would have made the first logger fail):
+    what may only be done then (the control token file, :func:`control_token`)."""
 
     def __init__(self, scenario, out: Path, session, hub: str, *, rate: float,
                  roll_size: int | None = None, roll_interval: float | None = None, connect=(), tmp: Path,
                  max_restarts: int = 5, zenoh_config: Path | None = None, foxglove_port: int | None = None,
                  controllers: list[str] | None = None, token_file: Path | None = None, loggers: int = 1,
-                 stall_s: float | None = STALL_S):
+                 stall_s: float | None = STALL_S, own_output=None):
         self.scenario = scenario
         self.session = session
         self.out = Path(out)
@@ -142,24 +148,32 @@ class Supervisor:
             common += ["--roll-size", str(roll_size)]
         if roll_interval:
             common += ["--roll-interval", str(roll_interval)]
-        self._logger_argv = [*common, "--out", str(out), "--leave-partial"]
+        # "--out=": a path that starts with "-" is not taken for an option
+        self._logger_argv = [*common, f"--out={out}", "--leave-partial"]
         self.logger_attempt = 0
         self.children: dict[str, Child] = {}
+        self.outdir = OutputDirectory(self.out)  # a rename or removal of it while recording fails serve
+        self.outdir_checked = time.monotonic()
+        self.outdir_failed = False  # its move or removal is among the failures
         self.start_first_logger()
         self.standbys: dict[str, Child] = {}  # hot standby loggers (--loggers N): not restarted
         for k in range(2, int(loggers) + 1):
             name = f"logger-{k}"
-            child = self.standbys[name] = Child(name, [*common, "--name", name, "--out", standby_path(out, k)], tmp,
+            child = self.standbys[name] = Child(name, [*common, "--name", name, f"--out={standby_path(out, k)}"], tmp,
                                                 env=self.child_env)
             failure = wait_ready(session, scenario.name, child, 30.0, {"signal": None})
             if failure is not None:  # nothing else has started: stop the loggers, say why
-                for ch in [*self.standbys.values(), self.children["logger"]]:
-                    ch.stop()
-                    ch.close()
+                self.stop_loggers()
                 raise bus.BusError(failure)
+        if own_output is not None:
+            try:
+                own_output()
+            except Exception:
+                self.stop_loggers()
+                raise
         self._argv = {kind: propagator_argv(kind, config_path, connect_args, "--endless") for kind in self.propagators}
         if "plant" in self._argv and token_file is not None:  # outside controllers present serve's token
-            self._argv["plant"] += ["--control-token-file", str(token_file)]
+            self._argv["plant"].append(f"--control-token-file={token_file}")  # "=": beside --out, may start with "-"
         self.schedule: tuple[float, float] | None = None  # (wall, t): sim t due at that monotonic wall time
         self.pause_reasserted = 0.0  # monotonic time pause / resume was last sent again (reassert_pause)
         for kind in self.propagators:
@@ -275,10 +289,32 @@ class Supervisor:
             request.error(f"{verb}: expected one of {', '.join(self.verbs)}")
         return False
 
+    def stop_loggers(self) -> None:
+        """Stop the loggers started so far (start-up failed: nothing else has started)."""
+        for ch in [*self.standbys.values(), self.children["logger"]]:
+            ch.stop()
+            ch.close()
+        self.outdir.close()
+
+    def check_output_directory(self, now: float) -> None:
+        """At most once a second: the directory of ``--out`` still where it was?  Renamed or
+        removed, the recording is not at ``--out`` any more: serve fails (nothing renamed or
+        removed), saying where it is when that can be told."""
+        if now - self.outdir_checked < 1.0 or self.state not in ("running", "paused"):
+            return
+        self.outdir_checked = now
+        if (problem := self.outdir.problem()) is not None:
+            msg = f"{problem}; the recording is not at --out {self.out} (nothing was renamed or removed)"
+            print(f"astrodyn serve: {msg}", file=sys.stderr, flush=True)
+            self.failures.append(msg)
+            self.outdir_failed = True
+            self.state = "failed"
+
     def check_children(self) -> None:
         """Notice dead processes (exit status or lost liveliness token); restart propagators."""
         self.beats.poll()  # the sim times a failure message names are the latest
         now = time.monotonic()
+        self.check_output_directory(now)
         for name in (*self.propagators, "logger"):
             ch = self.children[name]
             if self.state in ("running", "paused") and ch.kill_if_stalled(self.beats, self.stall_s, now):
@@ -392,7 +428,7 @@ class Supervisor:
         while True:
             attempt = self.logger_attempt
             own_file = Path(partial_path(self.out, attempt))
-            existed = own_file.exists()
+            existed = os.path.lexists(own_file)
             argv = [*self._logger_argv, *(["--attempt", str(attempt)] if attempt else [])]
             child = self.children["logger"] = Child("logger" if attempt == 0 else f"logger-r{attempt}", argv,
                                                     self.tmp, env=self.child_env)
@@ -407,8 +443,8 @@ class Supervisor:
                 raise bus.BusError(failure if rc is None or rc >= 0 else f"{self.budgets['logger'].refusal()}; last: {failure}")
             child.close()
             wait_until_gone(self.session, self.scenario.name, "logger")
-            if not existed:
-                own_file.unlink(missing_ok=True)
+            if (dead_file := LoggerFile.of_dead_logger(own_file, existed)) is not None:  # headers only, and its own
+                dead_file.unlink_if_here()
             self.logger_attempt += 1
             self.restarts.append({"process": "logger", "old_pid": child.pid, "new_pid": None, "why": f"killed by signal {-rc} while starting",
                                   "from_step": 0, "state_from": None, "time": time.time()})
@@ -532,6 +568,7 @@ class Supervisor:
             if ch.proc.poll() is None:
                 ch.stop()
         logger = self.children["logger"]
+        moved = self.outdir.problem()  # checked before the end, which would fail on it in other ways
         if any(self.children[kind].poll() != 0 for kind in self.propagators):
             # one ended without its last states (dead, not restarted, or stopped above): the
             # logger would wait for them until the deadline; it records what is queued and
@@ -567,9 +604,22 @@ class Supervisor:
         summary["logger"] = log = logger.summary()
         if "plant" in self.propagators:  # its rejected commands and answers (the ATTACKED line)
             summary["plant"] = self.children["plant"].summary()
+        rc = logger.poll()
+        if moved is not None and not self.outdir_failed:
+            self.failures.append(f"{moved}; the recording is not at --out {self.out} (nothing was renamed or removed)")
+        if rc not in (0, None) and not getattr(logger, "reported", False):  # it died at the end (its summary, ...)
+            self.failures.append(f"process logger (pid {logger.pid}) {logger.how(rc)} while finishing: "
+                                 f"{logger.last_words(2)}")
+        elif not log and not self.failures:
+            self.failures.append(f"the logger ended without its summary (its output in {self.tmp} is gone); its "
+                                 f"recording is not known to be at --out {self.out}")
         summary["file"] = self.name_the_recording((log or {}).get("file"), bool(self.failures))
         if summary["file"] is None:  # the logger died, not restarted: its part stays partial
             summary["file"] = next((p for p in self._parts() if ".partial" in os.path.basename(p)), None)
+        if moved is not None:  # its files are where the directory went (the failure says where), not at --out
+            summary["file"] = None
+        summary["failures"] = list(self.failures)
+        self.outdir.close()
         if self.failures and summary["file"] and ".partial" in os.path.basename(summary["file"]):
             print(f"astrodyn serve: the recording stays at {summary['file']} (serve failed, so it keeps its partial "
                   f"name); `astrodyn recover {summary['file']}` finishes it and gives it its name",
@@ -584,9 +634,17 @@ class Supervisor:
         from astrodyn.recording.writer import fsync_directory
 
         final = finished_name(written) if written else None
-        if written is None or final is None or failed or not os.path.exists(written):
+        if written is None or final is None or failed:
             return written
-        os.replace(written, final)
+        if not os.path.exists(written):  # removed or moved while serve recorded: never "done" (exit 1)
+            self.failures.append(f"the recording {written} is gone (removed or moved while serve recorded); "
+                                 f"nothing was renamed")
+            return None
+        try:
+            os.replace(written, final)
+        except OSError as exc:
+            self.failures.append(f"cannot name the recording {final}: {exc.strerror or exc}; it stays at {written}")
+            return written
         fsync_directory(final)
         return final
 
@@ -634,24 +692,37 @@ def roll_settings(args: argparse.Namespace, scenario) -> tuple[int | None, float
 
 
 @contextlib.contextmanager
-def control_token(out: Path, open_control: bool) -> Iterator[tuple[str | None, Path | None]]:
-    """``(token, file)``: serve's control token (docs/security.md) and its 0600 file
-    ``.<name>.control-token`` beside ``out``, which a previous serve's file is replaced by
-    and which is removed when serve ends (the token is never valid again); ``(None, None)``
-    with ``--open-control``.  StartError if the file cannot be written."""
+def control_token(out: Path, open_control: bool) -> Iterator[tuple[str | None, Path | None, Callable[[], None]]]:
+    """``(token, file, write)``: serve's control token (docs/security.md), its 0600 file
+    ``.<name>.control-token`` beside ``out``, and ``write()``, which writes that file
+    (replacing a previous serve's, whose token is never valid again).  ``write`` is to be
+    called only once this serve owns ``out`` (its logger is ready,
+    :class:`Supervisor`'s ``own_output``): a serve refused because another one records to
+    ``out`` must not take the token file of the one that runs.  The file is removed when
+    serve ends, only if it is still the one this serve wrote.  ``(None, None, no-op)`` with
+    ``--open-control``.  StartError if the file cannot be written."""
     if open_control:
-        yield None, None
+        yield None, None, lambda: None
         return
     token, path = auth.new_token(), control_token_path(out)
-    path.unlink(missing_ok=True)  # a previous run's token: never valid again
+    written: list[tuple[int, int]] = []
+
+    def write() -> None:
+        path.unlink(missing_ok=True)  # a previous run's token: never valid again
+        try:
+            auth.write_private_file(path, token.encode())
+            st = os.lstat(path)
+        except OSError as exc:
+            raise StartError(f"{path}: cannot write the control token: {exc.strerror or exc}") from None
+        written.append((st.st_dev, st.st_ino))
+
     try:
-        auth.write_private_file(path, token.encode())
-    except OSError as exc:
-        raise StartError(f"{path}: cannot write the control token: {exc.strerror or exc}") from None
-    try:
-        yield token, path
+        yield token, path, write
     finally:
-        path.unlink(missing_ok=True)
+        with contextlib.suppress(OSError):
+            st = os.lstat(path)
+            if written and (st.st_dev, st.st_ino) == written[0]:  # ours: never another serve's
+                path.unlink()
 
 
 def check_serve_flags(args: argparse.Namespace) -> bus.ZenohConfigText | None:
@@ -726,6 +797,8 @@ def main(argv: list[str] | None = None) -> int:
         created = make_parents(out)  # the last step before the output checks: nothing is created for a refused flag
         for path in [out, *(Path(standby_path(out, k)) for k in range(2, args.loggers + 1))]:
             checked_output_path(path, (args.config, args.zenoh_config))
+            if problem := series_parts_problem(path):  # an earlier serve's rolled parts: never written over
+                raise ScenarioError(f"--out {str(path)[:200]}: {problem}")
         rate = args.rate if args.rate is not None else scenario.real_time_factor
         try:
             rate = bus.parse_rate_factor(rate)
@@ -748,14 +821,14 @@ def main(argv: list[str] | None = None) -> int:
         with work_directory(out, "serve") as tmp, \
                 bus.open_session(listen=[hub], config_file=(zenoh_config_copy := zenoh_config_snapshot(zenoh_config, tmp))) \
                 as session, \
-                control_token(out, args.open_control) as (token, token_file):
+                control_token(out, args.open_control) as (token, token_file, write_token):
             try:
                 sup = Supervisor(scenario, out, session, hub, rate=rate, roll_size=roll_size,
                                  roll_interval=roll_interval, connect=args.connect, tmp=Path(tmp),
                                  zenoh_config=zenoh_config_copy,
                                  foxglove_port=None if args.foxglove is None else (args.foxglove or bus.free_port()),
                                  controllers=args.controller, token_file=token_file, loggers=args.loggers,
-                                 stall_s=args.stall_timeout or None)
+                                 stall_s=args.stall_timeout or None, own_output=write_token)
             except (bus.BusError, OSError) as exc:  # the logger could not start: nothing else was started
                 print(f"astrodyn serve: {exc}", file=sys.stderr)
                 return 1

@@ -42,15 +42,115 @@ from __future__ import annotations
 import json
 import os
 import re
+import stat
 import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from astrodyn.recording.writer import partial_path
+from astrodyn.recording.writer import being_written, partial_path
 
 __all__ = ["wait_until_gone", "contiguous_end", "RESTART_LIMIT", "RESTART_WINDOW_S", "RestartBudget", "LoggerRestart", "plan_logger_restart",
-           "PartRestart", "plan_part_restart", "part_number", "resume_from_parts"]
+           "PartRestart", "plan_part_restart", "part_number", "resume_from_parts", "LoggerFile",
+           "restarts_after_start_up_death"]
+
+def restarts_after_start_up_death(rc: int | None) -> bool:
+    """Whether a logger that ended with status ``rc`` before it was ready is replaced: only
+    one ended by a signal (SIGKILL, a crash: SIGSEGV, SIGABRT, the OOM killer).  One that
+    exits on its own said why (its file is in the way or cannot be written, its disk is
+    full, a bad argument) and another would fail the same way, or worse, record beside a
+    run that holds the file (docs/reliability.md)."""
+    return rc is not None and rc < 0
+
+
+def _identity(st: os.stat_result) -> tuple[int, int]:
+    return st.st_dev, st.st_ino
+
+
+class LoggerFile:
+    """A file one of this run's loggers created (``NAME.partial[-n].mcap``), known by its
+    identity ``(st_dev, st_ino)``: the supervisor removes or renames a path only while it
+    still names that file, never one another run (or the user) put there.  A read
+    descriptor is kept on the file until :meth:`close` (its inode number is not reused
+    meanwhile), which also tells where it went (its directory renamed, the file moved) at
+    the end (:meth:`where`, Linux).
+
+    :meth:`of_ready_logger`: the file of a logger that is ready (it created it with
+    ``O_EXCL`` and holds its ``flock``); :meth:`of_dead_logger`: the file a logger that died while starting may have
+    created: taken as its own only if there was nothing at ``path`` before it started, and
+    it is a regular file no live recorder holds."""
+
+    def __init__(self, path: str, identity: tuple[int, int], fd: int | None = None):
+        self.path, self.identity, self._fd = os.fspath(path), identity, fd
+
+    @classmethod
+    def _held(cls, path: str) -> LoggerFile | None:
+        """The regular file at ``path`` with a descriptor held on it (so its inode number
+        cannot be given to another file while the run goes on); None for anything else."""
+        try:
+            # O_PATH (Linux): no read permission needed, nothing is read; fstat and /proc/self/fd work on it
+            fd = os.open(path, getattr(os, "O_PATH", os.O_RDONLY | os.O_NONBLOCK) | os.O_NOFOLLOW | os.O_CLOEXEC)
+        except OSError:
+            return None
+        st = os.fstat(fd)
+        if not stat.S_ISREG(st.st_mode):
+            os.close(fd)
+            return None
+        return cls(path, _identity(st), fd)
+
+    @classmethod
+    def of_ready_logger(cls, path: str | os.PathLike) -> LoggerFile | None:
+        return cls._held(os.fspath(path))  # created with O_EXCL by the logger, which holds it
+
+    @classmethod
+    def of_dead_logger(cls, path: str | os.PathLike, existed_before: bool) -> LoggerFile | None:
+        path = os.fspath(path)
+        if existed_before or being_written(path):
+            return None
+        return cls._held(path)
+
+    def here(self) -> bool:
+        """Whether :attr:`path` still names this file."""
+        try:
+            return _identity(os.lstat(self.path)) == self.identity
+        except OSError:
+            return False
+
+    def where(self) -> str | None:
+        """Where the file is now, if it was moved (its directory renamed, the file
+        renamed): from the descriptor kept on it (``/proc/self/fd``); None when it was
+        removed or that cannot be told."""
+        if self.here():
+            return self.path
+        if self._fd is None:
+            return None
+        try:
+            now = os.readlink(f"/proc/self/fd/{self._fd}")
+        except OSError:
+            return None
+        if now.endswith(" (deleted)") or not os.path.exists(now):
+            return None
+        try:
+            return now if _identity(os.lstat(now)) == self.identity else None
+        except OSError:
+            return None
+
+    def unlink_if_here(self) -> bool:
+        """Remove :attr:`path` if it still names this file (a dead logger's, copied); True
+        if removed."""
+        if not self.here():
+            return False
+        try:
+            os.unlink(self.path)
+        except OSError:
+            return False
+        return True
+
+    def close(self) -> None:
+        if self._fd is not None:
+            os.close(self._fd)
+            self._fd = None
+
 
 #: A process that dies this many times ...
 RESTART_LIMIT = 5
@@ -140,7 +240,7 @@ def plan_logger_restart(scenario, out: Path, attempt: int, kinds: list[str], wor
             steps, run = 0, None
     if steps == 0 or run is None:
         return LoggerRestart(attempt, 0, None, list(first_logger_args or []), dict(first_propagator_args or {}))
-    logger_args = ["--prefill", dead, "--prefill-steps", str(steps)]
+    logger_args = [f"--prefill={dead}", "--prefill-steps", str(steps)]  # "=": a path may start with "-"
     props = {kind: propagator_resume_args(run, scenario, kind, steps - 1, work) for kind in kinds}
     return LoggerRestart(attempt, steps, dead, logger_args, props)
 
@@ -235,7 +335,9 @@ class PartRestart:
         from astrodyn.service.children import Child
 
         name = f"finish-part-{self.part - 1}"
-        return Child(name, [sys.executable, "-m", "astrodyn", "recover", self.source], Path(log_dir), foreign=True)
+        # absolute: a relative path that starts with "-" would read as an option
+        return Child(name, [sys.executable, "-m", "astrodyn", "recover", os.path.abspath(self.source)], Path(log_dir),
+                     foreign=True)
 
 
 def plan_part_restart(scenario, out: Path, dead: str | None, finished: list[str], kinds: list[str],
