@@ -19,7 +19,9 @@ CONFIGS = sorted(p for p in (ROOT / "configs").glob("*.toml") if p.stem != "demo
 #: run in `make test-all` only: constellation-1000 (minutes); explorer-1 (15 s) is also run
 #: by test_flexible_service.py::test_explorer_1_run_drifts_to_a_flat_spin_and_the_oblate_twin_stays_put,
 #: flexible-slew (12 s) as it is, with its controller, by test_plant_flexible.py's `slew` fixture
-SLOW_CONFIGS = ("constellation-1000", "explorer-1", "flexible-slew")
+# detumble: its controller on this config (cut to 30 s) runs in test_closed_loop, test_docs_walk_fixes and
+# test_live_view (CI time)
+SLOW_CONFIGS = ("constellation-1000", "explorer-1", "flexible-slew", "detumble")
 
 pytestmark = pytest.mark.network
 
