@@ -554,6 +554,12 @@ def _name_the_recording(written: str | None, out: Path, result: dict, files: dic
     from astrodyn.recording.writer import fsync_directory
 
     mine = files.get(attempt)
+    if mine is None and written is not None and Path(written) == Path(partial_path(out, attempt)):
+        # the logger's own summary names the file it created (O_EXCL): its file was not there yet
+        # when its readiness was seen (a liveliness token forged in its name came first)
+        mine = files[attempt] = LoggerFile.of_ready_logger(written)
+        if mine is None:
+            del files[attempt]
     if mine is not None and not mine.here():
         where = mine.where()
         _fail(result, f"the recording is not at {mine.path} (nor at {out}): " + (
