@@ -245,10 +245,13 @@ def _long_config(tmp_path: Path, duration: str = "30 d") -> Path:
     return cfg
 
 
-# SIGKILL in make test-all only: a propagator SIGKILLed under `run` and restarted with no hole
-# is also test_zenoh_config_flag.py::test_run_restarts_a_killed_propagator_from_its_own_copy_when_the_file_was_deleted
-# (every seq of both channels) and the random faults of test_supervision.py
-@pytest.mark.parametrize("fault", [pytest.param("SIGKILL", marks=pytest.mark.slow), "SIGSTOP"])
+# Both in make test-all only (CI time): a propagator SIGKILLed under `run` and restarted with no
+# hole is also test_zenoh_config_flag.py::test_run_restarts_a_killed_propagator_from_its_own_copy_when_the_file_was_deleted
+# (every seq of both channels) and the random faults of test_supervision.py; a hung (SIGSTOPped) one is
+# killed and restarted by the same Child.kill_if_stalled under serve in
+# test_reliability.py::test_serve_restarts_a_killed_or_hung_propagator_from_the_last_state[SIGSTOP]
+@pytest.mark.parametrize("fault", [pytest.param("SIGKILL", marks=pytest.mark.slow),
+                                   pytest.param("SIGSTOP", marks=pytest.mark.slow)])
 def test_killed_or_hung_propagator_is_restarted_and_the_file_has_no_hole(tmp_path, fault):
     """SIGKILL of the orbit propagator during `astrodyn run`, or SIGSTOP (hung: no heartbeat,
     so killed after ``--stall-timeout``, 3 s here): the runner restarts it after the

@@ -500,9 +500,9 @@ def _random_faults(tmp_path, processes, reference, trials: int, seed: int, trial
 
 
 def test_random_faults_fast_subset(tmp_path, processes, reference):
-    """Two seeded random trials (the series below has twenty)."""
-    records = _random_faults(tmp_path, processes, reference, trials=2, seed=20261125)
-    assert len(records) == 2 and any(r["killed"] for r in records)  # faults did happen
+    """One seeded random trial (the series below has twenty; CI time)."""
+    records = _random_faults(tmp_path, processes, reference, trials=1, seed=20261125)
+    assert len(records) == 1 and records[0]["killed"], records  # the fault did happen
 
 
 @pytest.mark.slow
@@ -566,9 +566,9 @@ def _serve_fault_trial(tmp_path: Path, processes, rng, reference_states: dict, c
 
 
 def test_serve_random_faults_fast_subset(tmp_path, processes, reference):
-    """Two seeded random trials against `serve` (the series below has twenty)."""
-    records = _random_faults(tmp_path, processes, reference, trials=2, seed=20261126, trial=_serve_fault_trial)
-    assert len(records) == 2 and sum(r["killed"] for r in records) >= 1
+    """One seeded random trial against `serve` (the series below has twenty; CI time)."""
+    records = _random_faults(tmp_path, processes, reference, trials=1, seed=20261126, trial=_serve_fault_trial)
+    assert len(records) == 1 and records[0]["killed"], records
 
 
 @pytest.mark.slow
