@@ -194,6 +194,7 @@ def test_replay_with_a_live_view(tmp_path):
     _check_states(got, rec, "leo")
 
 
+@pytest.mark.slow  # CI time: clients that stop reading, and ones cut mid-stream, are test_live_view_hostile's
 def test_a_vanished_client_changes_nothing(tmp_path):
     """A client that subscribes and then stops reading (a frozen browser) and one killed
     mid-stream: the run goes on and its recording is complete, without a gap."""

@@ -283,6 +283,7 @@ def test_a_standby_logger_records_the_whole_run_when_the_main_one_is_killed(tmp_
     assert not list(tmp_path.glob("*.partial*.mcap"))
 
 
+@pytest.mark.slow  # CI time: the standby loggers stay in CI through the serve standby test
 def test_a_killed_standby_logger_is_a_warning_and_its_partial_file_is_kept(tmp_path, processes, reference):
     """SIGKILL of the standby: the run still ends 0 with the main file complete, warns
     naming the standby and where its partial file stays; merging that partial file with
