@@ -66,3 +66,23 @@ def stop_serve(proc, settle_s: float = 1.0, timeout_s: float = 90.0) -> tuple[st
         proc.communicate()
         raise
     return stdout, stderr, json.loads(stdout.strip().splitlines()[-1])
+
+
+def serve_demo(out, rate: str) -> tuple:
+    """``astrodyn serve`` of configs/demo.toml at ``rate`` into ``out`` (at most 120 s of
+    wall time) and the start line it printed (hub, control token): ``(Popen, dict)``.  One
+    that did not start is stopped here (by PID) and the test fails with its stderr."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    from astrodyn.service.children import stop_process
+
+    config = Path(__file__).resolve().parents[1] / "configs" / "demo.toml"
+    serve = subprocess.Popen([sys.executable, "-m", "astrodyn", "serve", str(config), "--out", str(out), "--rate",
+                              str(rate), "--max-wall", "120"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        return serve, json.loads(serve.stdout.readline())
+    except ValueError:
+        stop_process(serve)
+        raise AssertionError(serve.stderr.read()[-3000:]) from None

@@ -20,7 +20,6 @@ from __future__ import annotations
 import json
 import os
 import signal
-import subprocess
 import sys
 import time
 from pathlib import Path
@@ -30,7 +29,7 @@ import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _recordings import children_by_kind, one_satellite_scene, run_while
-from _serve_control import wait_until
+from _serve_control import serve_demo, stop_serve, wait_until
 from astrodyn import bus
 from astrodyn.service.children import stop_process
 
@@ -84,12 +83,8 @@ def test_serve_resumes_in_real_time_from_where_ctrl_z_paused_it(tmp_path):
     """At x20 a 5 s pause would be 100 s of sim time; after fg the propagators go on from
     where they were at x20, instead of running flat out until they are back on the old schedule."""
     rate, paused_s = 20.0, 5.0
-    serve = subprocess.Popen([sys.executable, "-m", "astrodyn", "serve", str(ROOT / "configs" / "demo.toml"),
-                              "--out", str(tmp_path / "serve.mcap"), "--rate", str(rate), "--max-wall", "120"],
-                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    serve, hello = serve_demo(tmp_path / "serve.mcap", rate)
     try:
-        hello = json.loads(serve.stdout.readline() or "null")
-        assert hello, serve.stderr.read()[-3000:]
         with bus.open_session(connect=[hello["hub"]]) as s:
             def t_sim() -> float | None:
                 procs = bus.send_control(s, "demo", "status", token=hello["control_token"])[0]["processes"]
@@ -107,10 +102,8 @@ def test_serve_resumes_in_real_time_from_where_ctrl_z_paused_it(tmp_path):
         # ~1 s of real time since the continue (plus the query's own latency) at x20; the
         # race through the pause would add 100 s of sim time
         assert after - before < rate * (1.0 + paused_s / 2), (before, after)
-        serve.send_signal(signal.SIGTERM)
-        out, err = serve.communicate(timeout=90)
+        _, err, summary = stop_serve(serve, settle_s=0.0)
         assert serve.returncode == 0, err[-3000:]
-        summary = json.loads(out.strip().splitlines()[-1])
         assert summary["restarts"] == [] and summary["failures"] == [], summary
     finally:
         stop_process(serve)

@@ -15,15 +15,13 @@ A real serve, a real zenoh session; serve is stopped by its PID at the end.
 from __future__ import annotations
 
 import json
-import signal
-import subprocess
 import sys
 from pathlib import Path
 
 import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _serve_control import wait_until
+from _serve_control import serve_demo, stop_serve, wait_until
 from astrodyn import auth, bus, messages
 from astrodyn.service.children import stop_process
 
@@ -43,12 +41,8 @@ def _ask(session, key: str, payload: bytes, token: str | None = None) -> list[di
 
 
 def test_deep_json_queries_answer_with_an_error_and_kill_nothing(tmp_path):
-    serve = subprocess.Popen([sys.executable, "-m", "astrodyn", "serve", str(ROOT / "configs" / "demo.toml"),
-                              "--out", str(tmp_path / "q.mcap"), "--rate", "20", "--max-wall", "120"],
-                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    serve, hello = serve_demo(tmp_path / "q.mcap", "20")
     try:
-        hello = json.loads(serve.stdout.readline() or "null")
-        assert hello, serve.stderr.read()[-3000:]
         token = hello["control_token"]
         with bus.open_session(connect=[hello["hub"]]) as s:
             def status() -> dict:
@@ -66,10 +60,8 @@ def test_deep_json_queries_answer_with_an_error_and_kill_nothing(tmp_path):
             now = status()
             assert now["state"] == "running" and now["real_time_factor"] == 20.0, now
             assert now["processes"]["logger"]["pid"] == logger_pid and now["restarts"] == [], now
-        serve.send_signal(signal.SIGTERM)
-        out, err = serve.communicate(timeout=90)
+        _, err, summary = stop_serve(serve, settle_s=0.0)
         assert serve.returncode == 0, err[-3000:]
-        summary = json.loads(out.strip().splitlines()[-1])
         assert summary["failures"] == [] and summary["restarts"] == [], summary
     finally:
         stop_process(serve)

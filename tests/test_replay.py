@@ -73,6 +73,17 @@ class Collector:
                 n += 1
         return n
 
+    def assert_quiet(self, settle_s: float, quiet_s: float, what: str) -> int:
+        """After ``settle_s`` (puts in flight arrive), nothing more arrives for ``quiet_s``;
+        the number of messages got."""
+        time.sleep(settle_s)
+        self.drain()
+        n = len(self.got)
+        time.sleep(quiet_s)
+        self.drain()
+        assert len(self.got) == n, f"messages arrived while {what}"
+        return n
+
     def until_exit(self, proc: subprocess.Popen, timeout_s: float) -> None:
         deadline = time.monotonic() + timeout_s
         quiet_since = None
@@ -218,12 +229,7 @@ def test_ctrl_z_pauses_a_replay_and_fg_goes_on_at_its_rate(hub, spawn, recording
     _wait(lambda: col.drain() or col.got, 30, "first replayed message")
     time.sleep(1.0)
     os.kill(proc.pid, signal.SIGTSTP)
-    time.sleep(0.3)  # in-flight puts arrive
-    col.drain()
-    n_stopped = len(col.got)
-    time.sleep(2.0)
-    col.drain()
-    assert len(col.got) == n_stopped, "messages arrived while stopped"
+    n_stopped = col.assert_quiet(0.3, 2.0, "stopped")
     resumed = time.monotonic()
     os.kill(proc.pid, signal.SIGCONT)
     col.until_exit(proc, 60)
@@ -248,12 +254,7 @@ def test_replay_pause_resume_rate_seek_stop_over_zenoh(hub, spawn, recording):
     assert "error" in _control(session, "rate", {"factor": 1e-300}, token=token)
     status = _control(session, "pause", token=token)
     assert status["state"] == "paused"
-    time.sleep(0.2)  # in-flight puts arrive
-    col.drain()
-    n_paused = len(col.got)
-    time.sleep(1.0)
-    col.drain()
-    assert len(col.got) == n_paused, "messages arrived while paused"
+    n_paused = col.assert_quiet(0.2, 1.0, "paused")
     t_paused = _control(session, "status", token=token)["t"]
     assert 0 < t_paused < 50
     assert _control(session, "resume", token=token)["state"] == "running"

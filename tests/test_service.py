@@ -27,6 +27,9 @@ from astrodyn.orbit import propagate
 from astrodyn.scenario import load
 from astrodyn.service.children import stop_process
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _serve_control import serve_demo
+
 ROOT = Path(__file__).resolve().parents[1]
 CONFIGS = ROOT / "configs"
 ASTRODYN = [sys.executable, "-m", "astrodyn"]
@@ -434,18 +437,6 @@ def test_a_restarted_propagator_with_no_step_left_ends_when_the_logger_has_finis
     assert left.returncode != 0 and "logger" in left.stderr, left.stderr[-2000:]
 
 
-def _serve_demo(out: Path, rate: str) -> tuple[subprocess.Popen, dict]:
-    """``astrodyn serve`` of the demo at ``rate`` into ``out`` (at most 120 s of wall time)
-    and the start line it printed (hub, control token)."""
-    serve = subprocess.Popen([*ASTRODYN, "serve", str(ROOT / "configs" / "demo.toml"), "--out", str(out), "--rate", rate,
-                              "--max-wall", "120"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    try:
-        return serve, json.loads(serve.stdout.readline())
-    except ValueError:  # it did not start: stopped here (by PID), its stderr says why
-        stop_process(serve)
-        raise AssertionError(serve.stderr.read()[-3000:]) from None
-
-
 def _assert_the_propagators_stay_paused(session, token: str, timeout_s: float = 60.0) -> None:
     """Once the demo's orbit and attitude propagators have each sent a heartbeat with a sim
     time (serve's status through ``session``, with the control ``token``) and a re-sent
@@ -470,7 +461,7 @@ def test_a_pause_sent_while_the_propagators_start_holds_at_rate_inf(tmp_path):
     ``paused`` while the propagators ran on (55,000 s of sim time in 9 s).  Every heartbeat
     now says it."""
     out = tmp_path / "inf.mcap"
-    serve, hello = _serve_demo(out, "inf")
+    serve, hello = serve_demo(out, "inf")
     try:
         token = hello["control_token"]
         with bus.open_session(connect=[hello["hub"]]) as s:
@@ -493,7 +484,7 @@ def test_a_pause_and_a_stop_sent_while_the_propagators_start_still_reach_them(tm
     means no propagator's sim time moves, then each moves at the rate set; stop is answered
     within seconds."""
     out = tmp_path / "early.mcap"
-    serve, hello = _serve_demo(out, "20")
+    serve, hello = serve_demo(out, "20")
     try:
         token = hello["control_token"]
         with bus.open_session(connect=[hello["hub"]]) as s:
