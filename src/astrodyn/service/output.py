@@ -16,7 +16,7 @@ from astrodyn.recording.reader import MCAP_MAGIC, RecordingError, open_recording
 from astrodyn.recording.writer import being_written, part_path, partial_path
 from astrodyn.scenario import ScenarioError
 
-__all__ = ["check_output_path", "OutputDirectory", "series_parts_problem"]
+__all__ = ["check_output_path", "OutputDirectory", "series_parts_problem", "held_path"]
 
 
 def _same_file(a: Path, b: Path) -> bool:
@@ -103,6 +103,21 @@ def series_parts_problem(path: Path) -> str | None:
             f"recording: move {'them' if many else 'it'} elsewhere or choose another --out")
 
 
+def held_path(fd: int | None, identity: tuple[int, int]) -> str | None:
+    """Where the file or directory held open by descriptor ``fd`` is now (``/proc/self/fd``,
+    Linux), if a path there still names it (``(st_dev, st_ino)`` = ``identity``); None when
+    it was removed or that cannot be told.  How a run finds its recording after its
+    directory was renamed (:class:`OutputDirectory`, ``supervision.LoggerFile``)."""
+    if fd is None:
+        return None
+    try:
+        now = os.readlink(f"/proc/self/fd/{fd}")
+        st = os.lstat(now)
+    except OSError:
+        return None
+    return now if (st.st_dev, st.st_ino) == identity and not now.endswith(" (deleted)") else None
+
+
 class OutputDirectory:
     """The directory a recording is written in, held open (a descriptor on it) from the
     start: :meth:`problem` tells when it was renamed or removed while the run recorded
@@ -121,14 +136,7 @@ class OutputDirectory:
 
     def where(self) -> str | None:
         """Where the directory is now (None: removed, or not known)."""
-        if self._fd is None:
-            return None
-        try:
-            now = os.readlink(f"/proc/self/fd/{self._fd}")
-            st = os.stat(now)
-        except OSError:
-            return None
-        return now if (st.st_dev, st.st_ino) == self.identity and not now.endswith(" (deleted)") else None
+        return held_path(self._fd, self.identity)
 
     def problem(self) -> str | None:
         """None while the directory is still at :attr:`path`; else one line saying it was

@@ -120,20 +120,9 @@ class LoggerFile:
         """Where the file is now, if it was moved (its directory renamed, the file
         renamed): from the descriptor kept on it (``/proc/self/fd``); None when it was
         removed or that cannot be told."""
-        if self.here():
-            return self.path
-        if self._fd is None:
-            return None
-        try:
-            now = os.readlink(f"/proc/self/fd/{self._fd}")
-        except OSError:
-            return None
-        if now.endswith(" (deleted)") or not os.path.exists(now):
-            return None
-        try:
-            return now if _identity(os.lstat(now)) == self.identity else None
-        except OSError:
-            return None
+        from astrodyn.service.output import held_path
+
+        return self.path if self.here() else held_path(self._fd, self.identity)
 
     def unlink_if_here(self) -> bool:
         """Remove :attr:`path` if it still names this file (a dead logger's, copied); True
