@@ -105,9 +105,12 @@ def test_no_child_outlives_a_killed_run_supervisor(tmp_path, processes, delay_s)
     cfg = tmp_path / "long.toml"
     cfg.write_text(LONG)
     out = tmp_path / "long.mcap"
+    scratch = tmp_path / "tmp"  # the run's TMPDIR: a killed run cannot clean up, so it must leave nothing there
+    scratch.mkdir()
     sup = processes([*ASTRODYN, "run", cfg, "--out", out, "--quiet"], stdout=subprocess.DEVNULL,
-                    stderr=subprocess.PIPE)
+                    stderr=subprocess.PIPE, env={**os.environ, "TMPDIR": str(scratch)})
     seen = _kill_supervisor_after(sup, delay_s)
+    assert list(scratch.iterdir()) == []
     if delay_s >= 4.0:
         assert len(seen) >= 3  # the logger and both propagators had started: the check saw real children
     # what the killed run left beside its recording is found and finished by recover

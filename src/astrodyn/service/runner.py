@@ -739,7 +739,9 @@ def main(argv: list[str] | None = None) -> int:
                     help="exit 0 even when the logger rejected messages that did not come from this run's own "
                          "processes (default: exit 3, the record was attacked; docs/security.md)")
     args = ap.parse_args(argv)
-    with tempfile.TemporaryDirectory(prefix="astrodyn-resume-") as work:
+    # the resume work directory exists only for --resume: a run killed by SIGKILL leaves nothing in /tmp
+    work_dir = tempfile.TemporaryDirectory(prefix="astrodyn-resume-") if args.resume else contextlib.nullcontext("")
+    with work_dir as work:
         try:
             if args.out == "":
                 raise ScenarioError("--out: expected a file path, got an empty string")
