@@ -209,6 +209,28 @@ def test_a_zenoh_config_above_the_cap_is_refused_by_every_command(tmp_path):
         assert not list(tmp_path.glob("*.mcap"))
 
 
+def test_a_zenoh_config_nested_past_the_parsers_stack_is_refused_by_every_command(tmp_path):
+    """``"[" * 50000`` (100 kB, under the size cap) made Zenoh's JSON5 parser recurse past the
+    native stack: every command taking the file died of SIGSEGV with nothing printed
+    (sweep probe, session 16).  Now each refuses it in one line, exit 2, before Zenoh reads it; brackets inside strings and
+    comments are text, so a config with an IPv6 endpoint and a commented ``[`` still passes."""
+    deep = tmp_path / "deep.json5"
+    deep.write_text("[" * 50000 + "]" * 50000 + "\n")
+    for name in ("run", "router"):  # serve and replay read it through the same bus._load_zenoh_config
+        argv, flag = _command(name, tmp_path, deep)
+        done = subprocess.run([str(a) for a in argv], capture_output=True, text=True, timeout=30)
+        assert done.returncode == 2, (name, done.returncode, done.stderr[-2000:])
+        assert done.stderr.strip().endswith(
+            f"{flag} {deep}: expected a Zenoh configuration nested at most {bus.ZENOH_CONFIG_MAX_DEPTH} deep "
+            f"('{{' and '['), got deeper"), (name, done.stderr)
+        assert len(done.stderr.strip().splitlines()) == 1
+    brackets_as_text = ('{\n  // [[[[ a comment\n  /* [[[[ */\n'
+                        '  connect: { endpoints: ["tcp/[::1]:7447" ] },\n  id: null, // ' + "[" * 200 + "\n}\n")
+    assert bus.zenoh_config_depth(brackets_as_text.encode()) == 3
+    assert bus.zenoh_config_depth(b'{a: "' + b"[" * 300 + b'"}') == 1
+    assert bus.zenoh_config_depth(b"/* " + b"[" * 300) == 0  # an unclosed comment ends the text
+
+
 SYNTAX_ERROR = '{\n  transport: { unicast: { max_sessions: } },\n}\n'  # no value: JSON5 syntax
 TYPE_ERROR = '{\n  scouting: { gossip: { enabled: "yes" } },\n}\n'  # valid JSON5, a string for a boolean
 

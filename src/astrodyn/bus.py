@@ -288,6 +288,29 @@ def _endpoint_list(name: str, value: str | Sequence[str] | None) -> list[str]:
 #: and a config with TLS paths and access-control rules is a few kB.
 ZENOH_CONFIG_MAX_BYTES = 2**20
 
+#: Deepest nesting of ``{`` / ``[`` astrodyn hands to Zenoh's parser: its JSON5 parser recurses
+#: once per level on the native stack, and ``"[" * 50000`` (100 kB, well under the size limit)
+#: killed every command taking ``--zenoh-config`` with SIGSEGV.  Real configs nest 5-8 deep.
+ZENOH_CONFIG_MAX_DEPTH = 128
+
+#: What :func:`zenoh_config_depth` skips: JSON5 / YAML strings and comments, whose brackets
+#: are text (``"tcp/[::1]:7447"``).
+_CONFIG_TEXT = re.compile(rb'"(?:[^"\\\n]|\\.)*"|\'(?:[^\'\\\n]|\\.)*\'|//[^\n]*|/\*.*?(?:\*/|\Z)|#[^\n]*', re.S)
+
+
+def zenoh_config_depth(data: bytes, limit: int = ZENOH_CONFIG_MAX_DEPTH) -> int:
+    """How deep ``{`` and ``[`` nest in the configuration text ``data`` (outside strings and
+    comments), counted up to ``limit + 1`` (a deeper text stops the count there)."""
+    depth = deepest = 0
+    for c in _CONFIG_TEXT.sub(b"", data).translate(None, delete=bytes(set(range(256)) - set(b"{}[]"))):
+        depth += 1 if c in b"{[" else -1
+        if depth > deepest:
+            deepest = depth
+            if deepest > limit:
+                break
+    return deepest
+
+
 #: The settings of a Zenoh configuration file that decide who can reach a session and that
 #: astrodyn sets itself on top of it (:func:`make_config`): a file that sets them gets a warning.
 _SETTINGS_ASTRODYN_SETS = ("listen/endpoints", "connect/endpoints", "scouting/multicast/enabled")
@@ -360,6 +383,11 @@ def _load_zenoh_config(path: str | os.PathLike, label: str) -> zenoh.Config:
     if problem := zenoh_config_problem(path):
         raise BusError(f"{label}: {problem}")
     try:
+        with open(path, "rb") as f:  # a regular file of at most ZENOH_CONFIG_MAX_BYTES (checked above)
+            depth = zenoh_config_depth(f.read(ZENOH_CONFIG_MAX_BYTES + 1))
+        if depth > ZENOH_CONFIG_MAX_DEPTH:
+            raise BusError(f"{label}: expected a Zenoh configuration nested at most {ZENOH_CONFIG_MAX_DEPTH} deep "
+                           f"('{{' and '['), got deeper")
         return zenoh.Config.from_file(os.fspath(path))
     except (zenoh.ZError, OSError, ValueError) as exc:
         raise BusError(f"{label}: expected a readable Zenoh JSON5 configuration: {zenoh_config_error_text(exc)}") from None
