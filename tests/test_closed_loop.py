@@ -106,8 +106,14 @@ def test_lockstep_is_deterministic_and_commands_resimulate_bit_for_bit(tmp_path)
     assert len(pa["astrodyn/slew/sc/attitude"]) == 201
     assert pa == pb  # two lockstep runs, same deterministic controller: identical payloads
     assert pa == pc  # re-simulated from a's commands, no controller: identical payloads
+    # every message of step k is stamped t = k / rate, as the propagators stamp theirs
+    # (docs/architecture.md): the plant stamped k * (1 / rate), 3 * 0.1 = 0.30000000000000004
+    run = load(a)
+    for kind in ("/attitude", "/gyro", "/actuators"):
+        track = run.channels[f"astrodyn/slew/sc{kind}"]
+        assert np.array_equal(track.t, np.asarray(track.seq) / 10.0), kind
     # and the loop did something: the wheels were commanded and clipped at their limit
-    act = load(a).channels["astrodyn/slew/sc/actuators"]
+    act = run.channels["astrodyn/slew/sc/actuators"]
     assert np.max(np.abs(np.stack(act.wheel_torque))) == pytest.approx(0.2, rel=1e-12)
 
 

@@ -341,6 +341,7 @@ class PlantLoop:
             plant.set_faults(replay_faults)
         self.control = control = scenario.control
         self.name = scenario.name
+        self.rate = scenario.rate
         self.dt = 1.0 / scenario.rate
         self.n_steps = (2**53 if endless else scenario.n_steps) if max_steps is None else min(scenario.n_steps, int(max_steps))
         self.replay = replay
@@ -656,7 +657,7 @@ class PlantLoop:
             gc.freeze()
             try:
                 while k < self.n_steps:
-                    t = k * self.dt
+                    t = k / self.rate  # the time of step k of every process (docs/architecture.md), not k * dt
                     self.wait_for_time(t, supervisor, heartbeat)
                     if self.stopping["why"]:
                         break
