@@ -280,7 +280,7 @@ def test_transforms_carry_exactly_the_states_log_times_and_no_made_up_attitude(t
                 logged.setdefault(channel.topic, []).append(msg.log_time)
     for body in ("leo", "geo"):
         att = run.bodies[body].attitude
-        states = np.union1d(run.bodies[body].orbit.log_time, att.log_time if att is not None else np.zeros(0, np.int64))
+        states = np.union1d(run.bodies[body].orbit.log_time, att.log_time if att is not None else np.zeros(0, np.uint64))  # Track.log_time: uint64
         assert states.max() - states.min() > 2**53  # the far part is covered
         assert sorted(logged[f"foxglove/{body}/tf"]) == states.tolist(), body
         stamps = [m["timestamp"]["sec"] * 10**9 + m["timestamp"]["nsec"] for m in back["tfs"][f"foxglove/{body}/tf"]]

@@ -16,6 +16,7 @@ import threading
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 from mcap.writer import CompressionType, Writer
 
@@ -82,15 +83,18 @@ def test_a_schema_claiming_a_billion_numbers_stays_in_bounded_memory(tmp_path):
     assert proc.stdout.split() == ["2", "0"]
 
 
-def test_a_log_time_past_int64_is_counted_invalid_not_an_overflow(tmp_path):
-    """MCAP log times are uint64; a Track's are int64 ns.  2**64 - 1 is counted invalid on
-    its channel (the other messages are read), not OverflowError."""
+def test_a_log_time_past_int64_is_read_exactly_not_an_overflow(tmp_path):
+    """MCAP log times are uint64 and so is a Track's ``log_time``: 2**64 - 1 and 2**63 (after
+    2262-04-11, which a config may reach) are read exactly, not counted invalid (they used
+    to be: every state after 2262 vanished from load / analyze / export), nor OverflowError."""
     good = json.dumps(ORBIT).encode()
     path = _write(tmp_path / "late.mcap", [("astrodyn/demo/sat/orbit", b"{}", [(2**64 - 1, good), (5, good.replace(
         b'"seq":0', b'"seq":1'))]), ("other/x", b'{"type":"object"}', [(2**63, b"{}")])])
     run = load(path)
-    assert run.messages == 1 and run.invalid_by_channel == {"astrodyn/demo/sat/orbit": 1, "other/x": 1}
-    assert any("log_time 18446744073709551615" in e for e in run.invalid_examples), run.invalid_examples
+    assert run.messages == 3 and run.invalid == 0 and run.complete, run
+    orbit = run.channels["astrodyn/demo/sat/orbit"]
+    assert orbit.log_time.dtype == np.uint64 and orbit.log_time.tolist() == [2**64 - 1, 5]  # sorted by seq
+    assert run.channels["other/x"].log_time.tolist() == [2**63]
 
 
 def test_a_fifo_is_refused_at_once_not_waited_on(tmp_path):

@@ -247,7 +247,9 @@ def gmst_rad(unix_ns: np.ndarray) -> np.ndarray:
     IAU 1982 (Vallado 4th ed. eq. 3-47): GMST = 67310.54841 s + (876600 h + 8640184.812866 s) T
     + 0.093104 s T^2 - 6.2e-6 s T^3, T Julian centuries of UT1 from J2000.
     """
-    ns = np.asarray(unix_ns, dtype=np.int64)
+    ns = np.asarray(unix_ns)
+    if ns.dtype.kind != "u":  # Track.log_time is uint64 (to 2554): int64 would wrap times after 2262-04-11
+        ns = ns.astype(np.int64)
     days = (ns // 86_400_000_000_000).astype(np.float64) + (ns % 86_400_000_000_000) / 8.64e13
     tu = (days + (_UNIX_EPOCH_JD - _J2000_JD)) / 36525.0
     sec = 67310.54841 + (876600.0 * 3600.0 + 8640184.812866) * tu + 0.093104 * tu**2 - 6.2e-6 * tu**3

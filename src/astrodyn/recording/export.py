@@ -330,8 +330,8 @@ def ccsds_epochs(run: Run, t: np.ndarray, log_time: np.ndarray) -> tuple[list[st
         times = base + TimeDelta(np.asarray(t, dtype=np.float64), format="sec")
         system = _CCSDS_SCALES[scale]
     else:  # no scenario metadata: POSIX log times as UTC
-        ns = np.asarray(log_time, dtype=np.int64)
-        times = Time(ns // 10**9, (ns % 10**9) * 1e-9, format="unix", scale="utc")
+        ns = np.asarray(log_time, dtype=np.uint64)  # MCAP's uint64 ns: 1970 to 2554, none wrapped to 1677
+        times = Time((ns // np.uint64(10**9)).astype(np.float64), (ns % np.uint64(10**9)) * 1e-9, format="unix", scale="utc")
         system = "UTC"
     times.precision = 6
     return [s for s in np.atleast_1d(times.isot)], system
@@ -567,7 +567,7 @@ def frame_transforms(run: Run) -> list[tuple[int, str, bytes]]:
             continue
         parent = _orbit_frame(body)
         child = name if att is not None else f"{name}/position"
-        none = np.zeros(0, dtype=np.int64)  # not [] : a float64 union would round ns log times near 1.8e18
+        none = np.zeros(0, dtype=np.uint64)  # Track.log_time's dtype: another one's union is float64, rounding ns
         times = np.union1d(orbit.log_time if orbit is not None else none, att.log_time if att is not None else none)
         pos = np.zeros((times.size, 3))
         rot = np.tile([0.0, 0.0, 0.0, 1.0], (times.size, 1))  # the parent's axes: only for position-only frames

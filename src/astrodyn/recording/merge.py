@@ -13,7 +13,13 @@ What counts as the same message: same topic, same log time and same payload byte
 loggers record payloads as received, so two copies of one message are identical).  On a
 state channel (``<body>/orbit|attitude|crosscheck``) ``seq`` also rises with time: a
 message whose ``seq`` is not above the last one written for its topic, with other bytes,
-is a *conflict* (two different states claim one seq) -- counted, the first kept.
+is a *conflict* (two different states claim one seq) -- counted per topic, the first
+kept, the other left out of the merged file; ``astrodyn merge`` then ends with exit
+status 3 (docs/exports.md).  The step is the payload's ``seq`` (a run has up to 1e10
+steps), never MCAP's 32-bit ``sequence`` alone, which the writer stores as ``seq mod
+2**32``: a ``sequence`` one to 2**31 - 1 above the last one's (mod 2**32) is that many steps
+on, with no payload decoded (the usual case); any other (the same, lower, or a jump of
+2**31 or more) is judged by the ``seq`` decoded from the payload.
 Inputs of different scenarios are refused (their ``scenario`` records disagree).
 
 Writing uses the ``mcap`` package's own :class:`mcap.writer.Writer` (zstd chunks, full
@@ -28,6 +34,7 @@ not finish (a live or killed logger's file) is merged up to where it ends, with 
 from __future__ import annotations
 
 import heapq
+import json
 import os
 import struct
 from dataclasses import dataclass, field
@@ -56,16 +63,45 @@ class MergeReport:
     duplicates: int = 0
     conflicts: int = 0
     per_topic: dict[str, int] = field(default_factory=dict)
+    #: conflicts per topic: states of these channels were left out (two inputs disagree)
+    conflicts_per_topic: dict[str, int] = field(default_factory=dict)
     inputs: dict[str, str] = field(default_factory=dict)
 
     def as_dict(self) -> dict:
-        return {"out": self.out, "messages": self.messages, "duplicates": self.duplicates, "conflicts": self.conflicts,
-                "topics": len(self.per_topic), "inputs": self.inputs}
+        out = {"out": self.out, "messages": self.messages, "duplicates": self.duplicates, "conflicts": self.conflicts,
+               "topics": len(self.per_topic), "inputs": self.inputs}
+        if self.conflicts_per_topic:
+            out["conflicts_per_topic"] = dict(self.conflicts_per_topic)
+        return out
 
 
-def _seq_of(topic: str, sequence: int) -> int | None:
-    kind = topic.rsplit("/", 1)[-1]
-    return sequence if kind in STATE_KINDS and "/@" not in topic else None
+_WRAP = 2**32  #: MCAP's ``sequence`` is uint32: the writer stores ``seq mod 2**32``
+
+
+def _is_state(topic: str) -> bool:
+    return topic.rsplit("/", 1)[-1] in STATE_KINDS and "/@" not in topic
+
+
+def _payload_seq(data: bytes) -> int | None:
+    """The ``seq`` of a state payload (a JSON object's non-negative integer ``seq``), or None."""
+    try:
+        msg = json.loads(data)
+    except (ValueError, RecursionError):
+        return None
+    seq = msg.get("seq") if isinstance(msg, dict) else None
+    return seq if isinstance(seq, int) and not isinstance(seq, bool) and seq >= 0 else None
+
+
+def _step_of(m, last: int | None) -> int | None:
+    """The step (``seq``) of the state message ``m`` of a topic whose last written step is
+    ``last``: ``last + d`` when MCAP's 32-bit ``sequence`` is ``d`` in 1 .. 2**31 - 1 ahead of
+    ``last`` (mod 2**32); else the payload's ``seq`` (None when the payload has none: then
+    no seq rule applies to it)."""
+    if last is not None:
+        d = (m.sequence - last) % _WRAP
+        if 0 < d < _WRAP // 2:
+            return last + d
+    return _payload_seq(m.data)
 
 
 def taken_output_problem(inputs: list[str | os.PathLike], out: str | os.PathLike) -> str | None:
@@ -160,9 +196,10 @@ def _copy(streams, writer: Writer, report: MergeReport) -> None:
         if key in window:
             report.duplicates += 1
             continue
-        seq = _seq_of(m.topic, m.sequence)
+        seq = _step_of(m, last_seq.get(m.topic)) if _is_state(m.topic) else None
         if seq is not None and m.topic in last_seq and seq <= last_seq[m.topic]:
             report.conflicts += 1  # same seq again with other bytes (or out of order)
+            report.conflicts_per_topic[m.topic] = report.conflicts_per_topic.get(m.topic, 0) + 1
             continue
         window.add(key)
         cid = channel_ids.get(m.topic)
@@ -194,7 +231,6 @@ def main(argv: list[str] | None = None) -> int:
 
 def _main(argv: list[str] | None) -> int:
     import argparse
-    import json
     import sys
 
     ap = argparse.ArgumentParser(prog="astrodyn merge",
@@ -202,8 +238,9 @@ def _main(argv: list[str] | None) -> int:
                                              "loggers' parts) into one file without duplicates.",
                                  epilog="Exit status: 0 merged; 1 an input cannot be read or the inputs are not of "
                                         "one run, or the file cannot be written (or another process wrote --out meanwhile); 2 a bad flag value or an --out that "
-                                        "exists, is an input or is not a file path in a writable directory; 128 + "
-                                        "the signal when interrupted.")
+                                        "exists, is an input or is not a file path in a writable directory; 3 merged, "
+                                        "but the inputs disagree: states claiming a seq already written, with other "
+                                        "bytes (conflicts), were left out; 128 + the signal when interrupted.")
     ap.add_argument("inputs", nargs="+", type=path_argument, help="MCAP recordings of the same run (complete or cut)")
     ap.add_argument("--out", required=True, type=path_argument, help="the merged MCAP file to write (must not exist)")
     args = ap.parse_args(argv)
@@ -220,4 +257,10 @@ def _main(argv: list[str] | None) -> int:
         if state != "complete":
             warn_incomplete_input("merge", path, state, "merged the complete messages it holds")
     print(json.dumps(report.as_dict()))
+    if report.conflicts:  # states were left out: not a silent success
+        shown = ", ".join(f"{n} on {t}" for t, n in sorted(report.conflicts_per_topic.items())[:5])
+        print(f"astrodyn merge: CONFLICTS: {report.conflicts} states left out ({shown}): the inputs hold different "
+              f"states under one seq, the first in log-time order (then input order) was kept; {args.out} holds "
+              f"the rest of the merge", file=sys.stderr)
+        return 3
     return 0

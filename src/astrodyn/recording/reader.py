@@ -70,8 +70,10 @@ def gap_report(seqs: np.ndarray) -> dict:
 class Track:
     """The messages of one channel as arrays, sorted by seq.
 
-    Always: ``topic``, ``kind``, ``schema_name``, ``seq`` (int64), ``log_time`` (int64 ns
-    since the Unix epoch) and, for astrodyn kinds, ``t`` (s since the scenario epoch).
+    Always: ``topic``, ``kind``, ``schema_name``, ``seq`` (int64), ``log_time`` (uint64 ns
+    since the Unix epoch: MCAP's whole range, 1970 to 2554, so a state after 2262-04-11,
+    2**63 ns, reads like any other) and, for astrodyn kinds, ``t`` (s since the scenario
+    epoch).
     Schema fields become attributes: numbers -> ``(n,)`` float64, integers -> ``(n,)``
     int64, fixed-length number arrays -> ``(n, k)`` float64 (``r``, ``v``, ``q``, ``w``,
     ``dr``, ``dv``), strings -> ``(n,)`` object arrays (``model``, ``frame``).  Channels
@@ -430,7 +432,7 @@ class _Builder:
         its fields are known to be of their columns' types and are not checked again."""
         self.topic, self.kind, self.schema_name, self.columns = topic, kind, schema_name, columns
         self.validated = validated and columns is not None
-        self.seq, self.log_time = array("q"), array("q")
+        self.seq, self.log_time = array("q"), array("Q")  # log_time: MCAP's uint64 ns, all of it
         self.strings: dict[str, str] = {}
         self.records: list | None = None
         if columns is None:
@@ -511,7 +513,7 @@ class _Builder:
 
     def build(self) -> Track:
         seq = np.frombuffer(self.seq, dtype=np.int64).copy() if len(self.seq) else np.zeros(0, np.int64)
-        log_time = np.frombuffer(self.log_time, dtype=np.int64).copy() if len(self.log_time) else np.zeros(0, np.int64)
+        log_time = np.frombuffer(self.log_time, dtype=np.uint64).copy() if len(self.log_time) else np.zeros(0, np.uint64)
         order = np.argsort(seq, kind="stable")
         fields: dict[str, np.ndarray] = {}
         records = None
@@ -687,9 +689,6 @@ class RecordingScan:
             self.counters["orphans"] += 1
             return
         topic, kind, b = info
-        if rec.log_time > _INT64_MAX:  # MCAP's uint64; a Track's log_time is int64 ns
-            self.count_invalid(topic, rec.sequence, f"log_time {rec.log_time} ns: expected at most {_INT64_MAX} (int64)")
-            return
         if kind is not None:
             try:
                 msg = messages.decode(rec.data, kind)

@@ -195,7 +195,12 @@ __all__ = [
 MIN_RATE_HZ = 1e-6  #: slowest output rate (one state every ~11.6 days)
 MAX_RATE_HZ = 1000.0  #: fastest output rate; above this the bus, not physics, is the limit
 MAX_DURATION_S = 250 * 365.25 * 86400.0  #: 250 Julian years (MCAP log_time, uint64 ns, ends in 2554)
-MAX_OUTPUT_STEPS = 10**10  #: duration * rate
+MAX_OUTPUT_STEPS = 10**10  #: duration * rate (so at most 1e10 + 1 output instants, t = 0 included)
+#: Largest log time of a recording, exclusive: MCAP's ``log_time`` is uint64 ns since 1970
+#: (2**64 ns is 2554-07-21T23:34:33 UTC); every tool reads that whole range (``Track.log_time`` is uint64)
+LOG_TIME_END_NS = 2**64
+#: Smallest |r| of an initial state (m): |r|^3, which the kernels form, stays a normal float64 above it
+MIN_RADIUS_M = 1e-100
 MAX_REAL_TIME_FACTOR = 1e6
 MAX_BODIES = 100_000
 #: Largest config file, bytes (4 MiB): checked before the TOML is parsed, whose time grows
@@ -570,7 +575,9 @@ def _orbit(ctx: Ctx, data: Any, path: str, cb: CentralBody) -> OrbitSpec:
     if has_state:
         r0 = vector(ctx, tb.get("r"), "length", 3, f"{path}.r")
         v0 = vector(ctx, tb.get("v"), "speed", 3, f"{path}.v")
-        check(ctx, float(np.linalg.norm(r0)) > 0, f"{path}.r", "|r| > 0 (not at the centre of the central body)", tb.get("r"))
+        check(ctx, bool(np.any(r0 != 0)), f"{path}.r", "|r| > 0 (not at the centre of the central body)", tb.get("r"))
+        check(ctx, _norm(r0) >= MIN_RADIUS_M, f"{path}.r",
+              f"|r| >= {MIN_RADIUS_M:g} m (|r|^3 must stay a normal float64)", tb.get("r"))
         elements = None
     elif has_elements:
         r0, v0, elements = _elements(ctx, tb, path, cb.mu)
@@ -649,8 +656,23 @@ def _elements(ctx: Ctx, tb: Table, path: str, mu: float) -> tuple[np.ndarray, np
                f"|nu| < {math.degrees(limit):.6g} deg (between the asymptotes of e = {e!r})", tb.get("nu", nu))
     from astrodyn.orbit.elements import state_from_elements
 
+    # |r| = p / (1 + e cos nu) and |v| = sqrt(mu / p) sqrt(1 + 2 e cos nu + e^2), in logarithms (no overflow):
+    # the limits of a given v (a speed) and r (MIN_RADIUS_M), checked before the state is formed
+    q = 1.0 + e * math.cos(nu)
+    given = ", ".join(f"{k} = {show(tb.get(k))}" for k in (size_key, "e", "nu", "M") if tb.has(k))
+    log_r = math.log10(p) - math.log10(q) if q > 0 else math.inf
+    log_v = 0.5 * ((math.log10(mu) if mu > 0 else -math.inf) - math.log10(p)) + 0.5 * math.log10(max(1.0 + 2.0 * e * math.cos(nu) + e * e, 1e-300))
+    max_v = MAGNITUDE_MAX["speed"]
+    if not log_v <= math.log10(max_v):
+        raise ctx.error(f"{path}.{size_key}", f"elements whose speed |v| <= {max_v:g} m/s (0.1 c, the range of a "
+                        f"speed; |v| = sqrt(mu / p) sqrt(1 + 2 e cos nu + e^2))", f"{given}: |v| = {_power(log_v)} m/s",
+                        raw=True)
+    if not log_r >= math.log10(MIN_RADIUS_M):
+        raise ctx.error(f"{path}.{size_key}", f"elements whose position |r| >= {MIN_RADIUS_M:g} m (|r|^3 must stay "
+                        f"a normal float64)", f"{given}: |r| = {_power(log_r)} m", raw=True)
     try:
-        r0, v0 = state_from_elements(p, e, i, raan, argp, nu, mu)
+        with np.errstate(all="ignore"):  # a non-finite result is refused below, in one line
+            r0, v0 = state_from_elements(p, e, i, raan, argp, nu, mu)
     except ValueError as exc:  # pragma: no cover - every precondition is checked above
         raise ctx.error(path, "elements that define a state", str(exc), raw=True) from None
     r0, v0 = np.asarray(r0, dtype=np.float64).reshape(3), np.asarray(v0, dtype=np.float64).reshape(3)
@@ -662,6 +684,21 @@ def _elements(ctx: Ctx, tb: Table, path: str, mu: float) -> tuple[np.ndarray, np
     if tb.has("M"):
         elements["M"] = M
     return r0, v0, elements
+
+
+def _norm(x: np.ndarray) -> float:
+    """|x| without underflow or overflow (scaled by the largest component)."""
+    m = float(np.max(np.abs(x)))
+    return m * float(np.linalg.norm(x / m)) if m > 0 and math.isfinite(m) else m
+
+
+def _power(log10_x: float) -> str:
+    """A positive number given by its log10, shown like ``2e+110`` also beyond float64."""
+    if not math.isfinite(log10_x):
+        return "inf" if log10_x > 0 else "0"
+    exp = math.floor(log10_x)
+    mant = 10 ** (log10_x - exp)
+    return f"{mant:.3g}e{exp:+d}"
 
 
 def _angle(ctx: Ctx, tb: Table, key: str, path: str) -> float:
@@ -1012,10 +1049,13 @@ def load_dict(data: dict[str, Any], source: str = "<dict>", base_dir: str | Path
     duration = quantity(ctx, sc.get("duration"), "time", "scenario.duration")
     check(ctx, duration > 0, "scenario.duration", "duration > 0", sc.get("duration"))
     check(ctx, duration <= MAX_DURATION_S, "scenario.duration", "duration <= 250 years", sc.get("duration"))
-    check(ctx, epoch_ns + duration * 1e9 < 2.0**64, "scenario.duration", "an end before 2554 (MCAP log_time is uint64 ns since 1970)", sc.get("duration"))
+    check(ctx, epoch_ns + round(duration * 1e9) < LOG_TIME_END_NS, "scenario.duration",
+          "an end (scenario.epoch + duration) before 2554-07-21T23:34:33 UTC (2**64 ns since 1970: MCAP's uint64 log_time)",
+          sc.get("duration"))
     rate = quantity(ctx, sc.get("rate"), "frequency", "scenario.rate")
     check(ctx, MIN_RATE_HZ <= rate <= MAX_RATE_HZ, "scenario.rate", f"{MIN_RATE_HZ:g} Hz <= rate <= {MAX_RATE_HZ:g} Hz", sc.get("rate"))
-    check(ctx, duration * rate <= MAX_OUTPUT_STEPS, "scenario.rate", f"duration x rate <= {MAX_OUTPUT_STEPS:.0e} output steps", sc.get("rate"))
+    check(ctx, duration * rate <= MAX_OUTPUT_STEPS, "scenario.rate",
+          f"duration x rate <= {MAX_OUTPUT_STEPS:.0e} (at most {MAX_OUTPUT_STEPS + 1} output steps, t = 0 included)", sc.get("rate"))
     rtf = quantity(ctx, sc.get("real_time_factor", 1.0), "dimensionless", "scenario.real_time_factor")
     check(ctx, 0 < rtf <= MAX_REAL_TIME_FACTOR, "scenario.real_time_factor", f"0 < real_time_factor <= {MAX_REAL_TIME_FACTOR:g}", sc.get("real_time_factor", 1.0))
     cb = _central_body(ctx, top.get("central_body", {"name": "earth"}))

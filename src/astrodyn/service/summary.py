@@ -29,7 +29,18 @@ from astrodyn.messages import ATTITUDE_PROCESS_KINDS, MODEL_STATE_KINDS
 from astrodyn.scenario import Scenario, plan as make_plan
 from astrodyn.scenario.planning import counted, state_kinds_text
 
-__all__ = ["file_summary", "propagator_rows", "print_summary"]
+__all__ = ["file_summary", "propagator_rows", "print_summary", "FileRows"]
+
+
+class FileRows(list):
+    """The rows of :func:`file_summary` (a list of dicts, one per body) and what reading
+    the file back skipped, in ``read_back``: ``invalid`` messages (with ``invalid_by_channel``
+    and the first ``examples``) and ``corrupt_chunks``.  :func:`print_summary` says so when
+    either is not 0: the table counts only the states the reader returned."""
+
+    def __init__(self, rows=(), read_back: dict | None = None):
+        super().__init__(rows)
+        self.read_back = read_back or {"invalid": 0, "invalid_by_channel": {}, "examples": [], "corrupt_chunks": 0}
 
 
 def propagator_rows(result: dict, scenario: Scenario) -> list[dict] | None:
@@ -58,7 +69,7 @@ def propagator_rows(result: dict, scenario: Scenario) -> list[dict] | None:
     return rows
 
 
-def file_summary(path: Path, scenario: Scenario, block_messages: int = 50_000) -> list[dict]:
+def file_summary(path: Path, scenario: Scenario, block_messages: int = 50_000) -> FileRows:
     """Per body, from the file: models, states recorded per kind, the invariant rows
     (``orbit_invariants`` / ``attitude_invariants``: lists of :class:`Invariant` dicts),
     the cross-check difference, and the legacy drift keys (``energy_drift`` and
@@ -72,7 +83,9 @@ def file_summary(path: Path, scenario: Scenario, block_messages: int = 50_000) -
     the blocks' maxima combined (a NaN anywhere stays NaN).  An orbit that burns moved:
     from the first state of its current coast arc, the arcs found from the burns recorded
     so far (:class:`~astrodyn.analysis.closed_loop.OrbitActuation`, fed each block's
-    actuator states and applied commands before its states)."""
+    actuator states and applied commands before its states).  The messages the reader
+    skipped (invalid, in corrupt chunks) are counted in the result's ``read_back``
+    (:class:`FileRows`)."""
     from astrodyn.recording import load_blocks
 
     plan = {bp.name: bp for bp in make_plan(scenario).bodies}
@@ -80,7 +93,13 @@ def file_summary(path: Path, scenario: Scenario, block_messages: int = 50_000) -
                      "attitude_model": plan[b.name].attitude_model} for b in scenario.bodies}
     first: dict[tuple[str, str], tuple] = {}
     actuations = {b.name: OrbitActuation() for b in scenario.bodies if b.actuators is not None and b.orbit is not None}
+    read_back = {"invalid": 0, "invalid_by_channel": {}, "examples": [], "corrupt_chunks": 0}
     for run in load_blocks(path, block_messages):
+        read_back["invalid"] += run.invalid
+        read_back["corrupt_chunks"] += run.corrupt_chunks
+        for topic, n in run.invalid_by_channel.items():
+            read_back["invalid_by_channel"][topic] = read_back["invalid_by_channel"].get(topic, 0) + n
+        read_back["examples"] += run.invalid_examples[: max(0, 5 - len(read_back["examples"]))]
         for b in scenario.bodies:
             if b.name in actuations:
                 prefix = f"astrodyn/{scenario.name}/{b.name}/"
@@ -90,7 +109,7 @@ def file_summary(path: Path, scenario: Scenario, block_messages: int = 50_000) -
                 continue
             _add_block(rows[b.name], rec, run.scenario, plan[b.name], scenario.central_body.mu, first,
                        actuations.get(b.name))
-    return list(rows.values())
+    return FileRows(rows.values(), read_back)
 
 
 def _max_nan(a: float | None, b: float) -> float:
@@ -202,20 +221,43 @@ def print_summary(result: dict, rows: list[dict], scenario: Scenario, max_bodies
     xchecks = sum(r.get("crosscheck_states", 0) for r in rows)
     own = sum(r.get("own_states", 0) for r in rows)
     print(f"\nscenario {scenario.name}: {result['out']}")
-    print(f"  wall {result['wall_s']:.2f} s for {scenario.duration:.6g} s of sim time "
-          f"(real-time factor {scenario.duration / max(result['wall_s'], 1e-9):.1f}x)")
+    early = {p: e for p, e in (log.get("stopped_early") or {}).items() if isinstance(e, dict)}
+    reached = None
+    if log.get("t") is not None:  # the sim time every process got to: the least of the logger's and the early stops'
+        reached = min([log["t"], *(e["t"] for e in early.values() if isinstance(e.get("t"), (int, float)))])
+    stopped = bool(result.get("failure") or result.get("interrupted") or early)
+    wall = max(result["wall_s"], 1e-9)
+    if not stopped:
+        print(f"  wall {result['wall_s']:.2f} s for {scenario.duration:.6g} s of sim time "
+              f"(real-time factor {scenario.duration / wall:.1f}x)")
+    elif reached is not None:  # the run stopped early: the factor of the sim time it reached, not of the scene's
+        print(f"  wall {result['wall_s']:.2f} s for {reached:.6g} s of sim time reached (of {scenario.duration:.6g} s; "
+              f"real-time factor {reached / wall:.1f}x)")
+    else:
+        print(f"  wall {result['wall_s']:.2f} s; the run stopped before the end of its {scenario.duration:.6g} s of sim "
+              f"time (the logger left no summary of how far it got)")
     kinds = state_kinds_text(sum(r.get("orbit_states", 0) for r in rows), sum(r.get("attitude_states", 0) for r in rows))
     print(f"  in the file: {states} state messages ({kinds})"
           + (f" + {xchecks} cross-check messages" if xchecks else "")
           + (f" + {own} appendage / rolling / gimbal states" if own else "")
           + f"; logger: missing {log.get('missing', '?')}, malformed {log.get('malformed', '?')}, "
           f"rejected {sum((log.get('rejected') or {}).values())}")
-    if log.get("t") is not None and log.get("reason"):
-        early = {p: e for p, e in (log.get("stopped_early") or {}).items() if isinstance(e, dict)}
-        reached = min([log["t"], *(e["t"] for e in early.values() if isinstance(e.get("t"), (int, float)))])
-        print(f"  sim t reached {reached:.6g} s of {scenario.duration:.6g} s; logger stopped: {log['reason']}"
+    if reached is not None and log.get("reason"):
+        print(f"  sim t reached {reached:.6g} s of {scenario.duration:.6g} s (recorded, and published by every process)"
+              f"; logger stopped: {log['reason']}"
               + "".join(f"; {p} stopped early at sim t {e.get('t', 0):.6g} s ({e.get('reason')})"
-                        for p, e in sorted(early.items())))
+                        for p, e in sorted(early.items()))
+              + (" (the sim t of the last state each of them published)" if early else ""))
+    read_back = getattr(rows, "read_back", None) or {}
+    skipped = read_back.get("invalid", 0) + read_back.get("corrupt_chunks", 0)
+    if skipped:  # whatever the logger said: the table counts only what the reader returned
+        result["read_back"] = read_back
+        per = ", ".join(f"{n} on {t}" for t, n in sorted(read_back.get("invalid_by_channel", {}).items())[:5])
+        print(f"  WARNING: reading the file back skipped {read_back.get('invalid', 0)} invalid messages"
+              + (f" ({per})" if per else "")
+              + (f" and {read_back['corrupt_chunks']} corrupt chunks" if read_back.get("corrupt_chunks") else "")
+              + "; the states counted here and what load / analyze / export give leave them out"
+              + (f"; e.g. {read_back['examples'][0]}" if read_back.get("examples") else ""))
     print(f"  {'body':<14} {'kind':<9} {'model':<17} {'states':>7}  {'conserved quantity':<26} {'unit':<6} "
           f"{'max drift':>9}  relative to")
     shown = rows if len(rows) <= max_bodies else rows[: max_bodies - 5]
