@@ -38,7 +38,7 @@ import time
 from collections.abc import Callable, Iterator
 
 __all__ = ["STOP_SIGNALS", "STOP_SIGNAL_NAMES", "catch_stop_signals", "StopFlag", "Interrupted", "interruptible",
-           "deferred_interrupts", "catch_job_control", "suspended_s"]
+           "deferred_interrupts", "interrupt_received", "catch_job_control", "suspended_s"]
 
 #: SIGHUP too: without a handler it ended ``serve`` at once, in the middle of a recording
 #: (a partial file, its work directory left), when the terminal that started it closed.
@@ -89,9 +89,11 @@ class _State:
     raised = False  # an Interrupted is on its way: later signals are ignored
     deferring = 0  # inside deferred_interrupts
     pending: int | None = None  # a signal that arrived while deferring
+    received: int | None = None  # the first stop signal received under interruptible
 
 
 def _on_signal(signum: int, frame) -> None:
+    _State.received = _State.received or signum
     if _State.raised:
         return
     if _State.deferring:
@@ -101,6 +103,27 @@ def _on_signal(signum: int, frame) -> None:
     raise Interrupted(signum)
 
 
+def interrupt_received() -> int | None:
+    """The stop signal received under :func:`interruptible` (None before any): a loop that
+    must stop can check it itself, as the :class:`Interrupted` raised for it can be lost
+    (raised inside a garbage-collector callback or a ``__del__``, where Python prints and
+    drops exceptions)."""
+    return _State.received
+
+
+def _on_unraisable(previous: Callable) -> Callable:
+    """``sys.unraisablehook``: an :class:`Interrupted` Python dropped (a gc callback such as
+    Dask's ``GCDiagnosis``, a ``__del__``) is as if never raised: the next stop signal raises
+    again instead of being ignored for good (only SIGKILL then stopped the process)."""
+    def hook(unraisable) -> None:
+        if isinstance(unraisable.exc_value, Interrupted):
+            _State.raised = False
+            return
+        previous(unraisable)
+
+    return hook
+
+
 def interruptible(prog: str, run: Callable[[], int]) -> int:
     """``run()`` with :data:`STOP_SIGNALS` raising :class:`Interrupted`; its exit status, or
     128 + the signal after one line on stderr naming it.  A signal the parent made this
@@ -108,8 +131,10 @@ def interruptible(prog: str, run: Callable[[], int]) -> int:
     (where Python cannot handle signals) ``run()`` alone."""
     if threading.current_thread() is not threading.main_thread():
         return run()
-    _State.raised, _State.deferring, _State.pending = False, 0, None
+    _State.raised, _State.deferring, _State.pending, _State.received = False, 0, None, None
     previous = {sig: signal.getsignal(sig) for sig in STOP_SIGNALS}
+    previous_hook = sys.unraisablehook
+    sys.unraisablehook = _on_unraisable(previous_hook)
     for sig, handler in previous.items():
         if handler is not signal.SIG_IGN:
             signal.signal(sig, _on_signal)
@@ -131,6 +156,8 @@ def interruptible(prog: str, run: Callable[[], int]) -> int:
         sys.stderr.flush()
         os._exit(1)
     finally:
+        sys.unraisablehook = previous_hook
+        _State.received = None
         for sig, handler in previous.items():
             signal.signal(sig, handler)
 

@@ -70,8 +70,10 @@ written with ``repr`` so they read back bit for bit), ``summary.parquet`` when p
 is installed, ``failures.csv`` (case, error, the draws), ``failures/case-K.txt`` (the
 traceback of an unexpected exception), ``sweep.json`` (the spec: config, dispersions,
 seed, n, column units, versions, counts) and with ``--mcap`` one ``mcap/case-K.mcap``
-per case.  ``--case K`` (repeatable) reruns those cases serially and updates the tables
-in ``DIR``.  ``astrodyn analyze DIR`` plots the table (:mod:`astrodyn.analysis.sweep`).
+per case; while it runs, ``rows.jsonl`` (each finished row, appended) and the lock
+``.astrodyn-sweep.lock`` (one sweep per directory).  ``--case K`` (repeatable) reruns those
+cases serially and updates the tables in ``DIR``; ``--resume`` runs the cases a killed or
+interrupted sweep has no row for and completes its tables.  ``astrodyn analyze DIR`` plots the table (:mod:`astrodyn.analysis.sweep`).
 
 Exit status: 0 every case ran, 1 some cases failed, 2 bad arguments, spec, config or
 ``--out`` (nothing is created), 130 interrupted by Ctrl-C, 143 by SIGTERM (the finished
@@ -137,6 +139,7 @@ MAX_CASES = 10_000_000  #: upper bound on -n (a sanity limit, not a resource est
 MAX_GRID = 1_000_000  #: most points a grid(...) may have
 MAX_SPEC = 4096  #: longest --vary text
 SCHEDULER_TIMEOUT_S = 30.0  #: how long to try reaching a --scheduler
+SCHEDULER_GRACE_S = 5.0  #: beyond SCHEDULER_TIMEOUT_S, for Dask's handshake (which its timeout does not bound)
 
 #: Unit of each metric column, by the suffix after the last "." of the column name.
 METRIC_UNITS: dict[str, str] = {
@@ -524,7 +527,7 @@ class SweepSpec:
             "rng": "numpy.random.default_rng([seed, case])", "varies": [v.to_json() for v in self.varies],
             "cases_csv_columns": list(self.cases_header), "cases_csv_rows": len(self.cases_rows),
             "grid_sizes": list(self.grid_sizes), "config": self.config,
-        }
+        } | ({"cases_csv_sha256": _cases_digest(self.cases_rows)} if self.cases_rows else {})
 
 
 def _unravel(i: int, sizes: tuple[int, ...]) -> list[int]:
@@ -592,6 +595,30 @@ def _assign(config: dict, segments: tuple, value: Any, path: str) -> None:
     node[last] = value
 
 
+def _check_overlaps(resolved: dict[str, tuple], flags: dict[str, str]) -> None:
+    """Refuse two key paths that reach one config location (``bodies.sat1.orbit.e`` and
+    ``bodies[0].orbit.e``) or one inside the other (``...attitude.w[0]`` and ``...attitude.w``):
+    both were drawn and tabled, but only the one assigned last reached the simulation."""
+    items = list(resolved.items())
+    for i, (p1, s1) in enumerate(items):
+        for p2, s2 in items[i + 1:]:
+            short, long_ = (s1, s2) if len(s1) <= len(s2) else (s2, s1)
+            if long_[:len(short)] == short:
+                where = (f"the same config location {_join(s1)}" if s1 == s2 else
+                         f"{_join(long_)}, which is inside {_join(short)}")
+                raise SweepError(f"{flags[p1]} {p1!r} and {flags[p2]} {p2!r}: both set {where}; only one of them "
+                                 f"would reach the simulation while the table lists both: vary each config value "
+                                 f"once, under one spelling")
+
+
+def _cases_digest(rows: tuple[dict, ...]) -> str:
+    """SHA-256 of the parsed rows of a cases CSV (key order and spelling of numbers aside)."""
+    import hashlib
+
+    text = json.dumps([sorted(r.items()) for r in rows], separators=(",", ":"), default=str)
+    return hashlib.sha256(text.encode("utf-8")).hexdigest()
+
+
 def make_spec(config_path: str | os.PathLike, varies: Iterable[str], n: int | None = None, seed: int = 0,
               cases_csv: str | os.PathLike | None = None) -> SweepSpec:
     """Parse and check a sweep against the config file (SweepError / ScenarioError if bad)."""
@@ -635,6 +662,7 @@ def make_spec(config_path: str | os.PathLike, varies: Iterable[str], n: int | No
         resolved[v.path] = _resolve(config, v.segments, f"--vary {v.text!r}")
     for h in header:
         resolved[h] = _resolve(config, parse_path(h), f"--cases column {h!r}")
+    _check_overlaps(resolved, {v.path: "--vary" for v in parsed} | {h: "--cases column" for h in header})
     return SweepSpec(config=config, source=str(config_path), base_dir=str(Path(config_path).resolve().parent),
                      varies=parsed, n=n, seed=seed, cases_header=header, cases_rows=rows, resolved=resolved,
                      grid_sizes=grids)
@@ -830,16 +858,76 @@ def run_chunk(ks: list[int], spec: SweepSpec, numba_threads: int | None = None) 
     return [run_case(k, spec) for k in ks]
 
 
+def _check_stop() -> None:
+    """Raise the stop signal received under :func:`astrodyn.signals.interruptible` even if
+    the :class:`~astrodyn.signals.Interrupted` raised for it was lost (raised inside a
+    garbage-collector callback of Dask's, which Python prints and drops)."""
+    from astrodyn.signals import Interrupted, interrupt_received
+
+    if (signum := interrupt_received()) is not None:
+        raise Interrupted(signum)
+
+
+def _connect(scheduler: str):
+    """A Dask ``Client`` of the scheduler at ``scheduler``, or SweepError (one line) within
+    :data:`SCHEDULER_TIMEOUT_S` (+ :data:`SCHEDULER_GRACE_S`): Dask's own timeout bounds the TCP connect, not its
+    handshake, and a port that accepts and never answers held the sweep for good.  The
+    Client is made in a helper thread; this thread waits, so a stop signal is seen at once."""
+    from distributed import Client
+
+    got: dict[str, Any] = {}
+    done = threading.Event()
+
+    def connect() -> None:
+        try:
+            got["client"] = Client(scheduler, timeout=f"{SCHEDULER_TIMEOUT_S}s")
+        except BaseException as exc:  # handed to the caller's thread
+            got["error"] = exc
+        finally:
+            done.set()
+
+    threading.Thread(target=connect, name="astrodyn-scheduler-connect", daemon=True).start()
+    deadline = time.monotonic() + SCHEDULER_TIMEOUT_S + SCHEDULER_GRACE_S
+    while not done.wait(0.05):
+        _check_stop()
+        if time.monotonic() > deadline:
+            raise SweepError(f"--scheduler {scheduler}: no Dask scheduler answered within {SCHEDULER_TIMEOUT_S:.0f} s "
+                             f"(something accepts connections there but does not speak Dask's protocol)")
+    if "client" in got:
+        return got["client"]
+    exc = got["error"]
+    if isinstance(exc, (OSError, TimeoutError)):
+        raise SweepError(f"--scheduler {scheduler}: cannot reach a Dask scheduler ({_one_line(exc)})") from None
+    if isinstance(exc, MemoryError) or not isinstance(exc, Exception):  # a junk frame length, say
+        raise SweepError(f"--scheduler {scheduler}: what answered there is not a Dask scheduler "
+                         f"({type(exc).__name__}: {_one_line(exc)[:200]})") from None
+    hint = (" (TLS settings come from Dask's configuration, distributed.comm.tls.*)"
+            if scheduler.startswith(("tls://", "wss://")) else "")
+    raise SweepError(f"--scheduler {scheduler}: cannot use this Dask scheduler{hint}: "
+                     f"{type(exc).__name__}: {_one_line(exc)[:300]}") from None
+
+
+#: Dask tasks kept in flight per worker thread of the cluster (at least :data:`MIN_IN_FLIGHT`):
+#: submitting one task per case at once held O(n) futures (GBs for 10^6 cases) before any ran.
+IN_FLIGHT_PER_THREAD = 4
+MIN_IN_FLIGHT = 16
+
+
 def run_cases(spec: SweepSpec, cases: Iterable[int], workers: int = 2, scheduler: str | None = None,
               chunk: int = 1) -> Iterator[dict]:
     """Rows of ``cases`` as they finish: serially here (``workers=0`` and no scheduler), on
     a Dask ``LocalCluster`` of ``workers`` processes, or on the Dask ``scheduler`` address.
     ``chunk`` cases make one Dask task (for cases of a few ms, where the scheduler's
-    per-task overhead of ~10-20 ms would dominate)."""
+    per-task overhead of ~10-20 ms would dominate).  Tasks are submitted in a bounded
+    window (:data:`IN_FLIGHT_PER_THREAD` per worker thread), so memory does not grow with
+    the number of cases; a stop signal is checked between rows (:func:`_check_stop`)."""
     cases = list(cases)
     check_chunk(chunk)
+    if not cases:  # a --resume of a sweep that has every row: no cluster to start
+        return
     if workers == 0 and scheduler is None:
         for k in cases:
+            _check_stop()
             yield run_case(k, spec)
         return
     try:
@@ -848,31 +936,53 @@ def run_cases(spec: SweepSpec, cases: Iterable[int], workers: int = 2, scheduler
         raise SweepError("Dask is not installed: `pip install 'astrodyn[sweep]'` (or --workers 0 to run serially)") from None
 
     cluster = client = None
+    submitted: list = []
     try:
         if scheduler is None:
             cluster = start_local_cluster(workers)
             client = Client(cluster)
         else:
-            try:
-                client = Client(scheduler, timeout=f"{SCHEDULER_TIMEOUT_S}s")
-            except (OSError, TimeoutError) as exc:
-                raise SweepError(f"--scheduler {scheduler}: cannot reach a Dask scheduler ({exc})") from None
+            client = _connect(scheduler)
         spec_future = client.scatter(spec, broadcast=True)
         token = f"{os.getpid()}-{time.time_ns()}"
-        groups = [cases[i:i + chunk] for i in range(0, len(cases), chunk)]
-        futures = client.map(run_chunk, groups, spec=spec_future, numba_threads=1,
-                             key=[f"astrodyn-cases-{g[0]}-{len(g)}-{token}" for g in groups], pure=False)
-        group_of = {f.key: g for f, g in zip(futures, groups)}
+        groups = iter([cases[i:i + chunk] for i in range(0, len(cases), chunk)])
         try:
-            for fut in as_completed(futures):
-                try:
-                    yield from fut.result()
-                except Exception as exc:  # worker died (KilledWorker), lost data, ...
-                    for k in group_of[fut.key]:
-                        yield _failed_row(k, spec, exc)
-                fut.release()
+            threads = sum(client.nthreads().values())
+        except Exception:
+            threads = workers or 1
+        window = max(MIN_IN_FLIGHT, IN_FLIGHT_PER_THREAD * max(threads, 1))
+        group_of: dict = {}
+        ac = as_completed()
+
+        def submit(count: int) -> None:
+            for g in itertools.islice(groups, count):
+                fut = client.submit(run_chunk, g, spec=spec_future, numba_threads=1,
+                                    key=f"astrodyn-cases-{g[0]}-{len(g)}-{token}", pure=False)
+                group_of[fut.key] = g
+                submitted.append(fut)
+                ac.add(fut)
+
+        try:
+            submit(window)
+            while not ac.is_empty():
+                _check_stop()
+                batch = ac.next_batch(block=False)
+                if not batch:
+                    with ac.thread_condition:
+                        ac.thread_condition.wait(timeout=0.1)
+                    continue
+                for fut in batch:
+                    try:
+                        rows = fut.result()
+                    except Exception as exc:  # worker died (KilledWorker), lost data, ...
+                        rows = [_failed_row(k, spec, exc) for k in group_of[fut.key]]
+                    del group_of[fut.key]
+                    fut.release()
+                    yield from rows
+                submit(len(batch))
+                submitted[:] = [f for f in submitted if f.key in group_of]
         except BaseException:
-            client.cancel(futures)
+            client.cancel([f for f in submitted if f.key in group_of])
             raise
     finally:
         if client is not None:
@@ -982,19 +1092,31 @@ def _cell(x: Any) -> str:
 
 
 def read_table(path: str | os.PathLike) -> list[dict[str, str]]:
-    """Rows of a CSV written by :func:`write_tables` (cells as strings)."""
-    with open(path, newline="", encoding="utf-8") as fh:
-        return list(csv.DictReader(fh))
+    """Rows of a CSV written by :func:`write_tables` (cells as strings); ValueError (one line
+    naming the file) for a file that is not such a table, not a regular file or too large
+    (:func:`astrodyn.analysis.sweep.read_sweep_table`)."""
+    from astrodyn.analysis.sweep import read_sweep_table
+
+    return read_sweep_table(path)
+
+
+def _written(path: Path, write, mode: str = "w") -> None:
+    """``write(stream)`` into a new temporary file of ``path`` that takes the name only when
+    complete (:func:`astrodyn.recording.outputs.written_atomically`, suffix ``.part``): a full
+    disk or an interrupt leaves the earlier file whole and no temporary behind."""
+    with written_atomically(path, ".part") as tmp:
+        with open(tmp, mode, **({"newline": "", "encoding": "utf-8"} if "b" not in mode else {})) as fh:
+            write(fh)
 
 
 def _write_csv(path: Path, columns: list[str], rows: list[dict]) -> None:
-    tmp = path.with_suffix(path.suffix + ".part")
-    with open(tmp, "w", newline="", encoding="utf-8") as fh:
+    def write(fh) -> None:
         w = csv.writer(fh)
         w.writerow(columns)
         for row in rows:
             w.writerow([_cell(row.get(c)) for c in columns])
-    os.replace(tmp, path)
+
+    _written(path, write)
 
 
 def _draw_path(column: str) -> str:
@@ -1014,9 +1136,21 @@ def _typed(value: Any) -> Any:
     return value
 
 
+def _parquet_column(values: list) -> list:
+    """A column for Parquet: numbers typed (:func:`_typed`); a column holding an integer
+    beyond int64 (``choice(2, 99999999999999999999)``) as text, which Parquet can hold."""
+    typed = [_typed(v) for v in values]
+    if any(isinstance(x, int) and not isinstance(x, bool) and not -2**63 <= x < 2**63 for x in typed):
+        return [None if x is None else str(x) for x in typed]
+    return typed
+
+
 def write_tables(out: Path, rows: list[dict], spec: SweepSpec, extra: dict | None = None) -> dict[str, Path]:
-    """Write summary.csv (+ .parquet), failures.csv, failures/, sweep.json into ``out``."""
-    out.mkdir(parents=True, exist_ok=True)
+    """Write summary.csv (+ .parquet), failures.csv, failures/, sweep.json into ``out``, each
+    through a temporary file renamed when complete.  An OSError (disk full, read-only)
+    propagates, naming the file; what was written before it is complete."""
+    if not out.is_dir():  # moved away or removed mid-sweep: not made again elsewhere
+        raise FileNotFoundError(2, "the output directory is gone", str(out))
     rows = sorted(rows, key=lambda r: int(r["case"]))
     columns = _columns(rows)
     paths = {"summary": out / "summary.csv", "failures": out / "failures.csv", "spec": out / "sweep.json"}
@@ -1027,19 +1161,24 @@ def write_tables(out: Path, rows: list[dict], spec: SweepSpec, extra: dict | Non
     for r in failed:
         if r.get("traceback"):
             (out / "failures").mkdir(exist_ok=True)
-            (out / "failures" / f"case-{int(r['case']):06d}.txt").write_text(r["traceback"], encoding="utf-8")
+            _written(out / "failures" / f"case-{int(r['case']):06d}.txt", lambda fh, r=r: fh.write(r["traceback"]))
+    for r in rows:  # a rerun that now succeeds: the traceback of its earlier failure goes
+        if r.get("status") == "ok":
+            (out / "failures" / f"case-{int(r['case']):06d}.txt").unlink(missing_ok=True)
     try:
         import pyarrow as pa
         import pyarrow.parquet as pq
     except ImportError:
         pa = None
     if pa is not None:
-        table = {c: [_typed(r.get(c)) for r in rows] for c in columns}
         try:
-            pq.write_table(pa.table(table), out / "summary.parquet")
+            table = pa.table({c: _parquet_column([r.get(c) for r in rows]) for c in columns})
+        except (pa.ArrowInvalid, pa.ArrowTypeError, OverflowError) as exc:  # mixed types in a column: keep the CSV
+            print(f"astrodyn sweep: summary.parquet not written ({_one_line(exc)[:300]})", file=sys.stderr)
+            (out / "summary.parquet").unlink(missing_ok=True)  # not one of an earlier table
+        else:
+            _written(out / "summary.parquet", lambda fh: pq.write_table(table, fh), "wb")
             paths["parquet"] = out / "summary.parquet"
-        except (pa.ArrowInvalid, pa.ArrowTypeError) as exc:  # mixed types in a column: keep the CSV
-            print(f"astrodyn sweep: summary.parquet not written ({exc})", file=sys.stderr)
     units = {}
     for c in columns:
         m = re.search(r" \[([^\[\]]+)\]$", c)
@@ -1047,29 +1186,110 @@ def write_tables(out: Path, rows: list[dict], spec: SweepSpec, extra: dict | Non
             units[c] = m.group(1) if m else "SI"
         else:
             units[c] = METRIC_UNITS.get(c.rsplit(".", 1)[-1], "")
-    doc = spec.to_json() | {"columns": units, "cases_run": len(rows), "failed": len(failed)} | (extra or {})
-    paths["spec"].write_text(json.dumps(doc, indent=1, default=str), encoding="utf-8")
+    done = {int(r["case"]) for r in rows}
+    doc = spec.to_json() | {"columns": units, "cases_run": len(rows), "failed": len(failed),
+                            "complete": len(done) == spec.n} | (extra or {})
+    _write_spec(paths["spec"], doc)
     return paths
 
 
-def _merge(out: Path, new_rows: list[dict]) -> list[dict]:
-    """Existing rows of ``out/summary.csv`` with ``new_rows`` replacing the same cases."""
-    path = out / "summary.csv"
-    old = read_table(path) if path.exists() else []
-    errors = {}
-    fpath = out / "failures.csv"
-    if fpath.exists():
-        errors = {r["case"]: r.get("error", "") for r in read_table(fpath)}
+def _write_spec(path: Path, doc: dict) -> None:
+    text = json.dumps(doc, indent=1, default=str)
+    _written(path, lambda fh: fh.write(text))
+
+
+def _merge(earlier: list[dict], new_rows: list[dict]) -> list[dict]:
+    """``earlier`` rows (:func:`_earlier_rows`) with ``new_rows`` replacing the same cases."""
     replaced = {int(r["case"]) for r in new_rows}
-    rows: list[dict] = []
-    for r in old:
-        if int(r["case"]) in replaced:
-            continue
-        r = {k: v for k, v in r.items() if v != ""}
-        if r.get("status") != "ok" and r["case"] in errors:
-            r["error"] = errors[r["case"]]
-        rows.append(r)
-    return rows + list(new_rows)
+    return [r for r in earlier if int(r["case"]) not in replaced] + list(new_rows)
+
+
+#: Finished rows of a sweep not yet in its tables, one JSON object a line, appended as
+#: each case finishes and removed once the tables are written: what a killed sweep keeps.
+JOURNAL = "rows.jsonl"
+MAX_JOURNAL_LINE = 4 * 2**20  #: longest line of the journal read back (a row with its traceback)
+
+
+def _earlier_rows(out: Path) -> list[dict]:
+    """The rows a ``--case`` rerun / ``--resume`` keeps: ``summary.csv`` (with the errors of
+    ``failures.csv``), then the journal of a sweep that did not write its tables (killed),
+    later rows replacing earlier ones.  Read before any case runs; SweepError (one line)
+    for tables that are not a sweep's (the rerun's cases were computed, then a traceback)."""
+    rows: dict[int, dict] = {}
+    try:
+        if (out / "summary.csv").exists() or (out / "summary.csv").is_symlink():
+            errors: dict[str, str] = {}
+            if (out / "failures.csv").exists():
+                errors = {r["case"]: str(r.get("error") or "") for r in read_table(out / "failures.csv")}
+            for r in read_table(out / "summary.csv"):
+                r = {k: v for k, v in r.items() if v not in ("", None)}
+                if r.get("status") != "ok" and r["case"] in errors:
+                    r["error"] = errors[r["case"]]
+                rows[int(r["case"])] = r
+    except ValueError as exc:
+        raise SweepError(f"--out {out}: {exc}; this rerun would replace that table: restore it, or run the sweep "
+                         f"again into a new --out") from None
+    for row in _journal_rows(out / JOURNAL):
+        rows[int(row["case"])] = row
+    return list(rows.values())
+
+
+def _journal_rows(path: Path) -> Iterator[dict]:
+    """Rows of a journal (:data:`JOURNAL`); a line cut by a kill, or not a row, is skipped."""
+    from astrodyn.files import regular_file_problem
+
+    if not (path.exists() or path.is_symlink()):
+        return
+    if problem := regular_file_problem(path):
+        raise SweepError(f"--out {path}: {problem}")
+    try:
+        with open(path, "rb") as fh:
+            while line := fh.readline(MAX_JOURNAL_LINE + 1):
+                try:
+                    row = json.loads(line)
+                except (ValueError, RecursionError):
+                    continue
+                if isinstance(row, dict) and isinstance(row.get("case"), int) and not isinstance(row["case"], bool) \
+                        and row["case"] >= 0:
+                    yield row
+    except OSError as exc:
+        raise SweepError(f"--out {path}: cannot read the rows of the earlier run ({exc.strerror or exc})") from None
+
+
+class _Journal:
+    """Appends each finished row to ``out/rows.jsonl`` (opened at the first row): a sweep
+    that is killed (SIGKILL, the OOM killer, a power cut) keeps its finished cases, and
+    ``--resume`` completes it.  A write that fails (disk full) is reported once; the sweep
+    goes on with the rows in memory."""
+
+    def __init__(self, out: Path):
+        self.path = out / JOURNAL
+        self.fh = None
+        self.failed: str | None = None
+
+    def append(self, row: dict) -> None:
+        if self.failed:
+            return
+        try:
+            if self.fh is None:
+                self.fh = open(self.path, "a", encoding="utf-8")
+            self.fh.write(json.dumps(row, default=str) + "\n")
+            self.fh.flush()
+        except OSError as exc:
+            self.failed = exc.strerror or str(exc)
+            print(f"astrodyn sweep: warning: {self.path}: cannot write ({self.failed}); the finished rows are kept in "
+                  f"memory only (lost if the sweep is killed)", file=sys.stderr)
+
+    def close(self) -> None:
+        if self.fh is not None:
+            with contextlib.suppress(OSError):
+                self.fh.close()
+            self.fh = None
+
+    def remove(self) -> None:
+        self.close()
+        with contextlib.suppress(OSError):
+            self.path.unlink()
 
 
 # --------------------------------------------------------------------------- CLI
@@ -1094,6 +1314,9 @@ def _parser() -> argparse.ArgumentParser:
                     help="cases per Dask task (default 1; raise it for cases of a few ms)")
     ap.add_argument("--case", action="append", type=int, default=None, metavar="K",
                     help="rerun only case K (repeatable), serially, updating the tables in --out")
+    ap.add_argument("--resume", action="store_true",
+                    help="run the cases the sweep in --out has no row for (one that was killed or interrupted) "
+                         "and complete its tables")
     ap.add_argument("--mcap", action="store_true", help="also write one MCAP per case into OUT/mcap/")
     ap.add_argument("--out", required=True, metavar="DIR", type=path_argument,
                     help="output directory; one holding an earlier sweep's results is refused (a new directory, "
@@ -1112,6 +1335,8 @@ def check_chunk(chunk: Any) -> None:
 
 #: Dask's comm protocols a ``--scheduler`` address may name (``tcp`` when none is given);
 #: all but ``inproc`` (a scheduler in this very process: ``inproc://IP/PID/N``) take HOST:PORT.
+#: ``tls``/``wss`` take their certificates from Dask's configuration (``distributed.comm.tls.*``),
+#: ``ucx`` needs ucx-py; an address Dask cannot use is one line, exit 2 (:func:`_connect`).
 SCHEDULER_PROTOCOLS = ("tcp", "tls", "ws", "wss", "ucx", "inproc")
 
 
@@ -1140,54 +1365,131 @@ def check_scheduler_address(address: str) -> str:
 #: The tables a sweep writes into --out (:func:`write_tables`).
 RESULT_TABLES = ("summary.csv", "summary.parquet", "failures.csv", "sweep.json")
 _CASE_FILE = re.compile(r"^case-\d{6,}\.(txt|mcap)$")
+#: Temporary files of a sweep's tables and case files (:func:`_written`, :func:`write_case_mcap`)
+_TEMPORARY = re.compile(r"^(?:(?:summary|failures|sweep)\.\d+-[0-9a-f]{8}\.(?:csv|parquet|json)\.part"
+                        r"|(?:summary|failures)\.csv\.part|case-\d{6,}\.\d+-[0-9a-f]{8}\.(?:mcap\.tmp|txt\.part))$")
 
 
 def earlier_results(out: Path) -> list[Path]:
-    """The files an earlier sweep wrote into ``out``: its tables (:data:`RESULT_TABLES`) and
-    its per-case files (``failures/case-K.txt``, ``mcap/case-K.mcap``); nothing else."""
-    found = [out / name for name in RESULT_TABLES if (out / name).is_file()]
+    """The files an earlier sweep wrote into ``out``: its tables (:data:`RESULT_TABLES`), the
+    journal of one that was killed (:data:`JOURNAL`) and its per-case files
+    (``failures/case-K.txt``, ``mcap/case-K.mcap``); nothing else."""
+    found = [out / name for name in (*RESULT_TABLES, JOURNAL) if (out / name).is_file()]
     for sub in ("failures", "mcap"):
         if (out / sub).is_dir():
             found += sorted(p for p in (out / sub).iterdir() if _CASE_FILE.match(p.name) and p.is_file())
     return found
 
 
+def remove_temporaries(out: Path) -> list[Path]:
+    """Remove the temporary files of sweeps into ``out`` that did not end (killed: a
+    ``mcap/case-K.<pid>-<random>.mcap.tmp`` of several MB, a ``summary.<pid>-<random>.csv.part``).
+    Called with the directory's lock held (:func:`claim_directory`): no other sweep of this
+    machine writes there.  Returns them."""
+    removed = []
+    for folder in (out, out / "mcap", out / "failures"):
+        if folder.is_dir():
+            for p in folder.iterdir():
+                if _TEMPORARY.match(p.name) and p.is_file():
+                    with contextlib.suppress(OSError):
+                        p.unlink()
+                        removed.append(p)
+    return removed
+
+
+#: The lock file of a sweep's --out, held (``flock``) while the sweep runs and removed at its end.
+LOCK_NAME = ".astrodyn-sweep.lock"
+
+
+def claim_directory(out: Path) -> int:
+    """Take the exclusive lock of ``out`` (``flock`` on :data:`LOCK_NAME` inside it) and
+    return its file descriptor (:func:`release_directory`).  SweepError when another sweep
+    holds it: two sweeps into one directory overwrote each other's tables and case files.
+    The lock goes with the process (a killed sweep's too); the file is removed by its
+    holder at the end, so the lock taken is checked to be the one at that name."""
+    import fcntl
+
+    path = out / LOCK_NAME
+    for _ in range(20):
+        try:
+            fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW | getattr(os, "O_CLOEXEC", 0), 0o644)
+        except OSError as exc:
+            raise SweepError(f"--out {out}: cannot create its lock file {LOCK_NAME} ({exc.strerror or exc})") from None
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            try:
+                holder = os.read(fd, 32).decode("ascii", "replace").strip()
+            except OSError:
+                holder = ""
+            os.close(fd)
+            who = f" (pid {holder})" if holder.isdigit() else ""
+            raise SweepError(f"--out {out}: another astrodyn sweep{who} is writing into this directory; wait for it "
+                             f"to end or choose another --out") from None
+        try:
+            same = os.path.samestat(os.fstat(fd), os.stat(path, follow_symlinks=False))
+        except OSError:
+            same = False
+        if same:
+            with contextlib.suppress(OSError):
+                os.ftruncate(fd, 0)
+                os.pwrite(fd, f"{os.getpid()}\n".encode(), 0)
+            return fd
+        os.close(fd)  # its holder removed it meanwhile: take the new one
+    raise SweepError(f"--out {out}: cannot take its lock ({LOCK_NAME} keeps changing)")
+
+
+def release_directory(out: Path, fd: int | None) -> None:
+    """Remove the lock file of ``out`` (still holding the lock) and release it."""
+    if fd is None:
+        return
+    with contextlib.suppress(OSError):
+        if os.path.samestat(os.fstat(fd), os.stat(out / LOCK_NAME, follow_symlinks=False)):
+            os.unlink(out / LOCK_NAME)
+    os.close(fd)
+
+
 #: The keys of sweep.json that define which cases a sweep runs (its spec); a ``--case``
 #: rerun must have the same, or its rows would join another sweep's table.
-SPEC_KEYS = ("n", "seed", "varies", "cases_csv_columns", "cases_csv_rows", "grid_sizes", "config")
+SPEC_KEYS = ("n", "seed", "varies", "cases_csv_columns", "cases_csv_rows", "cases_csv_sha256", "grid_sizes", "config")
 
 
-def check_out_directory(out: Path, spec: SweepSpec, rerun: bool, overwrite: bool) -> None:
+def check_out_directory(out: Path, spec: SweepSpec, rerun: bool, overwrite: bool, flag: str = "--case") -> None:
     """``--out`` against what it already holds: a new sweep never replaces an earlier one's
     results without ``--overwrite`` (an interrupted sweep would leave a partial table in
     place of a complete one, and case files of two sweeps would mix); a ``--case`` rerun
-    updates only a sweep of the same spec (:data:`SPEC_KEYS`).  SweepError naming the flag."""
+    or ``--resume`` updates only a sweep of the same spec (:data:`SPEC_KEYS`).  SweepError
+    naming the flag."""
+    from astrodyn.analysis.sweep import read_sweep_spec
+
     if rerun and overwrite:
-        raise SweepError("--overwrite: expected either --overwrite (a new sweep replacing an earlier one) or --case "
-                         "(rerun cases of the sweep in --out, updating its tables), not both")
+        raise SweepError(f"--overwrite: expected either --overwrite (a new sweep replacing an earlier one) or {flag} "
+                         f"(rerun cases of the sweep in --out, updating its tables), not both")
     earlier = earlier_results(out) if out.is_dir() else []
     if rerun:
-        try:
-            recorded = json.loads((out / "sweep.json").read_text(encoding="utf-8"))
-        except (OSError, ValueError, RecursionError):
-            recorded = None
-        if earlier and not isinstance(recorded, dict):
-            raise SweepError(f"--case: {out} holds sweep results without a readable sweep.json; the rerun cannot "
+        recorded = read_sweep_spec(out / "sweep.json")
+        if earlier and recorded is None:
+            raise SweepError(f"{flag}: {out} holds sweep results without a readable sweep.json; the rerun cannot "
                              f"tell whether they are of this sweep (expected the --out of the sweep to rerun)")
-        if isinstance(recorded, dict):
+        if recorded is not None:
             current = json.loads(json.dumps(spec.to_json(), default=str))
             differ = [k for k in SPEC_KEYS if recorded.get(k) != current.get(k)]
+            if differ == ["cases_csv_sha256"] and "cases_csv_sha256" not in recorded:
+                raise SweepError(f"{flag}: {out} holds a sweep of a cases CSV whose sweep.json predates the CSV's "
+                                 f"digest (cases_csv_sha256), so this rerun cannot check that --cases holds the same "
+                                 f"cases; run the sweep again into a new --out")
             if differ:
-                raise SweepError(f"--case: {out} holds a sweep of another spec (it differs in {', '.join(differ)}); "
-                                 f"rerun with the config, --vary, --cases, -n and --seed of that sweep, or choose a "
-                                 f"new --out")
+                raise SweepError(f"{flag}: {out} holds a sweep of another spec (it differs in {', '.join(differ)}); "
+                                 f"rerun with the config, --vary, --cases (the same rows), -n and --seed of that "
+                                 f"sweep, or choose a new --out")
         return
     if earlier and not overwrite:
         shown = ", ".join(str(p.relative_to(out)) for p in earlier[:4]) + (f", ... ({len(earlier)} files)"
                                                                          if len(earlier) > 4 else "")
+        how = ("complete it with --resume, rerun cases of that sweep with --case K"
+               if (out / "sweep.json").is_file() else "")
         raise SweepError(f"--out {out}: holds the results of an earlier sweep ({shown}); they are never overwritten: "
-                         f"choose a new directory, rerun cases of that sweep with --case K, or pass --overwrite to "
-                         f"replace them")
+                         f"choose a new directory, {how + ', ' if how else ''}or pass --overwrite to replace them")
 
 
 def remove_earlier_results(out: Path) -> list[Path]:
@@ -1222,65 +1524,108 @@ def _main(argv: list[str] | None) -> int:
         check_chunk(args.chunk)
         if args.scheduler is not None:
             check_scheduler_address(args.scheduler)
+        if args.resume and args.case is not None:
+            raise SweepError("--resume: expected either --resume (every case without a row) or --case K, not both")
         spec = make_spec(args.config, args.vary, n=args.n, seed=args.seed, cases_csv=args.cases)
         cases = list(range(spec.n)) if args.case is None else sorted(set(args.case))
         for k in cases:
             if not 0 <= k < spec.n:
                 raise SweepError(f"--case: expected 0 <= K < {spec.n} (the sweep's -n), got {k}")
-        out = Path(args.out)
-        created = not out.exists()
-        try:  # the last check: a refused sweep creates nothing
+    except (SweepError, ScenarioError) as exc:
+        print(f"astrodyn sweep: {exc}", file=sys.stderr)
+        return 2
+    rerun = args.case is not None or args.resume
+    out = Path(args.out)
+    created = not out.exists() and not out.is_symlink()
+    lock: int | None = None
+    try:  # the last checks, under the directory's lock: a refused sweep creates nothing
+        try:
             if not created and not out.is_dir():
                 raise SweepError(f"--out {out}: expected a directory, got {file_kind(os.stat(out).st_mode)}")
-            check_out_directory(out, spec, rerun=args.case is not None, overwrite=args.overwrite)
             out.mkdir(parents=True, exist_ok=True)
         except OSError as exc:
             raise SweepError(f"--out {str(out)[:200]}: expected a directory that can be created, got "
                              f"{exc.strerror or exc}") from None
         if not os.access(out, os.W_OK):
             raise SweepError(f"--out {out}: expected a writable directory")
+        lock = claim_directory(out)
+        check_out_directory(out, spec, rerun=rerun, overwrite=args.overwrite,
+                            flag="--resume" if args.resume else "--case")
+        earlier = _earlier_rows(out) if rerun else []
+        if args.resume:
+            have = {int(r["case"]) for r in earlier}
+            cases = [k for k in range(spec.n) if k not in have]
         if args.mcap:
             spec.mcap_dir = str((out / "mcap").resolve())
     except (SweepError, ScenarioError) as exc:
+        release_directory(out, lock)
+        _remove_if_empty(out, created)
         print(f"astrodyn sweep: {exc}", file=sys.stderr)
         return 2
+    try:
+        return _sweep(args, spec, cases, out, created, earlier)
+    finally:
+        release_directory(out, lock)
+        _remove_if_empty(out, created)
+
+
+def _sweep(args: argparse.Namespace, spec: SweepSpec, cases: list[int], out: Path, created: bool,
+           earlier: list[dict]) -> int:
+    """The sweep proper, ``out`` claimed (:func:`claim_directory`) and checked."""
+    rerun = args.case is not None or args.resume
+    remove_temporaries(out)
     if args.overwrite:
         removed = remove_earlier_results(out)
         if removed and not args.quiet:
             print(f"astrodyn sweep: --overwrite: removed the {len(removed)} result files of the earlier sweep in {out}",
                   file=sys.stderr)
-    rerun = args.case is not None
-    workers, scheduler = (0, None) if rerun else (args.workers, args.scheduler)
+    started_spec = None
+    if not rerun:  # the spec first: a sweep killed later can be completed (--resume)
+        started_spec = out / "sweep.json"
+        try:
+            _write_spec(started_spec, spec.to_json() | {"cases_run": 0, "complete": False, "running": True})
+        except OSError as exc:
+            print(f"astrodyn sweep: --out {out}: cannot write sweep.json ({exc.strerror or exc}); nothing was run",
+                  file=sys.stderr)
+            return 1
+    workers, scheduler = (0, None) if args.case is not None else (args.workers, args.scheduler)
     where = "serially in this process" if workers == 0 and scheduler is None else (
         f"on the Dask scheduler {scheduler}" if scheduler else f"on a Dask LocalCluster of {workers} worker processes")
     if not args.quiet:
         print(f"astrodyn sweep: {len(cases)} case(s) of {spec.source} {where}, seed {spec.seed}", file=sys.stderr)
     progress = CaseProgress(len(cases), enabled=not args.quiet)
+    journal = _Journal(out)
     rows: list[dict] = []
     started = time.monotonic()
-    interrupted = False
+    interrupted = 0
     try:
         for row in run_cases(spec, cases, workers=workers, scheduler=scheduler, chunk=args.chunk):
             rows.append(row)
+            journal.append(row)
             progress.update(row)
-            if rerun:
+            if args.case is not None:
                 shown = {k: v for k, v in row.items() if k != "traceback"}
                 print(json.dumps(shown, default=str), flush=True)
     except SweepError as exc:
-        _remove_if_empty(out, created)
+        journal.close()
+        if not rows:
+            _forget_start(started_spec, journal)
         print(f"astrodyn sweep: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt as exc:  # Ctrl-C or SIGTERM (astrodyn.signals.interruptible)
-        interrupted = getattr(exc, "signum", signal.SIGINT)
+        interrupted = int(getattr(exc, "signum", signal.SIGINT))
+    journal.close()
+    all_rows = _merge(earlier, rows)
+    _remove_unlisted_case_files(spec, cases, all_rows)
+    if interrupted:
+        name = signal.Signals(interrupted).name
         if not rows:  # nothing finished (the cluster was starting, say): nothing is written, --out as it was
-            _remove_if_empty(out, created)
-            print(f"\nastrodyn sweep: interrupted by {signal.Signals(interrupted).name}; no case had finished, "
-                  f"nothing was written", file=sys.stderr)
+            _forget_start(started_spec, journal)
+            print(f"\nastrodyn sweep: interrupted by {name}; no case had finished, nothing was written",
+                  file=sys.stderr)
             return 128 + interrupted
-        print(f"\nastrodyn sweep: interrupted by {signal.Signals(interrupted).name}; writing the {len(rows)} finished "
-              f"cases", file=sys.stderr)
+        print(f"\nastrodyn sweep: interrupted by {name}; writing the {len(rows)} finished cases", file=sys.stderr)
     wall = time.monotonic() - started
-    all_rows = _merge(out, rows) if rerun else rows
     versions = {"astrodyn": _version(), "numpy": np.__version__}
     try:
         import distributed
@@ -1290,18 +1635,32 @@ def _main(argv: list[str] | None) -> int:
         pass
     extra = {"wall_s": wall, "workers": workers, "scheduler": scheduler, "versions": versions,
              "cases_per_s": len(rows) / wall if wall > 0 else None, "interrupted": bool(interrupted)}
-    if rerun and (out / "sweep.json").exists():  # keep the full run's record, note the rerun
-        try:
-            from astrodyn.messages import parse_json
+    if rerun:  # keep the full run's record, note the rerun
+        from astrodyn.analysis.sweep import read_sweep_spec
 
-            previous = parse_json((out / "sweep.json").read_text(encoding="utf-8"))
-        except ValueError:
-            previous = {}
+        previous = read_sweep_spec(out / "sweep.json") or {}
         keep = ("wall_s", "workers", "scheduler", "versions", "cases_per_s", "interrupted")
         # a rerun is listed once its cases are written: an interrupted one lists those that finished
         finished = sorted({int(r["case"]) for r in rows})
-        extra = {k: previous[k] for k in keep if k in previous} | {"reruns": previous.get("reruns", []) + [finished]}
-    write_tables(out, all_rows, spec, extra=extra)
+        reruns = previous.get("reruns") if isinstance(previous.get("reruns"), list) else []
+        extra = {k: previous[k] for k in keep if k in previous}
+        if args.resume:
+            resumes = previous.get("resumes") if isinstance(previous.get("resumes"), list) else []
+            extra |= {"reruns": reruns, "resumes": resumes + [len(finished)]} if reruns else \
+                {"resumes": resumes + [len(finished)]}
+        else:
+            extra |= {"reruns": reruns + [finished]}
+    try:
+        write_tables(out, all_rows, spec, extra=extra)
+    except OSError as exc:
+        where_ = f"{exc.filename}: " if exc.filename else ""
+        kept = (f"the rows of the {len(rows)} cases run are kept in {out / JOURNAL}: once the cause is fixed, the "
+                f"same command with --resume writes the tables (without running them again)"
+                if rows and not journal.failed else f"the rows of the {len(rows)} cases run are lost")
+        print(f"astrodyn sweep: cannot write the tables into {out} ({where_}{exc.strerror or exc}); {kept}",
+              file=sys.stderr)
+        return 1
+    journal.remove()
     failed = [r for r in rows if r.get("status") != "ok"]
     if not args.quiet:
         print(f"astrodyn sweep: {len(rows) - len(failed)} ok, {len(failed)} failed in {wall:.1f} s "
@@ -1316,6 +1675,27 @@ def _main(argv: list[str] | None) -> int:
     if interrupted:
         return 128 + interrupted
     return 1 if failed else 0
+
+
+def _forget_start(started_spec: Path | None, journal: _Journal) -> None:
+    """A new sweep of which no case finished writes nothing: its early sweep.json goes."""
+    if started_spec is not None:
+        with contextlib.suppress(OSError):
+            started_spec.unlink()
+        journal.remove()
+
+
+def _remove_unlisted_case_files(spec: SweepSpec, cases: list[int], rows: list[dict]) -> None:
+    """Remove ``mcap/case-K.mcap`` of this run's cases that have no row in the table: cases a
+    Dask worker finished while the interrupted sweep closed its cluster (their rows never
+    came back).  A case a rerun did not finish keeps its earlier file (it has its row)."""
+    if not spec.mcap_dir or len(rows) >= spec.n:
+        return
+    have = {int(r["case"]) for r in rows}
+    for k in cases:
+        if k not in have:
+            with contextlib.suppress(OSError):
+                (Path(spec.mcap_dir) / f"case-{k:06d}.mcap").unlink()
 
 
 def _remove_if_empty(out: Path, created: bool) -> None:

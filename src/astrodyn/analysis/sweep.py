@@ -37,7 +37,11 @@ import numpy as np
 from astrodyn.recording.outputs import staging_directory
 from astrodyn.signals import deferred_interrupts
 
-__all__ = ["sweep_report", "is_sweep_dir", "MAX_PANELS"]
+__all__ = ["sweep_report", "is_sweep_dir", "MAX_PANELS", "MAX_TABLE_BYTES", "MAX_SPEC_BYTES", "read_sweep_table",
+           "read_sweep_spec"]
+
+MAX_TABLE_BYTES = 512 * 2**20  #: largest summary.csv / failures.csv read back (~500,000 cases of ~1 kB)
+MAX_SPEC_BYTES = 64 * 2**20  #: largest sweep.json read back (it holds the config, not the cases)
 
 MAX_PANELS = 16  #: histogram panels per figure
 ROUND_OFF = 1e-13  #: a metric whose relative spread is below this (~450 ulp) is reported as constant
@@ -51,19 +55,63 @@ def is_sweep_dir(path: str | os.PathLike) -> bool:
     return p.is_dir() and (p / "summary.csv").is_file()
 
 
-def _load(dir_: Path) -> tuple[list[dict], dict]:
+def _bounded_file(path: Path, limit: int, what: str):
+    """``path`` opened for text reading once it is a regular file (symlinks followed) of at
+    most ``limit`` bytes; ValueError naming it otherwise (a FIFO blocked the reader, /dev/zero
+    or a huge file filled the memory)."""
+    from astrodyn.files import regular_file_problem
+
+    if problem := regular_file_problem(path):
+        raise ValueError(f"{path}: {problem} ({what})")
+    size = os.path.getsize(path)
+    if size > limit:
+        raise ValueError(f"{path}: expected {what} of at most {limit} bytes, got {size} bytes")
+    return open(path, newline="", encoding="utf-8")
+
+
+def read_sweep_table(path: str | os.PathLike, key: str = "case") -> list[dict[str, str]]:
+    """Rows of a sweep table (summary.csv, failures.csv) as dicts of strings, each with an
+    integer ``key`` cell; ValueError (one line naming the file) for anything else: not a
+    regular file, over :data:`MAX_TABLE_BYTES`, not UTF-8 CSV, no or a non-integer ``key``."""
+    path = Path(path)
+    what = "the table of a sweep (UTF-8 CSV)"
     try:
-        with open(dir_ / "summary.csv", newline="", encoding="utf-8") as fh:
-            rows = list(csv.DictReader(fh))
+        with _bounded_file(path, MAX_TABLE_BYTES, what) as fh:
+            reader = csv.DictReader(fh)
+            fields = reader.fieldnames or []
+            if fields and key not in fields:
+                raise ValueError(f"{path}: expected {what} with a {key!r} column, got the columns "
+                                 f"{', '.join(map(str, fields[:8]))[:200]}")
+            rows = []
+            for row in reader:
+                cell = row.get(key)
+                if not (isinstance(cell, str) and re.fullmatch(r"\d{1,18}", cell.strip())):
+                    raise ValueError(f"{path}: line {reader.line_num}: expected a case number in the {key!r} column, "
+                                     f"got {str(cell)[:40]!r}")
+                row[key] = cell.strip()
+                rows.append({str(k): v for k, v in row.items() if k is not None})
+            return rows
     except (UnicodeDecodeError, csv.Error) as exc:
-        raise ValueError(f"{dir_ / 'summary.csv'}: expected the table of a sweep (UTF-8 CSV), got {exc}") from None
-    spec = {}
-    if (dir_ / "sweep.json").is_file():
-        try:
-            spec = json.loads((dir_ / "sweep.json").read_text(encoding="utf-8"))
-        except (ValueError, RecursionError):
-            spec = {}
-    return rows, spec if isinstance(spec, dict) else {}
+        raise ValueError(f"{path}: expected {what}, got {' '.join(str(exc).split())[:200]}") from None
+    except OSError as exc:
+        raise ValueError(f"{path}: cannot read {what}: {exc.strerror or exc}") from None
+
+
+def read_sweep_spec(path: str | os.PathLike) -> dict | None:
+    """``sweep.json`` as a dict; None when it is missing, not a regular file, over
+    :data:`MAX_SPEC_BYTES`, not JSON or not an object (never a read without limit)."""
+    try:
+        with _bounded_file(Path(path), MAX_SPEC_BYTES, "the spec of a sweep") as fh:
+            doc = json.loads(fh.read())
+    except (OSError, ValueError, RecursionError):
+        return None
+    return doc if isinstance(doc, dict) else None
+
+
+def _load(dir_: Path) -> tuple[list[dict], dict]:
+    rows = read_sweep_table(dir_ / "summary.csv")
+    spec = read_sweep_spec(dir_ / "sweep.json") or {}
+    return rows, spec
 
 
 def _numeric_columns(rows: list[dict]) -> dict[str, np.ndarray]:
@@ -151,10 +199,11 @@ def sweep_report(dir: str | os.PathLike, out: str | os.PathLike | None = None) -
 def _write_report(dir_: Path, out_: Path, final: Path, rows: list[dict], spec: dict, plt) -> dict:
     """Write the figures, report.md and report.json of the sweep in ``dir_`` into ``out_``
     (the paths they name: in ``final``, where they are moved)."""
-    units: dict[str, str] = spec.get("columns") if isinstance(spec.get("columns"), dict) else {}
+    units: dict[str, str] = ({str(k): v for k, v in spec["columns"].items() if isinstance(v, str)}
+                             if isinstance(spec.get("columns"), dict) else {})
     varies = [v for v in spec.get("varies", []) if isinstance(v, dict)] if isinstance(spec.get("varies"), list) else []
     csv_columns = spec.get("cases_csv_columns") if isinstance(spec.get("cases_csv_columns"), list) else []
-    varied = {v.get("path") for v in varies} | {str(c) for c in csv_columns}
+    varied = {v.get("path") for v in varies if isinstance(v.get("path"), str)} | {str(c) for c in csv_columns}
     status = np.array([r.get("status") == "ok" for r in rows], dtype=bool)
     cols = _numeric_columns(rows)
     is_param = {c: re.sub(r"\[\d+\]$", "", re.sub(r" \[[^\[\]]*\]$", "", c)) in varied for c in cols}
@@ -227,9 +276,8 @@ def _write_report(dir_: Path, out_: Path, final: Path, rows: list[dict], spec: d
 
     failures = [r for r in rows if r.get("status") != "ok"]
     errors = {}
-    if (dir_ / "failures.csv").is_file():
-        with open(dir_ / "failures.csv", newline="", encoding="utf-8") as fh:
-            errors = {r["case"]: r.get("error", "") for r in csv.DictReader(fh)}
+    if failures and (dir_ / "failures.csv").exists():
+        errors = {r["case"]: str(r.get("error") or "") for r in read_sweep_table(dir_ / "failures.csv")}
     lines = [f"# Sweep report: {dir_}", "",
              f"{len(rows)} cases, {int(status.sum())} ok, {len(failures)} failed; seed {spec.get('seed', '?')}, "
              f"config {spec.get('source', '?')}.", ""]
