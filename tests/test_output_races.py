@@ -88,7 +88,7 @@ def test_a_refused_serve_says_why_and_leaves_the_running_ones_file_and_control_t
     recorder says so (not "a killed run's partial recording?"), exit 1, and the running
     serve's control-token file is left as it is (before: unlinked and replaced at start)."""
     config, out = _scene(tmp_path, "race2"), tmp_path / "x.mcap"
-    token = tmp_path / ".x.control-token"
+    token = tmp_path / ".x.mcap.control-token"
     token.write_text("the running serve's token")
     squatter = _Squatter(tmp_path, "serve", tmp_path / "x.partial.mcap")
     try:

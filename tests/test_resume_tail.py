@@ -114,20 +114,37 @@ def test_a_hostile_resume_seqs_file_is_refused_before_anything_is_written(tmp_pa
 
 
 def test_serve_finds_only_its_own_logger_parts(tmp_path):
-    """The files serve restarts from: the main logger's partial parts (newest first), then its
-    finished parts; never a standby logger's file (``NAME.logger-2...``, the newest here,
-    which a restart once took for the dead logger's) nor another recording sharing the prefix."""
+    """The files serve restarts from are the ones its loggers reported creating, newest
+    first, followed by identity (st_dev, st_ino) through a rename; never a file that only
+    has the name of a part: another user's serve recording ``served-0002.partial.mcap`` in
+    the same directory (serve took such a file for its dead logger's, resumed from it and
+    recorded another config's states: crossing probe, session 16), a standby logger's file,
+    or a file put where a reported one was."""
+    import json
     import os
-    import time
 
-    from astrodyn.service.serve import Supervisor
+    from astrodyn.service.supervision import LoggerFiles
 
-    names = ["served.mcap", "served-0001.mcap", "served-0002.partial-2.mcap", "served.logger-2.partial.mcap",
-             "served.logger-2-0001.mcap", "served-extra.mcap", "served.partial-1.mcap", "served-0003.mcap.recover-tmp"]
-    now = time.time()
-    for i, name in enumerate(names):
+    def make(name: str) -> Path:
         (tmp_path / name).write_text("x")
-        os.utime(tmp_path / name, (now + i, now + i))
-    holder = type("S", (), {"out": tmp_path / "served.mcap"})()
-    found = [os.path.basename(p) for p in Supervisor._parts(holder)]
-    assert found == ["served.partial-1.mcap", "served-0002.partial-2.mcap", "served-0001.mcap", "served.mcap"]
+        return tmp_path / name
+
+    report = tmp_path / "own-files"
+    own = [make("served.partial.mcap"), make("served-0001.partial.mcap")]
+    with open(report, "w") as f:
+        for path in own:
+            st = os.stat(path)
+            f.write(json.dumps({"file": str(path), "dev": st.st_dev, "ino": st.st_ino}) + "\n")
+    for name in ("served-0002.partial.mcap", "served.logger-2.partial.mcap", "served-0003.mcap"):
+        make(name)  # named like parts, not reported: another recorder's
+    files = LoggerFiles(report)
+    assert [where for _, where in files.newest_first()] == [str(own[1]), str(own[0])]
+    os.rename(own[0], tmp_path / "served.mcap")  # the first part finished: followed by identity
+    assert [where for _, where in files.newest_first()] == [str(own[1]), str(tmp_path / "served.mcap")]
+    assert files.owns(tmp_path / "served-0002.partial.mcap") is None
+    assert files.owns(tmp_path / "served.mcap") is not None
+    os.unlink(own[1])  # held open by `files`: its inode number cannot be reused meanwhile
+    make("served-0001.partial.mcap")  # another file where a reported one was: not the logger's
+    assert [where for _, where in files.newest_first()] == [str(tmp_path / "served.mcap")]
+    assert files.owns(tmp_path / "served-0001.partial.mcap") is None
+    files.close()

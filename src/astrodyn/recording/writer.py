@@ -41,7 +41,7 @@ import json
 import operator
 import os
 import time
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from typing import Any
 
 import numpy as np
@@ -397,7 +397,17 @@ class McapRecorder:
         to its name only once it is finished, so a failed or killed run never destroys
         the previous recording of that name (the logger of ``run`` / ``serve`` does this).
     first_part, attempt : for a restarted logger (``serve``): number its parts from
-        ``first_part`` and name its partial files ``NAME.partial-<attempt>.mcap``.
+        ``first_part`` and name its partial files ``NAME.partial-<attempt>.mcap``.  A rolled
+        part (any but the first file of a run: part k >= 1) whose partial name is taken
+        (another recorder's live file that happens to have that name, a killed run's) is
+        written as the partial file of a :func:`clash_name` instead
+        (``NAME-000k.clash-1.partial.mcap``), listed in :attr:`parts_kept_aside`; the file
+        in the way is never touched.  The first file of a run is never clash-named: its
+        name is the user's ``--out``, and a file in the way of it is an error naming it.
+    on_file : ``on_file(path, (st_dev, st_ino))``, called when a file is created (its
+        writing path, before anything but its headers is in it) and when a finished part
+        takes its name (same identity, new path): how a supervisor knows which files are
+        this recorder's own (:class:`astrodyn.service.supervision.LoggerFiles`).
 
     Errors: :class:`RecordingError` naming the path for an unwritable path, a full disk or
     any other write failure; after such an error the file is left without footer (it does
@@ -419,8 +429,11 @@ class McapRecorder:
         atomic: bool = False,
         first_part: int = 0,
         attempt: int = 0,
+        on_file: Callable[[str, tuple[int, int]], None] | None = None,
     ):
         self.path = os.fspath(path)
+        self._on_file = on_file
+        self._identity: tuple[int, int] | None = None
         if not (isinstance(first_part, int) and first_part >= 0 and isinstance(attempt, int) and attempt >= 0):
             raise ValueError(f"first_part, attempt: expected integers >= 0, got {first_part!r}, {attempt!r}")
         self.atomic = bool(atomic)
@@ -469,15 +482,19 @@ class McapRecorder:
         self.path = path
         self.writing_path = partial_path(path, self.attempt) if self.atomic else path
         try:
-            if self.atomic:
+            if self.atomic and path != self._base:  # a rolled part: beside a file in the way of its partial name
+                self._stream = self._open_new_partial_part(path)
+            elif self.atomic:
                 self._stream = open(self.writing_path, "xb")
             elif path != self._base:  # a rolled part written in place: never over an existing file
                 self._stream = self._open_new_part(path)
             else:
                 self._stream = open(self.path, "wb")
         except FileExistsError:
-            raise RecordingError(f"{self.writing_path}: exists (a killed run's partial recording?): finish it with "
-                                 f"`astrodyn recover {self.writing_path}` or remove it; it is never overwritten") from None
+            err = RecordingError(f"{self.writing_path}: exists (a killed run's partial recording?): finish it with "
+                                 f"`astrodyn recover {self.writing_path}` or remove it; it is never overwritten")
+            err.path = self.writing_path  # the file really in the way (the logger names it)
+            raise err from None
         except OSError as exc:
             raise RecordingError(f"{self.writing_path}: cannot open for writing: {exc.strerror or exc}") from None
         # held while this process writes the file (released by the kernel when it ends, even
@@ -489,6 +506,9 @@ class McapRecorder:
             raise RecordingError(f"{self.writing_path}: is being written by another process") from None
         self.paths.append(self.path)
         self._opened_at = time.monotonic()
+        st = os.fstat(self._stream.fileno())
+        self._identity = (st.st_dev, st.st_ino)
+        self._report(self.writing_path)
         try:
             self._writer = ChunkedWriter(self._stream, chunk_size=self.chunk_size, library=f"astrodyn {__version__}")
             self._writer.add_metadata("scenario", self._scenario)
@@ -509,6 +529,34 @@ class McapRecorder:
 
     def _roll_path(self, n: int) -> str:
         return part_path(self._base, n)
+
+    def _report(self, path: str) -> None:
+        """Tell ``on_file`` that this recorder's current file is now at ``path``."""
+        if self._on_file is not None and self._identity is not None:
+            self._on_file(path, self._identity)
+
+    def _open_new_partial_part(self, path: str):
+        """Create the partial file of rolled part ``path`` (atomic); when its partial name
+        is taken (another recorder's live file of that name, a killed run's), the partial
+        file of a :func:`clash_name` of ``path`` instead, reported in
+        :attr:`parts_kept_aside`: the file in the way is never touched."""
+        try:
+            return open(self.writing_path, "xb")
+        except FileExistsError:
+            taken = self.writing_path
+        for n in range(1, MAX_CLASH_NAMES + 1):
+            name = clash_name(path, n)
+            try:
+                stream = open(partial_path(name, self.attempt), "xb")
+            except FileExistsError:
+                continue
+            self.path, self.writing_path = name, partial_path(name, self.attempt)
+            self.parts_kept_aside.append({"part": path, "file": name,
+                                          "why": f"{taken} exists (another recorder's file, or a killed run's); it "
+                                                 f"was not touched"})
+            return stream
+        self.writing_path = taken
+        raise FileExistsError(taken)
 
     def _open_new_part(self, path: str):
         """Open rolled part ``path`` (not atomic) as a new file; when that name is taken (an
@@ -753,8 +801,10 @@ class McapRecorder:
                 # recording of that name: a run's --out)
                 os.replace(self.writing_path, self.path)
                 fsync_directory(self.path)
+                self._report(self.path)
             elif rename and self.writing_path != self.path:  # a rolled part: never over another one
                 self._name_finished_part()
+                self._report(self.path)
         except OSError as exc:
             self._fail(exc)
 

@@ -647,9 +647,17 @@ class JobControl:
         return resumed
 
 
-def wait_ready(session, scenario: str, child: Child, timeout_s: float, interrupted: dict) -> str | None:
+def wait_ready(session, scenario: str, child: Child, timeout_s: float, interrupted: dict,
+               verifier=None) -> str | None:
     """Wait for ``child``'s liveliness token; a failure description if it exits first (e.g.
-    the logger cannot write its file), is interrupted, or is not ready within ``timeout_s``."""
+    the logger cannot write its file), is interrupted, or is not ready within ``timeout_s``.
+
+    ``verifier`` (a logger's supervisor, holding the run secret): ready means the logger's
+    ``@latest`` reply signed by ``child.name`` with the run's secret
+    (:func:`astrodyn.bus.wait_for_logger`), not just a token in its name: on a bus shared
+    through a router another run of the same scenario has a logger token too, and taking
+    it for this run's logger made a serve whose own logger was refused (its ``--out`` taken)
+    carry on as if it recorded (docs/reliability.md)."""
     deadline = time.monotonic() + timeout_s
     while True:
         rc = child.poll()
@@ -659,7 +667,10 @@ def wait_ready(session, scenario: str, child: Child, timeout_s: float, interrupt
         if interrupted["signal"]:
             return f"interrupted by {interrupted['signal']} during start-up"
         try:
-            bus.wait_for_process(session, scenario, child.name, timeout_s=0.5)
+            if verifier is None:
+                bus.wait_for_process(session, scenario, child.name, timeout_s=0.5)
+            else:
+                bus.wait_for_logger(session, scenario, child.name, timeout_s=0.5, verifier=verifier)
             return None
         except bus.BusError:
             if time.monotonic() > deadline:

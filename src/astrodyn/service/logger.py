@@ -770,6 +770,8 @@ class Logger:
             stats = self.recorder.close(rename=finished)
             summary["file_complete"] = True
             summary["file"] = stats.get("file") or self.recorder.path
+            if stats.get("parts_kept_aside"):  # a rolled part's name was taken: where that part is instead
+                summary["parts_kept_aside"] = stats["parts_kept_aside"]
             for request in self._stop_requests:
                 request.reply(summary)
         return summary
@@ -810,8 +812,34 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                         "(serve's logger restart) and are dropped as already recorded")
     p.add_argument("--attempt", type=int, default=0,
                    help="restart count of this logger in its run: its partial files are NAME.partial-<attempt>.mcap")
+    p.add_argument("--own-files", default=None, metavar="FILE",
+                   help="append a JSON line {file, dev, ino} to FILE for every file this logger creates or names "
+                        "(a supervisor's record of which files are its own: docs/reliability.md)")
     bus.add_bus_arguments(p)
     return p.parse_args(argv)
+
+
+def own_files_reporter(path: str | None):
+    """The recorder's ``on_file`` for ``--own-files``: one JSON line per file created or
+    named, appended (``O_APPEND``: one write, whole lines) to the supervisor's private
+    file; None without the flag.  A line that cannot be written is said on stderr (the
+    supervisor then does not take the file for its own: it is never read, renamed or
+    removed by it)."""
+    if not path:
+        return None
+
+    def report(file: str, identity: tuple[int, int]) -> None:
+        line = json.dumps({"file": os.path.abspath(file), "dev": identity[0], "ino": identity[1]}) + "\n"
+        try:
+            fd = os.open(path, os.O_WRONLY | os.O_APPEND | os.O_CREAT | os.O_CLOEXEC, 0o600)
+            try:
+                os.write(fd, line.encode())
+            finally:
+                os.close(fd)
+        except OSError as exc:
+            with contextlib.suppress(OSError):
+                print(f"logger: warning: --own-files {path}: {exc.strerror or exc}", file=sys.stderr, flush=True)
+    return report
 
 
 def scenario_metadata(args: argparse.Namespace) -> dict:
@@ -923,7 +951,8 @@ def main(argv: list[str] | None = None) -> int:
             recorder = McapRecorder(args.out, meta, epoch_ns=args.epoch_ns,
                                     chunk_size=args.chunk_size, flush_interval_s=args.flush_interval,
                                     roll_size=args.roll_size, roll_interval_s=args.roll_interval,
-                                    atomic=not args.in_place, first_part=args.first_part, attempt=args.attempt)
+                                    atomic=not args.in_place, first_part=args.first_part, attempt=args.attempt,
+                                    on_file=own_files_reporter(args.own_files))
             copied = prefill(recorder, args.prefill, args.scenario, args.prefill_steps) if args.prefill else 0
             for key, next_seq in seeds.items():  # each channel starts where an earlier part ended
                 recorder.seq.seed(key, next_seq)
@@ -934,7 +963,8 @@ def main(argv: list[str] | None = None) -> int:
             if args.prefill:
                 summary["prefilled"] = copied
     except (RecordingError, bus.BusError) as exc:
-        writing = None if args.in_place else writing_path(args)
+        # the file really in the way: the first one, or a later rolled part's (the writer names it)
+        writing = None if args.in_place else (getattr(exc, "path", None) or writing_path(args))
         if writing is not None and isinstance(exc.__context__, FileExistsError):  # O_EXCL: something is there
             with contextlib.suppress(OSError):
                 print(f"logger: {in_the_way(writing)}", file=sys.stderr, flush=True)

@@ -186,6 +186,7 @@ class ScenarioRun:
         self.standbys: dict[str, Child] = {}  # hot standby loggers: logger-2, ... (not restarted)
         self.logger_files: dict[int, LoggerFile] = {}  # attempt -> the file that logger created (LoggerFile)
         self.logger_attempt = 0  # the attempt number of the logger running now
+        self.verifier: auth.Verifier | None = None  # a logger is ready when it answers signed (wait_ready)
 
     def start_logger(self, attempt: int, extra: list[str], announce=None) -> str | None:
         """Start logger number ``attempt`` (0: the first; ``--attempt N`` writes
@@ -202,7 +203,7 @@ class ScenarioRun:
         self.logger_attempt = attempt
         if announce is not None:
             announce(child)
-        failure = wait_ready(self.session, self.scenario.name, child, 60.0, self.interrupted)
+        failure = wait_ready(self.session, self.scenario.name, child, 60.0, self.interrupted, verifier=self.verifier)
         if failure is None:
             owned = LoggerFile.of_ready_logger(path)
         else:  # one that died may have created its file (headers only) before it was killed
@@ -235,6 +236,7 @@ class ScenarioRun:
                 bus.HeartbeatMonitor(session, scenario.name, verifier=secret and auth.Verifier(secret)) as beats, \
                 bus.AliveWatcher(session, scenario.name) as alive:
             self.session, self.tmpd = session, Path(tmp)
+            self.verifier = auth.Verifier(secret) if secret is not None else None
             self.config_path = config_snapshot(scenario, self.tmpd)
             # the run's identity: children sign what they publish (docs/security.md)
             self.child_env = {auth.SECRET_ENV: str(secret.save(self.tmpd))} if secret is not None else None
@@ -361,7 +363,8 @@ class ScenarioRun:
             name = f"logger-{k}"
             child = self.standbys[name] = Child(name, [*common, "--name", name, f"--out={standby_path(self.out, k)}"],
                                                 self.tmpd, env=self.child_env)
-            failure = wait_ready(self.session, self.scenario.name, child, 60.0, self.interrupted)
+            failure = wait_ready(self.session, self.scenario.name, child, 60.0, self.interrupted,
+                                 verifier=self.verifier)
             if failure is not None:
                 return failure
         if self.standbys:

@@ -45,11 +45,9 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import glob
 import json
 import math
 import os
-import re
 import signal
 import subprocess
 import sys
@@ -91,7 +89,9 @@ from astrodyn.service.runner import (
 )
 from astrodyn.service.supervision import (
     LoggerFile,
+    LoggerFiles,
     RestartBudget,
+    holds_config,
     next_event_seq,
     plan_part_restart,
     resume_from_parts,
@@ -143,13 +143,20 @@ class Supervisor:
         secret = auth.RunSecret.generate()
         self.child_env = {auth.SECRET_ENV: str(secret.save(tmp))}
         self.signer = auth.Signer(secret, "serve")
+        # a logger is ready when it answers signed with the run's secret: a liveliness token in its
+        # name is no proof (another run's logger on a shared router has one: docs/reliability.md)
+        self.verifier = auth.Verifier(secret)
+        # the files this serve's (main) loggers created, by identity (--own-files): the only ones it
+        # reads for a resume, finishes, counts as parts or renames, whatever else is named like them
+        self.own = LoggerFiles(tmp / "own-files.jsonl")
+        self.finishing_sources: dict[int, LoggerFile | None] = {}  # id(finish child) -> the dead part it finishes
         common = logger_base_argv(scenario, meta, config_path, self.propagators, connect_args)
         if roll_size:
             common += ["--roll-size", str(roll_size)]
         if roll_interval:
             common += ["--roll-interval", str(roll_interval)]
         # "--out=": a path that starts with "-" is not taken for an option
-        self._logger_argv = [*common, f"--out={out}", "--leave-partial"]
+        self._logger_argv = [*common, f"--out={out}", "--leave-partial", f"--own-files={self.own.report}"]
         self.logger_attempt = 0
         self.children: dict[str, Child] = {}
         self.outdir = OutputDirectory(self.out)  # a rename or removal of it while recording fails serve
@@ -161,7 +168,7 @@ class Supervisor:
             name = f"logger-{k}"
             child = self.standbys[name] = Child(name, [*common, "--name", name, f"--out={standby_path(out, k)}"], tmp,
                                                 env=self.child_env)
-            failure = wait_ready(session, scenario.name, child, 30.0, {"signal": None})
+            failure = wait_ready(session, scenario.name, child, 30.0, {"signal": None}, verifier=self.verifier)
             if failure is not None:  # nothing else has started: stop the loggers, say why
                 self.stop_loggers()
                 raise bus.BusError(failure)
@@ -295,6 +302,7 @@ class Supervisor:
             ch.stop()
             ch.close()
         self.outdir.close()
+        self.own.close()
 
     def check_output_directory(self, now: float) -> None:
         """At most once a second: the directory of ``--out`` still where it was?  Renamed or
@@ -433,7 +441,8 @@ class Supervisor:
             child = self.children["logger"] = Child("logger" if attempt == 0 else f"logger-r{attempt}", argv,
                                                     self.tmp, env=self.child_env)
             child.name = "logger"
-            failure = wait_ready(self.session, self.scenario.name, child, timeout_s, {"signal": None})
+            failure = wait_ready(self.session, self.scenario.name, child, timeout_s, {"signal": None},
+                                 verifier=self.verifier)
             if failure is None:
                 return
             rc = child.poll()
@@ -461,23 +470,50 @@ class Supervisor:
         from astrodyn.recording import RecordingError, load as load_run
         from astrodyn.service.resume import ResumeError, propagator_resume_args
 
-        part = self._parts()[0]
+        parts = self._parts()
+        if not parts or not holds_config(parts[0], self.scenario):  # never another config's states
+            return None, None
+        part = parts[0]
         try:
             return propagator_resume_args(load_run(part), self.scenario, kind, first_missing - 1, self.tmp), part
         except (RecordingError, ResumeError, OSError):
             return None, None
 
     def _parts(self) -> list[str]:
-        """The files the (main) logger has written so far, newest first: the part being
-        written (``NAME[-000k].partial[-n].mcap``), then the finished rolled parts; never a
-        standby logger's (``NAME.logger-2...``) or another recording's that shares the prefix."""
-        root, ext = os.path.splitext(str(self.out))
-        ext = ext or ".mcap"
-        mine = re.compile(re.escape(root) + r"(-\d{4,})?(\.partial(-\d+)?)?" + re.escape(ext) + "$")
-        found = [p for p in glob.glob(glob.escape(root) + "*" + ext) if mine.match(p)]
-        partial = sorted((p for p in found if ".partial" in p[len(root):]), key=os.path.getmtime)
-        rolled = sorted(p for p in found if ".partial" not in p[len(root):] and p != str(self.out))
-        return [p for p in [*reversed(partial), *reversed(rolled), str(self.out)] if os.path.exists(p)]
+        """The files the (main) loggers of this serve have written so far, newest first, where
+        they are now: the part being written (``NAME[-000k].partial[-n].mcap``), then the
+        finished parts (a dead logger's part finished by its ``recover`` in its place).  Only
+        files this serve's loggers created (:class:`~astrodyn.service.supervision.LoggerFiles`,
+        by identity): never another recorder's file, whatever its name (another user's serve
+        recording ``NAME-0002.mcap`` in the same directory), nor a standby logger's."""
+        self._take_finished_parts()
+        return [where for _, where in self.own.newest_first()]
+
+    def _take_finished_parts(self, wait_s: float = 10.0) -> None:
+        """Take the files the ``recover`` of dead loggers' parts made (restart_logger) as this
+        serve's own, each in the place of the part it finished.  One still running whose
+        source is gone already (it is about to end) is waited for, at most ``wait_s``."""
+        for child in self.finishing:
+            if id(child) not in self.finishing_sources:
+                continue
+            source = self.finishing_sources[id(child)]
+            if child.poll() is None and source is not None and not source.here():
+                with contextlib.suppress(subprocess.TimeoutExpired):
+                    child.proc.wait(timeout=wait_s)
+            if child.poll() is None:
+                continue
+            del self.finishing_sources[id(child)]
+            if child.poll() != 0:
+                continue
+            try:
+                lines = child.stdout_path.read_text(errors="replace").splitlines()
+            except OSError:
+                continue
+            for line in lines:
+                with contextlib.suppress(ValueError, TypeError, AttributeError):
+                    out = json.loads(line).get("out")
+                    if isinstance(out, str) and (lf := LoggerFile.of_ready_logger(out)) is not None:
+                        self.own.add(lf, instead_of=source)
 
     def restart_logger(self, why: str) -> None:
         """The logger died: a new one records the next part while the dead one's file is
@@ -494,14 +530,19 @@ class Supervisor:
         dead.close()
         wait_until_gone(self.session, self.scenario.name, "logger")
         self.logger_attempt += 1
-        partials = [p for p in self._parts() if finished_name(p)]
+        parts = self._parts()  # this serve's own files only (by identity), newest first
+        partials = [p for p in parts if finished_name(p)]
         plan = plan_part_restart(self.scenario, self.out, partials[0] if partials else None,
-                                 [p for p in self._parts() if not finished_name(p)], self.propagators,
+                                 [p for p in parts if not finished_name(p)], self.propagators,
                                  self.logger_attempt, self.tmp)
         argv = [*self._logger_argv, "--attempt", str(self.logger_attempt), *plan.logger_args]
         self.children["logger"] = Child(f"logger-r{self.logger_attempt}", argv, self.tmp, env=self.child_env)
         self.children["logger"].name = "logger"
-        bus.wait_for_process(self.session, self.scenario.name, "logger", timeout_s=30.0)
+        # its own signed answer, not a token in its name (another run's logger on a shared router)
+        failure = wait_ready(self.session, self.scenario.name, self.children["logger"], 30.0, {"signal": None},
+                             verifier=self.verifier)
+        if failure is not None:
+            raise bus.BusError(failure)
         for kind in self.propagators:
             argv = [*self._argv[kind], "--real-time-factor", str(self.rate), *self.pace_args()]
             for k, v in plan.propagator_args[kind].items():
@@ -509,9 +550,11 @@ class Supervisor:
             self.children[kind].close()
             self.children[kind] = Child(f"{kind}-l{self.logger_attempt}", argv, self.tmp, env=self.child_env)
             self.children[kind].name = kind
+        dead_file = self.own.owns(plan.source) if plan.source else None
         finishing = plan.finish_in_background(self.tmp)
         if finishing is not None:
             self.finishing.append(finishing)
+            self.finishing_sources[id(finishing)] = dead_file
         steps = {kind: args.get("--start-step", 0) for kind, args in plan.propagator_args.items()}
         record = {"process": "logger", "old_pid": dead.pid, "new_pid": self.children["logger"].pid, "why": why,
                   "from_step": min(steps.values(), default=0), "state_from": plan.source, "time": time.time()}
@@ -602,6 +645,9 @@ class Supervisor:
         summary = self.status()
         summary["standbys"] = standbys
         summary["logger"] = log = logger.summary()
+        for kept in (log or {}).get("parts_kept_aside") or []:  # a part's name was taken by a file not ours
+            print(f"astrodyn serve: warning: {kept.get('why')}: that part of this serve's recording is "
+                  f"{kept.get('file')} instead", file=sys.stderr, flush=True)
         if "plant" in self.propagators:  # its rejected commands and answers (the ATTACKED line)
             summary["plant"] = self.children["plant"].summary()
         rc = logger.poll()
@@ -613,13 +659,18 @@ class Supervisor:
         elif not log and not self.failures:
             self.failures.append(f"the logger ended without its summary (its output in {self.tmp} is gone); its "
                                  f"recording is not known to be at --out {self.out}")
-        summary["file"] = self.name_the_recording((log or {}).get("file"), bool(self.failures))
+        written = (log or {}).get("file")
+        if written is not None and self.own.owns(written) is None and os.path.exists(written):
+            self.failures.append(f"the logger says its recording is {written}, which is not a file this serve's "
+                                 f"loggers created; nothing was renamed")
+        summary["file"] = self.name_the_recording(written, bool(self.failures))
         if summary["file"] is None:  # the logger died, not restarted: its part stays partial
             summary["file"] = next((p for p in self._parts() if ".partial" in os.path.basename(p)), None)
         if moved is not None:  # its files are where the directory went (the failure says where), not at --out
             summary["file"] = None
         summary["failures"] = list(self.failures)
         self.outdir.close()
+        self.own.close()
         if self.failures and summary["file"] and ".partial" in os.path.basename(summary["file"]):
             print(f"astrodyn serve: the recording stays at {summary['file']} (serve failed, so it keeps its partial "
                   f"name); `astrodyn recover {summary['file']}` finishes it and gives it its name",
@@ -668,8 +719,10 @@ def sim_time(t) -> str:
 
 def control_token_path(out: Path) -> Path:
     """Where ``serve`` stores the control token of the run recording ``out`` (mode 0600):
-    ``.<name>.control-token`` beside it."""
-    return out.parent / f".{out.stem}.control-token"
+    ``.<file name>.control-token`` beside it (``.x.mcap.control-token`` for ``x.mcap``): one
+    file per recording path, so serves of ``x.mcap`` and ``x.MCAP`` / ``x.rec`` in one
+    directory never share (and replace, and remove) one token file."""
+    return out.parent / f".{out.name}.control-token"
 
 
 #: ``--roll-size`` bytes and ``--roll-interval`` wall seconds: the ranges of a config's
@@ -694,7 +747,7 @@ def roll_settings(args: argparse.Namespace, scenario) -> tuple[int | None, float
 @contextlib.contextmanager
 def control_token(out: Path, open_control: bool) -> Iterator[tuple[str | None, Path | None, Callable[[], None]]]:
     """``(token, file, write)``: serve's control token (docs/security.md), its 0600 file
-    ``.<name>.control-token`` beside ``out``, and ``write()``, which writes that file
+    ``.<file name>.control-token`` beside ``out`` (:func:`control_token_path`), and ``write()``, which writes that file
     (replacing a previous serve's, whose token is never valid again).  ``write`` is to be
     called only once this serve owns ``out`` (its logger is ready,
     :class:`Supervisor`'s ``own_output``): a serve refused because another one records to

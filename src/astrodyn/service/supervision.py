@@ -51,7 +51,7 @@ from pathlib import Path
 from astrodyn.recording.writer import being_written, partial_path
 
 __all__ = ["wait_until_gone", "contiguous_end", "RESTART_LIMIT", "RESTART_WINDOW_S", "RestartBudget", "LoggerRestart", "plan_logger_restart",
-           "PartRestart", "plan_part_restart", "part_number", "resume_from_parts", "LoggerFile",
+           "PartRestart", "plan_part_restart", "part_number", "resume_from_parts", "LoggerFile", "LoggerFiles", "holds_config",
            "restarts_after_start_up_death"]
 
 def restarts_after_start_up_death(rc: int | None) -> bool:
@@ -99,6 +99,16 @@ class LoggerFile:
         return cls(path, _identity(st), fd)
 
     @classmethod
+    def reported(cls, path: str | os.PathLike, identity: tuple[int, int]) -> LoggerFile | None:
+        """The file at ``path`` if it is the one a logger reported as created by it
+        (``identity``: ``--own-files``, :class:`LoggerFiles`); None for any other."""
+        held = cls._held(os.fspath(path))
+        if held is not None and held.identity != tuple(identity):
+            held.close()
+            return None
+        return held
+
+    @classmethod
     def of_ready_logger(cls, path: str | os.PathLike) -> LoggerFile | None:
         return cls._held(os.fspath(path))  # created with O_EXCL by the logger, which holds it
 
@@ -139,6 +149,111 @@ class LoggerFile:
         if self._fd is not None:
             os.close(self._fd)
             self._fd = None
+
+
+class LoggerFiles:
+    """Every file this run's loggers created, as :class:`LoggerFile` (by identity), oldest
+    first: ``serve``'s record of its own parts.  Its loggers report each file they create
+    and each name a finished part takes (``--own-files REPORT``, a file in the supervisor's
+    private work directory: ``{file, dev, ino}`` lines); :meth:`sync` takes the new lines.
+    A file is taken only while the reported path still names the reported ``(st_dev,
+    st_ino)``, and then held (:class:`LoggerFile`: its later names are followed, its inode
+    number is not reused).  A file another recorder (another user's serve, a run) wrote is
+    never among them, whatever its name: only these are read for a resume, finished as a
+    dead logger's part, counted as parts, or renamed."""
+
+    def __init__(self, report: Path):
+        self.report = Path(report)
+        self.files: list[LoggerFile] = []
+        self._offset = 0
+        self._pending: dict[tuple[int, int], str] = {}  # reported, not yet held: identity -> latest name
+
+    def sync(self) -> None:
+        try:
+            with open(self.report, "rb") as f:
+                f.seek(self._offset)
+                data = f.read()
+        except OSError:
+            return
+        end = data.rfind(b"\n") + 1  # whole lines only (a line is one O_APPEND write)
+        self._offset += end
+        held = {lf.identity for lf in self.files}
+        for line in data[:end].splitlines():
+            try:
+                rec = json.loads(line)
+                identity = (int(rec["dev"]), int(rec["ino"]))
+                path = str(rec["file"])
+            except (ValueError, KeyError, TypeError):
+                continue
+            if identity not in held:
+                self._pending[identity] = path  # kept in creation order, with the latest name
+        for identity, path in list(self._pending.items()):
+            lf = LoggerFile.reported(path, identity)
+            if lf is not None:
+                self.files.append(lf)
+                del self._pending[identity]
+
+    def add(self, lf: LoggerFile, instead_of: LoggerFile | None = None) -> None:
+        """Take ``lf`` (a file this run made otherwise: a dead part finished by its own
+        ``astrodyn recover``), in the place of ``instead_of`` when given."""
+        if instead_of is not None and instead_of in self.files:
+            self.files[self.files.index(instead_of)] = lf
+        else:
+            self.files.append(lf)
+
+    def newest_first(self) -> list[tuple[LoggerFile, str]]:
+        """``(file, where it is now)`` of every own file that still exists, newest first."""
+        self.sync()
+        out = []
+        for lf in reversed(self.files):
+            where = lf.where()
+            if where is not None:
+                out.append((lf, where))
+        return out
+
+    def owns(self, path: str | os.PathLike) -> LoggerFile | None:
+        """The own file ``path`` names now, if any."""
+        self.sync()
+        try:
+            identity = _identity(os.lstat(path))
+        except OSError:
+            return None
+        return next((lf for lf in self.files if lf.identity == identity), None)
+
+    def close(self) -> None:
+        for lf in self.files:
+            lf.close()
+
+
+def holds_config(path: str | os.PathLike, scenario) -> bool:
+    """Whether the recording ``path`` (finished or cut) holds ``scenario``'s config: the
+    ``scenario`` metadata record's name and config JSON equal this run's (as
+    :func:`astrodyn.service.runner.resume_plan` compares them), read from the file's head
+    (the logger writes it first).  False for anything else, and for a file that cannot
+    be read: a resume never starts from another config's states."""
+    from mcap.opcode import Opcode
+    from mcap.records import Metadata
+
+    from astrodyn.recording.reader import RecordingError, open_recording, parse_record, scan_records
+
+    want = scenario.to_metadata()
+    try:
+        f, size = open_recording(os.fspath(path))
+    except RecordingError:
+        return False
+    with f:
+        try:
+            for opcode, body, _offset, _length in scan_records(f, size, os.fspath(path), {}, heads={Opcode.CHUNK: 0}):
+                if opcode == Opcode.CHUNK:  # the metadata records come before the first chunk
+                    return False
+                if opcode != Opcode.METADATA:
+                    continue
+                rec = parse_record(opcode, body)
+                if isinstance(rec, Metadata) and rec.name == "scenario":
+                    return rec.metadata.get("name") == want["name"] and rec.metadata.get("json") == want["json"]
+        except (RecordingError, OSError, ValueError):
+            return False
+    return False
 
 
 #: A process that dies this many times ...
@@ -260,7 +375,7 @@ def part_number(path: str, out: str | os.PathLike) -> int:
     final = finished_name(path) or path
     if final == os.fspath(out):
         return 0
-    m = re.search(r"-(\d{4,})\.[^.]+$", final)
+    m = re.search(r"-(\d{4,})(?:\.clash-\d+)*\.[^.]+$", final)  # NAME-000k[.clash-n].mcap
     return int(m.group(1)) if m else 0
 
 
@@ -292,8 +407,9 @@ def resume_from_parts(scenario, kind: str, parts: list[str], work: Path,
     tails_of = {} if tails_of is None else tails_of
     for part in parts:
         if part not in tails_of:
-            try:
-                tails_of[part] = channel_tails(part, _state_channel_of(scenario.name))
+            try:  # never another config's states (same scenario name, other orbits: holds_config)
+                tails_of[part] = channel_tails(part, _state_channel_of(scenario.name)) \
+                    if holds_config(part, scenario) else {}
             except (RecordingError, OSError):
                 tails_of[part] = {}
         point = tail_resume_point(tails_of[part], scenario, kind)
