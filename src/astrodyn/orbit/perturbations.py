@@ -573,8 +573,25 @@ class _System:
         return out
 
 
-def _integrate_direction(system, r0, v0, taus, direction, rtol, atol, rectify_ratio, max_steps):
+def shortest_period(r0, v0, mu) -> float:
+    """The shortest two-body period (s) of the bound rows of ``r0, v0`` (N, 3) about ``mu``
+    (from the osculating semi-major axis), ``inf`` if none is bound."""
+    r = np.linalg.norm(r0, axis=-1)
+    energy = 0.5 * np.einsum("ij,ij->i", v0, v0) - mu / r
+    bound = energy < 0.0
+    if not np.any(bound):
+        return math.inf
+    a = -mu / (2.0 * energy[bound])
+    return float(np.min(2.0 * math.pi * np.sqrt(a**3 / mu)))
+
+
+def _integrate_direction(system, r0, v0, taus, direction, rtol, atol, rectify_ratio, max_steps, period=math.inf):
     """Integrate from t = 0 to each t = direction * tau (taus ascending, > 0).
+
+    ``max_steps`` applies per chunk: between two output times, and within each ``period``
+    (s) of integration (the shortest revolution of the bodies), whichever ends first -- it
+    catches a step size that collapses, never a long span (the integration itself is one
+    run, so the result does not depend on the chunks).
 
     Returns r, v of shape (len(taus), N, 3), steps, rectifications."""
     from scipy.integrate import DOP853
@@ -599,12 +616,22 @@ def _integrate_direction(system, r0, v0, taus, direction, rtol, atol, rectify_ra
     k = 0
     steps = 0
     rectifications = 0
+    chunk_steps = 0  # steps since the last output time or chunk boundary
+    chunk = period if period > 0 else math.inf
+    chunk_end = chunk  # elapsed |t| at which the chunk's count starts again
     while k < T:
-        if steps >= max_steps:
-            raise RuntimeError(f"propagate_perturbed: more than max_steps={max_steps} integrator steps; loosen rtol/atol or raise max_steps")
+        if chunk_steps >= max_steps:
+            where = f"between t = {solver.t:.9g} s and the next output time {direction * taus[k]:.9g} s"
+            per = f" and within one revolution ({chunk:.6g} s)" if math.isfinite(chunk) else ""
+            raise RuntimeError(f"propagate_perturbed: more than max_steps={max_steps} integrator steps {where}{per}; "
+                               "loosen rtol/atol or raise max_steps")
         t_prev = solver.t
         msg = solver.step()
         steps += 1
+        chunk_steps += 1
+        if direction * solver.t >= chunk_end:
+            chunk_steps = 0
+            chunk_end = direction * solver.t + chunk
         if solver.status == "failed":
             raise RuntimeError(f"propagate_perturbed: DOP853 failed at t = {solver.t} s: {msg}")
         t_new = solver.t
@@ -618,6 +645,7 @@ def _integrate_direction(system, r0, v0, taus, direction, rtol, atol, rectify_ra
                 yk = dense(tk)
             r_out[k], v_out[k] = system.state(tk, yk)
             k += 1
+            chunk_steps = 0
         if system.method == "encke" and k < T and t_new != t_prev:
             Y = solver.y.reshape(n, 6)
             rho, rho_dot = system._reference(t_new)
@@ -629,7 +657,7 @@ def _integrate_direction(system, r0, v0, taus, direction, rtol, atol, rectify_ra
     return r_out, v_out, steps, rectifications
 
 
-def _run(system, r0, v0, t_flat, rtol, atol, rectify_ratio, max_steps):
+def _run(system, r0, v0, t_flat, rtol, atol, rectify_ratio, max_steps, period=math.inf):
     n = r0.shape[0]
     T = t_flat.shape[0]
     r_out = np.empty((T, n, 3))
@@ -644,7 +672,8 @@ def _run(system, r0, v0, t_flat, rtol, atol, rectify_ratio, max_steps):
             continue
         order = idx[np.argsort(direction * t_flat[idx], kind="stable")]
         taus = direction * t_flat[order]
-        r_d, v_d, s, k = _integrate_direction(system, r0, v0, taus, direction, rtol, atol, rectify_ratio, max_steps)
+        r_d, v_d, s, k = _integrate_direction(system, r0, v0, taus, direction, rtol, atol, rectify_ratio, max_steps,
+                                          period)
         r_out[order] = r_d
         v_out[order] = v_d
         steps += s
@@ -684,7 +713,9 @@ def propagate_perturbed(
     error_estimate : run a second integration at 10x looser tolerances and
         report the difference (conservative) as ``error_r, error_v``.
     rectify_ratio : Encke rectification threshold on |delta| / |rho|.
-    max_steps : cap on integrator steps per direction (RuntimeError beyond).
+    max_steps : cap on integrator steps between two output times and within one
+        revolution of the fastest bound body, whichever ends first (RuntimeError beyond):
+        it catches a step size that collapses; a long span with many revolutions is fine.
 
     Returns a :class:`PerturbedStates`.  Bodies with a non-finite state or
     ``r0 = 0`` get NaN outputs (the others are integrated normally).
@@ -779,10 +810,13 @@ def integrate_finite_bodies(R0, V0, t_flat, mu, active, method, rtol, atol, erro
         floor = 100 * np.finfo(np.float64).eps
         scale = 1.0 / math.sqrt(n_ok)
 
+        period = shortest_period(R0[ok], V0[ok], mu)
+
         def once(factor):
             system = _System(mu, active, Lk, Vk, method)
             rr, vv, s, k = _run(
-                system, R0[ok], V0[ok], t_flat, max(rtol * factor * scale, floor), atol * factor * scale, rectify_ratio, max_steps
+                system, R0[ok], V0[ok], t_flat, max(rtol * factor * scale, floor), atol * factor * scale, rectify_ratio,
+                max_steps, period,
             )
             return rr, vv, s, k, system.nfev
 

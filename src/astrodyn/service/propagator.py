@@ -144,6 +144,70 @@ def _auto_block(n_bodies: int) -> int:
     return int(max(1, min(1000, 200_000 // max(1, n_bodies))))
 
 
+#: Work limits of one uninterruptible computation, so that the heartbeat goes out between
+#: them however far apart the output instants are (docs/reliability.md, hung processes):
+#: an orbit engine call spans at most this many revolutions of its fastest integrated body
+#: (DOP853: ~50 steps per revolution, ~0.3 ms each), ...
+ORBIT_REVOLUTIONS_PER_CALL = 5.0
+#: ... REBOUND advances at most this many revolutions of its fastest body between two
+#: heartbeats (IAS15: ~0.2 ms per LEO revolution and body) ...
+CROSSCHECK_REVOLUTIONS_PER_CALL = 200.0
+#: ... and an attitude engine call at most about this many splitting steps of its fastest
+#: integrated body (step ~ 1/60 of its fastest natural period, as the integrator's default).
+ATTITUDE_STEPS_PER_CALL = 10_000.0
+
+
+def _natural_period(r0: np.ndarray, v0: np.ndarray, mu: float) -> float:
+    """The time scale (s) of an orbit's work: its period if bound, else the time to cross
+    its initial radius at its initial speed (x 2 pi); inf for a state that cannot move."""
+    r, v = float(np.linalg.norm(r0)), float(np.linalg.norm(v0))
+    energy = 0.5 * v * v - mu / r if r > 0 else math.nan
+    if energy < 0:
+        return 2.0 * math.pi * math.sqrt((-mu / (2.0 * energy)) ** 3 / mu)
+    return 2.0 * math.pi * r / v if v > 0 else math.inf
+
+
+def _work_spans(kind: str, scenario: Scenario, engine, cross) -> tuple[float, float]:
+    """``(engine span, cross-check span)``: the sim seconds one engine call, and one REBOUND
+    advance, may cover (inf: its cost does not grow with the span -- exact models)."""
+    span, cross_span = math.inf, math.inf
+    if kind == "orbit":
+        mu = engine.mu
+        integrated = [int(i) for g in engine.groups for i in g.index]
+        if integrated:
+            span = ORBIT_REVOLUTIONS_PER_CALL * min(_natural_period(engine.r0[i], engine.v0[i], mu) for i in integrated)
+        checked = [int(i) for idx, _, _ in (cross.scenes if cross is not None else []) for i in idx]
+        if checked:
+            cross_span = CROSSCHECK_REVOLUTIONS_PER_CALL * min(
+                _natural_period(engine.r0[i], engine.v0[i], mu) for i in checked)
+        return span, cross_span
+    mu = scenario.central_body.mu
+    for b in engine.bodies:
+        if b.model == "torque_free" and b.gyros is None:
+            continue  # exact from the initial state at any t
+        rates = [float(np.max(np.abs(b.w0)))]
+        if b.rotor_momentum is not None:
+            rates.append(float(np.linalg.norm(b.rotor_momentum)) / float(np.min(b.inertia)))
+        body = scenario.body(b.name)
+        if b.model == "gravity_gradient" and body.orbit is not None:
+            rates.append(2.0 * 2.0 * math.pi / _natural_period(np.asarray(body.orbit.r0, dtype=np.float64),
+                                                            np.asarray(body.orbit.v0, dtype=np.float64), mu))
+        rate = max(rates)
+        step = 0.1 if not rate > 0 else 2.0 * math.pi / (60.0 * rate)
+        span = min(span, ATTITUDE_STEPS_PER_CALL * step)
+    return span, cross_span
+
+
+def _waypoints(t_from: float, t_to: float, span: float) -> np.ndarray:
+    """Times strictly between ``t_from`` and ``t_to`` (s), ``span`` apart from ``t_from``:
+    where a computation longer than ``span`` stops for a heartbeat (empty if none)."""
+    if not (span < t_to - t_from):
+        return np.zeros(0)
+    n = int(math.ceil((t_to - t_from) / span)) - 1
+    w = t_from + span * np.arange(1, n + 1, dtype=np.float64)
+    return w[w < t_to]
+
+
 def run_propagator(scenario: Scenario, session, opts: PropagatorOptions, log=print) -> dict:
     """Publish the states of ``opts.kind`` for the whole scenario; returns a summary dict."""
     if opts.kind not in KINDS:
@@ -179,6 +243,15 @@ def run_propagator(scenario: Scenario, session, opts: PropagatorOptions, log=pri
     cross = None
     if opts.kind == "orbit" and (opts.cross_check or any(scenario.body(n).cross_check for n in names)):
         cross = _CrossCheck(scenario, engine, all_bodies=opts.cross_check)
+    # one engine call never spans more than `span` s of sim time past the engine's state (an
+    # output spacing longer than that is integrated through unpublished waypoints), and the
+    # cross-check stops every `cross.span` s: a heartbeat goes out between them however long
+    # a block of output instants takes
+    span, cross_span = _work_spans(opts.kind, scenario, engine, cross)
+    if cross is not None:
+        cross.span = cross_span
+    engine_t = float(opts.resume_state[1]) if opts.resume_state is not None else 0.0
+    cross_t = 0.0  # REBOUND's time (a restarted process integrates it again from 0)
 
     pacer = Pacer(opts.real_time_factor, opts.pace_anchor)
     stopping = {"why": None}
@@ -220,16 +293,55 @@ def run_propagator(scenario: Scenario, session, opts: PropagatorOptions, log=pri
         # until the first block is out the numeric kernels are being compiled (a first run on
         # this install: tens of seconds; numba caches them) or loaded from numba's cache
         heartbeat.beat(force=True, t=t_reached, step=k, preparing=True)
+        kernels = {"loaded": False}
+        a = b = None
+        rows_done = 0
+
+        def working(what: str, t_now: float, t_to: float) -> None:
+            """Between two parts of a long computation: beat (saying what it does and how
+            far it got: ``busy``; ``preparing`` until the first engine call has returned)
+            and stop at a stop signal."""
+            if stopping["why"]:
+                raise _Stop
+            more = {} if kernels["loaded"] else {"preparing": True}
+            heartbeat.beat(t=t_reached, step=k, busy={"what": what, "t": float(t_now), "to": float(t_to)},
+                           **more, **pacer.state())
+
+        if cross is not None and start > 0:
+            cross.restart_t = start / rate  # REBOUND integrates again from t = 0 up to here
         try:
             while k < stop_at:
                 tb = np.arange(k, min(stop_at, k + block), dtype=np.float64) / rate
                 model_ended = None
-                try:
-                    a, b = engine.states(tb)
-                except ModelEnded as end:  # publish what was computed, then end the run with the reason
-                    a, b, tb, model_ended = end.q, end.w, tb[: end.rows], str(end)
-                xc = cross.block(tb, a, b) if cross is not None else None
-                rows_done = 0
+                rows_done = 0  # of this block's rows (a stop inside the block counts only those)
+                if math.isfinite(span) or math.isfinite(cross_span):
+                    # at most `span` s past the engine's state per call (an output instant further
+                    # ahead than that is reached through waypoints: computed, not published), and a
+                    # block of at most `cross_span` s of REBOUND, so its states go out as it goes
+                    limit = min(engine_t + span, cross_t + cross_span)
+                    fit = max(1, int(np.searchsorted(tb, limit, side="right")))
+                    if engine_t + span < float(tb[0]):
+                        what = (f"{opts.kind}: catching up to the restart step" if engine_t < (k - 1) / rate
+                                else f"{opts.kind}: integrating to the next output step")
+                        try:
+                            for tw in _waypoints(engine_t, float(tb[0]), span):
+                                engine.states(np.array([tw]))
+                                kernels["loaded"] = True
+                                engine_t = float(tw)
+                                working(what, engine_t, float(tb[0]))
+                        except ModelEnded as end:  # between two output steps: nothing more to publish
+                            model_ended = str(end)
+                    tb = tb[:fit]
+                if model_ended is not None:
+                    tb, a, b = tb[:0], np.zeros((0, len(names), 4 if opts.kind == "attitude" else 3)), np.zeros((0, len(names), 3))
+                else:
+                    try:
+                        a, b = engine.states(tb)
+                    except ModelEnded as end:  # publish what was computed, then end the run with the reason
+                        a, b, tb, model_ended = end.q, end.w, tb[: end.rows], str(end)
+                kernels["loaded"] = True
+                engine_t = cross_t = float(tb[-1]) if tb.shape[0] else engine_t
+                xc = cross.block(tb, a, b, working) if cross is not None else None
                 for j in range(tb.shape[0]):
                     t = float(tb[j])
                     pace_to(t, pacer, commands, stopping, heartbeat, commands_from, t_reached)
@@ -251,7 +363,8 @@ def run_propagator(scenario: Scenario, session, opts: PropagatorOptions, log=pri
                     stopping["why"] = f"model ended: {model_ended}"
                     break
         except _Stop:
-            conservation.update(a[:rows_done], b[:rows_done])
+            if a is not None:
+                conservation.update(a[:rows_done], b[:rows_done])
         wall = time.monotonic() - wall0
         extra = {"last_step": k - 1, "t_reached": float(t_reached), "reason": stopping["why"] or "end of scenario"}
         if cross is not None:
@@ -514,12 +627,33 @@ class _CrossCheck:
             self.scenes.append((np.asarray(idx), keys, scene))
         self.skipped = [engine.names[i] for i in chosen if engine.models[i] not in ("kepler", "j2")]
 
-    def block(self, tb, r, v):
+    #: sim s REBOUND advances between two calls of ``working`` (set by the propagator)
+    span = math.inf
+    #: a restarted process's first output time: REBOUND catches up from t = 0 to it
+    restart_t = -math.inf
+
+    def _reach(self, scene, t: float, working):
+        """REBOUND's states at ``t``, advanced in parts of at most :attr:`span` s with a
+        ``working(what, t_now, t_to)`` call between them (the heartbeat).  A restarted
+        process integrates again from t = 0 (the reference never takes a state from
+        astrodyn's output), so its first block can take as long as the run so far."""
+        what = ("orbit: cross-check: REBOUND integrates again from t = 0 to the restart step" if t <= self.restart_t
+                else "orbit: cross-check (REBOUND)")
+        while working is not None and t - scene.t > self.span:
+            scene.advance_to(scene.t + self.span)
+            working(what, scene.t, t)
+        return scene.advance_to(t)
+
+    def block(self, tb, r, v, working=None):
         if not self.scenes:
             return None
         parts = []
         for idx, keys, scene in self.scenes:
-            refs = [scene.advance_to(float(t)) for t in tb]
+            refs = []
+            for t in tb:
+                refs.append(self._reach(scene, float(t), working))
+                if working is not None:  # the heartbeat (at most every 0.5 s) between instants too
+                    working("orbit: cross-check (REBOUND)", scene.t, float(tb[-1]))
             dr = np.stack([r[j, idx] - refs[j][0] for j in range(len(tb))])
             dv = np.stack([v[j, idx] - refs[j][1] for j in range(len(tb))])
             norms = np.max(np.linalg.norm(dr, axis=-1), axis=0)
@@ -612,6 +746,12 @@ def service_main(kind: str, argv: list[str] | None = None) -> int:
     except ValueError as exc:  # a resume state that does not fit the scenario
         print(f"{kind}: {exc}", file=sys.stderr)
         return 2
+    except Exception as exc:  # a numeric failure: the traceback, then its one line last (the supervisor's tail)
+        import traceback
+
+        traceback.print_exc(file=sys.stderr)
+        print(f"{kind}: failed: {type(exc).__name__}: {exc}", file=sys.stderr, flush=True)
+        return 1
     print(json.dumps(summary, separators=(",", ":")), flush=True)
     if str(summary.get("reason", "")).startswith("model ended"):  # states up to there are published and logged
         print(f"{kind}: {summary['reason']}", file=sys.stderr, flush=True)
