@@ -109,6 +109,7 @@ def test_serve_resumes_in_real_time_from_where_ctrl_z_paused_it(tmp_path):
         stop_process(serve)
 
 
+@pytest.mark.slow  # CI time: the run and serve cases above pause whole runs in make test
 def test_a_lockstep_plant_does_not_time_out_a_controller_paused_with_it(tmp_path):
     """The whole run paused in the worst order: the controller before it answers, then the
     plant waiting for that answer, for longer than control.timeout.  Before the fix the

@@ -438,6 +438,7 @@ def test_hostile_appendage_channels_and_metadata_end_in_notes_not_tracebacks(rec
 
 
 @pytest.mark.network
+@pytest.mark.slow  # CI time: test_reliability's serve case resumes killed propagators in make test
 def test_serve_restarts_a_killed_attitude_propagator_from_the_recorded_elastic_state(tmp_path):
     """serve with a flexible body: SIGKILL the attitude propagator; serve restarts it from
     the last step both of the body's channels hold (hub attitude and appendages), and the

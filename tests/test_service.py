@@ -475,6 +475,7 @@ def test_a_pause_sent_while_the_propagators_start_holds_at_rate_inf(tmp_path):
     assert serve.returncode == 0, serve.stderr.read()[-3000:]
 
 
+@pytest.mark.slow  # CI time: ::test_a_pause_sent_while_the_propagators_start_holds_at_rate_inf stays in make test
 def test_a_pause_and_a_stop_sent_while_the_propagators_start_still_reach_them(tmp_path):
     """Serve's commands are plain puts: a propagator that subscribes after one was sent (it
     is still loading its kernels or waiting for the logger) missed it, and ran on while

@@ -215,6 +215,7 @@ def reference(tmp_path_factory) -> tuple[Path, dict]:
     return cfg, _states(recording)
 
 
+@pytest.mark.slow  # CI time: the serve case and test_random_faults_fast_subset kill loggers in make test
 def test_a_killed_logger_under_run_is_restarted_and_no_state_is_lost(tmp_path, processes, reference):
     """SIGKILL of the logger twice during `astrodyn run`: the run restarts it each time,
     exits 0, and the file holds exactly the states of an uninterrupted run of the same
