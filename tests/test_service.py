@@ -506,3 +506,37 @@ def test_a_pause_and_a_stop_sent_while_the_propagators_start_still_reach_them(tm
     finally:
         stop_process(serve)
     assert serve.returncode == 0, serve.stderr.read()[-3000:]
+
+
+BOOM_SITECUSTOMIZE = '''
+import os
+if b"astrodyn.service.propagator" in open("/proc/self/cmdline", "rb").read().split(b"\\0"):
+    from astrodyn import simulate
+
+    def _states(self, times):  # the same input, the same failure: a deterministic fault of the model
+        raise RuntimeError("a deterministic failure of this model")
+
+    simulate.OrbitEngine.states = _states
+'''
+
+
+def test_a_propagator_that_fails_the_same_way_at_the_same_step_is_not_restarted_for_ever(tmp_path):
+    """A propagator that ends with its own error, restarted at the same step and failing again
+    there with the same error, is deterministic: after 3 such deaths the run fails naming the
+    error (restart lines carry it too).  Before, each restart said only "exited with status 1"
+    and the run went on restarting until 5 deaths fell within 60 s; deaths further apart (a J2
+    block of 60 s at a long output spacing, horizons probe F7) restarted it for ever."""
+    site = tmp_path / "site"
+    site.mkdir()
+    (site / "sitecustomize.py").write_text(BOOM_SITECUSTOMIZE)
+    cfg = tmp_path / "boom.toml"
+    cfg.write_text((Path(__file__).resolve().parents[1] / "configs" / "demo.toml").read_text())
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(site), os.environ.get("PYTHONPATH", "")])}
+    done = subprocess.run([*ASTRODYN, "run", cfg, "--out", tmp_path / "boom.mcap"], capture_output=True, text=True,
+                          timeout=300, env=env)
+    assert done.returncode == 1, done.stderr[-3000:]
+    said = "exited with status 1: orbit: failed: RuntimeError: a deterministic failure of this model"
+    assert done.stderr.count(f"{said}: restarted") == 2, done.stderr[-3000:]
+    assert f"{said}, again: 3 times in a row at step 0 without recording a step; not restarted again" in done.stderr, \
+        done.stderr[-3000:]
+    assert "died 5 times" not in done.stderr

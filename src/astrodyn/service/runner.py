@@ -149,6 +149,12 @@ def run_scenario(scenario: Scenario, out: Path, *, cross_check: bool = False,
                        controllers=controllers, commands=commands, loggers=loggers, stall_s=stall_s).run()
 
 
+#: A propagator that ends with the same error this many times in a row, each time restarted at
+#: the same step and recording none (a deterministic failure), is not restarted again, however
+#: far apart the deaths (the RestartBudget counts deaths within 60 s only).
+SAME_ERROR_RESTARTS = 2
+
+
 class ScenarioRun:
     """One ``astrodyn run``: the module docstring's steps, one method each (start the
     logger, the propagators and the controllers, watch, restart what dies, finish)."""
@@ -480,6 +486,9 @@ class ScenarioRun:
         scenario = self.scenario
         dead = self.children[kind]
         how = dead.how(rc)
+        said = dead.stderr_tail(1) if rc > 0 and dead.stalled_s is None and dead.lost_to_logger is None else ""
+        if said:  # it ended with an error of its own: say it with the restart (it was lost before)
+            how = f"{how}: {said}"
         if not self.budgets[kind].allow():
             return f"{self.budgets[kind].refusal()}; last: {kind} (pid {dead.pid}) {how}: {dead.last_words(3)}"
         dead.close()
@@ -495,10 +504,22 @@ class ScenarioRun:
                 args = propagator_resume_args(run, scenario, kind, step, self.tmpd)
         except (RecordingError, OSError):
             pass  # nothing flushed yet: start again from the beginning
-        n = len(self.restarts_of(kind)) + 1
+        earlier = self.restarts_of(kind)
+        same = 0  # the restarts just before this one at this step that ended with this error
+        for r in reversed(earlier):
+            if not said or r.get("from_step") != args.get("--start-step", 0) or r.get("said") != said:
+                break
+            same += 1
+        if same >= SAME_ERROR_RESTARTS:
+            # restarted at this step, it ended with the same error each time before recording one more
+            # step: deterministic (the same input gives the same failure), a restart only repeats it
+            # (deaths further apart than the RestartBudget's 60 s repeated it for ever)
+            return (f"{kind} (pid {dead.pid}) {how}, again: {same + 1} times in a row at step "
+                    f"{args.get('--start-step', 0)} without recording a step; not restarted again")
+        n = len(earlier) + 1
         self.start_propagator(kind, args, n, event_seq=next_event_seq(self.session, scenario.name, kind, n))
         self.restarts.append({"process": kind, "old_pid": dead.pid, "new_pid": self.children[kind].pid, "why": how,
-                              "from_step": args.get("--start-step", 0)})
+                              "from_step": args.get("--start-step", 0), **({"said": said} if said else {})})
         self.say(f"\n  {kind} (pid {dead.pid}) {how}: restarted (pid {self.children[kind].pid}) at step "
                  f"{args.get('--start-step', 0)}")
         return None
