@@ -616,7 +616,8 @@ def progress_line(last: dict, propagators: list[str], duration: float, dt: float
     slowest one's, from their heartbeats ``last``), the messages the logger holds and its
     rate over the last ``dt`` s; a propagator that has not sent its first state yet is
     named as compiling (a first run compiles the numeric kernels; numba caches them)."""
-    preparing = [k for k in propagators if last.get(k, {}).get("preparing") or k not in last]
+    busy = {k: last[k]["busy"] for k in propagators if isinstance(last.get(k, {}).get("busy"), dict)}
+    preparing = [k for k in propagators if k not in busy and (last.get(k, {}).get("preparing") or k not in last)]
     ts = [float(last[k].get("t", 0.0)) for k in propagators if k in last]
     t_min = min(ts) if ts else 0.0
     msgs = last.get("logger", {}).get("messages", 0)
@@ -627,6 +628,10 @@ def progress_line(last: dict, propagators: list[str], duration: float, dt: float
         how = "compiled in every run: no writable cache" if kernels_uncached() else \
             "compiled on the first run only, cached afterwards"
         line += f"  [{', '.join(preparing)}: loading numeric kernels ({how})]"
+    for kind, b in busy.items():  # a long engine call, beating in parts: what it does and how far it got
+        with contextlib.suppress(TypeError, ValueError):
+            what = str(b.get("what", "computing")).removeprefix(f"{kind}: ")[:80]
+            line += f"  [{kind}: {what}: sim t {float(b['t']):.6g} of {float(b['to']):.6g} s]"
     return line
 
 
