@@ -26,6 +26,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 @pytest.mark.network
+@pytest.mark.slow  # CI time: the hostile-channels case below runs the closed-loop section in make test
 def test_the_report_of_a_slew_shows_momentum_conserved_and_the_wheels(tmp_path):
     cfg = tmp_path / "slew.toml"
     cfg.write_text((ROOT / "configs" / "slew.toml").read_text().replace('duration = "180 s"', 'duration = "30 s"'))

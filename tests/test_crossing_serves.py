@@ -156,6 +156,7 @@ def test_a_killed_propagator_and_logger_never_resume_from_another_serves_file(tm
     assert sorted(seqs) == list(range(len(seqs))), [p.name for p in parts]
 
 
+@pytest.mark.slow  # CI time: the killed propagator and logger case stays in make test
 def test_a_rolled_part_whose_name_another_serve_took_is_written_beside_it(tmp_path):
     """F1 of the crossing probe: user 2 serves ``--out x-0001.mcap`` (another config, same
     scenario name) before user 1's serve of ``x.mcap`` rolls into its part 1.  Now user 1's

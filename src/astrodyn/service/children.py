@@ -647,6 +647,13 @@ class JobControl:
         return resumed
 
 
+#: Longest wait, once a logger's liveliness token is there, for its ``@latest`` answer signed
+#: with the run's secret (:func:`wait_ready`), before the child's exit is looked at again: with
+#: 0.5 s, a logger busy with a flood of forged heartbeats never answered in time and the run
+#: failed after 60 s ("not ready").
+READY_ANSWER_WAIT_S = 5.0
+
+
 def wait_ready(session, scenario: str, child: Child, timeout_s: float, interrupted: dict,
                verifier=None) -> str | None:
     """Wait for ``child``'s liveliness token; a failure description if it exits first (e.g.
@@ -667,10 +674,10 @@ def wait_ready(session, scenario: str, child: Child, timeout_s: float, interrupt
         if interrupted["signal"]:
             return f"interrupted by {interrupted['signal']} during start-up"
         try:
-            if verifier is None:
-                bus.wait_for_process(session, scenario, child.name, timeout_s=0.5)
-            else:
-                bus.wait_for_logger(session, scenario, child.name, timeout_s=0.5, verifier=verifier)
+            bus.wait_for_process(session, scenario, child.name, timeout_s=0.5)
+            if verifier is not None:  # its token is there: its signed answer may take a while (a flooded bus)
+                bus.wait_for_logger(session, scenario, child.name, verifier=verifier,
+                                    timeout_s=max(0.5, min(READY_ANSWER_WAIT_S, deadline - time.monotonic())))
             return None
         except bus.BusError:
             if time.monotonic() > deadline:
