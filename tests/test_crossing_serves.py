@@ -12,6 +12,7 @@ eccentricity of the integrated (J2) body, an independent fact of the config.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import selectors
@@ -19,6 +20,7 @@ import signal
 import subprocess
 import sys
 import time
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -44,14 +46,20 @@ def configs(tmp_path: Path) -> tuple[Path, Path]:
     return mine, other
 
 
-def start_serves(*runs: tuple) -> list[tuple[subprocess.Popen, dict | None]]:
+@contextlib.contextmanager
+def serves(*runs: tuple) -> Iterator[list[tuple[subprocess.Popen, dict | None]]]:
     """``astrodyn serve CONFIG --out OUT EXTRA...`` for each ``(config, out, *extra)``, started
-    together (at most 60 s of wall time each), and the first JSON line of each (None if it
-    ended without one within 60 s)."""
+    together (at most 60 s of wall time each), with the first JSON line of each (None if it
+    ended without one within 60 s); each still running at the end is stopped by its PID."""
     procs = [subprocess.Popen([sys.executable, "-m", "astrodyn", "serve", str(config), f"--out={out}", "--rate", "50",
                                "--max-wall", "60", *extra], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
              for config, out, *extra in runs]
-    return [(p, first_line(p)) for p in procs]
+    try:
+        yield [(p, first_line(p)) for p in procs]
+    finally:
+        for p in procs:
+            if p.poll() is None:
+                stop_process(p)
 
 
 def first_line(proc: subprocess.Popen, timeout_s: float = 60.0) -> dict | None:
@@ -119,8 +127,7 @@ def test_a_killed_propagator_and_logger_never_resume_from_another_serves_file(tm
     mine, other = configs(tmp_path)
     d = tmp_path / "d"
     d.mkdir()
-    (a, hello_a), (b, hello_b) = start_serves((mine, d / "x.mcap"), (other, d / "x-0002.mcap"))
-    try:
+    with serves((mine, d / "x.mcap"), (other, d / "x-0002.mcap")) as ((a, hello_a), (b, hello_b)):
         assert hello_a and hello_b, (a.stderr.read() if a.poll() is not None else "", b.poll())
         session, status = status_of(hello_a)
         with session:
@@ -137,10 +144,6 @@ def test_a_killed_propagator_and_logger_never_resume_from_another_serves_file(tm
             time.sleep(2.0)
         _, err_a, sum_a = end(a)
         _, err_b, sum_b = end(b)
-    finally:
-        for p in (a, b):
-            if p.poll() is None:
-                stop_process(p)
     theirs = {str(d / "x-0002.partial.mcap"), str(d / "x-0002.mcap")}
     sources = [r["state_from"] for r in sum_a["restarts"]]
     assert not theirs & set(sources), (sources, err_a[-3000:])
@@ -166,9 +169,8 @@ def test_a_rolled_part_whose_name_another_serve_took_is_written_beside_it(tmp_pa
     mine, other = configs(tmp_path)
     d = tmp_path / "d"
     d.mkdir()
-    (a, hello_a), (b, hello_b) = start_serves((mine, d / "x.mcap", "--roll-interval", "5"),
-                                              (other, d / "x-0001.mcap"))
-    try:
+    with serves((mine, d / "x.mcap", "--roll-interval", "5"),
+                (other, d / "x-0001.mcap")) as ((a, hello_a), (b, hello_b)):
         assert hello_a and hello_b, (a.poll(), b.poll())
         session, status = status_of(hello_a)
         with session:
@@ -178,10 +180,6 @@ def test_a_rolled_part_whose_name_another_serve_took_is_written_beside_it(tmp_pa
             time.sleep(1.0)
         _, err_a, sum_a = end(a)
         _, err_b, sum_b = end(b)
-    finally:
-        for p in (a, b):
-            if p.poll() is None:
-                stop_process(p)
     assert sum_a["restarts"] == [] and sum_a["failures"] == [], err_a[-3000:]
     assert "x-0001.clash-1.mcap" in err_a, err_a[-2000:]  # said at the end: where part 1 is
     assert sum_b["failures"] == [] and sum_b["file"] == str(d / "x-0001.mcap"), err_b[-2000:]
@@ -200,8 +198,7 @@ def test_serves_of_x_mcap_and_x_MCAP_each_keep_their_own_control_token_file(tmp_
     second replaced the first's token (the first's owner was refused by its own serve) and
     removed the file when it ended."""
     mine, _ = configs(tmp_path)
-    (a, hello_a), (b, hello_b) = start_serves((mine, tmp_path / "x.mcap"), (mine, tmp_path / "x.MCAP"))
-    try:
+    with serves((mine, tmp_path / "x.mcap"), (mine, tmp_path / "x.MCAP")) as ((a, hello_a), (b, hello_b)):
         assert hello_a and hello_b
         assert hello_a["control_token_file"] != hello_b["control_token_file"]
         end(b)
@@ -211,10 +208,6 @@ def test_serves_of_x_mcap_and_x_MCAP_each_keep_their_own_control_token_file(tmp_
             reply = bus.send_control(s, "demo", "status", token=token_a.read_text())[0]
         assert reply.get("state") == "running", reply
         _, err_a, sum_a = end(a)
-    finally:
-        for p in (a, b):
-            if p.poll() is None:
-                stop_process(p)
     assert sum_a["failures"] == [], err_a[-2000:]
     assert not token_a.exists()  # removed by its own serve at its end
 

@@ -576,7 +576,7 @@ def _orbit(ctx: Ctx, data: Any, path: str, cb: CentralBody) -> OrbitSpec:
         r0 = vector(ctx, tb.get("r"), "length", 3, f"{path}.r")
         v0 = vector(ctx, tb.get("v"), "speed", 3, f"{path}.v")
         check(ctx, bool(np.any(r0 != 0)), f"{path}.r", "|r| > 0 (not at the centre of the central body)", tb.get("r"))
-        check(ctx, _norm(r0) >= MIN_RADIUS_M, f"{path}.r",
+        check(ctx, math.hypot(*r0) >= MIN_RADIUS_M, f"{path}.r",  # hypot: no underflow at 1e-300 m
               f"|r| >= {MIN_RADIUS_M:g} m (|r|^3 must stay a normal float64)", tb.get("r"))
         elements = None
     elif has_elements:
@@ -684,12 +684,6 @@ def _elements(ctx: Ctx, tb: Table, path: str, mu: float) -> tuple[np.ndarray, np
     if tb.has("M"):
         elements["M"] = M
     return r0, v0, elements
-
-
-def _norm(x: np.ndarray) -> float:
-    """|x| without underflow or overflow (scaled by the largest component)."""
-    m = float(np.max(np.abs(x)))
-    return m * float(np.linalg.norm(x / m)) if m > 0 and math.isfinite(m) else m
 
 
 def _power(log10_x: float) -> str:
