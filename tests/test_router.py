@@ -70,8 +70,10 @@ def _wait_router(proc: subprocess.Popen, log: Path, timeout: float = 30.0) -> di
     pytest.fail(f"router did not start: {log.with_suffix('.err').read_text() if log.with_suffix('.err').exists() else ''}")
 
 
-def _run_through_router(tmp: Path, endpoint: str, router_ns: list[str], logger_ns: list[str], prop_ns: list[str]) -> Path:
-    """Router, logger, orbit, attitude as four processes; the last three know only ``endpoint``."""
+def _run_through_router(tmp: Path, endpoint: str, router_ns: list[str], logger_ns: list[str], prop_ns: list[str],
+                        before_propagators=None) -> Path:
+    """Router, logger, orbit, attitude as four processes; the last three know only ``endpoint``.
+    ``before_propagators(config, scenario)`` is called once the logger is started."""
     config = tmp / "tiny.toml"
     config.write_text(TINY)
     scenario = load(config)
@@ -88,6 +90,8 @@ def _run_through_router(tmp: Path, endpoint: str, router_ns: list[str], logger_n
                          "--epoch-ns", str(scenario.epoch_unix_ns), "--expect", "orbit", "--expect", "attitude",
                          "--config", str(config), "--max-seconds", "120", *client], tmp / "logger", env)
         procs.append(logger)
+        if before_propagators is not None:
+            before_propagators(config, scenario)
         props = [_start([*prop_ns, PY, str(SERVICES / f"{kind}.py"), str(config), *client], tmp / kind, env)
                  for kind in ("orbit", "attitude")]
         procs += props
@@ -144,9 +148,29 @@ def test_router_rejects_a_bad_endpoint():
 
 
 def test_three_clients_through_a_router_on_loopback(tmp_path):
+    """Also: while that run's logger is up, ``astrodyn run`` and ``astrodyn serve`` of the same
+    scenario name joined to the router are refused before they start anything (exit 2, one
+    line naming the scenario and the live processes; docs/multihost.md), so the run on the
+    router ends unattacked (its logger's ``rejected`` stays empty).  Before: both started,
+    and each logger rejected the other's samples: both ended ATTACKED, exit 3."""
     endpoint = bus.loopback_endpoint()
-    out = _run_through_router(tmp_path, endpoint, [], [], [])
+    refused = []
+
+    def second_runs(config: Path, scenario) -> None:
+        with bus.open_session(connect=[endpoint], mode="client") as session:
+            bus.wait_for_process(session, scenario.name, "logger", timeout_s=60)
+        for cmd in ("run", "serve"):
+            p = subprocess.run([PY, "-m", "astrodyn", cmd, str(config), "--out", str(tmp_path / f"second-{cmd}.mcap"),
+                                "--connect", endpoint], capture_output=True, text=True, timeout=120)
+            refused.append((cmd, p.returncode, p.stderr))
+
+    out = _run_through_router(tmp_path, endpoint, [], [], [], before_propagators=second_runs)
     _check_complete(out, tmp_path / "tiny.toml")
+    for cmd, rc, err in refused:
+        assert rc == 2 and "Traceback" not in err, (cmd, rc, err[-2000:])
+        assert f"scenario 'router-test' is already running on the bus of --connect {endpoint}" in err, err
+        assert "logger" in err.splitlines()[-1] and "own [scenario] name" in err, err
+    assert not list(tmp_path.glob("second-*")), sorted(p.name for p in tmp_path.iterdir())
 
 
 def _netns_reason() -> str | None:

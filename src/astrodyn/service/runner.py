@@ -793,6 +793,7 @@ def main(argv: list[str] | None = None) -> int:
             zenoh_config = check_bus_flags(args.connect, args.zenoh_config)
             resume = resume_plan(Path(args.resume), scenario, out, Path(work)) if args.resume else {}
             check_closed_loop_arguments(scenario, args.controller or [], args.commands, out)
+            check_scenario_free(scenario.name, args.connect, zenoh_config)
         except ScenarioError as exc:
             print(f"astrodyn run: {exc}", file=sys.stderr)
             return 2
@@ -912,6 +913,40 @@ def check_bus_flags(connect: list[str] | None, zenoh_config: str | None) -> bus.
         except bus.BusError as exc:  # "connect: expected Zenoh endpoints like ..."
             raise ScenarioError(f"--{exc}") from None
     return text
+
+
+#: Seconds ``run`` / ``serve`` wait for the routers of ``--connect`` to list the processes of
+#: their scenario name (:func:`check_scenario_free`).
+SCENARIO_CHECK_WAIT_S = 2.0
+
+
+def check_scenario_free(scenario: str, connect: list[str] | None, zenoh_config: bus.ZenohConfigText | None) -> None:
+    """Refuse to start a run of ``scenario`` on a bus where one is running (ScenarioError).
+
+    Only with ``--connect``: without it the run's bus is its own hub, on a port just picked.
+    Every key of a run is ``astrodyn/<scenario>/...``, so two runs of one scenario name on
+    one router share them; each signs with its own secret, so each logger rejects the
+    other's samples and both runs end ATTACKED, exit 3 (docs/multihost.md).  A short client
+    session through the ``--connect`` endpoints (with the run's ``--zenoh-config``: TLS,
+    access control) lists the liveliness tokens ``astrodyn/<scenario>/@alive/*`` there.  An
+    endpoint that does not answer now is left to the run's own processes (they keep
+    trying); two runs started in the same second may both pass (each still ends
+    ATTACKED)."""
+    if not connect:
+        return
+    with tempfile.TemporaryDirectory(prefix="astrodyn-check-") as work:
+        try:
+            config = zenoh_config.write(work) if zenoh_config is not None else None
+            with bus.open_session(connect=connect, mode="client", config_file=config) as session:
+                others = bus.alive_processes(session, scenario, timeout_s=SCENARIO_CHECK_WAIT_S)
+        except (bus.BusError, OSError):
+            return
+    if others:
+        raise ScenarioError(
+            f"scenario {scenario!r} is already running on the bus of --connect {' '.join(connect)}: its processes "
+            f"{', '.join(sorted(others))} are alive there (astrodyn/{scenario}/@alive/*); two runs of one scenario "
+            f"name on one bus share every key and both end ATTACKED (docs/multihost.md): give this run its own "
+            f"[scenario] name, or stop the other one first")
 
 
 def checked_output_path(path: Path, inputs: tuple) -> None:

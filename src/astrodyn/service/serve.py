@@ -83,6 +83,7 @@ from astrodyn.service.runner import (
     attack_report,
     check_bus_flags,
     check_closed_loop_arguments,
+    check_scenario_free,
     checked_output_path,
     logger_base_argv,
     propagator_argv,
@@ -858,6 +859,7 @@ def main(argv: list[str] | None = None) -> int:
         except ValueError:
             raise ScenarioError(f"--rate: expected a real-time factor with {bus.RATE_BOUNDS[0]:g} <= x <= "
                                 f"{bus.RATE_BOUNDS[1]:g} (or inf), got {rate}") from None
+        check_scenario_free(scenario.name, args.connect, zenoh_config)
     except ScenarioError as exc:
         for d in reversed(created):  # the directories made for --out, left as they were
             with contextlib.suppress(OSError):
