@@ -4,8 +4,8 @@ The same scene is run for T and for 10 T; the peak resident set of every process
 the run (runner, propagators, logger: the largest of them, as the kernel reports it for
 waited-for descendants, getrusage(RUSAGE_CHILDREN).ru_maxrss) must agree within 10 %.
 A runner that allocated every output time up front, or a logger that kept every state,
-would grow by the 9 T extra steps: 100,000 extra steps x 5 channels of ~200 B payloads
-is ~100 MB, far above the 10 % bound on a ~200 MB process.
+would grow by the 9 T extra steps: 45,000 extra steps x 5 channels of ~200 B payloads
+is ~45 MB, far above the 10 % bound on a ~200 MB process.
 """
 
 from __future__ import annotations
@@ -35,6 +35,6 @@ def _peak_rss_kib(tmp_path: Path, duration_s: int) -> int:
 
 
 def test_peak_rss_is_flat_in_duration(tmp_path):
-    short = _peak_rss_kib(tmp_path, 1000)  # 10,001 steps
-    long = _peak_rss_kib(tmp_path, 10000)  # 100,001 steps
+    short = _peak_rss_kib(tmp_path, 500)  # 5,001 steps
+    long = _peak_rss_kib(tmp_path, 5000)  # 50,001 steps
     assert long <= 1.10 * short, f"peak RSS {short / 1024:.0f} MiB for T, {long / 1024:.0f} MiB for 10 T"

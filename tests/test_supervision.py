@@ -328,6 +328,7 @@ def _states_of_parts(paths: list[Path]) -> dict[str, dict[int, bytes]]:
     return out
 
 
+@pytest.mark.slow  # CI time (19 s): serve's logger killed and restarted stays in make test through the standby test below
 def test_a_killed_logger_under_serve_is_restarted_and_no_state_is_lost(tmp_path, processes):
     """SIGKILL of serve's logger, twice: serve restarts it each time without copying the
     dead one's file (that file is finished as its own part: NAME.mcap, NAME-0001.mcap, then
