@@ -199,3 +199,36 @@ def test_kernel_with_every_torque_term_matches_python_path(rotor):
     # measured 3.1e-15 and 1.7e-16; the bounds allow ~100x
     np.testing.assert_allclose(q1, q2, rtol=0, atol=3e-13)
     np.testing.assert_allclose(w1, w2, rtol=0, atol=2e-14)
+
+
+def test_a_position_following_the_documented_contract_works_with_every_method():
+    """``position`` as the class docstring asks for it (a 1-D array of times in, ``(len(t), 3)``
+    out; here it refuses anything else): the compiled splitting evaluates it at arrays of kick
+    times, DOP853 and the Python torque path at one time (as a 1-element array).  All agree
+    within the error they claim: split4's Richardson estimate, DOP853's tolerance."""
+    from astrodyn.orbit import propagate
+
+    r0, v0 = np.array([A, 0.0, 0.0]), np.array([0.0, 8.4e3, 1.0e3])  # an eccentric, inclined orbit
+
+    def position(t):
+        assert np.ndim(t) == 1, "the contract: a 1-D array of times"
+        return propagate(r0, v0, t, MU)[0]
+
+    inertia = np.array([[80.0, 3.0, -2.0], [3.0, 100.0, 1.0], [-2.0, 1.0, 40.0]])
+    gg = GravityGradientTorque(MU, position, inertia)
+    w0 = np.array([1e-3, -2e-3, 5e-4])
+    q0 = quat_from_axis_angle([0.2, 1.0, -0.3], 0.5)
+    t = np.array([100.0, 200.0])
+    rtol = 1e-12
+    wr, qr, _ = propagate_attitude(inertia, w0, q0, t, torque=gg, method="dop853", rtol=rtol, atol=1e-15)
+    w1, q1, info = propagate_attitude(inertia, w0, q0, t, torque=gg, method="split4", step=5.0)
+    w2, q2, info2 = propagate_attitude(inertia, w0, q0, t, torque=lambda tt, q, w: gg(tt, q, w), method="split4", step=5.0)
+    assert info["kernel"] and not info2["kernel"]
+    assert np.shape(gg(0.0, q0)) == (3,) and np.shape(gg(t, q0)) == (2, 3)
+    # DOP853's global error: its tolerance per unit of the state (|w| ~ 2e-3 rad/s, |q| = 1), times a few
+    tol_w = info["error_rate"] + 10 * rtol * np.linalg.norm(w0)
+    tol_q = info["error_attitude"] + 10 * rtol
+    np.testing.assert_allclose(w1, wr, rtol=0, atol=tol_w)
+    np.testing.assert_allclose(q1 * np.sign(q1[:, :1] * qr[:, :1]), qr, rtol=0, atol=tol_q)
+    np.testing.assert_allclose(w2, w1, rtol=0, atol=tol_w)
+    np.testing.assert_allclose(q2, q1, rtol=0, atol=tol_q)

@@ -17,7 +17,12 @@ One output step ``k`` (``t_k = k / rate``, ``dt = 1 / rate``) of a body:
    (:class:`astrodyn.attitude.integrators.HeldInputsBody`), without either by the exact
    torque-free solution; the orbit by the exact
    two-body propagation, or under thrust by :func:`astrodyn.orbit.propagate_perturbed`
-   with :class:`astrodyn.orbit.maneuvers.ConstantThrust` (mass falls at ``|F| / (isp g0)``).
+   (mass falls at ``|F| / (isp g0)``): an inertial thrust held fixed
+   (:class:`astrodyn.orbit.maneuvers.ConstantThrust`); a body-axis thrust turning with the
+   body (:class:`astrodyn.orbit.maneuvers.RotatingThrust`), from ``C(q(t_k))^T f`` at the
+   step's start to ``C(q(t_k + dt))^T f`` at its end, uniformly about the axis of the body's
+   inertial rotation over the step (its whole turns counted from the rates at both ends):
+   exact for a spin about a fixed axis at a constant rate, both ends exact otherwise.
    A flexible body (``attitude.model = "flexible"``: a rigid hub with cantilevered beams,
    :mod:`astrodyn.attitude.flexible`) advances its whole state (hub attitude and rates,
    the appendages' modal coordinates) with the same held commands: :class:`FlexiblePlantBody`.
@@ -45,9 +50,9 @@ from astrodyn.attitude.integrators import HeldInputsBody
 from astrodyn.attitude.torques import ConstantTorque
 from astrodyn.attitude.wheels import HeldInputsBatch, ReactionWheels, step_with_wheels
 from astrodyn.orbit import propagate
-from astrodyn.orbit.maneuvers import G0, ConstantThrust
+from astrodyn.orbit.maneuvers import G0, ConstantThrust, RotatingThrust
 from astrodyn.orbit.perturbations import propagate_perturbed
-from astrodyn.rotation import dcm_from_quat
+from astrodyn.rotation import dcm_from_quat, quat_conjugate, quat_multiply, rotvec_from_quat
 from astrodyn.scenario import Body, Scenario
 from astrodyn.scenario.appendages import DEFAULT_TOLERANCE, appendage_message, flexible_spacecraft
 from astrodyn.scenario.control import Fault, Sensor
@@ -76,6 +81,35 @@ def limited(vector, limit: float) -> np.ndarray:
     unit = v / big
     n = float(np.linalg.norm(unit))  # |v| = big n, which may overflow: compare, never form v / |v| from it
     return unit * (limit / n) if big * n > limit else v.copy()
+
+
+def _body_turn(q0, w0, q1, w1, dt: float) -> np.ndarray:
+    """The rotation vector ``v`` (rad, inertial axes) of a body's turn over a step of ``dt`` s
+    from attitude ``q0`` (rates ``w0``, body axes) to ``q1`` (``w1``): ``C(q1)^T C(q0) =
+    exp([v x])``, the active rotation that takes the body's axes at the start (inertial
+    components) to those at the end, by ``|v|`` about ``v`` (right-handed).
+
+    ``C(q0)^T C(q1) = C(conj(q0) q1)`` gives the axis ``n`` and the angle ``theta`` in
+    ``[0, pi]``; the rotation vectors of that rotation are ``n (theta + 2 pi j)``, ``j``
+    any integer (those with ``j < 0`` the turns the other way about ``-n``).  The body may
+    turn more than pi in a step, so ``j`` is the one closest to the estimate ``dt (C(q0)^T
+    w0 + C(q1)^T w1) / 2`` (the trapezoid rule on the inertial rate): ``j = round((s -
+    theta) / (2 pi))``, ``s`` the estimate's component along ``n``.  Near a whole number of
+    turns (``theta < 1e-6``) ``n`` is round-off (``~eps / theta``): the estimate's
+    direction is taken instead (the end attitude then met to ``theta``)."""
+    r = rotvec_from_quat(quat_multiply(quat_conjugate(q0), q1))  # C(q0)^T C(q1) = exp(-[r x])
+    est = 0.5 * dt * (dcm_from_quat(q0).T @ w0 + dcm_from_quat(q1).T @ w1)
+    theta = float(np.linalg.norm(r))
+    if theta > 1e-6:
+        n = r / theta
+    else:
+        big = float(np.linalg.norm(est))
+        if not big > math.pi:  # less than half a turn (or none): the small rotation itself
+            return r
+        n = est / big
+        theta = float(r @ n)
+    j = round((float(est @ n) - theta) / (2.0 * math.pi))
+    return n * (theta + 2.0 * math.pi * j)
 
 
 @dataclass
@@ -203,19 +237,30 @@ class PlantBody:
         self._held_locked = HeldInputsBody(i_eff)
 
     # ------------------------------------------------------------------ motion
-    def _thrust_inertial(self) -> np.ndarray:
+    def _thrust_inertial(self, q) -> np.ndarray:
+        """The held thrust in inertial axes (N) with the body at attitude ``q``."""
         f = self.thrust * self.faults.efficiency
         if self.thrust_frame == "body" and self.has_attitude:
-            f = dcm_from_quat(self.q).T @ f  # v_inertial = C^T v_body
+            f = dcm_from_quat(q).T @ f  # v_inertial = C^T v_body
         return f
+
+    def _turning_thrust(self) -> bool:
+        """Whether a body-axis thrust turns with the body in this step."""
+        return self.thrust_frame == "body" and self.has_attitude and self.has_orbit and bool(self.thrust.any())
+
+    def step_start(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """``(q, w)`` now, before the attitude advances, if :meth:`advance_orbit` needs them
+        (a body-axis thrust), else None."""
+        return (self.q.copy(), self.w.copy()) if self._turning_thrust() else None
 
     def advance(self, dt: float) -> None:
         """Move the body from t to t + dt with the held commands (and a dynamic gyro's gimbals)."""
         w_before = None if self.gimbals is None else self.w.copy()
+        start = self.step_start()
         if self.has_attitude:
             self.advance_attitude(dt)
         if self.has_orbit:
-            self.advance_orbit(dt)
+            self.advance_orbit(dt, start)
         if w_before is not None and dt > 0:
             self.advance_gimbals(w_before, dt)
 
@@ -256,11 +301,20 @@ class PlantBody:
             w1, q1, _ = propagate_attitude(self.inertia, self.w, self.q, float(dt), method="exact", error_estimate=False)
             self.w, self.q = np.asarray(w1), np.asarray(q1)
 
-    def advance_orbit(self, dt: float) -> None:
-        """The orbit part of :meth:`advance` (after the attitude: a body-axis thrust turns with it)."""
-        f = self._thrust_inertial() if np.any(self.thrust) else None
+    def advance_orbit(self, dt: float, start: tuple[np.ndarray, np.ndarray] | None = None) -> None:
+        """The orbit part of :meth:`advance`, after the attitude: ``start`` the ``(q, w)`` of
+        :meth:`step_start` before it (a body-axis thrust turns with the body from ``q`` to the
+        current :attr:`q`, module docstring; without ``start`` it is held at the current one)."""
+        q0 = self.q if start is None else start[0]
+        f = self._thrust_inertial(q0) if np.any(self.thrust) else None
         if f is not None and np.any(f):
-            burn = ConstantThrust(f, self.mass, self.limits.isp)
+            if start is not None:  # a body-axis thrust (step_start)
+                v = _body_turn(q0, start[1], self.q, self.w, float(dt))
+                angle = float(np.linalg.norm(v))
+                axis, rate = (v / angle, angle / dt) if angle > 0.0 and dt > 0 else ((0.0, 0.0, 1.0), 0.0)
+                burn = RotatingThrust(f, self.mass, self.limits.isp, axis, rate)
+            else:
+                burn = ConstantThrust(f, self.mass, self.limits.isp)
             out = propagate_perturbed(self.r, self.v, float(dt), self.mu, [burn], rtol=1e-13, atol=1e-15,
                                       error_estimate=False)
             r1, v1 = np.asarray(out.r).reshape(3), np.asarray(out.v).reshape(3)
@@ -352,8 +406,10 @@ class PlantBody:
         self.step_applied_ids = []
 
     def finish_commands(self) -> None:
-        """After the step's commands: the thrust and dv budget the step starts with."""
-        self._thrust_applied = self._thrust_inertial() if self.has_orbit else None
+        """After the step's commands: the thrust and dv budget the step starts with (the
+        thrust in inertial axes, the one applied at the step's time ``t``: a body-axis thrust
+        at the attitude of ``t``, from where it turns with the body through the step)."""
+        self._thrust_applied = self._thrust_inertial(self.q) if self.has_orbit else None
         self._dv_total_at_start = self.dv_total
 
 
@@ -573,6 +629,7 @@ class Plant:
         the held-input step (:meth:`PlantBody.batched`) in one compiled call, to round-off
         the same as one by one."""
         before = {id(b): b.w.copy() for b in bodies if b.gimbals is not None}
+        start = {id(b): b.step_start() for b in bodies if b.has_orbit}  # before any attitude moves
         group = [b for b in bodies if b.batched()]
         if group:
             self._advance_batch(group, dt)
@@ -582,7 +639,7 @@ class Plant:
                 b.advance_attitude(dt)
         for b in bodies:
             if b.has_orbit:
-                b.advance_orbit(dt)
+                b.advance_orbit(dt, start[id(b)])
         for b in bodies:
             if b.gimbals is not None and dt > 0:
                 b.advance_gimbals(before[id(b)], dt)

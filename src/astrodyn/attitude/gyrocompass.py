@@ -2,22 +2,29 @@
 (H. Baruh, *Analytical Dynamics*, sec. 10.7).
 
 Model.  A rotor (axial moment ``J``, kg m^2) spins at ``s`` rad/s relative to a
-gimbal that can turn only about the local vertical; the gimbal + rotor assembly
+gimbal that can turn only about the local vertical (``s`` is the relative spin in the
+initial state: the axial momentum ``h`` below is what stays constant, so the relative
+spin changes slightly as the axis swings); the gimbal + rotor assembly
 has moment ``I`` about that vertical axis (kg m^2).  The Earth turns at
 ``Omega_E`` rad/s; at geodetic latitude ``lat`` its rate has local components
 ``Omega_E (0, cos lat, sin lat)`` (east, north, up).  ``alpha`` is the azimuth of
 the spin axis, measured from north towards east.  The gimbal frame ``F``
-(``f1`` = spin axis, ``f2 = up x f1``, ``f3`` = up) turns at ``Omega_E + alpha' f3``,
+(``f1 = (sin alpha, cos alpha, 0)`` = spin axis, ``f2 = up x f1 = (-cos alpha, sin alpha, 0)``,
+``f3`` = up, in east-north-up components) turns relative to the ground at ``-alpha'``
+about up (``df1/dt = alpha' (cos alpha, -sin alpha, 0) = -alpha' f2``: a growing azimuth
+turns it clockwise seen from above), so in inertial space at ``Omega_E - alpha' f3``,
 whose components are ``Omega_E cos(lat) cos(alpha)``, ``Omega_E cos(lat) sin(alpha)``,
-``Omega_E sin(lat) + alpha'``.  The kinetic energy
+``Omega_E sin(lat) - alpha'``.  The kinetic energy
 
-    T = I/2 (alpha' + Omega_E sin lat)^2 + J/2 (phi' + Omega_E cos lat cos alpha)^2
+    T = I/2 (alpha' - Omega_E sin lat)^2 + J/2 (phi' + Omega_E cos lat cos alpha)^2
         + dI/2 (Omega_E cos lat)^2 sin^2 alpha
 
 (``phi`` the rotor angle, ``dI = I_2 - I_1`` the difference of the assembly's
 non-spinning moments about ``f2`` and ``f1``, default 0) has the cyclic rotor
 angle: the absolute axial momentum ``h = J (phi' + Omega_E cos lat cos alpha)`` is
-constant (frictionless spin bearing), and Lagrange's equation for ``alpha`` is
+constant (frictionless spin bearing), and Lagrange's equation for ``alpha`` is (the
+term of ``T`` linear in ``alpha'``, ``-I alpha' Omega_E sin lat``, has a constant
+coefficient and drops out of it, whatever its sign)
 
     I alpha'' = -h Omega_E cos(lat) sin(alpha) + dI (Omega_E cos lat)^2 sin(alpha) cos(alpha).
 
@@ -58,8 +65,10 @@ class Gyrocompass:
     """An undamped gyrocompass; symbols as in the module docstring.
 
     Parameters: ``gimbal_inertia`` ``I`` (kg m^2, about the local vertical),
-    ``rotor_inertia`` ``J`` (kg m^2, axial), ``spin`` ``s`` (rad/s, rotor relative to
-    the gimbal at ``alpha = 0``), ``latitude`` (rad, ``|lat| < pi/2``),
+    ``rotor_inertia`` ``J`` (kg m^2, axial), ``spin`` ``s`` (rad/s, the rotor relative
+    to the gimbal at the initial azimuth ``alpha0``: the axial momentum is
+    ``h = J (s + Omega_E cos(lat) cos(alpha0))``, :meth:`axial_momentum`, as
+    :meth:`simulate` and :meth:`period` take it), ``latitude`` (rad, ``|lat| < pi/2``),
     ``earth_rate`` (rad/s), ``inertia_difference`` ``dI = I_2 - I_1`` (kg m^2).
     """
 

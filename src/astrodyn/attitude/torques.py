@@ -65,7 +65,8 @@ class GravityGradientTorque:
     position : callable
         ``position(t) -> r`` inertial position of the spacecraft (m) relative to
         the attracting centre; must accept a 1-D array of times and return
-        ``(len(t), 3)`` (the integrator evaluates all kick times at once).
+        ``(len(t), 3)`` (the integrator evaluates all kick times at once; a torque
+        asked at one time, as by ``method="dop853"``, passes a 1-element array).
     inertia : array_like
         ``(3,)`` principal moments or ``(3, 3)`` tensor in body axes, kg m^2
         (the full mass distribution, rotors included).
@@ -123,7 +124,12 @@ class GravityGradientTorque:
         return GravityGradientTorque(self.mu, lambda t: position(np.asarray(t, dtype=np.float64) + dt), self.inertia)
 
     def __call__(self, t, q, w=None):
-        r = np.asarray(self.position(np.asarray(t, dtype=np.float64)), dtype=np.float64)
+        # position takes a 1-D array of times (class docstring), also when one scalar t is
+        # asked (propagate_attitude's dop853 and the Python torque path do): (1, 3) -> (3,)
+        t = np.asarray(t, dtype=np.float64)
+        r = np.asarray(self.position(np.atleast_1d(t)), dtype=np.float64)
+        if t.ndim == 0:
+            r = r.reshape(3)
         return _gravity_gradient(quat_rotate(q, r), self.inertia, self.mu)
 
 

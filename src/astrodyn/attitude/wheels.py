@@ -16,13 +16,21 @@ with a known ``h(t)``: exactly the form :func:`astrodyn.attitude.propagate_attit
 integrates with exact rotations (``rotor_momentum=h(t)``), which keeps ``|q| = 1`` and
 the inertial momentum of body plus wheels to round-off when ``tau_ext = 0``.
 
-Saturation, applied to each command before the step (:meth:`ReactionWheels.saturate`):
-the torque is clipped to ``|g_k| <= max_torque_k``, then so that the wheel's speed at
-the end of the step, predicted with the body rate held (``Omega_k + g_k dt / J_k``),
-stays within ``|Omega_k| <= max_speed_k``.  A wheel at its speed limit can still be
-torqued back towards zero.  The prediction ignores the change of ``a_k . w`` over the
-step; with control periods much shorter than the body's motion the overshoot is of
-order ``J_k |dw| / J_k``, reported by :meth:`ReactionWheels.speeds` after the step.
+Saturation, applied to each command before the step (:meth:`ReactionWheels.saturate`),
+only ever reduces a command (never reverses or increases it): the torque is clipped to
+``|g_k| <= max_torque_k``, then into ``[lb_k, ub_k]`` with
+
+    ub_k = max(0, (max_speed_k - Omega_k) J_k / dt),   lb_k = min(0, (-max_speed_k - Omega_k) J_k / dt),
+
+so that the wheel's speed at the end of the step, predicted with the body rate held
+(``Omega_k + g_k dt / J_k``), stays within ``|Omega_k| <= max_speed_k``.  A wheel at its
+speed limit can still be torqued back towards zero.  The prediction ignores the change of
+``a_k . w`` over the step, so a wheel may end a step beyond its limit (by about
+``|a_k . dw|``, reported by :meth:`ReactionWheels.speeds` after the step); such a wheel
+gets no torque that would speed it up further, and a command towards zero is applied as
+commanded (after the torque limit): the bounds never make up a braking torque nobody
+asked for.  A command of 0 is applied as 0, and the clipped wheels are exactly those whose
+applied torque differs from the command.
 """
 
 from __future__ import annotations
@@ -99,13 +107,14 @@ class ReactionWheels:
             raise ValueError(f"wheel torque: expected {self.n} finite numbers in N m, got {cmd.tolist()}")
         g = np.clip(cmd, -self.max_torque, self.max_torque)
         omega = self.speeds(h, w)
-        end = omega + g * dt / self.rotor_inertia
-        over = np.abs(end) > self.max_speed
-        limit = np.sign(end) * self.max_speed
-        g = np.where(over, (limit - omega) * self.rotor_inertia / dt, g)
-        # never accelerate further when already beyond the limit (only back towards it)
-        g = np.where(over & (np.sign(g) == np.sign(omega)) & (np.abs(omega) >= self.max_speed), 0.0, g)
-        g = np.clip(g, -self.max_torque, self.max_torque)
+        J, ms = self.rotor_inertia, self.max_speed
+        end = omega + g * dt / J
+        # clip(g, lb, ub) (module docstring), written so that a wheel predicted within its
+        # limit keeps g as it is (lb <= g <= ub there); the same comparisons as _saturate_row
+        # (the batch's: the same floats for the same speeds, signed zeros included)
+        ub, lb = (ms - omega) * J / dt, (-ms - omega) * J / dt
+        ub, lb = np.where(ub > 0.0, ub, 0.0), np.where(lb < 0.0, lb, 0.0)
+        g = np.where(end > ms, np.where(g < ub, g, ub), np.where(end < -ms, np.where(g > lb, g, lb), g))
         return g, g != cmd
 
 
@@ -166,11 +175,6 @@ def step_with_wheels(inertia, wheels: ReactionWheels, w, q, h, wheel_torque, dt:
 
 
 @jit(inline="always")
-def _sign(x):
-    return 1.0 if x > 0.0 else (-1.0 if x < 0.0 else 0.0)
-
-
-@jit(inline="always")
 def _clip(x, limit):
     return min(max(x, -limit), limit)
 
@@ -184,12 +188,14 @@ def _saturate_row(axes, J, max_torque, max_speed, n, w, h, cmd, dt, g, clipped):
         gk = _clip(cmd[k], mt)
         omega = h[k] / jk - (w[0] * a0 + w[1] * a1 + w[2] * a2)
         end = omega + gk * dt / jk
-        over = abs(end) > ms
-        if over:
-            gk = (_sign(end) * ms - omega) * jk / dt
-            if _sign(gk) == _sign(omega) and abs(omega) >= ms:
-                gk = 0.0
-        gk = _clip(gk, mt)
+        if end > ms:  # clip(gk, lb, ub): only ever towards 0 (ReactionWheels.saturate)
+            ub = (ms - omega) * jk / dt
+            ub = ub if ub > 0.0 else 0.0
+            gk = gk if gk < ub else ub
+        elif end < -ms:
+            lb = (-ms - omega) * jk / dt
+            lb = lb if lb < 0.0 else 0.0
+            gk = gk if gk > lb else lb
         g[k] = gk
         clipped[k] = gk != cmd[k]
 

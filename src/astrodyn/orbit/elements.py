@@ -8,8 +8,11 @@ shape ``(..., 3)``, every element has the leading shape, and a scalar call
 Classical elements
 ------------------
 :func:`elements_from_state` returns an :class:`Elements` with
-``p`` (semi-latus rectum, m), ``a`` (semi-major axis, m; ``inf`` for a
-parabola, negative for a hyperbola), ``e``, ``i`` in [0, pi],
+``p`` (semi-latus rectum, m), ``a`` (semi-major axis, m; negative for a
+hyperbola; ``inf`` only when the computed ``e`` is exactly 1: a parabolic state
+usually comes out with ``e`` a few ulps off 1, and then a huge finite ``a``
+of either sign, as the conditioning of ``p / (1 - e^2)`` there allows), ``e``,
+``i`` in [0, pi],
 ``raan``, ``argp`` and ``nu`` in [0, 2 pi).  :func:`state_from_elements`
 is the inverse, from ``(p, e, i, raan, argp, nu)`` (``p`` rather than ``a`` so
 that the parabola is an ordinary case).
@@ -177,8 +180,9 @@ def _out(x):
 class Elements:
     """Classical orbital elements (SI units, radians), arrays of the leading shape.
 
-    ``p`` semi-latus rectum (m); ``a`` semi-major axis (m; ``inf`` for a
-    parabola, negative for a hyperbola); ``e`` eccentricity; ``i``
+    ``p`` semi-latus rectum (m); ``a`` semi-major axis (m; negative for a
+    hyperbola, ``inf`` when the computed ``e`` is exactly 1, a huge finite value of
+    either sign for a parabolic state whose ``e`` comes out a few ulps off 1); ``e`` eccentricity; ``i``
     inclination in [0, pi]; ``raan`` right ascension of the ascending node,
     ``argp`` argument of periapsis, ``nu`` true anomaly, each in [0, 2 pi).
     See the module docstring for the circular/equatorial conventions."""
