@@ -60,9 +60,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from astrodyn.messages import CROSSCHECK_MODELS
+
 __all__ = ["CrossCheckResult", "ReboundScene", "crosscheck", "MODELS", "INTEGRATORS"]
 
-MODELS = ("kepler", "j2")
+MODELS = CROSSCHECK_MODELS
 """Force models the REBOUND twin can carry: point mass, point mass + J2 zonal."""
 
 INTEGRATORS = ("ias15", "whfast")

@@ -20,6 +20,9 @@ ATTITUDE_MODELS: tuple[str, ...] = ("torque_free", "gravity_gradient", "gyrostat
 #: docs/control.md).  A state message may name it; a config may not (the plan picks it).
 ACTUATED_MODEL = "actuated"
 CROSSCHECK_REFERENCES: tuple[str, ...] = ("rebound-ias15",)
+#: Orbit models the REBOUND cross-check can run (astrodyn.crosscheck's twin: point mass, point
+#: mass + J2); a body of another model asked to be cross-checked is planned as not checked.
+CROSSCHECK_MODELS: tuple[str, ...] = ("kepler", "j2")
 STATUS_STATES: tuple[str, ...] = ("starting", "running", "paused", "stopping", "stopped", "error")
 
 PREFIX = "astrodyn"

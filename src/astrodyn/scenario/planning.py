@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from astrodyn.messages import ACTUATED_MODEL, GIMBALS_KIND, MODEL_STATE_KINDS
+from astrodyn.messages import ACTUATED_MODEL, CROSSCHECK_MODELS, GIMBALS_KIND, MODEL_STATE_KINDS
 
 if TYPE_CHECKING:
     from astrodyn.scenario import OrbitSpec, Scenario
@@ -142,7 +142,9 @@ def plan(scenario: Scenario, cross_check_all: bool = False) -> Plan:
     """The cheapest exact model per body and the processes a run needs.
 
     ``cross_check_all``: the run checks every orbit against REBOUND (``run --cross-check``),
-    counted in ``crosscheck_messages`` like the bodies whose config asks for it.
+    counted in ``crosscheck_messages`` like the bodies whose config asks for it; only orbits
+    of a model REBOUND's twin runs (:data:`astrodyn.messages.CROSSCHECK_MODELS`) are checked,
+    the others noted as not cross-checked (a warning when their config asked for it).
 
     A perturbation that is identically zero for the scene is dropped: j2/zonal with all
     needed J_n = 0 -> kepler; gravity gradient on an inertially spherical body, a heavy
@@ -168,8 +170,6 @@ def plan(scenario: Scenario, cross_check_all: bool = False) -> Plan:
                 warnings.append(f"bodies[{len(out)}] ({b.name}).orbit: periapsis radius {rp / 1e3:.6g} km is below "
                                 f"the surface of {cb.name} (radius {cb.radius / 1e3:.6g} km): the orbit meets the central "
                                 f"body; check a / rp / e or r, v")
-            if b.cross_check:
-                notes.append("cross-checked against REBOUND IAS15")
         if b.attitude is not None and b.attitude.model != "none":
             a = b.attitude
             am = a.model
@@ -190,6 +190,15 @@ def plan(scenario: Scenario, cross_check_all: bool = False) -> Plan:
             om = ACTUATED_MODEL if b.orbit is not None else None
             am = ACTUATED_MODEL if am is not None else None
             notes = ["closed loop: moved by the plant with its controllers' commands (docs/control.md)"]
+        if om is not None and (b.cross_check or cross_check_all):
+            if om in CROSSCHECK_MODELS:
+                notes.append("cross-checked against REBOUND IAS15")
+            else:  # REBOUND's twin carries a point mass and J2 only (astrodyn.crosscheck)
+                notes.append(f"not cross-checked: REBOUND's twin runs {' and '.join(CROSSCHECK_MODELS)} orbits only")
+                if b.cross_check:
+                    warnings.append(f"bodies[{len(out)}] ({b.name}).cross_check: its orbit model {om} cannot be "
+                                    f"cross-checked (REBOUND's twin runs {', '.join(CROSSCHECK_MODELS)} only); the run "
+                                    f"goes on without a cross-check for it")
         # a flexible body keeps its appendages channel in the closed loop too (the plant publishes it)
         config_model = b.attitude.model if b.attitude is not None else None
         own = (MODEL_STATE_KINDS[config_model],) if am is not None and config_model in MODEL_STATE_KINDS else ()
@@ -212,7 +221,8 @@ def plan(scenario: Scenario, cross_check_all: bool = False) -> Plan:
     # flexible and rolling bodies, and bodies with gyroscopes, publish more state messages per step
     flexible = sum(len(bp.own_kinds) for bp in out)
     states = sum((bp.orbit_model is not None) + (bp.attitude_model is not None) for bp in out) + flexible
-    checked = sum(bp.orbit_model is not None and (cross_check_all or b.cross_check) for bp, b in zip(out, scenario.bodies))
+    checked = sum(bp.orbit_model in CROSSCHECK_MODELS and (cross_check_all or b.cross_check)
+                  for bp, b in zip(out, scenario.bodies))
     return Plan(scenario=scenario.name, processes=tuple(processes), bodies=tuple(out), n_steps=n,
                 messages=n * (states + checked), warnings=tuple(warnings), crosscheck_messages=n * checked,
                 model_state_messages=n * flexible)
