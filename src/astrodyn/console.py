@@ -10,7 +10,9 @@ makes that stream quietly discard whatever follows (its descriptor now points at
 have had.  Python ignores SIGPIPE, so without this the first progress line after the
 reader left ended the run with a traceback nobody saw and a partial recording.
 
->>> keep_working_when_output_closes()   # doctest: +SKIP   (astrodyn.cli.main does it)
+::
+
+    keep_working_when_output_closes()   # astrodyn.cli.main does it
 """
 
 from __future__ import annotations

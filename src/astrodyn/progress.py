@@ -4,10 +4,12 @@ line on stderr (stdlib only: every layer above the scene may use it).
 On a terminal the line is rewritten in place twice a second (``\\r``); into a file or a
 pipe (CI logs) a new line every 5 s, so logs stay short and readable.
 
->>> progress = Progress()                          # doctest: +SKIP
->>> while working:
-...     progress.show(lambda: f"sim t {t:.1f} s")  # the text is only built when it is printed
->>> progress.done(f"sim t {t:.1f} s")              # the last line, always printed
+::
+
+    progress = Progress()
+    while working:
+        progress.show(lambda: f"sim t {t:.1f} s")  # the text is only built when it is printed
+    progress.done(f"sim t {t:.1f} s")              # the last line, always printed
 """
 
 from __future__ import annotations

@@ -19,12 +19,14 @@ A third kind of signal is Ctrl-Z (SIGTSTP): :func:`catch_job_control` makes a pr
 part in it (a supervisor stops its children first; a paced propagator counts the time
 stopped, :func:`suspended_s`, and keeps its real-time schedule after ``fg``).
 
->>> stop = StopFlag()                    # doctest: +SKIP
->>> while not stop.why: ...              # "SIGTERM" / "SIGINT" / "SIGHUP" once one arrived
->>> stop.restore()                       # the previous handlers back (tests, in-process runs)
+::
 
->>> def main(argv=None) -> int:                       # doctest: +SKIP
-...     return interruptible("astrodyn export", lambda: _main(argv))
+    stop = StopFlag()
+    while not stop.why: ...              # "SIGTERM" / "SIGINT" / "SIGHUP" once one arrived
+    stop.restore()                       # the previous handlers back (tests, in-process runs)
+
+    def main(argv=None) -> int:
+        return interruptible("astrodyn export", lambda: _main(argv))
 """
 
 from __future__ import annotations

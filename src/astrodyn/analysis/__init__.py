@@ -1,8 +1,10 @@
 """``astrodyn analyze FILE.mcap [--out DIR] [--seq 321]``: a report with plots from a recording.
 
->>> from astrodyn.analysis import analyze
->>> report = analyze("demo.mcap", "demo-report")         # doctest: +SKIP
->>> report["bodies"]["iss"]["orbit"]["energy_drift_max"]  # the numbers of the report
+::
+
+    from astrodyn.analysis import analyze
+    report = analyze("demo.mcap", "demo-report")
+    report["bodies"]["iss"]["orbit"]["energy_drift_max"]  # the numbers of the report
 
 Writes into ``DIR`` (default ``<file>-report``):
 

@@ -1,11 +1,15 @@
 """Read an astrodyn MCAP file into numpy arrays, including files whose writer crashed.
 
->>> run = load("demo.mcap")                                       # doctest: +SKIP
->>> run.bodies["sat1"].orbit.r.shape        # (n, 3) metres, frame in .frame
->>> run.bodies["sat1"].attitude.q           # (n, 4) Euler parameters, scalar first
->>> run.scenario                            # the "scenario" metadata record (str -> str)
->>> run.truncated, run.truncation           # True and why, for a file without footer
->>> run.gaps["astrodyn/demo/sat1/orbit"]    # count, missing, gaps, duplicates
+::
+
+    run = load("demo.mcap")
+    run.bodies["sat1"].orbit.r.shape        # (n, 3) metres, frame in .frame
+    run.bodies["sat1"].attitude.q           # (n, 4) Euler parameters, scalar first
+    run.scenario                            # the "scenario" metadata record (str -> str)
+    run.complete, run.incomplete_reason     # False and why for a cut file, damaged chunks
+                                            # or invalid messages (True, "" otherwise)
+    run.truncated, run.truncation           # the cut alone: no footer, and why
+    run.gaps["astrodyn/demo/sat1/orbit"]    # count, missing, gaps, duplicates
 
 The file is read record by record from the start (never through the summary), one chunk
 at a time, so a 1 GB file never sits in memory and a file without summary or footer (a
