@@ -114,8 +114,19 @@ FORMATS = ("csv", "parquet", "oem", "aem", "aem1", "foxglove")
 _CCSDS_SCALES = {"utc": "UTC", "tai": "TAI", "tt": "TT", "tdb": "TDB", "tcb": "TCB", "tcg": "TCG", "ut1": "UT1"}
 _XYZ = XYZ
 
+#: States (rows) formatted and written at a time by the CSV, OEM and AEM writers: beyond the
+#: loaded arrays, an export holds the text of one chunk, whatever the number of states.
+_CHUNK_ROWS = 16_384
+
+
 class ExportError(RuntimeError):
     """An export cannot be done (missing optional package, nothing to export, bad option)."""
+
+
+def _chunks(start: int, stop: int):
+    """``(a, b)`` row ranges of at most :data:`_CHUNK_ROWS` rows covering ``start`` to ``stop``."""
+    size = _CHUNK_ROWS
+    return ((a, min(stop, a + size)) for a in range(start, stop, size))
 
 
 # ------------------------------------------------------------------------------ tables
@@ -256,25 +267,107 @@ def _cell(x) -> str:
     return str(x)
 
 
+def _cells(column: np.ndarray) -> list[str]:
+    """:func:`_cell` of each element of a 1-D column (numbers through ``tolist``: the same
+    text, without a numpy scalar per element)."""
+    kind = column.dtype.kind
+    if kind == "f" and column.dtype.itemsize <= 8:  # tolist: Python floats of the same values
+        return list(map(repr, column.tolist()))
+    if kind in "iub":
+        return list(map(str, column.tolist()))
+    return [_cell(x) for x in column]
+
+
+def _nested_shape(column: np.ndarray) -> tuple[int, ...] | None:
+    """The ``(n, m)`` of :func:`_nested_numbers` for the whole object column, found a chunk
+    at a time (every chunk converts, all to one shape), or None when it does not convert."""
+    shape = None
+    for a, b in _chunks(0, len(column)):
+        part = _nested_numbers(column[a:b])
+        if part is None or (shape is not None and part.shape[1:] != shape):
+            return None
+        shape = part.shape[1:]
+    return shape
+
+
+def _csv_columns(track: Track) -> tuple[list[str], list[tuple[str, object]], list[int]]:
+    """The column names of :func:`table`, where the cells come from and which of those
+    columns are kept, without converting any column whole.  Sources: ``("col", 1-D
+    array)``, ``("cols", 2-D array)`` (one column per array column), ``("nested", object
+    column)`` (rows of equally long lists of numbers), ``("json", records)``; a name made
+    twice (a foreign field ``seq``) keeps its first place and its last column, as in
+    :func:`table`'s dict.  :func:`_csv_rows` makes the cells of some rows."""
+    names: list[str] = []
+    sources: list[tuple[str, object]] = []
+    if "t" in track.fields:
+        names.append("t")
+        sources.append(("col", track.fields["t"]))
+    names += ["seq", "log_time_ns"]
+    sources += [("col", track.seq), ("col", track.log_time)]
+    for name, a in track.fields.items():
+        if name == "t":
+            continue
+        shape = _nested_shape(a) if a.dtype == object else None
+        if shape is not None:
+            inner = [str(c) for c in _XYZ] if shape[1] == 3 else [str(i) for i in range(shape[1])]
+            names += [f"{name}_{k}_{c}" for k in range(shape[0]) for c in inner]
+            sources.append(("nested", a))
+        elif a.ndim == 2:
+            names += [f"{name}_{c}" for c in _XYZ] if a.shape[1] == 3 else [f"{name}_{i}" for i in range(a.shape[1])]
+            sources.append(("cols", a))
+        else:
+            names.append(name)
+            sources.append(("col", a))
+    if track.records is not None:
+        names.append("json")
+        sources.append(("json", track.records))
+    kept: dict[str, int] = {}
+    for i, name in enumerate(names):
+        kept[name] = i
+    return list(kept), sources, list(kept.values())
+
+
+def _csv_rows(sources: list[tuple[str, object]], kept: list[int], a: int, b: int):
+    """The CSV rows ``a`` to ``b`` (cells as :func:`write_csv` writes them) of
+    :func:`_csv_columns`' sources, the columns ``kept``."""
+    columns: list[list[str]] = []
+    for how, src in sources:
+        if how == "col":
+            columns.append(_cells(src[a:b]))
+        elif how == "cols":
+            part = src[a:b]
+            columns += [_cells(part[:, i]) for i in range(part.shape[1])]
+        elif how == "nested":
+            part = np.array(list(src[a:b]), dtype=np.float64)
+            part = part.reshape(part.shape[0], -1)
+            columns += [_cells(part[:, i]) for i in range(part.shape[1])]
+        else:
+            columns.append([json.dumps(r) if not isinstance(r, bytes) else r.hex() for r in src[a:b]])
+    if len(kept) < len(columns):
+        columns = [columns[i] for i in kept]
+    return zip(*columns)
+
+
 def write_csv(run: Run, out: Path) -> list[Path]:
     """One CSV per channel (see the module docstring); returns the files written.
 
     Each file starts with ``# key: value`` comment lines (:func:`channel_header`: epoch,
     time scale, frame, quaternion order, units), then the column names, then one row per
     message.  ``pandas.read_csv(path, comment="#")`` reads it; so does any CSV reader
-    told to skip lines starting with ``#``."""
+    told to skip lines starting with ``#``.  The columns are those of :func:`table`,
+    formatted and written :data:`_CHUNK_ROWS` rows at a time."""
     written = []
     stems = channel_file_stems(run.channels)
     for topic, track in run.channels.items():
-        cols = table(track)
+        names, sources, kept = _csv_columns(track)
         path = out / f"{stems[topic]}.csv"
         with open(path, "w", newline="") as f:
-            for key, value in channel_header(run, topic, cols).items():
+            for key, value in channel_header(run, topic, names).items():
                 f.write(f"# {key}: {value}\n")
             w = csv.writer(f)
-            w.writerow(cols)
-            for row in zip(*cols.values()):
-                w.writerow([_cell(x) for x in row])
+            w.writerow(names)
+            for a, b in _chunks(0, len(track)):
+                w.writerows(_csv_rows(sources, kept, a, b))
         written.append(path)
     return written
 
@@ -312,8 +405,17 @@ def write_parquet(run: Run, out: Path) -> list[Path]:
 _CCSDS_EPOCH = re.compile(r"(?!0000)\d{4}-\d{2}-\d{2}T\d{2}:\d{2}:\d{2}(\.\d+)?$")
 
 
-def ccsds_epochs(run: Run, t: np.ndarray, log_time: np.ndarray) -> tuple[list[str], str]:
-    """Calendar epochs ``YYYY-MM-DDThh:mm:ss.ffffff`` of ``epoch + t`` and the CCSDS TIME_SYSTEM."""
+#: Julian dates, in the time's own scale, well inside the years 1000-9999 (1000-01-02T12:00
+#: to 9999-12-30T12:00), which astropy writes with the four digits of a CCSDS year (it
+#: writes 0999 as ``999``): epochs between them need no check of their text.
+_PLAIN_JD = (2086304.0, 5373482.0)
+
+
+def _epoch_times(run: Run):
+    """``(times, time_system)``: ``times(t, log_time)`` is the astropy ``Time`` of
+    ``epoch + t`` in the scale of the scenario epoch, or of the POSIX log times as UTC in a
+    file without scenario metadata; the same element by element for any slice of the
+    states, so epochs can be made a chunk at a time (:func:`ccsds_epochs`)."""
     from astropy.time import Time, TimeDelta
     from astropy.utils import iers
 
@@ -327,14 +429,39 @@ def ccsds_epochs(run: Run, t: np.ndarray, log_time: np.ndarray) -> tuple[list[st
         except ValueError:
             raise ExportError(f"{run.path}: scenario metadata epoch {given[:80]!r}: expected an ISO date and time "
                               f"(e.g. 2026-03-20T12:00:00 UTC)") from None
-        times = base + TimeDelta(np.asarray(t, dtype=np.float64), format="sec")
-        system = _CCSDS_SCALES[scale]
-    else:  # no scenario metadata: POSIX log times as UTC
+        return (lambda t, log_time: base + TimeDelta(np.asarray(t, dtype=np.float64), format="sec")), _CCSDS_SCALES[scale]
+
+    def posix(t, log_time):  # no scenario metadata: POSIX log times as UTC
         ns = np.asarray(log_time, dtype=np.uint64)  # MCAP's uint64 ns: 1970 to 2554, none wrapped to 1677
-        times = Time((ns // np.uint64(10**9)).astype(np.float64), (ns % np.uint64(10**9)) * 1e-9, format="unix", scale="utc")
-        system = "UTC"
+        return Time((ns // np.uint64(10**9)).astype(np.float64), (ns % np.uint64(10**9)) * 1e-9, format="unix", scale="utc")
+
+    return posix, "UTC"
+
+
+def _isot(times) -> list[str]:
+    """The calendar epochs ``YYYY-MM-DDThh:mm:ss.ffffff`` of astropy ``times``."""
     times.precision = 6
-    return [s for s in np.atleast_1d(times.isot)], system
+    return np.atleast_1d(times.isot).tolist()
+
+
+def ccsds_epochs(run: Run, t: np.ndarray, log_time: np.ndarray) -> tuple[list[str], str]:
+    """Calendar epochs ``YYYY-MM-DDThh:mm:ss.ffffff`` of ``epoch + t`` and the CCSDS TIME_SYSTEM."""
+    times, system = _epoch_times(run)
+    return _isot(times(t, log_time)), system
+
+
+class _Epochs:
+    """The CCSDS epochs of one track's states (:func:`ccsds_epochs`), made when asked, a
+    slice at a time: :meth:`at` one, :meth:`of` rows ``a`` to ``b``."""
+
+    def __init__(self, track: Track, times) -> None:
+        self.t, self.log_time, self.times = track.t, track.log_time, times
+
+    def of(self, a: int, b: int) -> list[str]:
+        return _isot(self.times(self.t[a:b], self.log_time[a:b]))
+
+    def at(self, k: int) -> str:
+        return self.of(k, k + 1)[0]
 
 
 def parse_ccsds_epoch(text: str, scale: str = "utc"):
@@ -382,12 +509,8 @@ def _orbit_frame(body) -> str:
     return sorted(set(orbit.frame))[0] if orbit is not None and len(orbit) else "GCRF"
 
 
-def _f(x: float) -> str:
-    return repr(float(x))
-
-
 def _message_head(version_key: str, version: str, run: Run, tr: Track, comments: list[str], name: str,
-                  meta: list[tuple[str, str]], system: str, epochs: list[str]) -> list[str]:
+                  meta: list[tuple[str, str]], system: str, start: str, stop: str) -> list[str]:
     """Header and metadata block shared by OEM and AEM (KVN)."""
     return [
         _kvn(version_key, version),
@@ -402,40 +525,75 @@ def _message_head(version_key: str, version: str, run: Run, tr: Track, comments:
         _kvn("CENTER_NAME", _central_name(run)),
         *(_kvn(k, v) for k, v in meta),
         _kvn("TIME_SYSTEM", system),
-        _kvn("START_TIME", epochs[0]),
-        _kvn("STOP_TIME", epochs[-1]),
+        _kvn("START_TIME", start),
+        _kvn("STOP_TIME", stop),
     ]
 
 
-def _ccsds_tracks(run: Run, kind: str):
+def _ccsds_tracks(run: Run, kind: str) -> list[tuple[str, object, Track, _Epochs, str]]:
     """``(name, body, track, epochs, time_system)`` for each body whose ``kind`` track
-    ("orbit" or "attitude") has samples; ``epochs``, ``time_system``: :func:`ccsds_epochs`."""
+    ("orbit" or "attitude") has samples; ``epochs`` (:class:`_Epochs`), ``time_system``:
+    :func:`ccsds_epochs`.  Every track is checked before this returns, so a refused export
+    has written nothing: epochs a CCSDS file can hold (:func:`_check_epochs`) and times that
+    increase with seq."""
+    tracks = []
     for name, body in run.bodies.items():
         tr = getattr(body, kind)
         if tr is None or len(tr) == 0:
             continue
+        times, system = _epoch_times(run)
+        epochs = _Epochs(tr, times)
+        _check_epochs(run, tr, epochs)
+        t = tr.t
+        for a, b in _chunks(0, len(tr)):  # OEM and AEM data lines: epochs in increasing order
+            steps = np.diff(np.asarray(t[a:b + 1], dtype=np.float64))
+            if steps.size and not np.all(steps > 0):
+                k = a + int(np.argmin(steps > 0))
+                raise ExportError(f"{run.path}: {tr.topic}: seq {int(tr.seq[k + 1])}: t = {float(t[k + 1]):g} s after "
+                                  f"t = {float(t[k]):g} s (seq {int(tr.seq[k])}): expected times that increase with "
+                                  f"seq (CCSDS data lines are in time order)")
+        tracks.append((name, body, tr, epochs, system))
+    return tracks
+
+
+def _check_epochs(run: Run, tr: Track, epochs: _Epochs) -> None:
+    """ExportError unless every state's epoch is a date of a CCSDS file (a four-digit year),
+    checked a chunk at a time without keeping any text: a chunk whose Julian dates lie in
+    :data:`_PLAIN_JD` passes as it is, any other has its epochs made and matched.  A time
+    no calendar date can show fails before an ill-written one anywhere in the track."""
+    bad = None  # (k, epoch) of the first epoch that is no CCSDS epoch
+    for a, b in _chunks(0, len(tr)):
         try:
-            epochs, system = ccsds_epochs(run, tr.t, tr.log_time)
+            times = epochs.times(epochs.t[a:b], epochs.log_time[a:b])
+            jd = times.jd1 + times.jd2
+            if np.all((jd > _PLAIN_JD[0]) & (jd < _PLAIN_JD[1])):
+                continue
+            text = _isot(times)
         except ValueError as exc:  # erfa's "unacceptable date": a hostile t (1e300 s) beyond any calendar
             raise ExportError(f"{run.path}: {tr.topic}: t from {float(np.min(tr.t)):g} to {float(np.max(tr.t)):g} s: "
                               f"expected times a calendar date can show ({type(exc).__name__}: {exc})") from None
-        for k, epoch in enumerate(epochs):  # CCSDS ASCII time: a four-digit year, 0001 to 9999
-            if not _CCSDS_EPOCH.match(epoch):
-                raise ExportError(f"{run.path}: {tr.topic}: seq {int(tr.seq[k])}: t = {float(tr.t[k]):g} s is "
-                                  f"{epoch}: expected a date of the years 0001-9999 (a CCSDS epoch)")
-        steps = np.diff(np.asarray(tr.t, dtype=np.float64))
-        if steps.size and not np.all(steps > 0):  # OEM and AEM data lines: epochs in increasing order
-            k = int(np.argmin(steps > 0))
-            raise ExportError(f"{run.path}: {tr.topic}: seq {int(tr.seq[k + 1])}: t = {float(tr.t[k + 1]):g} s after "
-                              f"t = {float(tr.t[k]):g} s (seq {int(tr.seq[k])}): expected times that increase with "
-                              f"seq (CCSDS data lines are in time order)")
-        yield name, body, tr, epochs, system
+        if bad is None:  # CCSDS ASCII time: a four-digit year, 0001 to 9999
+            bad = next(((a + k, e) for k, e in enumerate(text) if not _CCSDS_EPOCH.match(e)), None)
+    if bad is not None:
+        k, epoch = bad
+        raise ExportError(f"{run.path}: {tr.topic}: seq {int(tr.seq[k])}: t = {float(tr.t[k]):g} s is "
+                          f"{epoch}: expected a date of the years 0001-9999 (a CCSDS epoch)")
 
 
-def _write_lines(path: Path, lines: list[str]) -> Path:
-    """Write ``lines`` to ``path``, each ended by a newline (a KVN message); returns ``path``."""
-    path.write_text("\n".join(lines) + "\n")
-    return path
+def _write_lines(f, lines: list[str]) -> None:
+    """Write ``lines`` to the open text file ``f``, each ended by a newline (a KVN message)."""
+    if lines:
+        f.write("\n".join(lines) + "\n")
+
+
+def _impulse_cuts(tr: Track, impulses: dict[float, float]) -> list[int]:
+    """The rows that start a new OEM segment: each ``k + 1`` whose ``t[k]`` is the step of
+    an impulsive burn (:func:`_impulse_steps`), ``k + 1`` still a row of ``tr``."""
+    if not impulses:
+        return []
+    t, steps = np.asarray(tr.t), np.fromiter(impulses, dtype=np.float64, count=len(impulses))
+    hits = [a + k for a, b in _chunks(0, len(tr)) for k in np.flatnonzero(np.isin(t[a:b], steps)).tolist()]
+    return [k + 1 for k in hits if k + 1 < len(tr)]
 
 
 def _impulse_steps(run: Run, name: str) -> dict[float, float]:
@@ -460,34 +618,38 @@ def write_oem(run: Run, out: Path) -> list[Path]:
         comment = (f"scenario {run.scenario.get('name', '?')}, epoch {run.scenario.get('epoch', '?')}; "
                    f"models {', '.join(sorted(set(tr.model)))}")
         impulses = _impulse_steps(run, name)
-        cuts = [k + 1 for k, t in enumerate(np.asarray(tr.t)) if float(t) in impulses and k + 1 < len(tr)]
-        bounds = [0, *cuts, len(tr)]
+        bounds = [0, *_impulse_cuts(tr, impulses), len(tr)]
         frame = frames[0] if len(frames) == 1 else "GCRF"
-        r, v = tr.r / 1e3, tr.v / 1e3
-        lines = []
-        for j in range(len(bounds) - 1):
-            a, b = bounds[j], bounds[j + 1]
-            head = _message_head("CCSDS_OEM_VERS", "3.0", run, tr, [comment], name, [("REF_FRAME", frame)], system,
-                                 epochs[a:b])
-            if j > 0:  # later segments: only the metadata block (the header is the file's)
-                head = head[head.index("META_START"):]
-                lines.append("")
-            lines += head + ["META_STOP", ""]
-            if j > 0:
-                dt = float(tr.t[a - 1])
-                lines.append(f"COMMENT after an impulsive burn of {impulses[dt]!r} m/s applied between "
-                             f"{epochs[a - 1]} and {epochs[a]} (a new segment: do not interpolate across it)")
-            lines.append("COMMENT position km, velocity km/s")
-            for k in range(a, b):
-                lines.append(" ".join([epochs[k], *map(_f, r[k]), *map(_f, v[k])]))
-        written.append(_write_lines(out / f"{name}.oem", lines))
+        path = out / f"{name}.oem"
+        with open(path, "w") as f:
+            for j in range(len(bounds) - 1):
+                a, b = bounds[j], bounds[j + 1]
+                head = _message_head("CCSDS_OEM_VERS", "3.0", run, tr, [comment], name, [("REF_FRAME", frame)],
+                                     system, epochs.at(a), epochs.at(b - 1))
+                lines = []
+                if j > 0:  # later segments: only the metadata block (the header is the file's)
+                    head = head[head.index("META_START"):]
+                    lines.append("")
+                lines += head + ["META_STOP", ""]
+                if j > 0:
+                    dt = float(tr.t[a - 1])
+                    lines.append(f"COMMENT after an impulsive burn of {impulses[dt]!r} m/s applied between "
+                                 f"{epochs.at(a - 1)} and {epochs.at(a)} (a new segment: do not interpolate across it)")
+                lines.append("COMMENT position km, velocity km/s")
+                _write_lines(f, lines)
+                for c, d in _chunks(a, b):  # the data lines a chunk at a time: r and v in km, km/s
+                    r, v = (tr.r[c:d] / 1e3).tolist(), (tr.v[c:d] / 1e3).tolist()
+                    _write_lines(f, [" ".join([ep, *map(repr, rk), *map(repr, vk)])
+                                     for ep, rk, vk in zip(epochs.of(c, d), r, v)])
+        written.append(path)
     return written
 
 
 def _body_rates(tr: Track) -> np.ndarray | None:
     """The attitude track's body rates ``w`` (rad/s, ``(n, 3)``) if every message carries them."""
     w = tr.fields.get("w")
-    if w is None or w.ndim != 2 or w.shape != (len(tr), 3) or not np.all(np.isfinite(w)):
+    if w is None or w.ndim != 2 or w.shape != (len(tr), 3) or not all(np.all(np.isfinite(w[a:b]))
+                                                                       for a, b in _chunks(0, len(tr))):
         return None
     return w
 
@@ -522,21 +684,21 @@ def write_aem(run: Run, out: Path, version: str = "2.0") -> list[Path]:
                          "components in ANGVEL_FRAME = SC_BODY_1 (body axes), deg/s: the recorded w (rad/s) * 180/pi;",
                          "dC/dt = -[w x] C."]
             meta_tail = [_kvn("ATTITUDE_TYPE", "QUATERNION/ANGVEL"), _kvn("ANGVEL_FRAME", "SC_BODY_1")]
-        lines = _message_head("CCSDS_AEM_VERS", version, run, tr, comments, name, frames, system, epochs) + [
-            *meta_tail,
-            "META_STOP",
-            "",
-            "DATA_START",
-        ]
-        q = tr.q
-        w_deg = np.degrees(w) if w is not None else None
-        for k, ep in enumerate(epochs):
-            row = [ep, _f(q[k, 1]), _f(q[k, 2]), _f(q[k, 3]), _f(q[k, 0])]
-            if w_deg is not None:
-                row += [_f(w_deg[k, 0]), _f(w_deg[k, 1]), _f(w_deg[k, 2])]
-            lines.append(" ".join(row))
-        lines.append("DATA_STOP")
-        written.append(_write_lines(out / f"{name}.aem", lines))
+        head = _message_head("CCSDS_AEM_VERS", version, run, tr, comments, name, frames, system, epochs.at(0),
+                             epochs.at(len(tr) - 1))
+        path = out / f"{name}.aem"
+        with open(path, "w") as f:
+            _write_lines(f, [*head, *meta_tail, "META_STOP", "", "DATA_START"])
+            for a, b in _chunks(0, len(tr)):  # the data lines a chunk at a time: Q1 Q2 Q3 QC [ANGVEL deg/s]
+                q = np.asarray(tr.q[a:b], dtype=np.float64).tolist()
+                if w is None:
+                    lines = [f"{ep} {qk[1]!r} {qk[2]!r} {qk[3]!r} {qk[0]!r}" for ep, qk in zip(epochs.of(a, b), q)]
+                else:
+                    lines = [f"{ep} {qk[1]!r} {qk[2]!r} {qk[3]!r} {qk[0]!r} {wk[0]!r} {wk[1]!r} {wk[2]!r}"
+                             for ep, qk, wk in zip(epochs.of(a, b), q, np.degrees(w[a:b]).tolist())]
+                _write_lines(f, lines)
+            _write_lines(f, ["DATA_STOP"])
+        written.append(path)
     return written
 
 
@@ -558,6 +720,14 @@ def frame_transforms(run: Run) -> list[tuple[int, str, bytes]]:
     held).  A body with an orbit and no attitude is the frame ``<body>/position``: its
     position only, axes parallel to the parent frame (no attitude is made up for it).
     """
+    out = [m for frame in _body_frames(run) for m in _transform_messages(*frame)]
+    out.sort(key=lambda m: m[0])
+    return out
+
+
+def _body_frames(run: Run) -> list[tuple[str, str, str, np.ndarray, np.ndarray, np.ndarray]]:
+    """``(topic, parent, child, times, position_km, rotation_xyzw)`` of each body's
+    FrameTransforms (:func:`frame_transforms`) as arrays, one row per instant in time order."""
     out = []
     for name, body in run.bodies.items():
         orbit, att = body.orbit, body.attitude
@@ -579,12 +749,17 @@ def frame_transforms(run: Run) -> list[tuple[int, str, bytes]]:
                 have = np.isin(times, tr.log_time)
                 last = np.maximum.accumulate(np.where(have, np.arange(times.size), 0))
                 arr[:] = arr[last]
-        topic = f"foxglove/{name}/tf"
-        for k, lt in enumerate(times.tolist()):
-            msg = frame_transform(stamp(lt), parent, child, pos[k], rot[k])
-            out.append((lt, topic, json.dumps(msg, separators=(",", ":")).encode()))
-    out.sort(key=lambda m: m[0])
+        out.append((f"foxglove/{name}/tf", parent, child, times, pos, rot))
     return out
+
+
+def _transform_messages(topic: str, parent: str, child: str, times: np.ndarray, pos: np.ndarray, rot: np.ndarray):
+    """The ``(log_time, topic, payload)`` of one body's FrameTransforms (:func:`_body_frames`)
+    in time order, made :data:`_CHUNK_ROWS` at a time."""
+    encode = json.JSONEncoder(separators=(",", ":")).encode  # json.dumps(..., separators=...), one encoder for all
+    for a, b in _chunks(0, times.size):
+        for lt, p, r in zip(times[a:b].tolist(), pos[a:b].tolist(), rot[a:b].tolist()):
+            yield lt, topic, encode(frame_transform(stamp(lt), parent, child, p, r)).encode()
 
 
 def scene_updates(run: Run, max_line_points: int = MAX_LINE_POINTS,
@@ -660,8 +835,10 @@ def write_foxglove(run: Run, out: Path, max_line_points: int = MAX_LINE_POINTS) 
     except (TypeError, ValueError):
         raise ExportError(f"{run.path}: metadata epoch_unix_ns {str(raw)[:40]!r}: expected an integer number of ns "
                           f"(int64)") from None
-    # the scene first: at the first instant it is there before the first transform
-    tfs = sorted(scene_updates(run, max_line_points) + frame_transforms(run), key=lambda m: m[0])
+    # the scene first: at the first instant it is there before the first transform; then the
+    # bodies' transforms in time order (at one instant in body order), each made when written
+    frames = [_transform_messages(*frame) for frame in _body_frames(run)]
+    tfs = heapq.merge(scene_updates(run, max_line_points), *frames, key=lambda m: m[0])
     with open_stream(run.path) as stream, McapRecorder(path, run.scenario, epoch_ns=epoch_ns) as rec:
         registered: set[str] = set()
         seqs: dict[str, int] = {}
