@@ -99,6 +99,7 @@ import numpy as np
 
 from astrodyn.jit import jit
 from astrodyn.orbit.floating import sinh_parts, x_minus_sin
+from astrodyn.orbit.inputs import broadcast_shapes_named, real_array
 from astrodyn.orbit.kepler import solve_kepler, solve_kepler_hyperbolic
 
 __all__ = [
@@ -129,18 +130,39 @@ _TWO_PI = 2.0 * np.pi
 # ---------------------------------------------------------------- helpers
 
 
-def _vector(x, name):
-    a = np.asarray(x, dtype=np.float64)
+def _vector(x, name, who):
+    a = real_array(x, name, who)
     if a.ndim == 0 or a.shape[-1] != 3:
-        raise ValueError(f"{name} must have shape (..., 3) (Cartesian components), got shape {a.shape}")
+        raise ValueError(f"{who}: {name} must have shape (..., 3) (Cartesian components), got shape {a.shape}")
     return a
 
 
-def _positive_mu(mu):
-    mu = np.asarray(mu, dtype=np.float64)
+def _positive_mu(mu, who):
+    mu = real_array(mu, "mu", who)
     if np.any(mu <= 0):  # NaN compares False: NaN mu propagates to NaN elements
-        raise ValueError("mu (gravitational parameter, m^3/s^2) must be > 0")
+        raise ValueError(f"{who}: mu (gravitational parameter, m^3/s^2) must be > 0")
     return mu
+
+
+def _state_lead(r, v, mu, who):
+    """The broadcast leading shape of ``r, v`` (..., 3) and ``mu``; ValueError naming the three
+    shapes when they do not broadcast (:func:`astrodyn.orbit.inputs.broadcast_shapes_named`)."""
+    return broadcast_shapes_named(who, {"r": r.shape[:-1], "v": v.shape[:-1], "mu": mu.shape},
+                                  shown={"r": r.shape, "v": v.shape}, what="leading shapes")
+
+
+def _reals(who, **args):
+    """Each keyword argument as float64 (:func:`astrodyn.orbit.inputs.real_array`), in order."""
+    return [real_array(x, name, who) for name, x in args.items()]
+
+
+def _broadcast(who, names, arrays):
+    """``np.broadcast_arrays(*arrays)``; ValueError naming each argument and its shape."""
+    try:
+        return np.broadcast_arrays(*arrays)
+    except ValueError:
+        broadcast_shapes_named(who, {n: a.shape for n, a in zip(names, arrays)})
+        raise
 
 
 def _dot(a, b):
@@ -207,9 +229,10 @@ def elements_from_state(r, v, mu) -> Elements:
     Algorithm: Vallado (4th ed.) Algorithm 9 RV2COE, with every angle from
     atan2 and the singular cases of the module docstring.
     """
-    r = _vector(r, "r")
-    v = _vector(v, "v")
-    mu = _positive_mu(mu)
+    r = _vector(r, "r", "elements_from_state")
+    v = _vector(v, "v", "elements_from_state")
+    mu = _positive_mu(mu, "elements_from_state")
+    _state_lead(r, v, mu, "elements_from_state")
 
     h = np.cross(r, v)
     hnorm = _norm(h)
@@ -274,13 +297,15 @@ def state_from_elements(p, e, i, raan, argp, nu, mu):
 
     Reference: Vallado (4th ed.) Algorithm 10 COE2RV; Curtis Algorithm 4.5.
     """
-    p, e, i, raan, argp, nu = (np.asarray(x, dtype=np.float64) for x in (p, e, i, raan, argp, nu))
-    mu = _positive_mu(mu)
+    who = "state_from_elements"
+    p, e, i, raan, argp, nu = _reals(who, p=p, e=e, i=i, raan=raan, argp=argp, nu=nu)
+    mu = _positive_mu(mu, who)
     if np.any(p <= 0):
-        raise ValueError("p (semi-latus rectum, m) must be > 0")
+        raise ValueError(f"{who}: p (semi-latus rectum, m) must be > 0")
     if np.any(e < 0):
-        raise ValueError("e (eccentricity) must be >= 0")
-    p, e, i, raan, argp, nu, mu = np.broadcast_arrays(p, e, i, raan, argp, nu, mu)
+        raise ValueError(f"{who}: e (eccentricity) must be >= 0")
+    p, e, i, raan, argp, nu, mu = _broadcast(who, ("p", "e", "i", "raan", "argp", "nu", "mu"),
+                                             (p, e, i, raan, argp, nu, mu))
     cnu, snu = np.cos(nu), np.sin(nu)
     denom = 1.0 + e * cnu
     if np.any(denom <= 0):
@@ -330,9 +355,10 @@ def equinoctial_from_state(r, v, mu, retrograde=False) -> ModifiedEquinoctial:
     ``h = -w_y / (1 + I w_z)``; ``f, g`` are the eccentricity vector's
     components on ``f_hat, g_hat``; ``L = atan2(r . g_hat, r . f_hat)``.
     """
-    r = _vector(r, "r")
-    v = _vector(v, "v")
-    mu = _positive_mu(mu)
+    r = _vector(r, "r", "equinoctial_from_state")
+    v = _vector(v, "v", "equinoctial_from_state")
+    mu = _positive_mu(mu, "equinoctial_from_state")
+    _state_lead(r, v, mu, "equinoctial_from_state")
     I = -1.0 if retrograde else 1.0
     hv = np.cross(r, v)
     hnorm = _norm(hv)
@@ -354,11 +380,12 @@ def state_from_equinoctial(p, f, g, h, k, L, mu, retrograde=False):
     equinoctial elements (Walker, Ireland & Owens 1985, eqs. 3-4, written with
     the equinoctial basis of the module docstring).  ``p > 0``; on a
     hyperbola ``1 + f cos L + g sin L`` must be > 0."""
-    p, f, g, h, k, L = (np.asarray(x, dtype=np.float64) for x in (p, f, g, h, k, L))
-    mu = _positive_mu(mu)
+    who = "state_from_equinoctial"
+    p, f, g, h, k, L = _reals(who, p=p, f=f, g=g, h=h, k=k, L=L)
+    mu = _positive_mu(mu, who)
     if np.any(p <= 0):
-        raise ValueError("p (semi-latus rectum, m) must be > 0")
-    p, f, g, h, k, L, mu = np.broadcast_arrays(p, f, g, h, k, L, mu)
+        raise ValueError(f"{who}: p (semi-latus rectum, m) must be > 0")
+    p, f, g, h, k, L, mu = _broadcast(who, ("p", "f", "g", "h", "k", "L", "mu"), (p, f, g, h, k, L, mu))
     I = -1.0 if retrograde else 1.0
     cL, sL = np.cos(L), np.sin(L)
     w = 1.0 + f * cL + g * sL
@@ -378,6 +405,44 @@ def state_from_equinoctial(p, f, g, h, k, L, mu, retrograde=False):
 def _unwrap_like(angle, reference):
     """Add the multiple of 2 pi that brings ``angle`` within pi of ``reference``."""
     return angle + _TWO_PI * np.round((reference - angle) / _TWO_PI)
+
+
+_ELLIPTIC = "0 <= e < 1 (elliptic)"
+_HYPERBOLIC = "e > 1 (hyperbolic)"
+
+
+def _anomaly_args(who, name, x, e, hyperbolic):
+    """The arguments of an anomaly helper checked: ``x`` (named ``name``) and ``e`` float64
+    (TypeError naming one that is not real numbers), their shapes broadcast (ValueError
+    naming both), and every finite ``e`` inside the helper's domain -- ``0 <= e < 1``, or
+    ``e > 1`` when ``hyperbolic`` -- else ValueError in :func:`solve_kepler`'s words.  NaN
+    and infinite ``e`` pass (their elements come out NaN or infinite, as in solve_kepler).
+    No Python loop over the elements: the domain test is ``e.min()`` / ``e.max()``, and the
+    full element-wise test only when those are out of the domain or NaN."""
+    if type(x) is float and type(e) is float and _in_domain(e, hyperbolic):  # one value: the cheap path
+        return np.asarray(x), np.asarray(e)
+    x = real_array(x, name, who)
+    e = real_array(e, "e", who)
+    if x.shape != e.shape:
+        broadcast_shapes_named(who, {name: x.shape, "e": e.shape})
+    if e.ndim == 0 or e.size == 0:
+        inside = e.size == 0 or _in_domain(float(e), hyperbolic)
+    elif hyperbolic:
+        inside = e.min() > 1.0  # NaN anywhere: False, and the test below looks closer
+    else:
+        inside = e.min() >= 0.0 and e.max() < 1.0
+    if not inside:
+        outside = (e <= 1.0) if hyperbolic else ((e < 0.0) | (e >= 1.0))  # NaN compares False
+        bad = (outside & np.isfinite(e)).ravel()
+        if bad.any():
+            ev = float(e.ravel()[bad][0])
+            raise ValueError(f"{who}: e must satisfy {_HYPERBOLIC if hyperbolic else _ELLIPTIC}; got e = {ev!r}")
+    return x, e
+
+
+def _in_domain(ev, hyperbolic):
+    """Whether one eccentricity passes :func:`_anomaly_args` (NaN and +-inf do)."""
+    return not math.isfinite(ev) or (ev > 1.0 if hyperbolic else 0.0 <= ev < 1.0)
 
 
 # Kepler's equation residual pieces: the series kernels of astrodyn.orbit.kepler
@@ -400,70 +465,106 @@ def _mean_from_hyperbolic_flat(F, e, out):
 
 
 def _flat_kernel(kernel, x, e):
-    """Run a compiled per-element kernel over broadcast ``(x, e)``."""
-    x, e = np.broadcast_arrays(np.asarray(x, dtype=np.float64), np.asarray(e, dtype=np.float64))
+    """Run a compiled per-element kernel over broadcast float64 ``(x, e)``."""
+    x, e = np.broadcast_arrays(x, e)
     out = np.empty(x.shape)
     kernel(np.ascontiguousarray(x).ravel(), np.ascontiguousarray(e).ravel(), out.reshape(-1))
     return _out(out)
 
 
-def eccentric_from_true(nu, e):
-    """Eccentric anomaly ``E`` (rad) from true anomaly ``nu`` on an ellipse
-    (0 <= e < 1): ``E = atan2(sqrt(1 - e^2) sin nu, e + cos nu)`` (Vallado
-    sec. 2.2, in the atan2 form valid in every quadrant), in the same
-    revolution as ``nu``."""
-    nu, e = np.asarray(nu, dtype=np.float64), np.asarray(e, dtype=np.float64)
+# The unchecked bodies (float64 arrays in): the public helpers check their arguments first;
+# mean_from_true / true_from_mean call these on the elements of each conic.
+
+
+def _eccentric_from_true(nu, e):
     E = np.arctan2(np.sqrt((1.0 - e) * (1.0 + e)) * np.sin(nu), e + np.cos(nu))
     return _out(_unwrap_like(E, nu))
 
 
-def true_from_eccentric(E, e):
-    """True anomaly ``nu`` (rad) from eccentric anomaly on an ellipse:
-    ``nu = 2 atan2(sqrt(1 + e) sin(E/2), sqrt(1 - e) cos(E/2))`` (half-angle
-    form, accurate as e -> 1), in the same revolution as ``E``."""
-    E, e = np.asarray(E, dtype=np.float64), np.asarray(e, dtype=np.float64)
+def _true_from_eccentric(E, e):
     nu = 2.0 * np.arctan2(np.sqrt(1.0 + e) * np.sin(0.5 * E), np.sqrt(1.0 - e) * np.cos(0.5 * E))
     return _out(_unwrap_like(nu, E))
 
 
-def hyperbolic_from_true(nu, e):
-    """Hyperbolic anomaly ``F`` from true anomaly on a hyperbola (e > 1):
-    ``sinh F = sqrt(e^2 - 1) sin nu / (1 + e cos nu)`` (Vallado sec. 2.2), so
-    ``F = asinh(...)`` with no loss near ``nu = 0``.  ``nu`` is taken modulo
-    2 pi into (-pi, pi] and must lie between the asymptotes (else NaN)."""
-    nu, e = np.asarray(nu, dtype=np.float64), np.asarray(e, dtype=np.float64)
+def _hyperbolic_from_true(nu, e):
     denom = 1.0 + e * np.cos(nu)
     with np.errstate(invalid="ignore", divide="ignore"):
         F = np.arcsinh(np.sqrt((e - 1.0) * (e + 1.0)) * np.sin(nu) / denom)
     return _out(np.where(denom > 0.0, F, np.nan))
 
 
+def _true_from_hyperbolic(F, e):
+    return _out(2.0 * np.arctan2(np.sqrt(e + 1.0) * np.sinh(0.5 * F), np.sqrt(e - 1.0) * np.cosh(0.5 * F)))
+
+
+def eccentric_from_true(nu, e):
+    """Eccentric anomaly ``E`` (rad) from true anomaly ``nu`` on an ellipse
+    (0 <= e < 1): ``E = atan2(sqrt(1 - e^2) sin nu, e + cos nu)`` (Vallado
+    sec. 2.2, in the atan2 form valid in every quadrant), in the same
+    revolution as ``nu``.
+
+    Like every anomaly helper here: vectorized (``nu`` and ``e`` broadcast; ValueError
+    naming both shapes if they do not); a finite ``e`` outside the helper's domain anywhere
+    in the array raises ValueError (here ``0 <= e < 1``, as :func:`solve_kepler`); NaN or
+    infinite ``e`` gives NaN (or infinite) elements and no error, as in solve_kepler;
+    arguments that are not real numbers raise TypeError naming them."""
+    nu, e = _anomaly_args("eccentric_from_true", "nu", nu, e, False)
+    return _eccentric_from_true(nu, e)
+
+
+def true_from_eccentric(E, e):
+    """True anomaly ``nu`` (rad) from eccentric anomaly on an ellipse (0 <= e < 1):
+    ``nu = 2 atan2(sqrt(1 + e) sin(E/2), sqrt(1 - e) cos(E/2))`` (half-angle
+    form, accurate as e -> 1), in the same revolution as ``E``.  Arguments and
+    errors as :func:`eccentric_from_true`."""
+    E, e = _anomaly_args("true_from_eccentric", "E", E, e, False)
+    return _true_from_eccentric(E, e)
+
+
+def hyperbolic_from_true(nu, e):
+    """Hyperbolic anomaly ``F`` from true anomaly on a hyperbola (e > 1):
+    ``sinh F = sqrt(e^2 - 1) sin nu / (1 + e cos nu)`` (Vallado sec. 2.2), so
+    ``F = asinh(...)`` with no loss near ``nu = 0``.  ``nu`` is taken modulo
+    2 pi into (-pi, pi] and must lie between the asymptotes (else NaN).
+    Arguments and errors as :func:`eccentric_from_true`, with the domain ``e > 1``
+    (as :func:`solve_kepler_hyperbolic`)."""
+    nu, e = _anomaly_args("hyperbolic_from_true", "nu", nu, e, True)
+    return _hyperbolic_from_true(nu, e)
+
+
 def true_from_hyperbolic(F, e):
     """True anomaly in (-pi, pi) from hyperbolic anomaly (e > 1):
-    ``nu = 2 atan2(sqrt(e + 1) sinh(F/2), sqrt(e - 1) cosh(F/2))``."""
-    F, e = np.asarray(F, dtype=np.float64), np.asarray(e, dtype=np.float64)
-    return _out(2.0 * np.arctan2(np.sqrt(e + 1.0) * np.sinh(0.5 * F), np.sqrt(e - 1.0) * np.cosh(0.5 * F)))
+    ``nu = 2 atan2(sqrt(e + 1) sinh(F/2), sqrt(e - 1) cosh(F/2))``.  Arguments and
+    errors as :func:`hyperbolic_from_true`."""
+    F, e = _anomaly_args("true_from_hyperbolic", "F", F, e, True)
+    return _true_from_hyperbolic(F, e)
 
 
 def mean_from_eccentric(E, e):
     """Kepler's equation ``M = E - e sin E``, written as
     ``(1 - e) E + e (E - sin E)`` so that near e -> 1, E -> 0 no digits are
-    lost (the naive form loses about 3 there)."""
+    lost (the naive form loses about 3 there).  0 <= e < 1; arguments and errors as
+    :func:`eccentric_from_true`."""
+    E, e = _anomaly_args("mean_from_eccentric", "E", E, e, False)
     return _flat_kernel(_mean_from_eccentric_flat, E, e)
 
 
 def mean_from_hyperbolic(F, e):
     """Hyperbolic Kepler equation ``M = e sinh F - F``, written as
-    ``(e - 1) sinh F + (sinh F - F)`` (no cancellation near e -> 1, F -> 0)."""
+    ``(e - 1) sinh F + (sinh F - F)`` (no cancellation near e -> 1, F -> 0).
+    e > 1; arguments and errors as :func:`hyperbolic_from_true`."""
+    F, e = _anomaly_args("mean_from_hyperbolic", "F", F, e, True)
     return _flat_kernel(_mean_from_hyperbolic_flat, F, e)
 
 
-def _per_conic(x, e, ellipse, parabola, hyperbola):
+def _per_conic(who, name, x, e, ellipse, parabola, hyperbola):
     """Apply ``ellipse(x, e)``, ``parabola(x)`` or ``hyperbola(x, e)`` per
     element according to ``e < 1``, ``e == 1``, ``e > 1`` (NaN e gives NaN)."""
-    x, e = np.broadcast_arrays(np.asarray(x, dtype=np.float64), np.asarray(e, dtype=np.float64))
+    x = real_array(x, name, who)
+    e = real_array(e, "e", who)
+    x, e = _broadcast(who, (name, "e"), (x, e))
     if np.any(e < 0):
-        raise ValueError("e (eccentricity) must be >= 0")
+        raise ValueError(f"{who}: e (eccentricity) must be >= 0; got e = {float(e[e < 0].ravel()[0])!r}")
     out = np.full(x.shape, np.nan)
     for mask, fn in ((e < 1.0, ellipse), (e > 1.0, hyperbola)):
         if np.any(mask):
@@ -493,13 +594,16 @@ def mean_from_true(nu, e):
     ``D = tan(nu/2)``; hyperbola ``M = e sinh F - F``.  On the ellipse the
     revolution count of ``nu`` is kept; on the parabola ``nu`` is reduced to
     (-pi, pi] first; on the hyperbola ``nu`` must lie between the asymptotes
-    (else NaN)."""
+    (else NaN).  ``e >= 0`` (ValueError otherwise), NaN ``e`` gives NaN; shapes and
+    types as :func:`eccentric_from_true`."""
     return _per_conic(
+        "mean_from_true",
+        "nu",
         nu,
         e,
-        lambda nu, e: mean_from_eccentric(eccentric_from_true(nu, e), e),
+        lambda nu, e: _flat_kernel(_mean_from_eccentric_flat, _eccentric_from_true(nu, e), e),
         _barker_mean,
-        lambda nu, e: mean_from_hyperbolic(hyperbolic_from_true(nu, e), e),
+        lambda nu, e: _flat_kernel(_mean_from_hyperbolic_flat, _hyperbolic_from_true(nu, e), e),
     )
 
 
@@ -509,11 +613,13 @@ def true_from_mean(M, e):
     (revolution kept), hyperbola via ``solve_kepler_hyperbolic`` (nu in
     (-pi, pi)), parabola via the closed-form root of Barker's cubic
     ``D = 2 sinh(asinh(3 M / 2) / 3)`` (Cardano's hyperbolic form; no
-    cancellation for small or large M)."""
+    cancellation for small or large M).  Arguments and errors as :func:`mean_from_true`."""
     return _per_conic(
+        "true_from_mean",
+        "M",
         M,
         e,
-        lambda M, e: true_from_eccentric(solve_kepler(M, e), e),
+        lambda M, e: _true_from_eccentric(solve_kepler(M, e), e),
         _barker_true,
-        lambda M, e: true_from_hyperbolic(solve_kepler_hyperbolic(M, e), e),
+        lambda M, e: _true_from_hyperbolic(solve_kepler_hyperbolic(M, e), e),
     )

@@ -33,7 +33,10 @@ How the accuracy is obtained (every piece is exercised by ``tests/test_kepler.py
   ``MAX_ITER`` iterations, so NaN or pathological inputs never hang.
 
 NaN in ``M`` or ``e`` gives NaN; ``M = +-inf`` gives NaN.  ``e`` outside the
-allowed range (finite) raises ``ValueError``.
+allowed range (finite) raises ``ValueError``; so do shapes that do not broadcast (naming
+``M`` and ``e`` with their shapes).  Arguments that are not real numbers (``None``,
+complex, strings, object arrays, bools) raise ``TypeError`` naming them
+(:mod:`astrodyn.orbit.inputs`).
 
 Compiled kernels shared with :mod:`astrodyn.orbit.universal` (public names, callable
 from other numba code; the floating-point pieces they use live in
@@ -70,6 +73,7 @@ from astrodyn.orbit.floating import (
     sinh_parts_vec,
     x_minus_sin,
 )
+from astrodyn.orbit.inputs import broadcast_shapes_named, real_array
 
 __all__ = ["solve_kepler", "solve_kepler_hyperbolic"]
 
@@ -369,10 +373,10 @@ def _kepler_hyp_loop_par(M, e, out):
 # ---------------------------------------------------------------------------
 # public, vectorized
 # ---------------------------------------------------------------------------
-def _broadcast_flat(M, e):
-    M = np.asarray(M, dtype=np.float64)
-    e = np.asarray(e, dtype=np.float64)
-    shape = np.broadcast_shapes(M.shape, e.shape)
+def _broadcast_flat(M, e, who):
+    M = real_array(M, "M", who)
+    e = real_array(e, "e", who)
+    shape = broadcast_shapes_named(who, {"M": M.shape, "e": e.shape})
     Mf = np.ascontiguousarray(np.broadcast_to(M, shape)).reshape(-1)
     ef = np.ascontiguousarray(np.broadcast_to(e, shape)).reshape(-1)
     return shape, Mf, ef
@@ -407,14 +411,18 @@ def solve_kepler(M, e):
     Raises
     ------
     ValueError
-        If a finite ``e`` is outside ``[0, 1)``.
+        If a finite ``e`` is outside ``[0, 1)``, or the shapes of ``M`` and ``e`` do not
+        broadcast (names both with their shapes).
+    TypeError
+        ``M`` or ``e`` not real numbers (``None``, complex, str, object, bool; names it:
+        :mod:`astrodyn.orbit.inputs`).
     """
     if type(M) is float and type(e) is float and 0.0 <= e < 1.0:  # fast path for one value
         return _kepler_ell_scalar(M, e)
-    shape, Mf, ef = _broadcast_flat(M, e)
+    shape, Mf, ef = _broadcast_flat(M, e, "solve_kepler")
     bad = np.isfinite(ef) & ~((ef >= 0.0) & (ef < 1.0))
     if bad.any():
-        raise ValueError(f"solve_kepler: e must satisfy 0 <= e < 1 (elliptic); got e = {ef[bad][0]!r}")
+        raise ValueError(f"solve_kepler: e must satisfy 0 <= e < 1 (elliptic); got e = {float(ef[bad][0])!r}")
     return _run(_kepler_ell_loop, _kepler_ell_loop_par, Mf, ef, shape)
 
 
@@ -438,13 +446,13 @@ def solve_kepler_hyperbolic(M, e):
 
     Raises
     ------
-    ValueError
-        If a finite ``e`` is not ``> 1``.
+    ValueError, TypeError
+        If a finite ``e`` is not ``> 1``; otherwise as :func:`solve_kepler`.
     """
     if type(M) is float and type(e) is float and e > 1.0:  # fast path for one value
         return _kepler_hyp_scalar(M, e, e - 1.0)
-    shape, Mf, ef = _broadcast_flat(M, e)
+    shape, Mf, ef = _broadcast_flat(M, e, "solve_kepler_hyperbolic")
     bad = np.isfinite(ef) & ~(ef > 1.0)
     if bad.any():
-        raise ValueError(f"solve_kepler_hyperbolic: e must satisfy e > 1 (hyperbolic); got e = {ef[bad][0]!r}")
+        raise ValueError(f"solve_kepler_hyperbolic: e must satisfy e > 1 (hyperbolic); got e = {float(ef[bad][0])!r}")
     return _run(_kepler_hyp_loop, _kepler_hyp_loop_par, Mf, ef, shape)

@@ -92,6 +92,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from astrodyn.jit import jit
+from astrodyn.orbit.inputs import broadcast_shapes_named, real_array, real_scalar
 from astrodyn.orbit.universal import propagate, propagate_rows
 
 __all__ = [
@@ -290,10 +291,11 @@ def _zonal_potential_kernel(r, mu, R, J, out):
 # --------------------------------------------------------------------------- array wrappers
 
 
-def _rows(x, name):
-    a = np.asarray(x, dtype=np.float64)
+def _rows(x, name, who=""):
+    a = real_array(x, name, who)
     if a.ndim == 0 or a.shape[-1] != 3:
-        raise ValueError(f"{name} must have shape (..., 3) (Cartesian components in m), got shape {a.shape}")
+        prefix = f"{who}: " if who else ""
+        raise ValueError(f"{prefix}{name} must have shape (..., 3) (Cartesian components in m), got shape {a.shape}")
     return a
 
 
@@ -305,11 +307,22 @@ def point_mass_difference(x, dx, mu):
     m/s^2 of the broadcast shape.  Encke's deviation acceleration is
     ``point_mass_difference(rho, delta, mu)``; the third-body perturbation is
     ``-point_mass_difference(s, -r, mu3)``."""
-    x, dx = np.broadcast_arrays(_rows(x, "x"), _rows(dx, "dx"))
+    return _point_mass_difference(x, dx, mu, "point_mass_difference", ("x", "dx", "mu"))
+
+
+def _point_mass_difference(x, dx, mu, who, names):
+    x, dx = _rows(x, names[0], who), _rows(dx, names[1], who)
+    mu = real_scalar(mu, names[2], who, "m^3/s^2")
+    try:
+        x, dx = np.broadcast_arrays(x, dx)
+    except ValueError:
+        broadcast_shapes_named(who, {names[0]: x.shape[:-1], names[1]: dx.shape[:-1]},
+                               shown={names[0]: x.shape, names[1]: dx.shape}, what="leading shapes")
+        raise
     shape = dx.shape
     out = np.zeros((int(np.prod(shape[:-1], dtype=np.int64)), 3))
     _point_mass_difference_kernel(
-        np.ascontiguousarray(x).reshape(-1, 3), np.ascontiguousarray(dx).reshape(-1, 3), float(mu), 1.0, out
+        np.ascontiguousarray(x).reshape(-1, 3), np.ascontiguousarray(dx).reshape(-1, 3), mu, 1.0, out
     )
     return out.reshape(shape)
 
@@ -319,17 +332,20 @@ def third_body_acceleration(r, s, mu3):
     ``mu3`` at ``s`` (both relative to the central body, shape ``(..., 3)``,
     broadcast): ``mu3 [(s - r)/|s - r|^3 - s/|s|^3]`` via Battin's f(q)
     (module docstring)."""
-    r = _rows(r, "r")
-    s = _rows(s, "s")
-    return -point_mass_difference(s, -r, mu3)
+    who = "third_body_acceleration"
+    r = _rows(r, "r", who)
+    s = _rows(s, "s", who)
+    broadcast_shapes_named(who, {"r": r.shape[:-1], "s": s.shape[:-1]}, shown={"r": r.shape, "s": s.shape},
+                           what="leading shapes")
+    return -_point_mass_difference(s, -r, mu3, who, ("s", "r", "mu3"))
 
 
-def _zonal_call(kernel, r, mu, R, J, per_row):
-    r = _rows(r, "r")
+def _zonal_call(kernel, r, mu, R, J, per_row, who):
+    r = _rows(r, "r", who)
     shape = r.shape[:-1] + ((3,) if per_row else ())
     flat = np.ascontiguousarray(r).reshape(-1, 3)
     out = np.zeros((flat.shape[0], 3) if per_row else flat.shape[0])
-    kernel(flat, float(mu), float(R), np.asarray(J, dtype=np.float64).reshape(-1), out)
+    kernel(flat, real_scalar(mu, "mu", who), real_scalar(R, "R", who), real_array(J, "J", who).reshape(-1), out)
     return out.reshape(shape)
 
 
@@ -338,14 +354,15 @@ def zonal_acceleration(r, mu, R, J):
     body-fixed axes with z along the pole; for zonals any frame sharing the
     pole works).  ``J = (J2, J3, ...)``, unnormalized.  J2 alone uses the
     fast closed form; otherwise Bonnet's recurrence (module docstring)."""
-    J = tuple(float(j) for j in np.atleast_1d(J))
+    who = "zonal_acceleration"
+    J = tuple(float(j) for j in np.atleast_1d(real_array(J, "J", who)))
     if len(J) == 1:
-        r = _rows(r, "r")
+        r = _rows(r, "r", who)
         flat = np.ascontiguousarray(r).reshape(-1, 3)
         out = np.zeros_like(flat)
-        _j2_kernel(flat, float(mu), float(R), J[0], out)
+        _j2_kernel(flat, real_scalar(mu, "mu", who), real_scalar(R, "R", who), J[0], out)
         return out.reshape(r.shape)
-    return _zonal_call(_zonal_kernel, r, mu, R, J, True)
+    return _zonal_call(_zonal_kernel, r, mu, R, J, True, who)
 
 
 def zonal_potential(r, mu, R, J):
@@ -353,7 +370,8 @@ def zonal_potential(r, mu, R, J):
     ``V_J = -(mu / r) sum_n J_n (R / r)^n P_n(z / r)``, so that
     ``zonal_acceleration = grad V_J`` and the conserved energy of a satellite
     is ``|v|^2 / 2 - mu / |r| - V_J``.  Shape ``r.shape[:-1]``."""
-    return _zonal_call(_zonal_potential_kernel, r, mu, R, tuple(np.atleast_1d(J)), False)
+    return _zonal_call(_zonal_potential_kernel, r, mu, R, np.atleast_1d(real_array(J, "J", "zonal_potential")), False,
+                       "zonal_potential")
 
 
 # --------------------------------------------------------------------------- declarative models
@@ -362,17 +380,29 @@ def zonal_potential(r, mu, R, J):
 @dataclass(frozen=True)
 class Zonal:
     """Zonal harmonics of the central body: ``mu`` (m^3/s^2), reference radius
-    ``R`` (m), ``J = (J2, J3, ...)`` unnormalized; pole along z."""
+    ``R`` (m), ``J = (J2, J3, ...)`` unnormalized; pole along z.
+
+    ``mu`` and ``R`` finite and > 0, every ``J`` finite (ValueError naming it; TypeError for
+    values that are not real numbers), stored as floats."""
 
     mu: float
     R: float
     J: tuple[float, ...] = ()
 
     def __post_init__(self):
-        object.__setattr__(self, "J", tuple(float(j) for j in self.J))
+        mu = real_scalar(self.mu, "mu", "Zonal", "m^3/s^2")
+        R = real_scalar(self.R, "R", "Zonal", "m")
+        if not (mu > 0 and R > 0 and math.isfinite(mu) and math.isfinite(R)):
+            raise ValueError(f"Zonal: mu and R must be finite and > 0, got mu={self.mu!r}, R={self.R!r}")
+        J = real_array(self.J, "J", "Zonal")
+        if J.ndim != 1:
+            raise ValueError(f"Zonal: J must be a sequence (J2, J3, ...), got shape {J.shape}")
+        if not np.isfinite(J).all():
+            raise ValueError(f"Zonal: J must be finite, got J = {tuple(float(j) for j in J)}")
+        object.__setattr__(self, "mu", mu)
+        object.__setattr__(self, "R", R)
+        object.__setattr__(self, "J", tuple(float(j) for j in J))
         object.__setattr__(self, "_J_array", np.array(self.J, dtype=np.float64))
-        if not (self.mu > 0 and self.R > 0):
-            raise ValueError(f"Zonal: mu and R must be > 0, got mu={self.mu!r}, R={self.R!r}")
 
     @property
     def trivial(self) -> bool:
@@ -398,16 +428,29 @@ class KeplerOrbit:
     (3,)) at time ``t0`` (s), about a centre of gravitational parameter ``mu``.
 
     For a third body orbiting the central body (both massive), ``mu`` is
-    ``mu_central + mu_third`` (their relative orbit).  Calling it with ``t``
-    returns the position (3,) at ``t`` via ``astrodyn.orbit.propagate``."""
+    ``mu_central + mu_third`` (their relative orbit).  Calling it with a scalar ``t``
+    returns the position (3,) at ``t`` via ``astrodyn.orbit.propagate`` (an array ``t``
+    raises ValueError naming it).  ``r0, v0`` of shape (3,) and ``mu > 0`` are checked
+    when it is made."""
 
     r0: Sequence[float]
     v0: Sequence[float]
     mu: float
     t0: float = 0.0
 
+    def __post_init__(self):
+        for name in ("r0", "v0"):
+            shape = real_array(getattr(self, name), name, "KeplerOrbit").shape
+            if shape != (3,):
+                raise ValueError(f"KeplerOrbit: {name} must have shape (3,), got shape {shape}")
+        mu = real_scalar(self.mu, "mu", "KeplerOrbit", "m^3/s^2")
+        if not mu > 0:
+            raise ValueError(f"KeplerOrbit: mu must be > 0 (m^3/s^2), got {self.mu!r}")
+        real_scalar(self.t0, "t0", "KeplerOrbit", "s")
+
     def __call__(self, t):
-        r, _ = propagate(np.asarray(self.r0, float), np.asarray(self.v0, float), float(t) - self.t0, self.mu)
+        t = real_scalar(t, "t", "KeplerOrbit", "s")
+        r, _ = propagate(np.asarray(self.r0, float), np.asarray(self.v0, float), t - self.t0, self.mu)
         return r
 
 
@@ -415,10 +458,25 @@ class KeplerOrbit:
 class ThirdBody:
     """Point-mass third body ``mu3`` (m^3/s^2) at ``r3_of_t(t)`` (m, relative to
     the central body; a callable such as :class:`KeplerOrbit`, or a constant
-    (3,) position)."""
+    (3,) position).
+
+    ``mu3`` finite and >= 0 (0: a trivial perturbation, skipped), stored as a float; a
+    constant position finite of shape (3,), checked here; a callable's result must have
+    shape (3,), checked at each call (ValueError naming ``r3_of_t``)."""
 
     mu3: float
     r3_of_t: Callable | Sequence[float]
+
+    def __post_init__(self):
+        mu3 = real_scalar(self.mu3, "mu3", "ThirdBody", "m^3/s^2")
+        if not (mu3 >= 0.0 and math.isfinite(mu3)):
+            raise ValueError(f"ThirdBody: mu3 must be finite and >= 0 (m^3/s^2), got {self.mu3!r}")
+        object.__setattr__(self, "mu3", mu3)
+        if not callable(self.r3_of_t):
+            s = real_array(self.r3_of_t, "r3_of_t", "ThirdBody")
+            if s.shape != (3,) or not np.isfinite(s).all():
+                raise ValueError(f"ThirdBody: r3_of_t (a constant position) must be 3 finite numbers in m, "
+                                 f"got {'shape ' + str(s.shape) if s.shape != (3,) else s.tolist()}")
 
     @property
     def trivial(self) -> bool:
@@ -426,7 +484,11 @@ class ThirdBody:
 
     def position(self, t):
         if callable(self.r3_of_t):
-            return np.asarray(self.r3_of_t(t), dtype=np.float64)
+            s = real_array(self.r3_of_t(t), "r3_of_t(t)", "ThirdBody")
+            if s.shape != (3,):
+                raise ValueError(f"ThirdBody: r3_of_t(t) must return a position of shape (3,) in m, "
+                                 f"got shape {s.shape} at t = {t}")
+            return s
         return np.asarray(self.r3_of_t, dtype=np.float64)
 
     def acceleration(self, t, r, v=None):
@@ -435,7 +497,7 @@ class ThirdBody:
     def _add_acceleration(self, t, r, v, out):
         """out += acceleration (propagator fast path): -(G(s - r) - G(s))."""
         s = np.ascontiguousarray(self.position(t), dtype=np.float64).reshape(1, 3)
-        _point_mass_difference_kernel(s, np.negative(r), float(self.mu3), -1.0, out)
+        _point_mass_difference_kernel(s, np.negative(r), self.mu3, -1.0, out)
 
 
 # --------------------------------------------------------------------------- propagator
@@ -465,6 +527,12 @@ class PerturbedStates:
     rectifications: int = 0
     message: str = ""
     perturbations: tuple = field(default=(), repr=False)
+
+
+def _describe(p) -> str:
+    """A perturbation in one short line (its repr, whitespace collapsed, at most 100 characters)."""
+    text = " ".join(repr(p).split())
+    return text if len(text) <= 100 else text[:97] + "..."
 
 
 def _active(perturbations):
@@ -502,10 +570,16 @@ def _central_acceleration(r, mu, a):
 
 @jit
 def _pack(dr_dt, a, L, V, out):
+    """out = the scaled derivative (dr/dt / L, a / V per body); returns whether all of it is finite."""
+    finite = True
     for k in range(L.shape[0]):
         for j in range(3):
-            out[6 * k + j] = dr_dt[k, j] / L[k]
-            out[6 * k + 3 + j] = a[k, j] / V[k]
+            x = dr_dt[k, j] / L[k]
+            y = a[k, j] / V[k]
+            out[6 * k + j] = x
+            out[6 * k + 3 + j] = y
+            finite = finite and math.isfinite(x) and math.isfinite(y)
+    return finite
 
 
 class _System:
@@ -569,8 +643,37 @@ class _System:
             else:
                 a += np.asarray(p.acceleration(t, r, v), dtype=np.float64)
         out = np.empty(6 * self.n)
-        _pack(xd, a, self.L, self.V, out)
+        if not _pack(xd, a, self.L, self.V, out):
+            raise RuntimeError(self._not_finite(t, r, v))
         return out
+
+    def _not_finite(self, t, r, v) -> str:
+        """Why the right-hand side at ``t`` is not finite, naming the culprit (the message of
+        the RuntimeError that stops the integration: scipy's DOP853 would otherwise shrink
+        its step without end on a NaN derivative, or loop forever on a NaN step size)."""
+        where = f"at t = {t:.9g} s" if math.isfinite(t) else f"at t = {t}"
+        head = "propagate_perturbed: "
+        if not (np.isfinite(r).all() and np.isfinite(v).all()):
+            return f"{head}the integrated state is not finite {where} (the step size collapsed?)"
+        scratch = np.zeros((self.n, 3))
+        if self.method == "encke":
+            rho, _ = self._reference(t)
+            _point_mass_difference_kernel(rho, r - rho, self.mu, 1.0, scratch)
+        else:
+            _central_acceleration(r, self.mu, scratch)
+        if not np.isfinite(scratch).all():
+            return f"{head}the central body's acceleration is not finite {where} (|r| = 0: a collision?)"
+        for p in self.perturbations:
+            scratch[:] = 0.0
+            add = getattr(p, "_add_acceleration", None)
+            if add is not None:
+                add(t, r, v, scratch)
+            else:
+                scratch += np.asarray(p.acceleration(t, r, v), dtype=np.float64)
+            if not np.isfinite(scratch).all():
+                return (f"{head}the acceleration of {_describe(p)} is not finite {where} (a third body at the "
+                        "spacecraft's position, a non-finite coefficient or ephemeris?)")
+        return f"{head}the equations of motion are not finite {where}"
 
 
 def shortest_period(r0, v0, mu) -> float:
@@ -625,6 +728,9 @@ def _integrate_direction(system, r0, v0, taus, direction, rtol, atol, rectify_ra
             per = f" and within one revolution ({chunk:.6g} s)" if math.isfinite(chunk) else ""
             raise RuntimeError(f"propagate_perturbed: more than max_steps={max_steps} integrator steps {where}{per}; "
                                "loosen rtol/atol or raise max_steps")
+        if not (math.isfinite(solver.t) and math.isfinite(solver.h_abs)):  # DOP853 would never leave its step
+            raise RuntimeError(f"propagate_perturbed: the integrator's time or step size is not finite "
+                               f"(t = {solver.t}, step = {solver.h_abs})")
         t_prev = solver.t
         msg = solver.step()
         steps += 1
@@ -709,18 +815,23 @@ def propagate_perturbed(
         exact Kepler propagation, nothing is integrated.
     method : "cowell" or "encke" (module docstring).
     rtol, atol : DOP853 tolerances on the scaled state (dimensionless; atol is
-        a fraction of |r0| and sqrt(mu/|r0|)), per body.
+        a fraction of |r0| and sqrt(mu/|r0|)), per body; finite and > 0.
     error_estimate : run a second integration at 10x looser tolerances and
         report the difference (conservative) as ``error_r, error_v``.
-    rectify_ratio : Encke rectification threshold on |delta| / |rho|.
+    rectify_ratio : Encke rectification threshold on |delta| / |rho|; finite and > 0.
     max_steps : cap on integrator steps between two output times and within one
         revolution of the fastest bound body, whichever ends first (RuntimeError beyond):
         it catches a step size that collapses; a long span with many revolutions is fine.
+        An int >= 1.
 
     Returns a :class:`PerturbedStates`.  Bodies with a non-finite state or
-    ``r0 = 0`` get NaN outputs (the others are integrated normally).
+    ``r0 = 0`` get NaN outputs (the others are integrated normally).  Bad arguments raise
+    ValueError / TypeError naming them before anything is integrated
+    (:func:`checked_propagation_inputs`).  A perturbation whose acceleration is not finite
+    during the integration (a third body at the spacecraft's position, a NaN ephemeris)
+    stops it with a RuntimeError naming the perturbation and the time.
     """
-    r0, v0, mu, t_arr = checked_propagation_inputs(r0, v0, t, mu, method, rtol, atol)
+    r0, v0, mu, t_arr = checked_propagation_inputs(r0, v0, t, mu, method, rtol, atol, rectify_ratio, max_steps)
     active = _active(perturbations)
     if not active:
         return kepler_states(r0, v0, t_arr, mu)
@@ -747,28 +858,37 @@ def propagate_perturbed(
     )
 
 
-def checked_propagation_inputs(r0, v0, t, mu, method, rtol, atol):
+def checked_propagation_inputs(r0, v0, t, mu, method, rtol, atol, rectify_ratio=1e-2, max_steps=1_000_000):
     """The arguments of :func:`propagate_perturbed` checked and converted: ``(r0, v0)``
     float64 ``(..., 3)`` rows of one shape (m, m/s), ``mu`` a finite positive float
     (m^3/s^2), ``t`` a finite float64 scalar or 1-D array (s); ValueError naming the
-    argument otherwise (also for a ``method`` other than "cowell" / "encke" and
-    non-positive ``rtol``, ``atol``)."""
+    argument otherwise (also for a ``method`` other than "cowell" / "encke", ``rtol``,
+    ``atol`` and ``rectify_ratio`` not finite and > 0, and ``max_steps`` < 1), TypeError
+    naming it for values that are not real numbers (:mod:`astrodyn.orbit.inputs`) and for a
+    ``max_steps`` that is not an int."""
+    who = "propagate_perturbed"
     if method not in ("cowell", "encke"):
-        raise ValueError(f"method must be 'cowell' or 'encke', got {method!r}")
-    r0 = _rows(r0, "r0")
-    v0 = _rows(v0, "v0")
+        raise ValueError(f"{who}: method must be 'cowell' or 'encke', got {method!r}")
+    r0 = _rows(r0, "r0", who)
+    v0 = _rows(v0, "v0", who)
     if r0.shape != v0.shape:
-        raise ValueError(f"v0 must have the shape of r0 {r0.shape}, got {v0.shape}")
-    mu = float(mu)
+        raise ValueError(f"{who}: v0 must have the shape of r0 {r0.shape}, got {v0.shape}")
+    mu = real_scalar(mu, "mu", who, "m^3/s^2")
     if not (math.isfinite(mu) and mu > 0):
-        raise ValueError(f"mu (central gravitational parameter, m^3/s^2) must be finite and > 0, got {mu!r}")
-    if not (rtol > 0 and atol > 0):
-        raise ValueError(f"rtol and atol must be > 0, got rtol={rtol!r}, atol={atol!r}")
-    t_arr = np.asarray(t, dtype=np.float64)
+        raise ValueError(f"{who}: mu (central gravitational parameter, m^3/s^2) must be finite and > 0, got {mu!r}")
+    for name, value in (("rtol", rtol), ("atol", atol), ("rectify_ratio", rectify_ratio)):
+        x = real_scalar(value, name, who)
+        if not (math.isfinite(x) and x > 0):
+            raise ValueError(f"{who}: {name} must be finite and > 0, got {value!r}")
+    if isinstance(max_steps, bool) or not isinstance(max_steps, (int, np.integer)):
+        raise TypeError(f"{who}: max_steps: expected an integer >= 1, got {type(max_steps).__name__} {max_steps!r}")
+    if max_steps < 1:
+        raise ValueError(f"{who}: max_steps must be >= 1, got {max_steps!r}")
+    t_arr = real_array(t, "t", who)
     if t_arr.ndim > 1:
-        raise ValueError(f"t must be a scalar or a 1-D array of times in s, got shape {t_arr.shape}")
+        raise ValueError(f"{who}: t must be a scalar or a 1-D array of times in s, got shape {t_arr.shape}")
     if not np.all(np.isfinite(t_arr)):
-        raise ValueError("t must be finite (seconds since the epoch of r0, v0)")
+        raise ValueError(f"{who}: t must be finite (seconds since the epoch of r0, v0)")
     return r0, v0, mu, t_arr
 
 

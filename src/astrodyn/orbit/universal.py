@@ -104,6 +104,7 @@ from astrodyn.orbit.floating import (
     two_sum,
     x_minus_sin,
 )
+from astrodyn.orbit.inputs import broadcast_shapes_named, real_array
 from astrodyn.orbit.kepler import (
     MAX_ITER,
     hyperbolic_upper_start_vec,
@@ -159,9 +160,10 @@ def stumpff(z):
 
     ``z = alpha chi^2`` (dimensionless); ``c2(0) = 1/2``, ``c3(0) = 1/6``.
     Series near ``z = 0``, closed forms elsewhere (Vallado 4th ed. eq. 2-52).
-    Returns two arrays of the shape of ``z`` (floats for scalar ``z``).
+    Returns two arrays of the shape of ``z`` (floats for scalar ``z``); ``TypeError``
+    naming ``z`` for values that are not real numbers (:mod:`astrodyn.orbit.inputs`).
     """
-    z = np.asarray(z, dtype=np.float64)
+    z = real_array(z, "z", "stumpff")
     zf = np.ascontiguousarray(z).reshape(-1)
     c2 = np.empty_like(zf)
     c3 = np.empty_like(zf)
@@ -1149,19 +1151,70 @@ def _propagate_single(r0, v0, dt, mu):
 
 
 @jit
+def propagate_scalar_kernel(rx, ry, rz, vx, vy, vz, dt, mu):
+    """The compiled body of :func:`propagate_scalar`, for other numba code (a controller's
+    step calls it without any call overhead).  The same arguments and result; once
+    :func:`propagate_scalar` has run in the process it holds the float64 specialization only
+    and converts other real types to it, which compiled callers should pass anyway."""
+    f, g, fd, gd = lagrange_coefficients_scalar(rx, ry, rz, vx, vy, vz, dt, mu)
+    return (f * rx + g * vx, f * ry + g * vy, f * rz + g * vz,
+            fd * rx + gd * vx, fd * ry + gd * vy, fd * rz + gd * vz)
+
+
+_SCALAR_ARGS = ("rx", "ry", "rz", "vx", "vy", "vz", "dt", "mu")
+
+
+def _scalar_kernel_first_call(*args):
+    """The first call of :func:`propagate_scalar` in a process: the kernel's float64
+    specialization (from numba's cache), then no further compilation, so numba's dispatch
+    converts ints, float32 and the like to it instead of compiling a specialization for each
+    mix of types (11 s each, and a 60-line TypingError for ints)."""
+    global _scalar_kernel
+    propagate_scalar_kernel(1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 1.0)  # float64 x 8: compiled or loaded
+    propagate_scalar_kernel.disable_compile()
+    _scalar_kernel = propagate_scalar_kernel
+    return propagate_scalar_kernel(*args)
+
+
+_scalar_kernel = _scalar_kernel_first_call
+
+
+def _scalar_floats(args) -> list[float]:
+    """The arguments numba's dispatch refused, as floats: real numbers it does not convert
+    (a 0-d array, a ``Fraction``); ``TypeError`` naming the first argument that is not one."""
+    out = []
+    for name, x in zip(_SCALAR_ARGS, args):
+        if x is None or isinstance(x, (complex, np.complexfloating, str, bytes)) or np.ndim(x) != 0:
+            got = "None" if x is None else type(x).__name__ + (f" of shape {np.shape(x)}" if np.ndim(x) else "")
+            raise TypeError(f"propagate_scalar: {name}: expected a real number, got {got}")
+        try:
+            out.append(float(x))
+        except (TypeError, ValueError):
+            raise TypeError(f"propagate_scalar: {name}: expected a real number, got {type(x).__name__}") from None
+    return out
+
+
 def propagate_scalar(rx, ry, rz, vx, vy, vz, dt, mu):
     """One state by ``dt`` with scalars in and out: ``(x, y, z, vx, vy, vz)`` [m, m/s].
 
     The same exact propagation as :func:`propagate` (bit for bit its single-state
     result) without arrays: ``r0 = (rx, ry, rz)`` [m], ``v0 = (vx, vy, vz)`` [m/s],
     ``dt`` [s], ``mu`` [m^3/s^2].  About 0.5 us from Python (a third of a
-    :func:`propagate` call, which boxes two arrays) and free of call overhead from
-    other compiled code (a controller's step).  Invalid input (NaN/inf, ``r0 = 0``,
-    ``mu <= 0``) gives NaN; no exception.
+    :func:`propagate` call, which boxes two arrays); other compiled code (a controller's
+    step) calls :func:`propagate_scalar_kernel`, free of call overhead.  Invalid values
+    (NaN/inf, ``r0 = 0``, ``mu <= 0``) give NaN; no exception.
+
+    Any real scalars: Python and numpy ints and floats of any width are converted to
+    float64 by numba's dispatch (one compiled specialization serves every mix; bools, which
+    numba converts too, count as 0 and 1 here, unlike in the array functions); 0-d arrays
+    and other real numbers through ``float()``.  ``None``, complex numbers, strings and
+    arrays raise ``TypeError`` naming the argument.
     """
-    f, g, fd, gd = lagrange_coefficients_scalar(rx, ry, rz, vx, vy, vz, dt, mu)
-    return (f * rx + g * vx, f * ry + g * vy, f * rz + g * vz,
-            fd * rx + gd * vx, fd * ry + gd * vy, fd * rz + gd * vz)
+    try:
+        return _scalar_kernel(rx, ry, rz, vx, vy, vz, dt, mu)
+    except TypeError:  # numba's dispatch: "No matching definition for argument type(s) ..."
+        pass
+    return _scalar_kernel(*_scalar_floats((rx, ry, rz, vx, vy, vz, dt, mu)))
 
 
 @jit
@@ -1175,24 +1228,26 @@ def _lagrange_loop(r0, v0, dt, mu, out):
 # ---------------------------------------------------------------------------
 # public API
 # ---------------------------------------------------------------------------
+def _state_vector(x, name, who, unit):
+    """``x`` as float64 ``(..., 3)`` (:func:`astrodyn.orbit.inputs.real_array`), else an error naming it."""
+    x = real_array(x, name, who)
+    if x.ndim == 0 or x.shape[-1] != 3:
+        raise ValueError(f"{who}: {name} must have shape (..., 3) [{unit}]; got shape {x.shape}")
+    return x
+
+
 def _prepare(r0, v0, dt, mu, who):
     """Validate and broadcast; returns the leading shape and flat contiguous arrays."""
-    r0 = np.asarray(r0, dtype=np.float64)
-    v0 = np.asarray(v0, dtype=np.float64)
-    if r0.ndim == 0 or r0.shape[-1] != 3:
-        raise ValueError(f"{who}: r0 must have shape (..., 3) [m]; got shape {r0.shape}")
-    if v0.ndim == 0 or v0.shape[-1] != 3:
-        raise ValueError(f"{who}: v0 must have shape (..., 3) [m/s]; got shape {v0.shape}")
-    dt = np.asarray(dt, dtype=np.float64)
-    mu = np.asarray(mu, dtype=np.float64)
+    r0 = _state_vector(r0, "r0", who, "m")
+    v0 = _state_vector(v0, "v0", who, "m/s")
+    dt = real_array(dt, "dt", who)
+    mu = real_array(mu, "mu", who)
     if np.any(mu <= 0.0):  # NaN mu is let through and gives NaN
-        raise ValueError(f"{who}: mu must be > 0 [m^3/s^2]; got {mu[mu <= 0.0].ravel()[0]!r}")
-    try:
-        lead = np.broadcast_shapes(r0.shape[:-1], v0.shape[:-1], dt.shape, mu.shape)
-    except ValueError:
-        raise ValueError(
-            f"{who}: leading shapes do not broadcast: r0 {r0.shape}, v0 {v0.shape}, dt {dt.shape}, mu {mu.shape}"
-        ) from None
+        raise ValueError(f"{who}: mu must be > 0 [m^3/s^2]; got {float(mu[mu <= 0.0].ravel()[0])!r}")
+    lead = broadcast_shapes_named(
+        who, {"r0": r0.shape[:-1], "v0": v0.shape[:-1], "dt": dt.shape, "mu": mu.shape},
+        shown={"r0": r0.shape, "v0": v0.shape}, what="leading shapes",
+    )
     n = math.prod(lead)
     r0f = np.ascontiguousarray(np.broadcast_to(r0, lead + (3,))).reshape(n, 3)
     v0f = np.ascontiguousarray(np.broadcast_to(v0, lead + (3,))).reshape(n, 3)
@@ -1229,10 +1284,13 @@ def propagate(r0, v0, dt, mu):
     ------
     ValueError
         Wrong shapes (names the argument) or a finite ``mu <= 0``.
+    TypeError
+        An argument that is not real numbers (``None``, complex, str, object, bool; names
+        it: :mod:`astrodyn.orbit.inputs`).
     """
     if type(dt) is float and type(mu) is float:  # fast path for one state (a few microseconds)
-        r0a = np.asarray(r0, dtype=np.float64)
-        v0a = np.asarray(v0, dtype=np.float64)
+        r0a = real_array(r0, "r0", "propagate")
+        v0a = real_array(v0, "v0", "propagate")
         if r0a.shape == (3,) and v0a.shape == (3,) and mu > 0.0:
             return _propagate_single(r0a, v0a, dt, mu)
     lead, r0f, v0f, dtf, muf = _prepare(r0, v0, dt, mu, "propagate")
