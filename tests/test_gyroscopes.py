@@ -412,7 +412,7 @@ def test_sampled_base_rate_from_an_attitude_model():
     permutation.  Agreement to the spline's accuracy."""
     from astrodyn.attitude import torque_free
 
-    Ib = np.array([1.0, 2.0, 3.5])
+    Ib = np.array([1.0, 2.0, 2.5])
     w0 = np.array([0.3, 0.8, 0.2])
     ts = np.linspace(0.0, 1.0, 401)
     wb = torque_free(Ib, w0, [1.0, 0, 0, 0], ts)[0]

@@ -25,7 +25,7 @@ CASES = [
     ("Dzhanibekov, near the separatrix", (1.0, 2.0, 3.0), (1e-3, 1.0, 1e-3)),
     ("moments in any order", (3.0, 1.0, 2.0), (0.2, 0.7, -0.4)),
     ("axisymmetric", (2.0, 2.0, 3.0), (0.3, 0.2, 1.0)),
-    ("near-axisymmetric, Pi form", (1.0, 1.0 + 1e-9, 3.0), (0.3, 0.2, 1.0)),
+    ("near-axisymmetric, Pi form", (1.0, 1.0 + 1e-9, 2.0), (0.3, 0.2, 1.0)),
     ("pure spin about the intermediate axis", (1.0, 2.0, 3.0), (0.0, 1.0, 0.0)),
     ("zero rates", (1.0, 2.0, 3.0), (0.0, 0.0, 0.0)),
     ("sphere", (2.0, 2.0, 2.0), (0.3, -0.2, 0.5)),

@@ -59,7 +59,7 @@ CASES = [
     ("triaxial_major", (1.0, 2.0, 3.0), (0.3, 0.2, 1.0), 4.0),
     ("triaxial_minor_unsorted", (3.0, 1.0, 2.0), (0.2, 1.0, 0.4), 4.0),
     ("axisymmetric", (2.0, 2.0, 3.0), (0.3, 0.2, 1.0), 4.0),
-    ("near_axisymmetric", (1.0, 1.0 + 1e-9, 3.0), (0.3, 0.2, 1.0), 4.0),
+    ("near_axisymmetric", (1.0, 1.0 + 1e-9, 2.0), (0.3, 0.2, 1.0), 4.0),
     ("prolate_axisymmetric", (1.0, 3.0, 3.0), (0.3, 0.2, 1.0), 4.0),
     ("sphere", (1.0, 1.0, 1.0), (0.1, 0.2, 0.3), 4.0),
     ("sphere_plus_ulp", (1.0, 1.0, 1.0 + 2.0**-52), (0.1, 0.2, 0.3), 4.0),
@@ -69,9 +69,9 @@ CASES = [
     ("exact_intermediate_spin", (1.0, 2.0, 3.0), (0.0, 1.0, 0.0), 4.0),
     ("fast_spin_300", (1.0, 2.0, 3.0), (3.0, 2.0, 300.0), 0.03),
     # moment gap 1e-9 between the two minor moments, circulating about the minor axis
-    # (w3^2 < (B - A) w1^2 / 6): wp = 2.6e-5 rad/s, n = -6.7e8, k = 2.6e4; one ulp of
+    # (w3^2 < (B - A) w1^2 / 2): wp = 2.3e-5 rad/s, n = -5.0e8, k = 2.2e4; one ulp of
     # the inputs moves C by < 7e-16 (mpmath), the J - J0 form lost |k| eps ~ 1e-11
-    ("near_symmetric_slow_circulation", (1.0, 1.0 + 1e-9, 3.0), (1.0, 0.2, 1e-6), 4.0),
+    ("near_symmetric_slow_circulation", (1.0, 1.0 + 1e-9, 2.0), (1.0, 0.2, 1e-6), 4.0),
     ("near_prolate_circulation", (1.0, 3.0, 3.0 + 3e-9), (1.0, 0.2, 0.3), 4.0),
 ]
 
@@ -214,8 +214,8 @@ def test_initial_state_reproduced():
 
 @pytest.mark.parametrize(
     "inertia, w0",
-    [((1.0, 2.0, 3.0), (0.3, 0.2, 1.0)), ((1.0, 2.0, 3.0), (1e-9, 1.0, 1e-9)), ((1.0, 1.0 + 1e-9, 3.0), (0.3, 0.2, 1.0)),
-     ((3.0, 1.0, 2.0), (0.2, 1.0, 0.4)), ((1.0, 2.0, 3.0), (3.0, 2.0, 300.0)), ((1.0, 1.0 + 1e-9, 3.0), (1.0, 0.2, 1e-6))],
+    [((1.0, 2.0, 3.0), (0.3, 0.2, 1.0)), ((1.0, 2.0, 3.0), (1e-9, 1.0, 1e-9)), ((1.0, 1.0 + 1e-9, 2.0), (0.3, 0.2, 1.0)),
+     ((3.0, 1.0, 2.0), (0.2, 1.0, 0.4)), ((1.0, 2.0, 3.0), (3.0, 2.0, 300.0)), ((1.0, 1.0 + 1e-9, 2.0), (1.0, 0.2, 1e-6))],
 )
 def test_long_span_conservation(inertia, w0):
     """Over 1e6 s: |q| - 1 <= 1e-12, energy and inertial momentum C^T I w to 1e-10 relative."""
@@ -230,7 +230,7 @@ def test_long_span_conservation(inertia, w0):
 
 
 @pytest.mark.parametrize(
-    "inertia, w0", [((1.0, 2.0, 3.0), (0.3, 0.2, 1.0)), ((1.0, 1.0 + 1e-9, 3.0), (1.0, 0.2, 1e-6))], ids=["triaxial", "slow"]
+    "inertia, w0", [((1.0, 2.0, 3.0), (0.3, 0.2, 1.0)), ((1.0, 1.0 + 1e-9, 2.0), (1.0, 0.2, 1e-6))], ids=["triaxial", "slow"]
 )
 def test_restart_across_half_periods(inertia, w0):
     """Flow property x(t1 + t2) = flow(t2, x(t1)) across several half periods of the rates.

@@ -44,8 +44,26 @@ returns a ``scipy.spatial.transform.Rotation`` ``R`` with
 
 All functions take float64 arrays with leading (batch) axes and broadcast them;
 a single rotation is just the shape ``(4,)`` or ``(3, 3)`` case.  NaN inputs
-give NaN outputs; malformed shapes, unknown sequences and zero quaternions or
-axes raise ``ValueError`` naming the argument.
+give NaN outputs; malformed shapes, leading shapes that do not broadcast, unknown
+sequences and zero quaternions or axes raise ``ValueError`` naming the argument;
+``None``, complex numbers, strings and non-numeric objects raise
+:class:`NonRealInputError` (a ``TypeError``, and a ``ValueError`` for callers that
+catch that) naming the argument.
+
+One rule for quaternions: every function that reads ``q`` as an attitude uses the
+rotation of ``q / |q|`` (so any nonzero ``q`` is accepted, as in
+:func:`dcm_from_quat`) and raises ``ValueError`` for ``|q| = 0``.  The exceptions
+are stated where they apply: the component shuffles (:func:`quat_conjugate`,
+:func:`quat_to_scalar_last`, :func:`quat_from_scalar_last`) do not interpret
+``q``; :func:`quat_multiply` returns the algebraic product (norm ``|q2| |q1|``,
+whose rotation is the composition); :func:`quat_rate` is the linear right-hand side
+``0.5 Omega(w) q`` of the given ``q``.  Matrices read as attitudes
+(:func:`quat_from_dcm`, :func:`euler_from_dcm`) must be rotations to within
+:data:`DCM_ORTHOGONALITY_TOL`.
+
+The input checks shared with :mod:`astrodyn.attitude` are public here:
+:func:`real_array`, :func:`real_scalar`, :func:`broadcast_leading` and
+:class:`NonRealInputError`.
 
 Example: a body turned by 30 deg about the inertial z axis sees the inertial x
 axis at -30 deg in its own frame::
@@ -59,6 +77,9 @@ axis at -30 deg in its own frame::
 
 from __future__ import annotations
 
+import math
+import numbers
+
 import numpy as np
 
 from astrodyn.jit import jit
@@ -68,6 +89,11 @@ __all__ = [
     "GIMBAL_LOCK_TOL",
     "EULER_RATE_SINGULAR_TOL",
     "EulerSingularityError",
+    "DCM_ORTHOGONALITY_TOL",
+    "NonRealInputError",
+    "real_array",
+    "real_scalar",
+    "broadcast_leading",
     "elementary_dcm",
     "skew",
     "quat_normalize",
@@ -120,19 +146,99 @@ GIMBAL_LOCK_TOL = 4.0 * np.finfo(np.float64).eps
 EULER_RATE_SINGULAR_TOL = float(np.sqrt(np.finfo(np.float64).eps))
 
 
+#: :func:`quat_from_dcm` and :func:`euler_from_dcm` refuse a matrix with
+#: ``max |C C^T - I| > DCM_ORTHOGONALITY_TOL`` (or ``det C < 0``, a reflection).  The
+#: attitude read from a matrix ``d = max |C C^T - I|`` away from orthogonal is uncertain
+#: by ``O(d)`` rad (its nearest rotation, Markley's normalized Shepperd answer and the
+#: angles read from its columns differ at that order), so ``d`` is the accuracy the
+#: answer can claim.  1e-6 admits every float64 construction (``d ~ 1e-15``) and a
+#: float32 round trip (``d <= 2 x 2^-24 ~ 1.2e-7``), and refuses zero, scaled, sheared
+#: and reflected matrices (``d`` or ``1 - det C`` of order 1), whose "attitude" would be
+#: an arbitrary choice.
+DCM_ORTHOGONALITY_TOL = 1e-6
+
+# |q|^2 within this (8 ulp) of 1 counts as unit in quat_rotate: q is used as given (no
+# division), so normalized quaternions (|q|^2 - 1 ~ 1e-16) give the bits they always gave;
+# dividing by such |q|^2 would change the result by less than this (round-off) anyway.
+_UNIT_NORM2_TOL = 8.0 * np.finfo(np.float64).eps
+
+
 class EulerSingularityError(ValueError):
     """Euler angle rates requested at (or too near) the sequence's singular attitude."""
 
 
+class NonRealInputError(TypeError, ValueError):
+    """An argument that is not real numbers: ``None``, complex, strings, non-numeric objects.
+
+    A ``TypeError``; also a ``ValueError``, so callers that caught the ``ValueError``
+    these inputs used to give keep working.  The message names the argument.
+    """
+
+
 # --------------------------------------------------------------------------
-# input checking
+# input checking (public: shared with astrodyn.attitude)
+
+
+def _describe(x, a):
+    """What a non-real argument is, for the error message."""
+    if x is None:
+        return "None"
+    if a.dtype.kind == "O":
+        bad = next((e for e in a.flat if not isinstance(e, numbers.Real)), None)
+        return f"{type(bad).__name__} in an object array" if a.ndim else type(bad).__name__
+    return type(x).__name__ if a.ndim == 0 and not isinstance(x, np.ndarray) else f"an array of {a.dtype}"
+
+
+def real_array(x, name):
+    """``x`` as a float64 array, refusing what is not real numbers.
+
+    Booleans, integers and floats of any width convert as numpy converts them
+    (``np.asarray(x).astype(float64)``); an object array is accepted when every element is
+    a real number.  ``None``, complex values (even with a zero imaginary part), strings,
+    bytes and other objects raise :class:`NonRealInputError` naming ``name`` (numpy
+    would turn ``None`` into NaN and drop an imaginary part with only a warning); a
+    ragged sequence raises ``ValueError`` naming ``name``.
+    """
+    if type(x) is np.ndarray and x.dtype == np.float64:  # the common case, unchanged
+        return x
+    if x is None:
+        raise NonRealInputError(f"{name} must be real numbers, got None")
+    try:
+        a = np.asarray(x)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{name} must be an array of real numbers: {exc}") from None
+    kind = a.dtype.kind
+    if kind not in "biuf" and not (kind == "O" and all(isinstance(e, numbers.Real) for e in a.flat)):
+        raise NonRealInputError(f"{name} must be real numbers, got {_describe(x, a)}")
+    return a.astype(np.float64, copy=False)
+
+
+def real_scalar(x, name):
+    """``x`` as one Python float: :func:`real_array` of shape ``()``, else ``ValueError`` naming ``name``."""
+    a = real_array(x, name)
+    if a.ndim != 0:
+        raise ValueError(f"{name} must be a single real number, got an array of shape {a.shape}")
+    return float(a)
+
+
+def broadcast_leading(where, *args):
+    """The broadcast leading shape of ``(name, array, n_trailing)`` triples.
+
+    ``n_trailing`` axes at the end of each array are its own (a quaternion's 4, a
+    vector's 3, none for a scalar field); the leading axes must broadcast, else
+    ``ValueError("<where>: leading shapes do not broadcast: q (2, 4), v (5, 3)")``
+    naming every argument and its full shape.
+    """
+    shapes = [np.shape(a)[: np.ndim(a) - n] if n else np.shape(a) for _, a, n in args]
+    try:
+        return np.broadcast_shapes(*shapes)
+    except ValueError:
+        listed = ", ".join(f"{name} {np.shape(a)}" for name, a, _ in args)
+        raise ValueError(f"{where}: leading shapes do not broadcast: {listed}") from None
 
 
 def _as_array(x, name, last_shape):
-    try:
-        a = np.asarray(x, dtype=np.float64)
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f"{name} must be a real float array of shape (..., {', '.join(map(str, last_shape))}): {exc}") from None
+    a = real_array(x, name)
     n = len(last_shape)
     if a.ndim < n or a.shape[a.ndim - n :] != tuple(last_shape):
         want = "(..., " + ", ".join(map(str, last_shape)) + ")"
@@ -153,10 +259,48 @@ def _as_dcm(C, name="C"):
 
 
 def _as_scalar_array(x, name):
-    try:
-        return np.asarray(x, dtype=np.float64)
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f"{name} must be a real number or float array: {exc}") from None
+    return real_array(x, name)
+
+
+def _norm2_nonzero(q, name):
+    """``|q|^2`` over the last axis (keepdims); ``ValueError`` naming ``name`` if any is 0 (NaN passes)."""
+    n2 = np.einsum("...i,...i->...", q, q)[..., None]
+    if np.any(n2 == 0.0):
+        raise ValueError(f"{name} must be nonzero: got a quaternion of norm 0")
+    return n2
+
+
+def _orthogonality(c00, c01, c02, c10, c11, c12, c20, c21, c22, vmax):
+    """``(max |C C^T - I|, det C)`` from the nine entries (floats, or arrays with ``vmax`` = np.maximum)."""
+    g00 = c00 * c00 + c01 * c01 + c02 * c02 - 1.0
+    g11 = c10 * c10 + c11 * c11 + c12 * c12 - 1.0
+    g22 = c20 * c20 + c21 * c21 + c22 * c22 - 1.0
+    g01 = c00 * c10 + c01 * c11 + c02 * c12
+    g02 = c00 * c20 + c01 * c21 + c02 * c22
+    g12 = c10 * c20 + c11 * c21 + c12 * c22
+    err = vmax(vmax(vmax(abs(g00), abs(g11)), vmax(abs(g22), abs(g01))), vmax(abs(g02), abs(g12)))
+    det = c00 * (c11 * c22 - c12 * c21) - c01 * (c10 * c22 - c12 * c20) + c02 * (c10 * c21 - c11 * c20)
+    return err, det
+
+
+def _check_rotation(C, name):
+    """``ValueError`` naming ``name`` unless every finite ``C`` (``(..., 3, 3)``) is a rotation
+    to :data:`DCM_ORTHOGONALITY_TOL` (non-finite matrices pass: they give NaN)."""
+    if C.ndim == 2:
+        entries = C.ravel().tolist()
+        err, det = _orthogonality(*entries, max)
+        bad = all(map(math.isfinite, entries)) and (err > DCM_ORTHOGONALITY_TOL or det < 0.0)
+    else:
+        flat = C.reshape(C.shape[:-2] + (9,))
+        err, det = _orthogonality(*(flat[..., n] for n in range(9)), np.maximum)
+        bad = np.isfinite(err) & ((err > DCM_ORTHOGONALITY_TOL) | (det < 0.0))
+        if np.any(bad):
+            err, det = err[bad].flat[0], det[bad].flat[0]
+    if np.any(bad):
+        raise ValueError(
+            f"{name} must be a rotation matrix (max |C C^T - I| <= {DCM_ORTHOGONALITY_TOL:g} and det C = +1), "
+            f"got max |C C^T - I| = {float(err):.3g} and det C = {float(det):.3g}"
+        )
 
 
 def _parse_seq(seq):
@@ -201,15 +345,15 @@ def skew(v):
 def elementary_dcm(axis, angle):
     """Elementary frame rotation ``C_axis(angle)`` (docs/architecture.md, section 2; Baruh ch. 7).
 
-    ``axis`` is 1, 2 or 3; ``angle`` in rad, any shape; returns ``(..., 3, 3)``.
+    ``axis`` is the int 1, 2 or 3; ``angle`` in rad, any shape; returns ``(..., 3, 3)``.
     ``C_3(a) = [[c, s, 0], [-s, c, 0], [0, 0, 1]]`` and cyclically
     ``C_1(a) = [[1, 0, 0], [0, c, s], [0, -s, c]]``,
     ``C_2(a) = [[c, 0, -s], [0, 1, 0], [s, 0, c]]``: components in the frame
     turned by ``a`` about its axis ``axis``.
     """
-    if axis not in (1, 2, 3):
-        raise ValueError(f"axis must be 1, 2 or 3, got {axis!r}")
-    return _elementary0(axis - 1, _as_scalar_array(angle, "angle"))
+    if isinstance(axis, (bool, np.bool_)) or not isinstance(axis, (int, np.integer)) or axis not in (1, 2, 3):
+        raise ValueError(f"axis must be 1, 2 or 3 (an int), got {axis!r}")
+    return _elementary0(int(axis) - 1, _as_scalar_array(angle, "angle"))
 
 
 def _elementary0(n, a):
@@ -246,15 +390,21 @@ def _transpose(M):
 
 def quat_normalize(q):
     """``q / |q|`` (shape ``(..., 4)``); a zero quaternion raises ``ValueError``."""
-    q = _as_quat(q)
+    return _normalized(_as_quat(q), "q")
+
+
+def _normalized(q, name):
     n = np.linalg.norm(q, axis=-1, keepdims=True)
     if np.any(n == 0.0):
-        raise ValueError("q must be nonzero: got a quaternion of norm 0")
+        raise ValueError(f"{name} must be nonzero: got a quaternion of norm 0")
     return q / n
 
 
 def quat_conjugate(q):
-    """Conjugate ``(e0, -e1, -e2, -e3)``: the inverse rotation of a unit ``q`` (``C(q*) = C(q)^T``)."""
+    """Conjugate ``(e0, -e1, -e2, -e3)``: the inverse rotation of ``q`` (``C(q*) = C(q)^T``).
+
+    A sign change only: ``q`` is not interpreted (not normalized, zero passes through).
+    """
     q = _as_quat(q)
     return q * np.array([1.0, -1.0, -1.0, -1.0])
 
@@ -288,11 +438,21 @@ def quat_hamilton_scalar(p0, p1, p2, p3, q0, q1, q2, q3):
 
 @jit
 def _quat_multiply_loop(a, b, out):
-    """``out[n] = a[n] (x) b[n]`` (Hamilton) over rows of ``(N, 4)`` arrays."""
+    """``out[n] = a[n] (x) b[n]`` (Hamilton) over rows of ``(N, 4)`` arrays.
+
+    Returns 1 if a row of ``a`` is the zero quaternion, 2 if one of ``b`` is (3: both),
+    else 0; the products are written either way.
+    """
+    zero = 0
     for n in range(a.shape[0]):
-        out[n, 0], out[n, 1], out[n, 2], out[n, 3] = quat_hamilton_scalar(
-            a[n, 0], a[n, 1], a[n, 2], a[n, 3], b[n, 0], b[n, 1], b[n, 2], b[n, 3]
-        )
+        a0, a1, a2, a3 = a[n, 0], a[n, 1], a[n, 2], a[n, 3]
+        b0, b1, b2, b3 = b[n, 0], b[n, 1], b[n, 2], b[n, 3]
+        if a0 == 0.0 and a1 == 0.0 and a2 == 0.0 and a3 == 0.0:
+            zero |= 1
+        if b0 == 0.0 and b1 == 0.0 and b2 == 0.0 and b3 == 0.0:
+            zero |= 2
+        out[n, 0], out[n, 1], out[n, 2], out[n, 3] = quat_hamilton_scalar(a0, a1, a2, a3, b0, b1, b2, b3)
+    return zero
 
 
 def quat_multiply(q2, q1):
@@ -304,32 +464,82 @@ def quat_multiply(q2, q1):
     *J. Astronaut. Sci.* 41(4), 1993, 439-517):
     scalar ``a0 b0 - a.b`` and vector ``a0 b + b0 a - a x b`` for
     ``q2 = (a0, a)``, ``q1 = (b0, b)``; equivalently the Hamilton product
-    ``q1 (x)_H q2`` (:func:`quat_hamilton_scalar`).  Broadcasts over leading axes.
+    ``q1 (x)_H q2`` (:func:`quat_hamilton_scalar`).  Broadcasts over leading axes
+    (``ValueError`` naming both if they do not).
+
+    The algebraic product: non-unit inputs give a product of norm ``|q2| |q1|``, whose
+    rotation (read as every function here reads it, ``q / |q|``) is still the
+    composition.  A zero ``q2`` or ``q1`` raises ``ValueError`` naming it.
     """
     q2 = _as_quat(q2, "q2")
     q1 = _as_quat(q1, "q1")
-    shape = np.broadcast_shapes(q2.shape, q1.shape)
+    try:
+        shape = np.broadcast_shapes(q2.shape, q1.shape)
+    except ValueError:
+        broadcast_leading("quat_multiply", ("q2", q2, 1), ("q1", q1, 1))  # raises, naming both
+        raise
+    return _product(q2, q1, shape, "q2", "q1")
+
+
+def _product(q2, q1, shape, name2, name1):
+    """:func:`quat_multiply` of checked arrays, broadcast to ``shape``; zero rows raise naming them."""
     a = np.ascontiguousarray(np.broadcast_to(q1, shape).reshape(-1, 4))
     b = np.ascontiguousarray(np.broadcast_to(q2, shape).reshape(-1, 4))
     out = np.empty_like(a)
-    _quat_multiply_loop(a, b, out)
+    zero = _quat_multiply_loop(a, b, out)
+    if zero:
+        raise ValueError(f"{name1 if zero & 1 else name2} must be nonzero: got a quaternion of norm 0")
     return out.reshape(shape)
 
 
 def quat_rotate(q, v):
-    """Inertial -> body component transform ``C(q) @ v`` without forming ``C`` (unit ``q``).
+    """Inertial -> body component transform ``C(q) @ v`` without forming ``C``.
 
-    ``C v = v - e0 t + e x t`` with ``t = 2 e x v`` (expansion of
-    ``(e0^2 - e.e) v + 2 e (e.v) - 2 e0 e x v``).  ``q`` ``(..., 4)`` and
-    ``v`` ``(..., 3)`` broadcast.  For body -> inertial use
+    ``C v = v - e0 t + e x t`` with ``t = (2 / |q|^2) e x v`` (expansion of
+    ``((e0^2 - e.e) v + 2 e (e.v) - 2 e0 e x v) / |q|^2``), so any nonzero ``q``
+    gives the rotation of ``q / |q|``, as :func:`dcm_from_quat` does; a ``q`` with
+    ``|q|^2`` within 8 ulp of 1 is used as given (``2 / |q|^2`` taken as 2: unit
+    quaternions keep their bits, and the division would only move them by
+    round-off).  A zero ``q`` raises ``ValueError``.  ``q``
+    ``(..., 4)`` and ``v`` ``(..., 3)`` broadcast.  For body -> inertial use
     ``quat_rotate(quat_conjugate(q), v)``.
     """
     q = _as_quat(q)
     v = _as_vec3(v, "v")
+    if q.shape == (4,) and v.shape == (3,):
+        return _rotate_one(q, v)
     e0, e = q[..., :1], q[..., 1:]
-    e, v = np.broadcast_arrays(e, v)
-    t = 2.0 * _cross(e, v)
+    try:
+        e, v = np.broadcast_arrays(e, v)
+    except ValueError:
+        broadcast_leading("quat_rotate", ("q", q, 1), ("v", v, 1))  # raises, naming both
+        raise
+    # the components summed left to right, as _rotate_one does: a row gives the same bits
+    # through either path
+    q0, q1, q2, q3 = q[..., :1], q[..., 1:2], q[..., 2:3], q[..., 3:]
+    n2 = q0 * q0 + q1 * q1 + q2 * q2 + q3 * q3
+    dev = np.abs(n2 - 1.0)
+    if dev.max(initial=0.0) <= _UNIT_NORM2_TOL:  # all unit (NaN fails the test)
+        s = 2.0
+    elif np.any(n2 == 0.0):
+        raise ValueError("q must be nonzero: got a quaternion of norm 0")
+    else:
+        s = np.where(dev <= _UNIT_NORM2_TOL, 2.0, 2.0 / n2)
+    t = s * _cross(e, v)
     return v - e0 * t + _cross(e, t)
+
+
+def _rotate_one(q, v):
+    """:func:`quat_rotate` of one ``(4,)`` and one ``(3,)`` in Python floats (the torque
+    models' per-call case): the same operations in the same order, so the same bits."""
+    e0, e1, e2, e3 = q.tolist()
+    x, y, z = v.tolist()
+    n2 = e0 * e0 + e1 * e1 + e2 * e2 + e3 * e3
+    if n2 == 0.0:
+        raise ValueError("q must be nonzero: got a quaternion of norm 0")
+    s = 2.0 if abs(n2 - 1.0) <= _UNIT_NORM2_TOL else 2.0 / n2
+    t0, t1, t2 = s * (e2 * z - e3 * y), s * (e3 * x - e1 * z), s * (e1 * y - e2 * x)
+    return np.array([x - e0 * t0 + (e2 * t2 - e3 * t1), y - e0 * t1 + (e3 * t0 - e1 * t2), z - e0 * t2 + (e1 * t1 - e2 * t0)])
 
 
 def dcm_from_quat(q):
@@ -371,9 +581,12 @@ def quat_from_dcm(C):
     ``C22``), which is never smaller than 1, so no step divides by a small
     number; then normalize.  Accurate to a few ulp everywhere including near
     180 deg.  For a slightly non-orthogonal input the result is a nearby unit
-    quaternion (Markley's normalization).  ``C`` is ``(..., 3, 3)``.
+    quaternion (Markley's normalization).  ``C`` is ``(..., 3, 3)``; a matrix that is
+    not a rotation (``max |C C^T - I| >`` :data:`DCM_ORTHOGONALITY_TOL`, or ``det C <
+    0``) raises ``ValueError`` naming ``C``; non-finite entries give NaN.
     """
     C = _as_dcm(C)
+    _check_rotation(C, "C")
     c00, c01, c02 = C[..., 0, 0], C[..., 0, 1], C[..., 0, 2]
     c10, c11, c12 = C[..., 1, 0], C[..., 1, 1], C[..., 1, 2]
     c20, c21, c22 = C[..., 2, 0], C[..., 2, 1], C[..., 2, 2]
@@ -434,10 +647,18 @@ def euler_from_dcm(C, seq):
     ``C -> angles -> C`` stays at a few ulp everywhere.  At gimbal lock
     (``|cos a2|``, resp. ``sin a2``, at most :data:`GIMBAL_LOCK_TOL`) the
     returned triple has ``a3 = 0`` and ``a1`` carries the whole rotation about
-    the locked axis.  ``C`` is ``(..., 3, 3)``; returns ``(..., 3)``.
+    the locked axis.  ``C`` is ``(..., 3, 3)``, a rotation to
+    :data:`DCM_ORTHOGONALITY_TOL` (else ``ValueError`` naming ``C``, as
+    :func:`quat_from_dcm`); returns ``(..., 3)``.
     """
     i, j, k = _parse_seq(seq)
     C = _as_dcm(C)
+    _check_rotation(C, "C")
+    return _euler_from_rotation(C, i, j, k)
+
+
+def _euler_from_rotation(C, i, j, k):
+    """:func:`euler_from_dcm` of a checked rotation matrix, axes ``(i, j, k)`` zero-based."""
     cii, cji = C[..., i, i], C[..., j, i]
     if i != k:
         s = _levi_civita(i, j, k)
@@ -480,7 +701,8 @@ def _elementary_quat(n, a):
 
 def euler_from_quat(q, seq):
     """Euler angles of ``dcm_from_quat(q)`` (see :func:`euler_from_dcm` for ranges and gimbal lock)."""
-    return euler_from_dcm(dcm_from_quat(q), seq)
+    i, j, k = _parse_seq(seq)
+    return _euler_from_rotation(dcm_from_quat(q), i, j, k)
 
 
 # --------------------------------------------------------------------------
@@ -497,6 +719,7 @@ def quat_from_axis_angle(axis, angle):
     """
     axis = _as_vec3(axis, "axis")
     angle = _as_scalar_array(angle, "angle")
+    broadcast_leading("quat_from_axis_angle", ("axis", axis, 1), ("angle", angle, 0))
     n = np.linalg.norm(axis, axis=-1, keepdims=True)
     if np.any(n == 0.0):
         raise ValueError("axis must be a nonzero vector")
@@ -511,9 +734,12 @@ def axis_angle_from_quat(q):
 
     ``angle = 2 atan2(|e|, |e0|)`` (well conditioned at every angle) after
     flipping ``q`` to ``e0 >= 0``; ``axis = e / |e|``.  For the identity
-    (``angle = 0``) the axis is undefined and ``(1, 0, 0)`` is returned.
+    (``angle = 0``) the axis is undefined and ``(1, 0, 0)`` is returned.  Both
+    are ratios of components, so a non-unit ``q`` gives the axis and angle of
+    ``q / |q|``; a zero ``q`` raises ``ValueError``.
     """
     q = _as_quat(q)
+    _norm2_nonzero(q, "q")
     q = np.where(q[..., :1] < 0.0, -q, q)
     e = q[..., 1:]
     ne = np.linalg.norm(e, axis=-1)
@@ -527,9 +753,15 @@ def attitude_difference(qa, qb):
     """Rotation angle (rad, in ``[0, pi]``) between two attitudes ``qa``, ``qb`` ``(..., 4)``.
 
     The angle of ``qb (x) qa*``, ``2 atan2(|e|, |e0|)`` (the sign of either quaternion is
-    irrelevant; well conditioned at every angle).  Inputs are not normalized.
+    irrelevant; well conditioned at every angle).  A ratio of components: non-unit
+    inputs give the angle between ``qa / |qa|`` and ``qb / |qb|`` (no normalization
+    needed); a zero ``qa`` or ``qb`` raises ``ValueError`` naming it, leading shapes that
+    do not broadcast ``ValueError`` naming both.
     """
-    d = quat_multiply(qb, quat_conjugate(qa))
+    qa = _as_quat(qa, "qa")
+    qb = _as_quat(qb, "qb")
+    shape = broadcast_leading("attitude_difference", ("qa", qa, 1), ("qb", qb, 1)) + (4,)
+    d = _product(qb, quat_conjugate(qa), shape, "qb", "qa")
     return 2.0 * np.arctan2(np.linalg.norm(d[..., 1:], axis=-1), np.abs(d[..., 0]))
 
 
@@ -550,9 +782,11 @@ def rotvec_from_quat(q):
     After flipping to ``e0 >= 0``: ``r = e * angle / |e|`` with
     ``angle / |e| = 2 atan2(|e|, e0) / |e|``, replaced near 0 by the series
     ``(2 / e0) (1 - x^2/3 + x^4/5)``, ``x = |e| / e0``, so tiny rotations keep
-    full relative accuracy.
+    full relative accuracy.  Ratios of components: a non-unit ``q`` gives the rotation
+    vector of ``q / |q|``; a zero ``q`` raises ``ValueError``.
     """
     q = _as_quat(q)
+    _norm2_nonzero(q, "q")
     q = np.where(q[..., :1] < 0.0, -q, q)
     e0, e = q[..., 0], q[..., 1:]
     ne = np.linalg.norm(e, axis=-1)
@@ -575,12 +809,17 @@ def slerp(q0, q1, tau):
     R^4 (half the rotation angle between the attitudes).  The weights are
     evaluated as ``(1-tau) sinc((1-tau) W) / sinc(W)`` so ``W -> 0`` is exact.
     The attitude turns at constant angular rate about a fixed axis,
-    ``q(0) = q0``, ``q(1) = q1'``.  Inputs are normalized first; ``tau``
-    (any real, extrapolates outside [0, 1]) broadcasts with the leading axes.
+    ``q(0) = q0``, ``q(1) = q1'``.  Inputs are normalized first (a zero ``q0`` or
+    ``q1`` raises ``ValueError`` naming it); ``tau`` (any real, extrapolates outside
+    [0, 1]) broadcasts with the leading axes (``ValueError`` naming all three if not).
     """
-    q0 = quat_normalize(_as_quat(q0, "q0"))
-    q1 = quat_normalize(_as_quat(q1, "q1"))
-    tau = _as_scalar_array(tau, "tau")[..., None]
+    q0 = _as_quat(q0, "q0")
+    q1 = _as_quat(q1, "q1")
+    tau = _as_scalar_array(tau, "tau")
+    broadcast_leading("slerp", ("q0", q0, 1), ("q1", q1, 1), ("tau", tau, 0))
+    q0 = _normalized(q0, "q0")
+    q1 = _normalized(q1, "q1")
+    tau = tau[..., None]
     q1 = np.where(np.sum(q0 * q1, axis=-1, keepdims=True) < 0.0, -q1, q1)
     W = 2.0 * np.arctan2(np.linalg.norm(q0 - q1, axis=-1, keepdims=True), np.linalg.norm(q0 + q1, axis=-1, keepdims=True))
     sW = _sinc(W)
@@ -599,12 +838,18 @@ def quat_rate(q, w):
     ``Omega(w) = [[0, -w^T], [w, -[w x]]]``: ``de0/dt = -0.5 e.w``,
     ``de/dt = 0.5 (e0 w + e x w)``.  ``w`` is the body angular velocity in body
     components (rad/s), ``q`` ``(..., 4)``, ``w`` ``(..., 3)``; returns 1/s.
-    Consistent with ``dC/dt = -[w x] C``.
+    Consistent with ``dC/dt = -[w x] C``.  Linear in ``q``: the rate of the
+    given ``q`` (not normalized; this is the right-hand side an integrator of ``q``
+    needs, and a zero ``q`` has zero rate).
     """
     q = _as_quat(q)
     w = _as_vec3(w, "w")
     e0, e = q[..., :1], q[..., 1:]
-    e, w = np.broadcast_arrays(e, w)
+    try:
+        e, w = np.broadcast_arrays(e, w)
+    except ValueError:
+        broadcast_leading("quat_rate", ("q", q, 1), ("w", w, 1))  # raises, naming both
+        raise
     d0 = -0.5 * np.sum(e * w, axis=-1, keepdims=True)
     de = 0.5 * (e0 * w + _cross(e, w))
     return np.concatenate([d0, de], axis=-1)
@@ -615,10 +860,12 @@ def omega_from_quat_rate(q, qdot):
 
     Inverse of :func:`quat_rate`: ``w = 2 (e0 de - de0 e - e x de) / |q|^2``
     (the vector part of ``2 conj(q) (x)_H qdot / |q|^2``).  Any component of
-    ``qdot`` along ``q`` (a norm change) is ignored.
+    ``qdot`` along ``q`` (a norm change) is ignored.  A zero ``q`` raises ``ValueError``.
     """
     q = _as_quat(q)
     qdot = _as_quat(qdot, "qdot")
+    broadcast_leading("omega_from_quat_rate", ("q", q, 1), ("qdot", qdot, 1))
+    _norm2_nonzero(q, "q")
     e0, e = q[..., :1], q[..., 1:]
     d0, de = qdot[..., :1], qdot[..., 1:]
     e, de = np.broadcast_arrays(e, de)
@@ -654,6 +901,7 @@ def omega_from_euler_rates(angles, rates, seq):
     """
     (i, j, k), c2, s2, c3, s3 = _euler_rate_trig(angles, seq)
     r = _as_vec3(rates, "rates")
+    broadcast_leading("omega_from_euler_rates", ("angles", angles, 1), ("rates", r, 1))
     d1, d2, d3 = r[..., 0], r[..., 1], r[..., 2]
     c2, s2, c3, s3, d1, d2, d3 = np.broadcast_arrays(c2, s2, c3, s3, d1, d2, d3)
     w = np.empty(c2.shape + (3,))
@@ -692,6 +940,7 @@ def euler_rates(angles, w, seq, *, tol=EULER_RATE_SINGULAR_TOL, on_singular="rai
         raise ValueError(f"on_singular must be 'raise' or 'nan', got {on_singular!r}")
     (i, j, k), c2, s2, c3, s3 = _euler_rate_trig(angles, seq)
     w = _as_vec3(w, "w")
+    broadcast_leading("euler_rates", ("angles", angles, 1), ("w", w, 1))
     wi, wj, wk = w[..., i], w[..., j], w[..., k]
     c2, s2, c3, s3, wi, wj, wk = np.broadcast_arrays(c2, s2, c3, s3, wi, wj, wk)
     den = c2 if i != k else s2
@@ -760,12 +1009,18 @@ def _quat_step_kernel(e0, e1, e2, e3, w1, w2, w3, dt):
 
 @jit
 def _quat_propagate_loop(q, w, dt, out):
+    """Rows of :func:`quat_propagate_constant_rate`; returns True if a row of ``q`` is zero."""
+    zero = False
     for n in range(q.shape[0]):
-        a, b, c, d = _quat_step_kernel(q[n, 0], q[n, 1], q[n, 2], q[n, 3], w[n, 0], w[n, 1], w[n, 2], dt[n])
+        e0, e1, e2, e3 = q[n, 0], q[n, 1], q[n, 2], q[n, 3]
+        if e0 == 0.0 and e1 == 0.0 and e2 == 0.0 and e3 == 0.0:
+            zero = True
+        a, b, c, d = _quat_step_kernel(e0, e1, e2, e3, w[n, 0], w[n, 1], w[n, 2], dt[n])
         out[n, 0] = a
         out[n, 1] = b
         out[n, 2] = c
         out[n, 3] = d
+    return zero
 
 
 def quat_propagate_constant_rate(q, w, dt):
@@ -776,17 +1031,20 @@ def quat_propagate_constant_rate(q, w, dt):
     ``q(t+dt) = quat_multiply(quat_from_rotvec(w dt), q(t))``; evaluated by the
     compiled :func:`_quat_step_kernel` and renormalized, so ``|q| = 1`` to
     round-off.  ``q`` ``(..., 4)``, ``w`` ``(..., 3)`` and ``dt`` (s, any sign)
-    broadcast.  The input ``q`` is used as given (normalize it first if needed).
+    broadcast (``ValueError`` naming all three if not).  The result is renormalized,
+    so a non-unit ``q`` gives the propagated ``q / |q|``; a zero ``q`` raises
+    ``ValueError``.
     """
     q = _as_quat(q)
     w = _as_vec3(w, "w")
     dt = _as_scalar_array(dt, "dt")
-    shape = np.broadcast_shapes(q.shape[:-1], w.shape[:-1], dt.shape)
+    shape = broadcast_leading("quat_propagate_constant_rate", ("q", q, 1), ("w", w, 1), ("dt", dt, 0))
     qb = np.ascontiguousarray(np.broadcast_to(q, shape + (4,)).reshape(-1, 4))
     wb = np.ascontiguousarray(np.broadcast_to(w, shape + (3,)).reshape(-1, 3))
     db = np.ascontiguousarray(np.broadcast_to(dt, shape).reshape(-1))
     out = np.empty_like(qb)
-    _quat_propagate_loop(qb, wb, db, out)
+    if _quat_propagate_loop(qb, wb, db, out):
+        raise ValueError("q must be nonzero: got a quaternion of norm 0")
     return out.reshape(shape + (4,))
 
 
@@ -822,6 +1080,8 @@ def to_scipy_rotation(q):
     """
     from scipy.spatial.transform import Rotation
 
+    q = _as_quat(q)
+    _norm2_nonzero(q, "q")
     return Rotation.from_quat(quat_to_scalar_last(q))
 
 

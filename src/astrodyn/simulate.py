@@ -414,6 +414,16 @@ class GyroSet:
                 "indicated": self.bank.indicated(angle).tolist()}
 
 
+#: ``max_steps`` of the engine's splitting calls (one block of output times per call).  The
+#: callers bound a call's span themselves -- the service to ATTITUDE_STEPS_PER_CALL steps of
+#: the fastest body between heartbeats, :func:`simulate` to one block of the config's own
+#: output grid -- and the shipped configs take at most ~2e4 steps per call; the cap (100x the
+#: integrator's default, ~10-90 s of kernel time) only refuses a config whose rates make one
+#: block absurdly long (e.g. 1e6 rad/s), with the integrator's message, instead of running
+#: for hours.
+ENGINE_MAX_STEPS = 100_000_000
+
+
 @dataclass
 class _AttitudeBody:
     name: str
@@ -586,12 +596,13 @@ class AttitudeEngine:
                     continue
                 if b.top is not None:
                     wp, qp, info = b.top.simulate(b.w0, b.q0, times - b.t0, method="top4", step=self.step,
-                                                  error_estimate=False)
+                                                  error_estimate=False, max_steps=ENGINE_MAX_STEPS)
                 else:
                     torque = _shifted(b.torque, b.t0)
                     wp, qp, info = propagate_attitude(b.inertia, b.w0, b.q0, times - b.t0, torque=torque,
                                                       rotor_momentum=b.rotor_momentum, method="split4",
-                                                      step=self.step, error_estimate=False)
+                                                      step=self.step, error_estimate=False,
+                                                      max_steps=ENGINE_MAX_STEPS)
                 b.t0, b.w0, b.q0 = float(times[-1]), wp[-1].copy(), qp[-1].copy()
                 b.steps += int(info.get("n_steps", 0))
             # principal -> body axes: C_BI = C_BP C_PI with C_BP = axes

@@ -28,11 +28,15 @@ Everything is vectorized over leading axes ``(..., 3)``; a single state returns
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
-from astrodyn.rotation import quat_rate
+from astrodyn.rotation import broadcast_leading, quat_rate, real_array
 
 __all__ = [
+    "TRIANGLE_SLACK",
+    "check_principal_moments",
     "inertia_tensor",
     "principal_axes",
     "angular_acceleration",
@@ -43,21 +47,69 @@ __all__ = [
 
 
 def _as_vec3(x, name):
-    a = np.asarray(x, dtype=np.float64)
+    a = real_array(x, name)
     if a.shape[-1:] != (3,):
         raise ValueError(f"{name}: expected an array of shape (..., 3), got shape {a.shape}")
     return a
+
+
+#: Relative slack of the triangle inequality ``I1 + I2 >= I3 (1 - slack)`` (round-off of
+#: moments computed from a mass distribution, or of an eigen-decomposition).
+TRIANGLE_SLACK = 1e-12
+
+
+def check_principal_moments(moments, name="inertia"):
+    """Refuse principal moments of inertia no rigid body can have; returns them unchanged.
+
+    ``moments`` ``(..., 3)`` kg m^2, any order (a float64 array).  Every row must be
+    finite and positive and satisfy the triangle inequalities ``I_i + I_j >= I_k``
+    (checked on the sorted moments, ``I1 + I2 >= I3 (1 - 1e-12)``: the moments of any
+    mass distribution do, with equality for a flat body).  Otherwise ``ValueError``
+    naming ``name`` and the first offending row.  The one checker of the attitude
+    package: :func:`inertia_tensor` (on the eigenvalues of a tensor),
+    :func:`angular_acceleration`, :func:`body_momentum_rates`,
+    :func:`~astrodyn.attitude.torque_free.torque_free` and
+    :func:`~astrodyn.attitude.integrators.propagate_attitude` all use it.
+    """
+    if moments.shape == (3,):  # one body: plain floats (cheap on the per-call paths)
+        row = moments.tolist()
+        why = _moments_problem(row)
+    else:
+        m = np.sort(moments, axis=-1)
+        ok = np.all(np.isfinite(m), axis=-1) & (m[..., 0] > 0.0)
+        ok &= ~(m[..., 0] + m[..., 1] < m[..., 2] * (1.0 - TRIANGLE_SLACK))
+        if np.all(ok):
+            return moments
+        row = moments[~ok][0].tolist()
+        why = _moments_problem(row)
+    if why is not None:
+        raise ValueError(f"{name}: expected finite positive principal moments (kg m^2) obeying the triangle "
+                         f"inequality I1 + I2 >= I3, got {row} ({why})")
+    return moments
+
+
+def _moments_problem(row):
+    """Why three principal moments (floats) are not a rigid body's, or None (same tests as
+    the vectorized path of :func:`check_principal_moments`, in the same arithmetic)."""
+    if not all(math.isfinite(x) for x in row):
+        return "not finite"
+    a, b, c = sorted(row)
+    if not a > 0.0:
+        return "not positive"
+    if a + b < c * (1.0 - TRIANGLE_SLACK):
+        return f"{a!r} + {b!r} < {c!r}: no rigid body has these"
+    return None
 
 
 def inertia_tensor(inertia) -> np.ndarray:
     """The ``(3, 3)`` inertia tensor from principal moments ``(3,)`` or a tensor ``(3, 3)``.
 
     Checks that the tensor is symmetric (to 1e-12 relative) and physically
-    realisable: positive moments satisfying the triangle inequalities
-    ``I1 + I2 >= I3`` (cyclic), with a 1e-12 relative slack for round-off.
-    Raises ``ValueError`` naming ``inertia`` otherwise.
+    realisable: its eigenvalues pass :func:`check_principal_moments` (positive,
+    triangle inequalities ``I1 + I2 >= I3`` cyclic, with a 1e-12 relative slack for
+    round-off).  Raises ``ValueError`` naming ``inertia`` otherwise.
     """
-    a = np.asarray(inertia, dtype=np.float64)
+    a = real_array(inertia, "inertia")
     if a.shape == (3,):
         J = np.diag(a)
     elif a.shape == (3, 3):
@@ -70,11 +122,7 @@ def inertia_tensor(inertia) -> np.ndarray:
     if np.max(np.abs(J - J.T)) > 1e-12 * scale:
         raise ValueError("inertia: tensor must be symmetric")
     J = 0.5 * (J + J.T)
-    m = np.linalg.eigvalsh(J)
-    if m[0] <= 0.0:
-        raise ValueError(f"inertia: principal moments must be positive, got {m}")
-    if m[0] + m[1] < m[2] * (1.0 - 1e-12):
-        raise ValueError(f"inertia: principal moments {m} violate the triangle inequality I1 + I2 >= I3")
+    check_principal_moments(np.linalg.eigvalsh(J))
     return J
 
 
@@ -101,22 +149,38 @@ def angular_acceleration(inertia, w, torque=0.0, rotor_momentum=0.0, rotor_momen
     ``I w' = tau - h' - w x (I w + h)`` (Baruh eq. 8.5x for ``h = 0``; gyrostat
     form of ch. 10).  ``inertia`` principal moments ``(3,)`` (the classic
     component form ``I1 w1' = (I2 - I3) w2 w3 + tau1`` ...) or a full tensor
-    ``(3, 3)``; ``w, torque, rotor_momentum, rotor_momentum_rate`` broadcast over
-    leading axes ``(..., 3)``.
+    ``(3, 3)``, both checked as :func:`inertia_tensor` checks them
+    (:func:`check_principal_moments`); ``w, torque, rotor_momentum,
+    rotor_momentum_rate`` ``(..., 3)`` (the last three may be scalars) broadcast over
+    leading axes (``ValueError`` naming them if not).
     """
     w = _as_vec3(w, "w")
-    tau = np.asarray(torque, dtype=np.float64)
-    h = np.asarray(rotor_momentum, dtype=np.float64)
-    hd = np.asarray(rotor_momentum_rate, dtype=np.float64)
-    a = np.asarray(inertia, dtype=np.float64)
-    if a.shape == (3,):
-        H = a * w + h
+    tau = _vec3_or_scalar(torque, "torque")
+    h = _vec3_or_scalar(rotor_momentum, "rotor_momentum")
+    hd = _vec3_or_scalar(rotor_momentum_rate, "rotor_momentum_rate")
+    a = real_array(inertia, "inertia")
+    try:
+        if a.shape == (3,):
+            check_principal_moments(a)
+            H = a * w + h
+            rhs = tau - hd - np.cross(w, H)
+            return rhs / a
+        J = inertia_tensor(a)
+        H = w @ J.T + h
         rhs = tau - hd - np.cross(w, H)
-        return rhs / a
-    J = inertia_tensor(a)
-    H = w @ J.T + h
-    rhs = tau - hd - np.cross(w, H)
-    return rhs @ np.linalg.inv(J).T
+        return rhs @ np.linalg.inv(J).T
+    except ValueError:
+        named = [("w", w), ("torque", tau), ("rotor_momentum", h), ("rotor_momentum_rate", hd)]
+        broadcast_leading("angular_acceleration", *((n, x, 1 if x.ndim else 0) for n, x in named))
+        raise
+
+
+def _vec3_or_scalar(x, name):
+    """A body vector ``(..., 3)`` or a scalar (broadcast to every component), as float64."""
+    a = real_array(x, name)
+    if a.ndim and a.shape[-1] != 3:
+        raise ValueError(f"{name}: expected a scalar or an array of shape (..., 3), got shape {a.shape}")
+    return a
 
 
 euler_rates = angular_acceleration
@@ -128,19 +192,27 @@ def body_momentum_rates(inertia, H, torque=0.0, rotor_momentum=0.0):
     """``H' = H x w + tau`` with ``w = I^{-1} (H - h)``: Euler's equations in momentum form.
 
     ``H`` total angular momentum in body components (N m s), ``rotor_momentum``
-    ``h`` the rotors' momentum relative to the body.  Returns ``(H', w)``.  This
+    ``h`` the rotors' momentum relative to the body; ``inertia`` as in
+    :func:`angular_acceleration` (checked the same way).  Returns ``(H', w)``.  This
     form needs no ``h'`` (a commanded rotor speed enters only through ``h(t)``)
     and is the Lie-Poisson form the splitting integrator preserves.
     """
     H = _as_vec3(H, "H")
-    a = np.asarray(inertia, dtype=np.float64)
-    rel = H - np.asarray(rotor_momentum, dtype=np.float64)
-    if a.shape == (3,):
-        w = rel / a
-    else:
-        J = inertia_tensor(a)
-        w = rel @ np.linalg.inv(J).T
-    return np.cross(H, w) + np.asarray(torque, dtype=np.float64), w
+    a = real_array(inertia, "inertia")
+    h = _vec3_or_scalar(rotor_momentum, "rotor_momentum")
+    tau = _vec3_or_scalar(torque, "torque")
+    try:
+        rel = H - h
+        if a.shape == (3,):
+            w = rel / check_principal_moments(a)
+        else:
+            J = inertia_tensor(a)
+            w = rel @ np.linalg.inv(J).T
+        return np.cross(H, w) + tau, w
+    except ValueError:
+        named = [("H", H), ("torque", tau), ("rotor_momentum", h)]
+        broadcast_leading("body_momentum_rates", *((n, x, 1 if x.ndim else 0) for n, x in named))
+        raise
 
 
 def attitude_state_rates(t, state, inertia, torque=None, rotor_momentum=None):
@@ -152,7 +224,7 @@ def attitude_state_rates(t, state, inertia, torque=None, rotor_momentum=None):
     callable ``h(t) -> (3,)`` (its rate is then taken by a central difference
     of step ``1e-6 * max(1, |t|)`` s; pass constant rotors where possible).
     """
-    x = np.asarray(state, dtype=np.float64)
+    x = real_array(state, "state")
     if x.shape[-1:] != (7,):
         raise ValueError(f"state: expected shape (..., 7) = (q, w), got {x.shape}")
     q, w = x[..., :4], x[..., 4:]

@@ -51,8 +51,16 @@ from dataclasses import dataclass
 import numpy as np
 
 from astrodyn.attitude.elliptic import ellipk
-from astrodyn.attitude.integrators import SPLIT4_WEIGHTS, step_chunks, step_plan
+from astrodyn.attitude.integrators import (
+    MAX_STEPS,
+    SPLIT4_WEIGHTS,
+    check_step_budget,
+    checked_max_steps,
+    step_chunks,
+    step_plan,
+)
 from astrodyn.jit import jit
+from astrodyn.rotation import real_array, real_scalar
 
 __all__ = ["Gyrocompass", "EARTH_ROTATION_RATE"]
 
@@ -136,24 +144,30 @@ class Gyrocompass:
             + 0.5 * self.inertia_difference * wh * wh * np.sin(alpha) ** 2
         )
 
-    def simulate(self, alpha0, alpha_dot0, t, step=None):
+    def simulate(self, alpha0, alpha_dot0, t, step=None, max_steps=MAX_STEPS):
         """Swing of the spin axis: ``(alpha, alpha_dot)`` (rad, rad/s) at times ``t`` (s, >= 0 ascending).
 
         ``alpha0`` azimuth of the spin axis from north (rad), ``alpha_dot0`` its rate
         at ``t = 0``.  ``step`` defaults to 1/200 of the small-swing period.  4th-order
         symplectic splitting (module docstring); the rotor's momentum ``h`` is set
-        from the initial state.
+        from the initial state.  More than ``max_steps`` steps in total
+        (:data:`~astrodyn.attitude.integrators.MAX_STEPS` by default) are refused
+        before the run, as by :func:`~astrodyn.attitude.integrators.propagate_attitude`.
         """
-        t_out = np.atleast_1d(np.asarray(t, dtype=np.float64))
+        max_steps = checked_max_steps(max_steps)
+        t_out = np.atleast_1d(real_array(t, "t"))
         if t_out.ndim != 1 or not np.all(np.isfinite(t_out)) or np.any(t_out < 0) or np.any(np.diff(t_out) < 0):
             raise ValueError("t: expected a scalar or 1-D array of finite times >= 0 s, ascending")
         h = self.axial_momentum(float(alpha0))
         wh = self.horizontal_earth_rate
+        note = ""
         if step is None:
             step = 2.0 * math.pi / self.natural_frequency(float(alpha0)) / 200.0
-        step = float(step)
+            note = " (the default: 1/200 of the small-swing period)"
+        step = real_scalar(step, "step")
         if not (step > 0 and math.isfinite(step)):
             raise ValueError(f"step: expected a positive finite step in s, got {step}")
+        check_step_budget(t_out, step, False, max_steps, note)
         coef = np.array([h * wh / self.gimbal_inertia, self.inertia_difference * wh * wh / self.gimbal_inertia])
         starts, n, dt = step_plan(t_out, step, False)
         out = np.empty((len(t_out), 2))

@@ -93,10 +93,19 @@ from astrodyn.attitude.torques import (
 )
 from astrodyn.jit import jit
 from astrodyn.orbit.universal import lagrange_coefficients_scalar
-from astrodyn.rotation import attitude_difference, quat_from_dcm, quat_multiply
+from astrodyn.rotation import attitude_difference, quat_from_dcm, quat_multiply, real_array, real_scalar
 
 __all__ = ["propagate_attitude", "SPLIT2_WEIGHTS", "SPLIT4_WEIGHTS", "YOSHIDA4_WEIGHTS", "free_rigid_body_step",
-           "held_torque_step", "HeldInputsBody"]
+           "held_torque_step", "HeldInputsBody", "MAX_STEPS", "checked_max_steps", "check_step_budget"]
+
+MAX_STEPS = 1_000_000
+"""Default ``max_steps`` of :func:`propagate_attitude` (and of the heavy top's and the
+gyrocompass's splitting): the most integration steps one call may take, as
+``propagate_perturbed``'s default.  About 0.1-1 s in the compiled kernel (65-850 ns a
+step, ``astrodyn bench attitude``), 10-30 s through a Python torque; a call that needs
+more is refused before it starts (a step far too small for the span, or rates so high
+that the default step -- 1/60 of the fastest natural period -- is tiny), and a caller
+that means it passes a larger ``max_steps``."""
 
 SPLIT2_WEIGHTS = np.array([1.0])
 """Stage weights of the 2nd-order Strang step (one stage)."""
@@ -691,7 +700,8 @@ class _Frame:
         self.J = inertia_tensor(inertia)
         self.moments, self.P = principal_axes(self.J)
         self.identity = bool(np.array_equal(self.P, np.eye(3)))
-        self.r = quat_from_dcm(self.P.T)  # C(r) = P^T
+        # C(r) = P^T (quat_from_dcm of the identity is exactly (1, 0, 0, 0))
+        self.r = np.array([1.0, 0.0, 0.0, 0.0]) if self.identity else quat_from_dcm(self.P.T)
         self.r_inv = self.r * np.array([1.0, -1.0, -1.0, -1.0])
 
     def vec_to_p(self, v):
@@ -760,7 +770,7 @@ def _rotor_function(rotor_momentum, frame):
             return frame.vec_to_p(h)
 
         return 2, h_p, None
-    h = np.asarray(rotor_momentum, dtype=np.float64)
+    h = real_array(rotor_momentum, "rotor_momentum")
     if h.shape != (3,):
         raise ValueError(f"rotor_momentum: expected a (3,) body vector in N m s or a callable h(t), got shape {h.shape}")
     hp = frame.vec_to_p(h)
@@ -776,6 +786,42 @@ def step_plan(t_out, step, even):
         n = n + (n % 2)
     dt = np.where(n > 0, span / np.maximum(n, 1), 0.0)
     return starts, n, dt
+
+
+def checked_max_steps(max_steps):
+    """``max_steps`` as a Python int >= 1 (``ValueError`` naming it otherwise; bools refused)."""
+    if isinstance(max_steps, (bool, np.bool_)) or not isinstance(max_steps, (int, np.integer)) or max_steps < 1:
+        raise ValueError(f"max_steps: expected an int >= 1 (a cap on integration steps), got {max_steps!r}")
+    return int(max_steps)
+
+
+def check_step_budget(t_out, step, even, max_steps, step_note=""):
+    """Refuse, before any work, a :func:`step_plan` of more than ``max_steps`` steps in total.
+
+    The count is the one the run would take (``sum ceil(|span_k| / step)``, made even per
+    interval when ``even``), computed in floating point so that no span/step ratio can
+    overflow.  The ``ValueError`` names the step, the span, the steps needed and
+    ``max_steps``, and says how to raise it; ``step_note`` says where the step came from.
+    ``t_out`` is monotone away from 0 (as the callers check), so a cheap bound settles
+    most calls.
+    """
+    if len(t_out) == 0:
+        return
+    # t_out is monotone away from 0, so the count is at most |t_end| / step + 2 per interval
+    if abs(float(t_out[-1])) / step + 2.0 * len(t_out) <= max_steps:
+        return
+    starts = np.concatenate([[0.0], t_out[:-1]])
+    with np.errstate(over="ignore"):
+        n = np.ceil(np.abs(t_out - starts) / step)
+    if even:
+        n = n + n % 2.0
+    need = float(np.sum(n))
+    if not need <= max_steps:
+        raise ValueError(
+            f"step: {step:.6g} s{step_note} over the {abs(float(t_out[-1])):.6g} s span of t needs {need:.6g} steps, "
+            f"more than max_steps={max_steps}; pass a larger step, or max_steps={int(min(need, 2.0**63 - 1))} "
+            "to run it anyway"
+        )
 
 
 def step_chunks(starts, n, dt, chunk=_CHUNK):
@@ -939,18 +985,18 @@ def _default_step(frame, M0, h0, ktorque, torque, w0):
 
 # the initial state and times on the first line, the options on the second (fmt: skip)
 def _checked_inputs(w0, q0, t, torque, rotor_momentum, method):
-    """:func:`propagate_attitude`'s arguments checked (ValueError naming the argument):
+    """:func:`propagate_attitude`'s arguments checked (ValueError / TypeError naming the argument):
     ``w0 (3,)``, ``q0 (4,)`` normalised, ``t`` as a 1-D array, and ``auto`` resolved."""
-    w0 = np.asarray(w0, dtype=np.float64)
+    w0 = real_array(w0, "w0")
     if w0.shape != (3,):
         raise ValueError(f"w0: expected body rates of shape (3,) in rad/s, got shape {w0.shape}")
-    q0 = np.asarray(q0, dtype=np.float64)
+    q0 = real_array(q0, "q0")
     if q0.shape != (4,):
         raise ValueError(f"q0: expected Euler parameters of shape (4,), scalar first, got shape {q0.shape}")
     nq = np.linalg.norm(q0)
     if not abs(nq - 1.0) <= 1e-6:
         raise ValueError(f"q0: expected unit Euler parameters (|q0| = 1 within 1e-6), got |q0| = {nq}")
-    t_out = np.atleast_1d(np.asarray(t, dtype=np.float64))
+    t_out = np.atleast_1d(real_array(t, "t"))
     if t_out.ndim != 1:
         raise ValueError(f"t: expected a scalar or 1-D array of times in s, got shape {t_out.shape}")
     if not np.all(np.isfinite(t_out)):
@@ -970,7 +1016,7 @@ def _checked_inputs(w0, q0, t, torque, rotor_momentum, method):
 
 def propagate_attitude(
     inertia, w0, q0, t, torque=None, rotor_momentum=None, method="auto", step=None,
-    rtol=1e-12, atol=1e-14, error_estimate=True,
+    rtol=1e-12, atol=1e-14, error_estimate=True, max_steps=MAX_STEPS,
 ):  # fmt: skip
     """Propagate a rigid body (or gyrostat) under torques; returns ``(w, q, info)``.
 
@@ -983,7 +1029,13 @@ def propagate_attitude(
     w0 : array_like (3,)
         Initial body angular velocity, rad/s, at ``t = 0``.
     q0 : array_like (4,)
-        Initial Euler parameters, scalar first (``|q0| = 1`` to 1e-6; renormalised).
+        Initial Euler parameters, scalar first.  Must be a unit quaternion to 1e-6
+        (``||q0| - 1| <= 1e-6``, else ``ValueError``); it is then divided by ``|q0|``.
+        This is stricter than :func:`~astrodyn.attitude.torque_free.torque_free`,
+        which accepts and normalises any nonzero ``q0``: here a ``q0`` that is
+        not unit is taken as a caller's mistake (e.g. scalar-last order, a lost
+        component), since the integrator's initial state should be an attitude.
+        ``method="exact"`` goes through ``torque_free`` with this checked ``q0``.
     t : float or array_like (n,)
         Output times, s, monotone away from 0 (all >= 0 ascending or all <= 0
         descending).
@@ -1001,10 +1053,20 @@ def propagate_attitude(
         Splitting step, s (each output interval uses ``ceil(span / step)`` equal
         steps); default about 1/60 of the fastest natural period.
     rtol, atol : float
-        DOP853 tolerances (``atol`` on the scaled state, see below).
+        DOP853 tolerances (``atol`` on the scaled state, see below), both > 0.
     error_estimate : bool
         Splitting only: repeat the run with steps ``2 h`` and report a Richardson
         estimate of the error of the returned solution (costs +50 %).
+    max_steps : int
+        Cap on the integration steps of the call, default :data:`MAX_STEPS`
+        (1,000,000).  Splitting: the total number of steps (``info["n_steps"]``, the
+        sum of ``ceil(span / step)`` over the output intervals; the error-estimate
+        run takes half as many more) is known from ``t`` and ``step`` and checked
+        before anything runs: beyond ``max_steps`` a ``ValueError`` names the step,
+        the span, the steps needed and how to allow them.  ``dop853``: at most
+        ``max_steps`` DOP853 steps (counted as 12 function evaluations each;
+        ``RuntimeError`` beyond).  Unused by ``exact`` (its cost does not grow with
+        the span).
 
     Returns
     -------
@@ -1019,6 +1081,7 @@ def propagate_attitude(
     tick = _time.perf_counter()
     frame = _Frame(inertia)
     w0, q0, t_out, method = _checked_inputs(w0, q0, t, torque, rotor_momentum, method)
+    max_steps = checked_max_steps(max_steps)
     scalar_t = np.ndim(t) == 0
 
     def finish(w, q, info):
@@ -1046,14 +1109,28 @@ def propagate_attitude(
         return finish(nan, np.full((len(t_out), 4), np.nan), dict(method=method, order=None))
 
     if method == "dop853":
-        return finish(*_run_dop853(frame, w0, q0, t_out, torque, rotor_momentum, rtol, atol))
+        rtol, atol = real_scalar(rtol, "rtol"), real_scalar(atol, "atol")
+        if not (0.0 < rtol < math.inf and 0.0 < atol < math.inf):
+            raise ValueError(f"rtol and atol: expected finite tolerances > 0, got rtol={rtol!r}, atol={atol!r}")
+        if len(t_out) == 0:
+            info = dict(method="dop853", order=8, rtol=rtol, atol=atol, nfev=0, quat_norm_drift=0.0)
+            return finish(np.empty((0, 3)), np.empty((0, 4)), info)
+        return finish(*_run_dop853(frame, w0, q0, t_out, torque, rotor_momentum, rtol, atol, max_steps))
 
     ktorque = _kernel_torque(torque, frame)
+    note = ""
     if step is None:
         step = _default_step(frame, M0_p, h0_p, ktorque, torque, w0)
-    step = float(step)
+        note = " (the default: 1/60 of the fastest natural period)"
+    step = real_scalar(step, "step")
     if not step > 0 or not math.isfinite(step):
         raise ValueError(f"step: expected a positive finite step in s, got {step}")
+    check_step_budget(t_out, step, error_estimate, max_steps, note)
+    if len(t_out) == 0:  # nothing to integrate (as the exact path: empty arrays)
+        info = dict(method=method, order=_ORDER[method], step=step, n_steps=0, kernel=ktorque is not None)
+        if error_estimate:
+            info.update(error_attitude=0.0, error_rate=0.0)
+        return finish(np.empty((0, 3)), np.empty((0, 4)), info)
     weights = _WEIGHTS[method]
     q0_p = frame.quat_to_p(q0)
     M_p, q_p, nsteps = _run_split(frame, M0_p, q0_p, t_out, step, weights, ktorque, rotor, torque, error_estimate)
@@ -1070,8 +1147,9 @@ def propagate_attitude(
     return finish(frame.vec_from_p(w_p), frame.quat_from_p(q_p), info)
 
 
-def _run_dop853(frame, w0, q0, t_out, torque, rotor_momentum, rtol, atol):
-    """scipy DOP853 on (q, M) in body axes; M scaled by |M0| (or max I) for the tolerances."""
+def _run_dop853(frame, w0, q0, t_out, torque, rotor_momentum, rtol, atol, max_steps=MAX_STEPS):
+    """scipy DOP853 on (q, M) in body axes; M scaled by |M0| (or max I) for the tolerances.
+    More than ``max_steps`` steps (12 right-hand sides each) raise RuntimeError."""
     from scipy.integrate import solve_ivp
 
     J = frame.J
@@ -1095,7 +1173,14 @@ def _run_dop853(frame, w0, q0, t_out, torque, rotor_momentum, rtol, atol):
     (j00, j01, j02), (j10, j11, j12), (j20, j21, j22) = Jinv.tolist()
     h_const = None if callable(rotor_momentum) else hfun(0.0).tolist()
 
+    max_fev = 12 * max_steps
+    calls = [0]
+
     def rhs(t, y):
+        calls[0] += 1
+        if calls[0] > max_fev:
+            raise RuntimeError(f"propagate_attitude: dop853 needs more than max_steps={max_steps} steps "
+                               f"({max_fev} right-hand sides) before t = {t:.9g} s; loosen rtol/atol or raise max_steps")
         e0, e1, e2, e3, m0, m1, m2 = y.tolist()
         m0 *= scale
         m1 *= scale

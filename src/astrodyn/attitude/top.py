@@ -57,10 +57,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from astrodyn.attitude.integrators import (
+    MAX_STEPS,
     SMALL_ANGLE,
     SPLIT2_WEIGHTS,
     SPLIT4_WEIGHTS,
     axis_rotation_trig,
+    check_step_budget,
+    checked_max_steps,
     cos_sinc_minus_one,
     renormalized,
     step_chunks,
@@ -75,6 +78,8 @@ from astrodyn.rotation import (
     omega_from_euler_rates,
     quat_from_euler,
     quat_hamilton_scalar,
+    real_array,
+    real_scalar,
 )
 
 __all__ = ["HeavyTop"]
@@ -187,7 +192,7 @@ class HeavyTop:
         u_lo, u_hi = np.clip(r[0], -1.0, 1.0), np.clip(r[1], -1.0, 1.0)
         return float(np.arccos(u_hi)), float(np.arccos(u_lo))
 
-    def simulate(self, w0, q0, t, method="top4", step=None, error_estimate=True, **kwargs):
+    def simulate(self, w0, q0, t, method="top4", step=None, error_estimate=True, max_steps=MAX_STEPS, **kwargs):
         """Propagate the top from body rates ``w0`` (rad/s) and ``q0`` at ``t = 0``; returns ``(w, q, info)``.
 
         ``method="top4"`` / ``"top2"``: the symmetric-top splitting of the module
@@ -195,7 +200,8 @@ class HeavyTop:
         scalar or 1-D array of times monotone away from 0 (s), ``step`` s (default
         1/60 of the fastest of the spin, precession and pendulum periods), and
         ``info`` as :func:`~astrodyn.attitude.integrators.propagate_attitude`'s
-        (Richardson error estimates when ``error_estimate``).  Any other
+        (Richardson error estimates when ``error_estimate``; ``max_steps`` likewise:
+        more steps than that in total are refused before the run).  Any other
         ``method`` goes to ``propagate_attitude`` with the gravity torque.
         """
         if method not in ("top2", "top4"):
@@ -203,23 +209,23 @@ class HeavyTop:
 
             return propagate_attitude(
                 self.inertia, w0, q0, t, torque=self.gravity_torque(), method=method, step=step,
-                error_estimate=error_estimate, **kwargs,
+                error_estimate=error_estimate, max_steps=max_steps, **kwargs,
             )
         if kwargs:
-            raise ValueError(f"method: {method!r} takes only t, step and error_estimate, got {sorted(kwargs)}")
-        return self._simulate_split(w0, q0, t, method, step, error_estimate)
+            raise ValueError(f"method: {method!r} takes only t, step, error_estimate and max_steps, got {sorted(kwargs)}")
+        return self._simulate_split(w0, q0, t, method, step, error_estimate, checked_max_steps(max_steps))
 
-    def _simulate_split(self, w0, q0, t, method, step, error_estimate):
+    def _simulate_split(self, w0, q0, t, method, step, error_estimate, max_steps):
         tick = _time.perf_counter()
-        w0 = np.asarray(w0, dtype=np.float64)
-        q0 = np.asarray(q0, dtype=np.float64)
+        w0 = real_array(w0, "w0")
+        q0 = real_array(q0, "q0")
         if w0.shape != (3,):
             raise ValueError(f"w0: expected body rates of shape (3,) in rad/s, got shape {w0.shape}")
         if q0.shape != (4,) or not abs(np.linalg.norm(q0) - 1.0) <= 1e-6:
             raise ValueError(f"q0: expected unit Euler parameters of shape (4,), scalar first, got {q0!r}")
         q0 = q0 / np.linalg.norm(q0)
         scalar_t = np.ndim(t) == 0
-        t_out = np.atleast_1d(np.asarray(t, dtype=np.float64))
+        t_out = np.atleast_1d(real_array(t, "t"))
         if t_out.ndim != 1 or not np.all(np.isfinite(t_out)):
             raise ValueError(f"t: expected a scalar or 1-D array of finite times in s, got shape {t_out.shape}")
         sgn = 1.0 if np.all(t_out >= 0) else -1.0
@@ -227,13 +233,16 @@ class HeavyTop:
             raise ValueError("t: expected times monotone away from 0 (all >= 0 ascending, or all <= 0 descending)")
         I, J = self.transverse_inertia, self.axial_inertia
         M0 = self.inertia * w0
+        note = ""
         if step is None:
             rates = [np.max(np.abs(w0)), np.linalg.norm(M0) / min(I, J), math.sqrt(self.mgl / I)]
             rate = max(rates)
             step = 0.1 if not rate > 0 else 2.0 * math.pi / (60.0 * rate)
-        step = float(step)
+            note = " (the default: 1/60 of the fastest of the spin, precession and pendulum periods)"
+        step = real_scalar(step, "step")
         if not (step > 0 and math.isfinite(step)):
             raise ValueError(f"step: expected a positive finite step in s, got {step}")
+        check_step_budget(t_out, step, error_estimate, max_steps, note)
         weights = SPLIT4_WEIGHTS if method == "top4" else SPLIT2_WEIGHTS
         order = 4 if method == "top4" else 2
         M, q, n = self._run(M0, q0, t_out, step, weights, error_estimate)

@@ -75,8 +75,13 @@ uniformly, ``C(t) = exp(-[w x] t) C0``.  Axisymmetric bodies give ``m = n = 0``
 (Sterbenz) and finite coefficients.  On the separatrix itself (``m1 == 0``)
 ``sn = tanh``, ``cn = dn = sech``, ``J`` is elementary and nothing is periodic.
 
-NaN in ``w0``, ``q0`` or ``t`` gives NaN rows; non-positive or non-finite
-moments raise ``ValueError``.  ``q0`` is normalised.
+NaN in ``w0``, ``q0`` or ``t`` gives NaN rows, and so does a zero ``q0`` (a batch
+of bodies keeps its good rows); moments that are not a rigid body's (non-finite,
+non-positive, or violating the triangle inequality ``I1 + I2 >= I3``) raise
+``ValueError`` through :func:`astrodyn.attitude.euler.check_principal_moments`, the
+checker :func:`~astrodyn.attitude.integrators.propagate_attitude` uses too.  Any
+nonzero ``q0`` is normalised (the convention of this module; ``propagate_attitude``
+instead requires ``|q0| = 1`` to 1e-6, see its docstring).
 
 Example (Dzhanibekov flip: spin near the intermediate axis reverses every half
 period)::
@@ -97,8 +102,9 @@ import math
 import numpy as np
 
 from astrodyn.attitude.elliptic import ellipk_scalar, elliprf_scalar, elliprj_scalar, reduce_half_period, sncndn_half
+from astrodyn.attitude.euler import TRIANGLE_SLACK, check_principal_moments
 from astrodyn.jit import jit, parallel_kernel, prange
-from astrodyn.rotation import quat_hamilton_scalar
+from astrodyn.rotation import broadcast_leading, quat_hamilton_scalar, real_array
 
 __all__ = ["torque_free", "PreparedBody", "BODY_DTYPE", "polhode", "herpolhode", "rate_period", "flip_period"]
 
@@ -460,11 +466,19 @@ def set_initial_attitude(p, q0, qn):
 
 @jit
 def _valid_inertia(inertia):
-    ok = True
-    for i in range(3):
-        if not (math.isfinite(inertia[i]) and inertia[i] > 0.0):
-            ok = False
-    return ok
+    """The test of :func:`astrodyn.attitude.euler.check_principal_moments` in compiled form (the
+    scalar path's; the same arithmetic, so the two agree): finite, positive, and the sorted
+    moments ``a <= b <= c`` with ``a + b >= c (1 - TRIANGLE_SLACK)``."""
+    a, b, c = inertia[0], inertia[1], inertia[2]
+    if not (math.isfinite(a) and math.isfinite(b) and math.isfinite(c)):
+        return False
+    if a > b:  # sort the three (a sorting network)
+        a, b = b, a
+    if b > c:
+        b, c = c, b
+    if a > b:
+        a, b = b, a
+    return a > 0.0 and not (a + b < c * (1.0 - TRIANGLE_SLACK))
 
 
 @parallel_kernel("torque_free_setup")
@@ -507,9 +521,9 @@ def _state_of_new_body(inertia, w0, q0, t, w, q):
 
 
 def _as_rows(inertia, w0, q0):
-    inertia = np.asarray(inertia, dtype=np.float64)
-    w0 = np.asarray(w0, dtype=np.float64)
-    q0 = np.asarray(q0, dtype=np.float64)
+    inertia = real_array(inertia, "inertia")
+    w0 = real_array(w0, "w0")
+    q0 = real_array(q0, "q0")
     if inertia.ndim < 1 or inertia.shape[-1] != 3:
         raise ValueError(f"inertia: expected principal moments of shape (..., 3), got shape {inertia.shape}")
     if w0.ndim < 1 or w0.shape[-1] != 3:
@@ -521,12 +535,11 @@ def _as_rows(inertia, w0, q0):
 
 
 def _check_inertia(inertia):
-    if not np.all(np.isfinite(inertia)) or np.any(inertia <= 0):
-        raise ValueError(f"inertia: expected finite positive principal moments (kg m^2), got {inertia.tolist()}")
+    check_principal_moments(inertia, "inertia")
 
 
 def _times(t):
-    t_arr = np.asarray(t, dtype=np.float64)
+    t_arr = real_array(t, "t")
     if t_arr.ndim > 1:
         raise ValueError(f"t: expected a scalar or a 1-D array of times (s), got shape {t_arr.shape}")
     return t_arr.ndim == 0, np.ascontiguousarray(t_arr.reshape(-1))
@@ -547,7 +560,7 @@ class PreparedBody:
 
     def __init__(self, inertia, w0, q0):
         inertia, w0, q0 = _as_rows(inertia, w0, q0)
-        self.shape = np.broadcast_shapes(inertia.shape[:-1], w0.shape[:-1], q0.shape[:-1])
+        self.shape = broadcast_leading("torque_free", ("inertia", inertia, 1), ("w0", w0, 1), ("q0", q0, 1))
         rows = [np.ascontiguousarray(np.broadcast_to(a, self.shape + (a.shape[-1],))).reshape(-1, a.shape[-1])
                 for a in (inertia, w0, q0)]
         self.bodies = np.empty(rows[0].shape[0], dtype=BODY_DTYPE)
@@ -572,12 +585,16 @@ def torque_free(inertia, w0, q0, t):
     Parameters
     ----------
     inertia : array_like, shape (..., 3)
-        Principal moments of inertia (kg m^2), any order, finite and positive.
+        Principal moments of inertia (kg m^2), any order, finite, positive and
+        satisfying the triangle inequality (a rigid body's; else ``ValueError``).
     w0 : array_like, shape (..., 3)
         Body angular velocity at ``t = 0`` (rad/s, body principal axes).
     q0 : array_like, shape (..., 4)
-        Euler parameters at ``t = 0``, scalar first, ``v_body = C(q0) @ v_inertial``
-        (normalised internally).
+        Euler parameters at ``t = 0``, scalar first, ``v_body = C(q0) @ v_inertial``.
+        Any nonzero ``q0`` is accepted and normalised (``q0 / |q0|`` is the initial
+        attitude); a zero ``q0`` gives NaN rows.  Note the difference from
+        :func:`~astrodyn.attitude.integrators.propagate_attitude`, which requires
+        ``|q0| = 1`` to 1e-6 (and raises ``ValueError`` otherwise).
     t : array_like, shape (N,) or scalar
         Times (s) relative to the initial state; any sign, any order.
 
@@ -593,13 +610,14 @@ def torque_free(inertia, w0, q0, t):
     and its accuracy are described in the module docstring.  One body at one time takes
     one compiled call; bodies evaluated again and again are cheaper as a :class:`PreparedBody`.
     """
-    inertia = np.asarray(inertia, dtype=np.float64)
-    w0 = np.asarray(w0, dtype=np.float64)
-    q0 = np.asarray(q0, dtype=np.float64)
+    inertia = real_array(inertia, "inertia")
+    w0 = real_array(w0, "w0")
+    q0 = real_array(q0, "q0")
     if isinstance(t, (float, int)) and inertia.shape == (3,) and w0.shape == (3,) and q0.shape == (4,):
         w, q = np.empty(3), np.empty(4)
         if not _state_of_new_body(inertia, w0, q0, float(t), w, q):
-            _check_inertia(inertia)
+            _check_inertia(inertia)  # raises (the same test, with the message)
+            raise AssertionError("unreachable: _valid_inertia and check_principal_moments disagree")
         return w, q
     return PreparedBody(inertia, w0, q0).states(t)
 
@@ -642,13 +660,13 @@ def polhode(inertia, w0, n=256):
     intermediate-axis equilibria to 1e-8; a uniform rotation gives ``n``
     copies of ``w0``.
     """
-    inertia = np.asarray(inertia, dtype=np.float64)
-    w0 = np.asarray(w0, dtype=np.float64)
+    inertia = real_array(inertia, "inertia")
+    w0 = real_array(w0, "w0")
     if inertia.shape != (3,) or w0.shape != (3,):
         raise ValueError("inertia, w0: expected shape (3,) each (one body)")
+    if isinstance(n, (bool, np.bool_)) or not isinstance(n, (int, np.integer)) or n < 1:
+        raise ValueError(f"n: expected a positive integer number of samples, got {n!r}")
     n = int(n)
-    if n < 1:
-        raise ValueError(f"n: expected a positive number of samples, got {n}")
     prepared = PreparedBody(inertia, w0, np.array([1.0, 0.0, 0.0, 0.0]))
     p = prepared.bodies[0]
     if p["mode"] != 2:

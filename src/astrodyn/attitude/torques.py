@@ -24,10 +24,12 @@ works too (through a slower Python path).
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from astrodyn.attitude.euler import inertia_tensor
-from astrodyn.rotation import quat_rotate
+from astrodyn.rotation import quat_rotate, real_array, real_scalar
 
 __all__ = [
     "gravity_gradient_torque",
@@ -43,11 +45,28 @@ def gravity_gradient_torque(r_body, inertia, mu):
 
     ``r_body`` ``(..., 3)``: position of the body's centre of mass relative to the
     attracting centre, in body components (m); ``inertia`` ``(3,)`` principal
-    moments or ``(3, 3)`` tensor about the centre of mass (kg m^2); ``mu``
-    gravitational parameter (m^3/s^2).  First-order term of the expansion of the
-    gravity field over the body (Hughes, ch. 8; Baruh ch. 8).
+    moments or ``(3, 3)`` tensor about the centre of mass (kg m^2, checked by
+    :func:`~astrodyn.attitude.euler.inertia_tensor`); ``mu`` gravitational parameter
+    (m^3/s^2), one number > 0, as :class:`GravityGradientTorque` requires.  First-order
+    term of the expansion of the gravity field over the body (Hughes, ch. 8; Baruh ch. 8).
     """
-    return _gravity_gradient(np.asarray(r_body, dtype=np.float64), inertia_tensor(inertia), float(mu))
+    rb = _vector(r_body, "r_body", "(..., 3) position in m")
+    return _gravity_gradient(rb, inertia_tensor(inertia), _checked_mu(mu))
+
+
+def _vector(x, name, what, batch=True):
+    """``x`` as float64 of shape ``(..., 3)`` (``batch``) or ``(3,)``; ValueError naming ``name``."""
+    a = real_array(x, name)
+    if (a.shape[-1:] != (3,)) if batch else (a.shape != (3,)):
+        raise ValueError(f"{name}: expected a {what}, got shape {a.shape}")
+    return a
+
+
+def _checked_mu(mu):
+    mu = real_scalar(mu, "mu")
+    if not mu > 0.0:
+        raise ValueError(f"mu: expected a positive gravitational parameter in m^3/s^2, got {mu}")
+    return mu
 
 
 def _gravity_gradient(rb, J, mu):
@@ -83,9 +102,7 @@ class GravityGradientTorque:
     def __init__(self, mu, position, inertia):
         if not callable(position):
             raise ValueError("position: expected a callable r(t) -> (..., 3) inertial position in m")
-        self.mu = float(mu)
-        if not self.mu > 0.0:
-            raise ValueError(f"mu: expected a positive gravitational parameter in m^3/s^2, got {mu}")
+        self.mu = _checked_mu(mu)
         self.position = position
         self.inertia = inertia_tensor(inertia)
         self.orbit = None  # (r0, v0, t0) of a Kepler orbit, see kepler()
@@ -101,12 +118,12 @@ class GravityGradientTorque:
         """
         from astrodyn.orbit.universal import propagate
 
-        r0 = np.array(r0, dtype=np.float64).reshape(-1)
-        v0 = np.array(v0, dtype=np.float64).reshape(-1)
+        r0 = np.array(real_array(r0, "r0"), dtype=np.float64).reshape(-1)
+        v0 = np.array(real_array(v0, "v0"), dtype=np.float64).reshape(-1)
         if r0.shape != (3,) or v0.shape != (3,):
             raise ValueError(f"r0, v0: expected inertial position (3,) m and velocity (3,) m/s, got {r0.shape} and {v0.shape}")
-        t0 = float(t0)
-        mu = float(mu)
+        t0 = real_scalar(t0, "t0")
+        mu = _checked_mu(mu)
 
         def position(t):
             return propagate(r0, v0, np.asarray(t, dtype=np.float64) - t0, mu)[0]
@@ -136,16 +153,19 @@ class GravityGradientTorque:
 class UniformGravityTorque:
     """Torque of a uniform gravity field about a fixed point: ``tau = r_c x (m C g)``.
 
-    ``mass`` kg; ``center_of_mass`` ``(3,)`` position of the centre of mass
+    ``mass`` kg, finite and >= 0 (0: no torque, as a massless
+    :class:`~astrodyn.attitude.top.HeavyTop`); ``center_of_mass`` ``(3,)`` position of the centre of mass
     relative to the fixed point, body axes (m); ``gravity`` ``(3,)`` field in
     inertial axes (m/s^2), default ``(0, 0, -9.80665)`` (inertial Z up).
     For the heavy symmetric top of Baruh sec. 10.5 ``center_of_mass = (0, 0, l)``.
     """
 
     def __init__(self, mass, center_of_mass, gravity=(0.0, 0.0, -9.80665)):
-        self.mass = float(mass)
-        self.center_of_mass = np.asarray(center_of_mass, dtype=np.float64).reshape(3)
-        self.gravity = np.asarray(gravity, dtype=np.float64).reshape(3)
+        self.mass = real_scalar(mass, "mass")
+        if not (math.isfinite(self.mass) and self.mass >= 0.0):
+            raise ValueError(f"mass: expected a finite non-negative mass in kg, got {self.mass}")
+        self.center_of_mass = _vector(center_of_mass, "center_of_mass", "(3,) body vector in m", batch=False)
+        self.gravity = _vector(gravity, "gravity", "(3,) inertial field in m/s^2", batch=False)
 
     def __call__(self, t, q, w=None):
         return np.cross(self.center_of_mass, self.mass * quat_rotate(q, self.gravity))
@@ -157,7 +177,7 @@ class ConstantTorque:
     def __init__(self, torque, frame="body"):
         if frame not in ("body", "inertial"):
             raise ValueError(f"frame: expected 'body' or 'inertial', got {frame!r}")
-        self.torque = np.asarray(torque, dtype=np.float64).reshape(3)
+        self.torque = _vector(torque, "torque", "(3,) torque in N m", batch=False)
         self.frame = frame
 
     def __call__(self, t, q, w=None):
