@@ -4,20 +4,19 @@ Each test is a reproducer of a fault the API probe found: a call that ran withou
 silent wrong result, or an error from deep inside numpy that did not name the argument.  The
 contract: a non-finite (or empty) output or a one-line ``ValueError`` / ``TypeError`` naming
 the argument, and nothing runs without bound.  The formerly unbounded calls run under
-:func:`_deadline`: the splitting kernel returns to Python between chunks of steps, so an
+:func:`_hostile_calls.time_bound`: the splitting kernel returns to Python between chunks of steps, so an
 alarm stops a run that would otherwise take months, and the test fails instead of hanging.
 """
 
 from __future__ import annotations
 
 import math
-import signal
 import time
-from contextlib import contextmanager
 
 import numpy as np
 import pytest
 
+from _hostile_calls import time_bound
 from astrodyn.attitude import (
     ConstantTorque,
     Gyrocompass,
@@ -31,6 +30,7 @@ from astrodyn.attitude import (
     propagate_attitude,
     torque_free,
 )
+from astrodyn.inputs import NonRealInputError
 from astrodyn.rotation import (
     attitude_difference,
     axis_angle_from_quat,
@@ -60,23 +60,6 @@ V = np.array([1.0, 2.0, 3.0])
 ZERO_Q = np.zeros(4)
 
 
-@contextmanager
-def _deadline(seconds: float):
-    """Raise TimeoutError in the main thread after ``seconds`` (SIGALRM): a bound on calls that
-    used to run for hours."""
-
-    def expired(signum, frame):
-        raise TimeoutError(f"no answer within {seconds} s: the call is not bounded")
-
-    previous = signal.signal(signal.SIGALRM, expired)
-    signal.setitimer(signal.ITIMER_REAL, seconds)
-    try:
-        yield
-    finally:
-        signal.setitimer(signal.ITIMER_REAL, 0.0)
-        signal.signal(signal.SIGALRM, previous)
-
-
 # ---------------------------------------------------------------------------
 # report #2 / #10: propagate_attitude's work is bounded before it starts
 
@@ -84,7 +67,7 @@ def _deadline(seconds: float):
 def test_tiny_step_is_refused_before_the_kernel_starts():
     # formerly 1e13 splitting steps (months); now refused in milliseconds
     tick = time.perf_counter()
-    with _deadline(5.0), pytest.raises(ValueError, match=r"^step: 1e-09 s over the 10000 s span of t needs 1e\+13 steps, "
+    with time_bound(5.0), pytest.raises(ValueError, match=r"^step: 1e-09 s over the 10000 s span of t needs 1e\+13 steps, "
                                                          r"more than max_steps=1000000; .*max_steps="):
         propagate_attitude(I3, W0, Q1, [0.0, 1e4], torque=ConstantTorque([1e-3, 0, 0]), step=1e-9)
     assert time.perf_counter() - tick < 2.0
@@ -92,7 +75,7 @@ def test_tiny_step_is_refused_before_the_kernel_starts():
 
 def test_fast_spin_with_the_default_step_is_refused():
     # 1e6 rad/s: the default step is 3.3e-8 s, 3.0e7 steps for 1 s (15 s of wall time, silently)
-    with _deadline(5.0), pytest.raises(ValueError, match=r"^step: 3\.31\d+e-08 s \(the default: .*\) over the 1 s span "
+    with time_bound(5.0), pytest.raises(ValueError, match=r"^step: 3\.31\d+e-08 s \(the default: .*\) over the 1 s span "
                                                          r"of t needs 3\.01975e\+07 steps, more than max_steps=1000000"):
         propagate_attitude(I3, [1e6, 0.0, 1e6], Q1, [0.0, 1.0], torque=ConstantTorque([1e-3, 0, 0]))
 
@@ -117,17 +100,17 @@ def test_dop853_refuses_non_positive_tolerances_and_is_bounded():
     for rtol, atol in ((-1.0, 1e-14), (0.0, 1e-14), (1e-9, -1.0), (math.nan, 1e-14)):
         with pytest.raises(ValueError, match="^rtol and atol: expected finite tolerances > 0"):
             propagate_attitude(I3, W0, Q1, [0.0, 10.0], torque=tq, method="dop853", rtol=rtol, atol=atol)
-    with _deadline(5.0), pytest.raises(RuntimeError, match="dop853 needs more than max_steps=2 steps"):
+    with time_bound(5.0), pytest.raises(RuntimeError, match="dop853 needs more than max_steps=2 steps"):
         propagate_attitude(I3, W0, Q1, [0.0, 10.0], torque=tq, method="dop853", max_steps=2)
 
 
 def test_heavy_top_and_gyrocompass_splitting_are_bounded_too():
     top = HeavyTop(mass=0.5, cm_distance=0.04, transverse_inertia=2e-3, axial_inertia=1e-3)
     wt, qt = top.state_from_euler(0.0, 0.5, 0.0, 0.0, 0.0, 60.0)
-    with _deadline(5.0), pytest.raises(ValueError, match="more than max_steps=1000000"):
+    with time_bound(5.0), pytest.raises(ValueError, match="more than max_steps=1000000"):
         top.simulate(wt, qt, [1e4], step=1e-9)
     gc = Gyrocompass(gimbal_inertia=0.05, rotor_inertia=0.02, spin=2000.0, latitude=0.5)
-    with _deadline(5.0), pytest.raises(ValueError, match="more than max_steps=1000000"):
+    with time_bound(5.0), pytest.raises(ValueError, match="more than max_steps=1000000"):
         gc.simulate(0.1, 0.0, [1e4], step=1e-9)
 
 
@@ -222,7 +205,7 @@ def test_gravity_gradient_torque_needs_one_positive_mu():
         gravity_gradient_torque([7e6, 1e5, 1e5], I3, -MU)
     with pytest.raises(ValueError, match="^mu: expected a positive"):
         gravity_gradient_torque([7e6, 1e5, 1e5], I3, 0.0)
-    with pytest.raises(ValueError, match="^mu must be a single real number"):
+    with pytest.raises(ValueError, match=r"^gravity_gradient_torque: mu: expected a scalar, got shape \(2,\)"):
         gravity_gradient_torque([7e6, 1e5, 1e5], I3, [MU, MU])
     with pytest.raises(ValueError, match=r"^r_body: expected a \(\.\.\., 3\) position"):
         gravity_gradient_torque([7e6, 1e5, 1e5, 1.0], I3, MU)
@@ -278,34 +261,37 @@ def test_uniform_gravity_torque_refuses_a_negative_mass_and_bad_vectors():
 @pytest.mark.parametrize(
     "call, name",
     [
-        (lambda: quat_rotate(QA + 1j, V), "q"),
-        (lambda: quat_rotate(QA, V + 0j), "v"),
-        (lambda: quat_multiply(QA + 1j, QA), "q2"),
-        (lambda: quat_rotate(np.array([1, None, 0, 0], dtype=object), V), "q"),
-        (lambda: dcm_from_quat("abcd"), "q"),
-        (lambda: torque_free(I3, W0, Q1, None), "t"),
-        (lambda: torque_free(I3, W0, Q1, [1 + 1j]), "t"),
-        (lambda: torque_free(I3, [0.1, None, 0.3], Q1, [1.0]), "w0"),
-        (lambda: propagate_attitude(I3, W0, Q1, None), "t"),
-        (lambda: propagate_attitude(I3, W0, Q1 + 0j, [1.0]), "q0"),
-        (lambda: angular_acceleration(I3, [1j, 0, 0]), "w"),
-        (lambda: quat_propagate_constant_rate(QA, V, 1j), "dt"),
+        (lambda: quat_rotate(QA + 1j, V), "quat_rotate: q"),
+        (lambda: quat_rotate(QA, V + 0j), "quat_rotate: v"),
+        (lambda: quat_multiply(QA + 1j, QA), "quat_multiply: q2"),
+        (lambda: quat_rotate(np.array([1, None, 0, 0], dtype=object), V), "quat_rotate: q"),
+        (lambda: quat_rotate(QA, np.array([True, False, False])), "quat_rotate: v"),
+        (lambda: quat_rotate(QA, [True, False, False]), "quat_rotate: v"),
+        (lambda: dcm_from_quat("abcd"), "dcm_from_quat: q"),
+        (lambda: torque_free(I3, W0, Q1, None), "torque_free: t"),
+        (lambda: torque_free(I3, W0, Q1, [1 + 1j]), "torque_free: t"),
+        (lambda: torque_free(I3, [0.1, None, 0.3], Q1, [1.0]), "torque_free: w0"),
+        (lambda: torque_free(I3, W0, Q1, True), "torque_free: t"),
+        (lambda: propagate_attitude(I3, W0, Q1, None), "propagate_attitude: t"),
+        (lambda: propagate_attitude(I3, W0, Q1 + 0j, [1.0]), "propagate_attitude: q0"),
+        (lambda: propagate_attitude(I3, W0, Q1, [1.0], torque=ConstantTorque([1e-3, 0, 0]), step=True),
+         "propagate_attitude: step"),
+        (lambda: angular_acceleration(I3, [1j, 0, 0]), "angular_acceleration: w"),
+        (lambda: quat_propagate_constant_rate(QA, V, 1j), "quat_propagate_constant_rate: dt"),
     ],
 )
 def test_non_real_input_raises_type_error_naming_the_argument(call, name):
-    with pytest.raises(TypeError, match=rf"^{name} must be real numbers, got "):
+    with pytest.raises(NonRealInputError, match=rf"^{name}: expected real numbers, got "):
         call()
 
 
 def test_non_real_input_error_is_also_a_value_error():
-    from astrodyn.rotation import NonRealInputError
-
     # callers that caught the ValueError these inputs used to give keep working
     assert issubclass(NonRealInputError, TypeError) and issubclass(NonRealInputError, ValueError)
-    with pytest.raises(ValueError, match="^angles must be real numbers"):
+    with pytest.raises(ValueError, match="^dcm_from_euler: angles: expected real numbers, got str"):
         dcm_from_euler("abc", "321")
-    # real numbers of any kind still convert: bools, ints, float32, object arrays of numbers
-    np.testing.assert_array_equal(quat_rotate(np.array([1, 0, 0, 0], dtype=object), [True, 2, np.float32(3)]), V)
+    # real numbers of any kind still convert: ints, unsigned ints, float32, object arrays of ints and floats
+    np.testing.assert_array_equal(quat_rotate(np.array([1, 0, 0, 0], dtype=object), [np.uint8(1), 2, np.float32(3)]), V)
 
 
 # ---------------------------------------------------------------------------
@@ -329,7 +315,8 @@ def test_non_real_input_error_is_also_a_value_error():
          r"omega_from_euler_rates: leading shapes do not broadcast: angles \(2, 3\), rates \(5, 3\)"),
         (lambda: angular_acceleration(I3, np.zeros((2, 3)), np.zeros((5, 3))),
          r"angular_acceleration: leading shapes do not broadcast: w \(2, 3\), torque \(5, 3\)"),
-        (lambda: angular_acceleration(I3, W0, torque=[1.0, 2.0]), r"torque: expected a scalar or an array of shape"),
+        (lambda: angular_acceleration(I3, W0, torque=[1.0, 2.0]),
+         r"angular_acceleration: torque: expected a scalar or an array of shape"),
     ],
 )
 def test_errors_name_the_argument(call, message):

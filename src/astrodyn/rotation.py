@@ -46,9 +46,10 @@ All functions take float64 arrays with leading (batch) axes and broadcast them;
 a single rotation is just the shape ``(4,)`` or ``(3, 3)`` case.  NaN inputs
 give NaN outputs; malformed shapes, leading shapes that do not broadcast, unknown
 sequences and zero quaternions or axes raise ``ValueError`` naming the argument;
-``None``, complex numbers, strings and non-numeric objects raise
-:class:`NonRealInputError` (a ``TypeError``, and a ``ValueError`` for callers that
-catch that) naming the argument.
+``None``, complex numbers, strings, bools and non-numeric objects raise
+:class:`astrodyn.inputs.NonRealInputError` (a ``TypeError``, and a ``ValueError`` for
+callers that catch that) naming the function and the argument (the core's one input
+rule, :mod:`astrodyn.inputs`).
 
 One rule for quaternions: every function that reads ``q`` as an attitude uses the
 rotation of ``q / |q|`` (so any nonzero ``q`` is accepted, as in
@@ -60,10 +61,6 @@ whose rotation is the composition); :func:`quat_rate` is the linear right-hand s
 ``0.5 Omega(w) q`` of the given ``q``.  Matrices read as attitudes
 (:func:`quat_from_dcm`, :func:`euler_from_dcm`) must be rotations to within
 :data:`DCM_ORTHOGONALITY_TOL`.
-
-The input checks shared with :mod:`astrodyn.attitude` are public here:
-:func:`real_array`, :func:`real_scalar`, :func:`broadcast_leading` and
-:class:`NonRealInputError`.
 
 Example: a body turned by 30 deg about the inertial z axis sees the inertial x
 axis at -30 deg in its own frame::
@@ -78,10 +75,10 @@ axis at -30 deg in its own frame::
 from __future__ import annotations
 
 import math
-import numbers
 
 import numpy as np
 
+from astrodyn.inputs import broadcast_named, real_array
 from astrodyn.jit import jit
 
 __all__ = [
@@ -90,10 +87,6 @@ __all__ = [
     "EULER_RATE_SINGULAR_TOL",
     "EulerSingularityError",
     "DCM_ORTHOGONALITY_TOL",
-    "NonRealInputError",
-    "real_array",
-    "real_scalar",
-    "broadcast_leading",
     "elementary_dcm",
     "skew",
     "quat_normalize",
@@ -167,99 +160,25 @@ class EulerSingularityError(ValueError):
     """Euler angle rates requested at (or too near) the sequence's singular attitude."""
 
 
-class NonRealInputError(TypeError, ValueError):
-    """An argument that is not real numbers: ``None``, complex, strings, non-numeric objects.
-
-    A ``TypeError``; also a ``ValueError``, so callers that caught the ``ValueError``
-    these inputs used to give keep working.  The message names the argument.
-    """
-
-
-# --------------------------------------------------------------------------
-# input checking (public: shared with astrodyn.attitude)
-
-
-def _describe(x, a):
-    """What a non-real argument is, for the error message."""
-    if x is None:
-        return "None"
-    if a.dtype.kind == "O":
-        bad = next((e for e in a.flat if not isinstance(e, numbers.Real)), None)
-        return f"{type(bad).__name__} in an object array" if a.ndim else type(bad).__name__
-    return type(x).__name__ if a.ndim == 0 and not isinstance(x, np.ndarray) else f"an array of {a.dtype}"
-
-
-def real_array(x, name):
-    """``x`` as a float64 array, refusing what is not real numbers.
-
-    Booleans, integers and floats of any width convert as numpy converts them
-    (``np.asarray(x).astype(float64)``); an object array is accepted when every element is
-    a real number.  ``None``, complex values (even with a zero imaginary part), strings,
-    bytes and other objects raise :class:`NonRealInputError` naming ``name`` (numpy
-    would turn ``None`` into NaN and drop an imaginary part with only a warning); a
-    ragged sequence raises ``ValueError`` naming ``name``.
-    """
-    if type(x) is np.ndarray and x.dtype == np.float64:  # the common case, unchanged
-        return x
-    if x is None:
-        raise NonRealInputError(f"{name} must be real numbers, got None")
-    try:
-        a = np.asarray(x)
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f"{name} must be an array of real numbers: {exc}") from None
-    kind = a.dtype.kind
-    if kind not in "biuf" and not (kind == "O" and all(isinstance(e, numbers.Real) for e in a.flat)):
-        raise NonRealInputError(f"{name} must be real numbers, got {_describe(x, a)}")
-    return a.astype(np.float64, copy=False)
-
-
-def real_scalar(x, name):
-    """``x`` as one Python float: :func:`real_array` of shape ``()``, else ``ValueError`` naming ``name``."""
-    a = real_array(x, name)
-    if a.ndim != 0:
-        raise ValueError(f"{name} must be a single real number, got an array of shape {a.shape}")
-    return float(a)
-
-
-def broadcast_leading(where, *args):
-    """The broadcast leading shape of ``(name, array, n_trailing)`` triples.
-
-    ``n_trailing`` axes at the end of each array are its own (a quaternion's 4, a
-    vector's 3, none for a scalar field); the leading axes must broadcast, else
-    ``ValueError("<where>: leading shapes do not broadcast: q (2, 4), v (5, 3)")``
-    naming every argument and its full shape.
-    """
-    shapes = [np.shape(a)[: np.ndim(a) - n] if n else np.shape(a) for _, a, n in args]
-    try:
-        return np.broadcast_shapes(*shapes)
-    except ValueError:
-        listed = ", ".join(f"{name} {np.shape(a)}" for name, a, _ in args)
-        raise ValueError(f"{where}: leading shapes do not broadcast: {listed}") from None
-
-
-def _as_array(x, name, last_shape):
-    a = real_array(x, name)
+def _as_array(x, name, last_shape, who):
+    a = real_array(x, name, who)
     n = len(last_shape)
     if a.ndim < n or a.shape[a.ndim - n :] != tuple(last_shape):
         want = "(..., " + ", ".join(map(str, last_shape)) + ")"
-        raise ValueError(f"{name} must have shape {want}, got {a.shape}")
+        raise ValueError(f"{who}: {name} must have shape {want}, got {a.shape}")
     return a
 
 
-def _as_quat(q, name="q"):
-    return _as_array(q, name, (4,))
+def _as_quat(q, who, name="q"):
+    return _as_array(q, name, (4,), who)
 
 
-def _as_vec3(v, name):
-    return _as_array(v, name, (3,))
+def _as_vec3(v, name, who):
+    return _as_array(v, name, (3,), who)
 
 
-def _as_dcm(C, name="C"):
-    return _as_array(C, name, (3, 3))
-
-
-def _as_scalar_array(x, name):
-    return real_array(x, name)
+def _as_dcm(C, who, name="C"):
+    return _as_array(C, name, (3, 3), who)
 
 
 def _norm2_nonzero(q, name):
@@ -333,7 +252,7 @@ def _sinc(x):
 
 def skew(v):
     """Cross-product matrix ``[v x]`` with ``[v x] @ u = v x u``; shape ``(..., 3, 3)``."""
-    v = _as_vec3(v, "v")
+    v = _as_vec3(v, "v", "skew")
     z = np.zeros_like(v[..., 0])
     x, y, w = v[..., 0], v[..., 1], v[..., 2]
     return np.stack(
@@ -353,7 +272,7 @@ def elementary_dcm(axis, angle):
     """
     if isinstance(axis, (bool, np.bool_)) or not isinstance(axis, (int, np.integer)) or axis not in (1, 2, 3):
         raise ValueError(f"axis must be 1, 2 or 3 (an int), got {axis!r}")
-    return _elementary0(int(axis) - 1, _as_scalar_array(angle, "angle"))
+    return _elementary0(int(axis) - 1, real_array(angle, "angle", "elementary_dcm"))
 
 
 def _elementary0(n, a):
@@ -390,7 +309,7 @@ def _transpose(M):
 
 def quat_normalize(q):
     """``q / |q|`` (shape ``(..., 4)``); a zero quaternion raises ``ValueError``."""
-    return _normalized(_as_quat(q), "q")
+    return _normalized(_as_quat(q, "quat_normalize"), "q")
 
 
 def _normalized(q, name):
@@ -405,13 +324,13 @@ def quat_conjugate(q):
 
     A sign change only: ``q`` is not interpreted (not normalized, zero passes through).
     """
-    q = _as_quat(q)
+    q = _as_quat(q, "quat_conjugate")
     return q * np.array([1.0, -1.0, -1.0, -1.0])
 
 
 def quat_inverse(q):
     """Inverse ``q* / |q|^2`` (equal to :func:`quat_conjugate` for unit ``q``); zero raises ``ValueError``."""
-    q = _as_quat(q)
+    q = _as_quat(q, "quat_inverse")
     n2 = np.sum(q * q, axis=-1, keepdims=True)
     if np.any(n2 == 0.0):
         raise ValueError("q must be nonzero: got a quaternion of norm 0")
@@ -471,12 +390,12 @@ def quat_multiply(q2, q1):
     rotation (read as every function here reads it, ``q / |q|``) is still the
     composition.  A zero ``q2`` or ``q1`` raises ``ValueError`` naming it.
     """
-    q2 = _as_quat(q2, "q2")
-    q1 = _as_quat(q1, "q1")
+    q2 = _as_quat(q2, "quat_multiply", "q2")
+    q1 = _as_quat(q1, "quat_multiply", "q1")
     try:
         shape = np.broadcast_shapes(q2.shape, q1.shape)
     except ValueError:
-        broadcast_leading("quat_multiply", ("q2", q2, 1), ("q1", q1, 1))  # raises, naming both
+        broadcast_named("quat_multiply", ("q2", q2, 1), ("q1", q1, 1))  # raises, naming both
         raise
     return _product(q2, q1, shape, "q2", "q1")
 
@@ -504,15 +423,15 @@ def quat_rotate(q, v):
     ``(..., 4)`` and ``v`` ``(..., 3)`` broadcast.  For body -> inertial use
     ``quat_rotate(quat_conjugate(q), v)``.
     """
-    q = _as_quat(q)
-    v = _as_vec3(v, "v")
+    q = _as_quat(q, "quat_rotate")
+    v = _as_vec3(v, "v", "quat_rotate")
     if q.shape == (4,) and v.shape == (3,):
         return _rotate_one(q, v)
     e0, e = q[..., :1], q[..., 1:]
     try:
         e, v = np.broadcast_arrays(e, v)
     except ValueError:
-        broadcast_leading("quat_rotate", ("q", q, 1), ("v", v, 1))  # raises, naming both
+        broadcast_named("quat_rotate", ("q", q, 1), ("v", v, 1))  # raises, naming both
         raise
     # the components summed left to right, as _rotate_one does: a row gives the same bits
     # through either path
@@ -551,7 +470,7 @@ def dcm_from_quat(q):
     ``C[0, 1] = 2 (e1 e2 + e0 e3) / |q|^2``, and so on.  ``q`` and ``-q`` give
     the same ``C``.  Zero ``q`` raises ``ValueError``.  Returns ``(..., 3, 3)``.
     """
-    q = _as_quat(q)
+    q = _as_quat(q, "dcm_from_quat")
     n2 = np.sum(q * q, axis=-1)
     if np.any(n2 == 0.0):
         raise ValueError("q must be nonzero: got a quaternion of norm 0")
@@ -585,7 +504,7 @@ def quat_from_dcm(C):
     not a rotation (``max |C C^T - I| >`` :data:`DCM_ORTHOGONALITY_TOL`, or ``det C <
     0``) raises ``ValueError`` naming ``C``; non-finite entries give NaN.
     """
-    C = _as_dcm(C)
+    C = _as_dcm(C, "quat_from_dcm")
     _check_rotation(C, "C")
     c00, c01, c02 = C[..., 0, 0], C[..., 0, 1], C[..., 0, 2]
     c10, c11, c12 = C[..., 1, 0], C[..., 1, 1], C[..., 1, 2]
@@ -619,7 +538,7 @@ def dcm_from_euler(angles, seq):
     :data:`EULER_SEQUENCES`.  Returns ``(..., 3, 3)`` (Baruh ch. 7, Euler angles).
     """
     i, j, k = _parse_seq(seq)
-    a = _as_vec3(angles, "angles")
+    a = _as_vec3(angles, "angles", "dcm_from_euler")
     return _elementary0(k, a[..., 2]) @ _elementary0(j, a[..., 1]) @ _elementary0(i, a[..., 0])
 
 
@@ -652,7 +571,7 @@ def euler_from_dcm(C, seq):
     :func:`quat_from_dcm`); returns ``(..., 3)``.
     """
     i, j, k = _parse_seq(seq)
-    C = _as_dcm(C)
+    C = _as_dcm(C, "euler_from_dcm")
     _check_rotation(C, "C")
     return _euler_from_rotation(C, i, j, k)
 
@@ -688,7 +607,7 @@ def quat_from_euler(angles, seq):
     not canonicalized (``e0`` may be negative).
     """
     i, j, k = _parse_seq(seq)
-    a = _as_vec3(angles, "angles")
+    a = _as_vec3(angles, "angles", "quat_from_euler")
     return quat_multiply(_elementary_quat(k, a[..., 2]), quat_multiply(_elementary_quat(j, a[..., 1]), _elementary_quat(i, a[..., 0])))
 
 
@@ -702,7 +621,7 @@ def _elementary_quat(n, a):
 def euler_from_quat(q, seq):
     """Euler angles of ``dcm_from_quat(q)`` (see :func:`euler_from_dcm` for ranges and gimbal lock)."""
     i, j, k = _parse_seq(seq)
-    return _euler_from_rotation(dcm_from_quat(q), i, j, k)
+    return _euler_from_rotation(dcm_from_quat(_as_quat(q, "euler_from_quat")), i, j, k)
 
 
 # --------------------------------------------------------------------------
@@ -717,9 +636,9 @@ def quat_from_axis_angle(axis, angle):
     ``axis = (0, 0, 1)``).  ``axis`` ``(..., 3)`` nonzero (zero raises
     ``ValueError``), ``angle`` broadcastable.  Not sign-canonicalized.
     """
-    axis = _as_vec3(axis, "axis")
-    angle = _as_scalar_array(angle, "angle")
-    broadcast_leading("quat_from_axis_angle", ("axis", axis, 1), ("angle", angle, 0))
+    axis = _as_vec3(axis, "axis", "quat_from_axis_angle")
+    angle = real_array(angle, "angle", "quat_from_axis_angle")
+    broadcast_named("quat_from_axis_angle", ("axis", axis, 1), ("angle", angle, 0))
     n = np.linalg.norm(axis, axis=-1, keepdims=True)
     if np.any(n == 0.0):
         raise ValueError("axis must be a nonzero vector")
@@ -738,7 +657,7 @@ def axis_angle_from_quat(q):
     are ratios of components, so a non-unit ``q`` gives the axis and angle of
     ``q / |q|``; a zero ``q`` raises ``ValueError``.
     """
-    q = _as_quat(q)
+    q = _as_quat(q, "axis_angle_from_quat")
     _norm2_nonzero(q, "q")
     q = np.where(q[..., :1] < 0.0, -q, q)
     e = q[..., 1:]
@@ -758,9 +677,9 @@ def attitude_difference(qa, qb):
     needed); a zero ``qa`` or ``qb`` raises ``ValueError`` naming it, leading shapes that
     do not broadcast ``ValueError`` naming both.
     """
-    qa = _as_quat(qa, "qa")
-    qb = _as_quat(qb, "qb")
-    shape = broadcast_leading("attitude_difference", ("qa", qa, 1), ("qb", qb, 1)) + (4,)
+    qa = _as_quat(qa, "attitude_difference", "qa")
+    qb = _as_quat(qb, "attitude_difference", "qb")
+    shape = broadcast_named("attitude_difference", ("qa", qa, 1), ("qb", qb, 1)) + (4,)
     d = _product(qb, quat_conjugate(qa), shape, "qb", "qa")
     return 2.0 * np.arctan2(np.linalg.norm(d[..., 1:], axis=-1), np.abs(d[..., 0]))
 
@@ -771,7 +690,7 @@ def quat_from_rotvec(rotvec):
     ``q = (cos(|r|/2), r * 0.5 sinc(|r|/2))``, with a series for ``sinc`` near 0
     so tiny vectors keep full relative accuracy.  ``rotvec`` ``(..., 3)``.
     """
-    r = _as_vec3(rotvec, "rotvec")
+    r = _as_vec3(rotvec, "rotvec", "quat_from_rotvec")
     half = 0.5 * np.linalg.norm(r, axis=-1)
     return np.concatenate([np.cos(half)[..., None], r * (0.5 * _sinc(half))[..., None]], axis=-1)
 
@@ -785,7 +704,7 @@ def rotvec_from_quat(q):
     full relative accuracy.  Ratios of components: a non-unit ``q`` gives the rotation
     vector of ``q / |q|``; a zero ``q`` raises ``ValueError``.
     """
-    q = _as_quat(q)
+    q = _as_quat(q, "rotvec_from_quat")
     _norm2_nonzero(q, "q")
     q = np.where(q[..., :1] < 0.0, -q, q)
     e0, e = q[..., 0], q[..., 1:]
@@ -813,10 +732,10 @@ def slerp(q0, q1, tau):
     ``q1`` raises ``ValueError`` naming it); ``tau`` (any real, extrapolates outside
     [0, 1]) broadcasts with the leading axes (``ValueError`` naming all three if not).
     """
-    q0 = _as_quat(q0, "q0")
-    q1 = _as_quat(q1, "q1")
-    tau = _as_scalar_array(tau, "tau")
-    broadcast_leading("slerp", ("q0", q0, 1), ("q1", q1, 1), ("tau", tau, 0))
+    q0 = _as_quat(q0, "slerp", "q0")
+    q1 = _as_quat(q1, "slerp", "q1")
+    tau = real_array(tau, "tau", "slerp")
+    broadcast_named("slerp", ("q0", q0, 1), ("q1", q1, 1), ("tau", tau, 0))
     q0 = _normalized(q0, "q0")
     q1 = _normalized(q1, "q1")
     tau = tau[..., None]
@@ -842,13 +761,13 @@ def quat_rate(q, w):
     given ``q`` (not normalized; this is the right-hand side an integrator of ``q``
     needs, and a zero ``q`` has zero rate).
     """
-    q = _as_quat(q)
-    w = _as_vec3(w, "w")
+    q = _as_quat(q, "quat_rate")
+    w = _as_vec3(w, "w", "quat_rate")
     e0, e = q[..., :1], q[..., 1:]
     try:
         e, w = np.broadcast_arrays(e, w)
     except ValueError:
-        broadcast_leading("quat_rate", ("q", q, 1), ("w", w, 1))  # raises, naming both
+        broadcast_named("quat_rate", ("q", q, 1), ("w", w, 1))  # raises, naming both
         raise
     d0 = -0.5 * np.sum(e * w, axis=-1, keepdims=True)
     de = 0.5 * (e0 * w + _cross(e, w))
@@ -862,9 +781,9 @@ def omega_from_quat_rate(q, qdot):
     (the vector part of ``2 conj(q) (x)_H qdot / |q|^2``).  Any component of
     ``qdot`` along ``q`` (a norm change) is ignored.  A zero ``q`` raises ``ValueError``.
     """
-    q = _as_quat(q)
-    qdot = _as_quat(qdot, "qdot")
-    broadcast_leading("omega_from_quat_rate", ("q", q, 1), ("qdot", qdot, 1))
+    q = _as_quat(q, "omega_from_quat_rate")
+    qdot = _as_quat(qdot, "omega_from_quat_rate", "qdot")
+    broadcast_named("omega_from_quat_rate", ("q", q, 1), ("qdot", qdot, 1))
     _norm2_nonzero(q, "q")
     e0, e = q[..., :1], q[..., 1:]
     d0, de = qdot[..., :1], qdot[..., 1:]
@@ -873,10 +792,10 @@ def omega_from_quat_rate(q, qdot):
     return 2.0 * (e0 * de - d0 * e - _cross(e, de)) / n2
 
 
-def _euler_rate_trig(angles, seq):
+def _euler_rate_trig(angles, seq, who):
     i, j, k = _parse_seq(seq)
-    a = _as_vec3(angles, "angles")
-    return (i, j, k), np.cos(a[..., 1]), np.sin(a[..., 1]), np.cos(a[..., 2]), np.sin(a[..., 2])
+    a = _as_vec3(angles, "angles", who)
+    return a, (i, j, k), np.cos(a[..., 1]), np.sin(a[..., 1]), np.cos(a[..., 2]), np.sin(a[..., 2])
 
 
 def euler_singular(angles, seq, tol=EULER_RATE_SINGULAR_TOL):
@@ -886,7 +805,7 @@ def euler_singular(angles, seq, tol=EULER_RATE_SINGULAR_TOL):
     or ``|sin a2| < tol`` (symmetric, ``a2 = 0, pi``); the default ``tol`` is
     :data:`EULER_RATE_SINGULAR_TOL` = sqrt(eps).
     """
-    (i, j, k), c2, s2, _, _ = _euler_rate_trig(angles, seq)
+    _, (i, j, k), c2, s2, _, _ = _euler_rate_trig(angles, seq, "euler_singular")
     return np.abs(c2 if i != k else s2) < tol
 
 
@@ -899,9 +818,9 @@ def omega_from_euler_rates(angles, rates, seq):
     everywhere (no singularity in this direction).  ``angles``, ``rates``
     ``(..., 3)``.
     """
-    (i, j, k), c2, s2, c3, s3 = _euler_rate_trig(angles, seq)
-    r = _as_vec3(rates, "rates")
-    broadcast_leading("omega_from_euler_rates", ("angles", angles, 1), ("rates", r, 1))
+    angles, (i, j, k), c2, s2, c3, s3 = _euler_rate_trig(angles, seq, "omega_from_euler_rates")
+    r = _as_vec3(rates, "rates", "omega_from_euler_rates")
+    broadcast_named("omega_from_euler_rates", ("angles", angles, 1), ("rates", r, 1))
     d1, d2, d3 = r[..., 0], r[..., 1], r[..., 2]
     c2, s2, c3, s3, d1, d2, d3 = np.broadcast_arrays(c2, s2, c3, s3, d1, d2, d3)
     w = np.empty(c2.shape + (3,))
@@ -938,9 +857,9 @@ def euler_rates(angles, w, seq, *, tol=EULER_RATE_SINGULAR_TOL, on_singular="rai
     """
     if on_singular not in ("raise", "nan"):
         raise ValueError(f"on_singular must be 'raise' or 'nan', got {on_singular!r}")
-    (i, j, k), c2, s2, c3, s3 = _euler_rate_trig(angles, seq)
-    w = _as_vec3(w, "w")
-    broadcast_leading("euler_rates", ("angles", angles, 1), ("w", w, 1))
+    angles, (i, j, k), c2, s2, c3, s3 = _euler_rate_trig(angles, seq, "euler_rates")
+    w = _as_vec3(w, "w", "euler_rates")
+    broadcast_named("euler_rates", ("angles", angles, 1), ("w", w, 1))
     wi, wj, wk = w[..., i], w[..., j], w[..., k]
     c2, s2, c3, s3, wi, wj, wk = np.broadcast_arrays(c2, s2, c3, s3, wi, wj, wk)
     den = c2 if i != k else s2
@@ -1035,10 +954,10 @@ def quat_propagate_constant_rate(q, w, dt):
     so a non-unit ``q`` gives the propagated ``q / |q|``; a zero ``q`` raises
     ``ValueError``.
     """
-    q = _as_quat(q)
-    w = _as_vec3(w, "w")
-    dt = _as_scalar_array(dt, "dt")
-    shape = broadcast_leading("quat_propagate_constant_rate", ("q", q, 1), ("w", w, 1), ("dt", dt, 0))
+    q = _as_quat(q, "quat_propagate_constant_rate")
+    w = _as_vec3(w, "w", "quat_propagate_constant_rate")
+    dt = real_array(dt, "dt", "quat_propagate_constant_rate")
+    shape = broadcast_named("quat_propagate_constant_rate", ("q", q, 1), ("w", w, 1), ("dt", dt, 0))
     qb = np.ascontiguousarray(np.broadcast_to(q, shape + (4,)).reshape(-1, 4))
     wb = np.ascontiguousarray(np.broadcast_to(w, shape + (3,)).reshape(-1, 3))
     db = np.ascontiguousarray(np.broadcast_to(dt, shape).reshape(-1))
@@ -1060,13 +979,13 @@ def quat_to_scalar_last(q):
     parent = inertial, child = body) it maps body components to inertial ones,
     i.e. its matrix is ``C.T``.
     """
-    q = _as_quat(q)
+    q = _as_quat(q, "quat_to_scalar_last")
     return np.concatenate([q[..., 1:], q[..., :1]], axis=-1)
 
 
 def quat_from_scalar_last(xyzw):
     """Scalar-last ``(x, y, z, w)`` -> scalar-first ``(e0, e1, e2, e3) = (w, x, y, z)``."""
-    xyzw = _as_quat(xyzw, "xyzw")
+    xyzw = _as_quat(xyzw, "quat_from_scalar_last", "xyzw")
     return np.concatenate([xyzw[..., 3:], xyzw[..., :3]], axis=-1)
 
 
@@ -1080,7 +999,7 @@ def to_scipy_rotation(q):
     """
     from scipy.spatial.transform import Rotation
 
-    q = _as_quat(q)
+    q = _as_quat(q, "to_scipy_rotation")
     _norm2_nonzero(q, "q")
     return Rotation.from_quat(quat_to_scalar_last(q))
 

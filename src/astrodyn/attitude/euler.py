@@ -32,7 +32,8 @@ import math
 
 import numpy as np
 
-from astrodyn.rotation import broadcast_leading, quat_rate, real_array
+from astrodyn.inputs import broadcast_named, real_array
+from astrodyn.rotation import quat_rate
 
 __all__ = [
     "TRIANGLE_SLACK",
@@ -46,10 +47,10 @@ __all__ = [
 ]
 
 
-def _as_vec3(x, name):
-    a = real_array(x, name)
+def _as_vec3(x, name, who):
+    a = real_array(x, name, who)
     if a.shape[-1:] != (3,):
-        raise ValueError(f"{name}: expected an array of shape (..., 3), got shape {a.shape}")
+        raise ValueError(f"{who}: {name}: expected an array of shape (..., 3), got shape {a.shape}")
     return a
 
 
@@ -109,7 +110,7 @@ def inertia_tensor(inertia) -> np.ndarray:
     triangle inequalities ``I1 + I2 >= I3`` cyclic, with a 1e-12 relative slack for
     round-off).  Raises ``ValueError`` naming ``inertia`` otherwise.
     """
-    a = real_array(inertia, "inertia")
+    a = real_array(inertia, "inertia", "inertia_tensor")
     if a.shape == (3,):
         J = np.diag(a)
     elif a.shape == (3, 3):
@@ -154,11 +155,12 @@ def angular_acceleration(inertia, w, torque=0.0, rotor_momentum=0.0, rotor_momen
     rotor_momentum_rate`` ``(..., 3)`` (the last three may be scalars) broadcast over
     leading axes (``ValueError`` naming them if not).
     """
-    w = _as_vec3(w, "w")
-    tau = _vec3_or_scalar(torque, "torque")
-    h = _vec3_or_scalar(rotor_momentum, "rotor_momentum")
-    hd = _vec3_or_scalar(rotor_momentum_rate, "rotor_momentum_rate")
-    a = real_array(inertia, "inertia")
+    who = "angular_acceleration"
+    w = _as_vec3(w, "w", who)
+    tau = _vec3_or_scalar(torque, "torque", who)
+    h = _vec3_or_scalar(rotor_momentum, "rotor_momentum", who)
+    hd = _vec3_or_scalar(rotor_momentum_rate, "rotor_momentum_rate", who)
+    a = real_array(inertia, "inertia", who)
     try:
         if a.shape == (3,):
             check_principal_moments(a)
@@ -171,15 +173,15 @@ def angular_acceleration(inertia, w, torque=0.0, rotor_momentum=0.0, rotor_momen
         return rhs @ np.linalg.inv(J).T
     except ValueError:
         named = [("w", w), ("torque", tau), ("rotor_momentum", h), ("rotor_momentum_rate", hd)]
-        broadcast_leading("angular_acceleration", *((n, x, 1 if x.ndim else 0) for n, x in named))
+        broadcast_named(who, *((n, x, 1 if x.ndim else 0) for n, x in named))
         raise
 
 
-def _vec3_or_scalar(x, name):
+def _vec3_or_scalar(x, name, who):
     """A body vector ``(..., 3)`` or a scalar (broadcast to every component), as float64."""
-    a = real_array(x, name)
+    a = real_array(x, name, who)
     if a.ndim and a.shape[-1] != 3:
-        raise ValueError(f"{name}: expected a scalar or an array of shape (..., 3), got shape {a.shape}")
+        raise ValueError(f"{who}: {name}: expected a scalar or an array of shape (..., 3), got shape {a.shape}")
     return a
 
 
@@ -197,10 +199,11 @@ def body_momentum_rates(inertia, H, torque=0.0, rotor_momentum=0.0):
     form needs no ``h'`` (a commanded rotor speed enters only through ``h(t)``)
     and is the Lie-Poisson form the splitting integrator preserves.
     """
-    H = _as_vec3(H, "H")
-    a = real_array(inertia, "inertia")
-    h = _vec3_or_scalar(rotor_momentum, "rotor_momentum")
-    tau = _vec3_or_scalar(torque, "torque")
+    who = "body_momentum_rates"
+    H = _as_vec3(H, "H", who)
+    a = real_array(inertia, "inertia", who)
+    h = _vec3_or_scalar(rotor_momentum, "rotor_momentum", who)
+    tau = _vec3_or_scalar(torque, "torque", who)
     try:
         rel = H - h
         if a.shape == (3,):
@@ -211,7 +214,7 @@ def body_momentum_rates(inertia, H, torque=0.0, rotor_momentum=0.0):
         return np.cross(H, w) + tau, w
     except ValueError:
         named = [("H", H), ("torque", tau), ("rotor_momentum", h)]
-        broadcast_leading("body_momentum_rates", *((n, x, 1 if x.ndim else 0) for n, x in named))
+        broadcast_named(who, *((n, x, 1 if x.ndim else 0) for n, x in named))
         raise
 
 
@@ -224,9 +227,9 @@ def attitude_state_rates(t, state, inertia, torque=None, rotor_momentum=None):
     callable ``h(t) -> (3,)`` (its rate is then taken by a central difference
     of step ``1e-6 * max(1, |t|)`` s; pass constant rotors where possible).
     """
-    x = real_array(state, "state")
+    x = real_array(state, "state", "attitude_state_rates")
     if x.shape[-1:] != (7,):
-        raise ValueError(f"state: expected shape (..., 7) = (q, w), got {x.shape}")
+        raise ValueError(f"attitude_state_rates: state: expected shape (..., 7) = (q, w), got {x.shape}")
     q, w = x[..., :4], x[..., 4:]
     tau = 0.0 if torque is None else torque(t, q, w)
     h, hd = 0.0, 0.0

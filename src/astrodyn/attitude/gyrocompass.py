@@ -59,8 +59,8 @@ from astrodyn.attitude.integrators import (
     step_chunks,
     step_plan,
 )
+from astrodyn.inputs import real_array, real_scalar
 from astrodyn.jit import jit
-from astrodyn.rotation import real_array, real_scalar
 
 __all__ = ["Gyrocompass", "EARTH_ROTATION_RATE"]
 
@@ -155,7 +155,7 @@ class Gyrocompass:
         before the run, as by :func:`~astrodyn.attitude.integrators.propagate_attitude`.
         """
         max_steps = checked_max_steps(max_steps)
-        t_out = np.atleast_1d(real_array(t, "t"))
+        t_out = np.atleast_1d(real_array(t, "t", "Gyrocompass.simulate"))
         if t_out.ndim != 1 or not np.all(np.isfinite(t_out)) or np.any(t_out < 0) or np.any(np.diff(t_out) < 0):
             raise ValueError("t: expected a scalar or 1-D array of finite times >= 0 s, ascending")
         h = self.axial_momentum(float(alpha0))
@@ -164,7 +164,7 @@ class Gyrocompass:
         if step is None:
             step = 2.0 * math.pi / self.natural_frequency(float(alpha0)) / 200.0
             note = " (the default: 1/200 of the small-swing period)"
-        step = real_scalar(step, "step")
+        step = real_scalar(step, "step", "Gyrocompass.simulate")
         if not (step > 0 and math.isfinite(step)):
             raise ValueError(f"step: expected a positive finite step in s, got {step}")
         check_step_budget(t_out, step, False, max_steps, note)

@@ -91,9 +91,10 @@ from astrodyn.attitude.torques import (
     TorqueSum,
     UniformGravityTorque,
 )
+from astrodyn.inputs import real_array, real_scalar
 from astrodyn.jit import jit
 from astrodyn.orbit.universal import lagrange_coefficients_scalar
-from astrodyn.rotation import attitude_difference, quat_from_dcm, quat_multiply, real_array, real_scalar
+from astrodyn.rotation import attitude_difference, quat_from_dcm, quat_multiply
 
 __all__ = ["propagate_attitude", "SPLIT2_WEIGHTS", "SPLIT4_WEIGHTS", "YOSHIDA4_WEIGHTS", "free_rigid_body_step",
            "held_torque_step", "HeldInputsBody", "MAX_STEPS", "checked_max_steps", "check_step_budget"]
@@ -770,7 +771,7 @@ def _rotor_function(rotor_momentum, frame):
             return frame.vec_to_p(h)
 
         return 2, h_p, None
-    h = real_array(rotor_momentum, "rotor_momentum")
+    h = real_array(rotor_momentum, "rotor_momentum", "propagate_attitude")
     if h.shape != (3,):
         raise ValueError(f"rotor_momentum: expected a (3,) body vector in N m s or a callable h(t), got shape {h.shape}")
     hp = frame.vec_to_p(h)
@@ -987,16 +988,16 @@ def _default_step(frame, M0, h0, ktorque, torque, w0):
 def _checked_inputs(w0, q0, t, torque, rotor_momentum, method):
     """:func:`propagate_attitude`'s arguments checked (ValueError / TypeError naming the argument):
     ``w0 (3,)``, ``q0 (4,)`` normalised, ``t`` as a 1-D array, and ``auto`` resolved."""
-    w0 = real_array(w0, "w0")
+    w0 = real_array(w0, "w0", "propagate_attitude")
     if w0.shape != (3,):
         raise ValueError(f"w0: expected body rates of shape (3,) in rad/s, got shape {w0.shape}")
-    q0 = real_array(q0, "q0")
+    q0 = real_array(q0, "q0", "propagate_attitude")
     if q0.shape != (4,):
         raise ValueError(f"q0: expected Euler parameters of shape (4,), scalar first, got shape {q0.shape}")
     nq = np.linalg.norm(q0)
     if not abs(nq - 1.0) <= 1e-6:
         raise ValueError(f"q0: expected unit Euler parameters (|q0| = 1 within 1e-6), got |q0| = {nq}")
-    t_out = np.atleast_1d(real_array(t, "t"))
+    t_out = np.atleast_1d(real_array(t, "t", "propagate_attitude"))
     if t_out.ndim != 1:
         raise ValueError(f"t: expected a scalar or 1-D array of times in s, got shape {t_out.shape}")
     if not np.all(np.isfinite(t_out)):
@@ -1109,7 +1110,7 @@ def propagate_attitude(
         return finish(nan, np.full((len(t_out), 4), np.nan), dict(method=method, order=None))
 
     if method == "dop853":
-        rtol, atol = real_scalar(rtol, "rtol"), real_scalar(atol, "atol")
+        rtol, atol = real_scalar(rtol, "rtol", "propagate_attitude"), real_scalar(atol, "atol", "propagate_attitude")
         if not (0.0 < rtol < math.inf and 0.0 < atol < math.inf):
             raise ValueError(f"rtol and atol: expected finite tolerances > 0, got rtol={rtol!r}, atol={atol!r}")
         if len(t_out) == 0:
@@ -1122,7 +1123,7 @@ def propagate_attitude(
     if step is None:
         step = _default_step(frame, M0_p, h0_p, ktorque, torque, w0)
         note = " (the default: 1/60 of the fastest natural period)"
-    step = real_scalar(step, "step")
+    step = real_scalar(step, "step", "propagate_attitude")
     if not step > 0 or not math.isfinite(step):
         raise ValueError(f"step: expected a positive finite step in s, got {step}")
     check_step_budget(t_out, step, error_estimate, max_steps, note)

@@ -71,6 +71,7 @@ from astrodyn.attitude.integrators import (
     turn_body,
 )
 from astrodyn.attitude.torques import UniformGravityTorque
+from astrodyn.inputs import real_array, real_scalar
 from astrodyn.jit import jit
 from astrodyn.rotation import (
     attitude_difference,
@@ -78,8 +79,6 @@ from astrodyn.rotation import (
     omega_from_euler_rates,
     quat_from_euler,
     quat_hamilton_scalar,
-    real_array,
-    real_scalar,
 )
 
 __all__ = ["HeavyTop"]
@@ -217,15 +216,15 @@ class HeavyTop:
 
     def _simulate_split(self, w0, q0, t, method, step, error_estimate, max_steps):
         tick = _time.perf_counter()
-        w0 = real_array(w0, "w0")
-        q0 = real_array(q0, "q0")
+        w0 = real_array(w0, "w0", "HeavyTop.simulate")
+        q0 = real_array(q0, "q0", "HeavyTop.simulate")
         if w0.shape != (3,):
             raise ValueError(f"w0: expected body rates of shape (3,) in rad/s, got shape {w0.shape}")
         if q0.shape != (4,) or not abs(np.linalg.norm(q0) - 1.0) <= 1e-6:
             raise ValueError(f"q0: expected unit Euler parameters of shape (4,), scalar first, got {q0!r}")
         q0 = q0 / np.linalg.norm(q0)
         scalar_t = np.ndim(t) == 0
-        t_out = np.atleast_1d(real_array(t, "t"))
+        t_out = np.atleast_1d(real_array(t, "t", "HeavyTop.simulate"))
         if t_out.ndim != 1 or not np.all(np.isfinite(t_out)):
             raise ValueError(f"t: expected a scalar or 1-D array of finite times in s, got shape {t_out.shape}")
         sgn = 1.0 if np.all(t_out >= 0) else -1.0
@@ -239,7 +238,7 @@ class HeavyTop:
             rate = max(rates)
             step = 0.1 if not rate > 0 else 2.0 * math.pi / (60.0 * rate)
             note = " (the default: 1/60 of the fastest of the spin, precession and pendulum periods)"
-        step = real_scalar(step, "step")
+        step = real_scalar(step, "step", "HeavyTop.simulate")
         if not (step > 0 and math.isfinite(step)):
             raise ValueError(f"step: expected a positive finite step in s, got {step}")
         check_step_budget(t_out, step, error_estimate, max_steps, note)

@@ -103,8 +103,9 @@ import numpy as np
 
 from astrodyn.attitude.elliptic import ellipk_scalar, elliprf_scalar, elliprj_scalar, reduce_half_period, sncndn_half
 from astrodyn.attitude.euler import TRIANGLE_SLACK, check_principal_moments
+from astrodyn.inputs import broadcast_named, real_array
 from astrodyn.jit import jit, parallel_kernel, prange
-from astrodyn.rotation import broadcast_leading, quat_hamilton_scalar, real_array
+from astrodyn.rotation import quat_hamilton_scalar
 
 __all__ = ["torque_free", "PreparedBody", "BODY_DTYPE", "polhode", "herpolhode", "rate_period", "flip_period"]
 
@@ -521,9 +522,9 @@ def _state_of_new_body(inertia, w0, q0, t, w, q):
 
 
 def _as_rows(inertia, w0, q0):
-    inertia = real_array(inertia, "inertia")
-    w0 = real_array(w0, "w0")
-    q0 = real_array(q0, "q0")
+    inertia = real_array(inertia, "inertia", "torque_free")
+    w0 = real_array(w0, "w0", "torque_free")
+    q0 = real_array(q0, "q0", "torque_free")
     if inertia.ndim < 1 or inertia.shape[-1] != 3:
         raise ValueError(f"inertia: expected principal moments of shape (..., 3), got shape {inertia.shape}")
     if w0.ndim < 1 or w0.shape[-1] != 3:
@@ -539,7 +540,7 @@ def _check_inertia(inertia):
 
 
 def _times(t):
-    t_arr = real_array(t, "t")
+    t_arr = real_array(t, "t", "torque_free")
     if t_arr.ndim > 1:
         raise ValueError(f"t: expected a scalar or a 1-D array of times (s), got shape {t_arr.shape}")
     return t_arr.ndim == 0, np.ascontiguousarray(t_arr.reshape(-1))
@@ -560,7 +561,7 @@ class PreparedBody:
 
     def __init__(self, inertia, w0, q0):
         inertia, w0, q0 = _as_rows(inertia, w0, q0)
-        self.shape = broadcast_leading("torque_free", ("inertia", inertia, 1), ("w0", w0, 1), ("q0", q0, 1))
+        self.shape = broadcast_named("torque_free", ("inertia", inertia, 1), ("w0", w0, 1), ("q0", q0, 1))
         rows = [np.ascontiguousarray(np.broadcast_to(a, self.shape + (a.shape[-1],))).reshape(-1, a.shape[-1])
                 for a in (inertia, w0, q0)]
         self.bodies = np.empty(rows[0].shape[0], dtype=BODY_DTYPE)
@@ -610,10 +611,10 @@ def torque_free(inertia, w0, q0, t):
     and its accuracy are described in the module docstring.  One body at one time takes
     one compiled call; bodies evaluated again and again are cheaper as a :class:`PreparedBody`.
     """
-    inertia = real_array(inertia, "inertia")
-    w0 = real_array(w0, "w0")
-    q0 = real_array(q0, "q0")
-    if isinstance(t, (float, int)) and inertia.shape == (3,) and w0.shape == (3,) and q0.shape == (4,):
+    inertia = real_array(inertia, "inertia", "torque_free")
+    w0 = real_array(w0, "w0", "torque_free")
+    q0 = real_array(q0, "q0", "torque_free")
+    if isinstance(t, (float, int)) and type(t) is not bool and inertia.shape == (3,) and w0.shape == (3,) and q0.shape == (4,):
         w, q = np.empty(3), np.empty(4)
         if not _state_of_new_body(inertia, w0, q0, float(t), w, q):
             _check_inertia(inertia)  # raises (the same test, with the message)
@@ -660,8 +661,8 @@ def polhode(inertia, w0, n=256):
     intermediate-axis equilibria to 1e-8; a uniform rotation gives ``n``
     copies of ``w0``.
     """
-    inertia = real_array(inertia, "inertia")
-    w0 = real_array(w0, "w0")
+    inertia = real_array(inertia, "inertia", "polhode")
+    w0 = real_array(w0, "w0", "polhode")
     if inertia.shape != (3,) or w0.shape != (3,):
         raise ValueError("inertia, w0: expected shape (3,) each (one body)")
     if isinstance(n, (bool, np.bool_)) or not isinstance(n, (int, np.integer)) or n < 1:

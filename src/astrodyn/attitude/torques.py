@@ -29,7 +29,8 @@ import math
 import numpy as np
 
 from astrodyn.attitude.euler import inertia_tensor
-from astrodyn.rotation import quat_rotate, real_array, real_scalar
+from astrodyn.inputs import real_array, real_scalar
+from astrodyn.rotation import quat_rotate
 
 __all__ = [
     "gravity_gradient_torque",
@@ -50,20 +51,21 @@ def gravity_gradient_torque(r_body, inertia, mu):
     (m^3/s^2), one number > 0, as :class:`GravityGradientTorque` requires.  First-order
     term of the expansion of the gravity field over the body (Hughes, ch. 8; Baruh ch. 8).
     """
-    rb = _vector(r_body, "r_body", "(..., 3) position in m")
-    return _gravity_gradient(rb, inertia_tensor(inertia), _checked_mu(mu))
+    who = "gravity_gradient_torque"
+    rb = _vector(r_body, "r_body", "(..., 3) position in m", who)
+    return _gravity_gradient(rb, inertia_tensor(inertia), _checked_mu(mu, who))
 
 
-def _vector(x, name, what, batch=True):
+def _vector(x, name, what, who, batch=True):
     """``x`` as float64 of shape ``(..., 3)`` (``batch``) or ``(3,)``; ValueError naming ``name``."""
-    a = real_array(x, name)
+    a = real_array(x, name, who)
     if (a.shape[-1:] != (3,)) if batch else (a.shape != (3,)):
         raise ValueError(f"{name}: expected a {what}, got shape {a.shape}")
     return a
 
 
-def _checked_mu(mu):
-    mu = real_scalar(mu, "mu")
+def _checked_mu(mu, who):
+    mu = real_scalar(mu, "mu", who)
     if not mu > 0.0:
         raise ValueError(f"mu: expected a positive gravitational parameter in m^3/s^2, got {mu}")
     return mu
@@ -102,7 +104,7 @@ class GravityGradientTorque:
     def __init__(self, mu, position, inertia):
         if not callable(position):
             raise ValueError("position: expected a callable r(t) -> (..., 3) inertial position in m")
-        self.mu = _checked_mu(mu)
+        self.mu = _checked_mu(mu, "GravityGradientTorque")
         self.position = position
         self.inertia = inertia_tensor(inertia)
         self.orbit = None  # (r0, v0, t0) of a Kepler orbit, see kepler()
@@ -118,12 +120,13 @@ class GravityGradientTorque:
         """
         from astrodyn.orbit.universal import propagate
 
-        r0 = np.array(real_array(r0, "r0"), dtype=np.float64).reshape(-1)
-        v0 = np.array(real_array(v0, "v0"), dtype=np.float64).reshape(-1)
+        who = "GravityGradientTorque.kepler"
+        r0 = np.array(real_array(r0, "r0", who), dtype=np.float64).reshape(-1)
+        v0 = np.array(real_array(v0, "v0", who), dtype=np.float64).reshape(-1)
         if r0.shape != (3,) or v0.shape != (3,):
             raise ValueError(f"r0, v0: expected inertial position (3,) m and velocity (3,) m/s, got {r0.shape} and {v0.shape}")
-        t0 = real_scalar(t0, "t0")
-        mu = _checked_mu(mu)
+        t0 = real_scalar(t0, "t0", who)
+        mu = _checked_mu(mu, who)
 
         def position(t):
             return propagate(r0, v0, np.asarray(t, dtype=np.float64) - t0, mu)[0]
@@ -161,11 +164,11 @@ class UniformGravityTorque:
     """
 
     def __init__(self, mass, center_of_mass, gravity=(0.0, 0.0, -9.80665)):
-        self.mass = real_scalar(mass, "mass")
+        self.mass = real_scalar(mass, "mass", "UniformGravityTorque")
         if not (math.isfinite(self.mass) and self.mass >= 0.0):
             raise ValueError(f"mass: expected a finite non-negative mass in kg, got {self.mass}")
-        self.center_of_mass = _vector(center_of_mass, "center_of_mass", "(3,) body vector in m", batch=False)
-        self.gravity = _vector(gravity, "gravity", "(3,) inertial field in m/s^2", batch=False)
+        self.center_of_mass = _vector(center_of_mass, "center_of_mass", "(3,) body vector in m", "UniformGravityTorque", batch=False)
+        self.gravity = _vector(gravity, "gravity", "(3,) inertial field in m/s^2", "UniformGravityTorque", batch=False)
 
     def __call__(self, t, q, w=None):
         return np.cross(self.center_of_mass, self.mass * quat_rotate(q, self.gravity))
@@ -177,7 +180,7 @@ class ConstantTorque:
     def __init__(self, torque, frame="body"):
         if frame not in ("body", "inertial"):
             raise ValueError(f"frame: expected 'body' or 'inertial', got {frame!r}")
-        self.torque = _vector(torque, "torque", "(3,) torque in N m", batch=False)
+        self.torque = _vector(torque, "torque", "(3,) torque in N m", "ConstantTorque", batch=False)
         self.frame = frame
 
     def __call__(self, t, q, w=None):

@@ -14,8 +14,9 @@ radians, arrays of shape ``(..., 3)`` in and out; a single state works too
 * elements and anomalies (:mod:`astrodyn.orbit.elements`), perturbations and the
   perturbed propagator (:mod:`astrodyn.orbit.perturbations`), manoeuvres
   (:mod:`astrodyn.orbit.maneuvers`).
-* the argument checks they share (:mod:`astrodyn.orbit.inputs`): real numbers only
-  (``TypeError`` naming the argument for ``None``, complex, strings, object arrays, bools)
+* the argument checks of the whole core (:mod:`astrodyn.inputs`): real numbers only
+  (:class:`~astrodyn.inputs.NonRealInputError`, a ``TypeError``, naming the argument for
+  ``None``, complex, strings, bools, object arrays holding anything but ints and floats)
   and ``ValueError`` naming each argument and its shape when shapes do not broadcast.
 """
 

@@ -97,9 +97,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from astrodyn.inputs import broadcast_named, real_array
 from astrodyn.jit import jit
 from astrodyn.orbit.floating import sinh_parts, x_minus_sin
-from astrodyn.orbit.inputs import broadcast_shapes_named, real_array
 from astrodyn.orbit.kepler import solve_kepler, solve_kepler_hyperbolic
 
 __all__ = [
@@ -146,13 +146,12 @@ def _positive_mu(mu, who):
 
 def _state_lead(r, v, mu, who):
     """The broadcast leading shape of ``r, v`` (..., 3) and ``mu``; ValueError naming the three
-    shapes when they do not broadcast (:func:`astrodyn.orbit.inputs.broadcast_shapes_named`)."""
-    return broadcast_shapes_named(who, {"r": r.shape[:-1], "v": v.shape[:-1], "mu": mu.shape},
-                                  shown={"r": r.shape, "v": v.shape}, what="leading shapes")
+    shapes when they do not broadcast (:func:`astrodyn.inputs.broadcast_named`)."""
+    return broadcast_named(who, ("r", r, 1), ("v", v, 1), ("mu", mu, 0))
 
 
 def _reals(who, **args):
-    """Each keyword argument as float64 (:func:`astrodyn.orbit.inputs.real_array`), in order."""
+    """Each keyword argument as float64 (:func:`astrodyn.inputs.real_array`), in order."""
     return [real_array(x, name, who) for name, x in args.items()]
 
 
@@ -161,7 +160,7 @@ def _broadcast(who, names, arrays):
     try:
         return np.broadcast_arrays(*arrays)
     except ValueError:
-        broadcast_shapes_named(who, {n: a.shape for n, a in zip(names, arrays)})
+        broadcast_named(who, *((n, a, 0) for n, a in zip(names, arrays)))
         raise
 
 
@@ -424,7 +423,7 @@ def _anomaly_args(who, name, x, e, hyperbolic):
     x = real_array(x, name, who)
     e = real_array(e, "e", who)
     if x.shape != e.shape:
-        broadcast_shapes_named(who, {name: x.shape, "e": e.shape})
+        broadcast_named(who, (name, x, 0), ("e", e, 0))
     if e.ndim == 0 or e.size == 0:
         inside = e.size == 0 or _in_domain(float(e), hyperbolic)
     elif hyperbolic:

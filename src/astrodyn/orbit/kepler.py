@@ -35,8 +35,8 @@ How the accuracy is obtained (every piece is exercised by ``tests/test_kepler.py
 NaN in ``M`` or ``e`` gives NaN; ``M = +-inf`` gives NaN.  ``e`` outside the
 allowed range (finite) raises ``ValueError``; so do shapes that do not broadcast (naming
 ``M`` and ``e`` with their shapes).  Arguments that are not real numbers (``None``,
-complex, strings, object arrays, bools) raise ``TypeError`` naming them
-(:mod:`astrodyn.orbit.inputs`).
+complex, strings, bools, object arrays holding anything but ints and floats) raise
+:class:`astrodyn.inputs.NonRealInputError` (a ``TypeError``) naming them.
 
 Compiled kernels shared with :mod:`astrodyn.orbit.universal` (public names, callable
 from other numba code; the floating-point pieces they use live in
@@ -56,6 +56,7 @@ import math
 
 import numpy as np
 
+from astrodyn.inputs import broadcast_named, real_array
 from astrodyn.jit import jit, pjit, prange
 from astrodyn.orbit.floating import (
     EPS,
@@ -73,7 +74,6 @@ from astrodyn.orbit.floating import (
     sinh_parts_vec,
     x_minus_sin,
 )
-from astrodyn.orbit.inputs import broadcast_shapes_named, real_array
 
 __all__ = ["solve_kepler", "solve_kepler_hyperbolic"]
 
@@ -376,7 +376,7 @@ def _kepler_hyp_loop_par(M, e, out):
 def _broadcast_flat(M, e, who):
     M = real_array(M, "M", who)
     e = real_array(e, "e", who)
-    shape = broadcast_shapes_named(who, {"M": M.shape, "e": e.shape})
+    shape = broadcast_named(who, ("M", M, 0), ("e", e, 0))
     Mf = np.ascontiguousarray(np.broadcast_to(M, shape)).reshape(-1)
     ef = np.ascontiguousarray(np.broadcast_to(e, shape)).reshape(-1)
     return shape, Mf, ef
@@ -414,8 +414,8 @@ def solve_kepler(M, e):
         If a finite ``e`` is outside ``[0, 1)``, or the shapes of ``M`` and ``e`` do not
         broadcast (names both with their shapes).
     TypeError
-        ``M`` or ``e`` not real numbers (``None``, complex, str, object, bool; names it:
-        :mod:`astrodyn.orbit.inputs`).
+        ``M`` or ``e`` not real numbers (``None``, complex, str, bool; names it:
+        :class:`astrodyn.inputs.NonRealInputError`).
     """
     if type(M) is float and type(e) is float and 0.0 <= e < 1.0:  # fast path for one value
         return _kepler_ell_scalar(M, e)

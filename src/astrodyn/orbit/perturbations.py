@@ -91,8 +91,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from astrodyn.inputs import broadcast_named, real_array, real_scalar
 from astrodyn.jit import jit
-from astrodyn.orbit.inputs import broadcast_shapes_named, real_array, real_scalar
 from astrodyn.orbit.universal import propagate, propagate_rows
 
 __all__ = [
@@ -316,8 +316,7 @@ def _point_mass_difference(x, dx, mu, who, names):
     try:
         x, dx = np.broadcast_arrays(x, dx)
     except ValueError:
-        broadcast_shapes_named(who, {names[0]: x.shape[:-1], names[1]: dx.shape[:-1]},
-                               shown={names[0]: x.shape, names[1]: dx.shape}, what="leading shapes")
+        broadcast_named(who, (names[0], x, 1), (names[1], dx, 1))
         raise
     shape = dx.shape
     out = np.zeros((int(np.prod(shape[:-1], dtype=np.int64)), 3))
@@ -335,8 +334,7 @@ def third_body_acceleration(r, s, mu3):
     who = "third_body_acceleration"
     r = _rows(r, "r", who)
     s = _rows(s, "s", who)
-    broadcast_shapes_named(who, {"r": r.shape[:-1], "s": s.shape[:-1]}, shown={"r": r.shape, "s": s.shape},
-                           what="leading shapes")
+    broadcast_named(who, ("r", r, 1), ("s", s, 1))
     return -_point_mass_difference(s, -r, mu3, who, ("s", "r", "mu3"))
 
 
@@ -864,7 +862,7 @@ def checked_propagation_inputs(r0, v0, t, mu, method, rtol, atol, rectify_ratio=
     (m^3/s^2), ``t`` a finite float64 scalar or 1-D array (s); ValueError naming the
     argument otherwise (also for a ``method`` other than "cowell" / "encke", ``rtol``,
     ``atol`` and ``rectify_ratio`` not finite and > 0, and ``max_steps`` < 1), TypeError
-    naming it for values that are not real numbers (:mod:`astrodyn.orbit.inputs`) and for a
+    naming it for values that are not real numbers (:mod:`astrodyn.inputs`) and for a
     ``max_steps`` that is not an int."""
     who = "propagate_perturbed"
     if method not in ("cowell", "encke"):

@@ -77,6 +77,7 @@ from fractions import Fraction
 
 import numpy as np
 
+from astrodyn.inputs import NonRealInputError, broadcast_named, real_array
 from astrodyn.jit import jit, pjit, prange
 from astrodyn.orbit.floating import (
     EPS,
@@ -104,7 +105,6 @@ from astrodyn.orbit.floating import (
     two_sum,
     x_minus_sin,
 )
-from astrodyn.orbit.inputs import broadcast_shapes_named, real_array
 from astrodyn.orbit.kepler import (
     MAX_ITER,
     hyperbolic_upper_start_vec,
@@ -161,7 +161,7 @@ def stumpff(z):
     ``z = alpha chi^2`` (dimensionless); ``c2(0) = 1/2``, ``c3(0) = 1/6``.
     Series near ``z = 0``, closed forms elsewhere (Vallado 4th ed. eq. 2-52).
     Returns two arrays of the shape of ``z`` (floats for scalar ``z``); ``TypeError``
-    naming ``z`` for values that are not real numbers (:mod:`astrodyn.orbit.inputs`).
+    naming ``z`` for values that are not real numbers (:mod:`astrodyn.inputs`).
     """
     z = real_array(z, "z", "stumpff")
     zf = np.ascontiguousarray(z).reshape(-1)
@@ -1181,16 +1181,21 @@ _scalar_kernel = _scalar_kernel_first_call
 
 def _scalar_floats(args) -> list[float]:
     """The arguments numba's dispatch refused, as floats: real numbers it does not convert
-    (a 0-d array, a ``Fraction``); ``TypeError`` naming the first argument that is not one."""
+    (a 0-d array, a ``Fraction``); :class:`astrodyn.inputs.NonRealInputError` naming the first
+    argument that is not one (``TypeError`` for an array of more than one number)."""
     out = []
     for name, x in zip(_SCALAR_ARGS, args):
-        if x is None or isinstance(x, (complex, np.complexfloating, str, bytes)) or np.ndim(x) != 0:
-            got = "None" if x is None else type(x).__name__ + (f" of shape {np.shape(x)}" if np.ndim(x) else "")
-            raise TypeError(f"propagate_scalar: {name}: expected a real number, got {got}")
+        if x is None or isinstance(x, (complex, np.complexfloating, str, bytes)):
+            got = "None" if x is None else type(x).__name__
+            raise NonRealInputError(f"propagate_scalar: {name}: expected a real number, got {got}")
+        if np.ndim(x) != 0:
+            raise TypeError(f"propagate_scalar: {name}: expected a real number, got {type(x).__name__} "
+                            f"of shape {np.shape(x)}")
         try:
             out.append(float(x))
         except (TypeError, ValueError):
-            raise TypeError(f"propagate_scalar: {name}: expected a real number, got {type(x).__name__}") from None
+            raise NonRealInputError(f"propagate_scalar: {name}: expected a real number, "
+                                    f"got {type(x).__name__}") from None
     return out
 
 
@@ -1207,8 +1212,10 @@ def propagate_scalar(rx, ry, rz, vx, vy, vz, dt, mu):
     Any real scalars: Python and numpy ints and floats of any width are converted to
     float64 by numba's dispatch (one compiled specialization serves every mix; bools, which
     numba converts too, count as 0 and 1 here, unlike in the array functions); 0-d arrays
-    and other real numbers through ``float()``.  ``None``, complex numbers, strings and
-    arrays raise ``TypeError`` naming the argument.
+    and other real numbers through ``float()``.  ``None``, complex numbers and strings raise
+    :class:`astrodyn.inputs.NonRealInputError`, arrays ``TypeError``, naming the argument.
+    This is the one exception to the core's input rule (:mod:`astrodyn.inputs`): the
+    compiled scalar call converts what numba converts.
     """
     try:
         return _scalar_kernel(rx, ry, rz, vx, vy, vz, dt, mu)
@@ -1229,7 +1236,7 @@ def _lagrange_loop(r0, v0, dt, mu, out):
 # public API
 # ---------------------------------------------------------------------------
 def _state_vector(x, name, who, unit):
-    """``x`` as float64 ``(..., 3)`` (:func:`astrodyn.orbit.inputs.real_array`), else an error naming it."""
+    """``x`` as float64 ``(..., 3)`` (:func:`astrodyn.inputs.real_array`), else an error naming it."""
     x = real_array(x, name, who)
     if x.ndim == 0 or x.shape[-1] != 3:
         raise ValueError(f"{who}: {name} must have shape (..., 3) [{unit}]; got shape {x.shape}")
@@ -1244,10 +1251,7 @@ def _prepare(r0, v0, dt, mu, who):
     mu = real_array(mu, "mu", who)
     if np.any(mu <= 0.0):  # NaN mu is let through and gives NaN
         raise ValueError(f"{who}: mu must be > 0 [m^3/s^2]; got {float(mu[mu <= 0.0].ravel()[0])!r}")
-    lead = broadcast_shapes_named(
-        who, {"r0": r0.shape[:-1], "v0": v0.shape[:-1], "dt": dt.shape, "mu": mu.shape},
-        shown={"r0": r0.shape, "v0": v0.shape}, what="leading shapes",
-    )
+    lead = broadcast_named(who, ("r0", r0, 1), ("v0", v0, 1), ("dt", dt, 0), ("mu", mu, 0))
     n = math.prod(lead)
     r0f = np.ascontiguousarray(np.broadcast_to(r0, lead + (3,))).reshape(n, 3)
     v0f = np.ascontiguousarray(np.broadcast_to(v0, lead + (3,))).reshape(n, 3)
@@ -1285,8 +1289,9 @@ def propagate(r0, v0, dt, mu):
     ValueError
         Wrong shapes (names the argument) or a finite ``mu <= 0``.
     TypeError
-        An argument that is not real numbers (``None``, complex, str, object, bool; names
-        it: :mod:`astrodyn.orbit.inputs`).
+        An argument that is not real numbers (``None``, complex, str, bool, an object array
+        holding anything but ints and floats): :class:`astrodyn.inputs.NonRealInputError`
+        naming it.
     """
     if type(dt) is float and type(mu) is float:  # fast path for one state (a few microseconds)
         r0a = real_array(r0, "r0", "propagate")
