@@ -38,6 +38,7 @@ from astrodyn import bus, messages
 from astrodyn.jit import service_threads, set_threads
 from astrodyn.scenario import Scenario, plan as make_plan
 from astrodyn.service.children import LOGGED_WAIT_S, MODEL_ENDED_EXIT, share_fate_with_supervisor
+from astrodyn.service.summary import TWO_BODY_KEYS
 from astrodyn.signals import catch_job_control, catch_stop_signals, suspended_s
 from astrodyn.simulate import AttitudeEngine, ModelEnded, OrbitEngine
 
@@ -435,7 +436,11 @@ class _Conservation:
     """Drift of the conserved quantities over the states a propagator published.
 
     Orbit: specific energy (relative to mu/|r0|, the size of its terms, not to the energy
-    itself, which is ~0 near parabolic orbits) and |r x v| (relative).  Attitude: max
+    itself, which is ~0 near parabolic orbits) and |r x v| (relative): ``energy_drift``
+    and ``momentum_drift`` for a Kepler body, which conserves both; for a perturbed one
+    (J2, zonals, third bodies) ``two_body_energy_change`` and ``two_body_momentum_change``,
+    the physical change of quantities its model does not conserve (``astrodyn run``'s
+    summary gives the conserved ones, e.g. E with J2).  Attitude: max
     ||q| - 1|; for torque-free bodies also rotational energy and inertial angular
     momentum C^T (J w) (relative).  Reported per body, from the first state published.
     """
@@ -448,6 +453,7 @@ class _Conservation:
         self.qnorm = np.zeros(len(self.names))
         if kind == "orbit":
             self.mu = engine.mu
+            self.two_body = np.array([m == "kepler" for m in engine.models], dtype=bool)
         else:
             self.J = np.array([scenario.body(n).attitude.inertia for n in self.names]).reshape(-1, 3, 3)
             self.free = np.array([m == "torque_free" for m in engine.models], dtype=bool)
@@ -487,7 +493,8 @@ class _Conservation:
         out = {}
         for i, name in enumerate(self.names):
             if self.kind == "orbit":
-                out[name] = {"energy_drift": float(self.dev[i, 0]), "momentum_drift": float(self.dev[i, 1])}
+                e, h = float(self.dev[i, 0]), float(self.dev[i, 1])
+                out[name] = dict(zip(TWO_BODY_KEYS[bool(self.two_body[i])], (e, h)))
             else:
                 row = {"quat_norm_error": float(self.qnorm[i])}
                 if self.free[i]:

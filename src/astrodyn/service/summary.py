@@ -25,11 +25,18 @@ import numpy as np
 from astrodyn.analysis.closed_loop import OrbitActuation
 from astrodyn.analysis.invariants import own_state_arrays, recorded_invariants
 from astrodyn.analysis.metrics import coast_arc_first
-from astrodyn.messages import ATTITUDE_PROCESS_KINDS, MODEL_STATE_KINDS
+from astrodyn.messages import ACTUATED_MODEL, ATTITUDE_PROCESS_KINDS, MODEL_STATE_KINDS
 from astrodyn.scenario import Scenario, plan as make_plan
 from astrodyn.scenario.planning import counted, state_kinds_text
 
-__all__ = ["file_summary", "propagator_rows", "print_summary", "FileRows"]
+__all__ = ["file_summary", "propagator_rows", "print_summary", "FileRows", "TWO_BODY_KEYS"]
+
+#: The names of the two-body energy and |h| deviations (relative to mu/|r0| and |h0|) of an
+#: orbit: ``TWO_BODY_KEYS[True]`` for a model that conserves them (Kepler; an actuated orbit
+#: between its burns), a drift; ``TWO_BODY_KEYS[False]`` for one that does not (J2, zonals,
+#: third bodies), the physical change.  Used by the propagators' end-of-run lines too.
+TWO_BODY_KEYS = {True: ("energy_drift", "momentum_drift"),
+                 False: ("two_body_energy_change", "two_body_momentum_change")}
 
 
 class FileRows(list):
@@ -150,11 +157,13 @@ def _add_orbit_block(row: dict, orbit, recorded_scenario: dict, bp, mu: float, f
     row["orbit_states"] = row.get("orbit_states", 0) + len(orbit)
     row["orbit_last_seq"] = max(row.get("orbit_last_seq", -1), int(orbit.seq[-1]))
     row["orbit_invariants"] = _merge_invariants(row.get("orbit_invariants"), [i.as_dict() for i in inv])
-    row["energy_drift"] = _max_nan(row.get("energy_drift"),
-                                   float(np.max(np.abs(energy - energy[arc_first]) * rn[arc_first] / mu)))
+    # two-body E and |h|: a drift for a Kepler (or actuated, between burns) body, a physical
+    # change of quantities its model does not conserve for a perturbed one
+    e_key, h_key = TWO_BODY_KEYS[bp.orbit_model in ("kepler", ACTUATED_MODEL)]
+    row[e_key] = _max_nan(row.get(e_key), float(np.max(np.abs(energy - energy[arc_first]) * rn[arc_first] / mu)))
     with np.errstate(divide="ignore", invalid="ignore"):
         h_drift = np.where(h_first != 0, np.abs(h - h_first) / np.where(h_first != 0, h_first, 1.0), 0.0)
-    row["momentum_drift"] = _max_nan(row.get("momentum_drift"), float(np.max(h_drift)))
+    row[h_key] = _max_nan(row.get(h_key), float(np.max(h_drift)))
 
 
 def _attitude_block(rec, bp, first: dict) -> tuple[np.ndarray, np.ndarray, dict | None]:
