@@ -50,6 +50,18 @@ MESSAGE_KINDS = ("orbit", "attitude", "crosscheck", "appendages", "rolling", "gi
 _SPECIAL_WITH_NAME = ("@control", "@alive", "@batch", "@schema", "@done")
 _SPECIAL_PLAIN = {"@status": "status", "@event": "event", "@latest": "latest", "@tick": "tick"}
 
+#: The names a run's own processes publish and sign as (docs/security.md): the plant's
+#: and the propagators' ``@batch/<process>`` envelopes carry states, never commands, and the
+#: plant drops what is signed with its own name.  Standby loggers are ``logger-2``, ...
+#: A controller may not take one of these names (:func:`is_run_process_name`).
+RUN_PROCESS_NAMES = frozenset(("plant", "orbit", "attitude", "logger", "serve", "run"))
+
+
+def is_run_process_name(name: str) -> bool:
+    """True if ``name`` is one of :data:`RUN_PROCESS_NAMES` or a standby logger's (``logger-N``)."""
+    return name in RUN_PROCESS_NAMES or re.fullmatch(r"logger-[0-9]+", name) is not None
+
+
 #: |q| may differ from 1 by at most this much in a message (integrators keep |q| at
 #: round-off, ~1e-15; JSON repr round-trips floats exactly, so 1e-9 only rejects garbage).
 QUAT_NORM_TOL = 1e-9

@@ -55,6 +55,7 @@ from typing import Any
 
 import numpy as np
 
+from astrodyn.messages import RUN_PROCESS_NAMES, is_run_process_name
 from astrodyn.scenario.fields import Ctx, Table, check, choice, field_name, integer, quantity, unit_quaternion, vector
 
 __all__ = ["Pointing", "parse_pointing", "Wheel", "Actuators", "Sensor", "Sensors", "Fault", "Control", "CONTROL_MODES", "FAULTS",
@@ -363,6 +364,9 @@ def parse_control(ctx: Ctx, data: Any, rate: float, duration: float,
         raise ctx.error("control.controllers", f"a list of at most {MAX_CONTROLLERS} controller names", raw)
     controllers = tuple(field_name(ctx, c, f"control.controllers[{k}]") for k, c in enumerate(raw))
     check(ctx, len(set(controllers)) == len(controllers), "control.controllers", "unique controller names", raw)
+    for k, c in enumerate(controllers):  # the plant takes what these sign for the run's own messages
+        check(ctx, not is_run_process_name(c), f"control.controllers[{k}]",
+              f"a name other than the run's own processes ({', '.join(sorted(RUN_PROCESS_NAMES))}, logger-N)", c)
     timeout = quantity(ctx, tb.get("timeout", 10.0), "time", "control.timeout")
     check(ctx, 0 < timeout <= MAX_TIMEOUT_S, "control.timeout", f"0 < timeout <= {MAX_TIMEOUT_S:g} s (wall time per step)",
           tb.get("timeout", 10.0))
