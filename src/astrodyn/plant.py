@@ -115,7 +115,7 @@ def _body_turn(q0, w0, q1, w1, dt: float) -> np.ndarray:
 @dataclass
 class _Faults:
     gyro_bias: np.ndarray | None = None
-    dropouts: dict = field(default_factory=dict)  # sensor kind -> end time (s)
+    dropouts: dict = field(default_factory=dict)  # sensor kind -> first output step k after it (inf: for ever)
     failed_wheels: set = field(default_factory=set)
     stuck_wheels: set = field(default_factory=set)
     efficiency: float = 1.0
@@ -364,7 +364,7 @@ class PlantBody:
 
     def due(self, s: Sensor, k: int, t: float) -> bool:
         """Whether sensor ``s`` gives a sample at output step ``k`` (time ``t``): its rate, no dropout."""
-        return not k % s.every and t >= self.faults.dropouts.get(s.kind, -math.inf)
+        return not k % s.every and k >= self.faults.dropouts.get(s.kind, -1)
 
     def sensor_samples(self, k: int, t: float) -> list[tuple[str, dict]]:
         """``(kind, fields)`` of each sensor due at output step ``k`` (time ``t``), noise from
@@ -664,16 +664,23 @@ class Plant:
                 b.clipped = [int(j) for j in np.flatnonzero(clipped[i, :nw])] if any_clipped[i] else []
 
     def faults_at(self, t: float) -> list[Fault]:
-        """Faults that begin at or before ``t`` and have not begun yet: applied, returned."""
-        half = 0.5 / self.rate
-        begun = [f for f in self._faults if f.t <= t + half]
-        self._faults = [f for f in self._faults if f.t > t + half]
+        """Faults whose time is at or before output step ``t`` and have not begun yet:
+        applied, returned.  A fault begins at the first output step at or after its ``t``
+        (within 1e-9 of a step, for a time computed as ``t_k + dt``); a dropout lasts
+        ``duration`` from that step, counted in whole steps (the sensor is silent at the
+        steps before ``t_k + duration``), so a re-simulation from the ``fault`` event (at
+        ``t_k``) silences the same samples; a dropout never shortens one already on."""
+        eps = 1e-9 / self.rate
+        begun = [f for f in self._faults if f.t <= t + eps]
+        self._faults = [f for f in self._faults if f.t > t + eps]
+        k = round(t * self.rate)
         for f in begun:
             b = self.bodies[f.body]
             if f.fault == "gyro_bias":
                 b.faults.gyro_bias = np.asarray(f.value, dtype=np.float64)
             elif f.fault == "sensor_dropout":
-                b.faults.dropouts[f.sensor] = f.t + f.duration
+                steps = math.ceil(f.duration * self.rate - 1e-9) if math.isfinite(f.duration) else math.inf
+                b.faults.dropouts[f.sensor] = max(b.faults.dropouts.get(f.sensor, -1), k + steps)
             elif f.fault == "wheel_failed":
                 b.faults.failed_wheels.add(int(f.wheel))
             elif f.fault == "wheel_stuck":
