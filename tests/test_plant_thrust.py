@@ -89,6 +89,36 @@ def test_thrust_and_dv_are_limited_and_the_efficiency_fault_scales_them():
     np.testing.assert_allclose(b.v - v0, [0.0, 0.0, 2.0], rtol=1e-15)
 
 
+def test_an_impulsive_dv_spends_propellant_by_the_rocket_equation_and_later_burns_feel_it():
+    """An impulse is a burn too short to resolve: with ``mass`` and ``isp`` it spends
+    m0 (1 - exp(-|dv| / (isp g0))) of propellant (Tsiolkovsky).  Before, the mass stayed at
+    500 kg after dv, so every later finite burn accelerated at F / m0 (closed-loop probe)."""
+    plant, b = _plant()
+    b.apply({"t": 0.0, "seq": 0, "sender": "c", "dv": [6.0, 8.0, 0.0]})  # |dv| = 10 m/s
+    m1 = 500.0 * math.exp(-10.0 / (300.0 * G0))
+    assert b.mass == pytest.approx(m1, rel=1e-15)
+    b.apply({"t": 0.0, "seq": 1, "sender": "c", "dv": [0.0, 0.0, 10.0]})
+    assert b.mass == pytest.approx(500.0 * math.exp(-20.0 / (300.0 * G0)), rel=1e-15)  # dv adds: exp multiplies
+    m2 = b.mass
+    v0 = b.v.copy()
+    b.apply({"t": 0.0, "seq": 2, "sender": "c", "thrust": [20.0, 0.0, 0.0]})
+    for _ in range(10):
+        b.begin_step()
+        b.finish_commands()
+        b.advance(1.0)
+    mdot = 20.0 / (300.0 * G0)
+    assert b.mass == pytest.approx(m2 - 10.0 * mdot, rel=1e-14)
+    assert b.v[0] - v0[0] == pytest.approx(300.0 * G0 * math.log(m2 / (m2 - 10.0 * mdot)), rel=1e-10)
+    assert b.dv_total == pytest.approx(20.0 + 300.0 * G0 * math.log(m2 / (m2 - 10.0 * mdot)), rel=1e-13)
+
+
+def test_an_impulsive_dv_without_isp_keeps_the_mass():
+    plant = Plant(loads(SCENE.replace('isp = "300 s"\n', "")))
+    b = plant.bodies["sc"]
+    b.apply({"t": 0.0, "seq": 0, "sender": "c", "dv": [6.0, 8.0, 0.0]})
+    assert b.mass == 500.0 and b.dv_total == pytest.approx(10.0, rel=1e-15)
+
+
 def _wheel(axis: str, speed: str) -> str:
     """A ``[[bodies.actuators.wheels]]`` entry: ``axis`` in body components, rotor 0.05 kg m^2, 0.2 N m and
     600 rad/s at most, the initial ``speed`` (a quantity)."""

@@ -200,6 +200,8 @@ class PlantBody:
             dv = limited(cmd["dv"], act.dv) * self.faults.efficiency
             self.v = self.v + dv
             self.dv_total += float(np.linalg.norm(dv))
+            if self.mass is not None and math.isfinite(act.isp):  # the rocket equation, m1 = m0 exp(-|dv| / (isp g0))
+                self.mass *= math.exp(-float(np.linalg.norm(dv)) / (act.isp * G0))
             self.step_dv = dv if self.step_dv is None else self.step_dv + dv
             self.step_dv_t = float(cmd["t"] if at is None else at)
         self.step_applied.append(command_id(cmd["sender"], cmd["seq"]))
