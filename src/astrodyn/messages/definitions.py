@@ -237,7 +237,8 @@ MAX_WHEELS = 64
 _Wheels = Annotated[list[float], Meta(min_length=1, max_length=MAX_WHEELS)]
 _Sender = _name("name of the controller that sent the command", "a controller name")
 _SENDER_SEQ = Annotated[int, Meta(ge=0, le=MAX_SEQ, description=(
-    "the sender's command counter: 0, 1, 2, ... over all its commands (every body)"))]
+    "the sender's counter of its commands to this body, increasing (0, 1, 2, ...; one counter over all "
+    "its commands, every body, increases per body too)"))]
 
 
 class Command(Stamped, forbid_unknown_fields=True, omit_defaults=True):
