@@ -407,7 +407,11 @@ def test_replay_bad_arguments_name_the_option(spawn, recording):
     cases = [(["--rate", "0"], "--rate: expected a real-time factor with 0.001 <= x <= 1e+06"),
              (["--rate", "1e-300"], "--rate: expected a real-time factor with 0.001"),
              (["--rate", "x"], "--rate: expected"),
-             (["--start", "30", "--end", "10"], "end: expected end >= start"),
+             (["--start", "30", "--end", "10"], "end: expected end >= start, got start=30, end=10"),
+             # past the recording (t 0 .. 50 s): said "end: expected end >= start" for --start 60 --end 70
+             (["--start", "60", "--end", "70"], "start: t = 60 s is after the recording's end (it covers t = 0 .. 50 s)"),
+             (["--start", "60"], "start: t = 60 s is after the recording's end (it covers t = 0 .. 50 s)"),
+             (["--end", "-5"], "end: t = -5 s is before the recording's start (it covers t = 0 .. 50 s)"),
              (["--start", "nan"], "--start: expected a finite number"),
              (["--port", str(port)], f"--port: expected a free port on 127.0.0.1, got {port} (Address already in use)"),
              (["--port", "65536"], "--port: expected a port 0..65535 (0: a free one), got 65536"),

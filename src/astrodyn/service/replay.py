@@ -136,10 +136,16 @@ class Replayer:
         self.batch = batch
         self.lo = stream.t_to_ns(start_t, "start") if start_t is not None else stream.start_ns
         self.hi = stream.t_to_ns(end_t, "end") if end_t is not None else stream.end_ns
+        if start_t is not None and end_t is not None and end_t < start_t:
+            raise ValueError(f"end: expected end >= start, got start={start_t:g}, end={end_t:g}")
+        if self.lo is not None and None not in (stream.start_ns, stream.end_ns) and self.lo > stream.end_ns:
+            raise ValueError(f"start: t = {start_t:g} s is after the recording's end (it covers t = "
+                             f"{stream.ns_to_t(stream.start_ns):g} .. {stream.ns_to_t(stream.end_ns):g} s)")
         if self.hi is not None and stream.end_ns is not None:
             self.hi = min(self.hi, stream.end_ns)
-        if self.lo is not None and self.hi is not None and self.hi < self.lo:
-            raise ValueError(f"end: expected end >= start, got start={start_t}, end={end_t}")
+        if self.lo is not None and self.hi is not None and self.hi < self.lo:  # an end before the recording's start
+            raise ValueError(f"end: t = {end_t:g} s is before the recording's start (it covers t = "
+                             f"{stream.ns_to_t(stream.start_ns):g} .. {stream.ns_to_t(stream.end_ns):g} s)")
         self.state = "running"
         self.published = 0
         self.skipped: dict[str, str] = {}
