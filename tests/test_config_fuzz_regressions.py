@@ -171,6 +171,8 @@ def test_run_flags_refused_before_anything_starts(short, capsys, monkeypatch, ar
     (["--roll-size", "-5"], "--roll-size: expected bytes 1048576 (1 MiB) <= N"),  # was: the logger crashed 5 times
     (["--roll-interval", "nan"], "--roll-interval: expected wall seconds 1 <= S <= 7.8894e+09, got nan"),
     (["--roll-interval", "0.001"], "--roll-interval: expected wall seconds 1 <= S"),  # was: a file per flush
+    (["--roll-interval", "0.5 s"], "--roll-interval: expected wall seconds 1 <= S <= 7.8894e+09, got 0.5"),
+    (["--roll-size", "1 KiB"], "--roll-size: expected bytes 1048576 (1 MiB) <= N <= 1125899906842624 (1 PiB), got 1024"),
     (["--port", "70000"], "--port: expected a port 0..65535 (0: a free one), got 70000"),  # was: BusError traceback
     (["--connect", "garbage"], "--connect: expected Zenoh endpoints like 'tcp/127.0.0.1:7447', got 'garbage'"),
     (["--out", "short.toml/x.mcap"], "--out short.toml/x.mcap: expected a file path in a directory that can be created"),
@@ -296,3 +298,29 @@ def test_analyze_bad_body_and_figure_flags_are_clear(tmp_path, capsys, args, err
         code = exc.code
     assert code in (1, 2) and error in capsys.readouterr().err
     assert not (tmp_path / "rep").exists()
+
+
+@pytest.mark.parametrize("size_text,interval_text,size,interval", [
+    ("256 MB", "1 h", 256_000_000, 3600.0),  # what the config takes (newcomer walk: "invalid int value")
+    ("1 GiB", "90min", 2**30, 5400.0),
+    ("1048576", "30", 2**20, 30.0),  # plain bytes and seconds as before
+    ("1.5e6", "2.5", 1_500_000, 2.5),
+])
+def test_serve_roll_flags_take_the_configs_quantities(size_text, interval_text, size, interval):
+    got_size = serve.flag_quantity("bytes", "bytes")(size_text)
+    assert got_size == size and type(got_size) is int  # the logger's --roll-size is an int
+    assert serve.flag_quantity("time", "seconds")(interval_text) == interval
+
+
+@pytest.mark.parametrize("argv,says", [
+    (["--roll-interval", "1 hx"], 'argument --roll-interval: expected a time, e.g. "90 min", or a number of seconds'),
+    (["--roll-size", "12 parsecs"], 'argument --roll-size: expected a size, e.g. "256 MB", or a number of bytes'),
+])
+def test_serve_roll_flags_that_are_no_quantity_say_what_they_take(short, capsys, monkeypatch, argv, says):
+    monkeypatch.chdir(short.parent)
+    with pytest.raises(SystemExit) as exited:
+        serve.main([str(short.name), "--out", "o.mcap", *argv])
+    assert exited.value.code == 2
+    err = capsys.readouterr().err
+    assert says in err and "Traceback" not in err, err
+    assert list(short.parent.iterdir()) == [short]

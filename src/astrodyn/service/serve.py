@@ -58,6 +58,7 @@ from pathlib import Path
 from astrodyn import auth, bus
 from astrodyn.recording.writer import standby_path
 from astrodyn.scenario import ScenarioError, load, plan as make_plan
+from astrodyn.scenario.fields import QUANTITY_KINDS, parse_quantity_string
 from astrodyn.service.children import (
     DISK_FULL_EXIT,
     MODEL_ENDED_EXIT,
@@ -779,6 +780,25 @@ def control_token(out: Path, open_control: bool) -> Iterator[tuple[str | None, P
                 path.unlink()
 
 
+def flag_quantity(kind: str, plain: str) -> Callable[[str], float]:
+    """An argparse ``type`` for a flag that takes what the config's field of that ``kind``
+    takes: a quantity string (``"1 h"``, ``"256 MB"``, units of astrodyn.scenario) or a
+    plain number of ``plain`` (SI: ``"seconds"``, ``"bytes"``); bytes come out as an int
+    (rounded), ranges are judged by :func:`check_serve_flags`."""
+    example = QUANTITY_KINDS[kind][1]
+
+    def parse(text: str) -> float:
+        try:
+            x = float(text)
+        except ValueError:
+            x = parse_quantity_string(text.strip(), kind)
+        if isinstance(x, str):  # the reason it is not one
+            raise argparse.ArgumentTypeError(f"expected {example}, or a number of {plain}; got {text!r} ({x})")
+        return round(x) if kind == "bytes" and math.isfinite(x) else x
+
+    return parse
+
+
 def check_serve_flags(args: argparse.Namespace) -> bus.ZenohConfigText | None:
     """The numeric flags of ``serve`` argparse does not bound, and the bus flags
     (:func:`~astrodyn.service.runner.check_bus_flags`); ScenarioError naming the flag.
@@ -812,13 +832,13 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--out", help="MCAP file (default out/<scenario>.mcap; rolled files get -0001, -0002, ...)")
     ap.add_argument("--rate", type=bus.rate_argument, default=None,
                     help='real-time factor, or "inf" (default: the scenario\'s real_time_factor)')
-    ap.add_argument("--roll-size", type=int, default=None,
-                    help="start a new MCAP file after this many bytes (default: the config's [output] roll_size, "
-                         "else no size limit)")
-    ap.add_argument("--roll-interval", type=float, default=None,
-                    help="start a new MCAP file after this many wall seconds (default: the config's [output] "
-                         "roll_interval, else 3600: hourly files keep each file's chunk index, held in memory for its "
-                         "summary, small)")
+    ap.add_argument("--roll-size", type=flag_quantity("bytes", "bytes"), default=None,
+                    help='start a new MCAP file after this many bytes ("256 MB", "1 GiB" or a number of bytes; '
+                         "default: the config's [output] roll_size, else no size limit)")
+    ap.add_argument("--roll-interval", type=flag_quantity("time", "seconds"), default=None,
+                    help="start a new MCAP file after this much wall time (\"1 h\", \"90 min\" or seconds; default: "
+                         "the config's [output] roll_interval, else 3600: hourly files keep each file's chunk index, "
+                         "held in memory for its summary, small)")
     ap.add_argument("--max-wall", type=wall_seconds, default=None, help="stop by itself after this many wall seconds")
     ap.add_argument("--port", type=int, default=None, help="loopback port of the control hub (default: a free one)")
     ap.add_argument("--connect", action="append", default=[], metavar="ENDPOINT", help="also connect to this endpoint (router)")
