@@ -40,6 +40,7 @@ import fcntl
 import json
 import operator
 import os
+import re
 import time
 from collections.abc import Callable, Mapping
 from typing import Any
@@ -50,7 +51,7 @@ from astrodyn import __version__, messages
 from astrodyn.recording import ingest
 from astrodyn.recording.chunked_writer import ChunkedWriter
 
-__all__ = ["RecordingError", "McapRecorder", "being_written", "partial_path", "part_path", "standby_path", "fsync_directory", "link_new", "clash_name", "BatchLayout", "SeqTracker", "OK", "GAP", "LATE", "DUPLICATE"]
+__all__ = ["RecordingError", "McapRecorder", "being_written", "partial_path", "is_partial_path", "part_path", "standby_path", "fsync_directory", "link_new", "clash_name", "BatchLayout", "SeqTracker", "OK", "GAP", "LATE", "DUPLICATE"]
 
 OK, GAP, LATE, DUPLICATE = 0, 1, 2, 3
 _STATUS_NAMES = ("ok", "gap", "late", "duplicate")
@@ -252,6 +253,13 @@ def partial_path(path: str | os.PathLike, attempt: int = 0) -> str:
     with this name is what a killed run leaves; ``astrodyn recover`` finishes it."""
     root, ext = os.path.splitext(os.fspath(path))
     return f"{root}.partial{'' if attempt == 0 else f'-{attempt}'}{ext or '.mcap'}"
+
+
+def is_partial_path(path: str | os.PathLike) -> bool:
+    """Whether ``path`` is named like an unfinished recording (:func:`partial_path`:
+    ``NAME.partial.mcap``, ``NAME.partial-N.mcap``)."""
+    root, _ = os.path.splitext(os.path.basename(os.fspath(path)))
+    return re.search(r"\.partial(-[1-9][0-9]*)?$", root) is not None
 
 
 def part_path(path: str | os.PathLike, part: int) -> str:

@@ -13,7 +13,7 @@ import os
 from pathlib import Path
 
 from astrodyn.recording.reader import MCAP_MAGIC, RecordingError, open_recording
-from astrodyn.recording.writer import being_written, part_path, partial_path
+from astrodyn.recording.writer import being_written, is_partial_path, part_path, partial_path
 from astrodyn.scenario import ScenarioError
 
 __all__ = ["check_output_path", "OutputDirectory", "series_parts_problem", "held_path"]
@@ -54,6 +54,9 @@ def check_output_path(path: Path, inputs: tuple = ()) -> None:
         if head != MCAP_MAGIC:
             raise ScenarioError(f"--out {path}: exists and is not an MCAP recording; it is never overwritten "
                                 f"(expected a new path or an earlier recording to replace)")
+        if is_partial_path(path):  # a finished recording may be replaced; an unfinished one only recovered
+            raise ScenarioError(f"--out {path}: exists and is the partial recording of a killed or failed run; it is "
+                                f"never replaced: finish it with `astrodyn recover {path}`, or choose another --out")
     partial = Path(partial_path(path))
     if partial.is_symlink():  # a dangling one too (exists() says False): the logger's O_EXCL would fail on it
         raise ScenarioError(f"--out {path}: {partial} is a symbolic link, in the way of the recording (it is written "
