@@ -70,6 +70,7 @@ import numpy as np
 import zenoh
 
 from astrodyn import auth, bus, messages
+from astrodyn.messages.keys import NAME_FULL_RE
 from astrodyn.plant import CommandRefused, FlexiblePlantBody, Plant, command_id
 from astrodyn.recording import RecordingError
 from astrodyn.service.children import share_fate_with_supervisor
@@ -108,6 +109,49 @@ MAX_ROUND_TRIPS = 1_000_000
 TICK_REPEAT_S = 0.5
 
 
+def _applied_limit() -> int:
+    """``max_length`` of :class:`astrodyn.messages.definitions.ActuatorState`'s ``applied``:
+    the commands one actuator state can name, so the most one body applies in one step."""
+    import msgspec
+
+    from astrodyn.messages.definitions import ActuatorState
+
+    t = next(f.type for f in msgspec.inspect.type_info(ActuatorState).fields if f.name == "applied")
+    while not isinstance(t, msgspec.inspect.ListType):
+        t = t.type if isinstance(t, msgspec.inspect.Metadata) else next(
+            x for x in t.types if isinstance(x, (msgspec.inspect.ListType, msgspec.inspect.Metadata)))
+    return int(t.max_length)
+
+
+def _largest_command() -> int:
+    """Bytes of the largest valid command (every actuator field, ``MAX_WHEELS`` wheels, the
+    longest sender and seq, floats of the longest repr), canonical JSON."""
+    from astrodyn.messages.definitions import MAX_WHEELS
+    from astrodyn.messages.keys import MAX_SEQ
+
+    x = -1.2345678901234567e-300  # the longest repr of a float
+    return len(messages.encode({"t": x, "seq": MAX_SEQ, "sender": "s" * 128, "torque": [x] * 3,
+                                "wheel_torque": [x] * MAX_WHEELS, "dv": [x] * 3, "thrust": [x] * 3, "frame": "inertial"},
+                               "command"))
+
+
+#: Commands one body applies in one step (the most an ActuatorState's ``applied`` names); more are refused.
+MAX_APPLIED_PER_STEP = _applied_limit()
+#: Payload of a command or an answer on its own key: larger ones are rejected (``oversized``)
+#: before they are queued.  Twice the largest valid command (a non-canonical encoder's
+#: spaces and indentation), plus 1 kB.
+MAX_COMMAND_BYTES = 2 * _largest_command() + 1024
+#: A controller's ``@batch`` envelope: at most this many commands' worth (keys included) per
+#: actuated body, ``MAX_BATCH_MIN_ENTRIES`` at least.
+MAX_BATCH_ENTRIES_PER_BODY = 4
+MAX_BATCH_MIN_ENTRIES = 1024
+#: Bytes the intake may hold waiting (samples beyond are dropped, as beyond INTAKE_CAPACITY).
+INTAKE_BYTES = 256 * 2**20
+#: Command senders the plant keeps track of (seq, counts); commands of further senders are
+#: refused (free mode; in lockstep only ``control.controllers`` may command).
+MAX_SENDERS = 1024
+
+
 class ControllerTimeout(RuntimeError):
     """A controller did not answer a control step in time (lockstep)."""
 
@@ -126,18 +170,47 @@ class Intake:
         self.rejected: dict[str, int] = {}
         self.examples: list[str] = []
         self.dropped = 0
+        self.max_batch = max(MAX_BATCH_MIN_ENTRIES, MAX_BATCH_ENTRIES_PER_BODY * len(self.bodies)) * (MAX_COMMAND_BYTES + 512)
+        self.oversized = self.oversized_counted = 0  # counted by Zenoh's thread, folded into rejected by the plant's
+        self.oversized_examples: list[str] = []
+        self.bytes_in = self.bytes_out = 0  # queued / taken payload bytes (INTAKE_BYTES)
+        #: commands rejected here, by the sender they name (or the controller whose envelope
+        #: held them): they arrived, and count toward what that sender announced (lockstep)
+        self.rejected_from: list[str] = []
 
     def callback(self, sample) -> None:  # Zenoh's thread: copy out, never block
+        key = str(sample.key_expr)
+        size = len(sample.payload)
+        if size > (self.max_batch if "/@batch/" in key else MAX_COMMAND_BYTES):  # before a copy is made
+            self.oversized += 1
+            if len(self.oversized_examples) < MAX_EXAMPLES:
+                self.oversized_examples.append(f"oversized: {key[:100]}: {size} bytes")
+            return
+        if self.bytes_in - self.bytes_out + size > INTAKE_BYTES:
+            self.dropped += 1
+            return
         a = sample.attachment
         try:
-            self.queue.put_nowait((str(sample.key_expr), sample.payload.to_bytes(), None if a is None else a.to_bytes()))
+            self.queue.put_nowait((key, sample.payload.to_bytes(), None if a is None else a.to_bytes()))
+            self.bytes_in += size
         except queue.Full:
             self.dropped += 1
 
-    def reject(self, reason: str, detail: str) -> None:
+    def fold_oversized(self) -> None:
+        """Count the oversized samples the callback refused among the rejected (the plant's thread)."""
+        n = self.oversized
+        if n != self.oversized_counted:
+            self.rejected["oversized"] = self.rejected.get("oversized", 0) + n - self.oversized_counted
+            self.oversized_counted = n
+            while self.oversized_examples and len(self.examples) < MAX_EXAMPLES:
+                self.examples.append(self.oversized_examples.pop(0))
+
+    def reject(self, reason: str, detail: str, sender: str | None = None) -> None:
         self.rejected[reason] = self.rejected.get(reason, 0) + 1
         if len(self.examples) < MAX_EXAMPLES:
             self.examples.append(f"{reason}: {detail[:200]}")
+        if sender is not None:
+            self.rejected_from.append(sender)
 
     def judge_batch(self, key: str, payload: bytes, attachment: bytes | None) -> list[tuple[str, str, dict]]:
         """The commands of a controller's envelope on ``@batch/<controller>`` (one
@@ -155,10 +228,11 @@ class Intake:
             return []
         out = []
         for entry_key, entry in items:
-            judged = self._judge_entry(entry_key, entry, signer if signer is not True else None)
+            judged = self._judge_entry(entry_key, entry, signer if signer is not True else None, controller)
             if judged is not None:
                 if judged[2]["sender"] != controller:
-                    self.reject("impersonation", f"{key}: entry {entry_key[:100]} is not {controller!r}'s")
+                    self.reject("impersonation", f"{key}: entry {entry_key[:100]} is not {controller!r}'s",
+                                controller if judged[0] == "command" else None)
                     continue
                 out.append(judged)  # commands, and the answer to the tick, which may close the envelope
         return out
@@ -187,7 +261,9 @@ class Intake:
             return None  # refused (counted), or our own copy of an applied command
         return self._judge_entry(key, payload, signer if signer is not True else None)
 
-    def _judge_entry(self, key: str, payload: bytes, signer: str | None) -> tuple[str, str, dict] | None:
+    def _judge_entry(self, key: str, payload: bytes, signer: str | None,
+                     envelope_of: str | None = None) -> tuple[str, str, dict] | None:
+        """``envelope_of``: the controller whose ``@batch`` envelope held the entry."""
         who = self.command_keys.get(key)
         try:
             if who is not None:  # the common case: a command for one of the plant's bodies
@@ -200,21 +276,34 @@ class Intake:
                 raise messages.MessageError(f"key: expected a command or an answer of scenario {self.scenario!r}")
             msg = messages.decode(payload, kind)
         except messages.MessageError as exc:
-            self.reject("malformed", f"{key}: {exc}")
+            is_command = who is not None or key.endswith("/command")
+            self.reject("malformed", f"{key}: {exc}",
+                        (envelope_of or signer or _named_sender(payload)) if is_command else None)
             return None
         return self._judged(kind, who, key, msg, signer)
 
     def _judged(self, kind: str, who: str, key: str, msg: dict, signer: str | None) -> tuple[str, str, dict] | None:
         if signer is not None and signer != msg["sender"]:
-            self.reject("impersonation", f"{key}: sender {msg['sender']!r} signed by {signer!r}")
+            self.reject("impersonation", f"{key}: sender {msg['sender']!r} signed by {signer!r}",
+                        signer if kind == "command" else None)
             return None
         if kind == "command" and who not in self.bodies:
-            self.reject("not-actuated", f"{key}: body {who!r} is not one of the plant's bodies")
+            self.reject("not-actuated", f"{key}: body {who!r} is not one of the plant's bodies", msg["sender"])
             return None
         if kind == "done" and who != msg["sender"]:
             self.reject("impersonation", f"{key}: answer of {msg['sender']!r} on {who!r}'s key")
             return None
         return kind, who, msg
+
+
+def _named_sender(payload: bytes) -> str | None:
+    """The ``sender`` a rejected command payload names, if it is JSON naming a valid one."""
+    try:
+        msg = json.loads(payload)
+    except (ValueError, RecursionError):
+        return None
+    sender = msg.get("sender") if isinstance(msg, dict) else None
+    return sender if isinstance(sender, str) and NAME_FULL_RE.fullmatch(sender) else None
 
 
 def recorded_commands(path: str | Path, scenario) -> dict[int, list[dict]]:
@@ -372,9 +461,16 @@ class PlantLoop:
         self.seqs: dict[str, int] = {}  # sensor key -> next seq
         self.keys: dict[tuple[str, str], str] = {}  # (body, kind) -> its key
         self.pending: dict[str, list[tuple[dict, bytes | None]]] = {b: [] for b in plant.bodies}
-        self.received: dict[str, int] = {}  # authenticated commands per sender
+        # lockstep, per controller, for the current tick only (docs/control.md, "Lockstep"):
+        # the commands that count toward its answer (arrived while the tick is current, t not
+        # before the tick's, not a copy of the last one taken; rejected ones too) and the
+        # number its answer announced.  Nothing carries over to the next tick.
+        self.received: dict[str, int] = {}
+        self.promised: dict[str, int] = {}
+        self.tick_t = 0.0  # t of the current tick
         self.last_command_seq: dict[tuple[str, str], int] = {}  # (sender, body) -> seq of its last command taken
-        self.promised: dict[str, int] = {}  # commands announced by the sender's answers
+        self.last_command: dict[tuple[str, str], dict] = {}  # (sender, body) -> its last command taken (a retransmission is a copy)
+        self.senders: set[str] = set()  # senders whose commands were taken (at most MAX_SENDERS)
         self.answered: dict[str, int] = {}  # last control step each controller answered
         self.controllers = frozenset(control.controllers)  # who may answer a tick
         self.tick_seq = -1  # seq of the last tick published (the current control step)
@@ -441,19 +537,33 @@ class PlantLoop:
         try:
             item = intake.queue.get(timeout=block_s) if block_s else intake.queue.get_nowait()
         except queue.Empty:
+            intake.fold_oversized()
             return False
         while True:
+            intake.bytes_out += len(item[1])
             for kind, who, msg in (intake.judge_batch(*item) if "/@batch/" in item[0] else
                                    [j for j in (intake.judge(*item),) if j is not None]):
                 if kind == "command":
-                    self.received[msg["sender"]] = self.received.get(msg["sender"], 0) + 1
-                    last = self.last_command_seq.get((msg["sender"], who), -1)
+                    sender = msg["sender"]
+                    if self.lockstep and sender not in self.controllers:
+                        self.refuse(who, msg, f"sender {sender!r} is not one of control.controllers "
+                                              f"({', '.join(sorted(self.controllers)) or 'none'}): in lockstep only they command")
+                        continue
+                    if sender not in self.senders:
+                        if len(self.senders) >= MAX_SENDERS:
+                            self.refuse(who, msg, f"more than {MAX_SENDERS} senders have commanded the plant")
+                            continue
+                        self.senders.add(sender)
+                    last = self.last_command_seq.get((sender, who), -1)
+                    if self.lockstep and msg["t"] >= self.tick_t - self.eps and msg != self.last_command.get((sender, who)):
+                        self.received[sender] = self.received.get(sender, 0) + 1  # counts toward its answer
                     if msg["seq"] <= last:  # its copy would be recorded as a duplicate, not as applied
-                        self.refuse(who, msg, f"seq {msg['seq']} is not above {msg['sender']}'s last command to "
+                        self.refuse(who, msg, f"seq {msg['seq']} is not above {sender}'s last command to "
                                               f"{who} (seq {last}): a sender numbers its commands to a body upward, "
                                               f"across its restarts too (docs/control.md)")
                         continue
-                    self.last_command_seq[msg["sender"], who] = msg["seq"]
+                    self.last_command_seq[sender, who] = msg["seq"]
+                    self.last_command[sender, who] = msg
                     if len(self.pending[who]) >= MAX_PENDING:
                         self.refuse(who, msg, f"more than {MAX_PENDING} commands waiting for their time")
                     else:
@@ -463,11 +573,18 @@ class PlantLoop:
                     if problem is not None:
                         intake.reject(*problem)
                         continue
-                    self.promised[who] = self.promised.get(who, 0) + int(msg["commands"])
+                    if int(msg["seq"]) == self.tick_seq:  # the announcement of the current tick (lockstep waits for it)
+                        self.promised[who] = int(msg["commands"])
                     self.answered[who] = max(self.answered.get(who, -1), int(msg["seq"]))
+            if intake.rejected_from:  # rejected commands arrived: they count toward what their sender announced
+                for sender in intake.rejected_from:
+                    if self.lockstep and sender in self.controllers:
+                        self.received[sender] = self.received.get(sender, 0) + 1
+                intake.rejected_from.clear()
             try:
                 item = intake.queue.get_nowait()
             except queue.Empty:
+                intake.fold_oversized()
                 return True
 
     def answer_problem(self, who: str, seq: int) -> tuple[str, str] | None:
@@ -538,7 +655,10 @@ class PlantLoop:
         ``control.timeout``, on the plant's listening clock: a pause of the whole run, which
         stops the controllers too, is not counted against them)."""
         j = k // self.control.every
-        self.tick_seq = j  # before the put: an answer can only come after it
+        self.drain(None)  # what came for the last tick counts toward it, not toward this one
+        self.tick_seq, self.tick_t = j, t  # before the put: an answer can only come after it
+        self.received.clear()
+        self.promised.clear()
         key, payload = messages.tick_key(self.name), tick_payload(t, j, k, samples)
         self.put(key, payload, self.tick_signer)
         sent_at = put_at = time.monotonic()
@@ -555,9 +675,7 @@ class PlantLoop:
             now = time.monotonic()
             left = self.control.timeout - waited.tick(now)
             if left <= 0:
-                raise ControllerTimeout(
-                    f"controller {waiting[0]!r} did not answer control step {j} (t = {t:g} s) within "
-                    f"{self.control.timeout:g} s" + (f" (also {', '.join(map(repr, waiting[1:]))})" if waiting[1:] else ""))
+                raise ControllerTimeout(self.timeout_message(waiting, j, t))
             if now - put_at >= TICK_REPEAT_S:  # the same tick again (fresh authenticators): for a late subscriber
                 self.put(key, payload, self.tick_signer)
                 self.tick_repeats += 1
@@ -565,6 +683,17 @@ class PlantLoop:
             self.drain(min(left, put_at + TICK_REPEAT_S - now))
             heartbeat.beat(t=t, step=k, waiting=waiting)
             obey_commands(supervisor, self.pacer, t, self.stopping, heartbeat, self.commands_from, self.verbs)
+
+    def timeout_message(self, waiting: list[str], j: int, t: float) -> str:
+        """Why the plant gave up on control step ``j``: who did not answer, or whose announced commands did not all arrive."""
+        def why(c: str) -> str:
+            if self.answered.get(c, -1) < j:
+                return f"controller {c!r} did not answer control step {j} (t = {t:g} s)"
+            return (f"controller {c!r} answered control step {j} (t = {t:g} s) announcing {self.promised.get(c, 0)} "
+                    f"commands, of which {self.received.get(c, 0)} arrived (counted: commands for t >= {t:g} s, "
+                    f"rejected ones included, a repeat of the last one taken not)")
+        return (f"{why(waiting[0])} within {self.control.timeout:g} s"
+                + (f" (also {'; '.join(why(c) for c in waiting[1:])})" if waiting[1:] else ""))
 
     def commands_due(self, k: int, t: float, bname: str) -> list[tuple[dict, bytes | None]]:
         """The commands ``bname`` applies in step ``k``: due in [t, t + dt) in arrival order
@@ -588,7 +717,12 @@ class PlantLoop:
         self.applied_now: list[tuple[str, dict, bytes | None]] = []
         for bname, b in self.plant.bodies.items():
             inside = []
+            before = self.applied
             for cmd, raw in self.commands_due(k, t, bname):
+                if self.applied - before >= MAX_APPLIED_PER_STEP:
+                    self.refuse(bname, cmd, f"more than {MAX_APPLIED_PER_STEP} commands for {bname} in one step "
+                                            f"(the most one actuator state records)")
+                    continue
                 if cmd["t"] > t + eps:
                     inside.append((cmd, raw))
                     continue
@@ -601,6 +735,10 @@ class PlantLoop:
             b.finish_commands()
             done_s = 0.0  # commands inside the step: advance to their t, apply, go on
             for cmd, raw in sorted(inside, key=lambda e: e[0]["t"]):
+                if self.applied - before >= MAX_APPLIED_PER_STEP:
+                    self.refuse(bname, cmd, f"more than {MAX_APPLIED_PER_STEP} commands for {bname} in one step "
+                                            f"(the most one actuator state records)")
+                    continue
                 if cmd["t"] - t > done_s:
                     b.advance(cmd["t"] - t - done_s)
                     done_s = cmd["t"] - t
