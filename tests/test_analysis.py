@@ -202,7 +202,8 @@ def test_many_bodies_numbers_for_all_figures_for_the_first_few(tmp_path):
     picked = analyze(path, tmp_path / "picked", bodies=["l*"])
     assert set(picked["bodies"]) == {"leo"} and picked["bodies"]["leo"] == full["bodies"]["leo"]
     assert "Numbers for 1 of the 2 bodies" in (tmp_path / "picked" / "report.md").read_text()
-    with pytest.raises(ValueError, match=r"--bodies: 'sat\*' matches no body of the recording \(it has 2: geo, leo\)"):
+    # called from Python the error names the argument (the command line prints its flag, --bodies)
+    with pytest.raises(ValueError, match=r"^bodies: 'sat\*' matches no body of the recording \(it has 2: geo, leo\)"):
         analyze(path, tmp_path / "none", bodies=["sat*"])
     proc = subprocess.run([sys.executable, "-m", "astrodyn", "analyze", str(path), "--out", str(tmp_path / "cli"),
                            "--figures-for", "0", "--bodies", "geo,leo"], capture_output=True, text=True, timeout=120)
@@ -229,3 +230,26 @@ def test_analyze_says_how_far_it_is_and_quiet_says_nothing(tmp_path):
                             "--figures-for", "0", "--quiet"], capture_output=True, text=True, timeout=120)
     assert quiet.returncode == 0 and quiet.stderr == "", quiet.stderr
     assert quiet.stdout.strip() == str(tmp_path / "q" / "report.html")
+
+
+@pytest.mark.parametrize("kwargs, argument, flag, reason", [
+    ({"seq": "123x"}, "seq", "--seq", "expected one of 121, 123, 131, 132, 212, 213, 231, 232, 312, 313, 321, 323 "
+                                      "(the Euler angle sequence), got '123x'"),
+    ({"figures_for": -1}, "figures_for", "--figures-for", "expected an integer >= 0, got -1"),
+    ({"bodies": ["leo", ""]}, "bodies", "--bodies", "expected comma-separated body names or shell patterns, none empty "
+                                                    "(e.g. 'sat-00*,leo'), got 'leo,'"),
+])
+def test_analyze_from_python_names_the_argument_and_the_cli_the_flag(tmp_path, capsys, kwargs, argument, flag, reason):
+    """analyze() called from Python names its own argument (``seq``), not a command-line
+    flag; ``astrodyn analyze`` prints the flag (``--seq``), word for word as before."""
+    from astrodyn import analysis
+
+    missing = tmp_path / "never-read.mcap"  # judged before the input is read
+    with pytest.raises(ValueError) as info:
+        analyze(missing, tmp_path / "rep", **kwargs)
+    assert str(info.value) == f"{argument}: {reason}"
+    assert type(info.value).__name__ == "ReportOptionError" and info.value.flag_message == f"{flag}: {reason}"
+    value = {"seq": "123x", "figures_for": "-1", "bodies": "leo,"}[argument]
+    assert analysis.main([str(missing), "--out", str(tmp_path / "rep"), flag, value]) == 2
+    assert capsys.readouterr().err.strip().splitlines()[-1] == f"astrodyn analyze: error: {flag}: {reason}"
+    assert not (tmp_path / "rep").exists()

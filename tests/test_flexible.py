@@ -847,7 +847,8 @@ _HOSTILE = [
 
 @pytest.mark.parametrize(("field", "call"), _HOSTILE, ids=[f"{f}-{i}" for i, (f, _) in enumerate(_HOSTILE)])
 def test_hostile_input_names_the_field(field, call):
-    assert_refused_quickly(call, rf"^{field}\b")
+    # a value that is not real numbers names the function first (astrodyn.inputs: "beam_matrices: EI: ...")
+    assert_refused_quickly(call, rf"^(\w+: )?{field}\b")
 
 
 def test_monomial_basis_limit_is_where_conditioning_fails():

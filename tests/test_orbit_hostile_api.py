@@ -254,3 +254,21 @@ def test_propagate_perturbed_names_mu_and_rtol():
             r"propagate_perturbed: mu: expected a scalar .*shape \(2,\)", 5.0)
     refused(pp([zonal], rtol="1e-9"), NonRealInputError, r"propagate_perturbed: rtol: expected real numbers, got str", 5.0)
     refused(pp([zonal], atol=math.nan), ValueError, r"propagate_perturbed: atol", 5.0)
+
+
+@pytest.mark.parametrize("degree, error", [(-3, ValueError), (0, ValueError), (1, ValueError), (7, ValueError),
+                                           (2.5, TypeError), (3.0, TypeError), (True, TypeError), ("3", TypeError)])
+def test_central_body_zonal_names_degree_and_the_range(degree, error):
+    # -3, 0, 1 and True (read as 1) used to give an empty zonal model silently, 2.5 a TypeError about slices
+    text = refused(lambda: o.EARTH_EGM2008.zonal(degree), error,
+                   r"^zonal: degree: expected an int from 2 to 6 \(Earth \(EGM2008\) has J2\.\.J6\), got ", 5.0)
+    assert text.endswith(repr(degree) if error is TypeError else str(degree)), text
+    refused(lambda: o.SUN.zonal(2), ValueError, r"^zonal: degree: expected None \(Sun has no zonal coefficients\), got 2")
+
+
+def test_central_body_zonal_takes_every_degree_it_has():
+    body = o.EARTH_EGM2008
+    for degree in range(2, len(body.J) + 2):
+        for d in (degree, np.int64(degree)):
+            assert body.zonal(d).J == body.J[: degree - 1]
+    assert body.zonal().J == body.J and o.SUN.zonal().J == ()

@@ -58,6 +58,7 @@ from astrodyn.scenario.appendages import DEFAULT_TOLERANCE, appendage_message, f
 from astrodyn.scenario.control import Fault, Sensor
 from astrodyn.scenario.gyros import GimbalBank
 from astrodyn.sensors import PositionReceiver, RateGyro, StarTracker, WheelTachometer
+from astrodyn.simulate import ENGINE_MAX_STEPS
 
 __all__ = ["CommandRefused", "PlantBody", "FlexiblePlantBody", "Plant", "command_id", "limited", "plant_body"]
 
@@ -290,12 +291,13 @@ class PlantBody:
         elif self.wheels is not None:
             cmd = self.wheel_command_applied()
             s = step_with_wheels(self.inertia, self.wheels, self.w, self.q, self.h, cmd, dt,
-                                 external_torque=ConstantTorque(self.torque) if torqued else None, body=self._held)
+                                 external_torque=ConstantTorque(self.torque) if torqued else None, body=self._held,
+                                 max_steps=ENGINE_MAX_STEPS)
             self.w, self.q, self.h = s.w, s.q, s.h
             self.applied_wheel = s.torque
             self.clipped = [int(i) for i in np.flatnonzero(s.clipped & (cmd != 0))]
         elif torqued:
-            self.w, self.q = self._held.step_held(self.w, self.q, float(dt), tau=self.torque)
+            self.w, self.q = self._held.step_held(self.w, self.q, float(dt), tau=self.torque, max_steps=ENGINE_MAX_STEPS)
         elif self._diagonal:
             w1, q1 = torque_free(np.diag(self.inertia).copy(), self.w, self.q, float(dt))
             self.w, self.q = np.asarray(w1), np.asarray(q1)
@@ -342,7 +344,7 @@ class PlantBody:
         g, clipped = self.wheels.saturate(cmd, self.h, self.w, dt)
         g = np.where(free, g, 0.0)
         self.w, self.q = self._held_locked.step_held(self.w, self.q, float(dt), tau=self.torque if torqued else None,
-                                                      h0=(self.h * free) @ a, hdot=g @ a)
+                                                      h0=(self.h * free) @ a, hdot=g @ a, max_steps=ENGINE_MAX_STEPS)
         self.h = np.where(free, self.h + g * dt, J * (a @ self.w))
         self.applied_wheel = g
         self.clipped = [int(i) for i in np.flatnonzero(clipped & (cmd != 0))]

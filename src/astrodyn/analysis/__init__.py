@@ -51,7 +51,8 @@ from astrodyn.recording import RecordingError, load
 from astrodyn.recording.outputs import staging_directory, warn_incomplete_input
 from astrodyn.signals import deferred_interrupts, interruptible
 
-__all__ = ["analyze", "main", "FIGURES", "orbit_arc_starts", "SEQ_NOT_COUNTED", "sequence_issues", "sequence_note", "check_report_options"]
+__all__ = ["analyze", "main", "FIGURES", "orbit_arc_starts", "SEQ_NOT_COUNTED", "sequence_issues", "sequence_note", "check_report_options",
+           "ReportOptionError"]
 
 #: figure name -> what it shows (report captions)
 FIGURES = {
@@ -88,24 +89,51 @@ def _fmt(x) -> str:
 FIGURE_BODIES = 12
 
 
+#: The ``astrodyn analyze`` flag of each :func:`analyze` argument (:class:`ReportOptionError`).
+_FLAGS = {"seq": "--seq", "bodies": "--bodies", "figures_for": "--figures-for"}
+
+
+class ReportOptionError(ValueError):
+    """A bad ``seq``, ``bodies`` or ``figures_for`` of :func:`analyze`.  ``str`` names the
+    Python argument (``"seq: expected one of ..."``); :attr:`flag_message` says the same
+    naming the ``astrodyn analyze`` flag (``"--seq: expected one of ..."``), which the
+    command line prints."""
+
+    def __init__(self, argument: str, reason: str):
+        super().__init__(f"{argument}: {reason}")
+        self.argument, self.reason = argument, reason
+
+    @property
+    def flag_message(self) -> str:
+        return f"{_FLAGS[self.argument]}: {self.reason}"
+
+
+def _cli_message(exc: ValueError) -> str:
+    """``exc``'s text for the command line: a :class:`ReportOptionError` names the flag."""
+    return exc.flag_message if isinstance(exc, ReportOptionError) else str(exc)
+
+
 def check_report_options(seq: str, bodies: Sequence[str] | None, figures_for: int) -> None:
-    """ValueError naming the flag (``--seq``, ``--bodies``, ``--figures-for``) and what it
-    allows, for a value wrong whatever the recording: judged before the file is read
-    (``astrodyn analyze`` exits 2 for these).  A ``--bodies`` pattern that matches no body
-    of the recording is the recording's matter (:func:`select_bodies`, exit 1)."""
+    """:class:`ReportOptionError` (a ValueError) naming the argument (``seq``, ``bodies``,
+    ``figures_for``; its :attr:`~ReportOptionError.flag_message` the flag ``--seq``,
+    ``--bodies``, ``--figures-for``) and what it allows, for a value wrong whatever the
+    recording: judged before the file is read (``astrodyn analyze`` exits 2 for these).  A
+    ``bodies`` pattern that matches no body of the recording is the recording's matter
+    (:func:`select_bodies`, exit 1)."""
     if seq not in _SEQS:
-        raise ValueError(f"--seq: expected one of {', '.join(_SEQS)} (the Euler angle sequence), got {seq!r}")
+        raise ReportOptionError("seq", f"expected one of {', '.join(_SEQS)} (the Euler angle sequence), got {seq!r}")
     if bodies is not None and (isinstance(bodies, str) or not all(isinstance(p, str) and p.strip() for p in bodies)):
         shown = bodies if isinstance(bodies, str) else ",".join(map(str, bodies))
-        raise ValueError(f"--bodies: expected comma-separated body names or shell patterns, none empty (e.g. "
-                         f"'sat-00*,leo'), got {shown!r}")
+        raise ReportOptionError("bodies", f"expected comma-separated body names or shell patterns, none empty (e.g. "
+                                          f"'sat-00*,leo'), got {shown!r}")
     if type(figures_for) is not int or figures_for < 0:
-        raise ValueError(f"--figures-for: expected an integer >= 0, got {figures_for!r}")
+        raise ReportOptionError("figures_for", f"expected an integer >= 0, got {figures_for!r}")
 
 
 def select_bodies(names, patterns: Sequence[str] | None) -> list[str]:
     """The body names (sorted) that match any of ``patterns`` (names or shell globs such as
-    ``sat-00*``; None: all); ValueError naming a pattern that matches none."""
+    ``sat-00*``; None: all); :class:`ReportOptionError` (a ValueError) naming ``bodies``
+    and a pattern that matches none."""
     names = sorted(names)
     if patterns is None:
         return names
@@ -114,7 +142,7 @@ def select_bodies(names, patterns: Sequence[str] | None) -> list[str]:
         found = fnmatch.filter(names, pattern)
         if not found:
             shown = ", ".join(names[:8]) + (", ..." if len(names) > 8 else "")
-            raise ValueError(f"--bodies: {pattern!r} matches no body of the recording (it has {len(names)}: {shown})")
+            raise ReportOptionError("bodies", f"{pattern!r} matches no body of the recording (it has {len(names)}: {shown})")
         chosen.update(found)
     return [n for n in names if n in chosen]
 
@@ -172,7 +200,8 @@ def analyze(path: str | os.PathLike, out: str | os.PathLike | None = None, seq: 
     cover every one): a figure takes ~0.2-1 s to draw, so a scene of 1000 bodies with all of
     them would take about an hour.  ``progress``: where to say how far it is (reading the
     file, then body k of n; ``astrodyn analyze`` passes a :class:`~astrodyn.progress.Progress`
-    on stderr), None for nothing."""
+    on stderr), None for nothing.  A bad ``seq``, ``bodies`` or ``figures_for`` raises
+    :class:`ReportOptionError` naming the argument (``astrodyn analyze`` prints its flag)."""
     from astrodyn.scenario.planning import counted  # the progress lines' numbers (scenario: not needed before)
 
     check_report_options(seq, bodies, figures_for)
@@ -560,7 +589,7 @@ def _main(argv: list[str] | None) -> int:
         if problem is not None:
             raise ValueError(f"--out {args.out}: {problem}")
     except ValueError as exc:
-        print(f"astrodyn analyze: error: {exc}", file=sys.stderr)
+        print(f"astrodyn analyze: error: {_cli_message(exc)}", file=sys.stderr)
         return 2
     if Path(args.file).is_dir():
         if not (Path(args.file) / "summary.csv").is_file():
@@ -585,7 +614,7 @@ def _main(argv: list[str] | None) -> int:
     try:
         report = analyze(args.file, args.out, args.seq, bodies, args.figures_for, Progress(enabled=not args.quiet))
     except (RecordingError, ValueError) as exc:
-        print(f"astrodyn analyze: error: {exc}", file=sys.stderr)
+        print(f"astrodyn analyze: error: {_cli_message(exc)}", file=sys.stderr)
         return 1
     except OSError as exc:  # writing the report: e.g. the disk is full
         print(f"astrodyn analyze: error: cannot write the report{' file ' + str(exc.filename) if exc.filename else ''}: "

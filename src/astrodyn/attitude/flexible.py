@@ -139,6 +139,7 @@ import numpy as np
 from numpy.polynomial import legendre as _leg
 
 from astrodyn.attitude.output_times import check_output_times, integrate_dop853
+from astrodyn.inputs import NonRealInputError, real_array, real_scalar
 from astrodyn.jit import jit
 
 __all__ = [
@@ -195,27 +196,23 @@ class BeamModes:
         return self.rho * self.L
 
 
-def _real(name, value):
-    """``float(value)``, or a ValueError naming the field (strings, None, arrays...)."""
-    try:
-        return float(value)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name}: expected a real number, got {value!r}") from None
+def _real(name, value, who):
+    """``value`` as a float: real numbers only (:func:`astrodyn.inputs.real_scalar`:
+    ``NonRealInputError`` naming ``who: name`` for None, strings, bools, complex...)."""
+    return real_scalar(value, name, who)
 
 
-def _state_vector(name, value, size, finite=True):
-    """``value`` as a float vector of ``size`` (``finite``) numbers, or a ValueError naming it."""
-    try:
-        y = np.asarray(value, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name}: expected {size} numbers") from None
+def _state_vector(name, value, size, who, finite=True):
+    """``value`` as a float64 vector of ``size`` (``finite``) real numbers
+    (:func:`astrodyn.inputs.real_array`), or an error naming it."""
+    y = real_array(value, name, who)
     if y.shape != (size,) or (finite and not np.all(np.isfinite(y))):
         raise ValueError(f"{name}: expected {size} {'finite ' if finite else ''}numbers, got shape {y.shape}")
     return y
 
 
-def _positive(name, value):
-    value = _real(name, value)
+def _positive(name, value, who):
+    value = _real(name, value, who)
     if not (math.isfinite(value) and value > 0):
         raise ValueError(f"{name}: expected a finite number > 0, got {value!r}")
     return value
@@ -265,6 +262,8 @@ def beam_matrices(n_modes: int, EI: float, rho: float, L: float, r: float = 0.0,
     # the monomials' mass matrix is Hilbert-like (condition ~ 2e12 at n = 8, ~1e17 at 12):
     # past 8 their frequencies lose all accuracy and the Cholesky of M fails (n >= 12)
     n_max = 8 if basis == "monomial" else 24
+    if isinstance(n_modes, (bool, np.bool_)):
+        raise NonRealInputError(f"beam_matrices: n_modes: expected an integer from 1 to {n_max}, got {n_modes!r}")
     try:
         n = int(n_modes)
         ok = n == n_modes and 1 <= n <= n_max
@@ -272,11 +271,12 @@ def beam_matrices(n_modes: int, EI: float, rho: float, L: float, r: float = 0.0,
         ok = False
     if not ok:
         raise ValueError(f"n_modes: expected an integer from 1 to {n_max} (basis {basis!r}), got {n_modes!r}")
-    EI, rho, L = _positive("EI", EI), _positive("rho", rho), _positive("L", L)
-    r = _real("r", r)
+    who = "beam_matrices"
+    EI, rho, L = _positive("EI", EI, who), _positive("rho", rho, who), _positive("L", L, who)
+    r = _real("r", r, who)
     if not (math.isfinite(r) and r >= 0):
         raise ValueError(f"r: expected a finite number >= 0 (m), got {r!r}")
-    zeta = _real("damping_ratio", damping_ratio)
+    zeta = _real("damping_ratio", damping_ratio, who)
     if not (math.isfinite(zeta) and zeta >= 0):
         raise ValueError(f"damping_ratio: expected a finite number >= 0, got {damping_ratio!r}")
     # xi^2 P_k(2 xi - 1), k < n: the span of xi^2 .. xi^(n+1), well conditioned
@@ -311,7 +311,15 @@ def beam_matrices(n_modes: int, EI: float, rho: float, L: float, r: float = 0.0,
 def shape_functions(beam: BeamModes, x, derivative: int = 0) -> np.ndarray:
     """The shape functions ``phi_j(x)`` (dimensionless), or their ``derivative``-th
     derivative (1/m^k), at ``x`` (m, 0 at the root), shape ``(n_modes,) + x.shape``."""
-    x = np.asarray(x, dtype=np.float64)
+    x = real_array(x, "x", "shape_functions")
+    if isinstance(derivative, (bool, np.bool_)):
+        raise NonRealInputError(f"shape_functions: derivative: expected an integer >= 0, got {derivative!r}")
+    try:
+        ok = int(derivative) == derivative and derivative >= 0
+    except (TypeError, ValueError, OverflowError):  # None, "1", nan, inf
+        ok = False
+    if not ok:
+        raise ValueError(f"derivative: expected an integer >= 0, got {derivative!r}")
     values = _series_values(beam.coef, x.reshape(-1) / beam.L, int(derivative)) / beam.L ** int(derivative)
     return values.reshape((beam.n_modes,) + x.shape)
 
@@ -327,7 +335,7 @@ def natural_frequencies(beam: BeamModes, spin: float = 0.0, plane: str = "out", 
 
     if plane not in ("out", "in"):
         raise ValueError(f"plane: expected 'out' or 'in', got {plane!r}")
-    spin = _real("spin", spin)
+    spin = _real("spin", spin, "natural_frequencies")
     if not math.isfinite(spin):
         raise ValueError(f"spin: expected a finite number (rad/s), got {spin!r}")
     W2 = spin**2
@@ -339,7 +347,7 @@ def natural_frequencies(beam: BeamModes, spin: float = 0.0, plane: str = "out", 
 def tip_deflection(beam: BeamModes, q) -> np.ndarray:
     """Transverse tip deflection ``w(L) = sum_j phi_j(L) q_j`` (m) of coordinates
     ``q`` (..., n_modes)."""
-    return np.asarray(q, dtype=np.float64) @ beam.tip
+    return real_array(q, "q", "tip_deflection") @ beam.tip
 
 
 # --------------------------------------------------------------------------- planar model
@@ -350,10 +358,10 @@ def krb_spinup(t, omega_s: float = 6.0, T: float = 15.0):
     (T / 2 pi)^2 (cos(2 pi t / T) - 1))`` for ``t < T``, then the constant rate
     ``omega_s`` (rad/s): ``theta = omega_s (t - T / 2)``.  Returns ``(theta, theta',
     theta'')`` in rad, rad/s, rad/s^2 (floats, or arrays like ``t``)."""
-    omega_s, T = _real("omega_s", omega_s), _positive("T", T)
+    omega_s, T = _real("omega_s", omega_s, "krb_spinup"), _positive("T", T, "krb_spinup")
     if not math.isfinite(omega_s):
         raise ValueError(f"omega_s: expected a finite number (rad/s), got {omega_s!r}")
-    t = np.asarray(t, dtype=np.float64)
+    t = real_array(t, "t", "krb_spinup")
     k = 2.0 * math.pi / T
     up = t < T
     th = np.where(up, omega_s / T * (t * t / 2 + (np.cos(k * t) - 1.0) / (k * k)), omega_s * (t - T / 2))
@@ -378,7 +386,8 @@ def planar_prescribed_rates(beam: BeamModes, t: float, state, hub_motion: Callab
     ``hub_motion(t) -> (theta, theta', theta'')`` (rad, rad/s, rad/s^2):
     ``M q'' = -b theta'' - C q' - (K - theta'^2 D) q`` (module docstring)."""
     n = beam.n_modes
-    s = _state_vector("state", state, 2 * n, finite=False)
+    t = _real("t", t, "planar_prescribed_rates")
+    s = _state_vector("state", state, 2 * n, "planar_prescribed_rates", finite=False)
     q, qd = s[:n], s[n:]
     _, thd, thdd = hub_motion(t)
     _, b = _planar_J_b(beam)
@@ -392,8 +401,10 @@ def propagate_planar_prescribed(beam: BeamModes, hub_motion: Callable, state0, t
     beam on a hub turning as ``hub_motion(t) -> (theta, theta', theta'')`` (e.g.
     :func:`krb_spinup`); DOP853.  Returns ``(states, info)``."""
     n = beam.n_modes
-    y0 = _state_vector("state0", state0, 2 * n)
-    t = check_output_times(t)
+    who = "propagate_planar_prescribed"
+    y0 = _state_vector("state0", state0, 2 * n, who)
+    t = check_output_times(real_array(t, "t", who))
+    rtol, atol = _real("rtol", rtol, who), _real("atol", atol, who)
     _, b = _planar_J_b(beam)
     D = _planar_D(beam, stiffening)
     Minv = np.linalg.inv(beam.M)
@@ -413,7 +424,9 @@ def planar_free_rates(beam: BeamModes, hub_inertia: float, state, torque: float 
     ``hub_inertia`` (kg m^2, about its fixed axis through O) carrying the beam, under the
     hub torque ``torque`` (N m); module docstring's two equations, solved together."""
     n = beam.n_modes
-    s = _state_vector("state", state, 2 + 2 * n, finite=False)
+    who = "planar_free_rates"
+    hub_inertia, torque = _real("hub_inertia", hub_inertia, who), _real("torque", torque, who)
+    s = _state_vector("state", state, 2 + 2 * n, who, finite=False)
     thd, q, qd = s[1], s[2 : 2 + n], s[2 + n :]
     Jb, b = _planar_J_b(beam)
     D = _planar_D(beam, stiffening)
@@ -435,9 +448,11 @@ def propagate_planar_free(beam: BeamModes, hub_inertia: float, state0, t, torque
     largest relative drift of the energy and of the angular momentum (meaningful when
     undamped and torque-free)."""
     n = beam.n_modes
-    J = _positive("hub_inertia", hub_inertia)
-    y0 = _state_vector("state0", state0, 2 + 2 * n)
-    t = check_output_times(t)
+    who = "propagate_planar_free"
+    J = _positive("hub_inertia", hub_inertia, who)
+    y0 = _state_vector("state0", state0, 2 + 2 * n, who)
+    t = check_output_times(real_array(t, "t", who))
+    rtol, atol = _real("rtol", rtol, who), _real("atol", atol, who)
 
     def rhs(time, y):
         return planar_free_rates(beam, J, y, 0.0 if torque is None else float(torque(time, y)), stiffening)
@@ -450,8 +465,9 @@ def propagate_planar_free(beam: BeamModes, hub_inertia: float, state0, t, torque
                     "momentum_drift": float(np.max(np.abs(h - h[0])) / max(abs(h[0]), 1e-300))}
 
 
-def _planar_parts(beam, hub_inertia, state, stiffening):
-    s = np.asarray(state, dtype=np.float64)
+def _planar_parts(beam, hub_inertia, state, stiffening, who):
+    hub_inertia = _real("hub_inertia", hub_inertia, who)
+    s = real_array(state, "state", who)
     n = beam.n_modes
     thd, q, qd = s[..., 1], s[..., 2 : 2 + n], s[..., 2 + n :]
     Jb, b = _planar_J_b(beam)
@@ -461,14 +477,14 @@ def _planar_parts(beam, hub_inertia, state, stiffening):
 
 def planar_energy(beam: BeamModes, hub_inertia: float, state, stiffening: bool = True) -> np.ndarray:
     """``T + V`` (J) of the planar free-hub states ``(..., 2 + 2 n)``."""
-    thd, q, qd, J, b = _planar_parts(beam, hub_inertia, state, stiffening)
+    thd, q, qd, J, b = _planar_parts(beam, hub_inertia, state, stiffening, "planar_energy")
     T = 0.5 * J * thd * thd + thd * (qd @ b) + 0.5 * np.einsum("...i,ij,...j->...", qd, beam.M, qd)
     return T + 0.5 * np.einsum("...i,ij,...j->...", q, beam.K, q)
 
 
 def planar_angular_momentum(beam: BeamModes, hub_inertia: float, state, stiffening: bool = True) -> np.ndarray:
     """Angular momentum about the axis (kg m^2/s), ``(J + q.D q) theta' + b.q'``."""
-    thd, q, qd, J, b = _planar_parts(beam, hub_inertia, state, stiffening)
+    thd, q, qd, J, b = _planar_parts(beam, hub_inertia, state, stiffening, "planar_angular_momentum")
     return J * thd + qd @ b
 
 
@@ -497,13 +513,13 @@ class Appendage:
     def __post_init__(self) -> None:
         if not isinstance(self.beam, BeamModes):
             raise ValueError(f"beam: expected a BeamModes (beam_matrices), got {type(self.beam).__name__}")
-        e, f = _state_vector("axis", self.axis, 3), _state_vector("normal", self.normal, 3)
+        e, f = _state_vector("axis", self.axis, 3, "Appendage"), _state_vector("normal", self.normal, 3, "Appendage")
         if np.linalg.norm(e) == 0 or np.linalg.norm(f) == 0:
             raise ValueError("axis, normal: expected finite nonzero 3-vectors")
         e, f = e / np.linalg.norm(e), f / np.linalg.norm(f)
         if abs(e @ f) > 1e-9:
             raise ValueError(f"normal: expected perpendicular to axis, got cos = {e @ f!r}")
-        a = self.beam.r * e if self.root is None else _state_vector("root", self.root, 3)
+        a = self.beam.r * e if self.root is None else _state_vector("root", self.root, 3, "Appendage")
         object.__setattr__(self, "axis", e)
         object.__setattr__(self, "normal", f)
         object.__setattr__(self, "root", a)
@@ -570,11 +586,8 @@ class FlexibleSpacecraft:
     _packed: tuple = field(default=(), repr=False)
 
     def __post_init__(self) -> None:
-        _positive("hub_mass", self.hub_mass)
-        try:
-            J = np.asarray(self.hub_inertia, dtype=np.float64)
-        except (TypeError, ValueError):
-            raise ValueError(f"hub_inertia: expected a (3, 3) tensor or 3 moments, got {self.hub_inertia!r}") from None
+        _positive("hub_mass", self.hub_mass, "FlexibleSpacecraft")
+        J = real_array(self.hub_inertia, "hub_inertia", "FlexibleSpacecraft")
         if J.shape == (3,):
             J = np.diag(J)
         if J.shape != (3, 3) or not np.all(np.isfinite(J)) or not np.allclose(J, J.T, rtol=0, atol=1e-12 * np.abs(J).max()):
@@ -629,22 +642,23 @@ def make_state(sc: FlexibleSpacecraft, q=(1.0, 0.0, 0.0, 0.0), w=(0.0, 0.0, 0.0)
     lay = state_layout(sc)
     ne = sc.n_elastic
     y = np.zeros(lay["size"])
-    q = _state_vector("q", q, 4)
+    who = "make_state"
+    q = _state_vector("q", q, 4, who)
     if np.linalg.norm(q) == 0:
         raise ValueError("q: expected nonzero Euler parameters")
     y[lay["q"]] = q / np.linalg.norm(q)
-    y[lay["w"]] = _state_vector("w", w, 3)
-    y[lay["r"]] = _state_vector("r", r, 3)
+    y[lay["w"]] = _state_vector("w", w, 3, who)
+    y[lay["r"]] = _state_vector("r", r, 3, who)
     if eta is not None:
-        y[lay["eta"]] = _state_vector("eta", eta, ne)
+        y[lay["eta"]] = _state_vector("eta", eta, ne, who)
     if eta_dot is not None:
-        y[lay["eta_dot"]] = _state_vector("eta_dot", eta_dot, ne)
+        y[lay["eta_dot"]] = _state_vector("eta_dot", eta_dot, ne, who)
     if v is None:  # P = m v + (w x s + sdot + sum B_v etadot) = 0, P linear in v
         y[lay["v"]] = 0.0
         P0 = _assemble(sc, y)["P"]
         y[lay["v"]] = -P0 / sc.mass
     else:
-        y[lay["v"]] = _state_vector("v", v, 3)
+        y[lay["v"]] = _state_vector("v", v, 3, who)
     return y
 
 
@@ -1012,7 +1026,8 @@ def spacecraft_rates(sc: FlexibleSpacecraft, t: float, state, torque: Callable |
     """Time derivative of the state (module docstring), with the hub torque
     ``torque(t, state)`` (N m, body components) or none: one compiled pass
     (``_rates_kernel``; :func:`spacecraft_rates_reference` is the same in numpy)."""
-    y = _state_vector("state", state, 13 + 2 * sc.n_elastic, finite=False)
+    t = _real("t", t, "spacecraft_rates")
+    y = _state_vector("state", state, 13 + 2 * sc.n_elastic, "spacecraft_rates", finite=False)
     tau = np.zeros(3) if torque is None else np.asarray(torque(t, y), dtype=np.float64).reshape(3)
     return _rates_kernel(y, tau, *sc._packed)
 
@@ -1022,7 +1037,8 @@ def spacecraft_rates_reference(sc: FlexibleSpacecraft, t: float, state, torque: 
     (:func:`_assemble`): the readable form, and the reference the compiled kernel is
     tested against."""
     ne = sc.n_elastic
-    y = _state_vector("state", state, 13 + 2 * ne, finite=False)
+    t = _real("t", t, "spacecraft_rates_reference")
+    y = _state_vector("state", state, 13 + 2 * ne, "spacecraft_rates_reference", finite=False)
     q, w, v = y[0:4], y[4:7], y[10:13]
     A = _assemble(sc, y)
     P, H, s, sd = A["P"], A["H"], A["s"], A["sd"]
@@ -1051,9 +1067,9 @@ def spacecraft_rates_reference(sc: FlexibleSpacecraft, t: float, state, torque: 
     return np.concatenate([qdot, acc_rb[3:], rdot, acc_rb[:3], y[13 + ne : 13 + 2 * ne], etadd])
 
 
-def _each(sc, state, fn):
+def _each(sc, state, fn, who):
     """``fn`` over the last axis of ``state`` (one state or a stack of them)."""
-    s = np.asarray(state, dtype=np.float64)
+    s = real_array(state, "state", who)
     size = 13 + 2 * sc.n_elastic
     if s.ndim == 0 or s.shape[-1] != size:
         raise ValueError(f"state: expected shape (..., {size}) (state_layout), got {s.shape}")
@@ -1066,7 +1082,7 @@ def spacecraft_energy(sc: FlexibleSpacecraft, state) -> np.ndarray:
     ``T = 1/2 (v.P + w.H + etadot.p_eta)`` (compiled; :func:`spacecraft_energy_reference`
     is the same in numpy)."""
     packed = sc._packed
-    return _each(sc, state, lambda y: _energy_momentum_kernel(np.ascontiguousarray(y), *packed)[0])
+    return _each(sc, state, lambda y: _energy_momentum_kernel(np.ascontiguousarray(y), *packed)[0], "spacecraft_energy")
 
 
 def spacecraft_momentum(sc: FlexibleSpacecraft, state):
@@ -1079,7 +1095,7 @@ def spacecraft_momentum(sc: FlexibleSpacecraft, state):
         _, p, h = _energy_momentum_kernel(np.ascontiguousarray(y), *packed)
         return np.concatenate([p, h])
 
-    out = _each(sc, state, one)
+    out = _each(sc, state, one, "spacecraft_momentum")
     return out[..., :3], out[..., 3:]
 
 
@@ -1096,7 +1112,7 @@ def spacecraft_energy_reference(sc: FlexibleSpacecraft, state) -> np.ndarray:
             V += 0.5 * eta @ d.Kq @ eta
         return 0.5 * T2 + V
 
-    return _each(sc, state, one)
+    return _each(sc, state, one, "spacecraft_energy_reference")
 
 
 def spacecraft_momentum_reference(sc: FlexibleSpacecraft, state):
@@ -1108,7 +1124,7 @@ def spacecraft_momentum_reference(sc: FlexibleSpacecraft, state):
         P = Ct @ A["P"]
         return np.concatenate([P, _cross(y[7:10], P) + Ct @ A["H"]])
 
-    out = _each(sc, state, one)
+    out = _each(sc, state, one, "spacecraft_momentum_reference")
     return out[..., :3], out[..., 3:]
 
 
@@ -1128,7 +1144,7 @@ def tip_deflections(sc: FlexibleSpacecraft, state) -> np.ndarray:
             out.append(d.f * (d.tip @ ef) + d.g * (d.tip @ eg) + u * d.e)
         return np.array(out).reshape(-1, 3)
 
-    return _each(sc, state, one)
+    return _each(sc, state, one, "tip_deflections")
 
 
 def propagate_spacecraft(sc: FlexibleSpacecraft, state0, t, torque: Callable | None = None, rtol: float = 1e-10,
@@ -1142,10 +1158,12 @@ def propagate_spacecraft(sc: FlexibleSpacecraft, state0, t, torque: Callable | N
     the largest relative loss ``max |E - E0| / |E0|``, which is the physical dissipation
     ``int eta'^T C eta' dt``, not an error."""
     lay = state_layout(sc)
-    y0 = np.asarray(state0, dtype=np.float64).reshape(-1)
+    who = "propagate_spacecraft"
+    y0 = real_array(state0, "state0", who).reshape(-1)
     if y0.size != lay["size"] or not np.all(np.isfinite(y0)):
         raise ValueError(f"state0: expected {lay['size']} finite numbers (state_layout), got shape {y0.shape}")
-    t = check_output_times(t)
+    t = check_output_times(real_array(t, "t", who))
+    rtol, atol = _real("rtol", rtol, who), _real("atol", atol, who)
 
     packed, zero = sc._packed, np.zeros(3)
 

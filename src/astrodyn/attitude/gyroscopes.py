@@ -129,7 +129,9 @@ so ``theta ~ (H / c) int w1 dt`` once the time constant ``J2 / c`` has passed.
 
 All propagators integrate with scipy's DOP853 and stop with ``RuntimeError`` after
 ``max_nfev`` right-hand-side evaluations (bounded time).  Bad inputs raise ``ValueError``
-naming the field.
+naming the field; numeric arguments take real numbers only (:mod:`astrodyn.inputs`: None,
+strings, bools, complex numbers raise ``NonRealInputError``, a ``TypeError`` and a
+``ValueError``, naming the function and the field).
 """
 
 from __future__ import annotations
@@ -141,6 +143,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from astrodyn.attitude.output_times import check_output_times, integrate_dop853
+from astrodyn.inputs import real_array, real_scalar
 
 __all__ = [
     "FREE_STATE_FIELDS", "SINGLE_STATE_FIELDS",
@@ -163,54 +166,46 @@ DEFAULT_MAX_NFEV = 2_000_000
 # --------------------------------------------------------------------------- validation
 
 
-def _real(name, value):
-    """``float(value)`` or a ValueError naming the field (strings, None, arrays, bools)."""
-    if isinstance(value, (bool, np.bool_, str, bytes)):
-        raise ValueError(f"{name}: expected a real number, got {value!r}")
-    try:
-        return float(value)
-    except (TypeError, ValueError, OverflowError):
-        raise ValueError(f"{name}: expected a real number, got {value!r}") from None
+def _real(name, value, who):
+    """``value`` as a float (:func:`astrodyn.inputs.real_scalar`: ``NonRealInputError``
+    naming ``who: name`` for None, strings, bools, complex...; ValueError for an array)."""
+    return real_scalar(value, name, who)
 
 
-def _finite(name, value, unit=""):
-    v = _real(name, value)
+def _finite(name, value, who, unit=""):
+    v = _real(name, value, who)
     if not math.isfinite(v):
         raise ValueError(f"{name}: expected a finite number{unit}, got {value!r}")
     return v
 
 
-def _nonneg(name, value, unit=""):
-    v = _finite(name, value, unit)
+def _nonneg(name, value, who, unit=""):
+    v = _finite(name, value, who, unit)
     if v < 0:
         raise ValueError(f"{name}: expected a finite number >= 0{unit}, got {value!r}")
     return v
 
 
-def _positive(name, value, unit=""):
-    v = _finite(name, value, unit)
+def _positive(name, value, who, unit=""):
+    v = _finite(name, value, who, unit)
     if not v > 0:
         raise ValueError(f"{name}: expected a finite number > 0{unit}, got {value!r}")
     return v
 
 
-def _vector(name, value, size, unit=""):
-    try:
-        raw = np.asarray(value)
-        if raw.dtype.kind not in "iuf":  # strings, bools, None, objects
-            raise TypeError
-        y = np.array(raw, dtype=np.float64)
-    except (TypeError, ValueError, OverflowError):
-        raise ValueError(f"{name}: expected {size} finite numbers{unit}, got {value!r}") from None
+def _vector(name, value, size, who, unit=""):
+    """A new float64 array of ``size`` finite numbers (real numbers only:
+    :func:`astrodyn.inputs.real_array`), or an error naming ``name``."""
+    y = np.array(real_array(value, name, who), dtype=np.float64)
     if y.shape != (size,) or not np.all(np.isfinite(y)):
         raise ValueError(f"{name}: expected {size} finite numbers{unit}, got shape {y.shape}"
                          + ("" if y.shape != (size,) else f" with values {y.tolist()}"))
     return y
 
 
-def _gimbal_moments(name, value):
+def _gimbal_moments(name, value, who):
     """Three principal moments >= 0 (kg m^2) obeying the triangle inequality unless all zero."""
-    m = _vector(name, value, 3, " (kg m^2)")
+    m = _vector(name, value, 3, who, " (kg m^2)")
     if np.any(m < 0):
         raise ValueError(f"{name}: moments of inertia must be >= 0 (kg m^2), got {m.tolist()}")
     total = float(m.sum())
@@ -220,17 +215,17 @@ def _gimbal_moments(name, value):
     return m
 
 
-def _rotor(C, A, c_name, a_name):
-    C = _positive(c_name, C, " (kg m^2)")
-    A = _positive(a_name, A, " (kg m^2)")
+def _rotor(C, A, c_name, a_name, who):
+    C = _positive(c_name, C, who, " (kg m^2)")
+    A = _positive(a_name, A, who, " (kg m^2)")
     if C > 2.0 * A * (1.0 + 1e-12):
         raise ValueError(f"{c_name}: an axisymmetric rigid rotor needs C <= 2 A, got C = {C!r}, A = {A!r}")
     return C, A
 
 
-def _tolerances(rtol, atol, max_nfev):
-    rtol = _positive("rtol", rtol)
-    atol = _positive("atol", atol)
+def _tolerances(rtol, atol, max_nfev, who):
+    rtol = _positive("rtol", rtol, who)
+    atol = _positive("atol", atol, who)
     if rtol < 1e-14:
         raise ValueError(f"rtol: expected >= 1e-14 (DOP853 cannot meet less), got {rtol!r}")
     if isinstance(max_nfev, (bool, np.bool_)) or not isinstance(max_nfev, (int, np.integer)) or max_nfev < 1:
@@ -269,11 +264,12 @@ class FreeGyroscope:
     outer_gimbal: float = 0.0
 
     def __post_init__(self):
-        C, A = _rotor(self.rotor_axial, self.rotor_transverse, "rotor_axial", "rotor_transverse")
+        C, A = _rotor(self.rotor_axial, self.rotor_transverse, "rotor_axial", "rotor_transverse", "FreeGyroscope")
         object.__setattr__(self, "rotor_axial", C)
         object.__setattr__(self, "rotor_transverse", A)
-        object.__setattr__(self, "inner_gimbal", tuple(_gimbal_moments("inner_gimbal", self.inner_gimbal).tolist()))
-        object.__setattr__(self, "outer_gimbal", _nonneg("outer_gimbal", self.outer_gimbal, " (kg m^2)"))
+        object.__setattr__(self, "inner_gimbal", tuple(_gimbal_moments("inner_gimbal", self.inner_gimbal,
+                                                                           "FreeGyroscope").tolist()))
+        object.__setattr__(self, "outer_gimbal", _nonneg("outer_gimbal", self.outer_gimbal, "FreeGyroscope", " (kg m^2)"))
 
     @property
     def inner_axis_inertia(self) -> float:
@@ -287,20 +283,21 @@ class FreeGyroscope:
 
     def outer_inertia(self, theta):
         """``M(theta) = I_o + (A + B2) sin^2 theta + B3 cos^2 theta`` (kg m^2)."""
+        theta = real_array(theta, "theta", "FreeGyroscope.outer_inertia")
         s, c = np.sin(theta), np.cos(theta)
         return self.outer_gimbal + (self.rotor_transverse + self.inner_gimbal[1]) * s * s + self.inner_gimbal[2] * c * c
 
 
-def _free_state(name, value):
-    return _vector(name, value, 6, " (psi, theta, phi in rad, their rates in rad/s)")
+def _free_state(name, value, who):
+    return _vector(name, value, 6, who, " (psi, theta, phi in rad, their rates in rad/s)")
 
 
 def free_gyro_state(gyro: FreeGyroscope, spin: float, theta: float = 0.5 * math.pi, psi: float = 0.0,
                     psi_dot: float = 0.0, theta_dot: float = 0.0, phi: float = 0.0) -> np.ndarray:
     """A state (6,) with the rotor's absolute axial rate ``spin`` ``n`` (rad/s):
     ``phi' = n - psi' cos theta`` (so ``h = C n``)."""
-    spin = _finite("spin", spin, " (rad/s)")
-    vals = {k: _finite(k, v) for k, v in (("theta", theta), ("psi", psi), ("psi_dot", psi_dot),
+    spin = _finite("spin", spin, "free_gyro_state", " (rad/s)")
+    vals = {k: _finite(k, v, "free_gyro_state") for k, v in (("theta", theta), ("psi", psi), ("psi_dot", psi_dot),
                                           ("theta_dot", theta_dot), ("phi", phi))}
     return np.array([vals["psi"], vals["theta"], vals["phi"], vals["psi_dot"], vals["theta_dot"],
                      spin - vals["psi_dot"] * math.cos(vals["theta"])])
@@ -342,7 +339,8 @@ def free_gyro_rates(gyro: FreeGyroscope, t: float, state, torques: Callable | No
     module docstring, section 1).  ``torques(t, state) -> (Q_psi, Q_theta, Q_phi)`` (N m):
     about the outer axis on the outer gimbal, about the inner axis on the inner gimbal, and
     the spin motor's torque on the rotor; ``None`` for none."""
-    y = _vector("state", state, 6)
+    t = _real("t", t, "free_gyro_rates")
+    y = _vector("state", state, 6, "free_gyro_rates")
     q = _free_torques(torques, t, y)
     B1, B2, B3 = gyro.inner_gimbal
     A, C = gyro.rotor_transverse, gyro.rotor_axial
@@ -359,9 +357,9 @@ def propagate_free_gyro(gyro: FreeGyroscope, state0, t, torques: Callable | None
     relative to ``max(|p_psi|, |h|)``)."""
     if not isinstance(gyro, FreeGyroscope):
         raise ValueError(f"gyro: expected a FreeGyroscope, got {type(gyro).__name__}")
-    y0 = _free_state("state0", state0)
-    t = check_output_times(t)
-    rtol, atol, max_nfev = _tolerances(rtol, atol, max_nfev)
+    y0 = _free_state("state0", state0, "propagate_free_gyro")
+    t = check_output_times(real_array(t, "t", "propagate_free_gyro"))
+    rtol, atol, max_nfev = _tolerances(rtol, atol, max_nfev, "propagate_free_gyro")
     if torques is not None and not callable(torques):
         raise ValueError("torques: expected a callable (t, state) -> (Q_psi, Q_theta, Q_phi) or None")
     _check_lock(gyro, y0[1], "state0")
@@ -389,8 +387,8 @@ def propagate_free_gyro(gyro: FreeGyroscope, state0, t, torques: Callable | None
     return states, info
 
 
-def _free_states(states):
-    s = np.asarray(states, dtype=np.float64)
+def _free_states(states, who):
+    s = real_array(states, "states", who)
     if s.ndim < 1 or s.shape[-1] != 6:
         raise ValueError(f"states: expected shape (..., 6) = {FREE_STATE_FIELDS}, got {s.shape}")
     return s
@@ -398,7 +396,7 @@ def _free_states(states):
 
 def free_gyro_energy(gyro: FreeGyroscope, states) -> np.ndarray:
     """Kinetic energy (J) ``1/2 A_i theta'^2 + 1/2 M(theta) psi'^2 + h^2 / (2 C)``."""
-    s = _free_states(states)
+    s = _free_states(states, "free_gyro_energy")
     th, psi_d, th_d, phi_d = s[..., 1], s[..., 3], s[..., 4], s[..., 5]
     h = gyro.rotor_axial * (phi_d + psi_d * np.cos(th))
     return (0.5 * gyro.inner_axis_inertia * th_d**2 + 0.5 * gyro.outer_inertia(th) * psi_d**2
@@ -409,7 +407,7 @@ def free_gyro_integrals(gyro: FreeGyroscope, states):
     """``(T, p_psi, h)``: energy (J), angular momentum about the outer axis ``M psi' + h cos
     theta`` and the rotor's axial momentum ``C (phi' + psi' cos theta)`` (N m s); constant
     when torque-free."""
-    s = _free_states(states)
+    s = _free_states(states, "free_gyro_integrals")
     th, psi_d, phi_d = s[..., 1], s[..., 3], s[..., 5]
     h = gyro.rotor_axial * (phi_d + psi_d * np.cos(th))
     return free_gyro_energy(gyro, s), gyro.outer_inertia(th) * psi_d + h * np.cos(th), h
@@ -419,7 +417,7 @@ def free_gyro_momentum(gyro: FreeGyroscope, states) -> np.ndarray:
     """Angular momentum (..., 3) of outer gimbal + inner gimbal + rotor about the pivot,
     inertial (N) components, N m s.  Its ``n3`` component is ``p_psi``; the whole vector is
     constant only with massless gimbals (the bearings take the rest)."""
-    s = _free_states(states)
+    s = _free_states(states, "free_gyro_momentum")
     psi, th, psi_d, th_d, phi_d = s[..., 0], s[..., 1], s[..., 3], s[..., 4], s[..., 5]
     B1, B2, B3 = gyro.inner_gimbal
     A, C = gyro.rotor_transverse, gyro.rotor_axial
@@ -436,8 +434,8 @@ def free_gyro_momentum(gyro: FreeGyroscope, states) -> np.ndarray:
 def nutation_frequency(gyro: FreeGyroscope, h: float, theta0: float = 0.5 * math.pi) -> float:
     """Exact linearized nutation frequency (rad/s) about the inner gimbal angle ``theta0``
     (rad) for the rotor's axial momentum ``h`` (N m s): ``|h sin theta0| / sqrt(A_i M(theta0))``."""
-    h = _finite("h", h, " (N m s)")
-    theta0 = _finite("theta0", theta0, " (rad)")
+    h = _finite("h", h, "nutation_frequency", " (N m s)")
+    theta0 = _finite("theta0", theta0, "nutation_frequency", " (rad)")
     _check_lock(gyro, theta0, "theta0")
     return abs(h * math.sin(theta0)) / math.sqrt(gyro.inner_axis_inertia * float(gyro.outer_inertia(theta0)))
 
@@ -445,7 +443,7 @@ def nutation_frequency(gyro: FreeGyroscope, h: float, theta0: float = 0.5 * math
 def fast_rotor_nutation_frequency(gyro: FreeGyroscope, spin: float) -> float:
     """Baruh's fast-rotor nutation frequency ``C n / sqrt(A_i A_o)`` (rad/s; ``C n / A``
     with massless gimbals) for the rotor's axial rate ``spin`` ``n`` (rad/s)."""
-    spin = _finite("spin", spin, " (rad/s)")
+    spin = _finite("spin", spin, "fast_rotor_nutation_frequency", " (rad/s)")
     return abs(gyro.rotor_axial * spin) / math.sqrt(gyro.inner_axis_inertia * gyro.outer_axis_inertia)
 
 
@@ -461,11 +459,12 @@ def free_gyro_linear(gyro: FreeGyroscope, h: float, t, theta0: float = 0.5 * mat
         psi - psi0 = v t + (g / M0) (a t + b t^2 / 2 - a sin(w t) / w + (u - b) (1 - cos(w t)) / w^2) + Q_psi t^2 / (2 M0)
 
     with ``g = h sin theta0``, ``M0 = M(theta0)``, ``w`` = :func:`nutation_frequency`."""
-    h = _finite("h", h, " (N m s)")
-    theta0 = _finite("theta0", theta0, " (rad)")
-    u, v = _finite("inner_rate", inner_rate, " (rad/s)"), _finite("outer_rate", outer_rate, " (rad/s)")
-    qt, qp = _finite("inner_torque", inner_torque, " (N m)"), _finite("outer_torque", outer_torque, " (N m)")
-    t = np.asarray(t, dtype=np.float64)
+    who = "free_gyro_linear"
+    h = _finite("h", h, who, " (N m s)")
+    theta0 = _finite("theta0", theta0, who, " (rad)")
+    u, v = _finite("inner_rate", inner_rate, who, " (rad/s)"), _finite("outer_rate", outer_rate, who, " (rad/s)")
+    qt, qp = _finite("inner_torque", inner_torque, who, " (N m)"), _finite("outer_torque", outer_torque, who, " (N m)")
+    t = real_array(t, "t", who)
     if not np.all(np.isfinite(t)):
         raise ValueError("t: expected finite times (s)")
     g = h * math.sin(theta0)
@@ -505,13 +504,15 @@ class SingleAxisGyro:
     free_rotor: bool = False
 
     def __post_init__(self):
-        C, A = _rotor(self.spin_inertia, self.transverse_inertia, "spin_inertia", "transverse_inertia")
+        who = "SingleAxisGyro"
+        C, A = _rotor(self.spin_inertia, self.transverse_inertia, "spin_inertia", "transverse_inertia", who)
         object.__setattr__(self, "spin_inertia", C)
         object.__setattr__(self, "transverse_inertia", A)
-        object.__setattr__(self, "spin_rate", _finite("spin_rate", self.spin_rate, " (rad/s)"))
-        object.__setattr__(self, "gimbal_inertia", tuple(_gimbal_moments("gimbal_inertia", self.gimbal_inertia).tolist()))
-        object.__setattr__(self, "spring", _nonneg("spring", self.spring, " (N m/rad)"))
-        object.__setattr__(self, "damping", _nonneg("damping", self.damping, " (N m s/rad)"))
+        object.__setattr__(self, "spin_rate", _finite("spin_rate", self.spin_rate, who, " (rad/s)"))
+        object.__setattr__(self, "gimbal_inertia", tuple(_gimbal_moments("gimbal_inertia", self.gimbal_inertia,
+                                                                         who).tolist()))
+        object.__setattr__(self, "spring", _nonneg("spring", self.spring, who, " (N m/rad)"))
+        object.__setattr__(self, "damping", _nonneg("damping", self.damping, who, " (N m s/rad)"))
         if not isinstance(self.free_rotor, (bool, np.bool_)):
             raise ValueError(f"free_rotor: expected True or False, got {self.free_rotor!r}")
         if not math.isfinite(self.momentum * self.spin_rate):
@@ -521,7 +522,7 @@ class SingleAxisGyro:
     def rate_gyro(cls, spin_inertia, transverse_inertia, spin_rate, spring, damping, gimbal_inertia=(0.0, 0.0, 0.0),
                   free_rotor=False) -> SingleAxisGyro:
         """A rate gyro: restraining spring ``k > 0`` (N m/rad) and damper ``c`` (N m s/rad)."""
-        if not (_finite("spring", spring) > 0):
+        if not (_finite("spring", spring, "SingleAxisGyro.rate_gyro") > 0):
             raise ValueError(f"spring: a rate gyro needs k > 0 (N m/rad), got {spring!r}")
         return cls(spin_inertia, transverse_inertia, spin_rate, gimbal_inertia, spring, damping, free_rotor)
 
@@ -529,7 +530,7 @@ class SingleAxisGyro:
     def rate_integrating(cls, spin_inertia, transverse_inertia, spin_rate, damping, gimbal_inertia=(0.0, 0.0, 0.0),
                          free_rotor=False) -> SingleAxisGyro:
         """A rate-integrating gyro: no spring, damper ``c > 0`` (N m s/rad)."""
-        if not (_finite("damping", damping) > 0):
+        if not (_finite("damping", damping, "SingleAxisGyro.rate_integrating") > 0):
             raise ValueError(f"damping: a rate-integrating gyro needs c > 0 (N m s/rad), got {damping!r}")
         return cls(spin_inertia, transverse_inertia, spin_rate, gimbal_inertia, 0.0, damping, free_rotor)
 
@@ -587,7 +588,7 @@ class SingleAxisGyro:
 
 def constant_base_rate(w) -> Callable:
     """A base turning at the constant ``w`` (3,) (rad/s, case components): ``t -> (w, 0)``."""
-    w = _vector("w", w, 3, " (rad/s)")
+    w = _vector("w", w, 3, "constant_base_rate", " (rad/s)")
     zero = np.zeros(3)
 
     def base(_t):
@@ -606,20 +607,14 @@ def sampled_base_rate(times, rates, mount=None) -> Callable:
     components); identity by default."""
     from scipy.interpolate import CubicSpline
 
-    try:
-        tt = np.asarray(times, dtype=np.float64)
-        ww = np.asarray(rates, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise ValueError("times, rates: expected arrays of numbers") from None
+    tt = real_array(times, "times", "sampled_base_rate")
+    ww = real_array(rates, "rates", "sampled_base_rate")
     if tt.ndim != 1 or tt.size < 4 or not np.all(np.isfinite(tt)) or np.any(np.diff(tt) <= 0):
         raise ValueError(f"times: expected >= 4 finite, strictly increasing times (s), got shape {tt.shape}")
     if ww.shape != (tt.size, 3) or not np.all(np.isfinite(ww)):
         raise ValueError(f"rates: expected shape ({tt.size}, 3) of finite rates (rad/s), got {ww.shape}")
     if mount is not None:
-        try:
-            R = np.asarray(mount, dtype=np.float64)
-        except (TypeError, ValueError):
-            raise ValueError("mount: expected a 3x3 direction cosine matrix") from None
+        R = real_array(mount, "mount", "sampled_base_rate")
         if R.shape != (3, 3) or not np.all(np.isfinite(R)) or not np.allclose(R @ R.T, np.eye(3), atol=1e-9) \
                 or np.linalg.det(R) < 0:
             raise ValueError("mount: expected a proper orthogonal 3x3 matrix (v_case = mount @ v_body)")
@@ -657,15 +652,16 @@ def _single_accel(C, J1, J2, J3, k, c, free, th, th_d, spin, w1, w2, w3, wd1, wd
     return th_dd, spin_d
 
 
-def _single_state(name, value):
-    return _vector(name, value, 3, " (theta rad, theta_dot rad/s, spin rad/s)")
+def _single_state(name, value, who):
+    return _vector(name, value, 3, who, " (theta rad, theta_dot rad/s, spin rad/s)")
 
 
 def single_axis_rates(gyro: SingleAxisGyro, t: float, state, base: Callable, torquer: Callable | None = None):
     """Time derivative (3,) of ``state = (theta, theta', Omega)`` (module docstring, section
     2) with ``base(t) -> (w, w')`` (case components, rad/s and rad/s^2) and the optional
     torquer ``torquer(t, state) -> tau`` (N m about the output axis)."""
-    y = _single_state("state", state)
+    t = _real("t", t, "single_axis_rates")
+    y = _single_state("state", state, "single_axis_rates")
     w, wd = _base_values(base, t)
     tau = _torquer_value(torquer, t, y)
     acc = _single_accel(gyro.spin_inertia, gyro.input_inertia, gyro.output_inertia, gyro.spin_axis_inertia,
@@ -699,11 +695,12 @@ def propagate_single_axis(gyro: SingleAxisGyro, base: Callable, t, theta0: float
         raise ValueError("base: expected a callable t -> (w, w_dot) (rad/s, rad/s^2, case components)")
     if torquer is not None and not callable(torquer):
         raise ValueError("torquer: expected a callable (t, state) -> torque (N m) or None")
-    theta0 = _finite("theta0", theta0, " (rad)")
-    theta_dot0 = _finite("theta_dot0", theta_dot0, " (rad/s)")
-    spin0 = gyro.spin_rate if spin0 is None else _finite("spin0", spin0, " (rad/s)")
-    t = check_output_times(t)
-    rtol, atol, max_nfev = _tolerances(rtol, atol, max_nfev)
+    who = "propagate_single_axis"
+    theta0 = _finite("theta0", theta0, who, " (rad)")
+    theta_dot0 = _finite("theta_dot0", theta_dot0, who, " (rad/s)")
+    spin0 = gyro.spin_rate if spin0 is None else _finite("spin0", spin0, who, " (rad/s)")
+    t = check_output_times(real_array(t, "t", who))
+    rtol, atol, max_nfev = _tolerances(rtol, atol, max_nfev, who)
     y0 = np.array([theta0, theta_dot0, spin0])
     _base_values(base, 0.0)
     _torquer_value(torquer, 0.0, y0)
@@ -724,15 +721,15 @@ def propagate_single_axis(gyro: SingleAxisGyro, base: Callable, t, theta0: float
     return states, {"method": "dop853", "rtol": rtol, "atol": atol, "nfev": nfev}
 
 
-def _single_states(states):
-    s = np.asarray(states, dtype=np.float64)
+def _single_states(states, who):
+    s = real_array(states, "states", who)
     if s.ndim < 1 or s.shape[-1] != 3:
         raise ValueError(f"states: expected shape (..., 3) = {SINGLE_STATE_FIELDS}, got {s.shape}")
     return s
 
 
-def _rates_array(name, w, shape):
-    w = np.asarray(w, dtype=np.float64)
+def _rates_array(name, w, shape, who):
+    w = real_array(w, name, who)
     if w.shape[-1:] != (3,):
         raise ValueError(f"{name}: expected (..., 3) rates, got shape {w.shape}")
     return np.broadcast_to(w, shape + (3,)) if w.ndim == 1 else w
@@ -745,10 +742,10 @@ def error_torques(gyro: SingleAxisGyro, states, w, w_dot) -> dict:
     (wg1 - w1)``, ``"output_acceleration"`` ``-J2 w2'``, ``"anisoinertia"`` ``(J3 - J1) wg1
     wg3`` and ``"spin_change"`` ``C (Omega - Omega_nominal) w1``; with them the ideal
     equation is exact: ``J2 theta'' + c theta' + k theta = H w1 + sum``."""
-    s = _single_states(states)
+    s = _single_states(states, "error_torques")
     th, spin = s[..., 0], s[..., 2]
-    w = _rates_array("w", w, th.shape)
-    wd = _rates_array("w_dot", w_dot, th.shape)
+    w = _rates_array("w", w, th.shape, "error_torques")
+    wd = _rates_array("w_dot", w_dot, th.shape, "error_torques")
     w1, w3 = w[..., 0], w[..., 2]
     wg1 = w1 * np.cos(th) - w3 * np.sin(th)
     wg3 = w1 * np.sin(th) + w3 * np.cos(th)
@@ -766,7 +763,7 @@ def steady_state_angle(gyro: SingleAxisGyro, w) -> float:
     (rad/s) and a regulated rotor: the root near ``H w1 / (k + H w3)`` of ``k theta = wg1 (H +
     (J3 - J1) wg3)`` (module docstring), by Newton's method from the small-angle estimate; a
     ValueError naming ``w`` when there is no stable root there (``k + H w3 <~ 0``)."""
-    w1, w2, w3 = _vector("w", w, 3, " (rad/s)").tolist()
+    w1, w2, w3 = _vector("w", w, 3, "steady_state_angle", " (rad/s)").tolist()
     if gyro.spring <= 0:
         raise ValueError("spring: a steady output angle needs k > 0")
     H, k, dJ = gyro.momentum, gyro.spring, gyro.spin_axis_inertia - gyro.input_inertia
@@ -794,9 +791,9 @@ def steady_state_angle(gyro: SingleAxisGyro, w) -> float:
 def single_axis_energy(gyro: SingleAxisGyro, states, w) -> np.ndarray:
     """Kinetic + spring energy (J) of gimbal + rotor with the base rate ``w`` (..., 3):
     ``1/2 (J1 wg1^2 + J2 wg2^2 + Ig3 wg3^2 + C (wg3 + Omega)^2 + k theta^2)``."""
-    s = _single_states(states)
+    s = _single_states(states, "single_axis_energy")
     th, th_d, spin = s[..., 0], s[..., 1], s[..., 2]
-    w = _rates_array("w", w, th.shape)
+    w = _rates_array("w", w, th.shape, "single_axis_energy")
     wg1 = w[..., 0] * np.cos(th) - w[..., 2] * np.sin(th)
     wg2 = w[..., 1] + th_d
     wg3 = w[..., 0] * np.sin(th) + w[..., 2] * np.cos(th)
@@ -810,9 +807,9 @@ def single_axis_jacobi_integral(gyro: SingleAxisGyro, states, w) -> np.ndarray:
     Omega dT/dOmega - T + k theta^2 / 2``, with ``dT/dtheta' = J2 wg2`` and ``dT/dOmega = C (wg3
     + Omega)``.  Constant for a free rotor without damper or torquer (the Lagrangian in the
     case's coordinates does not depend on time); the energy alone is not."""
-    s = _single_states(states)
+    s = _single_states(states, "single_axis_jacobi_integral")
     th, th_d, spin = s[..., 0], s[..., 1], s[..., 2]
-    w = _rates_array("w", w, th.shape)
+    w = _rates_array("w", w, th.shape, "single_axis_jacobi_integral")
     wg2 = w[..., 1] + th_d
     wg3 = w[..., 0] * np.sin(th) + w[..., 2] * np.cos(th)
     e = single_axis_energy(gyro, s, w)
@@ -823,9 +820,9 @@ def single_axis_jacobi_integral(gyro: SingleAxisGyro, states, w) -> np.ndarray:
 def single_axis_momentum(gyro: SingleAxisGyro, states, w) -> np.ndarray:
     """Angular momentum (..., 3) of gimbal + rotor about the pivot in case (B) components (N m s):
     ``C_2(theta)^T (J1 wg1, J2 wg2, J3 wg3 + C Omega)``."""
-    s = _single_states(states)
+    s = _single_states(states, "single_axis_momentum")
     th, th_d, spin = s[..., 0], s[..., 1], s[..., 2]
-    w = _rates_array("w", w, th.shape)
+    w = _rates_array("w", w, th.shape, "single_axis_momentum")
     st, ct = np.sin(th), np.cos(th)
     wg1 = w[..., 0] * ct - w[..., 2] * st
     wg2 = w[..., 1] + th_d

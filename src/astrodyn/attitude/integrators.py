@@ -651,11 +651,26 @@ class HeldInputsBody:
         self._min_moment = float(np.min(self.frame.moments))
         self._zero = np.zeros(3)
 
-    def step_held(self, w, q, dt, tau=None, h0=None, hdot=None, step=None):
+    def step_held(self, w, q, dt, tau=None, h0=None, hdot=None, step=None, max_steps=MAX_STEPS):
         """``(w, q)`` after ``dt`` s from body rates ``w`` (3,) rad/s and ``q`` (4,) (scalar
         first) with the body torque ``tau`` (3,) N m and the rotor momentum
         ``h0 + hdot t`` (3,) N m s held (body axes; None: zero).  ``step``: the splitting
-        step (default as :func:`propagate_attitude`'s: 1/60 of the fastest natural period)."""
+        step (default as :func:`propagate_attitude`'s: 1/60 of the fastest natural period).
+
+        ``dt`` and ``step``: finite and > 0 (``ValueError`` naming them).  ``max_steps``: the
+        most splitting steps the call may take (as :func:`propagate_attitude`'s): a ``dt``
+        that needs more (a ``step`` far too small for it, or rates so high that the default
+        step is tiny) is refused before the kernel runs, with a ``ValueError`` naming the step
+        and the number of steps it would need."""
+        dt = real_scalar(dt, "dt", "step_held")
+        if not (dt > 0.0 and math.isfinite(dt)):
+            raise ValueError(f"dt: expected a finite step > 0 s, got {dt!r}")
+        max_steps = checked_max_steps(max_steps)
+        note = ""
+        if step is not None:
+            step = real_scalar(step, "step", "step_held")
+            if not (step > 0.0 and math.isfinite(step)):
+                raise ValueError(f"step: expected a finite splitting step > 0 s, got {step!r}")
         f = self.frame
         z = self._zero
         h0p = z if h0 is None else f.vec_to_p(np.asarray(h0, dtype=np.float64))
@@ -669,8 +684,16 @@ class HeldInputsBody:
             d0, d1, d2 = M - h0p
             rate = max(abs(w0), abs(w1_), abs(w2), math.sqrt(d0 * d0 + d1 * d1 + d2 * d2) / self._min_moment)
             step = 0.1 if not rate > 0 else 2.0 * math.pi / (60.0 * rate)
-        n = max(1, int(math.ceil(abs(dt) / step)))
-        held_torque_step(M, qp, f.moments, SPLIT4_WEIGHTS, float(dt), n, np.ascontiguousarray(taup, dtype=np.float64),
+            note = " (the default: 1/60 of the fastest natural period)"
+        ratio = dt / step if step > 0.0 else math.inf
+        if not ratio <= max_steps:  # ceil(ratio) <= max_steps exactly when ratio <= max_steps
+            need = float(math.ceil(ratio)) if math.isfinite(ratio) else math.inf
+            raise ValueError(
+                f"step: {step:.6g} s{note} over dt = {dt:.6g} s needs {need:.6g} steps, more than "
+                f"max_steps={max_steps}; pass a larger step, or max_steps={int(min(need, 2.0**63 - 1))} to run it anyway"
+            )
+        n = max(1, int(math.ceil(ratio)))
+        held_torque_step(M, qp, f.moments, SPLIT4_WEIGHTS, dt, n, np.ascontiguousarray(taup, dtype=np.float64),
                          np.ascontiguousarray(h0p, dtype=np.float64), np.ascontiguousarray(hdp, dtype=np.float64))
         w1 = f.vec_from_p((M - (h0p + hdp * dt)) / f.moments)
         return w1, (qp if f.identity else np.asarray(f.quat_from_p(qp)))

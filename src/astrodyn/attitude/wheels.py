@@ -40,7 +40,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from astrodyn.attitude.integrators import SPLIT4_WEIGHTS, HeldInputsBody, held_torque_step
+from astrodyn.attitude.integrators import MAX_STEPS, SPLIT4_WEIGHTS, HeldInputsBody, checked_max_steps, held_torque_step
+from astrodyn.inputs import real_scalar
 from astrodyn.jit import jit
 from astrodyn.rotation import quat_hamilton_scalar
 
@@ -132,7 +133,8 @@ class WheelStep:
 
 
 def step_with_wheels(inertia, wheels: ReactionWheels, w, q, h, wheel_torque, dt: float, *,
-                     external_torque=None, step: float | None = None, body=None) -> WheelStep:
+                     external_torque=None, step: float | None = None, body=None,
+                     max_steps: int = MAX_STEPS) -> WheelStep:
     """Advance body and wheels by one control step of ``dt`` s with the motor torques
     ``wheel_torque`` (n,) N m held (after :meth:`ReactionWheels.saturate`).
 
@@ -145,12 +147,23 @@ def step_with_wheels(inertia, wheels: ReactionWheels, w, q, h, wheel_torque, dt:
     once by a caller that steps the same body many times.  No torque or a constant body
     torque run the compiled held-input step (about 10 us per call instead of 200 us);
     other torque models the general :func:`astrodyn.attitude.propagate_attitude`.
+
+    ``dt`` and ``step``: finite and > 0 (``ValueError`` naming them).  ``max_steps``: the
+    most splitting steps the call may take (as :func:`propagate_attitude`'s): a ``dt`` that
+    needs more is refused before any work, with a ``ValueError`` naming the step and the
+    number of steps it would need.
     """
     from astrodyn.attitude.integrators import propagate_attitude
     from astrodyn.attitude.torques import ConstantTorque
 
+    dt = real_scalar(dt, "dt", "step_with_wheels")
     if not dt > 0 or not np.isfinite(dt):
         raise ValueError(f"dt: expected a finite control step > 0 s, got {dt!r}")
+    if step is not None:
+        step = real_scalar(step, "step", "step_with_wheels")
+        if not (step > 0.0 and math.isfinite(step)):
+            raise ValueError(f"step: expected a finite splitting step > 0 s, got {step!r}")
+    max_steps = checked_max_steps(max_steps)
     h0 = np.asarray(h, dtype=np.float64).reshape(wheels.n)
     g, clipped = wheels.saturate(wheel_torque, h0, w, dt)
     axes = wheels.axes
@@ -158,15 +171,16 @@ def step_with_wheels(inertia, wheels: ReactionWheels, w, q, h, wheel_torque, dt:
         # held inputs: the compiled step (same splitting, stages and rotor values as below)
         body = body or HeldInputsBody(wheels.kinematic_inertia(inertia))
         tau = None if external_torque is None else external_torque.torque
-        w1, q1 = body.step_held(w, q, float(dt), tau=tau, h0=h0 @ axes, hdot=g @ axes, step=step)
+        w1, q1 = body.step_held(w, q, dt, tau=tau, h0=h0 @ axes, hdot=g @ axes, step=step, max_steps=max_steps)
         return WheelStep(w1, q1, h0 + g * dt, g, clipped)
 
     def rotor(t):
         t = np.asarray(t, dtype=np.float64)
         return (h0 + g * t[..., None]) @ axes
 
-    w1, q1, _ = propagate_attitude(wheels.kinematic_inertia(inertia), w, q, float(dt), torque=external_torque,
-                                   rotor_momentum=rotor, method="split4", step=step, error_estimate=False)
+    w1, q1, _ = propagate_attitude(wheels.kinematic_inertia(inertia), w, q, dt, torque=external_torque,
+                                   rotor_momentum=rotor, method="split4", step=step, error_estimate=False,
+                                   max_steps=max_steps)
     return WheelStep(np.asarray(w1), np.asarray(q1), h0 + g * dt, g, clipped)
 
 

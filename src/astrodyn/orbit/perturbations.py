@@ -134,11 +134,21 @@ class CentralBody:
     source: str = ""
 
     def zonal(self, degree: int | None = None) -> Zonal:
-        """A :class:`Zonal` perturbation with ``J2 .. J_degree`` (all if None)."""
-        J = self.J if degree is None else self.J[: max(0, degree - 1)]
-        if degree is not None and degree - 1 > len(self.J):
-            raise ValueError(f"degree: {self.name} has zonals up to J{len(self.J) + 1}, asked for J{degree}")
-        return Zonal(self.mu, self.radius, J)
+        """A :class:`Zonal` perturbation with ``J2 .. J_degree`` (all if None).
+
+        ``degree``: an int from 2 to the body's highest (``len(J) + 1``); ``TypeError``
+        naming it for a float, a bool or anything else that is not an int, ``ValueError``
+        naming it and the range for an int outside it (a body without zonals takes only None)."""
+        if degree is None:
+            return Zonal(self.mu, self.radius, self.J)
+        top = len(self.J) + 1
+        allowed = f"an int from 2 to {top} ({self.name} has J2..J{top})" if self.J else \
+            f"None ({self.name} has no zonal coefficients)"
+        if isinstance(degree, (bool, np.bool_)) or not isinstance(degree, (int, np.integer)):
+            raise TypeError(f"zonal: degree: expected {allowed}, got {degree!r}")
+        if not 2 <= degree <= top:
+            raise ValueError(f"zonal: degree: expected {allowed}, got {int(degree)}")
+        return Zonal(self.mu, self.radius, self.J[: int(degree) - 1])
 
 
 EARTH_EGM2008 = CentralBody(
