@@ -99,8 +99,6 @@ PROCESS = "plant"
 #: messages (tests/test_closed_loop.py).
 INTAKE_CAPACITY = 100_000
 MAX_EXAMPLES = 20
-#: Processes of a run whose @batch envelopes carry states, never commands.
-RUN_PROCESSES = frozenset(("plant", "orbit", "attitude", "logger", "serve", "run"))
 #: Commands one body may hold for later times (more are refused).
 MAX_PENDING = 10_000
 #: Lockstep round trips kept for the summary's percentiles.
@@ -216,7 +214,7 @@ class Intake:
         """The commands of a controller's envelope on ``@batch/<controller>`` (one
         authenticator for all; each entry a ``<body>/command`` of that controller)."""
         controller = key.rsplit("/", 1)[-1]
-        if controller in RUN_PROCESSES:
+        if messages.is_run_process_name(controller):  # (a config refuses these as controller names)
             return []  # the run's own state envelopes: not for the plant
         signer = self._authenticate(key, payload, attachment)
         if signer is None:
