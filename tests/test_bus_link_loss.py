@@ -122,6 +122,8 @@ def test_a_propagator_silent_for_a_while_is_not_taken_for_cut_off_when_it_beats_
     assert run["logger"]["missing"] == 0 and run["logger"]["duplicates"] == 0, run["logger"]
 
 
+# slow (20 s; CI time): the run variants above cover the republishing, which serve shares
+@pytest.mark.slow
 def test_serve_publishes_again_the_states_a_broken_link_lost(tmp_path):
     """`serve` (real time x100) with its logger stopped 3 s: the gap it leaves in the part
     being written is refilled (the propagator restarted just before the first missing

@@ -117,6 +117,8 @@ def kill_child(status, name: str) -> int:
     return pid
 
 
+# slow (15 s; CI time): the other crossing-serves tests run in make test
+@pytest.mark.slow
 def test_a_killed_propagator_and_logger_never_resume_from_another_serves_file(tmp_path):
     """F7 / F4 of the crossing probe: user 2's serve records ``x-0002.mcap`` (same scenario
     name, another config) beside user 1's ``x.mcap``.  User 1's orbit propagator, then its

@@ -79,6 +79,8 @@ def test_ctrl_z_pauses_every_process_of_a_run_and_fg_continues_it(tmp_path):
     assert log["missing"] == 0 and log["duplicates"] == 0 and log["states"] == 2 * STEPS, log
 
 
+# slow (13 s; CI time): Ctrl-Z of a run above covers the job control serve shares
+@pytest.mark.slow
 def test_serve_resumes_in_real_time_from_where_ctrl_z_paused_it(tmp_path):
     """At x20 a 5 s pause would be 100 s of sim time; after fg the propagators go on from
     where they were at x20, instead of running flat out until they are back on the old schedule."""
