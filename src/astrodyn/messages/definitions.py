@@ -234,6 +234,8 @@ class Status(Stamped, forbid_unknown_fields=True, omit_defaults=True):
 
 #: Most reaction wheels (or rotors) of one body.
 MAX_WHEELS = 64
+#: Commands one actuator state names as applied in its step (the plant applies no more per body per step).
+MAX_APPLIED = 4096
 _Wheels = Annotated[list[float], Meta(min_length=1, max_length=MAX_WHEELS)]
 _Sender = _name("name of the controller that sent the command", "a controller name")
 _SENDER_SEQ = Annotated[int, Meta(ge=0, le=MAX_SEQ, description=(
@@ -269,7 +271,7 @@ class ActuatorState(Stamped, forbid_unknown_fields=True, omit_defaults=True):
     thrust: _vec(3, "thrust applied, inertial axes, N") | msgspec.UnsetType = msgspec.UNSET
     mass: Annotated[float, Meta(gt=0, description="mass at t, kg")] | msgspec.UnsetType = msgspec.UNSET
     dv_total: Annotated[float, Meta(ge=0, description="delta-v spent since the start, m/s")] | msgspec.UnsetType = msgspec.UNSET
-    applied: Annotated[list[str], Meta(max_length=4096, description=(
+    applied: Annotated[list[str], Meta(max_length=MAX_APPLIED, description=(
         "commands first applied at this step, as sender#seq"))] | msgspec.UnsetType = msgspec.UNSET
 
 

@@ -70,6 +70,7 @@ import numpy as np
 import zenoh
 
 from astrodyn import auth, bus, messages
+from astrodyn.messages.definitions import MAX_APPLIED
 from astrodyn.messages.keys import NAME_FULL_RE
 from astrodyn.plant import CommandRefused, FlexiblePlantBody, Plant, command_id
 from astrodyn.recording import RecordingError
@@ -107,20 +108,6 @@ MAX_ROUND_TRIPS = 1_000_000
 TICK_REPEAT_S = 0.5
 
 
-def _applied_limit() -> int:
-    """``max_length`` of :class:`astrodyn.messages.definitions.ActuatorState`'s ``applied``:
-    the commands one actuator state can name, so the most one body applies in one step."""
-    import msgspec
-
-    from astrodyn.messages.definitions import ActuatorState
-
-    t = next(f.type for f in msgspec.inspect.type_info(ActuatorState).fields if f.name == "applied")
-    while not isinstance(t, msgspec.inspect.ListType):
-        t = t.type if isinstance(t, msgspec.inspect.Metadata) else next(
-            x for x in t.types if isinstance(x, (msgspec.inspect.ListType, msgspec.inspect.Metadata)))
-    return int(t.max_length)
-
-
 def _largest_command() -> int:
     """Bytes of the largest valid command (every actuator field, ``MAX_WHEELS`` wheels, the
     longest sender and seq, floats of the longest repr), canonical JSON."""
@@ -134,7 +121,7 @@ def _largest_command() -> int:
 
 
 #: Commands one body applies in one step (the most an ActuatorState's ``applied`` names); more are refused.
-MAX_APPLIED_PER_STEP = _applied_limit()
+MAX_APPLIED_PER_STEP = MAX_APPLIED
 #: Payload of a command or an answer on its own key: larger ones are rejected (``oversized``)
 #: before they are queued.  Twice the largest valid command (a non-canonical encoder's
 #: spaces and indentation), plus 1 kB.
