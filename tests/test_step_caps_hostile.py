@@ -130,6 +130,56 @@ def test_step_with_wheels_takes_real_numbers_only(field, dt, step):
 
 
 # ---------------------------------------------------------------------------
+# HeldInputsBatch.step (the plant's many bodies in one compiled call)
+
+
+def _batch_inputs(rates):
+    """Two bodies of ``INERTIA`` with the wheels of ``_wheels()``, body rates ``rates`` (2, 3)."""
+    from astrodyn.attitude.wheels import HeldInputsBatch
+
+    batch = HeldInputsBatch([INERTIA] * 2, [_wheels(), _wheels()])
+    w = np.array(rates, dtype=np.float64)
+    q, h = np.tile(Q1, (2, 1)), np.full((2, 3), 1e-3)
+    return batch, w, q, h, np.full((2, 3), 0.01), np.tile(TAU, (2, 1))
+
+
+def test_batch_step_refuses_rates_that_make_the_default_step_tiny_and_steps_nothing():
+    # formerly ~1e10 splitting steps for the second body's 1 s, in one compiled call: no way out
+    batch, w, q, h, cmd, tau = _batch_inputs([W0, [1e9, 0.0, 1e9]])
+    before = (w.copy(), q.copy(), h.copy())
+    with time_bound(5.0), pytest.raises(ValueError, match=r"^row 1 \(body 1\): step \S+ s \(the default: 1/60 of the "
+                                                         r"fastest natural period\) over dt = 1 s needs \S+ steps, "
+                                                         r"more than max_steps=1000000"):
+        batch.step([0, 1], w, q, h, cmd, tau, 1.0)
+    for a, b in zip((w, q, h), before):  # neither body moved: refused before any work
+        assert np.array_equal(a, b)
+
+
+def test_batch_step_counts_steps_as_step_held_does():
+    """The batch refuses exactly the steps the one-body path refuses: the splitting step is
+    1/60 of the fastest natural period, here 2 pi / (60 * 40) s for a 40 rad/s spin about
+    the axis of least inertia (INERTIA with the wheels held: diag(1.99, 2.49, 2.99), so
+    |I w| / I_min = 40 too), and 1 s takes ceil(1 / step) = ceil(381.97...) = 382 steps."""
+    rates = [[40.0, 0.0, 0.0], W0]
+    need = math.ceil(1.0 / (2.0 * math.pi / (60.0 * 40.0)))
+    assert need == 382
+    for cap in (need - 1, need):
+        batch, w, q, h, cmd, tau = _batch_inputs(rates)
+        refused_one = refused_batch = False
+        try:
+            HeldInputsBody(_wheels().kinematic_inertia(INERTIA)).step_held(w[0], q[0], 1.0, tau=TAU, max_steps=cap)
+        except ValueError:
+            refused_one = True
+        try:
+            batch.step([0, 1], w, q, h, cmd, tau, 1.0, max_steps=cap)
+        except ValueError:
+            refused_batch = True
+        assert refused_one == refused_batch == (cap < need), cap
+    with pytest.raises(ValueError, match="^max_steps: expected an int >= 1"):
+        batch.step([0, 1], w, q, h, cmd, tau, 1.0, max_steps=0)
+
+
+# ---------------------------------------------------------------------------
 # the closed loop's plant passes the engine's cap
 
 

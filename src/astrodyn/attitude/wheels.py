@@ -225,11 +225,27 @@ def _to_p(P, identity, v0, v1, v2, out):
 
 
 @jit
+def _default_step(P, identity, moments, min_moment, w, i):
+    """:meth:`HeldInputsBody.step_held`'s default splitting step of row ``i`` (s): 1/60 of
+    its fastest natural period, from its body rates at the start of the step (the body's
+    own momentum ``I w``; the wheels' part cancels in ``M - h0``)."""
+    wp = np.empty(3)
+    _to_p(P[i], identity[i], w[i, 0], w[i, 1], w[i, 2], wp)
+    d0, d1, d2 = moments[i, 0] * wp[0], moments[i, 1] * wp[1], moments[i, 2] * wp[2]
+    rate = max(abs(wp[0]), abs(wp[1]), abs(wp[2]), math.sqrt(d0 * d0 + d1 * d1 + d2 * d2) / min_moment[i])
+    return 0.1 if not rate > 0 else 2.0 * math.pi / (60.0 * rate)
+
+
+@jit
 def _step_many(P, r, identity, moments, min_moment, axes, J, max_torque, max_speed, n_wheels,
-               w, q, h, cmd, tau, dt, weights, g, clipped):
+               w, q, h, cmd, tau, dt, weights, g, clipped, max_steps):
     """Every row ``i``: saturate the wheel commands, then one held-input step of ``dt`` s
     (:meth:`HeldInputsBody.step_held` with ``h0 = h @ axes``, ``hdot = g @ axes``);
-    ``w``, ``q``, ``h`` updated in place."""
+    ``w``, ``q``, ``h`` updated in place.  Returns -1; or, before touching any row, the
+    first row whose default step would need more than ``max_steps`` splitting steps."""
+    for i in range(w.shape[0]):
+        if not dt / _default_step(P, identity, moments, min_moment, w, i) <= max_steps:
+            return i
     M, qp, h0p, hdp, taup = np.empty(3), np.empty(4), np.empty(3), np.empty(3), np.empty(3)
     for i in range(w.shape[0]):
         nw = n_wheels[i]
@@ -274,6 +290,7 @@ def _step_many(P, r, identity, moments, min_moment, axes, J, max_torque, max_spe
                                                                       r[i, 0], -r[i, 1], -r[i, 2], -r[i, 3])
         for k in range(nw):
             h[i, k] += g[i, k] * dt
+    return -1
 
 
 class HeldInputsBatch:
@@ -316,21 +333,34 @@ class HeldInputsBatch:
         return np.asarray(h, dtype=np.float64) / self.J[rows] - (w[:, None, 0] * axes[:, :, 0] + w[:, None, 1] * axes[:, :, 1]
                                                                    + w[:, None, 2] * axes[:, :, 2])
 
-    def step(self, rows, w, q, h, wheel_torque, torque, dt: float) -> tuple[np.ndarray, np.ndarray]:
+    def step(self, rows, w, q, h, wheel_torque, torque, dt: float,
+             max_steps: int = MAX_STEPS) -> tuple[np.ndarray, np.ndarray]:
         """Advance the bodies ``rows`` (k,) int by ``dt`` s, in place: body rates ``w`` (k, 3)
         rad/s, ``q`` (k, 4), absolute wheel momenta ``h`` (k, m) N m s (columns past a body's
         wheels ignored), with the motor torque commands ``wheel_torque`` (k, m) N m (saturated
         here) and the body torque ``torque`` (k, 3) N m held.  Returns the motor torques
-        applied (k, m) and which commands were clipped (k, m) bool."""
+        applied (k, m) and which commands were clipped (k, m) bool.
+
+        ``max_steps``: the most splitting steps one body's ``dt`` may take (as
+        :meth:`HeldInputsBody.step_held`'s): when a body's rates are so high that its default
+        step (1/60 of its fastest natural period) would need more, nothing is stepped and a
+        ``ValueError`` names the row and the steps it would need."""
         if not dt > 0 or not np.isfinite(dt):
             raise ValueError(f"dt: expected a finite control step > 0 s, got {dt!r}")
+        max_steps = checked_max_steps(max_steps)
         cmd = np.ascontiguousarray(wheel_torque, dtype=np.float64)
         if not np.all(np.isfinite(cmd)):
             raise ValueError("wheel torque: expected finite numbers in N m")
         rows = np.asarray(rows, dtype=np.int64)
         g = np.zeros((rows.shape[0], self.m))
         clipped = np.zeros((rows.shape[0], self.m), dtype=np.bool_)
-        _step_many(self.P[rows], self.r[rows], self.identity[rows], self.moments[rows], self.min_moment[rows],
-                   self.axes[rows], self.J[rows], self.max_torque[rows], self.max_speed[rows], self.n_wheels[rows],
-                   w, q, h, cmd, np.ascontiguousarray(torque, dtype=np.float64), float(dt), SPLIT4_WEIGHTS, g, clipped)
+        P, identity, moments, min_moment = self.P[rows], self.identity[rows], self.moments[rows], self.min_moment[rows]
+        bad = _step_many(P, self.r[rows], identity, moments, min_moment, self.axes[rows], self.J[rows],
+                         self.max_torque[rows], self.max_speed[rows], self.n_wheels[rows], w, q, h, cmd, np.ascontiguousarray(torque, dtype=np.float64),
+                         float(dt), SPLIT4_WEIGHTS, g, clipped, max_steps)
+        if bad >= 0:
+            step = _default_step(P, identity, moments, min_moment, w, bad)
+            raise ValueError(f"row {bad} (body {int(rows[bad])}): step {step:.6g} s (the default: 1/60 of the fastest "
+                             f"natural period) over dt = {dt:.6g} s needs {math.ceil(dt / step):.6g} steps, more than "
+                             f"max_steps={max_steps}; its rates are too high for the held-input step")
         return g, clipped
