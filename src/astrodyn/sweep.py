@@ -47,7 +47,10 @@ and with any number of workers, and ``--case k`` reruns exactly that case.
 Each case: the draws are applied to a copy of the config dict and validated with
 :func:`astrodyn.scenario.load_dict` -- an invalid draw makes the case *fail* with the
 :class:`~astrodyn.scenario.ScenarioError` text (``... case 7: bodies[0].orbit.e: expected
-0 <= e, got -0.1``) -- then simulated; any exception fails that case only.  Metrics per
+0 <= e, got -0.1``) -- then simulated; any exception fails that case only.  A ``--vary`` or
+``--cases`` column that would fail *every* case (a misspelled key, a unit of the wrong kind)
+is refused before any case runs, exit 2 (:func:`check_values_against_config`, which
+``astrodyn sweep`` applies to the spec of :func:`make_spec`).  Metrics per
 row (:data:`METRIC_UNITS` gives the unit of each column suffix):
 
 * orbit, per body ``<b>``: osculating elements at the last output time
@@ -116,6 +119,8 @@ __all__ = [
     "parse_path",
     "read_cases_csv",
     "make_spec",
+    "check_values_against_config",
+    "probe_values",
     "run_case",
     "run_chunk",
     "local_cluster",
@@ -376,10 +381,12 @@ def parse_vary(text: str) -> Vary:
 
 
 def _check_unit(unit: str, what: str) -> None:
-    from astropy import units as u
+    """Refuse a ``--vary`` unit the scenario loader would not know (astropy's units, ``rpm``
+    and the English unit words of :data:`astrodyn.scenario.fields.UNIT_WORDS`)."""
+    from astrodyn.scenario.fields import unit_text, units
 
     try:
-        u.Unit(unit, parse_strict="raise")
+        units().Unit(unit_text(unit), parse_strict="raise")
     except Exception:
         raise SweepError(f"{what}: expected a unit after the distribution (e.g. km, deg, rad/s), got {unit!r}") from None
 
@@ -666,6 +673,73 @@ def make_spec(config_path: str | os.PathLike, varies: Iterable[str], n: int | No
     return SweepSpec(config=config, source=str(config_path), base_dir=str(Path(config_path).resolve().parent),
                      varies=parsed, n=n, seed=seed, cases_header=header, cases_rows=rows, resolved=resolved,
                      grid_sizes=grids)
+
+
+PROBE_CASES = 4  #: joint cases tried before a dispersion no probe value of which validates is refused
+
+
+def probe_values(vary: Vary) -> list[Any]:
+    """A few values ``vary`` takes, before its unit, to check it against the scenario before any
+    case runs: ``uniform``: low, middle, high; ``normal``: mean, mean - sigma, mean + sigma;
+    ``choice`` / ``grid``: the first, middle and last value; a plain value: that value."""
+    if vary.kind in ("uniform", "normal"):
+        a, b = vary.args
+        if vary.kind == "uniform":
+            points = [a, (a + b) / 2, b]
+        else:
+            mean = np.broadcast_to(a, np.broadcast(a, b).shape)
+            points = [mean, mean - b, mean + b]
+        return [float(p) if np.ndim(p) == 0 else [float(x) for x in p] for p in points]
+    values = vary.values
+    return [values[i] for i in sorted({0, len(values) // 2, len(values) - 1})]
+
+
+def check_values_against_config(spec: SweepSpec) -> None:
+    """Refuse (:class:`SweepError`, before any case runs) a ``--vary`` or ``--cases`` column
+    that would fail every case: a misspelled key (``bodies.iss.orbit.ecc``) or a unit of the
+    wrong kind (``a=uniform(6800, 7200) deg``).
+
+    Each dispersion alone is put into the nominal config at its :func:`probe_values` (a cases
+    column: its values in the first, middle and last row), the config validated with
+    :func:`astrodyn.scenario.load_dict`.  If none of them validates, and none of the first
+    :data:`PROBE_CASES` cases (all dispersions together: a value may need another one, e.g. a
+    model chosen alongside) validates either, the sweep is refused with the scenario's own
+    message (the field, the allowed values).  A dispersion only some of whose values are
+    invalid is accepted: those cases fail one by one, as the module docstring says."""
+    from astrodyn.scenario import ScenarioError, load_dict
+
+    def problem(config: dict, source: str) -> ScenarioError | None:
+        try:
+            load_dict(config, source=source, base_dir=spec.base_dir)
+        except ScenarioError as exc:
+            return exc
+        return None
+
+    def with_value(path: str, value: Any) -> dict:
+        config = copy.deepcopy(spec.config)
+        _assign(config, spec.resolved[path], value, path)
+        return config
+
+    probes = [(f"--vary {v.text!r}", v.path, [_with_unit(x, v.unit) for x in probe_values(v)]) for v in spec.varies]
+    rows = spec.cases_rows
+    picked = [rows[i] for i in sorted({0, len(rows) // 2, len(rows) - 1})] if rows else []
+    probes += [(f"--cases column {h!r}", h, [r[h] for r in picked if h in r]) for h in spec.cases_header]
+    joint_ok: bool | None = None
+    for label, path, values in probes:
+        errors = [problem(with_value(path, x), label) for x in values]
+        if not values or not all(errors):
+            continue
+        if joint_ok is None:
+            joint_ok = any(problem(spec.case_config(k)[0], label) is None for k in range(min(spec.n, PROBE_CASES)))
+        if not joint_ok:
+            tried = ", ".join(_shown_value(x) for x in values)
+            raise SweepError(f"{errors[0]} (the values tried: {tried}; no case was run)")
+
+
+def _shown_value(value: Any) -> str:
+    """A probe value for a message: a number or quantity string as is, shortened."""
+    text = value if isinstance(value, str) else json.dumps(value, default=str)
+    return text if len(text) <= 60 else text[:57] + "..."
 
 
 # --------------------------------------------------------------------------- one case
@@ -1527,6 +1601,7 @@ def _main(argv: list[str] | None) -> int:
         if args.resume and args.case is not None:
             raise SweepError("--resume: expected either --resume (every case without a row) or --case K, not both")
         spec = make_spec(args.config, args.vary, n=args.n, seed=args.seed, cases_csv=args.cases)
+        check_values_against_config(spec)
         cases = list(range(spec.n)) if args.case is None else sorted(set(args.case))
         for k in cases:
             if not 0 <= k < spec.n:

@@ -1,4 +1,6 @@
-"""Speed-against-error benchmarks: ``astrodyn bench SUITE`` (:data:`SUITES`; ``all`` runs every one but the soak).
+"""Speed-against-error benchmarks: ``astrodyn bench SUITE`` (:data:`SUITES`; ``all`` runs every
+one but those of :data:`LEFT_OUT_OF_ALL`, ``all --quick`` each in its smoke form,
+:data:`QUICK_ARGS`).
 
 Each benchmark module exposes ``main(argv) -> int``, prints a table of ns per
 state (or step) and max error, and reports ratios against REBOUND / scipy
@@ -9,6 +11,7 @@ flag, exit 2).
 
 from __future__ import annotations
 
+import argparse
 import importlib
 import inspect
 import json
@@ -30,6 +33,24 @@ SUITES = {
     "view": "astrodyn.bench.view",
     "control": "astrodyn.bench.control",
     "flexible": "astrodyn.bench.flexible",
+}
+
+#: Suites ``astrodyn bench all`` does not run, and why.
+LEFT_OUT_OF_ALL = {"soak": "a real-time soak of `astrodyn serve`, an hour by default: run `astrodyn bench soak` on its own"}
+
+#: The options ``astrodyn bench all --quick`` gives each suite: its smoke form (seconds to a
+#: minute or two each), placed before the options given to ``all`` (which win).
+QUICK_ARGS: dict[str, list[str]] = {
+    "orbit": ["--quick"],
+    "attitude": ["--quick"],
+    "service": ["--bodies", "10"],
+    "sweep": ["--quick"],
+    "encode": ["--bodies", "100", "--repeat", "1"],
+    "auth": ["--bodies", "100", "--repeat", "1"],
+    "calls": ["--repeat", "1"],
+    "view": ["--wall", "1", "--rounds", "1"],
+    "control": ["--bodies", "1,10", "--steps", "50"],
+    "flexible": ["--quick"],
 }
 
 
@@ -102,23 +123,52 @@ def call_in_tree(fn, args: tuple, src: str | None, timeout_s: float = 900) -> ob
     return json.loads(done.stdout.strip().splitlines()[-1])
 
 
+def all_parser() -> argparse.ArgumentParser:
+    """The options of ``astrodyn bench all`` itself (``--quick``, ``--help``); any other option
+    is passed to every suite."""
+    from astrodyn.bench.attitude import DEFAULT_OUT
+
+    suites = [n for n in SUITES if n not in LEFT_OUT_OF_ALL]
+    left_out = "; ".join(f"{n}: {why}" for n, why in LEFT_OUT_OF_ALL.items())
+    ap = argparse.ArgumentParser(
+        prog="astrodyn bench all", allow_abbrev=False, usage="%(prog)s [-h] [--quick] [SUITE OPTIONS]",
+        description=f"Run the benchmark suites one after the other: {', '.join(suites)}. Left out: {left_out}.",
+        epilog="Any other option is passed to every suite, so it must be one every suite takes (see astrodyn bench "
+               "SUITE --help); every suite's options are checked before the first one runs. The attitude suite writes "
+               f"bench-attitude.md and .png into ./{DEFAULT_OUT}. Exit status: 0 every suite passed, 1 a suite reported a "
+               "failure, 2 a bad option.")
+    ap.add_argument("--quick", action="store_true",
+                    help="a smoke run: each suite in a small form, " + "; ".join(
+                        f"{n} {' '.join(QUICK_ARGS[n])}" for n in suites))
+    return ap
+
+
+def suite_args(rest: list[str], quick: bool) -> dict[str, list[str]]:
+    """The options ``astrodyn bench all`` gives each suite it runs: ``rest`` (the options
+    not its own), after the suite's :data:`QUICK_ARGS` with ``quick``."""
+    return {n: [*(QUICK_ARGS[n] if quick else []), *rest] for n in SUITES if n not in LEFT_OUT_OF_ALL}
+
+
 def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     if not argv or argv[0] in ("-h", "--help"):
-        print("usage: astrodyn bench {" + "|".join([*SUITES, "all"]) + "} [OPTIONS]")
+        print("usage: astrodyn bench {" + "|".join([*SUITES, "all"]) + "} [OPTIONS]\n"
+              "  astrodyn bench SUITE --help: a suite's options; astrodyn bench all --help: what `all` runs "
+              f"(every suite but {', '.join(LEFT_OUT_OF_ALL)}) and its --quick")
         return 0 if argv else 2
     name, rest = argv[0], argv[1:]
-    names = [n for n in SUITES if n != "soak"] if name == "all" else [name]  # the soak takes an hour
-    for n in names:
-        if n not in SUITES:
-            print(f"astrodyn bench: unknown suite {n!r}; expected one of: {', '.join(SUITES)}, all", file=sys.stderr)
-            return 2
-    if name == "all":  # every suite's options checked before the first runs (an error exits 2 here, not an hour in)
-        for n in names:
-            importlib.import_module(SUITES[n]).parse_args(rest)
+    if name != "all" and name not in SUITES:
+        print(f"astrodyn bench: unknown suite {name!r}; expected one of: {', '.join(SUITES)}, all", file=sys.stderr)
+        return 2
+    if name != "all":
+        return int(importlib.import_module(SUITES[name]).main(rest) or 0)
+    own, rest = all_parser().parse_known_args(rest)
+    runs = suite_args(rest, own.quick)
+    for n, args in runs.items():  # every suite's options checked before the first runs (an error exits 2 here, not an hour in)
+        importlib.import_module(SUITES[n]).parse_args(args)
     rc = 0
-    for n in names:
-        rc |= int(importlib.import_module(SUITES[n]).main(rest) or 0)
+    for n, args in runs.items():
+        rc |= int(importlib.import_module(SUITES[n]).main(args) or 0)
     return rc
 
 

@@ -16,7 +16,8 @@ is also given as a ratio to DOP853 at rtol 1e-12 on the same case in the same
 run.  A kernel micro-benchmark gives ns per splitting step (torque-free, gravity
 gradient with the Kepler orbit inside the kernel or from a Python ``r(t)``, and
 the heavy top's own splitting).  Writes ``bench-attitude.md`` and ``bench-attitude.png`` into
-``--out`` (default ``docs``).
+``--out`` (default ``bench-out`` in the current directory; docs/bench-attitude.* are made with
+``--out docs``).
 """
 
 from __future__ import annotations
@@ -37,6 +38,7 @@ CASES = {
     "fast spin 300 rad/s": ((1.0, 2.0, 3.0), (1.0, 0.5, 300.0), 2.0, False),
 }
 Q0 = np.array([0.9, 0.1, -0.3, 0.3]) / np.linalg.norm([0.9, 0.1, -0.3, 0.3])
+DEFAULT_OUT = "bench-out"  #: default --out: not the repository's tracked docs/ (a run there would rewrite them)
 TARGET_NS_PER_STEP = 200.0  # docs/architecture.md, section 7: torqued propagation <= 200 ns per step
 
 
@@ -176,8 +178,9 @@ def _plot(results, path):
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     """The options of ``astrodyn bench attitude``, checked (argparse's usage error, exit 2)."""
     p = argparse.ArgumentParser(prog="astrodyn bench attitude", description=__doc__.split("\n\n")[0])
-    p.add_argument("--out", type=output_dir, default="docs",
-                   help="directory for bench-attitude.md and bench-attitude.png, created if missing (default: docs)")
+    p.add_argument("--out", type=output_dir, default=DEFAULT_OUT,
+                   help=f"directory for bench-attitude.md and bench-attitude.png, created if missing (default: "
+                        f"{DEFAULT_OUT}, in the current directory; the committed docs/ figures are made with --out docs)")
     p.add_argument("--quick", action="store_true", help="fewer steps/tolerances, no mpmath reference (a smoke run)")
     p.add_argument("--repeats", type=int_in(1, 20), default=None,
                    help="timing repeats, best kept, 1..20 (each repeats every case; default 5, quick 2)")

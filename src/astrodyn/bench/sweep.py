@@ -1,6 +1,6 @@
 """Sweep throughput: cases per second serially and on a Dask LocalCluster of 1 and 2 workers.
 
-    python -m astrodyn.bench.sweep [--repeat 2] [--out docs/bench-sweep.md]
+    python -m astrodyn.bench.sweep [--repeat 2] [--quick] [--out docs/bench-sweep.md]
 
 Two scenes: ``configs/demo.toml`` (three bodies, orbit and attitude, 93 min at 1 Hz,
 one body with J2: about 0.3 s a case) dispersed in the ISS's eccentricity and the
@@ -55,6 +55,7 @@ SCENES = {
     "orbit-only": (ORBIT_ONLY, _ORBIT_VARY, 200, 1),
     "orbit-only, --chunk 10": (ORBIT_ONLY, _ORBIT_VARY, 200, 10),
 }
+QUICK_CASES_MIN = 4  #: fewest cases of a scene with --quick (a tenth of its cases otherwise)
 
 
 def measure(config: Path, varies: list[str], n: int, workers: int, chunk: int = 1) -> dict:
@@ -86,6 +87,8 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     ap.add_argument("--repeat", type=int_in(1, 10), default=2,
                     help="runs of each configuration, best kept, 1..10 (each starts its Dask clusters; default 2)")
     ap.add_argument("--out", default=None, type=output_file, help="Markdown file for the table (default: print only)")
+    ap.add_argument("--quick", action="store_true",
+                    help=f"a smoke run: a tenth of the cases (at least {QUICK_CASES_MIN}) and one run of each configuration")
     return ap.parse_args(argv)
 
 
@@ -93,9 +96,11 @@ def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
     from astrodyn.scenario.catalogue import config_path
 
+    repeat = 1 if args.quick else args.repeat
     results: dict[tuple[str, int], dict] = {}
     with tempfile.TemporaryDirectory() as tmp:
         for scene, (text, varies, n, chunk) in SCENES.items():
+            n = max(QUICK_CASES_MIN, n // 10) if args.quick else n
             if text is None:
                 config = config_path("demo")
             else:
@@ -103,7 +108,7 @@ def main(argv: list[str] | None = None) -> int:
                 config.write_text(text)
             for workers in (0, 1, 2):
                 best = None
-                for _ in range(args.repeat):
+                for _ in range(repeat):
                     r = measure(config, varies, n, workers, chunk)
                     if best is None or r["cases_per_s"] > best["cases_per_s"]:
                         best = r
@@ -113,9 +118,9 @@ def main(argv: list[str] | None = None) -> int:
                       file=sys.stderr, flush=True)
     lines = [
         "# Sweep throughput (`astrodyn sweep`)", "",
-        f"Measured with `python -m astrodyn.bench.sweep --repeat {args.repeat}` on {platform.machine()} "
-        f"({os.cpu_count()} logical CPUs, shared with other users: load average "
-        f"{', '.join(f'{x:.1f}' for x in os.getloadavg())} at the end), best of {args.repeat} runs.",
+        f"Measured with `python -m astrodyn.bench.sweep {'--quick' if args.quick else f'--repeat {repeat}'}` on "
+        f"{platform.machine()} ({os.cpu_count()} logical CPUs, shared with other users: load average "
+        f"{', '.join(f'{x:.1f}' for x in os.getloadavg())} at the end), best of {repeat} runs.",
         "Rates are n / wall time on a warmed-up cluster (started, and every worker has run cases so "
         "imports and the numba cache are loaded; that start-up + warm-up time is listed separately).  Serial = `--workers 0` (in this process, "
         "numba may use both cores for the vectorized kernels); 1 and 2 = Dask LocalCluster worker "

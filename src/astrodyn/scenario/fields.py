@@ -23,7 +23,8 @@ import numpy as np
 from astrodyn.messages import NAME_PATTERN
 
 __all__ = ["QUAT_TOL", "unit_quaternion", "ScenarioError", "Ctx", "Table", "MISSING", "MAX_STRING", "MAGNITUDE_MAX", "MAGNITUDE_MIN", "QUANTITY_KINDS",
-           "jsonable", "show", "short_key", "MAX_SHOWN_DEPTH", "did_you_mean", "units", "parse_quantity_string", "quantity", "vector", "check",
+           "jsonable", "show", "short_key", "MAX_SHOWN_DEPTH", "did_you_mean", "units", "KIND_UNITS", "UNIT_WORDS", "unit_text", "unknown_unit",
+           "parse_quantity_string", "quantity", "vector", "check",
            "field_name", "choice", "boolean", "integer", "string"]
 
 MAX_STRING = 256  #: longest accepted quantity / epoch string
@@ -213,15 +214,98 @@ QUANTITY_KINDS: dict[str, tuple[str, str]] = {
 }
 
 
+#: Common unit symbols of each kind, shown when a unit is not known (every one parses with
+#: astropy to that kind; any other astropy unit of the kind is accepted too).
+KIND_UNITS: dict[str, tuple[str, ...]] = {
+    "length": ("m", "km", "mm", "au"),
+    "angle": ("rad", "deg", "arcmin", "arcsec", "°"),
+    "time": ("s", "ms", "min", "h", "d", "yr"),
+    "frequency": ("Hz", "kHz", "1/s"),
+    "speed": ("m/s", "km/s", "km/h"),
+    "angular_velocity": ("rad/s", "deg/s", "rpm"),
+    "gm": ("m3/s2", "km3/s2"),
+    "inertia": ("kg m2", "g cm2"),
+    "angular_momentum": ("kg m2/s", "N m s"),
+    "mass": ("kg", "g"),
+    "acceleration": ("m/s2", "km/s2"),
+    "torque": ("N m", "mN m"),
+    "force": ("N", "mN", "kN"),
+    "linear_density": ("kg/m", "g/m"),
+    "bending_stiffness": ("N m2",),
+    "rotational_stiffness": ("N m/rad", "N m/deg"),
+    "rotational_damping": ("N m s/rad",),
+    "bytes": ("byte", "kB", "MB", "GB", "KiB", "MiB", "GiB"),
+    "dimensionless": (),
+}
+
+#: English unit words astropy does not take, each replaced by the unit it names before a
+#: quantity string is parsed: ``"93 minutes"``, ``"5580 sec"``, ``"51.64 degrees"``,
+#: ``"0.06 deg/sec"``, ``"7.5 km per s"``.  Whole words only, in any letter case (``Minutes``);
+#: only words with one meaning are here (the singular long names, ``minute``, ``degree``, are
+#: astropy's own).  Unit *symbols* keep astropy's case-sensitive SI meaning (``mm`` millimetre,
+#: ``Mm`` megametre, ``MB`` megabyte, ``mb`` millibarn): ``"6795 KM"`` is refused with the hint
+#: ``did you mean "km"?``, never guessed.
+UNIT_WORDS: dict[str, str] = {
+    "sec": "s", "secs": "s", "second": "s", "seconds": "s",
+    "mins": "min", "minute": "min", "minutes": "min",
+    "hrs": "h", "hour": "h", "hours": "h",
+    "day": "d", "days": "d",
+    "degs": "deg", "degree": "deg", "degrees": "deg",
+    "radian": "rad", "radians": "rad",
+    "meter": "m", "meters": "m", "metre": "m", "metres": "m",
+    "kilometer": "km", "kilometers": "km", "kilometre": "km", "kilometres": "km",
+    "kilogram": "kg", "kilograms": "kg", "gram": "g", "grams": "g",
+    "newton": "N", "newtons": "N",
+    "byte": "byte", "bytes": "byte",
+    "per": "/",
+}
+
+_WORD = re.compile(r"[A-Za-z]+")
+_LEADING_NUMBER = re.compile(r"^\s*[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?\s*")
+
+
+def unit_text(text: str) -> str:
+    """``text`` with the English unit words of :data:`UNIT_WORDS` replaced by astropy's units
+    (``"0.06 deg/sec"`` -> ``"0.06 deg/s"``, ``"7 km per s"`` -> ``"7 km / s"``)."""
+    return _WORD.sub(lambda m: f" {UNIT_WORDS[m.group().lower()]} " if m.group().lower() in UNIT_WORDS else m.group(), text)
+
+
+def unknown_unit(text: str, kind: str) -> str:
+    """Why the unit of the quantity string ``text`` is not one: the unknown word, a hint when it
+    differs from a unit of ``kind`` only in letter case, and the units of ``kind`` to use."""
+    u = units()
+    rest = _LEADING_NUMBER.sub("", text, count=1)
+    bad = []
+    for word in _WORD.findall(unit_text(rest)):
+        try:
+            u.Unit(word, parse_strict="raise")
+        except Exception:  # astropy raises ValueError (and others) for an unknown name
+            bad.append(word)
+    shown = f"unknown unit {json.dumps(bad[0] if bad else rest.strip(), ensure_ascii=False)}"
+    names = KIND_UNITS[kind]
+    same = [n for n in names if bad and n.lower() == bad[0].lower()]
+    if same:
+        shown += f' (did you mean "{same[0]}"? unit symbols are case-sensitive)'
+    if not names:
+        return f"{shown}; expected a plain number"
+    si = u.Unit(QUANTITY_KINDS[kind][0])
+    words = [w for w, to in UNIT_WORDS.items() if to != "/" and u.Unit(to).is_equivalent(si)]
+    return (f"{shown}; accepted: {', '.join(names)}" + (f"; the words {', '.join(words)}" if words else "")
+            + "; or any other astropy unit of that kind")
+
+
 @functools.lru_cache(maxsize=4096)
 def parse_quantity_string(text: str, kind: str) -> float | str:
-    """SI value of a quantity string, or an error description (str)."""
+    """SI value of a quantity string (an astropy quantity, English unit words of
+    :data:`UNIT_WORDS` allowed), or an error description (str): ``"unparsable"``, an unknown
+    unit (``"unknown unit ..."``, :func:`unknown_unit`), a unit of another kind (``"a quantity
+    in kg"``) or ``"not a scalar"``."""
     u = units()
     unit = u.Unit(QUANTITY_KINDS[kind][0]) if QUANTITY_KINDS[kind][0] else u.dimensionless_unscaled
     try:
-        q = u.Quantity(text)
+        q = u.Quantity(unit_text(text))
     except Exception:  # astropy raises ValueError, TypeError, UnitsError... on garbage
-        return "unparsable"
+        return unknown_unit(text, kind) if _LEADING_NUMBER.match(text) else "unparsable"
     try:
         with np.errstate(over="ignore", invalid="ignore"):  # an overflow is reported as "not finite" by the caller
             value = q.to_value(unit)
@@ -247,7 +331,7 @@ def quantity(ctx: Ctx, value: Any, kind: str, path: str) -> float:
             raise ctx.error(path, f"{desc} (at most {MAX_STRING} characters)", value)
         parsed = parse_quantity_string(value.strip(), kind)
         if isinstance(parsed, str):
-            raise ctx.error(path, desc, value)
+            raise ctx.error(path, f"{desc} ({parsed})" if parsed.startswith("unknown unit") else desc, value)
         x = parsed
     else:
         raise ctx.error(path, desc, value)

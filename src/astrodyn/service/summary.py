@@ -29,7 +29,7 @@ from astrodyn.messages import ACTUATED_MODEL, ATTITUDE_PROCESS_KINDS, MODEL_STAT
 from astrodyn.scenario import Scenario, plan as make_plan
 from astrodyn.scenario.planning import counted, state_kinds_text
 
-__all__ = ["file_summary", "propagator_rows", "print_summary", "FileRows", "TWO_BODY_KEYS"]
+__all__ = ["file_summary", "propagator_rows", "print_summary", "table_lines", "FileRows", "TWO_BODY_KEYS"]
 
 #: The names of the two-body energy and |h| deviations (relative to mu/|r0| and |h0|) of an
 #: orbit: ``TWO_BODY_KEYS[True]`` for a model that conserves them (Kepler; an actuated orbit
@@ -267,8 +267,7 @@ def print_summary(result: dict, rows: list[dict], scenario: Scenario, max_bodies
               + (f" and {read_back['corrupt_chunks']} corrupt chunks" if read_back.get("corrupt_chunks") else "")
               + "; the states counted here and what load / analyze / export give leave them out"
               + (f"; e.g. {read_back['examples'][0]}" if read_back.get("examples") else ""))
-    print(f"  {'body':<14} {'kind':<9} {'model':<17} {'states':>7}  {'conserved quantity':<26} {'unit':<6} "
-          f"{'max drift':>9}  relative to")
+    table = [_TABLE_HEADER]
     shown = rows if len(rows) <= max_bodies else rows[: max_bodies - 5]
     for r in shown:
         first = True
@@ -278,24 +277,48 @@ def print_summary(result: dict, rows: list[dict], scenario: Scenario, max_bodies
                 continue
             model = r.get(f"{kind}_model") or "-"
             for k, inv in enumerate(invs):
-                lead = (f"  {r['body'] if first else '':<14} {kind if k == 0 else '':<9} {model if k == 0 else '':<17} "
-                        f"{r.get(f'{kind}_states', 0) if k == 0 else '':>7}")
                 drift = _fmt(inv["drift"]) if inv["conserved"] else "-"
-                print(f"{lead}  {inv['name']:<26} {inv['unit']:<6} {drift:>9}  {inv['scale'] if inv['conserved'] else ''}")
+                table.append((r["body"] if first else "", kind if k == 0 else "", model if k == 0 else "",
+                              r.get(f"{kind}_states", 0) if k == 0 else "", inv["name"], inv["unit"], drift,
+                              inv["scale"] if inv["conserved"] else ""))
                 first = False
         if r.get("crosscheck_max_dr") is not None:
-            print(f"  {'':<14} {'x-check':<9} {'rebound-ias15':<17} {r.get('crosscheck_states', 0):>7}  "
-                  f"{'max |r - r_REBOUND|':<26} {'m':<6} {_fmt(r['crosscheck_max_dr'], '.2e'):>9}  absolute")
+            table.append(("", "x-check", "rebound-ias15", r.get("crosscheck_states", 0), "max |r - r_REBOUND|", "m",
+                          _fmt(r["crosscheck_max_dr"], ".2e"), "absolute"))
+    worst: dict[tuple, float] = {}
     if len(rows) > len(shown):
-        print(f"  ... {counted(len(rows) - len(shown), 'more body', 'more bodies')} (all in the --json summary); "
-              f"worst drift per quantity:")
-        worst: dict[tuple, float] = {}
         for r in rows:
             for kind in ("orbit", "attitude"):
                 for inv in r.get(f"{kind}_invariants") or []:
                     if inv["conserved"]:
                         key = (kind, r.get(f"{kind}_model"), inv["name"], inv["unit"], inv["scale"])
                         worst[key] = max(worst.get(key, 0.0), inv["drift"])
-        for (kind, model, name, unit, scale), d in worst.items():
-            print(f"  {'(all)':<14} {kind:<9} {model or '-':<17} {'':>7}  {name:<26} {unit:<6} {_fmt(d):>9}  {scale}")
+    tail = [("(all)", kind, model or "-", "", name, unit, _fmt(d), scale)
+            for (kind, model, name, unit, scale), d in worst.items()]
+    lines = table_lines([*table, *tail])
+    print("\n".join(lines[:len(table)]))
+    if len(rows) > len(shown):
+        print(f"  ... {counted(len(rows) - len(shown), 'more body', 'more bodies')} (all in the --json summary); "
+              f"worst drift per quantity:")
+        print("\n".join(lines[len(table):]))
 
+
+#: The columns of the run summary table: (header, least width, alignment) and the gap before
+#: each; a longer cell (a body name of 15+ characters, a long quantity name) widens its column.
+_TABLE_COLUMNS = (("body", 14, "<", "  "), ("kind", 9, "<", " "), ("model", 17, "<", " "), ("states", 7, ">", " "),
+                  ("conserved quantity", 26, "<", "  "), ("unit", 6, "<", " "), ("max drift", 9, ">", " "),
+                  ("relative to", 0, "<", "  "))
+_TABLE_HEADER = tuple(c[0] for c in _TABLE_COLUMNS)
+
+
+def table_lines(cells: list[tuple]) -> list[str]:
+    """The lines of the run summary table of ``cells`` (one tuple of 8 cells per line, the
+    header first): each column as wide as its widest cell (at least its least width), so
+    every line's columns start at the same offset; no trailing blanks."""
+    texts = [[str(c) for c in row] for row in cells]
+    widths = [max([least, *(len(t[j]) for t in texts)]) for j, (_, least, _, _) in enumerate(_TABLE_COLUMNS)]
+    out = []
+    for t in texts:
+        line = "".join(f"{gap}{cell:{align}{width}}" for cell, width, (_, _, align, gap) in zip(t, widths, _TABLE_COLUMNS))
+        out.append(line.rstrip())
+    return out
