@@ -114,6 +114,7 @@ __all__ = [
     "local_port_problem",
     "AliveWatcher",
     "Heartbeat",
+    "HEARTBEAT_PERIOD_S",
     "HeartbeatMonitor",
     "ControlRequest",
     "ControlServer",
@@ -847,16 +848,20 @@ class AliveWatcher(_Declared):
 # --------------------------------------------------------------------------- heartbeats
 
 
+#: Seconds between two heartbeats of a process (:class:`Heartbeat`): at most one per period.
+HEARTBEAT_PERIOD_S = 0.5
+
+
 class Heartbeat(_Declared):
     """Application heartbeat: call :meth:`beat` from the process's main loop.
 
-    At most one message per ``period_s`` is sent on ``@heartbeat/<process>`` (JSON: process,
+    At most one message per ``period_s`` (:data:`HEARTBEAT_PERIOD_S`) is sent on ``@heartbeat/<process>`` (JSON: process,
     wall-clock ``time_ns``, a counter ``n`` and any progress fields given, e.g. sim ``t``).
     Because it is driven by the application loop, a hung loop stops the heartbeat even
     though the liveliness token stays alive.
     """
 
-    def __init__(self, session: zenoh.Session, scenario: str, process: str, period_s: float = 0.5, *,
+    def __init__(self, session: zenoh.Session, scenario: str, process: str, period_s: float = HEARTBEAT_PERIOD_S, *,
                  signer: auth.Signer | None = None):
         self.process = process
         self.key = heartbeat_key(scenario, process)
@@ -1092,6 +1097,14 @@ class ControlServer(_Declared):
     it in its attachment is answered with an error naming the verb and never reaches
     ``poll()``; ``rejected`` counts such queries per verb.  ``token=None`` serves every
     query (``--open-control``, or a supervisor's private queryables).
+
+    ``answer_unknown``: also answer a query for any other verb of the scenario
+    (``@control/<verb>``) with an error naming the verbs served (``{"error": "seek: unknown
+    control verb; this process answers status, pause, ..."}``), never passed to ``poll()``;
+    without it such a query finds no queryable and its sender gets no reply at all
+    (:func:`send_control` returns ``[]``).  None (the default): when ``verbs`` holds every
+    one of :data:`CONTROL_VERBS`, i.e. for the process that runs the scenario (``serve``,
+    ``replay``), not for one that serves a verb or two beside it (the logger's ``stop``).
     """
 
     def __init__(
@@ -1102,17 +1115,26 @@ class ControlServer(_Declared):
         extra_keys: Mapping[str, str] | None = None,
         *,
         token: str | None = None,
+        answer_unknown: bool | None = None,
     ):
         self.token = token
         self.rejected: dict[str, int] = {}
-        keys = {messages.control_key(scenario, verb): verb for verb in verbs}
+        self.verbs = tuple(verbs)
+        keys = {messages.control_key(scenario, verb): verb for verb in self.verbs}
         keys.update(extra_keys or {})
         self._queryables = [
             (key, verb, session.declare_queryable(key, zenoh.handlers.FifoChannel(256)))
             for key, verb in keys.items()
         ]
+        if answer_unknown is None:
+            answer_unknown = set(CONTROL_VERBS) <= set(self.verbs)
+        self._any_verb = None  # a queryable on @control/*: a verb this server lacks gets an error, not silence
+        if answer_unknown:
+            self._any_verb = session.declare_queryable(messages.control_key(scenario, "x").rsplit("/", 1)[0] + "/*",
+                                                       zenoh.handlers.FifoChannel(256))
 
     def poll(self) -> list[ControlRequest]:
+        self._answer_unknown_verbs()
         requests = []
         for key, verb, queryable in self._queryables:
             while (query := queryable.try_recv()) is not None:
@@ -1132,9 +1154,26 @@ class ControlServer(_Declared):
                 requests.append(ControlRequest(verb, args, key, query))
         return requests
 
+    def _answer_unknown_verbs(self) -> None:
+        """Answer each pending query on ``@control/*`` for a verb this server does not serve
+        with an error naming the verbs it does; drop the others unanswered (a served verb is
+        answered by its own queryable; a wildcard query names no verb)."""
+        if self._any_verb is None:
+            return
+        while (query := self._any_verb.try_recv()) is not None:
+            verb = str(query.key_expr).rsplit("/", 1)[-1]
+            if verb not in self.verbs and "*" not in verb and "$" not in verb:
+                shown = verb if len(verb) <= 40 else verb[:37] + "..."
+                with contextlib.suppress(Exception):  # the querier may be gone: never the server's concern
+                    query.reply_err(json.dumps({"error": f"{shown}: unknown control verb; this process answers "
+                                                         f"{', '.join(self.verbs)}"}))
+            query.drop()
+
     def close(self) -> None:
         for _, _, queryable in self._queryables:
             queryable.undeclare()
+        if self._any_verb is not None:
+            self._any_verb.undeclare()
 
 
 class SchemaServer(_Declared):
@@ -1192,15 +1231,30 @@ def query_json(
 
 def send_control(
     session: zenoh.Session, scenario: str, verb: str, args: Mapping[str, Any] | None = None,
-    timeout_s: float = 5.0, token: str | None = None,
+    timeout_s: float = 5.0, token: str | None = None, *, require_reply: bool = False,
 ) -> list[dict]:
-    """Send a control verb (``status``, ``pause``, ``resume``, ``rate``, ``stop``) to a scenario.
+    """Send a control verb (``status``, ``pause``, ``resume``, ``rate``, ``stop``; ``seek`` of
+    ``replay``, ``fault`` of a closed-loop ``serve``) to a scenario.
 
-    ``rate`` takes ``{"factor": 2.0}``.  Returns every answering process's JSON reply.
+    ``rate`` takes ``{"factor": 2.0}``.  Returns every answering process's JSON reply, a
+    list: one dict per process that answered within ``timeout_s`` seconds (usually one:
+    ``serve`` or ``replay``).  A refusal is a reply too: ``{"error": "..."}`` names what is
+    wrong (a bad argument, a missing or wrong token: ``...unauthorised...``, a verb the
+    process does not have: ``...unknown control verb; this process answers status, ...``).
     ``token``: the run's control token (printed by ``serve``, stored in its 0600 token
-    file); a server that requires one answers ``{"error": "...unauthorised..."}`` without it.
+    file).
+
+    ``[]`` means that nothing answered: no process of ``scenario`` is reachable from
+    ``session`` (a wrong hub endpoint or scenario name, a run that has ended) or none
+    answered within ``timeout_s``.  With ``require_reply=True`` that is a :class:`BusError`
+    naming the scenario, the verb and what to check, instead of ``[]``.
     """
-    return query_json(session, messages.control_key(scenario, verb), args, timeout_s, token=token)
+    replies = query_json(session, messages.control_key(scenario, verb), args, timeout_s, token=token)
+    if not replies and require_reply:
+        raise BusError(f"control verb {verb!r}: no process of scenario {scenario!r} answered within {timeout_s:g} s "
+                       f"on {messages.control_key(scenario, verb)}; check the hub endpoint the session connects to "
+                       f"(the \"hub\" of serve's first stdout line) and the scenario name, and that the run still goes on")
+    return replies
 
 
 # --------------------------------------------------------------------------- consumers

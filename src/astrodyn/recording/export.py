@@ -39,7 +39,9 @@ What each format writes (one file per channel or body, named after the body):
 ``aem1``     the same attitude ephemeris as ADM version 1.0 (CCSDS 504.0-B-1) for readers
              that know only version 1: ``ATTITUDE_DIR = A2B``, ``QUATERNION_TYPE = LAST``,
              plain QUATERNION lines (no rates: see :func:`write_aem`).
-``foxglove`` ``<file>.foxglove.mcap``: every recorded channel copied unchanged, plus a
+``foxglove`` ``<file>.foxglove.mcap``: every recorded channel copied unchanged (but the
+             ``foxglove/*`` channels of an input that is itself such an export: they
+             are made anew), plus a
              ``foxglove.FrameTransform`` JSON channel per body on ``foxglove/<body>/tf``
              (parent frame = the orbit frame, e.g. ``GCRF``, child = the body name).
              Translation in **km** (Foxglove's 3D panel works in float32 "metres": an
@@ -107,7 +109,7 @@ from astrodyn.signals import deferred_interrupts, interruptible
 __all__ = [
     "FORMATS", "FIELD_UNITS", "channel_file_stems", "column_units", "channel_header", "ExportError", "export", "write_csv", "write_parquet", "write_oem", "write_aem", "write_aem_v1",
     "write_foxglove", "ccsds_epochs", "parse_ccsds_epoch", "FRAME_TRANSFORM_SCHEMA", "SCENE_UPDATE_SCHEMA",
-    "SCENE_TOPIC", "MAX_LINE_POINTS", "MAX_SCENE_POINTS", "scene_updates", "line_indices", "main",
+    "SCENE_TOPIC", "FOXGLOVE_TOPICS", "MAX_LINE_POINTS", "MAX_SCENE_POINTS", "scene_updates", "line_indices", "main",
 ]
 
 FORMATS = ("csv", "parquet", "oem", "aem", "aem1", "foxglove")
@@ -710,6 +712,12 @@ def write_aem_v1(run: Run, out: Path) -> list[Path]:
 # ------------------------------------------------------------------------------ Foxglove
 
 
+#: Topics an export to Foxglove writes (:func:`write_foxglove`): ``foxglove/<body>/tf`` and
+#: :data:`SCENE_TOPIC`.  An input's channels under it (a ``.foxglove.mcap`` exported again)
+#: are not copied: they are made anew from its states.
+FOXGLOVE_TOPICS = "foxglove/"
+
+
 def frame_transforms(run: Run) -> list[tuple[int, str, bytes]]:
     """``(log_time, topic, payload)`` of the ``foxglove.FrameTransform`` messages, time-sorted.
 
@@ -749,7 +757,7 @@ def _body_frames(run: Run) -> list[tuple[str, str, str, np.ndarray, np.ndarray, 
                 have = np.isin(times, tr.log_time)
                 last = np.maximum.accumulate(np.where(have, np.arange(times.size), 0))
                 arr[:] = arr[last]
-        out.append((f"foxglove/{name}/tf", parent, child, times, pos, rot))
+        out.append((f"{FOXGLOVE_TOPICS}{name}/tf", parent, child, times, pos, rot))
     return out
 
 
@@ -821,7 +829,10 @@ def scene_updates(run: Run, max_line_points: int = MAX_LINE_POINTS,
 
 def write_foxglove(run: Run, out: Path, max_line_points: int = MAX_LINE_POINTS) -> list[Path]:
     """A Foxglove-ready copy of the file: every channel unchanged plus FrameTransform
-    channels and the SceneUpdate channel (see the module docstring)."""
+    channels and the SceneUpdate channel (see the module docstring).  The input's own
+    channels under :data:`FOXGLOVE_TOPICS` (it is an earlier export's output) are left out,
+    so each instant has one transform per body and the scene is written once, not again
+    beside the earlier export's."""
     from astrodyn.recording.stream import open_stream
 
     path = out / (Path(run.path).name.removesuffix(".mcap") + ".foxglove.mcap")
@@ -842,7 +853,8 @@ def write_foxglove(run: Run, out: Path, max_line_points: int = MAX_LINE_POINTS) 
     with open_stream(run.path) as stream, McapRecorder(path, run.scenario, epoch_ns=epoch_ns) as rec:
         registered: set[str] = set()
         seqs: dict[str, int] = {}
-        originals = ((m.log_time, m.topic, m.data, m) for m in stream.messages())
+        originals = ((m.log_time, m.topic, m.data, m) for m in stream.messages()
+                     if not m.topic.startswith(FOXGLOVE_TOPICS))  # made anew below
         extras = ((lt, topic, data, None) for lt, topic, data in tfs)
         for lt, topic, data, raw in heapq.merge(originals, extras, key=lambda x: x[0]):
             if topic not in registered:

@@ -5,8 +5,9 @@ Every process of a run is started from the installed package (``python -m ...``)
 from a path in the source tree, so a plain ``pip install .`` runs every command
 (docs/architecture.md, "Processes").  Each child gets its own session (a signal to the
 supervisor's terminal group does not reach it) and its stdout / stderr go to files in
-the supervisor's work directory; :meth:`Child.summary` reads the one-line JSON summary
-a process prints last.
+the supervisor's work directory, each stream kept within :data:`OUTPUT_CAP_BYTES` there
+(:class:`CappedOutput`); :meth:`Child.summary` reads the one-line JSON summary a process
+prints last.
 
 Fate sharing: no child outlives its supervisor by more than about 2 s, whatever kills the
 supervisor and whenever.  :class:`Child` hands every child the supervisor's PID
@@ -47,7 +48,7 @@ from astrodyn.signals import catch_job_control, suspended_s
 if TYPE_CHECKING:
     from astrodyn.scenario import Scenario
 
-__all__ = ["Child", "config_snapshot", "zenoh_config_snapshot", "child_bus_arguments", "ensure_open_file_limit", "MIN_OPEN_FILES", "wait_ready", "children_of", "logger_command", "propagator_command", "plant_command", "controller_argv", "start_controller", "share_fate_with_supervisor",
+__all__ = ["Child", "CappedOutput", "OUTPUT_CAP_BYTES", "config_snapshot", "zenoh_config_snapshot", "child_bus_arguments", "ensure_open_file_limit", "MIN_OPEN_FILES", "wait_ready", "children_of", "logger_command", "propagator_command", "plant_command", "controller_argv", "start_controller", "share_fate_with_supervisor",
            "stop_process", "stop_process_group", "work_directory", "SUPERVISOR_ENV", "ORPHAN_GRACE_S", "EXIT_ORPHANED", "LOGGED_WAIT_S",
            "MODEL_ENDED_EXIT", "DISK_FULL_EXIT", "OUT_IN_THE_WAY_EXIT", "StartError", "JobControl", "JOB_STOP_WAIT_S", "catches_signal", "is_stopped"]
 
@@ -379,11 +380,191 @@ def logger_report_on(beats, process: str) -> tuple[float | None, int | None]:
     return silent, first
 
 
+#: Bytes of one output stream (stdout or stderr) of a child kept on disk, in two files of at
+#: most half as much each (:class:`CappedOutput`): its newest output, what a failure quotes.
+OUTPUT_CAP_BYTES = 4 * 1024 * 1024
+#: Seconds between two looks at the size of the output files astrodyn's own processes write
+#: themselves (:class:`CappedOutput`, not piped).
+OUTPUT_POLL_S = 0.2
+#: Longest wait, once a piped child has ended, for the rest of its output to reach the file
+#: (a process it started may hold the pipe open after it).
+OUTPUT_SETTLE_S = 1.0
+
+
+class CappedOutput:
+    """One output stream (stdout or stderr) of a child, kept on disk within ``cap`` bytes:
+    ``path`` holds the newest output and ``path.1`` (:attr:`older`) the ``cap / 2`` bytes
+    before it; whatever came earlier is dropped (:attr:`dropped` bytes).  A chatty controller
+    (1 kB a tick at 100 Hz is 8.6 GB a day) thus never fills the disk that holds the
+    recording, and its last lines, which a failure quotes, are kept.
+
+    ``piped`` (a program that is not astrodyn's: a controller): the child writes into a pipe
+    that a thread of the supervisor drains at once into the files (a child is never held up
+    by a full pipe while its supervisor runs), so the cap holds to the byte.  Not piped
+    (astrodyn's own processes, which print little): the child writes the file itself,
+    appending (``O_APPEND``), so it leaves its last words there even when its supervisor is
+    gone; a thread of the supervisor looks at its size every :data:`OUTPUT_POLL_S` and, past
+    ``cap / 2``, moves the newest ``cap / 2`` bytes to ``path.1`` and empties ``path`` (what
+    the child writes during that move may be lost, and the file may pass ``cap / 2`` by what
+    the child writes in :data:`OUTPUT_POLL_S`).
+
+    Call :meth:`start` with the child's process once it is started, and :meth:`close` when
+    done with it."""
+
+    def __init__(self, path: Path, piped: bool, cap: int = OUTPUT_CAP_BYTES):
+        if cap < 2:
+            raise ValueError(f"cap: expected at least 2 bytes, got {cap}")
+        self.path = Path(path)
+        self.older = self.path.with_name(self.path.name + ".1")
+        self.piped = piped
+        self.half = cap // 2
+        self.dropped = 0  # bytes of output no longer on disk
+        self._lock = threading.Lock()
+        self._thread: threading.Thread | None = None
+        self._stopping = threading.Event()
+        self._proc: subprocess.Popen | None = None
+        if piped:
+            self._read_end, self.child_end = os.pipe()
+            with contextlib.suppress(OSError, AttributeError):  # Linux: room for 1 MB while the thread is busy
+                import fcntl
+
+                fcntl.fcntl(self.child_end, getattr(fcntl, "F_SETPIPE_SZ", 1031), 1 << 20)
+            try:
+                self._file = open(self.path, "wb", buffering=0)  # the drain thread closes it
+            except OSError:
+                os.close(self._read_end)
+                os.close(self.child_end)
+                raise
+            self._size = 0
+        else:
+            self.child_end = os.open(self.path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC | os.O_APPEND | os.O_CLOEXEC, 0o600)
+
+    def start(self, proc: subprocess.Popen) -> None:
+        """The child ``proc`` started with :attr:`child_end` as its stream: close this
+        process's copy of it and start the thread that keeps the files within the cap."""
+        self._proc = proc
+        os.close(self.child_end)
+        target = self._drain if self.piped else self._watch
+        self._thread = threading.Thread(target=target, name=f"astrodyn-output-{self.path.name}", daemon=True)
+        self._thread.start()
+
+    def abandon(self) -> None:
+        """The child could not be started: release what :meth:`__init__` opened."""
+        with contextlib.suppress(OSError):
+            os.close(self.child_end)
+        if self.piped:
+            with contextlib.suppress(OSError):
+                os.close(self._read_end)
+            self._file.close()
+
+    def _drain(self) -> None:
+        try:
+            while True:
+                try:
+                    chunk = os.read(self._read_end, 1 << 16)
+                except InterruptedError:
+                    continue
+                except OSError:
+                    break
+                if not chunk:
+                    break  # every writer has closed it: the child (and what it started) ended
+                self._keep(chunk)
+        finally:
+            with contextlib.suppress(OSError):
+                os.close(self._read_end)
+            with self._lock:
+                with contextlib.suppress(OSError):
+                    self._file.close()
+
+    def _keep(self, chunk: bytes) -> None:
+        """Append ``chunk`` to the newest file, moving it to :attr:`older` each time it holds
+        ``cap / 2`` bytes.  A file that cannot be written (the disk is full, the work directory
+        gone) drops what it cannot take: the child must never wait for it."""
+        with self._lock:
+            while chunk:
+                room = self.half - self._size
+                part, chunk = chunk[:room], chunk[room:]
+                try:
+                    if not self._file.closed:
+                        self._file.write(part)
+                except OSError:
+                    self.dropped += len(part)
+                self._size += len(part)
+                if self._size >= self.half:
+                    self._rotate_piped()
+
+    def _rotate_piped(self) -> None:
+        if self.older.exists():
+            self.dropped += self.half
+        try:
+            self._file.close()
+            os.replace(self.path, self.older)
+            self._file = open(self.path, "wb", buffering=0)  # closed by the drain thread
+        except OSError:
+            pass  # the work directory is gone: the child is being stopped; what follows is dropped
+        self._size = 0
+
+    def _watch(self) -> None:
+        while not self._stopping.wait(OUTPUT_POLL_S):
+            self._trim_file()
+            if self._proc is not None and self._proc.poll() is not None:
+                self._trim_file()
+                return
+
+    def _trim_file(self) -> None:
+        """Not piped: past ``cap / 2``, move the newest ``cap / 2`` bytes of the file the
+        child appends to into :attr:`older` and empty the file."""
+        try:
+            if os.stat(self.path).st_size <= self.half:
+                return
+            with self._lock, open(self.path, "rb+") as f:  # a reader sees both files before or after
+                size = os.fstat(f.fileno()).st_size
+                f.seek(size - self.half)
+                tail = f.read(self.half)
+                tmp = self.older.with_name(self.older.name + ".tmp")
+                tmp.write_bytes(tail)
+                os.replace(tmp, self.older)
+                f.truncate(0)
+            self.dropped += size - len(tail)
+        except OSError:
+            pass
+
+    def settle(self, timeout: float = OUTPUT_SETTLE_S) -> None:
+        """Piped, once the child has ended: wait (at most ``timeout`` s) until the drain
+        thread has written all it will get, so the files end with the child's last words."""
+        if self.piped and self._thread is not None and self._proc is not None and self._proc.poll() is not None:
+            self._thread.join(timeout)
+
+    def tail(self, max_bytes: int | None = None) -> bytes:
+        """The newest output on disk (``older`` then ``path``), its last ``max_bytes`` only
+        if given."""
+        self.settle()
+        with self._lock:
+            parts = []
+            for path in (self.older, self.path):
+                try:
+                    parts.append(path.read_bytes())
+                except OSError:
+                    continue
+        data = b"".join(parts)
+        return data if max_bytes is None else data[-max_bytes:]
+
+    def close(self) -> None:
+        """Stop watching (the files stay): a piped stream's thread ends when every writer has
+        closed the pipe; it is waited for a moment only (a process the child started may
+        still hold it, and the thread drains it meanwhile)."""
+        self._stopping.set()
+        if self._thread is not None:
+            self._thread.join(OUTPUT_SETTLE_S if self.piped else 1.0)
+
+
 class Child:
     """One child process: ``argv`` started in its own session, stdout / stderr to
-    ``log_dir/<name>.out|.err``; ``env`` adds variables to the supervisor's environment
+    ``log_dir/<name>.out|.err``, each kept within :data:`OUTPUT_CAP_BYTES` on disk
+    (:class:`CappedOutput`); ``env`` adds variables to the supervisor's environment
     (e.g. :data:`astrodyn.auth.SECRET_ENV`, the path of the run secret).  ``foreign``: a
-    program that is not astrodyn's (a controller): the kernel ends it with the supervisor."""
+    program that is not astrodyn's (a controller): the kernel ends it with the supervisor,
+    and its output goes through a pipe the supervisor drains."""
 
     def __init__(self, name: str, argv: list[str], log_dir: Path, env: dict[str, str] | None = None,
                  foreign: bool = False):
@@ -391,11 +572,23 @@ class Child:
         self.foreign = foreign
         self.stdout_path = log_dir / f"{name}.out"
         self.stderr_path = log_dir / f"{name}.err"
-        self._out = open(self.stdout_path, "wb")
-        self._err = open(self.stderr_path, "wb")
-        self.proc = subprocess.Popen(argv, stdout=self._out, stderr=self._err, stdin=subprocess.DEVNULL,
-                                     start_new_session=True, preexec_fn=_die_with_parent if foreign else None,
-                                     env={**os.environ, **(env or {}), SUPERVISOR_ENV: str(os.getpid())})
+        self.stdout = CappedOutput(self.stdout_path, piped=foreign)
+        try:
+            self.stderr = CappedOutput(self.stderr_path, piped=foreign)
+        except BaseException:
+            self.stdout.abandon()
+            raise
+        try:
+            self.proc = subprocess.Popen(argv, stdout=self.stdout.child_end, stderr=self.stderr.child_end,
+                                         stdin=subprocess.DEVNULL, start_new_session=True,
+                                         preexec_fn=_die_with_parent if foreign else None,
+                                         env={**os.environ, **(env or {}), SUPERVISOR_ENV: str(os.getpid())})
+        except BaseException:
+            self.stdout.abandon()
+            self.stderr.abandon()
+            raise
+        self.stdout.start(self.proc)
+        self.stderr.start(self.proc)
         _STARTED.add(self)
         self.started = time.monotonic()
         self.started_listening: float | None = None  # the supervisor's listening clock at the start
@@ -527,16 +720,16 @@ class Child:
         return stop_process(self.proc, sig, timeout)
 
     def close(self) -> None:
-        self._out.close()
-        self._err.close()
+        self.stdout.close()
+        self.stderr.close()
+
+    def stdout_lines(self) -> list[str]:
+        """The lines of its stdout still on disk (the newest :data:`OUTPUT_CAP_BYTES`)."""
+        return self.stdout.tail().decode(errors="replace").splitlines()
 
     def summary(self) -> dict | None:
         """The one-line JSON summary the process printed last on stdout, if any."""
-        try:
-            lines = self.stdout_path.read_text(errors="replace").strip().splitlines()
-        except OSError:
-            return None
-        for line in reversed(lines):
+        for line in reversed(self.stdout_lines()):
             try:
                 obj = messages.parse_json(line)  # a controller's output is anything
             except ValueError:
@@ -546,14 +739,17 @@ class Child:
         return None
 
     def stderr_tail(self, n: int = 5) -> str:
-        try:
-            return "\n".join(self.stderr_path.read_text(errors="replace").strip().splitlines()[-n:])
-        except OSError:
-            return ""
+        """The last ``n`` lines of its stderr ("" if none)."""
+        text = self.stderr.tail(STDERR_TAIL_BYTES).decode(errors="replace")
+        return "\n".join(text.strip().splitlines()[-n:])
 
     def last_words(self, n: int = 3) -> str:
         """The last ``n`` lines of stderr, for a failure message ("no output on stderr" if none)."""
         return self.stderr_tail(n) or "no output on stderr"
+
+
+#: Bytes at the end of a child's stderr read for its last lines (:meth:`Child.stderr_tail`).
+STDERR_TAIL_BYTES = 64 * 1024
 
 
 #: Every :class:`Child` this process started (weakly held): :class:`JobControl` stops and

@@ -15,14 +15,22 @@ rate       ``{"factor": x}`` (1e-3..1e6, "inf")  the new status
 stop       --                                  the final summary once the file is finished
 fault      ``{"body", "fault", ...}``          closed loop only: a fault from the plant's next step
                                                (the keys of ``[[control.faults]]`` without ``t``;
-                                               docs/control.md); recorded as an event
+                                               docs/control.md); recorded as events: serve's
+                                               ``fault_requested`` (t: :meth:`Supervisor.sim_time_now`
+                                               of the plant) and the plant's ``fault`` (t: the step
+                                               it began)
 =========  ==================================  =============================================
+
+Any other verb of the scenario is answered with an error naming these
+(``{"error": "seek: unknown control verb; this process answers status, ..."}``).
 
 From Python::
 
+    from pathlib import Path
     from astrodyn import bus
-    with bus.open_session(connect=["tcp/127.0.0.1:7447"]) as s:
-        bus.send_control(s, "demo", "rate", {"factor": 50})
+    TOKEN = Path("out/.demo.mcap.control-token").read_text()  # serve's "control_token_file"
+    with bus.open_session(connect=["tcp/127.0.0.1:7447"]) as s:  # serve's "hub"
+        bus.send_control(s, "demo", "rate", {"factor": 50}, token=TOKEN, require_reply=True)  # BusError if none answers
 
 The supervisor forwards pause / resume / rate / stop to its propagators on the private key
 ``astrodyn/<scenario>/@command``; on ``stop`` the propagators end with their end-of-run
@@ -254,6 +262,27 @@ class Supervisor:
                 "t": min(ts) if ts else 0.0, "wall_s": round(time.monotonic() - self.started, 3),
                 "processes": procs, "failures": list(self.failures), "restarts": list(self.restarts)}
 
+    def sim_time_now(self, name: str) -> float:
+        """Serve's best estimate of the sim time process ``name`` is at now, s: the ``t`` of its
+        last heartbeat, advanced at the real-time factor that heartbeat states (``rate``) for
+        the wall time since it was sent (its ``time_ns``: serve's children run on its host), at
+        most one heartbeat period (:data:`astrodyn.bus.HEARTBEAT_PERIOD_S`: it beats that often
+        while it paces).  Not advanced when it does not pace at a finite rate: paused, waiting
+        for a controller (a lockstep plant), preparing, done, or ``inf``.  0.0 before its first
+        heartbeat.  Heartbeats are up to a period old, so at ``--rate 10`` the last one's ``t``
+        alone lags by up to 5 s of sim time (closedloop probe F13)."""
+        hb = self.beats.last.get(name, {})
+        t = hb.get("t")
+        if isinstance(t, bool) or not isinstance(t, (int, float)) or not math.isfinite(t):
+            return 0.0
+        rate, sent_ns = hb.get("rate"), hb.get("time_ns")
+        if (hb.get("paused") is not False or hb.get("waiting") or hb.get("preparing") or hb.get("done")
+                or isinstance(rate, bool) or not isinstance(rate, (int, float)) or not math.isfinite(rate)
+                or isinstance(sent_ns, bool) or not isinstance(sent_ns, int)):
+            return float(t)
+        age_s = min(max(0.0, (time.time_ns() - sent_ns) / 1e9), bus.HEARTBEAT_PERIOD_S)
+        return float(t) + age_s * float(rate)
+
     def handle(self, request: bus.ControlRequest) -> bool:
         """Answer one control request; True when it was ``stop``."""
         verb = request.verb
@@ -289,8 +318,11 @@ class Supervisor:
                 request.error(str(exc).removeprefix("fault: "))
                 return False
             self.command("fault", fault=request.args)
-            self.events.emit("fault_requested", self.status()["t"], json.dumps(
-                {"body": f.body, "fault": f.fault}, separators=(",", ":")))
+            self.beats.poll()
+            heard = self.beats.last.get("plant", {}).get("t")
+            self.events.emit("fault_requested", self.sim_time_now("plant"), json.dumps(
+                {"body": f.body, "fault": f.fault, "plant_t_heard": heard if isinstance(heard, (int, float)) else None,
+                 "begins": "at the plant's next step: its fault event gives the time"}, separators=(",", ":")))
             request.reply(self.status())
         elif verb == "stop":
             return True
@@ -507,11 +539,7 @@ class Supervisor:
             del self.finishing_sources[id(child)]
             if child.poll() != 0:
                 continue
-            try:
-                lines = child.stdout_path.read_text(errors="replace").splitlines()
-            except OSError:
-                continue
-            for line in lines:
+            for line in child.stdout_lines():
                 with contextlib.suppress(ValueError, TypeError, AttributeError):
                     out = json.loads(line).get("out")
                     if isinstance(out, str) and (lf := LoggerFile.of_ready_logger(out)) is not None:
