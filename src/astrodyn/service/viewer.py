@@ -972,7 +972,9 @@ class PlaybackBar:
         self.opened.set()
 
     def _send(self, verb: str, args: dict | None = None) -> dict:
-        replies = bus.send_control(self.session, self.scenario, verb, args, timeout_s=5.0, token=self.token)
+        # require_reply: a replay that has ended answers nothing, which is not a success
+        replies = bus.send_control(self.session, self.scenario, verb, args, timeout_s=5.0, token=self.token,
+                                   require_reply=True)
         reply = next((r for r in replies if isinstance(r, dict)), {})
         if "error" in reply:
             raise ValueError(str(reply["error"]))
