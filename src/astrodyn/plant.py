@@ -175,20 +175,10 @@ class PlantBody:
     def apply(self, cmd: dict, at: float | None = None) -> None:
         """Apply a decoded :class:`astrodyn.messages.Command` now, at simulated time ``at``
         (s; the command's own ``t`` when None), recorded as the impulse's time (raise CommandRefused)."""
+        why = self.refusal(cmd)
+        if why is not None:
+            raise CommandRefused(why)
         act = self.limits
-        if act is None:
-            raise CommandRefused(f"body {self.name} has no actuators (only sensors)")
-        lacks = (("torque", act.torque is None, "no torque actuator (actuators.torque)"),
-                 ("wheel_torque", self.wheels is None, "no reaction wheels"),
-                 ("dv", act.dv is None, "no impulsive dv capability (actuators.dv)"),
-                 ("thrust", act.thrust is None, "no thrusters (actuators.thrust)"))
-        for name, lacking, what in lacks:
-            if lacking and name in cmd:
-                raise CommandRefused(f"body {self.name} has {what}; it has {self.actuators_text()}")
-        if "wheel_torque" in cmd and len(cmd["wheel_torque"]) != self.wheels.n:
-            raise CommandRefused(f"wheel_torque: expected {self.wheels.n} values (one per wheel), got {len(cmd['wheel_torque'])}")
-        if "thrust" in cmd and cmd.get("frame", "inertial") == "body" and not self.has_attitude:
-            raise CommandRefused(f"thrust in body axes needs an attitude; body {self.name} has none")
         if "torque" in cmd:
             torque = np.asarray(cmd["torque"], dtype=np.float64)
             self.torque = np.minimum(np.maximum(torque, -act.torque), act.torque)  # np.clip, without its overhead
@@ -207,6 +197,26 @@ class PlantBody:
             self.step_dv_t = float(cmd["t"] if at is None else at)
         self.step_applied.append(command_id(cmd["sender"], cmd["seq"]))
         self.step_applied_ids.append((cmd["sender"], cmd["seq"]))
+
+    def refusal(self, cmd: dict) -> str | None:
+        """Why this body cannot apply the decoded command ``cmd`` at all, whenever it comes (an
+        actuator it does not have, one value per wheel not given, body-frame thrust without an
+        attitude); None when it can."""
+        act = self.limits
+        if act is None:
+            return f"body {self.name} has no actuators (only sensors)"
+        lacks = (("torque", act.torque is None, "no torque actuator (actuators.torque)"),
+                 ("wheel_torque", self.wheels is None, "no reaction wheels"),
+                 ("dv", act.dv is None, "no impulsive dv capability (actuators.dv)"),
+                 ("thrust", act.thrust is None, "no thrusters (actuators.thrust)"))
+        for name, lacking, what in lacks:
+            if lacking and name in cmd:
+                return f"body {self.name} has {what}; it has {self.actuators_text()}"
+        if "wheel_torque" in cmd and len(cmd["wheel_torque"]) != self.wheels.n:
+            return f"wheel_torque: expected {self.wheels.n} values (one per wheel), got {len(cmd['wheel_torque'])}"
+        if "thrust" in cmd and cmd.get("frame", "inertial") == "body" and not self.has_attitude:
+            return f"thrust in body axes needs an attitude; body {self.name} has none"
+        return None
 
     def actuators_text(self) -> str:
         """What this body can be commanded to do, with the command field of each and its

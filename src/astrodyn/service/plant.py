@@ -41,7 +41,10 @@ plant has published (its ``seq`` at most the last tick's), and once per controll
 answer to a tick the plant never sent (``unsent-tick``, e.g. a controller fooled by a forged
 ``@tick``), a second answer (``repeated-answer``) or one from another name
 (``unknown-controller``) is rejected.  Everything else is counted per reason (``rejected``
-in the end event and the summary, with examples), never applied, never fatal.
+in the end event and the summary, with examples), never applied, never fatal.  A sample
+that authenticates but is malformed, or commands a body that is not the plant's, is counted
+apart as its author's error (``controller_errors``: by author and reason in the summary),
+not among the rejected: what the run reports as an attack is what did not authenticate.
 
 Free mode (``control.mode = "free"``): nothing waits; the plant paces sim time at the
 scenario's real-time factor and applies what has arrived; commands whose time has passed
@@ -50,12 +53,15 @@ are applied at once and counted as ``late``.
 ``--commands REC.mcap``: no controllers; the commands recorded in REC are applied at the
 steps where REC's actuator states say they were, and the faults at the times REC's
 ``fault`` events say they began (the config's and those of serve's ``fault`` verb), which
-reproduces REC's states and sensor samples bit for bit.
+reproduces REC's states and sensor samples bit for bit, to the config's duration (past
+REC's last step the commands last applied stay held; ``astrodyn run`` checks REC first and
+says so, :func:`astrodyn.service.runner.check_command_recording`).
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import functools
 import gc
 import json
@@ -86,7 +92,8 @@ from astrodyn.service.propagator import (
 )
 from astrodyn.signals import catch_job_control, catch_stop_signals
 
-__all__ = ["main", "run_plant", "PlantLoop", "recorded_commands", "recorded_faults", "tick_payload", "encode_stamped",
+__all__ = ["main", "run_plant", "PlantLoop", "recorded_commands", "read_command_recording", "CommandRecording",
+           "recorded_faults", "tick_payload", "encode_stamped",
            "ControllerTimeout", "PROCESS"]
 
 PROCESS = "plant"
@@ -100,8 +107,13 @@ PROCESS = "plant"
 #: messages (tests/test_closed_loop.py).
 INTAKE_CAPACITY = 100_000
 MAX_EXAMPLES = 20
-#: Commands one body may hold for later times (more are refused).
+#: Commands one sender may have waiting for their time, per body (more are refused): a
+#: sender's flood of far-future commands fills its own allowance, not the others'.
 MAX_PENDING = 10_000
+#: Commands waiting for their time from all senders not in ``control.controllers`` together
+#: (free mode: token holders may command under any name); the controllers of
+#: ``control.controllers`` are held to MAX_PENDING alone, so that nobody else can lock them out.
+MAX_PENDING_UNLISTED = 100_000
 #: Lockstep round trips kept for the summary's percentiles.
 MAX_ROUND_TRIPS = 1_000_000
 #: Lockstep: wall seconds between puts of the current tick while the plant waits for answers.
@@ -162,6 +174,9 @@ class Intake:
         #: commands rejected here, by the sender they name (or the controller whose envelope
         #: held them): they arrived, and count toward what that sender announced (lockstep)
         self.rejected_from: list[str] = []
+        #: authenticated samples rejected for what they say, by their author and reason (:meth:`reject`)
+        self.controller_errors: dict[str, dict[str, int]] = {}
+        self.controller_error_examples: list[str] = []
 
     def callback(self, sample) -> None:  # Zenoh's thread: copy out, never block
         key = str(sample.key_expr)
@@ -190,10 +205,24 @@ class Intake:
             while self.oversized_examples and len(self.examples) < MAX_EXAMPLES:
                 self.examples.append(self.oversized_examples.pop(0))
 
-    def reject(self, reason: str, detail: str, sender: str | None = None) -> None:
-        self.rejected[reason] = self.rejected.get(reason, 0) + 1
-        if len(self.examples) < MAX_EXAMPLES:
-            self.examples.append(f"{reason}: {detail[:200]}")
+    def reject(self, reason: str, detail: str, sender: str | None = None, author: str | None = None) -> None:
+        """Count a rejected sample under ``reason``.  ``sender``: the controller a rejected
+        command counts toward (lockstep).  ``author``: for a sample that authenticated (the
+        run secret, signed by ``author``, or the control token, ``author`` then the sender it
+        names), rejected for what it says: a controller's error, counted in
+        ``controller_errors`` (not among the rejected, which are what did not come from the
+        run: an attack)."""
+        if author is not None:
+            if author not in self.controller_errors and len(self.controller_errors) >= MAX_SENDERS:
+                author = "(more controllers)"
+            counts = self.controller_errors.setdefault(author, {})
+            counts[reason] = counts.get(reason, 0) + 1
+            if len(self.controller_error_examples) < MAX_EXAMPLES:
+                self.controller_error_examples.append(f"{author}: {reason}: {detail[:200]}")
+        else:
+            self.rejected[reason] = self.rejected.get(reason, 0) + 1
+            if len(self.examples) < MAX_EXAMPLES:
+                self.examples.append(f"{reason}: {detail[:200]}")
         if sender is not None:
             self.rejected_from.append(sender)
 
@@ -209,7 +238,7 @@ class Intake:
         try:
             items = messages.decode_batch(payload)
         except messages.MessageError as exc:
-            self.reject("malformed", f"{key}: {exc}")
+            self.reject("malformed", f"{key}: {exc}", author=signer if signer is not True else controller)
             return []
         out = []
         for entry_key, entry in items:
@@ -262,8 +291,9 @@ class Intake:
             msg = messages.decode(payload, kind)
         except messages.MessageError as exc:
             is_command = who is not None or key.endswith("/command")
-            self.reject("malformed", f"{key}: {exc}",
-                        (envelope_of or signer or _named_sender(payload)) if is_command else None)
+            author = envelope_of or signer or _named_sender(payload)
+            self.reject("malformed", f"{key}: {exc}", author if is_command else None,
+                        author=author or "(a control-token holder, no sender named)")
             return None
         return self._judged(kind, who, key, msg, signer)
 
@@ -273,7 +303,8 @@ class Intake:
                         signer if kind == "command" else None)
             return None
         if kind == "command" and who not in self.bodies:
-            self.reject("not-actuated", f"{key}: body {who!r} is not one of the plant's bodies", msg["sender"])
+            self.reject("not-actuated", f"{key}: body {who!r} is not one of the plant's bodies", msg["sender"],
+                        author=signer or msg["sender"])
             return None
         if kind == "done" and who != msg["sender"]:
             self.reject("impersonation", f"{key}: answer of {msg['sender']!r} on {who!r}'s key")
@@ -291,66 +322,108 @@ def _named_sender(payload: bytes) -> str | None:
     return sender if isinstance(sender, str) and NAME_FULL_RE.fullmatch(sender) else None
 
 
-def recorded_commands(path: str | Path, scenario) -> dict[int, list[dict]]:
-    """The commands of recording ``path``, by the output step at which they were applied:
-    ``{k: [command, ...]}`` in the order the plant applied them (its actuator states'
-    ``applied`` lists).
+@dataclasses.dataclass
+class CommandRecording:
+    """What a recording holds for ``--commands`` re-simulation (:func:`read_command_recording`)."""
 
-    ``scenario``: the :class:`astrodyn.scenario.Scenario` re-simulated, or only its name.
+    #: step -> ``(body, command)`` in the order the plant applied them (empty when read to check only)
+    by_step: dict[int, list[tuple[str, dict]]]
+    #: commands its actuator states name as applied (each once)
+    applied: int
+    #: the last output step with an actuator state (the recording's last step of the loop; -1: none)
+    last_step: int
+    #: of ``applied``, those applied at a step at or after the scenario's ``n_steps`` (a served
+    #: run goes past the config's duration): a re-simulation of the config never reaches them
+    after_end: int
+    #: "" for a complete file, else why not (:meth:`astrodyn.recording.stream.McapStream.report`:
+    #: cut short, corrupt chunks), e.g. a run whose logger was killed
+    damage: str
+
+
+def recorded_commands(path: str | Path, scenario) -> dict[int, list[tuple[str, dict]]]:
+    """The commands of recording ``path``, by the output step at which they were applied:
+    ``{k: [(body, command), ...]}`` in the order the plant applied them (its actuator states'
+    ``applied`` lists); :func:`read_command_recording`, whose checks it makes."""
+    return read_command_recording(path, scenario).by_step
+
+
+def read_command_recording(path: str | Path, scenario, keep: bool = True) -> CommandRecording:
+    """Read recording ``path`` for a re-simulation of ``scenario`` (the
+    :class:`astrodyn.scenario.Scenario` re-simulated, or only its name).
+
     ValueError naming the channel and log time for what the plant never records: one
     command id recorded twice with different contents, a command applied at two steps, and
     (given the Scenario) a command or actuator state of a body that is not the scene's plant
     body, or a command applied in a step that ends before its ``t`` (it would move the body
-    to that ``t`` inside the step)."""
+    to that ``t`` inside the step).  ``keep=False`` makes the same checks but keeps no
+    command (``by_step`` empty; each command is held as its payload bytes while the file is
+    read, not decoded): the check ``astrodyn run`` makes before it starts the plant, which
+    reads the file again."""
     from astrodyn.recording.stream import open_stream
 
     name = scenario if isinstance(scenario, str) else scenario.name
     bodies = rate = None
+    n_steps = math.inf
     if not isinstance(scenario, str):
         from astrodyn.scenario.control import plant_bodies
 
-        bodies, rate = plant_bodies(scenario), scenario.rate
-    commands: dict[str, tuple[dict, str]] = {}  # body/id -> (command, where it is recorded)
-    applied: list[tuple[int, str, list[str], str]] = []
+        bodies, rate, n_steps = plant_bodies(scenario), scenario.rate, scenario.n_steps
+    # body/id -> (the command, or its payload when not kept; its t; channel; log time ns)
+    commands: dict[str, tuple[dict | bytes, float, str, int]] = {}
+    applied: list[tuple[int, str, list[str], str, int]] = []
+    last_step = -1
+    prefix = f"{messages.PREFIX}/{name}/"
     with open_stream(path) as s:
         for m in s.messages():
             try:
                 _, body, kind = messages.parse_key(m.topic)
             except messages.MessageError:
                 continue
-            if not m.topic.startswith(f"{messages.PREFIX}/{name}/") or kind not in ("command", "actuators"):
+            if not m.topic.startswith(prefix) or kind not in ("command", "actuators"):
                 continue
-            where = f"{m.topic} at log time {m.log_time} ns"
             if bodies is not None and body not in bodies:
-                raise ValueError(f"{where}: body {body!r} is not an actuated body of scenario {name!r} "
-                                 f"({', '.join(bodies) or 'none'})")
+                raise ValueError(f"{m.topic} at log time {m.log_time} ns: body {body!r} is not an actuated body of "
+                                 f"scenario {name!r} ({', '.join(bodies) or 'none'})")
             msg = _decode_recorded(m, kind)
             if kind == "command":
                 cid = f"{body}/{command_id(msg['sender'], msg['seq'])}"
-                if cid in commands and commands[cid][0] != msg:
-                    raise ValueError(f"{where}: command {cid} is recorded twice with different contents "
-                                     f"(first at {commands[cid][1]})")
-                commands.setdefault(cid, (msg, where))
-            elif msg.get("applied"):
-                applied.append((msg["seq"], body, msg["applied"], where))
-    out: dict[int, list[dict]] = {}
-    first: dict[str, tuple[int, str]] = {}
-    for k, body, ids, where in sorted(applied, key=lambda x: x[0]):
+                first = commands.get(cid)
+                if first is None:
+                    commands[cid] = (msg if keep else bytes(m.data), msg["t"], m.topic, m.log_time)
+                elif first[0] != (msg if keep else m.data) and \
+                        (keep or messages.decode(first[0], "command") != msg):  # (a copy need not be canonical)
+                    raise ValueError(f"{m.topic} at log time {m.log_time} ns: command {cid} is recorded twice with "
+                                     f"different contents (first at {first[2]} at log time {first[3]} ns)")
+            else:
+                last_step = max(last_step, msg["seq"])
+                if msg.get("applied"):
+                    applied.append((msg["seq"], body, msg["applied"], m.topic, m.log_time))
+        damage = "" if not s.truncated and not s.corrupt_chunks else s.report()
+    out: dict[int, list[tuple[str, dict]]] = {}
+    first_step: dict[str, tuple[int, str, int]] = {}
+    count = after_end = 0
+    for k, body, ids, topic, log_time in sorted(applied, key=lambda x: x[0]):
+        where = f"{topic} at log time {log_time} ns"
         for cid in ids:
             key = f"{body}/{cid}"
-            if key in first and first[key][0] != k:
+            if key in first_step and first_step[key][0] != k:
+                earlier = first_step[key]
                 raise ValueError(f"{where}: actuator state of {body} at step {k} names command {cid}, already "
-                                 f"applied at step {first[key][0]} ({first[key][1]}): the plant applies a command once")
-            first.setdefault(key, (k, where))
+                                 f"applied at step {earlier[0]} ({earlier[1]} at log time {earlier[2]} ns): the plant "
+                                 f"applies a command once")
+            first_step.setdefault(key, (k, topic, log_time))
             cmd = commands.get(key)
             if cmd is None:
                 raise ValueError(f"--commands {path}: actuator state of {body} at step {k} names command {cid}, "
                                  f"which the recording does not hold")
-            if rate is not None and cmd[0]["t"] > (k + 1) / rate * (1 + 1e-12):
-                raise ValueError(f"{cmd[1]}: command {cid} has t = {cmd[0]['t']!r} s, after the end of step {k} "
-                                 f"(t = {k / rate:g} s) where {where} says it was applied")
-            out.setdefault(k, []).append((body, cmd[0]))
-    return out
+            if rate is not None and cmd[1] > (k + 1) / rate * (1 + 1e-12):
+                raise ValueError(f"{cmd[2]} at log time {cmd[3]} ns: command {cid} has t = {cmd[1]!r} s, after the end "
+                                 f"of step {k} (t = {k / rate:g} s) where {where} says it was applied")
+            count += 1
+            after_end += k >= n_steps
+            if keep:
+                out.setdefault(k, []).append((body, cmd[0]))
+    return CommandRecording(out, count, last_step, after_end, damage)
 
 
 def recorded_faults(path: str | Path, scenario) -> list:
@@ -446,6 +519,8 @@ class PlantLoop:
         self.seqs: dict[str, int] = {}  # sensor key -> next seq
         self.keys: dict[tuple[str, str], str] = {}  # (body, kind) -> its key
         self.pending: dict[str, list[tuple[dict, bytes | None]]] = {b: [] for b in plant.bodies}
+        self.pending_count: dict[tuple[str, str], int] = {}  # (sender, body) -> its commands in pending
+        self.pending_unlisted = 0  # commands in pending from senders not in control.controllers
         # lockstep, per controller, for the current tick only (docs/control.md, "Lockstep"):
         # the commands that count toward its answer (arrived while the tick is current, t not
         # before the tick's, not a copy of the last one taken; rejected ones too) and the
@@ -506,6 +581,21 @@ class PlantLoop:
         if len(self.refusals) < MAX_EXAMPLES:
             self.refusals.append(f"{bname} {command_id(cmd['sender'], cmd['seq'])}: {why}")
 
+    def refusal(self, b, bname: str, cmd: dict, t: float, applied_in_step: int) -> str | None:
+        """Why body ``b`` (``bname``) does not apply ``cmd`` in the step at ``t`` (s), having
+        applied ``applied_in_step`` commands in it already; None if it does.  What the command
+        asks for comes first: a command the body can never apply is refused for that, even when
+        it is also late (in lockstep, in the past)."""
+        if applied_in_step >= MAX_APPLIED_PER_STEP:
+            return (f"more than {MAX_APPLIED_PER_STEP} commands for {bname} in one step (the most one actuator "
+                    f"state records)")
+        why = b.refusal(cmd)
+        if why is not None:
+            return why
+        if self.lockstep and cmd["t"] < t - self.eps:
+            return f"t = {cmd['t']:g} s is in the past (now {t:g} s)"
+        return None
+
     def apply_command(self, b, bname: str, cmd: dict, raw: bytes | None, at: float) -> None:
         """Apply now (simulated time ``at``, s); re-publish the command as applied (the copy the logger records)."""
         try:
@@ -549,10 +639,17 @@ class PlantLoop:
                         continue
                     self.last_command_seq[sender, who] = msg["seq"]
                     self.last_command[sender, who] = msg
-                    if len(self.pending[who]) >= MAX_PENDING:
-                        self.refuse(who, msg, f"more than {MAX_PENDING} commands waiting for their time")
+                    listed = sender in self.controllers
+                    if self.pending_count.get((sender, who), 0) >= MAX_PENDING:
+                        self.refuse(who, msg, f"more than {MAX_PENDING} commands of {sender} for {who} waiting for "
+                                              f"their time")
+                    elif not listed and self.pending_unlisted >= MAX_PENDING_UNLISTED:
+                        self.refuse(who, msg, f"more than {MAX_PENDING_UNLISTED} commands of senders not in "
+                                              f"control.controllers waiting for their time")
                     else:
                         self.pending[who].append((msg, None))  # applied: re-encoded (the same bytes for a canonical one)
+                        self.pending_count[sender, who] = self.pending_count.get((sender, who), 0) + 1
+                        self.pending_unlisted += not listed
                 elif kind == "done":
                     problem = self.answer_problem(who, int(msg["seq"]))
                     if problem is not None:
@@ -690,6 +787,14 @@ class PlantLoop:
         mine = [e for e in pending if e[0]["t"] <= due]
         if mine:
             self.pending[bname] = [e for e in pending if e[0]["t"] > due]
+            for cmd, _ in mine:
+                sender = cmd["sender"]
+                left = self.pending_count[sender, bname] - 1
+                if left:
+                    self.pending_count[sender, bname] = left
+                else:
+                    del self.pending_count[sender, bname]
+                self.pending_unlisted -= sender not in self.controllers
         return mine
 
     def apply_commands(self, k: int, t: float) -> None:
@@ -704,25 +809,22 @@ class PlantLoop:
             inside = []
             before = self.applied
             for cmd, raw in self.commands_due(k, t, bname):
-                if self.applied - before >= MAX_APPLIED_PER_STEP:
-                    self.refuse(bname, cmd, f"more than {MAX_APPLIED_PER_STEP} commands for {bname} in one step "
-                                            f"(the most one actuator state records)")
-                    continue
                 if cmd["t"] > t + eps:
                     inside.append((cmd, raw))
                     continue
+                why = self.refusal(b, bname, cmd, t, self.applied - before)
+                if why is not None:
+                    self.refuse(bname, cmd, why)
+                    continue
                 if self.replay is None and cmd["t"] < t - eps:
-                    if self.lockstep:
-                        self.refuse(bname, cmd, f"t = {cmd['t']:g} s is in the past (now {t:g} s)")
-                        continue
-                    self.late += 1
+                    self.late += 1  # (free mode: in lockstep it was refused)
                 self.apply_command(b, bname, cmd, raw, t)
             b.finish_commands()
             done_s = 0.0  # commands inside the step: advance to their t, apply, go on
             for cmd, raw in sorted(inside, key=lambda e: e[0]["t"]):
-                if self.applied - before >= MAX_APPLIED_PER_STEP:
-                    self.refuse(bname, cmd, f"more than {MAX_APPLIED_PER_STEP} commands for {bname} in one step "
-                                            f"(the most one actuator state records)")
+                why = self.refusal(b, bname, cmd, t, self.applied - before)
+                if why is not None:
+                    self.refuse(bname, cmd, why)
                     continue
                 if cmd["t"] - t > done_s:
                     b.advance(cmd["t"] - t - done_s)
@@ -807,8 +909,12 @@ class PlantLoop:
             wall = time.monotonic() - wall0
             extra = {"last_step": k - 1, "t_reached": self.t_reached, "reason": failure or self.stopping["why"] or "end of scenario",
                      "applied": self.applied, "refused": self.refused, "late": self.late,
+                     # taken, for a time the run never reached: neither applied nor refused
+                     "pending": sum(len(waiting) for waiting in self.pending.values()),
                      "rejected": {**self.intake.rejected,  # forged supervisor commands (@command) too
                                   **{f"supervisor {r}": n for r, n in self.commands_from.rejected.items()}},
+                     # authenticated samples rejected for what they say (by author in the summary)
+                     "controller_errors": sum(sum(c.values()) for c in self.intake.controller_errors.values()),
                      "dropped": self.intake.dropped}
             events.end(self.t_reached, self.published, **extra)
             heartbeat.beat(force=True, t=self.t_reached, step=k, done=True)
@@ -818,7 +924,9 @@ class PlantLoop:
     def summary(self, k: int, wall: float, extra: dict, failure: str | None) -> dict:
         summary = {"process": PROCESS, "bodies": len(self.plant.bodies), "steps": k, "messages": self.published,
                    "t": self.t_reached, "wall_s": wall, **extra, "tick_repeats": self.tick_repeats,
-                   "refusals": self.refusals, "rejected_examples": self.intake.examples}
+                   "refusals": self.refusals, "rejected_examples": self.intake.examples,
+                   "controller_errors_by_author": self.intake.controller_errors,
+                   "controller_error_examples": self.intake.controller_error_examples}
         if self.round_trips:
             rt = sorted(self.round_trips)
             summary["round_trip_us"] = {"n": len(rt), "p50": 1e6 * rt[len(rt) // 2],

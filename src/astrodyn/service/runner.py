@@ -80,7 +80,8 @@ from astrodyn.service.supervision import (
 )
 from astrodyn.signals import catch_stop_signals
 
-__all__ = ["main", "run_scenario", "ScenarioRun", "EXIT_REJECTED", "attack_report", "logger_base_argv", "propagator_argv"]
+__all__ = ["main", "run_scenario", "ScenarioRun", "EXIT_REJECTED", "attack_report", "closed_loop_line",
+           "recording_config_problem", "check_command_recording", "logger_base_argv", "propagator_argv"]
 
 #: Most loggers of one run (``--loggers``): the main one and its hot standbys.
 MAX_LOGGERS = 8
@@ -149,6 +150,23 @@ def run_scenario(scenario: Scenario, out: Path, *, cross_check: bool = False,
                        controllers=controllers, commands=commands, loggers=loggers, stall_s=stall_s).run()
 
 
+#: Wall seconds an interrupted run waits for the logger to end by itself, once the
+#: propagators are stopped (it ends once it holds their end-of-run events); then, or at a
+#: second stop signal, it is told to finish the file with what it holds (SIGTERM).
+INTERRUPTED_LOGGER_WAIT_S = 10.0
+
+
+def sim_time_reached(log: dict) -> float | None:
+    """The sim time (s) every process of a run got to, from the logger's summary ``log``: the
+    least of the last state it recorded and of where each process that stopped early said it
+    stopped (as the run's summary says it); None without a summary."""
+    if not isinstance(log.get("t"), (int, float)):
+        return None
+    early = [e["t"] for e in (log.get("stopped_early") or {}).values()
+             if isinstance(e, dict) and isinstance(e.get("t"), (int, float))]
+    return min([log["t"], *early])
+
+
 #: A propagator that ends with the same error this many times in a row, each time restarted at
 #: the same step and recording none (a deterministic failure), is not restarted again, however
 #: far apart the deaths (the RestartBudget counts deaths within 60 s only).
@@ -182,7 +200,7 @@ class ScenarioRun:
         self.connect_args: list[str] = []  # every child's bus flags (bus_config_copy)
         self.result: dict = {"scenario": scenario.name, "out": str(out), "processes": {}, "ok": False}
         self.restarts: list[dict] = self.result.setdefault("restarts", [])
-        self.interrupted: dict = {"signal": None}
+        self.interrupted: dict = {"signal": None, "count": 0}  # the last stop signal, how many came
         self.children: dict[str, Child] = {}
         self.controllers: dict[str, Child] = {}
         self.logger_budget = RestartBudget("logger")
@@ -226,6 +244,12 @@ class ScenarioRun:
         self.connect_args = child_bus_arguments(self.hub, self.connect, copy)
         return copy
 
+    def on_stop_signal(self, why: str) -> None:
+        """SIGINT (Ctrl-C), SIGTERM, SIGHUP: the run stops (:meth:`finish`); a second one
+        makes the logger finish its file at once."""
+        self.interrupted["signal"] = why
+        self.interrupted["count"] += 1
+
     def say(self, text: str) -> None:
         if self.progress:
             print(text, file=sys.stderr, flush=True)
@@ -234,7 +258,7 @@ class ScenarioRun:
         scenario, result = self.scenario, self.result
         ensure_open_file_limit()
         started = time.monotonic()
-        restore_signals = catch_stop_signals(lambda why: self.interrupted.update(signal=why))
+        restore_signals = catch_stop_signals(self.on_stop_signal)
         self.job = JobControl()  # Ctrl-Z pauses every process of the run
         secret = auth.RunSecret.generate() if self.authenticate else None
         with work_directory(self.out, "run") as tmp, \
@@ -285,6 +309,11 @@ class ScenarioRun:
         if not isinstance(log, dict):
             log = {}
         result["logger"] = log
+        why = self.interrupted["signal"]
+        reached = sim_time_reached(log)
+        if why and reached is not None and (result.get("failure") or "").startswith(f"interrupted by {why} at sim t"):
+            # how far the recording got (the heartbeats the watch saw may be seconds old, or from start-up)
+            result["failure"] = f"interrupted by {why} at sim t {reached:.6g} s of {self.scenario.duration:.6g} s"
         lost = log.get("missing", 0)
         if not result.get("failure") and lost:
             result["failure"] = f"{lost} messages missing in the recording"
@@ -430,9 +459,14 @@ class ScenarioRun:
     def restart(self, name: str, rc: int) -> str | None:
         if "plant" in self.propagators and name in ("plant", "logger"):
             dead = self.children[name]
+            if name == "logger":  # its file ends where it was killed: no index, no footer
+                partial = partial_path(self.out, self.logger_attempt)
+                what = (f"its file {partial} holds what it wrote before, without the index and footer that make it "
+                        f"readable as is: `astrodyn recover {partial}` finishes it")
+            else:  # the logger finishes the file with what it got
+                what = "the recording holds everything up to here"
             return (f"{name} (pid {dead.pid}) {dead.how(rc)}: a closed-loop run is not restarted (its controllers' "
-                    f"state lives outside astrodyn); the recording holds everything up to here: "
-                    f"{dead.last_words(3)}")
+                    f"state lives outside astrodyn); {what}: {dead.last_words(3)}")
         if name == "logger" and rc == DISK_FULL_EXIT:  # a new logger would fail the same way
             dead = self.children[name]
             return (f"logger (pid {dead.pid}) {dead.how(rc)}: not restarted; the recording holds what was written "
@@ -535,16 +569,23 @@ class ScenarioRun:
         process's exit and summary into the result; returns the run's failure, if any."""
         children = self.children
         logger = children["logger"]
+        if self.interrupted["signal"] and any(kind in children for kind in self.propagators):
+            # at once: the stop can take seconds, and a silent wait invites a kill
+            print(f"\nastrodyn run: stopping ({self.interrupted['signal']}): the processes end, then the logger "
+                  f"finishes the file (waiting up to {INTERRUPTED_LOGGER_WAIT_S:g} s for their last messages; "
+                  f"a second Ctrl-C or SIGTERM finishes it at once)", file=sys.stderr, flush=True)
         if failure:
             for kind in self.propagators:
                 if kind in children:
                     children[kind].stop()
-            if self.interrupted["signal"]:  # clean stops: the logger ends once it holds their last states
-                try:
-                    logger.proc.wait(timeout=10)
-                except subprocess.TimeoutExpired:
-                    pass
-            logger.stop(signal.SIGTERM, timeout=30)
+            if self.interrupted["signal"] and any(kind in children for kind in self.propagators):
+                # clean stops: the logger ends once it holds their last states (none to wait for
+                # when the run was stopped before it started them)
+                count = self.interrupted["count"]
+                deadline = time.monotonic() + INTERRUPTED_LOGGER_WAIT_S
+                while logger.poll() is None and time.monotonic() < deadline and self.interrupted["count"] == count:
+                    time.sleep(0.05)
+            logger.stop(signal.SIGTERM, timeout=30)  # it finishes the file with what it holds
         else:
             try:
                 logger.proc.wait(timeout=60)
@@ -792,7 +833,7 @@ def main(argv: list[str] | None = None) -> int:
                 check_json_path(Path(args.json), (args.config, args.resume, args.zenoh_config, args.commands, *outputs))
             zenoh_config = check_bus_flags(args.connect, args.zenoh_config)
             resume = resume_plan(Path(args.resume), scenario, out, Path(work)) if args.resume else {}
-            check_closed_loop_arguments(scenario, args.controller or [], args.commands, out)
+            replayed = check_closed_loop_arguments(scenario, args.controller or [], args.commands, out)
             check_scenario_free(scenario.name, args.connect, zenoh_config)
         except ScenarioError as exc:
             print(f"astrodyn run: {exc}", file=sys.stderr)
@@ -807,6 +848,8 @@ def main(argv: list[str] | None = None) -> int:
                   f"another --out, or pass --force", file=sys.stderr)
             return 2
         print(the_plan.text(), file=sys.stderr)
+        for note in command_recording_notes(replayed, scenario) if replayed else ():
+            print(f"astrodyn run: {note}", file=sys.stderr)
         if resume:
             print(f"  resuming from {args.resume} at step {resume['step']} (t = {resume['t']:.6g} s)", file=sys.stderr)
         try:
@@ -834,7 +877,10 @@ def main(argv: list[str] | None = None) -> int:
     rows = rows or []
     result["bodies"] = rows
     result["propagator_bodies"] = propagator_rows(result, scenario)
-    print_summary(result, rows, scenario)
+    if replayed:  # what of the --commands recording was re-simulated (command_recording_notes)
+        result["commands_recording"] = replayed
+    # the summary's header names the file that holds the recording (NAME.partial.mcap of a failed run), not --out
+    print_summary({**result, "out": recording} if recording and Path(recording).exists() else result, rows, scenario)
     for warning in result.get("warnings", []):
         print(f"astrodyn run: warning: {warning}", file=sys.stderr)
     for name, standby in (result.get("standbys") or {}).items():
@@ -851,9 +897,7 @@ def main(argv: list[str] | None = None) -> int:
             return 1
     plant = (result.get("processes", {}).get("plant") or {}).get("summary") or {}
     if plant:  # also when the run failed: a refused command may be why
-        print(f"astrodyn run: closed loop: {plant.get('applied', 0)} commands applied, {plant.get('refused', 0)} "
-              f"refused, {plant.get('late', 0)} late" + "".join(f"\n  refused: {r}" for r in plant.get("refusals", [])[:5]),
-              file=sys.stderr)
+        print(f"astrodyn run: {closed_loop_line(plant, replayed)}", file=sys.stderr)
     if result.get("failure"):
         print(f"astrodyn run: FAILED: {result['failure']}", file=sys.stderr)
         if result.get("interrupted"):  # shell convention: 128 + signal number
@@ -865,6 +909,40 @@ def main(argv: list[str] | None = None) -> int:
         if not args.tolerate_rejected:
             return EXIT_REJECTED
     return 0
+
+
+#: Controllers named with their errors in the end line of a closed-loop run (the rest are counted).
+MAX_AUTHORS_NAMED = 3
+
+
+def closed_loop_line(plant: dict, replayed: dict | None = None) -> str:
+    """The end line of a closed-loop run from the plant's summary ``plant``: commands applied,
+    refused, late, still waiting for their time when the run ended, the controllers'
+    malformed messages (their errors, not an attack: :func:`attack_report`), with the first
+    refusals and controller errors; and for a ``--commands`` re-simulation (``replayed``,
+    :func:`check_command_recording`) what of the recording it did not re-simulate."""
+    line = (f"closed loop: {plant.get('applied', 0)} commands applied, {plant.get('refused', 0)} refused, "
+            f"{plant.get('late', 0)} late")
+    if plant.get("pending"):
+        line += f", {plant['pending']} still waiting for their time at the end (never applied)"
+    errors = plant.get("controller_errors_by_author") or {}
+    if errors:
+        named = sorted(errors.items())[:MAX_AUTHORS_NAMED]
+        line += ", " + ", ".join(f"{sum(counts.values())} rejected from controller {name} ("
+                                 + ", ".join(f"{n} {reason}" for reason, n in sorted(counts.items())) + ")"
+                                 for name, counts in named)
+        if len(errors) > len(named):
+            rest = sum(sum(counts.values()) for _, counts in sorted(errors.items())[MAX_AUTHORS_NAMED:])
+            line += f", {rest} from {len(errors) - len(named)} other senders"
+    if replayed and replayed.get("held_after"):
+        line += (f"; the recording ended at step {replayed['last_step']}: the commands last applied were held "
+                 f"from there to step {replayed['config_last_step']}")
+    if replayed and replayed.get("commands_after_end"):
+        line += f"; {replayed['commands_after_end']} recorded commands after the config's duration not applied"
+    line += "".join(f"\n  refused: {r}" for r in plant.get("refusals", [])[:5])
+    if errors:
+        line += "".join(f"\n  controller error: {e}" for e in plant.get("controller_error_examples", [])[:5])
+    return line
 
 
 def attack_report(logger: dict | None, plant: dict | None) -> str | None:
@@ -984,8 +1062,10 @@ def check_json_path(path: Path, inputs: tuple) -> None:
         raise ScenarioError(f"--json {shown}: expected a usable file path, got {exc.strerror or exc}") from None
 
 
-def check_closed_loop_arguments(scenario: Scenario, controllers: list[str], commands: str | None, out: Path) -> None:
-    """``--controller`` / ``--commands`` against the scene; ScenarioError naming the option."""
+def check_closed_loop_arguments(scenario: Scenario, controllers: list[str], commands: str | None,
+                                out: Path) -> dict | None:
+    """``--controller`` / ``--commands`` against the scene; ScenarioError naming the option.
+    Returns what :func:`check_command_recording` says of the ``--commands`` recording (None without)."""
     control = scenario.control
     if (controllers or commands) and control is None:
         opt = "--controller" if controllers else "--commands"
@@ -1004,23 +1084,159 @@ def check_closed_loop_arguments(scenario: Scenario, controllers: list[str], comm
         if not argv:
             raise ScenarioError("--controller: expected a command line, got an empty string")
     if commands is not None:
-        from astrodyn.recording import RecordingError
-        from astrodyn.service.plant import recorded_commands, recorded_faults
+        return check_command_recording(scenario, Path(commands), out)
+    return None
 
-        path = Path(commands)
-        if path.resolve() == out.resolve():
-            raise ScenarioError(f"--commands {commands}: expected a recording other than --out")
-        if not path.is_file():
-            raise ScenarioError(f"--commands {commands}: expected an MCAP recording of this scenario, no such file")
-        try:  # read here, so a foreign, damaged or empty file is refused before anything starts
-            found = recorded_commands(path, scenario)
-            recorded_faults(path, scenario)
-        except (RecordingError, ValueError, OSError) as exc:
-            raise ScenarioError(f"--commands {commands}: expected an MCAP recording of scenario {scenario.name!r}: "
-                                f"{exc}") from None
-        if not found:
-            raise ScenarioError(f"--commands {commands}: expected applied commands of scenario {scenario.name!r} "
-                                f"(actuator states naming them), found none: nothing to re-simulate")
+
+def check_command_recording(scenario: Scenario, path: Path, out: Path) -> dict:
+    """``--commands REC``: refuse (ScenarioError naming the flag and what is wrong) a file
+    that is not a recording of this scenario and config (:func:`recording_config_problem`;
+    the duration may differ), holds no applied command (saying when the file is cut short or
+    damaged), or that the plant could not re-simulate (:func:`read_command_recording`'s
+    checks).  Returns what the run says about it (:func:`command_recording_notes`): where
+    the recording ends against the config's last step, and what it holds past the config's
+    duration.  The commands are checked without being kept (the plant reads them again)."""
+    from astrodyn.recording import RecordingError
+    from astrodyn.recording.stream import open_stream
+    from astrodyn.service.plant import read_command_recording, recorded_faults
+
+    shown = str(path)[:200]
+    if path.resolve() == out.resolve():
+        raise ScenarioError(f"--commands {shown}: expected a recording other than --out")
+    if not path.is_file():
+        raise ScenarioError(f"--commands {shown}: expected an MCAP recording of this scenario, no such file")
+    try:  # read here, so a foreign, damaged or empty file is refused before anything starts
+        with open_stream(path) as stream:  # (its index: the metadata records come first)
+            recorded = stream.metadata.get("scenario")
+        problem = recording_config_problem(recorded, scenario, ignore=DURATION_PATHS)
+        if problem is not None and recorded is not None:  # another config's commands would not fit this one
+            raise ScenarioError(f"--commands {shown}: expected a recording of this scenario and config "
+                                f"({scenario.name!r}; its duration may differ), got {problem}")
+        found = read_command_recording(path, scenario, keep=False)
+        faults = recorded_faults(path, scenario)
+    except (RecordingError, OSError) as exc:
+        raise ScenarioError(f"--commands {shown}: expected an MCAP recording of scenario {scenario.name!r}: "
+                            f"{exc}") from None
+    except ValueError as exc:
+        if isinstance(exc, ScenarioError):
+            raise
+        raise ScenarioError(f"--commands {shown}: expected an MCAP recording of scenario {scenario.name!r}: "
+                            f"{exc}") from None
+    if not found.applied:
+        damaged = (f"; the file is cut short or damaged ({found.damage[:300]}): what it holds past that cannot be "
+                   f"read (`astrodyn recover {shown}` saves what can be)") if found.damage else ""
+        raise ScenarioError(f"--commands {shown}: expected applied commands of scenario {scenario.name!r} "
+                            f"(actuator states naming them), found none: nothing to re-simulate{damaged}")
+    if problem is not None:  # commands, but no scenario metadata to check them against
+        raise ScenarioError(f"--commands {shown}: expected a recording of this scenario and config "
+                            f"({scenario.name!r}), got {problem}")
+    end = scenario.n_steps - 1
+    return {"file": str(path), "applied": found.applied, "last_step": found.last_step,
+            "t_last": found.last_step / scenario.rate, "config_last_step": end,
+            "held_after": found.last_step < end, "commands_after_end": found.after_end,
+            "faults_after_end": sum(1 for f in faults if f.t > end / scenario.rate * (1 + 1e-12)),
+            "damage": found.damage}
+
+
+def command_recording_notes(info: dict, scenario: Scenario) -> list[str]:
+    """The lines ``run`` prints at the start about its ``--commands`` recording ``info``
+    (:func:`check_command_recording`): a recording that ends before the config's last step
+    (a killed or stopped run: from there on the re-simulation holds the commands last
+    applied), and recorded commands and faults past the config's duration (a served run
+    goes past it), which are not applied."""
+    rate, shown = scenario.rate, info["file"][:200]
+    end_t = info["config_last_step"] / rate
+    notes = []
+    if info["held_after"]:
+        cut = f" (the file is cut short: {info['damage'][:200]})" if info["damage"] else ""
+        notes.append(f"--commands {shown}: the recording ends at step {info['last_step']} (t = {info['t_last']:.6g} s), "
+                     f"before this config's last step {info['config_last_step']} (t = {end_t:.6g} s){cut}: after it "
+                     f"the commands last applied stay held; the states from step {info['last_step'] + 1} on are not "
+                     f"a re-simulation of the recording")
+    if info["commands_after_end"] or info["faults_after_end"]:
+        what = " and ".join(f"{n} {kind}{'s' if n != 1 else ''}" for n, kind in
+                            ((info["commands_after_end"], "recorded command"), (info["faults_after_end"], "fault"))
+                            if n)
+        notes.append(f"--commands {shown}: the recording goes on to step {info['last_step']} (t = "
+                     f"{info['t_last']:.6g} s), past this config's duration ({end_t:.6g} s): its {what} after that "
+                     f"are not applied")
+    return notes
+
+
+#: Parts of a recording's "scenario" metadata (paths into its JSON) that do not describe what
+#: is simulated: where the config file was read from (the same file named another way, or a
+#: copy, is the same config).
+NOT_SIMULATED = (("source",),)
+#: ``--commands``: the duration, too, may differ: it says how far the re-simulation goes (the
+#: run says where the recording ends, and counts what it holds past the config's duration).
+DURATION_PATHS = (("duration",), ("n_steps",), ("config", "scenario", "duration"))
+#: Differences named in a refusal (the rest are counted).
+MAX_DIFFERENCES_NAMED = 3
+
+
+def recording_config_problem(recorded: dict | None, scenario: Scenario, ignore: tuple = ()) -> str | None:
+    """None when the "scenario" metadata record ``recorded`` of a recording (str -> str, as the
+    logger writes it) is ``scenario``'s: the same name and config (its ``json``, but for the
+    paths of :data:`NOT_SIMULATED` and ``ignore``); else what differs, for a refusal of
+    ``--resume`` and ``--commands``: ``one of scenario 'x'``, or ``one of another config of
+    'x': scenario.rate is 5.0 here, 10.0 in the recording; ...`` (the config's own keys as
+    written in its TOML first, the values resolved from them otherwise).  A record without
+    ``json`` is compared by name only (as ``--resume`` always did)."""
+    if not isinstance(recorded, dict) or recorded.get("name") is None:
+        return "a file without the scenario metadata record (the config it ran)"
+    if recorded.get("name") != scenario.name:
+        return f"one of scenario {str(recorded.get('name'))[:100]!r}"
+    text = recorded.get("json")
+    if not text:
+        return None
+    try:
+        theirs = json.loads(text)
+    except (ValueError, RecursionError) as exc:
+        return f"one whose scenario metadata is not JSON ({type(exc).__name__})"
+    ours = json.loads(scenario.to_metadata()["json"])
+    skip = {*NOT_SIMULATED, *ignore}
+    found: list[tuple[tuple, object, object]] = []
+    _differences(ours.get("config"), theirs.get("config") if isinstance(theirs, dict) else None, ("config",), skip, found)
+    if not found:  # the config as written is the same: what it resolves to (an included file, a newer astrodyn)
+        mine = {k: v for k, v in ours.items() if k != "config"}
+        other = {k: v for k, v in theirs.items() if k != "config"} if isinstance(theirs, dict) else theirs
+        _differences(mine, other, (), skip, found)
+    if not found:
+        return None
+
+    def shown(value) -> str:
+        text = "nothing" if value is _ABSENT else json.dumps(value, default=str)
+        return text if len(text) <= 60 else text[:57] + "..."
+
+    def where(path: tuple) -> str:
+        name = "".join(f"[{p}]" if isinstance(p, int) else f".{p}" for p in path).lstrip(".")
+        return name.removeprefix("config.") if path[:1] == ("config",) else f"{name or 'the scenario'} (resolved)"
+
+    named = "; ".join(f"{where(path)} is {shown(here)} here, {shown(there)} in the recording"
+                      for path, here, there in found[:MAX_DIFFERENCES_NAMED])
+    more = f" (and {len(found) - MAX_DIFFERENCES_NAMED} more)" if len(found) > MAX_DIFFERENCES_NAMED else ""
+    return f"one of another config of {scenario.name!r}: {named}{more}"
+
+
+_ABSENT = object()
+#: Depth of the metadata JSON compared key by key (deeper: compared whole).
+_MAX_DEPTH = 32
+
+
+def _differences(ours, theirs, path: tuple, skip: set, found: list) -> None:
+    """Append ``(path, ours, theirs)`` for each leaf where ``theirs`` differs from ``ours``
+    (dicts by key, lists of one length by index; a missing key is :data:`_ABSENT`);
+    ``skip``: paths not compared."""
+    if path in skip or ours == theirs:
+        return
+    if len(path) < _MAX_DEPTH and isinstance(ours, dict) and isinstance(theirs, dict):
+        for key in [*ours, *(k for k in theirs if k not in ours)]:
+            _differences(ours.get(key, _ABSENT), theirs.get(key, _ABSENT), (*path, key), skip, found)
+    elif len(path) < _MAX_DEPTH and isinstance(ours, list) and isinstance(theirs, list) and len(ours) == len(theirs):
+        for i, (a, b) in enumerate(zip(ours, theirs)):
+            _differences(a, b, (*path, i), skip, found)
+    else:
+        found.append((path, ours, theirs))
 
 
 def resume_plan(path: Path, scenario: Scenario, out: Path, work: Path) -> dict:
@@ -1038,10 +1254,10 @@ def resume_plan(path: Path, scenario: Scenario, out: Path, work: Path) -> dict:
         run = load_run(path)
     except RecordingError as exc:
         raise ScenarioError(f"--resume {exc}") from None
-    recorded = run.scenario.get("json")
-    if run.scenario.get("name") != scenario.name or (recorded and recorded != scenario.to_metadata()["json"]):
+    problem = recording_config_problem(run.scenario, scenario)
+    if problem:
         raise ScenarioError(f"--resume {path}: expected a recording of this scenario and config ({scenario.name!r}), "
-                            f"got one of {run.scenario.get('name')!r}{' with another config' if run.scenario.get('name') == scenario.name else ''}")
+                            f"got {problem}")
     p = make_plan(scenario)
     kinds = [k for k in p.processes if k != "logger"]
     topics = [t for kind in kinds for t in state_topics(scenario, kind).values()]
