@@ -248,3 +248,26 @@ def test_the_plant_passes_the_engine_cap_to_every_held_step(monkeypatch):
     wheeled.advance(0.1)
     assert {name for name, _ in seen} == {"step_held", "step_with_wheels"}
     assert seen and all(cap == ENGINE_MAX_STEPS for _, cap in seen), seen
+
+
+def test_the_plant_passes_the_engine_cap_to_the_batched_step(monkeypatch):
+    """Many bodies at once (Plant.advance: HeldInputsBatch.step) get the same cap."""
+    from astrodyn.attitude.wheels import HeldInputsBatch
+    from astrodyn.plant import Plant
+    from astrodyn.scenario import loads
+    from astrodyn.simulate import ENGINE_MAX_STEPS
+
+    seen = []
+    real = HeldInputsBatch.step
+
+    def step(self, *args, **kwargs):
+        seen.append(kwargs.get("max_steps"))
+        return real(self, *args, **kwargs)
+
+    monkeypatch.setattr(HeldInputsBatch, "step", step)
+    p = Plant(loads(SCENE))
+    bodies = list(p.bodies.values())
+    for b in bodies:
+        b.finish_commands()
+    p.advance(bodies, 0.1)
+    assert seen == [ENGINE_MAX_STEPS], seen

@@ -667,7 +667,8 @@ class Plant:
             if b.wheels is not None:
                 h[i, :b.wheels.n] = b.h
                 cmd[i, :b.wheels.n] = b.wheel_command_applied()
-        g, clipped = batch.step([b.row for b in group], w, q, h, cmd, np.array([b.torque for b in group]), dt)
+        g, clipped = batch.step([b.row for b in group], w, q, h, cmd, np.array([b.torque for b in group]), dt,
+                                max_steps=ENGINE_MAX_STEPS)
         clipped &= cmd != 0
         any_clipped = clipped.any(axis=1).tolist()
         for i, b in enumerate(group):
