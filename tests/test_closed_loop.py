@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import shlex
 import signal
 import subprocess
@@ -349,6 +350,9 @@ def test_serve_runs_a_free_closed_loop_with_its_controller_and_stops_cleanly(tmp
     assert summary["failures"] == [] and Path(summary["file"]).exists()
     run = load(summary["file"])
     commands = run.channels["astrodyn/detumble/sc/command"]
+    # the end line says what became of the commands, as run's does, counted by the plant
+    line = re.search(r"astrodyn serve: closed loop: (\d+) commands applied, (\d+) refused, (\d+) late", stderr)
+    assert line and int(line.group(1)) == len(commands), stderr[-2000:]
     att = run.channels["astrodyn/detumble/sc/attitude"]
     assert len(commands) > 100 and set(att.model) == {"actuated"}
     assert np.array_equal(att.seq, np.arange(len(att)))  # no gap

@@ -94,6 +94,7 @@ from astrodyn.service.runner import (
     check_closed_loop_arguments,
     check_scenario_free,
     checked_output_path,
+    closed_loop_line,
     logger_base_argv,
     propagator_argv,
 )
@@ -967,6 +968,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"astrodyn serve: error: {exc}", file=sys.stderr)
         return 1
     print(json.dumps(summary, default=str), flush=True)
+    if summary.get("plant"):  # as run's end line: applied, refused, late, waiting, controllers' errors
+        print(f"astrodyn serve: {closed_loop_line(summary['plant'])}", file=sys.stderr, flush=True)
     if summary["failures"]:
         return 1
     attack = attack_report(summary.get("logger"), summary.get("plant"))
