@@ -47,6 +47,7 @@ from astrodyn.jit import kernels_uncached
 from astrodyn.progress import Progress
 from astrodyn.recording.writer import partial_path, standby_path
 from astrodyn.scenario import Scenario, ScenarioError, load, plan as make_plan
+from astrodyn.scenario.recorded import DURATION_PATHS, config_difference
 from astrodyn.service.children import (
     DISK_FULL_EXIT,
     LOGGED_WAIT_S,
@@ -69,7 +70,7 @@ from astrodyn.service.children import (
     zenoh_config_snapshot,
 )
 from astrodyn.service.output import check_output_path
-from astrodyn.service.summary import file_summary, print_summary, propagator_rows
+from astrodyn.service.summary import file_summary, print_summary, propagator_rows, sim_time_reached
 from astrodyn.service.supervision import (
     LoggerFile,
     RestartBudget,
@@ -81,7 +82,7 @@ from astrodyn.service.supervision import (
 from astrodyn.signals import catch_stop_signals
 
 __all__ = ["main", "run_scenario", "ScenarioRun", "EXIT_REJECTED", "attack_report", "closed_loop_line",
-           "recording_config_problem", "check_command_recording", "logger_base_argv", "propagator_argv"]
+           "check_command_recording", "logger_base_argv", "propagator_argv"]
 
 #: Most loggers of one run (``--loggers``): the main one and its hot standbys.
 MAX_LOGGERS = 8
@@ -154,17 +155,6 @@ def run_scenario(scenario: Scenario, out: Path, *, cross_check: bool = False,
 #: propagators are stopped (it ends once it holds their end-of-run events); then, or at a
 #: second stop signal, it is told to finish the file with what it holds (SIGTERM).
 INTERRUPTED_LOGGER_WAIT_S = 10.0
-
-
-def sim_time_reached(log: dict) -> float | None:
-    """The sim time (s) every process of a run got to, from the logger's summary ``log``: the
-    least of the last state it recorded and of where each process that stopped early said it
-    stopped (as the run's summary says it); None without a summary."""
-    if not isinstance(log.get("t"), (int, float)):
-        return None
-    early = [e["t"] for e in (log.get("stopped_early") or {}).values()
-             if isinstance(e, dict) and isinstance(e.get("t"), (int, float))]
-    return min([log["t"], *early])
 
 
 #: A propagator that ends with the same error this many times in a row, each time restarted at
@@ -1090,7 +1080,8 @@ def check_closed_loop_arguments(scenario: Scenario, controllers: list[str], comm
 
 def check_command_recording(scenario: Scenario, path: Path, out: Path) -> dict:
     """``--commands REC``: refuse (ScenarioError naming the flag and what is wrong) a file
-    that is not a recording of this scenario and config (:func:`recording_config_problem`;
+    that is not a recording of this scenario and config
+    (:func:`astrodyn.scenario.recorded.config_difference`;
     the duration may differ), holds no applied command (saying when the file is cut short or
     damaged), or that the plant could not re-simulate (:func:`read_command_recording`'s
     checks).  Returns what the run says about it (:func:`command_recording_notes`): where
@@ -1108,7 +1099,7 @@ def check_command_recording(scenario: Scenario, path: Path, out: Path) -> dict:
     try:  # read here, so a foreign, damaged or empty file is refused before anything starts
         with open_stream(path) as stream:  # (its index: the metadata records come first)
             recorded = stream.metadata.get("scenario")
-        problem = recording_config_problem(recorded, scenario, ignore=DURATION_PATHS)
+        problem = config_difference(recorded, scenario, ignore=DURATION_PATHS)
         if problem is not None and recorded is not None:  # another config's commands would not fit this one
             raise ScenarioError(f"--commands {shown}: expected a recording of this scenario and config "
                                 f"({scenario.name!r}; its duration may differ), got {problem}")
@@ -1163,82 +1154,6 @@ def command_recording_notes(info: dict, scenario: Scenario) -> list[str]:
     return notes
 
 
-#: Parts of a recording's "scenario" metadata (paths into its JSON) that do not describe what
-#: is simulated: where the config file was read from (the same file named another way, or a
-#: copy, is the same config).
-NOT_SIMULATED = (("source",),)
-#: ``--commands``: the duration, too, may differ: it says how far the re-simulation goes (the
-#: run says where the recording ends, and counts what it holds past the config's duration).
-DURATION_PATHS = (("duration",), ("n_steps",), ("config", "scenario", "duration"))
-#: Differences named in a refusal (the rest are counted).
-MAX_DIFFERENCES_NAMED = 3
-
-
-def recording_config_problem(recorded: dict | None, scenario: Scenario, ignore: tuple = ()) -> str | None:
-    """None when the "scenario" metadata record ``recorded`` of a recording (str -> str, as the
-    logger writes it) is ``scenario``'s: the same name and config (its ``json``, but for the
-    paths of :data:`NOT_SIMULATED` and ``ignore``); else what differs, for a refusal of
-    ``--resume`` and ``--commands``: ``one of scenario 'x'``, or ``one of another config of
-    'x': scenario.rate is 5.0 here, 10.0 in the recording; ...`` (the config's own keys as
-    written in its TOML first, the values resolved from them otherwise).  A record without
-    ``json`` is compared by name only (as ``--resume`` always did)."""
-    if not isinstance(recorded, dict) or recorded.get("name") is None:
-        return "a file without the scenario metadata record (the config it ran)"
-    if recorded.get("name") != scenario.name:
-        return f"one of scenario {str(recorded.get('name'))[:100]!r}"
-    text = recorded.get("json")
-    if not text:
-        return None
-    try:
-        theirs = json.loads(text)
-    except (ValueError, RecursionError) as exc:
-        return f"one whose scenario metadata is not JSON ({type(exc).__name__})"
-    ours = json.loads(scenario.to_metadata()["json"])
-    skip = {*NOT_SIMULATED, *ignore}
-    found: list[tuple[tuple, object, object]] = []
-    _differences(ours.get("config"), theirs.get("config") if isinstance(theirs, dict) else None, ("config",), skip, found)
-    if not found:  # the config as written is the same: what it resolves to (an included file, a newer astrodyn)
-        mine = {k: v for k, v in ours.items() if k != "config"}
-        other = {k: v for k, v in theirs.items() if k != "config"} if isinstance(theirs, dict) else theirs
-        _differences(mine, other, (), skip, found)
-    if not found:
-        return None
-
-    def shown(value) -> str:
-        text = "nothing" if value is _ABSENT else json.dumps(value, default=str)
-        return text if len(text) <= 60 else text[:57] + "..."
-
-    def where(path: tuple) -> str:
-        name = "".join(f"[{p}]" if isinstance(p, int) else f".{p}" for p in path).lstrip(".")
-        return name.removeprefix("config.") if path[:1] == ("config",) else f"{name or 'the scenario'} (resolved)"
-
-    named = "; ".join(f"{where(path)} is {shown(here)} here, {shown(there)} in the recording"
-                      for path, here, there in found[:MAX_DIFFERENCES_NAMED])
-    more = f" (and {len(found) - MAX_DIFFERENCES_NAMED} more)" if len(found) > MAX_DIFFERENCES_NAMED else ""
-    return f"one of another config of {scenario.name!r}: {named}{more}"
-
-
-_ABSENT = object()
-#: Depth of the metadata JSON compared key by key (deeper: compared whole).
-_MAX_DEPTH = 32
-
-
-def _differences(ours, theirs, path: tuple, skip: set, found: list) -> None:
-    """Append ``(path, ours, theirs)`` for each leaf where ``theirs`` differs from ``ours``
-    (dicts by key, lists of one length by index; a missing key is :data:`_ABSENT`);
-    ``skip``: paths not compared."""
-    if path in skip or ours == theirs:
-        return
-    if len(path) < _MAX_DEPTH and isinstance(ours, dict) and isinstance(theirs, dict):
-        for key in [*ours, *(k for k in theirs if k not in ours)]:
-            _differences(ours.get(key, _ABSENT), theirs.get(key, _ABSENT), (*path, key), skip, found)
-    elif len(path) < _MAX_DEPTH and isinstance(ours, list) and isinstance(theirs, list) and len(ours) == len(theirs):
-        for i, (a, b) in enumerate(zip(ours, theirs)):
-            _differences(a, b, (*path, i), skip, found)
-    else:
-        found.append((path, ours, theirs))
-
-
 def resume_plan(path: Path, scenario: Scenario, out: Path, work: Path) -> dict:
     """How to continue ``scenario`` from the recording ``path``: the step k to start at (every
     state channel holds steps 0 .. k-1), the logger's prefill arguments and each
@@ -1254,7 +1169,7 @@ def resume_plan(path: Path, scenario: Scenario, out: Path, work: Path) -> dict:
         run = load_run(path)
     except RecordingError as exc:
         raise ScenarioError(f"--resume {exc}") from None
-    problem = recording_config_problem(run.scenario, scenario)
+    problem = config_difference(run.scenario, scenario)
     if problem:
         raise ScenarioError(f"--resume {path}: expected a recording of this scenario and config ({scenario.name!r}), "
                             f"got {problem}")

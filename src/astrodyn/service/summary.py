@@ -29,7 +29,7 @@ from astrodyn.messages import ACTUATED_MODEL, ATTITUDE_PROCESS_KINDS, MODEL_STAT
 from astrodyn.scenario import Scenario, plan as make_plan
 from astrodyn.scenario.planning import counted, state_kinds_text
 
-__all__ = ["file_summary", "propagator_rows", "print_summary", "table_lines", "FileRows", "TWO_BODY_KEYS"]
+__all__ = ["file_summary", "propagator_rows", "print_summary", "sim_time_reached", "table_lines", "FileRows", "TWO_BODY_KEYS"]
 
 #: The names of the two-body energy and |h| deviations (relative to mu/|r0| and |h0|) of an
 #: orbit: ``TWO_BODY_KEYS[True]`` for a model that conserves them (Kepler; an actuated orbit
@@ -223,6 +223,18 @@ def _fmt(x: float, spec: str = ".1e") -> str:
     return "-" if x is None or (isinstance(x, float) and math.isnan(x)) else format(x, spec)
 
 
+def sim_time_reached(log: dict) -> float | None:
+    """The sim time (s) every process of a run got to, from the logger's summary ``log``: the
+    least of the last state it recorded (``t``) and of where each process that stopped early
+    said it stopped (``stopped_early``: process -> ``{"t", "reason"}``); None when the summary
+    holds no ``t`` (no summary, or a logger that recorded nothing)."""
+    if not isinstance(log.get("t"), (int, float)):
+        return None
+    early = [e["t"] for e in (log.get("stopped_early") or {}).values()
+             if isinstance(e, dict) and isinstance(e.get("t"), (int, float))]
+    return min([log["t"], *early])
+
+
 def print_summary(result: dict, rows: list[dict], scenario: Scenario, max_bodies: int = 25) -> None:
     """The end-of-run table on stdout: one line per conserved quantity of each body."""
     log = result.get("logger") or {}
@@ -231,9 +243,7 @@ def print_summary(result: dict, rows: list[dict], scenario: Scenario, max_bodies
     own = sum(r.get("own_states", 0) for r in rows)
     print(f"\nscenario {scenario.name}: {result['out']}")
     early = {p: e for p, e in (log.get("stopped_early") or {}).items() if isinstance(e, dict)}
-    reached = None
-    if log.get("t") is not None:  # the sim time every process got to: the least of the logger's and the early stops'
-        reached = min([log["t"], *(e["t"] for e in early.values() if isinstance(e.get("t"), (int, float)))])
+    reached = sim_time_reached(log)
     stopped = bool(result.get("failure") or result.get("interrupted") or early)
     wall = max(result["wall_s"], 1e-9)
     if not stopped:

@@ -226,17 +226,18 @@ class LoggerFiles:
 
 
 def holds_config(path: str | os.PathLike, scenario) -> bool:
-    """Whether the recording ``path`` (finished or cut) holds ``scenario``'s config: the
-    ``scenario`` metadata record's name and config JSON equal this run's (as
-    :func:`astrodyn.service.runner.resume_plan` compares them), read from the file's head
-    (the logger writes it first).  False for anything else, and for a file that cannot
-    be read: a resume never starts from another config's states."""
+    """Whether the recording ``path`` (finished or cut) holds ``scenario``'s config: its
+    ``scenario`` metadata record, read from the file's head (the logger writes it first),
+    names the same scenario and config as ``run --resume`` and ``run --commands`` judge it
+    (:func:`astrodyn.scenario.recorded.config_difference`: where the config file was read
+    from does not count).  False for anything else, and for a file that cannot be read: a
+    resume never starts from another config's states."""
     from mcap.opcode import Opcode
     from mcap.records import Metadata
 
     from astrodyn.recording.reader import RecordingError, open_recording, parse_record, scan_records
+    from astrodyn.scenario.recorded import config_difference
 
-    want = scenario.to_metadata()
     try:
         f, size = open_recording(os.fspath(path))
     except RecordingError:
@@ -250,7 +251,7 @@ def holds_config(path: str | os.PathLike, scenario) -> bool:
                     continue
                 rec = parse_record(opcode, body)
                 if isinstance(rec, Metadata) and rec.name == "scenario":
-                    return rec.metadata.get("name") == want["name"] and rec.metadata.get("json") == want["json"]
+                    return config_difference(rec.metadata, scenario) is None
         except (RecordingError, OSError, ValueError):
             return False
     return False
