@@ -27,8 +27,8 @@ from pathlib import Path
 
 import numpy as np
 
-from astrodyn.analysis.recorded_scenario import recorded_body
 from astrodyn.rotation import dcm_from_quat
+from astrodyn.scenario.recorded import recorded_body
 
 __all__ = ["closed_loop_section", "CLOSED_LOOP_FIGURES", "OrbitActuation", "burn_changes"]
 

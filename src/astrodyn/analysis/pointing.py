@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from astrodyn.analysis.recorded_scenario import recorded_body
+from astrodyn.scenario.recorded import recorded_body
 
 __all__ = ["pointing_errors", "settling_time", "pointing_section", "POINTING_FIGURES"]
 

@@ -1,4 +1,6 @@
-"""Whether a recording holds a given config: its ``scenario`` metadata record against a :class:`Scenario`.
+"""The scenario a recording was made from, as its ``scenario`` metadata record holds it:
+whether that is a given config (:func:`config_difference`), and the config read back
+(:func:`recorded_scenario`, :func:`recorded_body`).
 
 The logger writes :meth:`astrodyn.scenario.Scenario.to_metadata` as the first metadata
 record of every file it makes (``name``, ``json`` and a few strings; docs/architecture.md,
@@ -17,13 +19,15 @@ config: where it was read from and where it records (:data:`NOT_SIMULATED`) are 
 
 from __future__ import annotations
 
+import functools
 import json
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
     from astrodyn.scenario import Scenario
 
-__all__ = ["config_difference", "NOT_SIMULATED", "DURATION_PATHS", "MAX_DIFFERENCES_NAMED"]
+__all__ = ["config_difference", "recorded_scenario", "recorded_body", "NOT_SIMULATED", "DURATION_PATHS",
+           "MAX_DIFFERENCES_NAMED"]
 
 #: Parts of a recording's "scenario" metadata (paths into its JSON) that do not describe what
 #: is simulated: where the config file was read from (the same file named another way, or a
@@ -101,3 +105,38 @@ def _differences(ours, theirs, path: tuple, skip: set, found: list) -> None:
             _differences(a, b, (*path, i), skip, found)
     else:
         found.append((path, ours, theirs))
+
+
+# --------------------------------------------------------------------------- reading it back
+# The analysis sections that need a body's config (wheel geometry, pointing target) ask
+# here: the config is parsed once per recording, not once per body and section (a 1000-body
+# scene's config parsed 1000 times was quadratic).  A foreign or damaged record gives None:
+# those sections are then left out, never a traceback.
+
+
+@functools.lru_cache(maxsize=4)
+def _parsed(text: str):
+    from astrodyn.scenario import load_dict
+
+    try:
+        return load_dict(json.loads(text)["config"], source="recording")
+    except Exception:  # a foreign or damaged scenario record
+        return None
+
+
+def recorded_scenario(scenario_meta: dict):
+    """The :class:`astrodyn.scenario.Scenario` of a recording's ``scenario`` metadata
+    (``run.scenario``), or None when it holds none that validates."""
+    text = scenario_meta.get("json") if isinstance(scenario_meta, dict) else None
+    return _parsed(text) if isinstance(text, str) else None
+
+
+def recorded_body(scenario_meta: dict, name: str):
+    """The config of body ``name`` (:class:`astrodyn.scenario.Body`), or None."""
+    scenario = recorded_scenario(scenario_meta)
+    if scenario is None:
+        return None
+    try:
+        return scenario.body(name)
+    except Exception:  # no such body in the record
+        return None
