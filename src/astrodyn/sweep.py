@@ -452,7 +452,7 @@ def read_cases_csv(path: str | os.PathLike) -> tuple[list[str], list[dict[str, A
         if size > MAX_TEXT_INPUT_BYTES:
             raise SweepError(f"--cases {path}: expected a CSV of at most {MAX_TEXT_INPUT_BYTES} bytes (4 MiB), got "
                              f"{size} bytes")
-        with open(path, newline="", encoding="utf-8") as fh:
+        with open(path, newline="", encoding="utf-8-sig") as fh:  # -sig: the byte order mark a spreadsheet writes
             reader = csv.reader(fh)
             header = next(reader, None)
             if not header:

@@ -1007,8 +1007,8 @@ def load(path: str | Path) -> Scenario:
         raise ctx.error("file", f"a config of at most {MAX_FILE_BYTES // 2**20} MiB ({MAX_FILE_BYTES} bytes; the size "
                         f"cap, MAX_FILE_BYTES: a [walker] table describes a large constellation in a few lines)",
                         got, raw=True)
-    try:
-        text = raw.decode("utf-8")
+    try:  # "utf-8-sig": a byte order mark, which some Windows editors write first, is dropped
+        text = raw.decode("utf-8-sig")
     except UnicodeDecodeError as exc:
         raise ctx.error("file", "UTF-8 text", f"invalid byte at offset {exc.start}", raw=True) from None
     return loads(text, source=source, base_dir=p.resolve().parent)
