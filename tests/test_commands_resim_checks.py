@@ -112,10 +112,23 @@ def test_a_recording_of_another_rate_or_config_is_refused_naming_what_differs(re
 
 
 @pytest.mark.network
+def _first_chunk_middle(data: bytes) -> int:
+    """The offset of the middle of the first Chunk record of MCAP ``data``, walking its records
+    as the MCAP spec lays them out: 8 magic bytes, then opcode (1 byte), length (uint64 LE),
+    body; Chunk is opcode 0x06.  (How many chunks the logger wrote depends on its flushes.)"""
+    pos = 8
+    while pos + 9 <= len(data):
+        opcode, length = data[pos], int.from_bytes(data[pos + 1:pos + 9], "little")
+        if opcode == 0x06:
+            return pos + 9 + length // 2
+        pos += 9 + length
+    raise AssertionError("no chunk in the recording")
+
+
 def test_a_recording_torn_inside_its_data_says_so_and_points_to_recover(recording, tmp_path, capsys):
     data = recording.read_bytes()
     torn = tmp_path / "torn.mcap"
-    torn.write_bytes(data[:len(data) // 2])  # inside the run's one data chunk
+    torn.write_bytes(data[:_first_chunk_middle(data)])  # no command readable: cut inside the first data chunk
     err = _refused(capsys, [str(_config(tmp_path / "c.toml")), "--out", str(tmp_path / "x.mcap"), "--commands",
                             str(torn)])
     assert "cut short or damaged" in err and "truncated" in err and f"astrodyn recover {torn}" in err, err
