@@ -387,7 +387,8 @@ def test_a_killed_logger_under_serve_is_restarted_and_no_state_is_lost(tmp_path,
 
 def test_serve_with_a_standby_logger_records_everything_twice_across_a_main_logger_kill(tmp_path, processes):
     """`serve --loggers 2`, main logger SIGKILLed: the standby's one file holds every state
-    channel 0 .. N-1 once, byte for byte what the main logger's parts hold together."""
+    channel 0 .. N-1 once, byte for byte what the main logger's parts hold together (and
+    more, when the stop comes before the restarted propagators have caught up)."""
     sup, out = _serve_long(tmp_path, processes, "served", "--loggers", "2")
     assert json.loads(sup.stdout.readline())["serving"] == "longrun"
     partial = tmp_path / "served.partial.mcap"
@@ -410,10 +411,16 @@ def test_serve_with_a_standby_logger_records_everything_twice_across_a_main_logg
     main = _states_of_parts([out, tmp_path / "served-0001.mcap"])
     got = _states(standby)
     assert got.keys() == main.keys()
-    for topic in main:
-        assert sorted(got[topic]) == sorted(main[topic]), (topic, len(got[topic]), len(main[topic]), sorted(set(got[topic]) ^ set(main[topic]))[:10])
-    assert got == main
-    assert all(sorted(per) == list(range(len(per))) and len(per) > 100 for per in main.values())
+    # The main logger's restart restarts the propagators from the last step in its dead
+    # logger's file, to publish the lost states again; a stop that comes before a restarted
+    # propagator has caught up (a slow start on a loaded machine) leaves the main parts
+    # without the states the old process had published past that step, which the standby
+    # recorded.  So: the standby holds 0 .. N-1 once each, every state the main parts hold,
+    # byte for byte, and at least as many.
+    for topic, per in main.items():
+        assert sorted(got[topic]) == list(range(len(got[topic]))) and len(got[topic]) >= len(per) > 100, topic
+        assert sorted(per) == list(range(len(per))), topic
+        assert all(got[topic][k] == payload for k, payload in per.items()), topic
 
 
 def test_a_logger_killed_while_serve_starts_is_replaced(tmp_path, processes):
