@@ -42,7 +42,7 @@ from astrodyn.service.summary import TWO_BODY_KEYS
 from astrodyn.signals import catch_job_control, catch_stop_signals, suspended_s
 from astrodyn.simulate import AttitudeEngine, ModelEnded, OrbitEngine
 
-__all__ = ["Pacer", "PropagatorOptions", "run_propagator", "command_key", "CommandVerifier", "obey_commands", "pace_to",
+__all__ = ["Pacer", "PropagatorOptions", "run_propagator", "command_key", "CommandVerifier", "command_anchor", "obey_commands", "pace_to",
            "wait_until_logged"]
 
 KINDS = ("orbit", "attitude")
@@ -79,23 +79,27 @@ class Pacer:
         self._anchor_sim: float | None = None if anchor is None else float(anchor[1])
         self._suspended_at_anchor = suspended_s()
 
-    def _reanchor(self, t_sim: float | None) -> None:
-        self._anchor_wall = time.monotonic()
-        self._anchor_sim = t_sim
+    def _reanchor(self, t_sim: float | None, anchor: tuple[float, float] | None = None) -> None:
+        self._anchor_wall, self._anchor_sim = (time.monotonic(), t_sim) if anchor is None else anchor
         self._suspended_at_anchor = suspended_s()
 
-    def set_factor(self, factor: float, t_sim: float | None) -> None:
+    def set_factor(self, factor: float, t_sim: float | None, anchor: tuple[float, float] | None = None) -> None:
+        """Pace at ``factor`` from now on: from this process's ``t_sim``, or on the schedule
+        ``anchor = (wall, t_sim)`` its supervisor gives every process (as ``__init__``'s), so
+        that processes that drifted apart (each ran as fast as it could at ``inf``) are paced
+        to one sim time again: one behind the schedule runs as fast as it can until it is on it."""
         if not (factor > 0):
             raise ValueError(f"rate factor: expected a number > 0 (or inf), got {factor!r}")
         self.factor = float(factor)
-        self._reanchor(t_sim)
+        self._reanchor(t_sim, anchor)
 
     def pause(self) -> None:
         self.paused = True
 
-    def resume(self, t_sim: float | None) -> None:
+    def resume(self, t_sim: float | None, anchor: tuple[float, float] | None = None) -> None:
+        """Go on from a pause: from ``t_sim`` now, or on the schedule ``anchor`` (:meth:`set_factor`)."""
         self.paused = False
-        self._reanchor(t_sim)
+        self._reanchor(t_sim, anchor)
 
     def state(self) -> dict:
         """``{"paused": bool, "rate": factor or "inf"}``: what every heartbeat says, so that a
@@ -563,6 +567,19 @@ class CommandVerifier:
         return False
 
 
+def command_anchor(cmd: dict) -> tuple[float, float] | None:
+    """The schedule ``(wall, t_sim)`` a supervisor's ``rate`` or ``resume`` command gives
+    (``"anchor": [monotonic wall s, sim t s]``, the same for every process), or None: the
+    process paces from its own sim time.  ValueError for one that is not two finite numbers."""
+    anchor = cmd.get("anchor")
+    if anchor is None:
+        return None
+    if (not isinstance(anchor, list) or len(anchor) != 2
+            or not all(type(x) in (int, float) and math.isfinite(x) for x in anchor)):
+        raise ValueError(f"anchor: expected [wall s, sim t s], two finite numbers, got {str(anchor)[:80]}")
+    return float(anchor[0]), float(anchor[1])
+
+
 def obey_commands(commands, pacer: Pacer, t: float, stopping: dict, heartbeat, commands_from: CommandVerifier,
                   more_verbs: dict | None = None) -> None:
     """Apply pending supervisor commands (malformed ones are ignored with a note on stderr,
@@ -577,9 +594,9 @@ def obey_commands(commands, pacer: Pacer, t: float, stopping: dict, heartbeat, c
             if verb == "pause":
                 pacer.pause()
             elif verb == "resume":
-                pacer.resume(t)
+                pacer.resume(t, command_anchor(cmd))
             elif verb == "rate":
-                pacer.set_factor(float(cmd["factor"]), t)
+                pacer.set_factor(float(cmd["factor"]), t, command_anchor(cmd))
             elif verb == "stop":
                 stopping["why"] = "stop requested"
                 pacer.resume(t)
