@@ -69,7 +69,7 @@ from astrodyn.service.children import (
     work_directory,
     zenoh_config_snapshot,
 )
-from astrodyn.service.output import check_output_path
+from astrodyn.service.output import check_output_path, series_start_problem
 from astrodyn.service.summary import file_summary, print_summary, propagator_rows, sim_time_reached
 from astrodyn.service.supervision import (
     LoggerFile,
@@ -819,6 +819,8 @@ def main(argv: list[str] | None = None) -> int:
             outputs = [out, *(Path(standby_path(out, k)) for k in range(2, args.loggers + 1))]
             for path in outputs:
                 checked_output_path(path, inputs)
+                if problem := series_start_problem(path, "run"):  # the only file of a session, or a series' first part
+                    raise ScenarioError(f"--out {str(path)[:200]}: {problem}")
             if args.json is not None:
                 check_json_path(Path(args.json), (args.config, args.resume, args.zenoh_config, args.commands, *outputs))
             zenoh_config = check_bus_flags(args.connect, args.zenoh_config)

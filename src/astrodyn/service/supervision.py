@@ -49,6 +49,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from astrodyn.recording.writer import being_written, partial_path
+from astrodyn.service.output import identity_at
 
 __all__ = ["wait_until_gone", "contiguous_end", "RESTART_LIMIT", "RESTART_WINDOW_S", "RestartBudget", "LoggerRestart", "plan_logger_restart",
            "PartRestart", "plan_part_restart", "part_number", "resume_from_parts", "LoggerFile", "LoggerFiles", "holds_config",
@@ -82,6 +83,7 @@ class LoggerFile:
 
     def __init__(self, path: str, identity: tuple[int, int], fd: int | None = None):
         self.path, self.identity, self._fd = os.fspath(path), identity, fd
+        self.names = [self.path]  # every name it was known by, oldest first (:meth:`renamed_to`)
 
     @classmethod
     def _held(cls, path: str) -> LoggerFile | None:
@@ -121,18 +123,37 @@ class LoggerFile:
 
     def here(self) -> bool:
         """Whether :attr:`path` still names this file."""
-        try:
-            return _identity(os.lstat(self.path)) == self.identity
-        except OSError:
-            return False
+        return identity_at(self.path) == self.identity
+
+    def renamed_to(self, path: str | os.PathLike) -> None:
+        """Its logger reported that the file took the name ``path`` (a finished part: the
+        partial name linked to ``NAME-000k.mcap`` and unlinked, :func:`~astrodyn.recording.writer.link_new`,
+        or renamed to ``NAME.mcap``): :attr:`path` becomes ``path`` if that names the file."""
+        path = os.fspath(path)
+        if path not in self.names:
+            self.names.append(path)
+        if identity_at(path) == self.identity:
+            self.path = path
 
     def where(self) -> str | None:
-        """Where the file is now, if it was moved (its directory renamed, the file
-        renamed): from the descriptor kept on it (``/proc/self/fd``); None when it was
-        removed or that cannot be told."""
+        """Where the file is now: :attr:`path` if it still names it, else the newest of
+        the names it was reported under that does, else where it was moved (its directory
+        renamed, the file renamed) as the descriptor kept on it tells (``/proc/self/fd``),
+        its finished name (``NAME-000k.mcap`` for ``NAME-000k.partial.mcap``) looked for
+        too: a part named by a hard link and an unlink of its partial name, which
+        ``/proc`` shows as deleted (:func:`astrodyn.service.output.held_path`); None when
+        it was removed or that cannot be told."""
+        from astrodyn.recording.recover import finished_name
         from astrodyn.service.output import held_path
 
-        return self.path if self.here() else held_path(self._fd, self.identity)
+        if self.here():
+            return self.path
+        names = [*reversed(self.names)]
+        for name in names:
+            if identity_at(name) == self.identity:
+                return name
+        names += [final for name in self.names if (final := finished_name(name)) is not None]
+        return held_path(self._fd, self.identity, names)
 
     def unlink_if_here(self) -> bool:
         """Remove :attr:`path` if it still names this file (a dead logger's, copied); True
@@ -177,7 +198,7 @@ class LoggerFiles:
             return
         end = data.rfind(b"\n") + 1  # whole lines only (a line is one O_APPEND write)
         self._offset += end
-        held = {lf.identity for lf in self.files}
+        held = {lf.identity: lf for lf in self.files}
         for line in data[:end].splitlines():
             try:
                 rec = json.loads(line)
@@ -185,7 +206,9 @@ class LoggerFiles:
                 path = str(rec["file"])
             except (ValueError, KeyError, TypeError):
                 continue
-            if identity not in held:
+            if identity in held:  # the name a finished part took (before: ignored, and a part seen
+                held[identity].renamed_to(path)  # while partial was lost once link_new named it)
+            else:
                 self._pending[identity] = path  # kept in creation order, with the latest name
         for identity, path in list(self._pending.items()):
             lf = LoggerFile.reported(path, identity)
@@ -227,34 +250,23 @@ class LoggerFiles:
 
 def holds_config(path: str | os.PathLike, scenario) -> bool:
     """Whether the recording ``path`` (finished or cut) holds ``scenario``'s config: its
-    ``scenario`` metadata record, read from the file's head (the logger writes it first),
-    names the same scenario and config as ``run --resume`` and ``run --commands`` judge it
+    ``scenario`` metadata record, wherever the file keeps it (the logger writes it first;
+    a part ``astrodyn recover`` finished, a dead logger's, has it after the messages, found
+    through its summary's metadata index: :func:`astrodyn.service.output.recorded_metadata`,
+    a bounded read whatever the file's size), names the same scenario and config as ``run
+    --resume`` and ``run --commands`` judge it
     (:func:`astrodyn.scenario.recorded.config_difference`: where the config file was read
     from does not count).  False for anything else, and for a file that cannot be read: a
     resume never starts from another config's states."""
-    from mcap.opcode import Opcode
-    from mcap.records import Metadata
-
-    from astrodyn.recording.reader import RecordingError, open_recording, parse_record, scan_records
+    from astrodyn.recording.reader import RecordingError
     from astrodyn.scenario.recorded import config_difference
+    from astrodyn.service.output import recorded_metadata
 
     try:
-        f, size = open_recording(os.fspath(path))
-    except RecordingError:
+        found = recorded_metadata(path, ("scenario",))
+    except (RecordingError, OSError, ValueError):
         return False
-    with f:
-        try:
-            for opcode, body, _offset, _length in scan_records(f, size, os.fspath(path), {}, heads={Opcode.CHUNK: 0}):
-                if opcode == Opcode.CHUNK:  # the metadata records come before the first chunk
-                    return False
-                if opcode != Opcode.METADATA:
-                    continue
-                rec = parse_record(opcode, body)
-                if isinstance(rec, Metadata) and rec.name == "scenario":
-                    return config_difference(rec.metadata, scenario) is None
-        except (RecordingError, OSError, ValueError):
-            return False
-    return False
+    return "scenario" in found and config_difference(found["scenario"], scenario) is None
 
 
 #: A process that dies this many times ...
