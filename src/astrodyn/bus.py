@@ -72,6 +72,7 @@ from astrodyn.files import file_kind, regular_file_problem
 
 __all__ = [
     "SchemaServer",
+    "EventSeqWatcher",
     "LISTENING_GAP_S",
     "ListeningClock",
     "DEFAULT_HOST",
@@ -728,6 +729,37 @@ class EventPublisher(_Declared):
         self.emit(END_EVENT, t, json.dumps(detail, separators=(",", ":")))
 
 
+class EventSeqWatcher(_Declared):
+    """The event numbering of each process of a scenario, as heard on
+    ``astrodyn/<scenario>/@event``: :meth:`next_seq` is one past the highest seq of the
+    process's events heard so far (0 for one not heard).  Only events signed by the process
+    they name count (``verifier``: the run's, :mod:`astrodyn.auth`), so a forged event never
+    moves a number, and memory is one entry per process of the run.  A supervisor gives
+    this to a process it restarts when the logger that counted its events is gone itself
+    (``serve``'s logger restart: the new logger has seen none of them)."""
+
+    def __init__(self, session: zenoh.Session, scenario: str, *, verifier: auth.Verifier):
+        self.verifier = verifier
+        self._next: dict[str, int] = {}
+        # a ring: never blocks Zenoh's thread when the owner polls late; the newest (highest) seqs are kept
+        self._entity = session.declare_subscriber(messages.event_key(scenario), zenoh.handlers.RingChannel(1024))
+
+    def poll(self) -> None:
+        while (sample := self._entity.try_recv()) is not None:
+            key, payload = str(sample.key_expr), sample.payload.to_bytes()
+            try:
+                sender = self.verifier.verify(key, payload, _attachment_bytes(sample))
+                msg = messages.decode(payload, "event")
+            except (auth.AuthError, ValueError):
+                continue
+            if msg["process"] == sender:
+                self._next[sender] = max(self._next.get(sender, 0), int(msg["seq"]) + 1)
+
+    def next_seq(self, process: str) -> int:
+        """The seq ``process``'s next event must carry to continue its numbering (after :meth:`poll`)."""
+        return self._next.get(process, 0)
+
+
 
 # --------------------------------------------------------------------------- liveliness
 
@@ -1105,6 +1137,15 @@ class ControlServer(_Declared):
     (:func:`send_control` returns ``[]``).  None (the default): when ``verbs`` holds every
     one of :data:`CONTROL_VERBS`, i.e. for the process that runs the scenario (``serve``,
     ``replay``), not for one that serves a verb or two beside it (the logger's ``stop``).
+
+    A verb acts only on a query of exactly its own key (``astrodyn/demo/@control/pause``).
+    Any other key expression that reaches it (``astrodyn/demo/@control/*``, the key serve
+    prints as ``control``, ``.../@control/**``, ``astrodyn/*/@control/stop``, ``.../st*``)
+    is never passed to ``poll()``: with ``answer_unknown`` it gets one error reply (from
+    the ``@control/*`` catch-all, not one per verb) naming the verbs and saying to query one
+    verb's key; nothing is done.  Before, each verb's queryable answered it, so one query
+    of the advertised key paused, resumed and stopped the service at once (svc probe F4).
+    The ``extra_keys`` (read-only status) still answer any query that reaches them.
     """
 
     def __init__(
@@ -1121,6 +1162,7 @@ class ControlServer(_Declared):
         self.rejected: dict[str, int] = {}
         self.verbs = tuple(verbs)
         keys = {messages.control_key(scenario, verb): verb for verb in self.verbs}
+        self._verb_keys = frozenset(keys)  # a query acts on one of these only if its key expression is exactly it
         keys.update(extra_keys or {})
         self._queryables = [
             (key, verb, session.declare_queryable(key, zenoh.handlers.FifoChannel(256)))
@@ -1128,16 +1170,21 @@ class ControlServer(_Declared):
         ]
         if answer_unknown is None:
             answer_unknown = set(CONTROL_VERBS) <= set(self.verbs)
-        self._any_verb = None  # a queryable on @control/*: a verb this server lacks gets an error, not silence
+        self._control_prefix = messages.control_key(scenario, "x").rsplit("/", 1)[0] + "/"  # astrodyn/<scenario>/@control/
+        self._any_verb = None  # a queryable on @control/*: a verb this server lacks or a wildcard gets an error, not silence
         if answer_unknown:
-            self._any_verb = session.declare_queryable(messages.control_key(scenario, "x").rsplit("/", 1)[0] + "/*",
-                                                       zenoh.handlers.FifoChannel(256))
+            self._any_verb = session.declare_queryable(self._control_prefix + "*", zenoh.handlers.FifoChannel(256))
 
     def poll(self) -> list[ControlRequest]:
         self._answer_unknown_verbs()
         requests = []
         for key, verb, queryable in self._queryables:
             while (query := queryable.try_recv()) is not None:
+                if key in self._verb_keys and str(query.key_expr) != key:
+                    # a wildcard or any expression other than this verb's key: never an action
+                    # (the @control/* catch-all answers it once, _answer_unknown_verbs)
+                    query.drop()
+                    continue
                 if self.token is not None and not auth.token_matches(
                         self.token, auth.token_from_attachment(_attachment_bytes(query))):
                     self.rejected[verb] = self.rejected.get(verb, 0) + 1
@@ -1155,18 +1202,29 @@ class ControlServer(_Declared):
         return requests
 
     def _answer_unknown_verbs(self) -> None:
-        """Answer each pending query on ``@control/*`` for a verb this server does not serve
-        with an error naming the verbs it does; drop the others unanswered (a served verb is
-        answered by its own queryable; a wildcard query names no verb)."""
+        """Answer each pending query on ``@control/*`` that is not exactly a served verb's
+        key, once: a single verb this server does not serve gets an error naming the verbs it
+        does; any other expression (a wildcard: ``@control/*``, ``**``, ``st*``; another
+        scenario's keys too) an error naming them and saying to query one verb's key.  A
+        served verb's own key is dropped here: its queryable answers it."""
         if self._any_verb is None:
             return
+        verbs = ", ".join(self.verbs)
         while (query := self._any_verb.try_recv()) is not None:
-            verb = str(query.key_expr).rsplit("/", 1)[-1]
-            if verb not in self.verbs and "*" not in verb and "$" not in verb:
+            expr = str(query.key_expr)
+            verb = expr[len(self._control_prefix):] if expr.startswith(self._control_prefix) else ""
+            if expr in self._verb_keys:
+                message = None
+            elif verb and not any(c in verb for c in "/*$"):
                 shown = verb if len(verb) <= 40 else verb[:37] + "..."
+                message = f"{shown}: unknown control verb; this process answers {verbs}"
+            else:
+                shown = expr if len(expr) <= 80 else expr[:77] + "..."
+                message = (f"{shown}: not the key of one control verb, so nothing was done; query one verb's key, "
+                           f"{self._control_prefix}<verb>, with <verb> one of {verbs}")
+            if message is not None:
                 with contextlib.suppress(Exception):  # the querier may be gone: never the server's concern
-                    query.reply_err(json.dumps({"error": f"{shown}: unknown control verb; this process answers "
-                                                         f"{', '.join(self.verbs)}"}))
+                    query.reply_err(json.dumps({"error": message}))
             query.drop()
 
     def close(self) -> None:

@@ -45,8 +45,19 @@ holds; exact models are re-evaluated from the initial state, integrated ones con
 that state with ``--resume-state``).  A ``restart`` event (process ``serve``) is recorded
 in the MCAP with the step it restarted from.  Steps the dead process published after the
 last flush are published again; the logger keeps the first copy of each seq, so the file
-has no gap and no duplicate.  After ``max_restarts`` deaths of one process it stays down
-and the failure is final (exit 1).
+has no gap and no duplicate.
+
+Restarts are limited by rate, not over the service's life: a process that dies for the
+:data:`~astrodyn.service.supervision.RESTART_LIMIT`-th time within
+:data:`~astrodyn.service.supervision.RESTART_WINDOW_S` seconds
+(:class:`~astrodyn.service.supervision.RestartBudget`, as ``run``), or that ended with the
+same error :data:`~astrodyn.service.runner.SAME_ERROR_RESTARTS` times in a row at the
+step it was restarted at (deterministic: a restart only repeats it), or whose model ended,
+is not restarted: serve says so on stderr at once (``process orbit died 5 times within 60
+s; not restarted again ...``), ``status`` says ``"state": "degraded"`` and gives the
+reason under that process (``not_restarted``) and in ``failures``, the other processes go
+on, and ``stop`` ends serve with exit 1.  Rare deaths spread over weeks are each
+restarted (before, the 6th death in the service's life was final and silent).
 """
 
 from __future__ import annotations
@@ -89,6 +100,7 @@ from astrodyn.service.propagator import command_key
 from astrodyn.service.runner import (
     EXIT_REJECTED,
     MAX_LOGGERS,
+    SAME_ERROR_RESTARTS,
     attack_report,
     check_bus_flags,
     check_closed_loop_arguments,
@@ -99,6 +111,7 @@ from astrodyn.service.runner import (
     propagator_argv,
 )
 from astrodyn.service.supervision import (
+    RESTART_WINDOW_S,
     LoggerFile,
     LoggerFiles,
     RestartBudget,
@@ -123,18 +136,23 @@ class Supervisor:
 
     ``own_output()`` is called once its loggers are ready, i.e. once this serve holds its
     output (another run or serve recording to it would have made the first logger fail):
-    what may only be done then (the control token file, :func:`control_token`)."""
+    what may only be done then (the control token file, :func:`control_token`).
+
+    ``restart_window_s``: the window of each process's restart budget (:class:`RestartBudget`:
+    the death that makes its ``limit``-th within this many seconds is not restarted); the
+    default is run's; tests shrink it (serve's hidden ``--restart-window``)."""
 
     def __init__(self, scenario, out: Path, session, hub: str, *, rate: float,
                  roll_size: int | None = None, roll_interval: float | None = None, connect=(), tmp: Path,
-                 max_restarts: int = 5, zenoh_config: Path | None = None, foxglove_port: int | None = None,
+                 restart_window_s: float = RESTART_WINDOW_S, zenoh_config: Path | None = None,
+                 foxglove_port: int | None = None,
                  controllers: list[str] | None = None, token_file: Path | None = None, loggers: int = 1,
                  stall_s: float | None = STALL_S, own_output=None):
         self.scenario = scenario
         self.session = session
         self.out = Path(out)
         self.tmp = tmp
-        self.max_restarts = int(max_restarts)
+        self.restart_window_s = float(restart_window_s)
         self.stall_s = stall_s  # a propagator or logger silent this long is killed, then restarted
         self.restarts: list[dict] = []
         self.finishing: list[Child] = []  # `recover` of dead loggers' parts (restart_logger)
@@ -142,9 +160,10 @@ class Supervisor:
         self.state = "starting"
         self.started = time.monotonic()
         self.failures: list[str] = []
+        self.not_restarted: dict[str, str] = {}  # process -> why it stays down (status: "degraded")
         p = make_plan(scenario)
         self.propagators = [k for k in p.processes if k != "logger"]
-        self.budgets = {k: RestartBudget(k) for k in p.processes}
+        self.budgets = {k: RestartBudget(k, window_s=self.restart_window_s) for k in p.processes}
         connect_args = child_bus_arguments(hub, connect, zenoh_config)
         meta = tmp / "scenario.json"
         meta.write_text(json.dumps(scenario.to_metadata()))
@@ -189,6 +208,9 @@ class Supervisor:
             except Exception:
                 self.stop_loggers()
                 raise
+        # the propagators' event numbering, heard from their first event on: a logger restart
+        # continues it (the new logger has seen none of it: restart_logger)
+        self.event_seqs = bus.EventSeqWatcher(session, scenario.name, verifier=auth.Verifier(secret))
         self._argv = {kind: propagator_argv(kind, config_path, connect_args, "--endless") for kind in self.propagators}
         if "plant" in self._argv and token_file is not None:  # outside controllers present serve's token
             self._argv["plant"].append(f"--control-token-file={token_file}")  # "=": beside --out, may start with "-"
@@ -202,7 +224,7 @@ class Supervisor:
             self._argv["viewer"] = [*viewer_command(), "--scenario", scenario.name, "--port", str(foxglove_port),
                                     "--metadata", str(meta), "--from-logger", "--services", ",".join(self.verbs),
                                     *connect_args]
-            self.budgets["viewer"] = RestartBudget("viewer")
+            self.budgets["viewer"] = RestartBudget("viewer", window_s=self.restart_window_s)
             self.children["viewer"] = Child("viewer", self._argv["viewer"], tmp, env=self.child_env)
             self.viewer_url = f"ws://127.0.0.1:{foxglove_port}"
         self.controllers: dict[str, Child] = {}
@@ -249,16 +271,22 @@ class Supervisor:
             self.schedule = (self.schedule[0] + paused_s, self.schedule[1])
 
     def status(self) -> dict:
+        """The ``status`` reply.  ``state``: serve's (``running``, ``paused``, ...), except
+        ``degraded`` while it runs with a process that died and is not restarted: that
+        process's entry gives why (``not_restarted``), as ``failures`` does."""
         self.beats.poll()
         procs = {}
         for name, ch in self.children.items():
             hb = self.beats.last.get(name, {})
             procs[name] = {"pid": ch.pid, "running": ch.poll() is None, "exit": ch.poll(),
                            "t": hb.get("t"), "messages": hb.get("messages")}
+            if name in self.not_restarted:
+                procs[name]["not_restarted"] = self.not_restarted[name]
         ts = [procs[k]["t"] for k in self.propagators if procs[k]["t"] is not None]
         for name, ch in self.controllers.items():
             procs[f"controller {name}"] = {"pid": ch.pid, "running": ch.poll() is None, "exit": ch.poll()}
-        return {"scenario": self.scenario.name, "state": self.state,
+        state = "degraded" if self.state == "running" and self.not_restarted else self.state
+        return {"scenario": self.scenario.name, "state": state,
                 "real_time_factor": "inf" if math.isinf(self.rate) else self.rate,
                 "t": min(ts) if ts else 0.0, "wall_s": round(time.monotonic() - self.started, 3),
                 "processes": procs, "failures": list(self.failures), "restarts": list(self.restarts)}
@@ -425,21 +453,37 @@ class Supervisor:
                         msg += f"; restart failed: {exc}"
                 else:
                     msg = f"{self.budgets['logger'].refusal()}; last: {msg}"
+                    print(f"astrodyn serve: {self.budgets['logger'].refusal()}: serve stops", file=sys.stderr, flush=True)
                 self.failures.append(msg)
                 self.state = "failed"
                 continue
             if name in self.propagators and rc == MODEL_ENDED_EXIT:  # it would end there again
-                self.failures.append(msg + " (a model that ended is not restarted)")
+                self.leave_down(name, msg, f"process {name} not restarted: its model ended (it would end there again)")
                 continue
-            if name in self.propagators and self.state in ("running", "paused") and n < self.max_restarts \
-                    and self.budgets[name].allow():
-                try:
-                    self.restart(name, msg, n)
+            if name in self.propagators and self.state in ("running", "paused"):
+                if not self.budgets[name].allow():  # a rate, not a count over the service's life
+                    self.leave_down(name, msg, self.budgets[name].refusal())
                     continue
+                said = ch.stderr_tail(1) if rc > 0 and ch.stalled_s is None and ch.lost_to_logger is None else ""
+                try:
+                    refused = self.restart(name, msg, n, said)
                 except Exception as exc:  # keep serving the others; the failure is final for this one
-                    msg += f"; restart failed: {exc}"
+                    refused = f"process {name} not restarted: the restart failed: {exc}"
+                if refused is not None:
+                    self.leave_down(name, msg, refused)
+                continue
             self.failures.append(msg)
         self.check_controllers()
+
+    def leave_down(self, name: str, death: str, why: str) -> None:
+        """Process ``name`` died (``death``: what serve said of it) and is not restarted
+        (``why``, a sentence that says so): said on stderr at once, in ``status`` (state
+        ``degraded``, the process's ``not_restarted``) and in ``failures`` (``stop`` ends
+        serve with exit 1); the other processes go on."""
+        self.not_restarted[name] = why
+        self.failures.append(f"{death}; {why}")
+        print(f"astrodyn serve: {why}; the other processes go on (status: degraded), and `stop` ends serve with exit 1",
+              file=sys.stderr, flush=True)
 
     def check_controllers(self) -> None:
         """A ``--controller`` that ended is not restarted (its state is its own): in lockstep
@@ -574,8 +618,14 @@ class Supervisor:
                              verifier=self.verifier)
         if failure is not None:
             raise bus.BusError(failure)
+        # each propagator's events continue its numbering (the new logger has seen none of them,
+        # so next_event_seq cannot tell: what serve heard does): a merged series has each seq once
+        self.event_seqs.poll()
         for kind in self.propagators:
-            argv = [*self._argv[kind], "--real-time-factor", str(self.rate), *self.pace_args()]
+            if kind in self.not_restarted:  # left down (leave_down): a logger restart does not revive it
+                continue
+            argv = [*self._argv[kind], "--real-time-factor", str(self.rate), "--first-event-seq",
+                    str(self.event_seqs.next_seq(kind)), *self.pace_args()]
             for k, v in plan.propagator_args[kind].items():
                 argv += [k, str(v)]
             self.children[kind].close()
@@ -586,10 +636,12 @@ class Supervisor:
         if finishing is not None:
             self.finishing.append(finishing)
             self.finishing_sources[id(finishing)] = dead_file
-        steps = {kind: args.get("--start-step", 0) for kind, args in plan.propagator_args.items()}
+        steps = {kind: args.get("--start-step", 0) for kind, args in plan.propagator_args.items()
+                 if kind not in self.not_restarted}
         record = {"process": "logger", "old_pid": dead.pid, "new_pid": self.children["logger"].pid, "why": why,
                   "from_step": min(steps.values(), default=0), "state_from": plan.source, "time": time.time()}
         self.restarts.append(record)
+        self.emit_restart(record, record["from_step"] - 1 if record["from_step"] > 0 else None)
         print(f"astrodyn serve: restarted logger (pid {record['new_pid']}) on part {plan.part}; the dead logger's "
               f"{plan.source or 'file'} is finished as part {plan.part - 1}; propagators continue at "
               + ", ".join(f"{k} step {v}" for k, v in steps.items()), file=sys.stderr, flush=True)
@@ -602,17 +654,31 @@ class Supervisor:
             return []
         return ["--pace-anchor", repr(self.schedule[0]), repr(self.schedule[1])]
 
-    def restart(self, kind: str, why: str, n: int) -> None:
+    def restart(self, kind: str, why: str, n: int, said: str = "") -> str | None:
         """Start ``kind`` again after the last step every one of its channels has in the
-        newest part that holds one (read from the parts' tails: a cost independent of their size)."""
+        newest part that holds one (read from the parts' tails: a cost independent of their size).
+        ``said``: the last line of its stderr when it exited with an error of its own ("" for
+        a signal, a stall, a cut bus link).  Returns None once restarted, or why it is not: it
+        ended with the same error :data:`SAME_ERROR_RESTARTS` times in a row, each time
+        restarted at this step (deterministic: a restart only repeats it, however far apart
+        the deaths are; the rate budget would restart it for ever)."""
         old = self.children[kind]
         args, source = self.refill_args(kind, old.refill_from) if old.refill_from else (None, None)
         if args is None:
             args, source = resume_from_parts(self.scenario, kind, self._parts(), self.tmp)
+        same = 0  # the restarts just before this one, at this step, that ended with this error
+        for r in reversed([r for r in self.restarts if r["process"] == kind]):
+            if not said or r.get("from_step") != args["--start-step"] or r.get("said") != said:
+                break
+            same += 1
+        if same >= SAME_ERROR_RESTARTS:
+            return (f"process {kind} not restarted: it ended with the same error {same + 1} times in a row, each time "
+                    f"restarted at step {args['--start-step']} without recording a step: {said}")
         step = args["--start-step"] - 1 if source is not None else None
         old.close()
         wait_until_gone(self.session, self.scenario.name, kind)
-        event_seq = next_event_seq(self.session, self.scenario.name, kind, n + 1)
+        self.event_seqs.poll()  # the logger's count, or what serve heard when the logger does not answer
+        event_seq = max(next_event_seq(self.session, self.scenario.name, kind, 0), self.event_seqs.next_seq(kind))
         argv = [*self._argv[kind], "--real-time-factor", str(self.rate), "--first-event-seq", str(event_seq),
                 *self.pace_args()]
         for k, v in args.items():
@@ -620,12 +686,22 @@ class Supervisor:
         self.children[kind] = Child(f"{kind}-r{n + 1}", argv, self.tmp, env=self.child_env)
         self.children[kind].name = kind
         record = {"process": kind, "old_pid": old.pid, "new_pid": self.children[kind].pid, "why": why,
-                  "from_step": args["--start-step"], "state_from": source, "time": time.time()}
+                  "from_step": args["--start-step"], "state_from": source, "time": time.time(),
+                  **({"said": said} if said else {})}
         self.restarts.append(record)
-        t = (args["--start-step"] - 1) / self.scenario.rate if step is not None else 0.0
-        self.events.emit("restart", max(0.0, t), json.dumps({k: record[k] for k in ("process", "old_pid", "new_pid", "from_step", "state_from")}))
+        self.emit_restart(record, step)
         print(f"astrodyn serve: restarted {kind} (pid {record['new_pid']}) from step {record['from_step']}"
               f"{' (state from ' + source + ')' if source else ''}", file=sys.stderr, flush=True)
+        return None
+
+    def emit_restart(self, record: dict, step: int | None) -> None:
+        """The ``restart`` event (process ``serve``) of a restart ``record``: its ``t`` is that
+        of ``step``, the step whose state the restarted process continued from (0 when it
+        started from the beginning); its detail the record's process, pids, ``from_step``
+        and ``state_from``."""
+        t = step / self.scenario.rate if step is not None else 0.0
+        self.events.emit("restart", max(0.0, t), json.dumps({k: record[k] for k in ("process", "old_pid", "new_pid",
+                                                                                      "from_step", "state_from")}))
 
     def stop(self, timeout_s: float = 60.0) -> dict:
         """Stop the propagators, let the logger finish the file, return the final summary."""
@@ -740,6 +816,7 @@ class Supervisor:
         self.beats.close()
         self.alive.close()
         self.events.close()
+        self.event_seqs.close()
         self.commands.undeclare()
 
 
@@ -760,6 +837,8 @@ def control_token_path(out: Path) -> Path:
 #: ``output.roll_size`` and ``output.roll_interval`` (astrodyn.scenario).
 ROLL_SIZE_BOUNDS = (2**20, 2**50)
 ROLL_INTERVAL_BOUNDS = (1.0, 250 * 365.25 * 86400.0)
+#: ``--restart-window`` wall seconds (a hidden flag, for tests: the restart budget's window).
+RESTART_WINDOW_BOUNDS = (0.1, 86400.0)
 #: Wall seconds between rolled files when neither ``--roll-interval`` nor the config's
 #: ``output.roll_interval`` says: hourly files keep each file's chunk index (held in the
 #: logger's memory for its summary) small (docs/soak.md).
@@ -838,6 +917,9 @@ def check_serve_flags(args: argparse.Namespace) -> bus.ZenohConfigText | None:
     lo, hi = ROLL_INTERVAL_BOUNDS
     if args.roll_interval is not None and not lo <= args.roll_interval <= hi:  # nan fails too
         raise ScenarioError(f"--roll-interval: expected wall seconds {lo:g} <= S <= {hi:g}, got {args.roll_interval}")
+    lo, hi = RESTART_WINDOW_BOUNDS
+    if not lo <= args.restart_window <= hi:  # nan fails too
+        raise ScenarioError(f"--restart-window: expected wall seconds {lo:g} <= S <= {hi:g}, got {args.restart_window}")
     if args.port is not None and (problem := bus.local_port_problem(args.port)):
         raise ScenarioError(f"--port: {problem}")
     return check_bus_flags(args.connect, args.zenoh_config)
@@ -882,6 +964,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--controller", action="append", default=None, metavar="CMD",
                     help="closed loop: start this controller program under serve (as with run; docs/control.md)")
     add_stall_argument(ap)
+    # for tests only (hidden): the window of each process's restart budget, wall seconds (default
+    # RESTART_WINDOW_S, 60); a test shrinks it to check in seconds that deaths spread wider than
+    # the window are each restarted and a burst within it is not (Supervisor's restart_window_s)
+    ap.add_argument("--restart-window", type=float, default=RESTART_WINDOW_S, help=argparse.SUPPRESS)
     ap.add_argument("--tolerate-rejected", action="store_true",
                     help="exit 0 even when the logger or the plant rejected messages that were not this run's own "
                          "(default: exit 3, the record was attacked; docs/security.md)")
@@ -932,7 +1018,8 @@ def main(argv: list[str] | None = None) -> int:
                                  zenoh_config=zenoh_config_copy,
                                  foxglove_port=None if args.foxglove is None else (args.foxglove or bus.free_port()),
                                  controllers=args.controller, token_file=token_file, loggers=args.loggers,
-                                 stall_s=args.stall_timeout or None, own_output=write_token)
+                                 stall_s=args.stall_timeout or None, own_output=write_token,
+                                 restart_window_s=args.restart_window)
             except (bus.BusError, OSError) as exc:  # the logger could not start: nothing else was started
                 print(f"astrodyn serve: {exc}", file=sys.stderr)
                 return 1

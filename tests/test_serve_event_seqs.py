@@ -1,0 +1,90 @@
+"""A logger restart under serve continues each process's event numbering and is recorded (svc probe F6).
+
+Each process numbers its own events 0, 1, ... over the whole run (``bus.EventPublisher``;
+a restarted process continues its predecessor's numbering: ``--first-event-seq``).  After a
+logger restart serve started the propagators without it, so their events began at 0 again in
+the new part: ``merge`` of the parts then held seqs 0, 1 twice with other content, which
+``analyze`` reported as duplicated.  And a logger restart left no ``restart`` event (process
+``serve``) in the recording, as a propagator restart does.
+
+Checked with the plain ``mcap`` reader on ``astrodyn merge`` of the parts: every process's
+events have the seqs 0 .. N-1, each once, and a ``restart`` event of serve names the logger.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+from mcap.reader import make_reader
+
+from astrodyn import bus
+
+ROOT = Path(__file__).resolve().parents[1]
+EVENT_TOPIC = "astrodyn/demo/@event"
+
+
+def _status(session, token: str) -> dict:
+    (reply,) = bus.send_control(session, "demo", "status", token=token, timeout_s=10)
+    return reply
+
+
+def _wait(what: str, timeout_s: float, ready):
+    deadline = time.monotonic() + timeout_s
+    while not (value := ready()):
+        assert time.monotonic() < deadline, what
+        time.sleep(0.05)
+    return value
+
+
+def test_after_a_logger_restart_the_merged_parts_hold_each_event_seq_once_and_the_restart_event(tmp_path):
+    out = tmp_path / "demo.mcap"
+    serve = subprocess.Popen([sys.executable, "-m", "astrodyn", "serve", str(ROOT / "configs" / "demo.toml"), "--out",
+                              str(out), "--rate", "20", "--max-wall", "90"],
+                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        hello = json.loads(serve.stdout.readline())
+        token = hello["control_token"]
+        partial = tmp_path / "demo.partial.mcap"
+        with bus.open_session(connect=[hello["hub"]]) as s:
+            # both propagators have published (their start events are out) and the logger has flushed some
+            _wait("the propagators never ran", 30, lambda: all(
+                (_status(s, token)["processes"][k]["t"] or 0) > 20 for k in ("orbit", "attitude")))
+            _wait("the logger flushed nothing", 30, lambda: partial.exists() and partial.stat().st_size > 20_000)
+            logger = _status(s, token)["processes"]["logger"]["pid"]
+            os.kill(logger, signal.SIGKILL)  # the logger of the serve this test started, named by its status
+            st = _wait("the logger was not restarted", 30, lambda: (st := _status(s, token))["restarts"] and all(
+                st["processes"][k]["running"] and (st["processes"][k]["t"] or 0) > 0 for k in st["processes"]) and st)
+            assert [r["process"] for r in st["restarts"]] == ["logger"], st["restarts"]
+            time.sleep(1.0)  # the new part records the restarted propagators' events and states
+            (final,) = bus.send_control(s, "demo", "stop", token=token, timeout_s=60)
+        _, err = serve.communicate(timeout=60)
+        assert serve.returncode == 0, err[-3000:]
+    finally:
+        if serve.poll() is None:  # only the serve this test started, by its PID (its children share its fate)
+            serve.kill()
+            serve.communicate(timeout=30)
+    parts = [out, tmp_path / "demo-0001.mcap"]
+    assert final["file"] == str(parts[-1]) and all(p.exists() for p in parts), sorted(tmp_path.iterdir())
+    merged = tmp_path / "all.mcap"
+    done = subprocess.run([sys.executable, "-m", "astrodyn", "merge", *map(str, parts), "--out", str(merged)],
+                          capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr[-2000:]
+    seqs: dict[str, list[int]] = {}
+    restarts = []
+    with open(merged, "rb") as f:
+        for _, channel, message in make_reader(f).iter_messages():
+            if channel.topic == EVENT_TOPIC:
+                event = json.loads(message.data)
+                seqs.setdefault(event["process"], []).append(event["seq"])
+                if event["process"] == "serve" and event["kind"] == "restart":
+                    restarts.append(json.loads(event["detail"]))
+    assert {"orbit", "attitude", "serve"} <= set(seqs), seqs
+    for process, got in seqs.items():
+        assert sorted(got) == list(range(len(got))), (process, sorted(got))  # 0 .. N-1, each once
+    assert [r["process"] for r in restarts] == ["logger"], restarts
