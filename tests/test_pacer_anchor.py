@@ -49,3 +49,11 @@ def test_a_malformed_anchor_is_refused(anchor):
 def test_no_anchor_is_none_and_a_good_one_is_two_floats():
     assert command_anchor({"verb": "rate", "factor": 10}) is None
     assert command_anchor({"verb": "resume", "anchor": [12, 3.5]}) == (12.0, 3.5)
+
+
+def test_a_process_ahead_of_the_anchor_goes_on_from_its_own_time_without_waiting():
+    """The supervisor's sim t comes from heartbeats (up to half a second old): a process
+    that ran on past it paces from its own t, never waits for the schedule to reach it."""
+    pacer = Pacer(10.0)
+    pacer.set_factor(10.0, 5000.0, anchor=(time.monotonic(), 1000.0))
+    assert 0.9 < pacer.wait_time(5010.0) <= 1.0  # from its own 5000, not 400 s later

@@ -80,14 +80,20 @@ class Pacer:
         self._suspended_at_anchor = suspended_s()
 
     def _reanchor(self, t_sim: float | None, anchor: tuple[float, float] | None = None) -> None:
-        self._anchor_wall, self._anchor_sim = (time.monotonic(), t_sim) if anchor is None else anchor
+        now = time.monotonic()
+        if anchor is not None and t_sim is not None and math.isfinite(self.factor) \
+                and t_sim > anchor[1] + (now - anchor[0]) * self.factor:
+            anchor = None  # ahead of the schedule (it ran on past what its supervisor heard): no wait, go on from here
+        self._anchor_wall, self._anchor_sim = (now, t_sim) if anchor is None else anchor
         self._suspended_at_anchor = suspended_s()
 
     def set_factor(self, factor: float, t_sim: float | None, anchor: tuple[float, float] | None = None) -> None:
         """Pace at ``factor`` from now on: from this process's ``t_sim``, or on the schedule
         ``anchor = (wall, t_sim)`` its supervisor gives every process (as ``__init__``'s), so
         that processes that drifted apart (each ran as fast as it could at ``inf``) are paced
-        to one sim time again: one behind the schedule runs as fast as it can until it is on it."""
+        to one sim time again: one behind the schedule runs as fast as it can until it is on
+        it; one ahead of it (the supervisor's ``t_sim`` is from heartbeats, up to half a second
+        old) goes on from its own ``t_sim`` without waiting."""
         if not (factor > 0):
             raise ValueError(f"rate factor: expected a number > 0 (or inf), got {factor!r}")
         self.factor = float(factor)

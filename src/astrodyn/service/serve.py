@@ -127,6 +127,11 @@ from astrodyn.signals import StopFlag
 __all__ = ["main", "Supervisor", "roll_settings", "check_serve_flags", "ROLL_INTERVAL_DEFAULT_S"]
 
 
+#: Wall seconds serve waits for its propagators to say they paused, when a rate change from
+#: ``inf`` brings them to one schedule (their heartbeats come every 0.5 s).
+PAUSE_HEARD_S = 2.0
+
+
 class Supervisor:
     """Starts the processes of one scenario and answers the control verbs (module docstring).
 
@@ -257,10 +262,13 @@ class Supervisor:
         beats = [self.beats.last.get(k, {}) for k in self.propagators]
         if any(hb.get("paused", paused) != paused for hb in beats):
             self.pause_reasserted = now
-            self.command("pause" if paused else "resume")
+            if paused:
+                self.command("pause")
+            else:
+                self.command("resume", **({"anchor": list(self.schedule)} if self.schedule else {}))
         if any(hb.get("rate", rate) != rate for hb in beats):
             self.pause_reasserted = now
-            self.command("rate", factor=self.rate)
+            self.command("rate", factor=self.rate, **({"anchor": list(self.schedule)} if self.schedule else {}))
 
     def resume_schedule(self, paused_s: float) -> None:
         """After a Ctrl-Z of ``paused_s`` seconds (:class:`~astrodyn.service.children.JobControl`):
@@ -312,6 +320,27 @@ class Supervisor:
         age_s = min(max(0.0, (time.time_ns() - sent_ns) / 1e9), bus.HEARTBEAT_PERIOD_S)
         return float(t) + age_s * float(rate)
 
+    def wait_paused(self, timeout_s: float) -> None:
+        """Wait (at most ``timeout_s``) until every running propagator's heartbeat says it is
+        paused: its ``t`` is then where it stopped, not where it was up to half a second ago."""
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline:
+            self.beats.poll()
+            if all(self.beats.last.get(k, {}).get("paused") is True or self.children[k].poll() is not None
+                   for k in self.propagators):
+                return
+            time.sleep(0.02)
+
+    def lead_schedule(self) -> tuple[float, float]:
+        """``(monotonic wall now, sim t)`` for a rate change or a resume: the sim time of the
+        propagator furthest on (:meth:`sim_time_now`), the one schedule every process paces to
+        from now on (``Pacer``'s anchor).  At ``rate inf`` each ran as fast as it could, so
+        orbit and attitude drifted apart (hours of sim time in seconds); paced each from its
+        own time, they stayed apart for good (svc probe F5): now those behind catch up."""
+        self.beats.poll()
+        ts = [self.sim_time_now(k) for k in self.propagators if self.beats.last.get(k, {}).get("t") is not None]
+        return time.monotonic(), max(ts, default=0.0)
+
     def handle(self, request: bus.ControlRequest) -> bool:
         """Answer one control request; True when it was ``stop``."""
         verb = request.verb
@@ -323,9 +352,9 @@ class Supervisor:
             self.schedule = None  # paused: no schedule; resume starts a new one
             request.reply(self.status())
         elif verb == "resume":
-            self.command("resume")
+            self.schedule = self.lead_schedule()
+            self.command("resume", anchor=list(self.schedule))
             self.state = "running"
-            self.schedule = (time.monotonic(), self.status()["t"])
             request.reply(self.status())
         elif verb == "rate":
             try:
@@ -333,9 +362,15 @@ class Supervisor:
             except ValueError as exc:
                 request.error(str(exc))
                 return False
+            from_inf = math.isinf(self.rate) and not math.isinf(factor) and self.state == "running"
             self.rate = factor
-            self.command("rate", factor=factor)
-            self.schedule = (time.monotonic(), self.status()["t"])
+            if from_inf:  # they ran apart: hold them where they are, so the schedule starts from the one furthest on
+                self.command("pause")
+                self.wait_paused(PAUSE_HEARD_S)
+            self.schedule = self.lead_schedule()
+            self.command("rate", factor=factor, anchor=list(self.schedule))
+            if from_inf:
+                self.command("resume", anchor=list(self.schedule))
             request.reply(self.status())
         elif verb == "fault" and "plant" in self.propagators:
             from astrodyn.scenario.control import parse_fault, plant_bodies
