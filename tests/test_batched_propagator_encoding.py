@@ -24,6 +24,7 @@ ROOT = Path(__file__).resolve().parents[1]
 pytestmark = pytest.mark.network
 
 
+@pytest.mark.slow  # CI time (9 s; the batch encoders stay checked field by field by test_encode_single and the batch tests)
 def test_batched_constellation_payloads_are_canonical_and_complete(tmp_path):
     text = (ROOT / "configs" / "constellation-1000.toml").read_text()
     for old, new in (('name = "constellation-1000"', 'name = "c100"'), ("t = 1000", "t = 100"), ("p = 20", "p = 5"),

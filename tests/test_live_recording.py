@@ -54,6 +54,7 @@ def test_a_recorder_holds_its_file_until_it_closes_or_its_process_dies(tmp_path)
     assert not being_written(partial)
 
 
+@pytest.mark.slow  # CI time (10 s; the live-recording refusals stay covered by the other tests of this file)
 @pytest.mark.network
 def test_recover_and_a_second_run_leave_a_live_recording_alone(tmp_path):
     cfg = tmp_path / "demo.toml"

@@ -452,6 +452,7 @@ def test_garbage_from_clients_never_crashes_the_view_nor_floods_its_log(tmp_path
     assert {"central_body/earth", "orbit/leo", "axes/leo"} <= ids
 
 
+@pytest.mark.slow  # CI time (9 s; the stalled-clients memory test stays in make test)
 def test_sigterm_with_stalled_and_half_open_connections_ends_serve_promptly_with_the_recording_intact(tmp_path):
     """``serve --foxglove`` with a client reading everything, one subscribed that never reads,
     a TCP connection that never sends its WebSocket handshake and a second of garbage

@@ -69,6 +69,7 @@ def test_a_refused_dv_between_applied_commands_does_not_fail_the_run(tmp_path):
     assert seqs == [s for s in range(steps) if s != 2], seqs  # every applied command once; the refused one absent
 
 
+@pytest.mark.slow  # CI time (9 s; the seq rules stay covered by test_closed_loop_intake_hostile)
 @pytest.mark.network
 def test_a_restarted_controller_goes_on_above_its_numbers_and_a_reused_seq_is_refused(tmp_path):
     """Found by the churn probe: an outside controller restarted (its link numbering from 0

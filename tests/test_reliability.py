@@ -108,7 +108,8 @@ def _seeking_count(path: Path) -> int:
 # ----------------------------------------------------------------------------- signals
 
 
-@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGHUP])  # SIGHUP: the terminal closed (it killed run at once)
+@pytest.mark.parametrize("sig", [signal.SIGTERM,  # SIGHUP: the terminal closed (it killed run at once); CI time (9 s):
+                                 pytest.param(signal.SIGHUP, marks=pytest.mark.slow)])  # the same handler as SIGTERM
 def test_sigterm_to_run_finishes_the_file_and_says_how_far(tmp_path, sig):
     out = tmp_path / "term.mcap"
     proc, _ = _start_run(_config(tmp_path, "30 d"), out)

@@ -215,6 +215,7 @@ def test_replay_paces_at_the_requested_rate(hub, spawn, recording):
     col.close()
 
 
+@pytest.mark.slow  # CI time (8 s; run's Ctrl-Z test (test_ctrl_z.py) covers the job control replay shares)
 def test_ctrl_z_pauses_a_replay_and_fg_goes_on_at_its_rate(hub, spawn, recording):
     """Ctrl-Z (SIGTSTP) stops the replay, nothing is published while it is stopped, and after
     fg (SIGCONT) it goes on at x10 from where it was: before, it raced through the log time
@@ -396,6 +397,7 @@ def test_replay_of_a_non_mcap_file_is_a_clear_error(spawn, tmp_path, content):
         assert f"astrodyn replay: error: {bad}: not an MCAP file" in err
 
 
+@pytest.mark.slow  # CI time (9 s; the flag checks stay covered by test_file_tool_flags)
 def test_replay_bad_arguments_name_the_option(spawn, recording):
     import socket
 

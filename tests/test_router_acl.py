@@ -41,6 +41,7 @@ def _router_config(tmp_path) -> str:
     return str(conf)
 
 
+@pytest.mark.slow  # CI time (9 s; the router's mTLS policy test (test_router_tls) stays in make test)
 def test_acl_on_a_real_router_blocks_publishers_it_does_not_allow(tmp_path, processes):
     port = bus.free_port()
     endpoint = bus.loopback_endpoint(port)

@@ -24,6 +24,8 @@ import threading
 import time
 from pathlib import Path
 
+import pytest
+
 from astrodyn import bus
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -114,6 +116,7 @@ def test_deaths_spread_wider_than_the_budget_are_each_restarted_and_a_burst_is_r
             serve.communicate(timeout=30)
 
 
+@pytest.mark.slow  # CI time (10 s; run's same-error test (test_service.py) covers the rule serve takes from runner)
 def test_a_propagator_that_fails_the_same_way_at_the_same_step_is_not_restarted_for_ever(tmp_path):
     """With the rate budget alone, a deterministic failure slower than 5 deaths a minute would be
     restarted for ever (the lifetime limit used to end it).  As in ``run``: the same error 3

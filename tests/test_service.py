@@ -335,6 +335,7 @@ def test_gravity_gradient_attitude_uses_the_published_orbit():
     assert np.array_equal(r_att, r_pub[:, orbits.names.index("gg-boom")])
 
 
+@pytest.mark.slow  # CI time (13 s; serve's verbs stay covered by test_serve_rate_sync, test_control_wildcard, test_send_control_errors, test_clients_doc)
 def test_serve_control_over_zenoh(tmp_path):
     port = bus.free_port()
     out = tmp_path / "serve.mcap"
@@ -425,6 +426,7 @@ def test_a_restarted_propagator_catches_up_with_the_schedule():
     assert fresh.wait_time(100.0) == 0.0 and 0.09 < fresh.wait_time(101.0) <= 0.1
 
 
+@pytest.mark.slow  # CI time (10 s; an edge of the restart path that test_reliability covers in make test)
 def test_a_restarted_propagator_with_no_step_left_ends_when_the_logger_has_finished():
     """Found by the random-fault series: a propagator killed after its last step was recorded
     (while it waited for the logger's receipt) was restarted at step N = n_steps, the logger
@@ -462,6 +464,7 @@ def _assert_the_propagators_stay_paused(session, token: str, timeout_s: float = 
     assert [after[k]["t"] for k in ("orbit", "attitude")] == [before[k]["t"] for k in ("orbit", "attitude")]
 
 
+@pytest.mark.slow  # CI time (9 s; pause and resume stay covered by test_serve_rate_sync and test_ctrl_z)
 def test_a_pause_sent_while_the_propagators_start_holds_at_rate_inf(tmp_path):
     """At ``--rate inf`` a propagator never waits, so it sent no heartbeat saying its pause
     state and serve never saw that a propagator had missed its early ``pause``: serve said

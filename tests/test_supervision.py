@@ -138,6 +138,7 @@ def test_no_child_outlives_a_killed_serve_supervisor(tmp_path, processes, delay_
     assert not [p for p in tmp_path.iterdir() if p.name.startswith(".astrodyn-")]
 
 
+@pytest.mark.slow  # CI time (8 s; test_partial_out_kept and test_output_races keep earlier recordings in make test)
 def test_a_killed_run_leaves_the_earlier_recording_intact(tmp_path, processes):
     """The same --out twice; the second run is SIGKILLed: the first recording is untouched
     (byte for byte) and the second's partial file is beside it for `recover`."""

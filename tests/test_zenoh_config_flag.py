@@ -142,6 +142,7 @@ def test_serve_restarts_a_killed_propagator_from_its_own_copy_when_the_file_beca
     assert not copy.exists()  # the work directory is gone with serve
 
 
+@pytest.mark.slow  # CI time (9 s; run's restarts stay covered by test_reliability and test_supervision)
 def test_run_restarts_a_killed_propagator_from_its_own_copy_when_the_file_was_deleted(tmp_path, processes):
     """``run --zenoh-config FILE``: FILE is deleted while the run goes on and the attitude
     propagator is SIGKILLed; the run restarts it from its copy and completes with every
