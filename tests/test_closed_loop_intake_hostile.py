@@ -16,6 +16,7 @@ from pathlib import Path
 
 import pytest
 
+from _by_hand_controller import CONTROLLER_PRELUDE, DETUMBLE_BODY
 from astrodyn.recording.stream import open_stream
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -33,49 +34,11 @@ controllers = ["detumble"]
 timeout = "{timeout}"
 seed = 42
 
-[[bodies]]
-name = "sc"
-[bodies.attitude]
-w = ["3 deg/s", "-2 deg/s", "2.5 deg/s"]
-inertia = ["100 kg m2", "120 kg m2", "80 kg m2"]
-[bodies.actuators]
-torque = "0.05 N m"
-[bodies.sensors]
-gyro = {{ sigma = "1e-5 rad/s" }}
-"""
+""" + DETUMBLE_BODY.replace("{torque}", "0.05 N m")  # still a format string
 
-_CONTROLLER = r'''
-import hashlib, hmac, json, os, queue, struct, sys, time
-import zenoh
-
-scenario = os.environ["ASTRODYN_SCENARIO"]; name = os.environ["ASTRODYN_CONTROLLER"]
-secret = open(os.environ["ASTRODYN_RUN_SECRET_FILE"], "rb").read()
-instance, counters = os.urandom(8), {}
+_CONTROLLER = CONTROLLER_PRELUDE + r'''
 HOSTILE = os.environ["HOSTILE"]
 ann = open(os.environ["ANNOUNCED"], "w")
-
-def put(s, key, msg=None, raw=None, signer=name):
-    payload = raw if raw is not None else json.dumps(msg, separators=(",", ":")).encode()
-    counters[signer, key] = counters.get((signer, key), 0) + 1
-    h = b"ADA1" + bytes([len(signer)]) + signer.encode() + instance + struct.pack("<Q", counters[signer, key])
-    att = h + hmac.new(secret, h + key.encode() + b"\0" + payload, hashlib.sha256).digest()
-    s.put(key, payload, attachment=att, congestion_control=zenoh.CongestionControl.BLOCK)
-
-ticks = queue.Queue(); last = [-1]
-def on_tick(sample):
-    tk = json.loads(sample.payload.to_bytes())
-    if tk["seq"] > last[0]:
-        last[0] = tk["seq"]; ticks.put(tk)
-def on_event(sample):
-    ev = json.loads(sample.payload.to_bytes())
-    if ev.get("process") == "plant" and ev.get("kind") == "end":
-        ticks.put(None)
-
-conf = zenoh.Config()
-conf.insert_json5("mode", '"peer"')
-conf.insert_json5("connect/endpoints", json.dumps([os.environ["ASTRODYN_CONNECT"]]))
-conf.insert_json5("scouting/multicast/enabled", "false")
-base = f"astrodyn/{scenario}"
 cmd_key = f"{base}/sc/command"
 n = 0
 with zenoh.open(conf) as s:

@@ -18,6 +18,7 @@ from pathlib import Path
 
 import pytest
 
+from _by_hand_controller import DETUMBLE_BODY
 from _recordings import payloads_by_topic
 from astrodyn.recording.stream import open_stream
 
@@ -42,16 +43,7 @@ body = "sc"
 fault = "gyro_bias"
 value = ["2e-4 rad/s", 0, 0]
 
-[[bodies]]
-name = "sc"
-[bodies.attitude]
-w = ["3 deg/s", "-2 deg/s", "2.5 deg/s"]
-inertia = ["100 kg m2", "120 kg m2", "80 kg m2"]
-[bodies.actuators]
-torque = "{torque}"
-[bodies.sensors]
-gyro = {{ sigma = "1e-5 rad/s" }}
-"""
+""" + DETUMBLE_BODY
 _NOMINAL = {"duration": "3 s", "rate": "10 Hz", "period": "0.1 s", "seed": 42, "torque": "0.05 N m"}
 
 
