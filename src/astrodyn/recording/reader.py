@@ -46,7 +46,7 @@ from astrodyn.files import file_kind
 from astrodyn.recording.chunked_writer import MAGIC
 from astrodyn.recording.writer import RecordingError
 
-__all__ = ["load", "load_blocks", "chunk_records", "chunk_limits", "parse_chunk_data", "ChunkError",
+__all__ = ["recorded_metadata", "load", "load_blocks", "chunk_records", "chunk_limits", "parse_chunk_data", "ChunkError",
            "MAX_CHUNK_BYTES", "MAX_CHUNK_RATIO", "Run", "BodyTracks", "Body", "Track", "gap_report", "MCAP_MAGIC", "read_records", "scan_records", "open_recording"]
 
 MCAP_MAGIC = MAGIC  #: the 8 bytes that open (and end) every MCAP file
@@ -802,3 +802,158 @@ def main(argv: list[str] | None = None) -> int:  # pragma: no cover - small insp
 
 if __name__ == "__main__":  # pragma: no cover
     sys.exit(main())
+
+
+# --------------------------------------------------------------------------- metadata records, by index
+
+
+#: Largest metadata record :func:`recorded_metadata` reads (bytes): astrodyn's records hold a
+#: config's text and a few numbers; a longer one is not read (treated as absent).
+MAX_METADATA_RECORD_BYTES = 16 * 2**20
+#: Most summary records :func:`recorded_metadata` walks to find the metadata index of a file
+#: whose summary has no offsets section (one per chunk: a file of 10^6 chunks).
+MAX_SUMMARY_RECORDS = 2_000_000
+#: Most records before the first chunk :func:`recorded_metadata` reads (the logger writes its
+#: header, two metadata records and a few schemas and channels there).
+MAX_HEAD_RECORDS = 10_000
+
+
+def recorded_metadata(path: str | os.PathLike, names) -> dict[str, dict[str, str]]:
+    """The metadata records of the recording ``path`` named in ``names``: name -> its
+    key/value map (the first record of that name), wherever the file keeps them.  Read are
+    the records before the first chunk (where astrodyn's logger writes ``scenario`` and
+    ``recording``) and, in a file with a footer, the records its summary's metadata index
+    points at (every metadata record of a finished file: the logger's ``end``, written
+    after the messages, and all of a file ``astrodyn recover`` or ``merge`` wrote, which put
+    theirs after the messages).  A cut file (no footer) is read from its head only.
+
+    Bounded whatever the file's size: no chunk is read or decompressed, at most
+    :data:`MAX_HEAD_RECORDS` head records and :data:`MAX_SUMMARY_RECORDS` summary records
+    are walked, and a record longer than :data:`MAX_METADATA_RECORD_BYTES` is not read.
+    Offsets and lengths from the file are checked before use, and a damaged record is
+    taken as absent.  :class:`~astrodyn.recording.reader.RecordingError` for a file that
+    cannot be opened or is not MCAP."""
+    wanted = set(names)
+    found: dict[str, dict[str, str]] = {}
+    path = os.fspath(path)
+    f, size = open_recording(path)
+    with f:
+        if f.read(len(MCAP_MAGIC)) != MCAP_MAGIC:
+            raise RecordingError(f"{path}: not an MCAP file (bad magic)")
+        # the records before the first chunk: only metadata bodies are read (a header, schema
+        # or channel of any claimed length is skipped with a seek)
+        head = _walk(f, len(MCAP_MAGIC), size, {Opcode.METADATA: MAX_METADATA_RECORD_BYTES},
+                     stop={Opcode.CHUNK, Opcode.MESSAGE, Opcode.DATA_END, Opcode.FOOTER}, limit=MAX_HEAD_RECORDS)
+        for _, body in head:
+            rec = _metadata_record(body)
+            if rec is not None and rec.name in wanted and rec.name not in found:
+                found[rec.name] = dict(rec.metadata)
+        if not wanted <= found.keys():
+            for name, (offset, length) in _metadata_index(f, size, wanted - found.keys()).items():
+                rec = _read_metadata_at(f, offset, length)
+                if rec is not None and rec.name == name:
+                    found[name] = dict(rec.metadata)
+    return found
+
+
+_RECORD_HEAD = 9  # opcode u8, length u64
+_FOOTER_BYTES = _RECORD_HEAD + 20  # summary_start u64, summary_offset_start u64, summary_crc u32
+
+
+def _metadata_record(body: bytes):
+    """The Metadata record of ``body``, None when it does not parse."""
+    import io
+
+    from mcap.data_stream import ReadDataStream
+    from mcap.records import Metadata
+
+    try:
+        return Metadata.read(ReadDataStream(io.BytesIO(body)))
+    except Exception:  # damaged content: lengths past the end, invalid UTF-8
+        return None
+
+
+def _read_metadata_at(f, offset: int, length: int):
+    """The Metadata record at byte ``offset`` (``length`` bytes with its header), None when
+    there is none."""
+    import struct
+
+    if length < _RECORD_HEAD or length - _RECORD_HEAD > MAX_METADATA_RECORD_BYTES:
+        return None
+    f.seek(offset)
+    data = f.read(length)
+    if len(data) != length:
+        return None
+    opcode, body_length = struct.unpack_from("<BQ", data)
+    if opcode != Opcode.METADATA or body_length != length - _RECORD_HEAD:
+        return None
+    return _metadata_record(data[_RECORD_HEAD:])
+
+
+def _metadata_index(f, size: int, names: set[str]) -> dict[str, tuple[int, int]]:
+    """name -> ``(offset, length)`` of the first metadata record of each of ``names`` that the
+    summary of the file ``f`` (``size`` bytes) indexes; empty for a file without footer or
+    summary.  Every offset is checked to lie in the file's data section."""
+    import io
+    import struct
+
+    from mcap.data_stream import ReadDataStream
+    from mcap.records import MetadataIndex
+
+    footer_at = size - len(MCAP_MAGIC) - _FOOTER_BYTES
+    if footer_at < len(MCAP_MAGIC):
+        return {}
+    f.seek(footer_at)
+    tail = f.read(_FOOTER_BYTES + len(MCAP_MAGIC))
+    if len(tail) != _FOOTER_BYTES + len(MCAP_MAGIC) or tail[_FOOTER_BYTES:] != MCAP_MAGIC:
+        return {}
+    opcode, length, summary_start, offsets_start = struct.unpack_from("<BQQQ", tail)
+    if opcode != Opcode.FOOTER or length != 20 or not len(MCAP_MAGIC) <= summary_start <= footer_at:
+        return {}
+    summary_end = footer_at
+    if offsets_start:
+        if not summary_start <= offsets_start <= footer_at:
+            return {}
+        summary_end = offsets_start
+        groups = _walk(f, offsets_start, footer_at, {Opcode.SUMMARY_OFFSET: 64})
+        spans = [struct.unpack_from("<BQQ", body) for _, body in groups if len(body) == 17]
+        span = next(((start, start + n) for op, start, n in spans if op == Opcode.METADATA_INDEX),
+                    (summary_start, summary_end))  # (no offset for that group: the whole summary is walked)
+        if not summary_start <= span[0] <= span[1] <= summary_end:
+            return {}  # an offset that lies
+        begin, end = span
+    else:
+        begin, end = summary_start, summary_end
+    out: dict[str, tuple[int, int]] = {}
+    for _, body in _walk(f, begin, end, {Opcode.METADATA_INDEX: 1 << 16}):
+        try:
+            index = MetadataIndex.read(ReadDataStream(io.BytesIO(body)))
+        except Exception:  # a damaged index record: as if absent
+            continue
+        if index.name in names and index.name not in out and len(MCAP_MAGIC) <= index.offset \
+                and index.offset + index.length <= summary_start:
+            out[index.name] = (index.offset, index.length)
+    return out
+
+
+def _walk(f, begin: int, end: int, wanted: dict[int, int], stop=frozenset(), limit: int = MAX_SUMMARY_RECORDS):
+    """``(opcode, body)`` of each record between bytes ``begin`` and ``end`` whose opcode is
+    in ``wanted`` (opcode -> largest body read; longer ones are skipped, and so is every
+    other record: a seek past it), over at most ``limit`` records; ends at a record whose
+    opcode is in ``stop`` and at one that does not fit."""
+    import struct
+
+    pos = begin
+    for _ in range(limit):
+        if end - pos < _RECORD_HEAD:
+            return
+        f.seek(pos)
+        head = f.read(_RECORD_HEAD)
+        if len(head) != _RECORD_HEAD:
+            return
+        opcode, length = struct.unpack("<BQ", head)
+        if opcode in stop or length > end - pos - _RECORD_HEAD:
+            return
+        if opcode in wanted and length <= wanted[opcode]:
+            yield opcode, f.read(length)
+        pos += _RECORD_HEAD + length

@@ -252,15 +252,14 @@ def holds_config(path: str | os.PathLike, scenario) -> bool:
     """Whether the recording ``path`` (finished or cut) holds ``scenario``'s config: its
     ``scenario`` metadata record, wherever the file keeps it (the logger writes it first;
     a part ``astrodyn recover`` finished, a dead logger's, has it after the messages, found
-    through its summary's metadata index: :func:`astrodyn.service.output.recorded_metadata`,
+    through its summary's metadata index: :func:`astrodyn.recording.reader.recorded_metadata`,
     a bounded read whatever the file's size), names the same scenario and config as ``run
     --resume`` and ``run --commands`` judge it
     (:func:`astrodyn.scenario.recorded.config_difference`: where the config file was read
     from does not count).  False for anything else, and for a file that cannot be read: a
     resume never starts from another config's states."""
-    from astrodyn.recording.reader import RecordingError
+    from astrodyn.recording.reader import RecordingError, recorded_metadata
     from astrodyn.scenario.recorded import config_difference
-    from astrodyn.service.output import recorded_metadata
 
     try:
         found = recorded_metadata(path, ("scenario",))
