@@ -8,6 +8,7 @@ with :func:`astrodyn.service.resume.last_common_step` and :func:`states_at`, the
 
 from __future__ import annotations
 
+import json
 import random
 import sys
 from pathlib import Path
@@ -75,7 +76,6 @@ def test_a_hostile_tail_is_never_a_state_to_continue_from(recording, tmp_path):
 
 
 def test_a_part_restart_plans_the_next_part_and_seeds_every_state_channel(recording, tmp_path):
-    import json
 
     path, sc = recording
     dead = tmp_path / "served.partial.mcap"
@@ -120,7 +120,6 @@ def test_serve_finds_only_its_own_logger_parts(tmp_path):
     the same directory (serve took such a file for its dead logger's, resumed from it and
     recorded another config's states: crossing probe, session 16), a standby logger's file,
     or a file put where a reported one was."""
-    import json
     import os
 
     from astrodyn.service.supervision import LoggerFiles
@@ -148,3 +147,20 @@ def test_serve_finds_only_its_own_logger_parts(tmp_path):
     assert [where for _, where in files.newest_first()] == [str(tmp_path / "served.mcap")]
     assert files.owns(tmp_path / "served-0001.partial.mcap") is None
     files.close()
+
+
+@pytest.mark.parametrize("channel, says", [
+    ("astrodyn/x/sat/orbit#orbit", "only an event key takes a #process"),
+    ("astrodyn/x/@event#bad name", "the process: expected a name"),
+    ("astrodyn/x/@event#", "the process: expected a name"),
+])
+def test_a_resume_seqs_entry_for_an_event_channel_names_an_event_key_and_a_process(tmp_path, channel, says):
+    from astrodyn.service.logger import read_seed_table
+
+    seeds = tmp_path / "seeds.json"
+    seeds.write_text(json.dumps({"astrodyn/x/@event#orbit": 4, channel: 3}))
+    with pytest.raises(ValueError, match="--resume-seqs") as refused:
+        read_seed_table(str(seeds))
+    assert says in str(refused.value)
+    seeds.write_text(json.dumps({"astrodyn/x/@event#orbit": 4, "astrodyn/x/@event#logger": 0}))
+    assert read_seed_table(str(seeds)) == {"astrodyn/x/@event#orbit": 4, "astrodyn/x/@event#logger": 0}

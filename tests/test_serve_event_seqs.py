@@ -7,8 +7,15 @@ the new part: ``merge`` of the parts then held seqs 0, 1 twice with other conten
 ``analyze`` reported as duplicated.  And a logger restart left no ``restart`` event (process
 ``serve``) in the recording, as a propagator restart does.
 
+The new logger's own accounting began every event channel at seq 0 as well: its part's
+``end`` record counted the earlier parts' events as missing (``complete: false``), and the
+logger's own events (a death it saw) began at 0 again.  The restarted logger now starts each
+process's event channel, its own included, where the run's numbering stands.
+
 Checked with the plain ``mcap`` reader on ``astrodyn merge`` of the parts: every process's
-events have the seqs 0 .. N-1, each once, and a ``restart`` event of serve names the logger.
+events -- the logger's own, from a propagator death before and one after its restart --
+have the seqs 0 .. N-1, each once, and ``restart`` events of serve name the processes; and
+the new part's ``end`` record counts no message missing.
 """
 
 from __future__ import annotations
@@ -42,6 +49,17 @@ def _wait(what: str, timeout_s: float, ready):
     return value
 
 
+def _kill_and_wait_restart(s, token: str, process: str, restarts_before: int, starts: list[str]) -> dict:
+    """Kill ``process`` and wait until serve has restarted it and every propagator it
+    restarted has started again (its ``start`` event heard: ``starts``)."""
+    restarted = ("orbit", "attitude") if process == "logger" else (process,)
+    before = {p: starts.count(p) for p in restarted}
+    os.kill(_status(s, token)["processes"][process]["pid"], signal.SIGKILL)  # a child of the serve this test started
+    _wait(f"{process} was not restarted", 30, lambda: all(starts.count(p) > before[p] for p in restarted))
+    return _wait(f"{process} was not restarted", 30,
+                 lambda: len((st := _status(s, token))["restarts"]) > restarts_before and st)
+
+
 def test_after_a_logger_restart_the_merged_parts_hold_each_event_seq_once_and_the_restart_event(tmp_path):
     out = tmp_path / "demo.mcap"
     serve = subprocess.Popen([sys.executable, "-m", "astrodyn", "serve", str(ROOT / "configs" / "demo.toml"), "--out",
@@ -52,15 +70,18 @@ def test_after_a_logger_restart_the_merged_parts_hold_each_event_seq_once_and_th
         token = hello["control_token"]
         partial = tmp_path / "demo.partial.mcap"
         with bus.open_session(connect=[hello["hub"]]) as s:
+            starts: list[str] = []  # the process of each start event heard
+            s.declare_subscriber(EVENT_TOPIC, lambda sample: starts.extend(
+                [e["process"]] if (e := json.loads(sample.payload.to_bytes()))["kind"] == "start" else []))
             # both propagators have published (their start events are out) and the logger has flushed some
             _wait("the propagators never ran", 30, lambda: all(
                 (_status(s, token)["processes"][k]["t"] or 0) > 20 for k in ("orbit", "attitude")))
             _wait("the logger flushed nothing", 30, lambda: partial.exists() and partial.stat().st_size > 20_000)
-            logger = _status(s, token)["processes"]["logger"]["pid"]
-            os.kill(logger, signal.SIGKILL)  # the logger of the serve this test started, named by its status
-            st = _wait("the logger was not restarted", 30, lambda: (st := _status(s, token))["restarts"] and all(
-                st["processes"][k]["running"] and (st["processes"][k]["t"] or 0) > 0 for k in st["processes"]) and st)
-            assert [r["process"] for r in st["restarts"]] == ["logger"], st["restarts"]
+            _kill_and_wait_restart(s, token, "orbit", 0, starts)  # the logger records the death: an event of its own
+            time.sleep(1.5)  # flushed (--flush-interval 1 s): a killed logger loses what it had not written
+            _kill_and_wait_restart(s, token, "logger", 1, starts)
+            st = _kill_and_wait_restart(s, token, "orbit", 2, starts)  # the new logger's own event continues its numbering
+            assert [r["process"] for r in st["restarts"]] == ["orbit", "logger", "orbit"], st["restarts"]
             time.sleep(1.0)  # the new part records the restarted propagators' events and states
             (final,) = bus.send_control(s, "demo", "stop", token=token, timeout_s=60)
         _, err = serve.communicate(timeout=60)
@@ -84,7 +105,11 @@ def test_after_a_logger_restart_the_merged_parts_hold_each_event_seq_once_and_th
                 seqs.setdefault(event["process"], []).append(event["seq"])
                 if event["process"] == "serve" and event["kind"] == "restart":
                     restarts.append(json.loads(event["detail"]))
-    assert {"orbit", "attitude", "serve"} <= set(seqs), seqs
+    assert {"orbit", "attitude", "serve", "logger"} <= set(seqs), seqs
+    assert len(seqs["logger"]) >= 2, seqs["logger"]  # a death seen by each logger
     for process, got in seqs.items():
         assert sorted(got) == list(range(len(got))), (process, sorted(got))  # 0 .. N-1, each once
-    assert [r["process"] for r in restarts] == ["logger"], restarts
+    assert [r["process"] for r in restarts] == ["orbit", "logger", "orbit"], restarts
+    with open(parts[-1], "rb") as f:  # the new part's own account: no earlier event counted as missing
+        (end,) = [dict(m.metadata) for m in make_reader(f).iter_metadata() if m.name == "end"]
+    assert end["missing"] == "0", end

@@ -759,6 +759,10 @@ class EventSeqWatcher(_Declared):
         """The seq ``process``'s next event must carry to continue its numbering (after :meth:`poll`)."""
         return self._next.get(process, 0)
 
+    def next_seqs(self) -> dict[str, int]:
+        """:meth:`next_seq` of every process heard so far (after :meth:`poll`): process -> seq."""
+        return dict(self._next)
+
 
 
 # --------------------------------------------------------------------------- liveliness

@@ -200,6 +200,7 @@ class Logger:
         scene_keys: Iterable[str] | None = None,
         signer: auth.Signer | None = None,
         publishers: dict[str, str] | None = None,
+        first_event_seq: int = 0,
     ):
         self.session = session
         self.scenario = messages.check_name(scenario, "scenario")
@@ -239,7 +240,10 @@ class Logger:
         self.died: dict[str, str] = {}
         self.stalled: set[str] = set()
         self.max_t = 0.0
-        self._own_event_seq = 0
+        #: the seq of the logger's next own event (a restarted logger's continues its
+        #: predecessor's: ``--resume-seqs``), and its publisher on the event key (in :meth:`run`)
+        self._own_event_seq = int(first_event_seq)
+        self._own_event_publisher: Any = None
         self._key_kind: dict[str, str | None] = {}
         self._layouts: dict[str, BatchLayout] = {}  # batch key -> its last envelope's keys
         self._spans = tuple(np.empty(4096, dtype=np.int64) for _ in range(4))  # frame_batch output
@@ -327,6 +331,8 @@ class Logger:
         if kind == "event":
             if sender is not None and msg["process"] != sender:
                 self._reject(key, "impersonation", sender, f"event of process {msg['process']!r} signed by {sender!r}")
+                return
+            if msg["process"] == self.name:  # its own event, recorded when it happened (_own_event): the echo
                 return
             track = f"{key}#{msg['process']}"
         elif kind == "command":  # seq counts each sender's commands to this body; the plant
@@ -488,11 +494,17 @@ class Logger:
             query.reply_err(json.dumps({"error": f"latest: {exc}"}))
 
     def _own_event(self, kind: str, detail: str) -> None:
+        """Record an event of the logger itself (a death or a stall it saw) and publish it,
+        signed, as every process publishes its events: a live client sees it, and a
+        supervisor counts the logger's event seqs (``serve`` continues them in a restarted
+        logger's part: :class:`astrodyn.bus.EventSeqWatcher`).  Its echo is not recorded twice."""
         msg = messages.event_message(self.max_t, self._own_event_seq, self.name, kind, detail[:4096])
         self._own_event_seq += 1
-        self.recorder.write_encoded(
-            self.event_key, messages.encode(msg), msg["t"], msg["seq"], time.time_ns(), f"{self.event_key}#{self.name}"
-        )
+        payload = messages.encode(msg)
+        self.recorder.write_encoded(self.event_key, payload, msg["t"], msg["seq"], time.time_ns(), f"{self.event_key}#{self.name}")
+        if self._own_event_publisher is not None:
+            with contextlib.suppress(Exception):  # the file holds it; the bus copy is for live clients
+                bus.signed_put(self._own_event_publisher, self.event_key, payload, self.signer)
         print(f"logger: {detail}", file=sys.stderr, flush=True)
 
     # ------------------------------------------------------------------ status
@@ -719,6 +731,8 @@ class Logger:
             stack.callback(latest.undeclare)
             alive = stack.enter_context(bus.AliveWatcher(self.session, self.scenario))
             heartbeat = stack.enter_context(bus.Heartbeat(self.session, self.scenario, self.name, signer=self.signer))
+            self._own_event_publisher = bus.declare_state_publisher(self.session, self.event_key)
+            stack.callback(self._own_event_publisher.undeclare)
             ingest.warm_up(INGEST_GRAMMAR)  # compile / load the batch kernels before we say ready
             stack.enter_context(bus.declare_alive(self.session, self.scenario, self.name))  # last: ready
             receivers = [sub.try_recv for sub in subs]
@@ -886,8 +900,9 @@ def prefill(recorder: McapRecorder, path: str, scenario: str, steps: int) -> int
 
 
 def read_seed_table(path: str) -> dict[str, int]:
-    """The ``--resume-seqs`` file: ``{key: next seq}`` (written by serve when it restarts a
-    dead logger: :mod:`astrodyn.service.supervision`), each key one astrodyn records;
+    """The ``--resume-seqs`` file: ``{channel: next seq}`` (written by serve when it restarts
+    a dead logger: :mod:`astrodyn.service.supervision`), each channel a key astrodyn records
+    or an event key and a process, ``KEY#PROCESS`` (each process numbers its own events);
     ValueError naming the file and the entry for anything else.  Read before the recording
     is opened, so a bad file leaves nothing behind."""
     try:
@@ -900,8 +915,13 @@ def read_seed_table(path: str) -> dict[str, int]:
     for key, next_seq in table.items():
         if not (isinstance(next_seq, int) and not isinstance(next_seq, bool) and 0 <= next_seq <= messages.MAX_SEQ):
             raise ValueError(f"--resume-seqs {path}: {key}: expected an integer seq 0 ... 2**53-1, got {next_seq!r}")
+        key_part, hash_sign, process = key.partition("#")
         try:
-            messages.kind_of_key(key)
+            kind = messages.kind_of_key(key_part)
+            if hash_sign:
+                if kind != "event":
+                    raise messages.MessageError(f"{key}: only an event key takes a #process, {key_part!r} is a {kind} key")
+                messages.check_name(process, f"{key}: the process")
         except messages.MessageError as exc:
             raise ValueError(f"--resume-seqs {path}: {exc}") from None
     return table
@@ -956,8 +976,9 @@ def main(argv: list[str] | None = None) -> int:
             copied = prefill(recorder, args.prefill, args.scenario, args.prefill_steps) if args.prefill else 0
             for key, next_seq in seeds.items():  # each channel starts where an earlier part ended
                 recorder.seq.seed(key, next_seq)
+            own_events = f"{messages.event_key(args.scenario)}#{args.name}"  # its own events continue too
             logger = Logger(session, args.scenario, recorder, name=args.name, expect=args.expect, queue_capacity=args.queue,
-                            control=not args.no_control, **trust)
+                            control=not args.no_control, first_event_seq=seeds.get(own_events, 0), **trust)
             logger.rename_at_end = not args.leave_partial
             summary = logger.run(max_seconds=args.max_seconds)
             if args.prefill:

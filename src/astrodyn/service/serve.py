@@ -642,9 +642,10 @@ class Supervisor:
         self.logger_attempt += 1
         parts = self._parts()  # this serve's own files only (by identity), newest first
         partials = [p for p in parts if finished_name(p)]
+        self.event_seqs.poll()  # every process's events, the dead logger's own included, continue their numbering
         plan = plan_part_restart(self.scenario, self.out, partials[0] if partials else None,
                                  [p for p in parts if not finished_name(p)], self.propagators,
-                                 self.logger_attempt, self.tmp)
+                                 self.logger_attempt, self.tmp, self.event_seqs.next_seqs())
         argv = [*self._logger_argv, "--attempt", str(self.logger_attempt), *plan.logger_args]
         self.children["logger"] = Child(f"logger-r{self.logger_attempt}", argv, self.tmp, env=self.child_env)
         self.children["logger"].name = "logger"

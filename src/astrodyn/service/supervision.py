@@ -458,11 +458,14 @@ class PartRestart:
 
 
 def plan_part_restart(scenario, out: Path, dead: str | None, finished: list[str], kinds: list[str],
-                      attempt: int, work: Path) -> PartRestart:
+                      attempt: int, work: Path, event_seqs: dict[str, int] | None = None) -> PartRestart:
     """How ``serve`` restarts its logger number ``attempt`` after a death (module
     docstring): ``dead`` is the dead logger's partial file (None if it left none),
-    ``finished`` the run's finished parts, newest first."""
-    from astrodyn.messages import decode, kind_of_key
+    ``finished`` the run's finished parts, newest first; ``event_seqs``: process -> the
+    seq of its next event (what serve heard: :class:`astrodyn.bus.EventSeqWatcher`), where
+    the new part's event channel of each process starts (its earlier events are not missing
+    from the new part: they are in the earlier ones)."""
+    from astrodyn.messages import decode, event_key, kind_of_key
     from astrodyn.recording.recover import finished_name
 
     numbers = [part_number(p, out) for p in ([dead] if dead else []) + finished]
@@ -485,6 +488,8 @@ def plan_part_restart(scenario, out: Path, dead: str | None, finished: list[str]
                     continue
             if seqs:
                 seeds[topic] = max(seqs) + 1
+    for process, next_seq in (event_seqs or {}).items():
+        seeds[f"{event_key(scenario.name)}#{process}"] = next_seq
     seeds_file = Path(work) / f"resume-seqs-{attempt}.json"
     seeds_file.write_text(json.dumps(seeds))
     logger_args = ["--first-part", str(part), "--resume-seqs", str(seeds_file)]
