@@ -82,7 +82,7 @@ def test_a_query_that_names_no_single_verb_gets_one_error_naming_the_verbs_and_n
 
 
 def test_serve_answers_its_advertised_control_key_with_an_error_and_keeps_running(tmp_path):
-    """A real serve: the key it prints as ``control``, queried with its token, gets one error
+    """A real serve: ``@control/*`` (the key its first line gave as ``control`` before), queried with its token, gets one error
     naming its verbs; serve is still running, not paused, and stops on ``stop`` (exit 0)."""
     out = tmp_path / "demo.mcap"
     serve = subprocess.Popen([sys.executable, "-m", "astrodyn", "serve", str(ROOT / "configs" / "demo.toml"), "--out",
@@ -92,7 +92,9 @@ def test_serve_answers_its_advertised_control_key_with_an_error_and_keeps_runnin
         hello = json.loads(serve.stdout.readline())
         token = hello["control_token"]
         with bus.open_session(connect=[hello["hub"]]) as s:
-            replies = bus.query_json(s, hello["control"], timeout_s=5.0, token=token)
+            # the first line names the verbs and the key of each (a template, not a key expression to query)
+            assert hello["control"] == "astrodyn/demo/@control/<verb>" and hello["verbs"] == list(bus.CONTROL_VERBS)
+            replies = bus.query_json(s, "astrodyn/demo/@control/*", timeout_s=5.0, token=token)
             assert len(replies) == 1 and "nothing was done" in replies[0].get("error", ""), replies
             assert re.findall(r"\w+", replies[0]["error"].split("one of", 1)[1]) == list(bus.CONTROL_VERBS)
             time.sleep(0.5)  # a stop or pause, had one been done, has taken effect

@@ -505,7 +505,7 @@ def main(argv: list[str] | None = None) -> int:
                     viewer_url = f"ws://127.0.0.1:{port}"
                 print(json.dumps({"replaying": stream.path, "scenario": scenario, "listen": listen,
                                   "connect": args.connect, "foxglove": viewer_url,
-                                  "control": f"astrodyn/{scenario}/@control/*",
+                                  "control": f"astrodyn/{scenario}/@control/<verb>", "verbs": list(REPLAY_VERBS),
                                   "real_time_factor": "inf" if math.isinf(rate) else rate,  # as status says it
                                   "control_token": token,
                                   "control_token_file": None if token is None else str(token_dir / "control-token")}),

@@ -1059,7 +1059,8 @@ def main(argv: list[str] | None = None) -> int:
             except (bus.BusError, OSError) as exc:  # the logger could not start: nothing else was started
                 print(f"astrodyn serve: {exc}", file=sys.stderr)
                 return 1
-            print(json.dumps({"serving": scenario.name, "hub": hub, "control": f"astrodyn/{scenario.name}/@control/*",
+            print(json.dumps({"serving": scenario.name, "hub": hub, "control": f"astrodyn/{scenario.name}/@control/<verb>",
+                              "verbs": list(sup.verbs),
                               "out": str(out), "real_time_factor": rate, "roll_size": roll_size,
                               "roll_interval_s": roll_interval, "foxglove": sup.viewer_url, "control_token": token,
                               "control_token_file": None if token_file is None else str(token_file)}), flush=True)
