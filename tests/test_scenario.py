@@ -515,6 +515,15 @@ ERROR_CASES = [
     ("output.path", "http://example.com/x.mcap", 'output.path: expected a file path (resolved relative to the config file), not a URL, got "http://example.com/x.mcap"'),
     ("output.path", "file:///tmp/x.mcap", 'output.path: expected a file path (resolved relative to the config file), not a URL, got "file:///tmp/x.mcap"'),
     ("output.roll_size", "10 kB", 'output.roll_size: expected 1 MiB <= roll_size <= 1 PiB, got "10 kB"'),
+    # b is bit, B is byte: "256 mb" was read as millibits (4 bytes) and "256 Mb" as megabits (32 MB), never what was meant
+    ("output.roll_size", "256 mb", 'output.roll_size: expected a size, e.g. "256 MB" (unit mbit counts bits, not bytes: b is '
+                                   'bit, B is byte, and unit symbols are case-sensitive; accepted: byte, kB, MB, GB, KiB, MiB, '
+                                   'GiB), got "256 mb"'),
+    ("output.roll_size", "2048 Mb", 'output.roll_size: expected a size, e.g. "256 MB" (unit Mbit counts bits, not bytes: b is '
+                                    'bit, B is byte, and unit symbols are case-sensitive; accepted: byte, kB, MB, GB, KiB, MiB, '
+                                    'GiB), got "2048 Mb"'),
+    ("output.roll_size", "2e9 mB", 'output.roll_size: expected a size, e.g. "256 MB" (unit mbyte is a fraction of a byte; '
+                                   'accepted: byte, kB, MB, GB, KiB, MiB, GiB), got "2e9 mB"'),
 ]
 
 

@@ -313,7 +313,22 @@ def parse_quantity_string(text: str, kind: str) -> float | str:
         return f"a quantity in {q.unit.to_string() or 'no unit'}"
     if np.ndim(value) != 0:
         return "not a scalar"
+    if kind == "bytes" and (problem := _not_bytes(q.unit)):
+        return problem
     return float(value)
+
+
+def _not_bytes(unit: Any) -> str | None:
+    """Why a size in ``unit`` is refused: bits (``"256 Mb"`` is 32 MB, ``"256 mb"`` a
+    thirty-second of a byte: almost surely meant as MB), or a fraction of a byte; None for
+    a unit of whole bytes."""
+    name = unit.to_string()
+    if "bit" in name:
+        return (f"unit {name} counts bits, not bytes: b is bit, B is byte, and unit symbols are case-sensitive; "
+                f"accepted: {', '.join(KIND_UNITS['bytes'])}")
+    if unit.to(units().byte) < 1:
+        return f"unit {name} is a fraction of a byte; accepted: {', '.join(KIND_UNITS['bytes'])}"
+    return None
 
 
 def quantity(ctx: Ctx, value: Any, kind: str, path: str) -> float:
@@ -331,7 +346,7 @@ def quantity(ctx: Ctx, value: Any, kind: str, path: str) -> float:
             raise ctx.error(path, f"{desc} (at most {MAX_STRING} characters)", value)
         parsed = parse_quantity_string(value.strip(), kind)
         if isinstance(parsed, str):
-            raise ctx.error(path, f"{desc} ({parsed})" if parsed.startswith("unknown unit") else desc, value)
+            raise ctx.error(path, f"{desc} ({parsed})" if parsed.startswith(("unknown unit", "unit ")) else desc, value)
         x = parsed
     else:
         raise ctx.error(path, desc, value)
