@@ -280,10 +280,19 @@ def stale_work_dirs(folder: str) -> list[str]:
             continue  # its supervisor still runs
         except ProcessLookupError:
             pass
-        except (OSError, ValueError):
-            pass  # no readable pid file: an unfinished start-up, or damaged
+        except (OSError, ValueError):  # no readable pid file: a start-up under way (the pid is written just
+            try:                       # after the directory is made), or damaged: only an old one is stale
+                if time.time() - os.stat(path).st_mtime < STARTING_WORK_DIR_S:
+                    continue
+            except OSError:
+                continue  # (removed meanwhile)
         out.append(path)
     return out
+
+
+#: A work directory without a readable ``supervisor.pid`` younger than this (seconds) is a
+#: supervisor's start under way, not a killed one's: ``recover`` leaves it.
+STARTING_WORK_DIR_S = 60.0
 
 
 def _still(path: str, read: os.stat_result) -> bool:
