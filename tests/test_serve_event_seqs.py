@@ -110,6 +110,8 @@ def test_after_a_logger_restart_the_merged_parts_hold_each_event_seq_once_and_th
     for process, got in seqs.items():
         assert sorted(got) == list(range(len(got))), (process, sorted(got))  # 0 .. N-1, each once
     assert [r["process"] for r in restarts] == ["orbit", "logger", "orbit"], restarts
+    # each names the file the state came from by the name it has once finished (not a partial name that is gone)
+    assert {r["state_from"] for r in restarts} <= {str(p) for p in parts}, restarts
     with open(parts[-1], "rb") as f:  # the new part's own account: no earlier event counted as missing
         (end,) = [dict(m.metadata) for m in make_reader(f).iter_metadata() if m.name == "end"]
     assert end["missing"] == "0", end

@@ -75,6 +75,7 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 
 from astrodyn import auth, bus
+from astrodyn.recording.recover import finished_name
 from astrodyn.recording.writer import standby_path
 from astrodyn.scenario import ScenarioError, load, plan as make_plan
 from astrodyn.scenario.fields import QUANTITY_KINDS, parse_quantity_string
@@ -631,7 +632,7 @@ class Supervisor:
         file holds (:func:`astrodyn.service.supervision.plan_part_restart`).  Nothing is
         copied, so the restart costs about a second whatever the size of the part: wall
         time, not states."""
-        from astrodyn.recording.recover import finished_name
+
 
         for kind in self.propagators:
             self.children[kind].reported = True  # stopped here, not a death to restart
@@ -675,7 +676,8 @@ class Supervisor:
         steps = {kind: args.get("--start-step", 0) for kind, args in plan.propagator_args.items()
                  if kind not in self.not_restarted}
         record = {"process": "logger", "old_pid": dead.pid, "new_pid": self.children["logger"].pid, "why": why,
-                  "from_step": min(steps.values(), default=0), "state_from": plan.source, "time": time.time()}
+                  "from_step": min(steps.values(), default=0), "state_from": plan.final or plan.source,  # its name once finished
+                  "time": time.time()}
         self.restarts.append(record)
         self.emit_restart(record, record["from_step"] - 1 if record["from_step"] > 0 else None)
         print(f"astrodyn serve: restarted logger (pid {record['new_pid']}) on part {plan.part}; the dead logger's "
@@ -722,7 +724,8 @@ class Supervisor:
         self.children[kind] = Child(f"{kind}-r{n + 1}", argv, self.tmp, env=self.child_env)
         self.children[kind].name = kind
         record = {"process": kind, "old_pid": old.pid, "new_pid": self.children[kind].pid, "why": why,
-                  "from_step": args["--start-step"], "state_from": source, "time": time.time(),
+                  "from_step": args["--start-step"], "state_from": source and (finished_name(source) or source),
+                  "time": time.time(),
                   **({"said": said} if said else {})}
         self.restarts.append(record)
         self.emit_restart(record, step)
@@ -824,7 +827,7 @@ class Supervisor:
         """The logger leaves its last file as ``NAME.partial.mcap`` (or ``NAME-000k.partial.mcap``
         when rolling); a stop that ends a healthy service renames it to its name, a failed
         one leaves it for ``astrodyn recover`` (docs/reliability.md)."""
-        from astrodyn.recording.recover import finished_name
+
         from astrodyn.recording.writer import fsync_directory
 
         final = finished_name(written) if written else None
