@@ -224,32 +224,52 @@ def scan_records(f: BinaryIO, size: int, path: str, state: dict,
             return
         raise RecordingError(f"{path}: not an MCAP file (bad magic)")
     heads = heads or {}
-    pos = 8
-    while True:
-        if pos == size:
-            state["truncation"] = f"file ends at byte {pos} without data end and footer (writer did not finish)"
-            return
-        if size - pos < 9:
-            state["truncation"] = f"file ends inside a record header at byte {pos}"
-            return
-        f.seek(pos)
-        opcode, length = _HEADER.unpack(f.read(9))
-        if length > size - pos - 9:
-            name = Opcode(opcode).name if opcode in Opcode._value2member_map_ else f"opcode {opcode:#x}"
-            state["truncation"] = (
-                f"{name} record at byte {pos} needs {length} bytes, only {size - pos - 9} left (cut or corrupt)"
-            )
-            return
+    for opcode, pos, length in record_headers(f, 8, size, state):
         body = f.read(min(length, heads[opcode]) if opcode in heads else length)
         yield opcode, body, pos, length
-        pos += 9 + length
         if opcode == Opcode.FOOTER:
-            f.seek(pos)
+            f.seek(pos + 9 + length)
             if f.read(8) != MCAP_MAGIC:
                 state["truncation"] = "footer not followed by the closing magic"
             else:
                 state["complete"] = True
             return
+
+
+def record_headers(f: BinaryIO, begin: int, end: int, state: dict | None = None,
+                   limit: int | None = None) -> Iterator[tuple[int, int, int]]:
+    """``(opcode, offset, body length)`` of each MCAP record from byte ``begin`` on, each
+    whole before byte ``end`` (the end of the file or of a section); over at most ``limit``
+    records.  After each yield ``f`` is at the record's body.  The walk ends at ``end`` and
+    at a record that does not fit before it; ``state["truncation"]`` (when ``state`` is
+    given) then says where the bytes ran out, for a walk up to the end of the file.  The one
+    record walk of the readers: :func:`scan_records` (a whole file, crash-tolerant) and the
+    bounded walks of a summary section (:func:`recorded_metadata`)."""
+    pos = begin
+    count = 0
+    while limit is None or count < limit:
+        count += 1
+        reason = None
+        if pos == end:
+            reason = f"file ends at byte {pos} without data end and footer (writer did not finish)"
+        elif end - pos < 9:
+            reason = f"file ends inside a record header at byte {pos}"
+        else:
+            f.seek(pos)
+            head = f.read(9)
+            if len(head) != 9:
+                reason = f"file ends inside a record header at byte {pos}"
+            else:
+                opcode, length = _HEADER.unpack(head)
+                if length > end - pos - 9:
+                    name = Opcode(opcode).name if opcode in Opcode._value2member_map_ else f"opcode {opcode:#x}"
+                    reason = f"{name} record at byte {pos} needs {length} bytes, only {end - pos - 9} left (cut or corrupt)"
+        if reason is not None:
+            if state is not None:
+                state["truncation"] = reason
+            return
+        yield opcode, pos, length
+        pos += 9 + length
 
 
 #: Largest declared uncompressed size of one chunk that is decompressed (bytes).  astrodyn
@@ -940,20 +960,9 @@ def _walk(f, begin: int, end: int, wanted: dict[int, int], stop=frozenset(), lim
     """``(opcode, body)`` of each record between bytes ``begin`` and ``end`` whose opcode is
     in ``wanted`` (opcode -> largest body read; longer ones are skipped, and so is every
     other record: a seek past it), over at most ``limit`` records; ends at a record whose
-    opcode is in ``stop`` and at one that does not fit."""
-    import struct
-
-    pos = begin
-    for _ in range(limit):
-        if end - pos < _RECORD_HEAD:
-            return
-        f.seek(pos)
-        head = f.read(_RECORD_HEAD)
-        if len(head) != _RECORD_HEAD:
-            return
-        opcode, length = struct.unpack("<BQ", head)
-        if opcode in stop or length > end - pos - _RECORD_HEAD:
+    opcode is in ``stop`` and at one that does not fit (:func:`record_headers`)."""
+    for opcode, _, length in record_headers(f, begin, end, limit=limit):
+        if opcode in stop:
             return
         if opcode in wanted and length <= wanted[opcode]:
             yield opcode, f.read(length)
-        pos += _RECORD_HEAD + length

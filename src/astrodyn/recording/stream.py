@@ -54,7 +54,6 @@ __all__ = ["RawMessage", "McapStream", "open_stream", "topic_matcher", "MAX_T_S"
 #: ``t * 1e9`` ns exact enough and finite.
 MAX_T_S = 1e12
 
-_HEADER = struct.Struct("<BQ")
 _CHUNK_HEAD = struct.Struct("<QQ")  # message_start_time, message_end_time
 _UNKNOWN = object()
 
