@@ -404,8 +404,9 @@ class CappedOutput:
     (astrodyn's own processes, which print little): the child writes the file itself,
     appending (``O_APPEND``), so it leaves its last words there even when its supervisor is
     gone; a thread of the supervisor looks at its size every :data:`OUTPUT_POLL_S` and, past
-    ``cap / 2``, moves the newest ``cap / 2`` bytes to ``path.1`` and empties ``path`` (what
-    the child writes during that move may be lost, and the file may pass ``cap / 2`` by what
+    ``cap / 2``, moves the newest ``cap / 2`` bytes to ``path.1``, with what the child wrote
+    during the move, and empties ``path`` (what the child writes in the few microseconds
+    between the last look and the emptying is lost; the files may pass ``cap / 2`` by what
     the child writes in :data:`OUTPUT_POLL_S`).
 
     Call :meth:`start` with the child's process once it is started, and :meth:`close` when
@@ -524,7 +525,13 @@ class CappedOutput:
                 tmp = self.older.with_name(self.older.name + ".tmp")
                 tmp.write_bytes(tail)
                 os.replace(tmp, self.older)
-                f.truncate(0)
+                with open(self.older, "ab") as older:  # what the child wrote meanwhile follows it there,
+                    done = size                       # up to the moment the file is emptied (a few us)
+                    while (end := os.fstat(f.fileno()).st_size) > done:
+                        f.seek(done)
+                        older.write(f.read(end - done))
+                        done = end
+                    f.truncate(0)
             self.dropped += size - len(tail)
         except OSError:
             pass
