@@ -59,7 +59,14 @@ from astrodyn import __version__
 from astrodyn.files import output_path_problem, path_argument
 from astrodyn.recording.chunked_writer import ChunkedWriter
 from astrodyn.recording.outputs import OutputTaken, stale_temporaries, write_atomically
-from astrodyn.recording.reader import MAX_CHUNK_BYTES, chunk_records, open_recording, parse_record, read_records
+from astrodyn.recording.reader import (
+    MAX_CHUNK_BYTES,
+    MCAP_MAGIC,
+    chunk_records,
+    open_recording,
+    parse_record,
+    read_records,
+)
 from astrodyn.recording.writer import RecordingError, being_written
 from astrodyn.signals import interruptible
 
@@ -225,14 +232,51 @@ def finished_name(partial: str) -> str | None:
 
 
 def find_partials(target: str) -> list[str]:
-    """The partial recordings ``recover TARGET`` finishes: TARGET itself when it is a file
-    (a recording or a ``.partial`` one); for a recording name that does not exist, its
-    partial files; for a directory, every partial file in it."""
+    """The partial recordings ``recover TARGET`` finishes: for a directory, every partial
+    file in it; for a recording name (``NAME.mcap``), the partial files of its series
+    (:func:`series_partials`: a killed ``serve`` leaves its last part, ``NAME-000k.partial.mcap``,
+    beside its finished ones), and TARGET itself when it exists and is not complete (a file
+    cut by another writer); for any other existing file (a ``.partial`` one), TARGET."""
     if os.path.isdir(target):
         return sorted(os.path.join(target, f) for f in os.listdir(target) if _PARTIAL.match(f) and f.endswith(".mcap"))
-    if os.path.exists(target):
+    if not os.path.exists(target):
+        return series_partials(target)
+    if finished_name(target) is not None:
         return [target]
-    return partials_of(target)
+    series = series_partials(target)
+    return series if series and is_complete(target) else [target, *series]
+
+
+def series_partials(recording: str) -> list[str]:
+    """The partial recordings beside ``recording`` (``NAME.mcap``) that finish as it or as
+    one of its rolled parts (``NAME-000k.mcap``, :func:`astrodyn.recording.writer.part_path`),
+    sorted."""
+    root, ext = os.path.splitext(recording)
+    folder = os.path.dirname(recording) or "."
+    part = re.compile(re.escape(os.path.basename(root)) + r"(?:-\d{4,})?" + re.escape(ext or ".mcap") + "$")
+    try:
+        names = os.listdir(folder)
+    except OSError:
+        return []
+    return sorted(os.path.join(folder, f) for f in names
+                  if _PARTIAL.match(f) and part.match(os.path.basename(finished_name(f) or "")))
+
+
+def is_complete(path: str) -> bool:
+    """Whether the file at ``path`` ends as a finished MCAP file does: a footer record
+    followed by the closing magic (what a writer that finished leaves; ``recover`` of it has
+    nothing to do)."""
+    footer = 9 + 20  # opcode, length, summary_start, summary_offset_start, summary_crc
+    try:
+        with open(path, "rb") as f:
+            size = os.fstat(f.fileno()).st_size
+            if size < 2 * len(MCAP_MAGIC) + footer:
+                return False
+            f.seek(size - len(MCAP_MAGIC) - footer)
+            tail = f.read(footer + len(MCAP_MAGIC))
+    except OSError:
+        return False
+    return tail[0] == 0x02 and int.from_bytes(tail[1:9], "little") == 20 and tail[footer:] == MCAP_MAGIC
 
 
 def partials_of(recording: str) -> list[str]:
@@ -326,8 +370,9 @@ def _main(argv: list[str] | None) -> int:
     ap = argparse.ArgumentParser(prog="astrodyn recover",
                                  description="Rewrite a crashed writer's MCAP file with a proper summary and index.")
     ap.add_argument("file", type=path_argument, help="MCAP file (typically cut by a killed logger): a NAME.partial.mcap left by a killed "
-                    "run, the --out path of that run (its partial file is found), or a directory (every partial "
-                    "file in it)")
+                    "run, the --out path of that run or serve (the partial files of its series are found: "
+                    "NAME.partial.mcap, NAME-000k.partial.mcap), or a directory (every partial file in it); a "
+                    "complete file is left as it is unless --out is given")
     ap.add_argument("--out", default=None, type=path_argument, help="write the recovered file here (default: NAME.mcap for "
                     "NAME.partial.mcap when no NAME.mcap exists, NAME.recovered.mcap when it does; other files "
                     "are rewritten in place)")
@@ -359,6 +404,10 @@ def _main(argv: list[str] | None) -> int:
     for src in sources:
         dst, remove_source = args.out, False
         final = finished_name(src)
+        if dst is None and final is None and is_complete(src):  # in place, and nothing to finish
+            print(json.dumps({"source": src, "source_complete": True, "nothing_done": "the file is complete (footer "
+                              "found); give --out to rewrite it anyway"}), flush=True)
+            continue
         if dst is None and final is not None:
             root, ext = os.path.splitext(final)
             dst = final if not os.path.exists(final) else f"{root}.recovered{ext}"
