@@ -416,3 +416,27 @@ def test_validated_channels_give_the_columns_the_checked_path_gives(tmp_path):
                 assert np.array_equal(column, b.fields[name], equal_nan=column.dtype.kind == "f"), name
     status = run.channels[messages.status_key("v")].fields
     assert np.isnan(status["rate"][0]) and status["rate"][1] == 2.0 and status["messages"][1] == -1
+
+
+def test_a_part_passes_roll_size_by_less_than_one_chunk_however_fast_messages_come(tmp_path):
+    """``roll_size`` was checked at each flush only (every ``flush_interval_s``): a logger fed
+    faster than a flush's worth of ``roll_size`` wrote parts many times over it (probe B:
+    20-27 MB parts for ``--roll-size "1 MiB"`` at 1000 bodies).  Here no flush is due during
+    the writes (a 1 h flush interval), so only the size check can roll; each finished part
+    must end within one compressed chunk (at most ``chunk_size`` plus its record header) of
+    ``roll_size``, and the parts together hold every message once, in order."""
+    roll, chunk = 6000, 2048
+    path = tmp_path / "r.mcap"
+    with McapRecorder(path, METADATA, epoch_ns=EPOCH_NS, chunk_size=chunk, roll_size=roll,
+                      flush_interval_s=3600.0) as rec:
+        for key, msg in _expected_messages():
+            rec.write(key, msg)
+        paths = list(rec.paths)
+    assert len(paths) >= 3, paths
+    for part in paths[:-1]:
+        assert os.path.getsize(part) <= roll + chunk + 4096, (part, os.path.getsize(part))  # + summary and footer
+    got = []
+    for part in paths:
+        with open(part, "rb") as f:
+            got += [(c.topic, json.loads(m.data)) for _, c, m in make_reader(f).iter_messages(log_time_order=False)]
+    assert got == _expected_messages()

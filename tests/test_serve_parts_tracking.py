@@ -54,9 +54,10 @@ def _write_steps(rec: McapRecorder, sc, res, steps: range) -> None:
 
 def _rolling_recorder(out: Path, report: Path, sc) -> McapRecorder:
     """The logger's recorder of ``serve``: atomic (partial names until finished), reporting
-    each file to ``report``; every flush rolls (``roll_size`` 1 byte), and only the test
-    flushes (one flush an hour otherwise)."""
-    return McapRecorder(out, sc.to_metadata(), epoch_ns=sc.epoch_unix_ns, atomic=True, roll_size=1,
+    each file to ``report``; every flush rolls (``roll_interval_s`` 1 ns: the age is checked
+    at each flush; a size is checked at each write), and only the test flushes (one flush an
+    hour otherwise)."""
+    return McapRecorder(out, sc.to_metadata(), epoch_ns=sc.epoch_unix_ns, atomic=True, roll_interval_s=1e-9,
                         flush_interval_s=3600.0, on_file=own_files_reporter(str(report)))
 
 

@@ -44,12 +44,12 @@ def _served(out: Path, rolls: int, ended: bool = True) -> list[Path]:
     and its parts, each finished (summary, footer); the last holds the logger's ``end``
     record when ``ended`` (the logger writes it into the file it stops in)."""
     sc = loads(SCENE)
-    rec = McapRecorder(out, sc.to_metadata(), epoch_ns=sc.epoch_unix_ns, atomic=True, roll_size=1,
+    rec = McapRecorder(out, sc.to_metadata(), epoch_ns=sc.epoch_unix_ns, atomic=True, roll_interval_s=1e-9,
                        flush_interval_s=3600.0)
     for k in range(rolls + 1):
         rec.write_encoded(f"astrodyn/{sc.name}/sat/orbit", b"{}", float(k), k)
         if k < rolls:
-            rec.flush()  # every flush rolls (roll_size 1 byte)
+            rec.flush()  # every flush rolls (an age of 1 ns; a size is checked at each write)
     if ended:
         rec.add_metadata("end", {"reason": "stop requested"})
     rec.close()

@@ -239,8 +239,8 @@ def test_a_rolled_part_never_replaces_an_existing_part(tmp_path, data, atomic):
     shutil.copy(data / "small.mcap", earlier)
     before = earlier.read_bytes()
     key = messages.orbit_key("rp", "sat")
-    with McapRecorder(tmp_path / "x.mcap", {"name": "rp"}, epoch_ns=0, roll_size=1, atomic=atomic) as rec:
-        for part in range(3):  # each flush finishes a part (roll_size 1 byte) and starts the next
+    with McapRecorder(tmp_path / "x.mcap", {"name": "rp"}, epoch_ns=0, roll_interval_s=1e-9, atomic=atomic) as rec:
+        for part in range(3):  # each flush finishes a part (an age of 1 ns) and starts the next
             for seq in range(part * 5, part * 5 + 5):
                 rec.write(key, messages.orbit_message(float(seq), seq, "kepler", [7e6, 0, 0], [0, 7.5e3, 0], 3.986e14))
             rec.flush()

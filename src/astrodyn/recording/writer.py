@@ -394,7 +394,8 @@ class McapRecorder:
         a SIGKILL can lose.
     roll_size, roll_interval_s : for long runs (``astrodyn serve``): finish the file and
         continue in ``<stem>-0001.mcap``, ``<stem>-0002.mcap``, ... once it holds
-        ``roll_size`` bytes or is ``roll_interval_s`` old (checked at each flush).  Every
+        ``roll_size`` bytes (checked at each write: a part passes it by less than one
+        compressed chunk) or is ``roll_interval_s`` old (checked at each flush).  Every
         finished part is a complete MCAP with both metadata records; seq accounting spans
         all parts; ``paths`` lists them.  A part never replaces a file of its name (an
         earlier session's part): it is kept as ``NAME-000k.clash-1.mcap`` instead
@@ -606,10 +607,10 @@ class McapRecorder:
 
     def _maybe_roll(self) -> None:
         """Finish this file and start the next one when it is over ``roll_size`` bytes or
-        ``roll_interval_s`` old (checked at each flush: a file overshoots by < 1 flush)."""
+        ``roll_interval_s`` old (:meth:`_over_roll_size`; the age at each flush)."""
         if self.closed or (self.roll_size is None and self.roll_interval_s is None):
             return
-        big = self.roll_size is not None and self._stream.tell() >= self.roll_size
+        big = self._over_roll_size()
         old = self.roll_interval_s is not None and time.monotonic() - self._opened_at >= self.roll_interval_s
         if not (big or old):
             return
@@ -680,9 +681,15 @@ class McapRecorder:
         except OSError as exc:
             self._fail(exc)
         self.message_count += 1
-        if time.monotonic() >= self._next_flush:
+        if time.monotonic() >= self._next_flush or self._over_roll_size():
             self.flush()
         return status
+
+    def _over_roll_size(self) -> bool:
+        """Whether the file's written chunks reach ``roll_size``: then the next flush rolls
+        (checked at each write, so a part overshoots by less than one chunk, however fast
+        messages come between flushes)."""
+        return self.roll_size is not None and self._stream.tell() >= self.roll_size
 
     def write_batch(self, buf: np.ndarray, count: int, pay_start: np.ndarray, pay_len: np.ndarray,
                     layout: BatchLayout, publish_time: int, slow) -> tuple[int, float]:
@@ -743,7 +750,7 @@ class McapRecorder:
                 slow(i)
                 i += 1
         self.message_count += written
-        if time.monotonic() >= self._next_flush:
+        if time.monotonic() >= self._next_flush or self._over_roll_size():
             self.flush()
         return written, max_t
 
