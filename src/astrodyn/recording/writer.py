@@ -681,8 +681,8 @@ class McapRecorder:
         except OSError as exc:
             self._fail(exc)
         self.message_count += 1
-        if time.monotonic() >= self._next_flush or self._over_roll_size():
-            self.flush()
+        if time.monotonic() >= self._next_flush or (self.roll_size is not None and self._over_roll_size()):
+            self.flush()  # (the roll_size test inline: this is the per-message path)
         return status
 
     def _over_roll_size(self) -> bool:
