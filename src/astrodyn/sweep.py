@@ -47,7 +47,11 @@ and with any number of workers, and ``--case k`` reruns exactly that case.
 Each case: the draws are applied to a copy of the config dict and validated with
 :func:`astrodyn.scenario.load_dict` -- an invalid draw makes the case *fail* with the
 :class:`~astrodyn.scenario.ScenarioError` text (``... case 7: bodies[0].orbit.e: expected
-0 <= e, got -0.1``) -- then simulated; any exception fails that case only.  A ``--vary`` or
+0 <= e, got -0.1``) -- then simulated; any exception fails that case only.  A case whose
+whole-run arrays would exceed the memory budget of a case (``--case-memory``; by default half
+the machine's memory over the cases run at once: :func:`case_memory_need`,
+:func:`default_case_memory`) fails before it makes them (:class:`CaseMemoryError`), and a sweep
+no case of which fits is refused up front (:func:`check_case_memory`).  A ``--vary`` or
 ``--cases`` column that would fail *every* case (a misspelled key, a unit of the wrong kind)
 is refused before any case runs, exit 2 (:func:`check_values_against_config`, which
 ``astrodyn sweep`` applies to the spec of :func:`make_spec`).  Metrics per
@@ -79,7 +83,7 @@ cases serially and updates the tables in ``DIR``; ``--resume`` runs the cases a 
 interrupted sweep has no row for and completes its tables.  ``astrodyn analyze DIR`` plots the table (:mod:`astrodyn.analysis.sweep`).
 
 Exit status: 0 every case ran, 1 some cases failed, 2 bad arguments, spec, config or
-``--out`` (nothing is created), 130 interrupted by Ctrl-C, 143 by SIGTERM (the finished
+``--out``, or no case fits in the memory budget (nothing is created), 130 interrupted by Ctrl-C, 143 by SIGTERM (the finished
 cases are written; nothing when none had finished).
 """
 
@@ -121,6 +125,13 @@ __all__ = [
     "make_spec",
     "check_values_against_config",
     "probe_values",
+    "CaseMemoryError",
+    "case_memory_need",
+    "case_memory_problem",
+    "check_case_memory",
+    "machine_memory",
+    "default_case_memory",
+    "case_memory_here",
     "run_case",
     "run_chunk",
     "local_cluster",
@@ -380,11 +391,23 @@ def parse_vary(text: str) -> Vary:
     return _build_vary(text, path_text.strip(), segments, kind, args, unit, what)
 
 
+#: A ``--vary`` unit that starts with a number is a scaled unit (``5 km``), refused, unless
+#: it is 1 over a unit (:data:`_PER_UNIT`: ``1/s``, ``1 / s``).
+_SCALED_UNIT = re.compile(r"^\s*[-+]?\.?\d")
+_PER_UNIT = re.compile(r"^\s*1\s*/")
+
+
 def _check_unit(unit: str, what: str) -> None:
     """Refuse a ``--vary`` unit the scenario loader would not know (astropy's units, ``rpm``
-    and the English unit words of :data:`astrodyn.scenario.fields.UNIT_WORDS`)."""
+    and the English unit words of :data:`astrodyn.scenario.fields.UNIT_WORDS`), or one that
+    starts with a number: astropy takes ``5 km`` as a unit 5 km long, so every draw would be
+    multiplied by 5 (``1/s``, 1 over a unit, stays legal)."""
     from astrodyn.scenario.fields import unit_text, units
 
+    if _SCALED_UNIT.match(unit) and not _PER_UNIT.match(unit):
+        raise SweepError(f"{what}: expected a unit without a number after the distribution (e.g. km, deg, rad/s, 1/s), "
+                         f"got {unit!r}: a number there would scale every draw; write the unit alone and put the "
+                         f"scale into the distribution's values")
     try:
         units().Unit(unit_text(unit), parse_strict="raise")
     except Exception:
@@ -497,6 +520,9 @@ class SweepSpec:
     resolved: dict = field(default_factory=dict)  #: path text -> concrete segments
     grid_sizes: tuple[int, ...] = ()
     mcap_dir: str | None = None
+    #: bytes one case may take (:func:`case_memory_need`); None: decided where the case runs
+    #: (:func:`case_memory_here`)
+    case_memory: int | None = None
 
     # ---- draws
     def draws(self, k: int) -> dict[str, Any]:
@@ -715,18 +741,9 @@ def check_values_against_config(spec: SweepSpec) -> None:
             return exc
         return None
 
-    def with_value(path: str, value: Any) -> dict:
-        config = copy.deepcopy(spec.config)
-        _assign(config, spec.resolved[path], value, path)
-        return config
-
-    probes = [(f"--vary {v.text!r}", v.path, [_with_unit(x, v.unit) for x in probe_values(v)]) for v in spec.varies]
-    rows = spec.cases_rows
-    picked = [rows[i] for i in sorted({0, len(rows) // 2, len(rows) - 1})] if rows else []
-    probes += [(f"--cases column {h!r}", h, [r[h] for r in picked if h in r]) for h in spec.cases_header]
     joint_ok: bool | None = None
-    for label, path, values in probes:
-        errors = [problem(with_value(path, x), label) for x in values]
+    for label, path, values in _probes(spec):
+        errors = [problem(_config_with(spec, path, x), label) for x in values]
         if not values or not all(errors):
             continue
         if joint_ok is None:
@@ -736,10 +753,176 @@ def check_values_against_config(spec: SweepSpec) -> None:
             raise SweepError(f"{errors[0]} (the values tried: {tried}; no case was run)")
 
 
+def _probes(spec: SweepSpec) -> list[tuple[str, str, list]]:
+    """``(label, path, values)`` the up-front checks put into the nominal config, one dispersion
+    at a time: each ``--vary``'s :func:`probe_values` with its unit, each ``--cases`` column's
+    values in the first, middle and last row."""
+    probes = [(f"--vary {v.text!r}", v.path, [_with_unit(x, v.unit) for x in probe_values(v)]) for v in spec.varies]
+    rows = spec.cases_rows
+    picked = [rows[i] for i in sorted({0, len(rows) // 2, len(rows) - 1})] if rows else []
+    probes += [(f"--cases column {h!r}", h, [r[h] for r in picked if h in r]) for h in spec.cases_header]
+    return probes
+
+
+def _config_with(spec: SweepSpec, path: str, value: Any) -> dict:
+    """A copy of the nominal config with ``value`` at ``path`` (a --vary or --cases path)."""
+    config = copy.deepcopy(spec.config)
+    _assign(config, spec.resolved[path], value, path)
+    return config
+
+
 def _shown_value(value: Any) -> str:
     """A probe value for a message: a number or quantity string as is, shortened."""
     text = value if isinstance(value, str) else json.dumps(value, default=str)
     return text if len(text) <= 60 else text[:57] + "..."
+
+
+# --------------------------------------------------------------------------- memory of a case
+
+#: Share of the memory available to a case (its machine's over the cases run at once, or its
+#: Dask worker's memory limit) its arrays may take by default: the rest is for the process,
+#: its libraries and the machine's other programs.
+CASE_MEMORY_FRACTION = 0.5
+#: Scratch bytes per output step :func:`case_metrics` takes on top of the run's arrays, for
+#: its per-body temporaries (at most 223 measured with tracemalloc, up to 20 bodies).
+METRICS_BYTES_PER_STEP = 256
+#: Bytes per output step of one orbit (r, v) and one attitude (q, w) in the whole-run arrays
+#: (float64, :class:`astrodyn.simulate.SimulationResult`); the times take 8 more.
+ORBIT_BYTES_PER_STEP = 48
+ATTITUDE_BYTES_PER_STEP = 56
+
+
+class CaseMemoryError(SweepError):
+    """A case whose whole-run arrays would exceed the memory budget of a case (refused before
+    anything of that size is made)."""
+
+
+def _case_bodies(scenario) -> tuple[int, int]:
+    """``(orbits, attitudes)`` :func:`astrodyn.simulate.simulate` propagates for ``scenario`` (at most)."""
+    orbits = sum(b.orbit is not None for b in scenario.bodies)
+    attitudes = sum(b.attitude is not None and b.attitude.model != "none" for b in scenario.bodies)
+    return orbits, attitudes
+
+
+def case_memory_need(scenario) -> int:
+    """Bytes :func:`run_case` takes at its peak for ``scenario`` (an upper bound), from the
+    counts alone (nothing of that size is made): the whole run's arrays
+    (:func:`astrodyn.simulate.simulate`), per output step 8 bytes for the time and
+    :data:`ORBIT_BYTES_PER_STEP` per orbit, :data:`ATTITUDE_BYTES_PER_STEP` per attitude,
+    the states held twice while simulate joins its blocks, or once plus the metrics' scratch
+    (:data:`METRICS_BYTES_PER_STEP`); over ``n_steps`` and one block of the engines' working
+    arrays (:data:`astrodyn.simulate.SIMULATE_BLOCK` steps at most)."""
+    from astrodyn.simulate import SIMULATE_BLOCK
+
+    orbits, attitudes = _case_bodies(scenario)
+    states = ORBIT_BYTES_PER_STEP * orbits + ATTITUDE_BYTES_PER_STEP * attitudes
+    steps = scenario.n_steps + min(scenario.n_steps, SIMULATE_BLOCK)
+    return steps * (8 + states + max(states, METRICS_BYTES_PER_STEP))
+
+
+def machine_memory() -> int | None:
+    """Bytes of memory of this machine (``SC_PHYS_PAGES`` x ``SC_PAGE_SIZE``), or the memory
+    limit of this process's cgroup (a container's) when lower; None when unknown."""
+    sizes = []
+    with contextlib.suppress(ValueError, OSError, AttributeError):
+        sizes.append(os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE"))
+    for limit in ("/sys/fs/cgroup/memory.max", "/sys/fs/cgroup/memory/memory.limit_in_bytes"):  # cgroup v2, v1
+        with contextlib.suppress(ValueError, OSError):
+            sizes.append(int(Path(limit).read_text(encoding="ascii").strip()))  # "max": no limit (ValueError)
+    sizes = [n for n in sizes if n > 0]
+    return min(sizes) if sizes else None
+
+
+def default_case_memory(cases_at_once: int) -> int | None:
+    """The memory budget of a case run on this machine (bytes): :data:`CASE_MEMORY_FRACTION`
+    of :func:`machine_memory` shared by the ``cases_at_once`` cases that run at once (the local
+    worker processes; 1 serially); None when the machine's memory is unknown."""
+    memory = machine_memory()
+    return None if memory is None else int(memory * CASE_MEMORY_FRACTION) // max(1, cases_at_once)
+
+
+def case_memory_here() -> int | None:
+    """The memory budget of a case whose spec names none (a ``--scheduler`` worker's, where the
+    sweep's machine is not the case's): :data:`CASE_MEMORY_FRACTION` of the Dask worker's memory
+    limit (Dask's share of its machine per worker), else of this machine's memory."""
+    if "distributed" in sys.modules:
+        limit = None
+        with contextlib.suppress(Exception):  # not in a Dask worker: ValueError
+            from distributed import get_worker
+
+            worker = get_worker()
+            limit = getattr(getattr(worker, "memory_manager", worker), "memory_limit", None)  # distributed >= 2022.6
+        if isinstance(limit, (int, float)) and limit > 0:
+            return int(limit * CASE_MEMORY_FRACTION)
+    return default_case_memory(1)
+
+
+def _size_text(n: float) -> str:
+    """``n`` bytes for a message, in binary units (``7.45 GiB``)."""
+    for unit in ("bytes", "KiB", "MiB", "GiB", "TiB"):
+        if n < 1024 or unit == "TiB":
+            return f"{int(n)} bytes" if unit == "bytes" else f"{n:.3g} {unit}"
+        n /= 1024
+    raise AssertionError("unreachable")  # pragma: no cover
+
+
+def case_memory_problem(scenario, budget: int | None) -> str | None:
+    """Why ``scenario`` cannot run as a case within ``budget`` bytes (:func:`case_memory_need`):
+    the estimate, the budget and what to change; None when it fits or there is no budget."""
+    if budget is None:
+        return None
+    need = case_memory_need(scenario)
+    if need <= budget:
+        return None
+    orbits, attitudes = _case_bodies(scenario)
+    return (f"needs about {_size_text(need)} of memory for its whole-run arrays ({scenario.n_steps} output steps of "
+            f"{orbits} orbit(s) and {attitudes} attitude(s)), over the memory budget of a case of "
+            f"{_size_text(budget)}; shorten scenario.duration, lower scenario.rate or use fewer bodies (or raise "
+            f"--case-memory, by default half the machine's memory over the cases run at once)")
+
+
+def check_case_memory(spec: SweepSpec) -> list[str]:
+    """Before any case runs: refuse (:class:`SweepError`) a sweep no case of which fits in the
+    memory budget of a case (``spec.case_memory``; nothing is checked without one), and return
+    one warning per ``--vary`` / ``--cases`` column some of whose values make a case too big
+    (those cases will fail, the others run).
+
+    Tried: the configs of :func:`check_values_against_config` (each dispersion alone at its
+    probe values, the first :data:`PROBE_CASES` cases); the sweep is refused when every one of
+    them that validates needs more than the budget (a grid whose every value is too long)."""
+    from astrodyn.scenario import ScenarioError, load_dict
+
+    budget = spec.case_memory
+    if budget is None:
+        return []
+    fits = False
+
+    def problem(config: dict) -> str | None:
+        nonlocal fits
+        try:
+            scenario = load_dict(config, source=spec.source, base_dir=spec.base_dir)
+        except ScenarioError:  # the loader's refusal is the case's own failure (check_values_against_config)
+            return None
+        found = case_memory_problem(scenario, budget)
+        fits = fits or found is None
+        return found
+
+    first = None
+    for k in range(min(spec.n, PROBE_CASES)):
+        if found := problem(spec.case_config(k)[0]):
+            first = first or f"case {k} {found}"
+    warnings = []
+    for label, path, values in _probes(spec):
+        over = [(x, found) for x in values if (found := problem(_config_with(spec, path, x)))]
+        if over:
+            value, found = over[0]
+            first = first or f"{label} at {_shown_value(value)}: a case {found}"
+            warnings.append(f"{label}: a case at {_shown_value(value)} {found}: the cases at such values will fail, "
+                            f"the others run")
+    if first is not None and not fits:
+        raise SweepError(f"no case fits in the memory budget of a case (tried: the first {min(spec.n, PROBE_CASES)} "
+                         f"cases and a few values of each dispersion; no case was run): {first}")
+    return warnings
 
 
 # --------------------------------------------------------------------------- one case
@@ -834,11 +1017,14 @@ def run_case(k: int, spec: SweepSpec) -> dict[str, Any]:
         config, draws = spec.case_config(k)
         row.update(_draw_columns(draws, spec))
         scenario = load_dict(config, source=f"{spec.source} case {k}", base_dir=spec.base_dir)
+        budget = spec.case_memory if spec.case_memory is not None else case_memory_here()
+        if too_big := case_memory_problem(scenario, budget):  # before simulate makes the arrays
+            raise CaseMemoryError(f"{spec.source} case {k}: {too_big}")
         result = simulate(scenario)
         row.update(case_metrics(scenario, result))
         if spec.mcap_dir:
             write_case_mcap(Path(spec.mcap_dir) / f"case-{k:06d}.mcap", scenario, result, draws, k)
-    except ScenarioError as exc:
+    except (ScenarioError, CaseMemoryError) as exc:
         row.update(status="failed", error=_one_line(exc))
     except Exception as exc:  # a case's failure must not stop the sweep: report it
         row.update(status="failed", error=f"{type(exc).__name__}: {_one_line(exc)}", traceback=traceback.format_exc())
@@ -1392,6 +1578,11 @@ def _parser() -> argparse.ArgumentParser:
                     help="run the cases the sweep in --out has no row for (one that was killed or interrupted) "
                          "and complete its tables")
     ap.add_argument("--mcap", action="store_true", help="also write one MCAP per case into OUT/mcap/")
+    ap.add_argument("--case-memory", type=case_memory_argument, default=None, metavar="SIZE",
+                    help='memory one case may take ("4 GiB", "500 MB" or a number of bytes); a case whose whole-run '
+                         "arrays need more fails without making them. Default: half the machine's memory over the "
+                         "cases run at once (--workers; 1 serially); with --scheduler, half each Dask worker's "
+                         "memory limit")
     ap.add_argument("--out", required=True, metavar="DIR", type=path_argument,
                     help="output directory; one holding an earlier sweep's results is refused (a new directory, "
                          "--case K to rerun cases of that sweep, or --overwrite)")
@@ -1399,6 +1590,17 @@ def _parser() -> argparse.ArgumentParser:
                     help="replace the results of an earlier sweep in --out (its tables and its per-case files)")
     ap.add_argument("--quiet", action="store_true", help="no progress line")
     return ap
+
+
+def case_memory_argument(text: str) -> int:
+    """``--case-memory``: a size (``"4 GiB"``, ``"500 MB"``, units of the config's sizes) or a
+    number of bytes, at least 1 byte (argparse's error naming the flag otherwise)."""
+    from astrodyn.service.serve import flag_quantity
+
+    size = flag_quantity("bytes", "bytes")(text)
+    if not (isinstance(size, int) and size >= 1):
+        raise argparse.ArgumentTypeError(f'expected a size of at least 1 byte, e.g. "4 GiB", got {text!r}')
+    return size
 
 
 def check_chunk(chunk: Any) -> None:
@@ -1602,6 +1804,11 @@ def _main(argv: list[str] | None) -> int:
             raise SweepError("--resume: expected either --resume (every case without a row) or --case K, not both")
         spec = make_spec(args.config, args.vary, n=args.n, seed=args.seed, cases_csv=args.cases)
         check_values_against_config(spec)
+        spec.case_memory = args.case_memory
+        if spec.case_memory is None and (args.scheduler is None or args.case is not None):  # cases run here
+            spec.case_memory = default_case_memory(args.workers if args.case is None else 1)
+        # --case K: the rows of those cases say it; the check's sample values may not be theirs
+        memory_warnings = check_case_memory(spec) if args.case is None else []
         cases = list(range(spec.n)) if args.case is None else sorted(set(args.case))
         for k in cases:
             if not 0 <= k < spec.n:
@@ -1637,6 +1844,8 @@ def _main(argv: list[str] | None) -> int:
         _remove_if_empty(out, created)
         print(f"astrodyn sweep: {exc}", file=sys.stderr)
         return 2
+    for line in memory_warnings:
+        print(f"astrodyn sweep: {line}", file=sys.stderr)
     try:
         return _sweep(args, spec, cases, out, created, earlier)
     finally:
