@@ -659,7 +659,7 @@ class Publisher(_Declared):
 
     def matching(self) -> bool:
         """True when at least one subscriber matches this channel."""
-        return bool(self._entity.matching_status)
+        return bool(self._entity.matching_status.matching)  # (the status object itself is always truthy)
 
 
 

@@ -12,11 +12,12 @@ crosscheck keys) or ``.../@batch/attitude`` (:func:`astrodyn.messages.encode_bat
 instead of one put per key.
 
 Options: ``--start T`` / ``--end T`` (s since the scenario epoch, inclusive), ``--topics
-GLOB`` (repeatable, shell-style, ``*`` crosses ``/``), ``--wait S`` (wait up to S s for
-a subscriber before the clock starts), ``--hold`` (after the end, keep answering control
-queries until ``stop``; a ``seek`` replays again), ``--listen`` / ``--connect`` /
-``--mode`` / ``--port`` (Zenoh endpoints; default one loopback endpoint, multicast
-scouting off, as every astrodyn process).
+GLOB`` (repeatable, shell-style, ``*`` crosses ``/``), ``--wait S`` (default 5: wait up
+to S wall s, before the clock starts, for a subscriber to any key the replay puts on;
+``status`` says ``"state": "waiting"`` meanwhile, with the keys and the seconds left),
+``--hold`` (after the end, keep answering control queries until ``stop``; a ``seek``
+replays again), ``--listen`` / ``--connect`` / ``--mode`` / ``--port`` (Zenoh endpoints;
+default one loopback endpoint, multicast scouting off, as every astrodyn process).
 
 Control, mirroring ``astrodyn serve`` (:mod:`astrodyn.service.serve`), as Zenoh queryables on
 ``astrodyn/<scenario>/@control/<verb>`` (``--control-scenario`` to use another name):
@@ -24,11 +25,13 @@ Control, mirroring ``astrodyn serve`` (:mod:`astrodyn.service.serve`), as Zenoh 
 =========  ==================================  =========================================
 verb       arguments (JSON payload)            reply
 =========  ==================================  =========================================
-status     --                                  state, rate, t, messages published, progress
+status     --                                  state (running, waiting, paused, finished),
+                                               rate, t, messages published, progress
 pause      --                                  the new status (nothing is sent while paused)
 resume     --                                  the new status (pacing re-anchored at t)
 rate       ``{"factor": x}`` (1e-3..1e6, "inf")  the new status
-seek       ``{"t": T}`` (s since the epoch)    the new status; replay continues from T
+seek       ``{"t": T}`` (s since the epoch,    the new status; replay continues from T
+           within ``t_start`` .. ``t_end``)
 stop       --                                  the final summary
 =========  ==================================  =========================================
 
@@ -72,6 +75,13 @@ __all__ = ["Replayer", "main", "build_parser", "open_recording", "start_viewer",
 REPLAY_VERBS = (*bus.CONTROL_VERBS, "seek")
 _BATCH_PROCESS = {"orbit": "orbit", "crosscheck": "orbit", "attitude": "attitude"}
 _POLL_S = 0.02  # control queries are answered within about this long
+#: Per 10 ms round of the wait for a first subscriber: publishers declared (~30 us each) and
+#: matching statuses read (~1 us each), so that a recording of many keys holds up the
+#: control verbs for no more than ~10 ms a round.
+WAIT_DECLARES_PER_ROUND = 256
+WAIT_READS_PER_ROUND = 4096
+#: Keys named in the ``waiting`` entry of the status (the rest are counted).
+WAITING_KEYS_SHOWN = 8
 
 
 def parse_rate(raw: Any, what: str = "rate") -> float:
@@ -156,6 +166,10 @@ class Replayer:
         # the pacing clock runs from the first step() (playback), not from here: a replay
         # waiting for its first subscriber stays at its start time (module docstring, Pacing)
         self.clock_started = False
+        # while wait_for_subscriber() runs: the monotonic time it ends at, the keys, the --wait
+        self.waiting_until: float | None = None
+        self.waiting_keys: list[str] = []
+        self.waiting_s = 0.0
         self._seek(self.lo)
         self.started = time.monotonic()
 
@@ -243,23 +257,52 @@ class Replayer:
         self.published += 1
         self.last_ns = msg.log_time
 
+    def replayed_keys(self) -> list[str]:
+        """The Zenoh keys this replay puts on, sorted: the recording's topics that ``--topics``
+        selects (the channels known so far: all of them in a complete file, those of the
+        chunks read in a cut one, the first message's at least), each replaced by its batch
+        envelope's key under ``--batch``."""
+        wanted = topic_matcher(self.topics)
+        topics = [topic for topic in self.stream.topics() if wanted(topic)]
+        if self._next is not None:
+            topics.append(self._next.topic)
+        return sorted({self._batch_key(topic) or topic for topic in topics})
+
     def wait_for_subscriber(self, timeout_s: float, keep_waiting: Callable[[], bool] = lambda: True) -> bool:
-        """Wait up to ``timeout_s`` until the first topic to replay has a subscriber; returns
-        whether one came.  ``keep_waiting()`` is called every 10 ms (the owner's control
-        verbs, signals and live view: a ``stop`` or SIGTERM must not wait for ``--wait``) and
-        ends the wait when it returns False."""
+        """Wait up to ``timeout_s`` wall seconds until a subscriber matches any key the replay
+        puts on (:meth:`replayed_keys`: a subscriber on ``astrodyn/<scenario>/<body>/orbit``,
+        ``.../*/orbit``, ``.../**`` or ``.../@event`` alike); returns whether one came.  Each
+        10 ms round declares the next :data:`WAIT_DECLARES_PER_ROUND` publishers (kept for
+        the playback), reads up to :data:`WAIT_READS_PER_ROUND` matching statuses, round
+        robin, then calls
+        ``keep_waiting()`` (the owner's control verbs, signals and live view: a ``stop`` or
+        SIGTERM must not wait for ``--wait``), which ends the wait when it returns False.
+        Meanwhile :meth:`status` says ``"state": "waiting"`` (unless paused) and what for."""
         if self._next is None or timeout_s <= 0:
             return False
-        key = self._batch_key(self._next.topic) or self._next.topic
-        pub = self._publisher(key)
-        deadline = time.monotonic() + timeout_s
-        while pub is not None and time.monotonic() < deadline and keep_waiting():
-            if pub.matching_status.matching:
-                self._anchor(self._anchor_ns)
-                return True
-            time.sleep(0.01)
-        self._anchor(self._anchor_ns)
-        return False
+        keys = self.replayed_keys()
+        self.waiting_keys = keys
+        self.waiting_s = timeout_s
+        self.waiting_until = deadline = time.monotonic() + timeout_s
+        publishers: list = []
+        declared = cursor = 0
+        try:
+            while time.monotonic() < deadline:
+                for key in keys[declared:declared + WAIT_DECLARES_PER_ROUND]:
+                    if (pub := self._publisher(key)) is not None:  # None: not a Zenoh key (skipped_topics)
+                        publishers.append(pub)
+                declared += WAIT_DECLARES_PER_ROUND
+                for _ in range(min(WAIT_READS_PER_ROUND, len(publishers))):
+                    if publishers[cursor].matching_status.matching:
+                        return True
+                    cursor = (cursor + 1) % len(publishers)
+                if not keep_waiting():
+                    return False
+                time.sleep(0.01)
+            return False
+        finally:
+            self.waiting_until = None
+            self._anchor(self._anchor_ns)
 
     def step(self, budget_s: float = _POLL_S) -> bool:
         """Publish what is due within the next ``budget_s`` of wall time; False when done."""
@@ -296,9 +339,19 @@ class Replayer:
         # the last message published; right after a seek (nothing published yet) the seek's point
         now_ns = self.last_ns if self.last_ns is not None else getattr(self, "_anchor_ns", lo)
         span = max(hi - lo, 1)
+        waiting = None
+        if self.waiting_until is not None:
+            shown = self.waiting_keys[:WAITING_KEYS_SHOWN]
+            waiting = {"for": f"a subscriber to any of the {len(self.waiting_keys)} keys this replay puts on",
+                       "keys": shown + ([f"... {len(self.waiting_keys) - len(shown)} more"]
+                                        if len(self.waiting_keys) > len(shown) else []),
+                       "wait_s": self.waiting_s,
+                       "left_s": round(max(0.0, self.waiting_until - time.monotonic()), 3)}
         return {
             "file": self.stream.path,
-            "state": self.state,
+            # "waiting": for a first subscriber (--wait; a pause asked meanwhile says "paused")
+            "state": "waiting" if waiting is not None and self.state == "running" else self.state,
+            "waiting": waiting,
             "real_time_factor": "inf" if math.isinf(self.rate) else self.rate,
             "t": self.stream.ns_to_t(now_ns),
             "t_start": self.stream.ns_to_t(lo),
@@ -329,10 +382,19 @@ class Replayer:
         self._anchor(int(v) if math.isfinite(v) else (self.last_ns or self._anchor_ns))
 
     def seek(self, t: Any) -> None:
+        """Go on from ``t`` (s since the scenario epoch) within the replayed range, ``t_start``
+        <= t <= ``t_end`` of :meth:`status` (the recording's, or narrowed by ``--start`` /
+        ``--end``); ValueError naming the verb, the value and the range otherwise (a seek
+        before the start used to be moved to the start without a word).  A ``t`` within the
+        range is taken to the nanosecond, kept inside it (a ``t_end`` sent back as the status
+        gave it can be a nanosecond past the last log time once rounded)."""
         ns = self.stream.t_to_ns(t, "seek.t")
-        ns = max(ns, self.lo) if self.lo is not None else ns
-        if self.hi is not None and ns > self.hi:
-            raise ValueError(f"seek.t: expected t <= end ({self.stream.ns_to_t(self.hi)} s), got {t!r}")
+        if self.lo is not None and self.hi is not None:
+            t_lo, t_hi = self.stream.ns_to_t(self.lo), self.stream.ns_to_t(self.hi)
+            if not t_lo <= t <= t_hi:
+                raise ValueError(f"seek.t: expected a time within the replayed range, {t_lo} <= t <= {t_hi} s since "
+                                 f"the scenario epoch (the recording's, or --start/--end), got {t!r}")
+            ns = min(max(ns, self.lo), self.hi)
         paused = self.state == "paused"
         self.state = "running"
         self.last_ns = None
@@ -390,7 +452,8 @@ def build_parser() -> argparse.ArgumentParser:
     ap.add_argument("--topics", action="append", default=None, metavar="GLOB", help="only topics matching (repeatable)")
     ap.add_argument("--batch", action="store_true", help="send states as batch envelopes on @batch/<process> like the propagators")
     ap.add_argument("--wait", type=float, default=5.0,
-                    help="wait up to this many wall s (at most a day) for a subscriber before starting (default 5)")
+                    help="wait up to this many wall s (at most a day) for a subscriber to any key the replay "
+                         "publishes before starting (default 5)")
     ap.add_argument("--hold", action="store_true", help="after the end, keep answering control queries until stop")
     ap.add_argument("--control-scenario", default=None, help="scenario name of the control keys (default: the recorded one)")
     ap.add_argument("--port", type=int, default=None, help="loopback port to listen on (default: a free one)")
@@ -595,7 +658,12 @@ def play(rep: Replayer, session, scenario: str, token: str | None, args: argpars
                 view.check()
             return rep.state != "stopped" and not stop_signal.why
 
-        rep.wait_for_subscriber(args.wait, keep_up)
+        def keep_waiting() -> bool:
+            """keep_up, and the progress line (which says "waiting") while no one subscribes."""
+            printer.show(lambda: _progress_line(rep))
+            return keep_up()
+
+        rep.wait_for_subscriber(args.wait, keep_waiting)
         while True:
             if not keep_up():
                 break
