@@ -175,6 +175,12 @@ def test_constellation_is_a_walker_delta():
         ("10 N m s", "angular_momentum", 10.0),
         ("9.81 m/s2", "acceleration", 9.81),
         ("256 MB", "bytes", 256e6),
+        # units with digits in them, not scale factors (a number after the value is refused: F4)
+        ("10 1/s", "frequency", 10.0),
+        ("10 1 / s", "frequency", 10.0),
+        ("2 rad s-1", "angular_velocity", 2.0),
+        ("1e3 km", "length", 1.0e6),
+        ("3.986004418e5 km3 / s2", "gm", 3.986004418e14),
         (7000, "length", 7000.0),  # bare numbers are SI
         (0.5, "angle", 0.5),
     ],
@@ -437,8 +443,8 @@ ERROR_CASES = [
     ("bodies.0.orbit.e", NAN, "bodies[0] (a).orbit.e: expected a number (finite), got nan"),
     ("bodies.0.orbit.e", float("inf"), "bodies[0] (a).orbit.e: expected a number (finite), got inf"),
     ("bodies.0.orbit.e", "big", 'bodies[0] (a).orbit.e: expected a number, got "big"'),
-    ("bodies.0.orbit.a", "7000 kg", 'bodies[0] (a).orbit.a: expected a length, e.g. "7000 km", got "7000 kg"'),
-    ("bodies.0.orbit.a", "7000", 'bodies[0] (a).orbit.a: expected a length, e.g. "7000 km", got "7000"'),
+    ("bodies.0.orbit.a", "7000 kg", 'bodies[0] (a).orbit.a: expected a length, e.g. "7000 km" (got a quantity in kg), got "7000 kg"'),
+    ("bodies.0.orbit.a", "7000", 'bodies[0] (a).orbit.a: expected a length, e.g. "7000 km" (got a number without a unit), got "7000"'),
     ("bodies.0.orbit.a", "nan km", 'bodies[0] (a).orbit.a: expected a length, e.g. "7000 km" (finite), got "nan km"'),
     ("bodies.0.orbit.a", "1e400 km", 'bodies[0] (a).orbit.a: expected a length, e.g. "7000 km" (finite), got "1e400 km"'),
     ("bodies.0.orbit.a", 10**400, 'bodies[0] (a).orbit.a: expected a length, e.g. "7000 km" (finite), got an integer of 401 digits'),
@@ -446,7 +452,7 @@ ERROR_CASES = [
     ("bodies.0.orbit.a", "-7000 km", 'bodies[0] (a).orbit.a: expected a > 0 for an ellipse (e < 1), got "-7000 km"'),
     ("bodies.0.orbit.i", "181 deg", 'bodies[0] (a).orbit.i: expected 0 <= i <= 180 deg, got "181 deg"'),
     ("bodies.0.orbit.i", 30, 'bodies[0] (a).orbit.i: expected an angle in rad (bare numbers are SI) or with a unit like "30 deg", got 30'),
-    ("bodies.0.orbit.raan", "10 m", 'bodies[0] (a).orbit.raan: expected an angle, e.g. "51.6 deg", got "10 m"'),
+    ("bodies.0.orbit.raan", "10 m", 'bodies[0] (a).orbit.raan: expected an angle, e.g. "51.6 deg" (got a quantity in m), got "10 m"'),
     ("bodies.0.orbit.ecc", 0.1, 'bodies[0] (a).orbit.ecc: expected one of the keys model, r, v, a, p, rp, e, i, raan, argp, nu, M, degree, perturbers (did you mean "e"?), got unknown key "ecc"'),
     ("bodies.0.orbit.model", "keppler", 'bodies[0] (a).orbit.model: expected one of kepler, j2, zonal, third_body (did you mean "kepler"?), got "keppler"'),
     ("bodies.0.orbit.M", "10 deg", 'bodies[0] (a).orbit.M: expected either nu or M, not both, got "10 deg"'),
@@ -456,7 +462,7 @@ ERROR_CASES = [
     ("bodies.0.orbit.perturbers", ["moon"], 'bodies[0] (a).orbit.perturbers: expected no perturbers unless model = "third_body", got ["moon"]'),
     ("bodies.1.orbit.r", ["0 km", "0 km", "0 km"], 'bodies[1] (b).orbit.r: expected |r| > 0 (not at the centre of the central body), got ["0 km", "0 km", "0 km"]'),
     ("bodies.1.orbit.r", ["1 km", "2 km"], 'bodies[1] (b).orbit.r: expected a list of 3 values, each a length, e.g. "7000 km", got ["1 km", "2 km"]'),
-    ("bodies.1.orbit.v", ["1 km", "0 km/s", "0 km/s"], 'bodies[1] (b).orbit.v[0]: expected a speed, e.g. "7.5 km/s", got "1 km"'),
+    ("bodies.1.orbit.v", ["1 km", "0 km/s", "0 km/s"], 'bodies[1] (b).orbit.v[0]: expected a speed, e.g. "7.5 km/s" (got a quantity in km), got "1 km"'),
     ("bodies.1.orbit", {}, "bodies[1] (b).orbit: expected a state vector (r, v) or elements (a | p | rp, e, i, raan, argp, nu | M), got neither"),
     ("bodies.1.orbit", 5, "bodies[1] (b).orbit: expected a table, got 5"),
     ("bodies.0.attitude.inertia", [1, 1, 3], "bodies[0] (a).attitude.inertia: expected principal moments obeying the triangle inequality (each <= the sum of the other two), got [1.0, 1.0, 3.0]"),
@@ -464,14 +470,14 @@ ERROR_CASES = [
     ("bodies.0.attitude.inertia", [-1, 2, 2], "bodies[0] (a).attitude.inertia: expected positive principal moments (a singular or negative inertia is not a rigid body), got [-1.0, 2.0, 2.0]"),
     ("bodies.0.attitude.inertia", [[1, 0.5, 0], [0, 1, 0], [0, 0, 1]], "bodies[0] (a).attitude.inertia: expected a symmetric tensor (I[i][j] = I[j][i]), got [[1, 0.5, 0], [0, 1, 0], [0, 0, 1]]"),
     ("bodies.0.attitude.inertia", [[1, 2, 0], [2, 1, 0], [0, 0, 1]], "bodies[0] (a).attitude.inertia: expected positive principal moments (a singular or negative inertia is not a rigid body), got [-1.0, 1.0, 3.0]"),
-    ("bodies.0.attitude.inertia", ["1 kg", "1 kg m2", "1 kg m2"], 'bodies[0] (a).attitude.inertia[0]: expected a moment of inertia, e.g. "100 kg m2", got "1 kg"'),
+    ("bodies.0.attitude.inertia", ["1 kg", "1 kg m2", "1 kg m2"], 'bodies[0] (a).attitude.inertia[0]: expected a moment of inertia, e.g. "100 kg m2" (got a quantity in kg), got "1 kg"'),
     ("bodies.0.attitude.q", [1, 1, 0, 0], "bodies[0] (a).attitude.q: expected a unit quaternion, scalar first (| |q| - 1 | <= 1e-06; |q| = 1.41421356), got [1, 1, 0, 0]"),
     ("bodies.0.attitude.q", [0, 0, 0, 0], "bodies[0] (a).attitude.q: expected a unit quaternion, scalar first (| |q| - 1 | <= 1e-06; |q| = 0), got [0, 0, 0, 0]"),
     ("bodies.0.attitude.euler", [0, 0, 0], "bodies[0] (a).attitude.euler: expected either q or euler (+ seq), not both, got [0, 0, 0]"),
     ("bodies.0.attitude.seq", "321", 'bodies[0] (a).attitude.seq: expected seq only together with euler, got "321"'),
     ("bodies.2.attitude.seq", "324", 'bodies[2] (c).attitude.seq: expected one of 121, 123, 131, 132, 212, 213, 231, 232, 312, 313, 321, 323 (did you mean "323"?), got "324"'),
     ("bodies.2.attitude.seq", DELETE, "bodies[2] (c).attitude.seq: expected a rotation sequence with euler, one of 121, 123, 131, 132, 212, 213, 231, 232, 312, 313, 321, 323, got nothing"),
-    ("bodies.0.attitude.w", ["1 rad", 0, 0], 'bodies[0] (a).attitude.w[0]: expected an angular velocity, e.g. "0.1 rad/s", got "1 rad"'),
+    ("bodies.0.attitude.w", ["1 rad", 0, 0], 'bodies[0] (a).attitude.w[0]: expected an angular velocity, e.g. "0.1 rad/s" (got a quantity in rad), got "1 rad"'),
     ("bodies.0.attitude.model", "torquefree", 'bodies[0] (a).attitude.model: expected one of none, torque_free, gravity_gradient, gyrostat, heavy_top, user, flexible, rolling_disk (did you mean "torque_free"?), got "torquefree"'),
     ("bodies.0.attitude.mass", "1 kg", 'bodies[0] (a).attitude.mass: expected no mass unless model = "heavy_top" or "flexible", got "1 kg"'),
     ("bodies.0.attitude.rotors", [{"axis": [0, 0, 0], "h": 1.0}], "bodies[0] (a).attitude.rotors[0].axis: expected a non-zero axis (body components; normalized on load), got [0, 0, 0]"),
@@ -494,10 +500,24 @@ ERROR_CASES = [
     ("scenario.duration", "0 s", 'scenario.duration: expected duration > 0, got "0 s"'),
     ("scenario.duration", "-5 min", 'scenario.duration: expected duration > 0, got "-5 min"'),
     ("scenario.duration", "2000 yr", 'scenario.duration: expected duration <= 250 years, got "2000 yr"'),
-    ("scenario.duration", "10 m", 'scenario.duration: expected a time, e.g. "90 min", got "10 m"'),
+    ("scenario.duration", "10 m", 'scenario.duration: expected a time, e.g. "90 min" (got a quantity in m), got "10 m"'),
     ("scenario.rate", "1 MHz", 'scenario.rate: expected 1e-06 Hz <= rate <= 1000 Hz, got "1 MHz"'),
     ("scenario.rate", 0, "scenario.rate: expected 1e-06 Hz <= rate <= 1000 Hz, got 0"),
-    ("scenario.rate", "10 s", 'scenario.rate: expected a rate, e.g. "10 Hz", got "10 s"'),
+    ("scenario.rate", "10 s", 'scenario.rate: expected a rate, e.g. "10 Hz" (got a quantity in s), got "10 s"'),
+    # the wrong kind of unit is named, also when every word of it is known (probe A, F12)
+    ("scenario.duration", "90 kg", 'scenario.duration: expected a time, e.g. "90 min" (got a quantity in kg), got "90 kg"'),
+    ("scenario.rate", "1 per minutes per sec", 'scenario.rate: expected a rate, e.g. "10 Hz" (got a quantity in 1 / s2), '
+                                               'got "1 per minutes per sec"'),
+    # digit groups: astropy read "5 400 s" as 5 x (a unit 400 s long) = 2000 s (probe A, F4)
+    ("scenario.duration", "5 400 s", 'scenario.duration: expected a time, e.g. "90 min" (a number after the value ("400" '
+                                     'after "5") would scale the unit; write numbers without spaces between digit groups, '
+                                     'e.g. "5400 s"), got "5 400 s"'),
+    ("bodies.0.orbit.a", "7 000 km", 'bodies[0] (a).orbit.a: expected a length, e.g. "7000 km" (a number after the value '
+                                     '("000" after "7") would scale the unit; write numbers without spaces between digit '
+                                     'groups, e.g. "7000 km"), got "7 000 km"'),
+    ("bodies.1.orbit.r", "[6 978.137, 0, 0] km", 'bodies[1] (b).orbit.r[0]: expected a length, e.g. "7000 km" (a number '
+                                                 'after the value ("978.137" after "6") would scale the unit; write numbers '
+                                                 'without spaces between digit groups, e.g. "6978.137 km"), got "6 978.137 km"'),
     ("scenario.real_time_factor", 0, "scenario.real_time_factor: expected 0 < real_time_factor <= 1e+06, got 0"),
     ("scenario.epoch", "yesterday", 'scenario.epoch: expected an epoch like "2026-03-20T12:00:00 TDB" (scales: UTC, TAI, TT, TDB, TCG, TCB, UT1), got "yesterday"'),
     ("scenario.epoch", "2026-03-20T12:00:00 GMT", 'scenario.epoch: expected an epoch like "2026-03-20T12:00:00 TDB" (scales: UTC, TAI, TT, TDB, TCG, TCB, UT1), got "2026-03-20T12:00:00 GMT"'),

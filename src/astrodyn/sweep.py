@@ -391,20 +391,14 @@ def parse_vary(text: str) -> Vary:
     return _build_vary(text, path_text.strip(), segments, kind, args, unit, what)
 
 
-#: A ``--vary`` unit that starts with a number is a scaled unit (``5 km``), refused, unless
-#: it is 1 over a unit (:data:`_PER_UNIT`: ``1/s``, ``1 / s``).
-_SCALED_UNIT = re.compile(r"^\s*[-+]?\.?\d")
-_PER_UNIT = re.compile(r"^\s*1\s*/")
-
-
 def _check_unit(unit: str, what: str) -> None:
     """Refuse a ``--vary`` unit the scenario loader would not know (astropy's units, ``rpm``
     and the English unit words of :data:`astrodyn.scenario.fields.UNIT_WORDS`), or one that
     starts with a number: astropy takes ``5 km`` as a unit 5 km long, so every draw would be
     multiplied by 5 (``1/s``, 1 over a unit, stays legal)."""
-    from astrodyn.scenario.fields import unit_text, units
+    from astrodyn.scenario.fields import scaled_unit_number, unit_text, units
 
-    if _SCALED_UNIT.match(unit) and not _PER_UNIT.match(unit):
+    if scaled_unit_number(unit) is not None:
         raise SweepError(f"{what}: expected a unit without a number after the distribution (e.g. km, deg, rad/s, 1/s), "
                          f"got {unit!r}: a number there would scale every draw; write the unit alone and put the "
                          f"scale into the distribution's values")

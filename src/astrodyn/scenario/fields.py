@@ -10,12 +10,15 @@ overflows float64 (docs/architecture.md, section 5).
 
 from __future__ import annotations
 
+import contextlib
+import contextvars
 import datetime as _dt
 import difflib
 import functools
 import json
 import math
 import re
+from collections.abc import Iterator
 from typing import Any
 
 import numpy as np
@@ -24,7 +27,7 @@ from astrodyn.messages import NAME_PATTERN
 
 __all__ = ["QUAT_TOL", "unit_quaternion", "ScenarioError", "Ctx", "Table", "MISSING", "MAX_STRING", "MAGNITUDE_MAX", "MAGNITUDE_MIN", "QUANTITY_KINDS",
            "jsonable", "show", "short_key", "MAX_SHOWN_DEPTH", "did_you_mean", "units", "KIND_UNITS", "UNIT_WORDS", "unit_text", "unknown_unit",
-           "parse_quantity_string", "quantity", "vector", "check",
+           "scaled_unit_number", "parse_quantity_string", "quantity", "quantities_read", "vector", "check",
            "field_name", "choice", "boolean", "integer", "string"]
 
 MAX_STRING = 256  #: longest accepted quantity / epoch string
@@ -243,7 +246,7 @@ KIND_UNITS: dict[str, tuple[str, ...]] = {
 #: ``"0.06 deg/sec"``, ``"7.5 km per s"``.  Whole words only, in any letter case (``Minutes``);
 #: only words with one meaning are here (the singular long names, ``minute``, ``degree``, are
 #: astropy's own).  Unit *symbols* keep astropy's case-sensitive SI meaning (``mm`` millimetre,
-#: ``Mm`` megametre, ``MB`` megabyte, ``mb`` millibarn): ``"6795 KM"`` is refused with the hint
+#: ``Mm`` megametre, ``MB`` megabyte, ``mb`` millibit): ``"6795 KM"`` is refused with the hint
 #: ``did you mean "km"?``, never guessed.
 UNIT_WORDS: dict[str, str] = {
     "sec": "s", "secs": "s", "second": "s", "seconds": "s",
@@ -294,23 +297,83 @@ def unknown_unit(text: str, kind: str) -> str:
             + "; or any other astropy unit of that kind")
 
 
+_NUMBER_FIRST = re.compile(r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?")
+_ONE_OVER = re.compile(r"1\s*/")
+_DIGIT_GROUP = re.compile(r"\d+(?:\.\d*)?")
+
+
+def scaled_unit_number(unit: str) -> str | None:
+    """The number the unit part ``unit`` of a quantity string starts with (``"400"`` for the
+    unit part ``"400 s"`` of ``"5 400 s"``), or None when it starts with none.  astropy takes
+    such a unit as a scaled unit (``"5 400 s"`` is 5 x a unit 400 s long, 2000 s), so a
+    number written in digit groups would silently multiply: a unit part starting with a
+    number is refused.  ``1`` over a unit (``"1/s"``, ``"1 / s"``) is a unit, not a scale: None."""
+    text = unit.lstrip()
+    if _ONE_OVER.match(text):
+        return None
+    m = _NUMBER_FIRST.match(text)
+    return m.group() if m else None
+
+
+def _divided_unit(unit: str) -> Any:
+    """The unit ``a / b / c`` = a / (b c) written with English words (``"per minutes per sec"``,
+    which astropy's grammar does not parse: it starts with "/"), or None if a part is not a
+    unit or the result is scaled (a number in it)."""
+    u = units()
+    parts = unit_text(unit).split("/")
+    try:
+        first = parts[0].strip()
+        result = u.dimensionless_unscaled if first in ("", "1") else u.Unit(first, parse_strict="raise")
+        for part in parts[1:]:
+            if not part.strip():
+                return None
+            result = result / u.Unit(part.strip(), parse_strict="raise")
+    except Exception:  # astropy raises ValueError (and others) for a part that is not a unit
+        return None
+    return result if result.scale == 1 else None
+
+
+def _si_dimension(unit: Any) -> str:
+    """``unit`` in SI base units without its scale (``1 / (min s)`` -> ``"1 / s2"``)."""
+    u = units()
+    base = unit.decompose()
+    return u.CompositeUnit(1, base.bases, base.powers).to_string() or "no unit"
+
+
 @functools.lru_cache(maxsize=4096)
 def parse_quantity_string(text: str, kind: str) -> float | str:
     """SI value of a quantity string (an astropy quantity, English unit words of
     :data:`UNIT_WORDS` allowed), or an error description (str): ``"unparsable"``, an unknown
-    unit (``"unknown unit ..."``, :func:`unknown_unit`), a unit of another kind (``"a quantity
-    in kg"``) or ``"not a scalar"``."""
+    unit (``"unknown unit ..."``, :func:`unknown_unit`), a number after the value (``"5 400
+    s"``: a scaled unit, :func:`scaled_unit_number`; ``"a number after the value ..."``), a
+    unit of another kind (``"a quantity in kg"``, ``"a quantity in 1 / s2"`` for ``"1 per
+    minute per sec"``), no unit where one is needed (``"a number without a unit"``) or ``"not
+    a scalar"``."""
     u = units()
     unit = u.Unit(QUANTITY_KINDS[kind][0]) if QUANTITY_KINDS[kind][0] else u.dimensionless_unscaled
+    lead = _LEADING_NUMBER.match(text)
+    rest = text[lead.end():] if lead else ""
+    if lead and (number := scaled_unit_number(rest)) is not None:
+        value = lead.group().strip()
+        why = f'a number after the value ("{number}" after "{value}") would scale the unit'
+        if _DIGIT_GROUP.fullmatch(number) and _NUMBER_FIRST.fullmatch(value + number) and "e" not in value.lower():
+            return (f'{why}; write numbers without spaces between digit groups, e.g. '
+                    f'"{value}{number}{rest.lstrip()[len(number):]}"')
+        return f"{why}; write the value as one number, then the unit"
     try:
         q = u.Quantity(unit_text(text))
     except Exception:  # astropy raises ValueError, TypeError, UnitsError... on garbage
-        return unknown_unit(text, kind) if _LEADING_NUMBER.match(text) else "unparsable"
+        if not lead:
+            return "unparsable"
+        divided = _divided_unit(rest)
+        if divided is not None and not divided.is_equivalent(unit):  # every word known: the wrong kind
+            return f"a quantity in {_si_dimension(divided)}"
+        return unknown_unit(text, kind)
     try:
         with np.errstate(over="ignore", invalid="ignore"):  # an overflow is reported as "not finite" by the caller
             value = q.to_value(unit)
     except Exception:
-        return f"a quantity in {q.unit.to_string() or 'no unit'}"
+        return f"a quantity in {q.unit.to_string()}" if q.unit.to_string() else "a number without a unit"
     if np.ndim(value) != 0:
         return "not a scalar"
     if kind == "bytes" and (problem := _not_bytes(q.unit)):
@@ -345,8 +408,14 @@ def quantity(ctx: Ctx, value: Any, kind: str, path: str) -> float:
         if len(value) > MAX_STRING:
             raise ctx.error(path, f"{desc} (at most {MAX_STRING} characters)", value)
         parsed = parse_quantity_string(value.strip(), kind)
-        if isinstance(parsed, str):
-            raise ctx.error(path, f"{desc} ({parsed})" if parsed.startswith(("unknown unit", "unit ")) else desc, value)
+        if isinstance(parsed, str):  # why not: the wrong kind of unit, an unknown one, a digit group, ...
+            if parsed in ("unparsable", "not a scalar"):
+                why = ""
+            elif parsed.startswith(("a quantity in ", "a number without")):  # the wrong kind: what it is
+                why = f" (got {parsed})"
+            else:  # an unknown unit, bits for bytes, a number after the value (digit groups)
+                why = f" ({parsed})"
+            raise ctx.error(path, f"{desc}{why}", value)
         x = parsed
     else:
         raise ctx.error(path, desc, value)
@@ -359,7 +428,29 @@ def quantity(ctx: Ctx, value: Any, kind: str, path: str) -> float:
                         f"astrodyn's models)".replace("  ", " "), value)
     if lo is not None and x != 0 and abs(x) < lo:
         raise ctx.error(path, f"|{path.rsplit('.', 1)[-1]}| >= {lo:g} {unit} or 0 (after unit conversion)", value)
+    if (read := _QUANTITIES_READ.get()) is not None:
+        read.setdefault(path, []).append((kind, x))
     return x
+
+
+_QUANTITIES_READ: contextvars.ContextVar[dict[str, list[tuple[str, float]]] | None] = contextvars.ContextVar(
+    "astrodyn_quantities_read", default=None)
+
+
+@contextlib.contextmanager
+def quantities_read() -> Iterator[dict[str, list[tuple[str, float]]]]:
+    """While the block runs (in this thread or task), every quantity :func:`quantity` reads is
+    noted in the dict it yields: key path as errors name it (``"scenario.rate"``,
+    ``"bodies[0] (iss).orbit.a"``, ``"bodies[0] (iss).orbit.r[1]"`` for an element of a
+    vector) -> ``[(kind, SI value), ...]`` in the order read.  The scenario loader reads every quantity of a config through
+    :func:`quantity` at the key path of its TOML, so this is what two configs written
+    differently resolve to (:func:`astrodyn.scenario.recorded.config_difference`)."""
+    read: dict[str, list[tuple[str, float]]] = {}
+    token = _QUANTITIES_READ.set(read)
+    try:
+        yield read
+    finally:
+        _QUANTITIES_READ.reset(token)
 
 
 VECTOR_STRING = re.compile(r"^\s*[\[(]([^\])]*)[\])]\s*(.*?)\s*$")
