@@ -400,3 +400,13 @@ def test_a_controller_started_by_hand_gives_up_when_no_tick_comes(tmp_path, hub)
     proc = _controller_by_hand(tmp_path, endpoint, ASTRODYN_FIRST_TICK_TIMEOUT="soon")
     rc, err, _ = _ended_within(proc, 20)
     assert rc == 1 and "ASTRODYN_FIRST_TICK_TIMEOUT: expected wall seconds >= 0 (0: wait for ever), got 'soon'" in err
+
+
+def test_analyze_of_a_missing_file_says_only_that_it_is_missing(tmp_path, capsys):
+    """Probe B (session 20): ``analyze nope.mcap`` printed ``reading nope.mcap (0.0 MB)`` before
+    saying the file does not exist."""
+    from astrodyn.cli import main
+
+    assert main(["analyze", str(tmp_path / "nope.mcap")]) == 1
+    err = capsys.readouterr().err
+    assert "No such file" in err and "reading" not in err and "MB" not in err, err

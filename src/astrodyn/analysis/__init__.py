@@ -206,9 +206,8 @@ def analyze(path: str | os.PathLike, out: str | os.PathLike | None = None, seq: 
 
     check_report_options(seq, bodies, figures_for)
     started = time.monotonic()
-    if progress is not None:
-        size = os.path.getsize(path) if os.path.isfile(path) else 0
-        progress.done(f"analyze: reading {os.fspath(path)} ({size / 1e6:.1f} MB)")
+    if progress is not None and os.path.isfile(path):  # (a missing file: load says so, nothing before it)
+        progress.done(f"analyze: reading {os.fspath(path)} ({os.path.getsize(path) / 1e6:.1f} MB)")
     run = load(path)
     names = select_bodies(run.bodies, bodies)
     if progress is not None:
