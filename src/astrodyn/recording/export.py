@@ -4,16 +4,22 @@ What each format writes (one file per channel or body, named after the body):
 
 ``csv``      ``<body>.<kind>.csv`` per astrodyn channel (``events.csv`` for ``@event``,
              other topics with ``/`` -> ``.``): columns ``t`` (s since the scenario
-             epoch), ``seq``, ``log_time_ns``, then the message fields; vectors are split
-             into ``r_x r_y r_z`` (3-vectors) and ``q_0 .. q_3`` (``q`` scalar first, as in
-             the messages).  Floats are written with ``repr`` (shortest round-trip form),
-             so reading the CSV back gives the recorded float64 values exactly.  SI units.
-             The file opens with ``# key: value`` lines: epoch, time scale, frame,
-             quaternion order and every column's unit (:func:`channel_header`).
+             epoch), ``seq``, ``log_time_ns``, then the message fields (:func:`_groups`):
+             fixed-length vectors split into ``r_x r_y r_z`` (3 numbers) or ``q_0 .. q_3``
+             (other lengths; ``q`` scalar first, as in the messages); one number per wheel
+             or gyroscope into ``wheel_torque_0 ..`` (config order, also for 3); one list
+             per appendage into ``eta_<k>_<i>`` / ``tip_<k>_x``; lists of names or indices
+             and objects as JSON text (``json.loads`` reads it).  A field the message does
+             not carry is an empty cell in every column it makes.  Floats are written with
+             ``repr`` (shortest round-trip form), so reading the CSV back gives the recorded
+             float64 values exactly.  SI units.  The file opens with ``# key: value``
+             lines: epoch, time scale, frame, quaternion order, empty cells, JSON columns
+             and every column's unit (:func:`channel_header`).  docs/exports.md lists every
+             channel's columns.
 ``parquet``  the same columns, one ``.parquet`` file per channel (needs the optional
-             ``pyarrow``: ``pip install 'astrodyn[parquet]'``); the header entries are the
-             file's key-value metadata (``astrodyn.epoch``, ...), each column's unit its
-             field metadata ``unit``.
+             ``pyarrow``: ``pip install 'astrodyn[parquet]'``), an absent field null; the
+             header entries are the file's key-value metadata (``astrodyn.epoch``, ...),
+             each column's unit its field metadata ``unit``.
 ``oem``      ``<body>.oem``: a CCSDS Orbit Ephemeris Message, KVN, version 3.0
              (CCSDS 502.0-B-3): header, one segment per body, data lines
              ``epoch X Y Z X_DOT Y_DOT Z_DOT`` in km and km/s.  ``REF_FRAME`` is the
@@ -80,6 +86,7 @@ import re
 import sys
 from datetime import UTC, datetime
 from pathlib import Path
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -107,7 +114,7 @@ from astrodyn.rotation import quat_to_scalar_last
 from astrodyn.signals import deferred_interrupts, interruptible
 
 __all__ = [
-    "FORMATS", "FIELD_UNITS", "channel_file_stems", "column_units", "channel_header", "ExportError", "export", "write_csv", "write_parquet", "write_oem", "write_aem", "write_aem_v1",
+    "FORMATS", "FIELD_UNITS", "INDICATED_UNITS", "channel_file_stems", "column_units", "channel_units", "channel_header", "ExportError", "export", "write_csv", "write_parquet", "write_oem", "write_aem", "write_aem_v1",
     "write_foxglove", "ccsds_epochs", "parse_ccsds_epoch", "FRAME_TRANSFORM_SCHEMA", "SCENE_UPDATE_SCHEMA",
     "SCENE_TOPIC", "FOXGLOVE_TOPICS", "MAX_LINE_POINTS", "MAX_SCENE_POINTS", "scene_updates", "line_indices", "main",
 ]
@@ -165,44 +172,188 @@ def channel_file_stems(topics) -> dict[str, str]:
     return out
 
 
-def table(track: Track) -> dict[str, np.ndarray]:
-    """Columns of one channel: t, seq, log_time_ns, then fields (vectors split, see module doc)."""
-    cols: dict[str, np.ndarray] = {}
+class _Group(NamedTuple):
+    """The columns one message field (or the channel's records) makes, and how their cells
+    are made (:func:`_group_values`).  ``how``: ``numbers`` (a float column, or a 2-D one,
+    one column per array column), ``integers`` (``absent``: the value that marks a field
+    the message does not carry, or None), ``lists`` (an object column of lists of numbers,
+    flattened by :func:`_flat_lists` with ``widths`` and ``nested``), ``values`` (text as
+    it is, any other value as JSON text; ``json``: the field's values are not text, so its
+    column holds JSON text), ``records`` (the decoded messages of a channel without a
+    schema, as JSON text)."""
+
+    how: str
+    names: list[str]
+    data: Any
+    absent: int | None = None
+    widths: tuple[int, ...] = ()
+    nested: bool = False
+    json: bool = False
+    short: bool = False  # lists: some row has no list or a shorter one than ``widths`` (empty cells)
+
+
+def _definition(track: Track) -> dict | None:
+    """The JSON Schema of the astrodyn message type the channel's messages were decoded
+    and checked with (:data:`astrodyn.messages.MESSAGE_TYPES`), or None for a foreign channel."""
+    if track.kind is None:
+        return None
+    try:
+        found = messages.schema_for_key(track.topic)
+    except messages.MessageError:
+        return None
+    return found[1] if found else None
+
+
+def _suffixes(width: int) -> list[str]:
+    """Column suffixes of a fixed-length vector: ``x y z`` for 3 numbers, ``0 .. n-1`` otherwise."""
+    return list(_XYZ) if width == 3 else [str(i) for i in range(width)]
+
+
+def _number_lists(prop: dict) -> tuple[bool, bool] | None:
+    """``(nested, fixed)`` when a field's definition is a list of numbers of varying length
+    (one per wheel or gyro: not nested) or a list of lists of numbers (one per appendage:
+    nested; ``fixed`` when each inner list has one length, as the tip's 3-vector); else None."""
+    items = prop.get("items") if prop.get("type") == "array" else None
+    if not isinstance(items, dict):
+        return None
+    if items.get("type") == "number":
+        return False, False
+    inner = items.get("items")
+    if items.get("type") == "array" and isinstance(inner, dict) and inner.get("type") == "number":
+        return True, items.get("minItems") is not None and items.get("minItems") == items.get("maxItems")
+    return None
+
+
+def _list_widths(column: np.ndarray, nested: bool) -> tuple[tuple[int, ...], bool]:
+    """The longest list of an object column (``nested``: per position of the outer list,
+    its longest inner list; messages without the field, None, count nothing), and whether
+    some row has no list or a shorter one (its cells of the missing elements are empty)."""
+    shapes = set()
+    for x in column:
+        if not isinstance(x, list):
+            shapes.add(None)
+        else:
+            shapes.add(tuple(len(inner) if isinstance(inner, list) else 0 for inner in x) if nested else (len(x),))
+    lists = [shape for shape in shapes if shape is not None]
+    widths = tuple(max((shape[k] for shape in lists if k < len(shape)), default=0)
+                   for k in range(max(map(len, lists), default=0)))
+    return widths, bool(shapes - {widths})
+
+
+def _groups(track: Track) -> list[_Group]:
+    """The column groups of one channel: ``t`` (s since the scenario epoch), ``seq``,
+    ``log_time_ns``, then each field in the order of the message definition (see the
+    module docstring and docs/exports.md, "CSV and Parquet columns")."""
+    definition = _definition(track)
+    properties = definition.get("properties", {}) if definition else {}
+    required = set(definition.get("required", ())) if definition else set()
+    groups = []
     if "t" in track.fields:
-        cols["t"] = track.fields["t"]
-    cols["seq"] = track.seq
-    cols["log_time_ns"] = track.log_time
+        groups.append(_Group("numbers", ["t"], track.fields["t"]))
+    groups += [_Group("integers", ["seq"], track.seq), _Group("integers", ["log_time_ns"], track.log_time)]
     for name, a in track.fields.items():
         if name == "t":
             continue
-        nested = _nested_numbers(a) if a.dtype == object else None
-        if nested is not None:  # per appendage a vector: eta_<k>_<i>, tip_<k>_x ...
-            a = nested.reshape(nested.shape[0], -1)
-            inner = [str(c) for c in _XYZ] if nested.shape[2] == 3 else [str(i) for i in range(nested.shape[2])]
-            names = [f"{name}_{k}_{c}" for k in range(nested.shape[1]) for c in inner]
-            for i, col in enumerate(names):
-                cols[col] = a[:, i]
-        elif a.ndim == 2:
-            names = [f"{name}_{c}" for c in _XYZ] if a.shape[1] == 3 else [f"{name}_{i}" for i in range(a.shape[1])]
-            for i, col in enumerate(names):
-                cols[col] = a[:, i]
-        else:
-            cols[name] = a
+        prop = properties.get(name) or {}
+        if a.dtype.kind == "f":
+            names = [name] if a.ndim == 1 else [f"{name}_{c}" for c in _suffixes(a.shape[1])]
+            groups.append(_Group("numbers", names, a))
+        elif a.dtype.kind in "iub":
+            # an astrodyn field the message may leave out is read as -1, never one of its values (>= 0)
+            absent = -1 if definition and name not in required and prop.get("minimum", -1) >= 0 else None
+            groups.append(_Group("integers", [name], a, absent))
+        elif (layout := _number_lists(prop)) is not None:
+            nested, fixed = layout
+            widths, short = _list_widths(a, nested)
+            if nested:  # per appendage a list: name_<k>_<i>, or name_<k>_x .. _z for its fixed 3-vector
+                names = [f"{name}_{k}_{c}" for k, n in enumerate(widths)
+                         for c in (_suffixes(n) if fixed else map(str, range(n)))]
+            else:  # one number per wheel, gyro, ...: indexed, even when there are 3
+                names = [f"{name}_{i}" for i in range(widths[0] if widths else 0)]
+            groups.append(_Group("lists", names, a, widths=widths, nested=nested, short=short))
+        else:  # text; JSON text of a list of names or wheel indices, an object, a foreign field's values
+            json_text = prop.get("type") in ("array", "object") if definition else \
+                any(x is not None and not isinstance(x, str) for x in a)
+            groups.append(_Group("values", [name], a, json=json_text))
     if track.records is not None:
-        cols["json"] = np.array([json.dumps(r) if not isinstance(r, bytes) else r.hex() for r in track.records], dtype=object)
-    return cols
+        groups.append(_Group("records", ["json"], track.records, json=True))
+    return groups
 
 
-def _nested_numbers(column: np.ndarray) -> np.ndarray | None:
-    """An object column whose every row is a list of equally long lists of numbers (the
-    appendages' ``eta``, ``eta_dot``, ``tip``) as a float array ``(rows, n, m)``; else None."""
-    if column.size == 0:
-        return None
-    try:
-        out = np.array(list(column), dtype=np.float64)
-    except (TypeError, ValueError):
-        return None
-    return out if out.ndim == 3 else None
+def _flat_lists(part: np.ndarray, widths: tuple[int, ...], nested: bool) -> np.ndarray:
+    """The lists of an object column's rows as a float64 array of ``sum(widths)`` columns:
+    element ``i`` of a row's list (``nested``: element ``i`` of its list ``k``) in column
+    ``i`` (``offset(k) + i``); NaN where a row has no such element or no list."""
+    total = int(sum(widths))
+    rows = len(part)
+    try:  # every row a list of the full widths: one conversion
+        flat = np.array(list(part), dtype=np.float64)
+        if flat.shape[:2] == (rows, len(widths) if nested else total) and flat.size == rows * total:
+            return flat.reshape(rows, total)
+    except (TypeError, ValueError):  # a row without the field, lists of other lengths
+        pass
+    out = np.full((rows, total), np.nan)
+    offsets = np.concatenate([[0], np.cumsum(widths)]).astype(int).tolist()
+    for r, x in enumerate(part):
+        if not isinstance(x, list):
+            continue
+        if not nested:
+            out[r, :len(x)] = x
+            continue
+        for k, inner in enumerate(x):
+            if isinstance(inner, list):
+                out[r, offsets[k]:offsets[k] + len(inner)] = inner
+    return out
+
+
+def _json_default(x: Any) -> Any:
+    if hasattr(x, "tolist"):  # a numpy scalar or array in a run built by hand
+        return x.tolist()
+    raise TypeError(f"{type(x).__name__} is not JSON")
+
+
+def _value_text(x: Any) -> str | None:
+    """The text of one ``values`` cell: None (absent) stays None, text is itself, any other
+    value (a list of names, of wheel indices, an object) its JSON text."""
+    if x is None or isinstance(x, str):
+        return x
+    return json.dumps(x, default=_json_default)
+
+
+def _group_values(group: _Group, a: int, b: int) -> list[tuple[Any, np.ndarray | None]]:
+    """``(values, absent)`` of each column of ``group`` for the rows ``a`` to ``b``: values a
+    float64 array, an int64 / uint64 array, or a list of str and None (None: absent); absent a
+    bool array marking the cells of a field the message does not carry (NaN of a number, the
+    group's ``absent`` integer), or None when there is none."""
+    part = group.data[a:b]
+    if group.how == "records":
+        return [([r.hex() if isinstance(r, bytes) else json.dumps(r, default=_json_default) for r in part], None)]
+    if group.how == "values":
+        return [([_value_text(x) for x in part], None)]
+    if group.how == "integers":
+        return [(part, None if group.absent is None else part == group.absent)]
+    if group.how == "lists":
+        part = _flat_lists(part, group.widths, group.nested)
+    columns = [part] if part.ndim == 1 else [part[:, i] for i in range(part.shape[1])]
+    return [(c, np.isnan(c) if np.isnan(c).any() else None) for c in columns]
+
+
+def _columns(track: Track) -> tuple[list[str], list[_Group], list[int]]:
+    """The column names of a channel, its groups (:func:`_groups`) and which of the columns
+    are kept: a name made twice (a foreign field ``seq``) keeps its first place and its last
+    column."""
+    groups = _groups(track)
+    names = [name for g in groups for name in g.names]
+    kept: dict[str, int] = {}
+    for i, name in enumerate(names):
+        kept[name] = i
+    return list(kept), groups, list(kept.values())
+
+
+def _column_values(groups: list[_Group], kept: list[int], a: int, b: int) -> list[tuple[Any, np.ndarray | None]]:
+    """:func:`_group_values` of every kept column (:func:`_columns`) for the rows ``a`` to ``b``."""
+    columns = [c for g in groups for c in _group_values(g, a, b)]
+    return columns if len(kept) == len(columns) else [columns[i] for i in kept]
 
 
 #: Unit of each message field as exported (SI; "1" for dimensionless, "" for text), keyed
@@ -220,9 +371,16 @@ FIELD_UNITS = {
     "eta": "m", "eta_dot": "m/s", "tip": "m",
     # a rolling disk (astrodyn.RollingState): contact point, centre, angles, generalized speeds
     "contact": "m", "center": "m", "heading": "rad", "lean": "rad", "spin_angle": "rad", "u": "rad/s",
-    # single-axis gyroscopes (astrodyn.GimbalState); "indicated" is rad/s or rad by gyro type: no one unit
+    # single-axis gyroscopes (astrodyn.GimbalState); "indicated" is rad/s or rad by gyro type
+    # (:data:`INDICATED_UNITS`, per column by :func:`channel_units`)
     "angle": "rad", "angle_rate": "rad/s",
+    # a serve's status (astrodyn.Status)
+    "state": "", "real_time_factor": "1", "rate": "Hz", "messages": "1", "processes": "",
 }
+
+#: Unit of a single-axis gyroscope's indication by its config ``type``: a rate gyro
+#: indicates the input rate, a rate-integrating gyro the input angle.
+INDICATED_UNITS = {"rate": "rad/s", "rate_integrating": "rad"}
 
 
 def column_units(columns) -> dict[str, str]:
@@ -237,13 +395,40 @@ def column_units(columns) -> dict[str, str]:
     return out
 
 
+def _gyro_types(run: Run, body: str) -> list:
+    """The config ``type`` of each single-axis gyroscope of ``body``, in config order, from
+    the scenario metadata (any JSON: [] when it does not say)."""
+    try:
+        bodies = json.loads(run.scenario["json"])["bodies"]
+        config = next(b for b in bodies if isinstance(b, dict) and b.get("name") == body)
+        return [g.get("type") if isinstance(g, dict) else None for g in config["gyros"]]
+    except (KeyError, ValueError, TypeError, StopIteration, RecursionError):
+        return []
+
+
+def channel_units(run: Run, topic: str, columns) -> dict[str, str]:
+    """:func:`column_units` of one channel's columns, with each gyroscope's indication
+    ``indicated_<k>`` in the unit of the k-th gyroscope's type (:data:`INDICATED_UNITS`;
+    ``?`` when the metadata do not say)."""
+    units = column_units(columns)
+    track = run.channels[topic]
+    if track.kind == "gimbals":
+        types = _gyro_types(run, messages.parse_key(topic)[1])
+        for col in columns:
+            if (m := re.fullmatch(r"indicated_(\d+)", col)) and int(m[1]) < len(types):
+                units[col] = INDICATED_UNITS.get(types[int(m[1])], "?")
+    return units
+
+
 def channel_header(run: Run, topic: str, columns) -> dict[str, str]:
     """What a reader of one exported channel needs besides the numbers: the channel, the
     scenario epoch and its time scale (``t`` counts SI seconds from it in that scale), the
-    frame of the vectors, the quaternion order and every column's unit.  Written as the
-    ``# key: value`` lines at the top of a CSV and as the Parquet key-value metadata."""
+    frame of the vectors, the quaternion order, whether cells may be empty, which columns
+    hold JSON text, and every column's unit.  Written as the ``# key: value`` lines at the
+    top of a CSV and as the Parquet key-value metadata."""
     track = run.channels[topic]
-    frames = sorted(set(map(str, track.fields["frame"]))) if "frame" in track.fields else []
+    definition = _definition(track)
+    groups = _groups(track)
     head = {
         "astrodyn_export": f"astrodyn {__version__}, file {os.path.basename(run.path)}, channel {topic}",
         "epoch": str(run.scenario.get("epoch", "none (t is absent; log_time_ns is POSIX time, UTC)")),
@@ -251,117 +436,52 @@ def channel_header(run: Run, topic: str, columns) -> dict[str, str]:
         "t": "SI seconds since the epoch, in the epoch's time scale",
         "log_time_ns": "MCAP log time, POSIX ns (epoch + t, leap seconds ignored)",
     }
-    if frames:
-        head["frame"] = ", ".join(frames) + " (inertial, origin at the central body)"
+    # the inertial frame a state's frame field names (a command's frame names the axes of its
+    # thrust, per message: its column says it)
+    if "frame" in track.fields and track.kind in (None, "orbit"):
+        frames = sorted({str(f) for f in track.fields["frame"] if f is not None})
+        if frames:
+            head["frame"] = ", ".join(frames) + " (inertial, origin at the central body)"
     if "q" in track.fields:
         head["quaternion"] = "q_0 q_1 q_2 q_3 = Euler parameters (e0, e1, e2, e3), scalar FIRST; v_body = C(q) v_inertial"
     if "w" in track.fields:
         head["w"] = "body angular velocity, body-axis components"
-    head["units"] = ", ".join(f"{c}={u}" for c, u in column_units(columns).items() if u)
+    optional = definition is None or set(definition.get("properties", ())) - set(definition.get("required", ()))
+    if optional or any(g.short for g in groups):
+        head["empty"] = ("an empty cell (Parquet: null) is a field the message does not carry, or an element "
+                         "its list does not have" + ("" if definition else " (in a channel astrodyn does not "
+                                                                            "define, also a NaN)"))
+    json_columns = [name for g in groups if g.json for name in g.names if name in columns]
+    if json_columns:
+        head["json"] = f"{', '.join(json_columns)}: JSON text (json.loads reads it)"
+    head["units"] = ", ".join(f"{c}={u}" for c, u in channel_units(run, topic, columns).items() if u)
     return head
 
 
-def _cell(x) -> str:
-    if isinstance(x, (float, np.floating)):
-        return repr(float(x))
-    if x is None:
-        return ""
-    return str(x)
-
-
-def _cells(column: np.ndarray) -> list[str]:
-    """:func:`_cell` of each element of a 1-D column (numbers through ``tolist``: the same
-    text, without a numpy scalar per element)."""
-    kind = column.dtype.kind
-    if kind == "f" and column.dtype.itemsize <= 8:  # tolist: Python floats of the same values
-        return list(map(repr, column.tolist()))
-    if kind in "iub":
-        return list(map(str, column.tolist()))
-    return [_cell(x) for x in column]
-
-
-def _nested_shape(column: np.ndarray) -> tuple[int, ...] | None:
-    """The ``(n, m)`` of :func:`_nested_numbers` for the whole object column, found a chunk
-    at a time (every chunk converts, all to one shape), or None when it does not convert."""
-    shape = None
-    for a, b in _chunks(0, len(column)):
-        part = _nested_numbers(column[a:b])
-        if part is None or (shape is not None and part.shape[1:] != shape):
-            return None
-        shape = part.shape[1:]
-    return shape
-
-
-def _csv_columns(track: Track) -> tuple[list[str], list[tuple[str, object]], list[int]]:
-    """The column names of :func:`table`, where the cells come from and which of those
-    columns are kept, without converting any column whole.  Sources: ``("col", 1-D
-    array)``, ``("cols", 2-D array)`` (one column per array column), ``("nested", object
-    column)`` (rows of equally long lists of numbers), ``("json", records)``; a name made
-    twice (a foreign field ``seq``) keeps its first place and its last column, as in
-    :func:`table`'s dict.  :func:`_csv_rows` makes the cells of some rows."""
-    names: list[str] = []
-    sources: list[tuple[str, object]] = []
-    if "t" in track.fields:
-        names.append("t")
-        sources.append(("col", track.fields["t"]))
-    names += ["seq", "log_time_ns"]
-    sources += [("col", track.seq), ("col", track.log_time)]
-    for name, a in track.fields.items():
-        if name == "t":
-            continue
-        shape = _nested_shape(a) if a.dtype == object else None
-        if shape is not None:
-            inner = [str(c) for c in _XYZ] if shape[1] == 3 else [str(i) for i in range(shape[1])]
-            names += [f"{name}_{k}_{c}" for k in range(shape[0]) for c in inner]
-            sources.append(("nested", a))
-        elif a.ndim == 2:
-            names += [f"{name}_{c}" for c in _XYZ] if a.shape[1] == 3 else [f"{name}_{i}" for i in range(a.shape[1])]
-            sources.append(("cols", a))
-        else:
-            names.append(name)
-            sources.append(("col", a))
-    if track.records is not None:
-        names.append("json")
-        sources.append(("json", track.records))
-    kept: dict[str, int] = {}
-    for i, name in enumerate(names):
-        kept[name] = i
-    return list(kept), sources, list(kept.values())
-
-
-def _csv_rows(sources: list[tuple[str, object]], kept: list[int], a: int, b: int):
-    """The CSV rows ``a`` to ``b`` (cells as :func:`write_csv` writes them) of
-    :func:`_csv_columns`' sources, the columns ``kept``."""
-    columns: list[list[str]] = []
-    for how, src in sources:
-        if how == "col":
-            columns.append(_cells(src[a:b]))
-        elif how == "cols":
-            part = src[a:b]
-            columns += [_cells(part[:, i]) for i in range(part.shape[1])]
-        elif how == "nested":
-            part = np.array(list(src[a:b]), dtype=np.float64)
-            part = part.reshape(part.shape[0], -1)
-            columns += [_cells(part[:, i]) for i in range(part.shape[1])]
-        else:
-            columns.append([json.dumps(r) if not isinstance(r, bytes) else r.hex() for r in src[a:b]])
-    if len(kept) < len(columns):
-        columns = [columns[i] for i in kept]
-    return zip(*columns)
+def _cells(values: Any, absent: np.ndarray | None) -> list[str]:
+    """The CSV cells of one column of :func:`_column_values`: floats with ``repr`` (the
+    shortest text that reads back to the same float64), integers as they are, text as it
+    is; a field the message does not carry is an empty cell."""
+    if isinstance(values, list):
+        return ["" if v is None else v for v in values]
+    cells = list(map(repr if values.dtype.kind == "f" else str, values.tolist()))
+    if absent is not None:
+        cells = ["" if gone else c for c, gone in zip(cells, absent.tolist())]
+    return cells
 
 
 def write_csv(run: Run, out: Path) -> list[Path]:
     """One CSV per channel (see the module docstring); returns the files written.
 
     Each file starts with ``# key: value`` comment lines (:func:`channel_header`: epoch,
-    time scale, frame, quaternion order, units), then the column names, then one row per
-    message.  ``pandas.read_csv(path, comment="#")`` reads it; so does any CSV reader
-    told to skip lines starting with ``#``.  The columns are those of :func:`table`,
-    formatted and written :data:`_CHUNK_ROWS` rows at a time."""
+    time scale, frame, quaternion order, empty cells, JSON columns, units), then the column
+    names, then one row per message.  ``pandas.read_csv(path, comment="#")`` reads it; so
+    does any CSV reader told to skip lines starting with ``#``.  The columns are those of
+    :func:`_columns`, formatted and written :data:`_CHUNK_ROWS` rows at a time."""
     written = []
     stems = channel_file_stems(run.channels)
     for topic, track in run.channels.items():
-        names, sources, kept = _csv_columns(track)
+        names, groups, kept = _columns(track)
         path = out / f"{stems[topic]}.csv"
         with open(path, "w", newline="") as f:
             for key, value in channel_header(run, topic, names).items():
@@ -369,15 +489,16 @@ def write_csv(run: Run, out: Path) -> list[Path]:
             w = csv.writer(f)
             w.writerow(names)
             for a, b in _chunks(0, len(track)):
-                w.writerows(_csv_rows(sources, kept, a, b))
+                w.writerows(zip(*(_cells(v, gone) for v, gone in _column_values(groups, kept, a, b))))
         written.append(path)
     return written
 
 
 def write_parquet(run: Run, out: Path) -> list[Path]:
-    """One Parquet file per channel (needs pyarrow); the :func:`channel_header` entries are
-    the file's key-value metadata (keys prefixed ``astrodyn.``) and each column's unit is
-    its field metadata ``unit``."""
+    """One Parquet file per channel (needs pyarrow), the CSV's columns: floats float64,
+    integers int64 / uint64, text and JSON text strings, a field the message does not carry
+    null.  The :func:`channel_header` entries are the file's key-value metadata (keys
+    prefixed ``astrodyn.``) and each column's unit is its field metadata ``unit``."""
     try:
         import pyarrow as pa
         import pyarrow.parquet as pq
@@ -386,14 +507,14 @@ def write_parquet(run: Run, out: Path) -> list[Path]:
     written = []
     stems = channel_file_stems(run.channels)
     for topic, track in run.channels.items():
-        cols = table(track)
-        units = column_units(cols)
+        names, groups, kept = _columns(track)
+        units = channel_units(run, topic, names)
         fields, arrays = [], []
-        for k, v in cols.items():
-            arr = pa.array(list(v) if v.dtype == object else v)
-            fields.append(pa.field(k, arr.type, metadata={"unit": units[k]}))
+        for name, (values, absent) in zip(names, _column_values(groups, kept, 0, len(track))):
+            arr = pa.array(values, type=pa.string()) if isinstance(values, list) else pa.array(values, mask=absent)
+            fields.append(pa.field(name, arr.type, metadata={"unit": units[name]}))
             arrays.append(arr)
-        meta = {f"astrodyn.{k}": v for k, v in channel_header(run, topic, cols).items()}
+        meta = {f"astrodyn.{k}": v for k, v in channel_header(run, topic, names).items()}
         path = out / f"{stems[topic]}.parquet"
         pq.write_table(pa.Table.from_arrays(arrays, schema=pa.schema(fields, metadata=meta)), path)
         written.append(path)
