@@ -694,7 +694,8 @@ class Plant:
             if f.fault == "gyro_bias":
                 b.faults.gyro_bias = np.asarray(f.value, dtype=np.float64)
             elif f.fault == "sensor_dropout":
-                steps = math.ceil(f.duration * self.rate - 1e-9) if math.isfinite(f.duration) else math.inf
+                span = f.duration * self.rate - 1e-9  # steps; beyond 2**53 (or inf) it is "for good"
+                steps = math.ceil(span) if span < 2.0**53 else math.inf
                 b.faults.dropouts[f.sensor] = max(b.faults.dropouts.get(f.sensor, -1), k + steps)
             elif f.fault == "wheel_failed":
                 b.faults.failed_wheels.add(int(f.wheel))

@@ -99,7 +99,11 @@ class McapStream:
         self._f, self.size = open_recording(self.path)
         self.schemas: dict[int, Schema] = {}
         self.channels: dict[int, Channel] = {}
+        #: name -> key/value map of the metadata records outside chunks: the last of each name
+        #: (a file that holds two that differ: :meth:`metadata_conflict`)
         self.metadata: dict[str, dict[str, str]] = {}
+        self._first_metadata: dict[str, dict[str, str]] = {}  # name -> its first record
+        self._differing_metadata: dict[str, dict[str, str]] = {}  # name -> the first record unlike that
         self.chunks: list[_ChunkRef] = []
         self.truncated = True
         self.truncation = ""
@@ -146,10 +150,23 @@ class McapStream:
             self.channels.setdefault(rec.id, rec)
         elif opcode == Opcode.METADATA:
             rec = Metadata.read(stream)
-            self.metadata[rec.name] = dict(rec.metadata)
+            data = self.metadata[rec.name] = dict(rec.metadata)
+            first = self._first_metadata.setdefault(rec.name, data)
+            if data != first:
+                self._differing_metadata.setdefault(rec.name, data)
         else:
             rec = Message.read(stream, len(body))
             self.chunks.append(_ChunkRef(rec.log_time, rec.log_time, pos, length, single=rec))
+
+    def metadata_conflict(self, name: str) -> tuple[dict[str, str], dict[str, str]] | None:
+        """``(first, other)`` when the file holds more than one metadata record ``name`` that
+        differ: its first, and the first that differs from it (:attr:`metadata` holds the
+        last); None when it holds at most one, or copies of one.  Which record counts cannot
+        be told then: ``run --commands`` and ``run --resume`` refuse a file whose ``scenario``
+        records differ, where :func:`astrodyn.recording.reader.recorded_metadata` (serve)
+        reads the first and :func:`astrodyn.recording.load` the last."""
+        other = self._differing_metadata.get(name)
+        return None if other is None else (self._first_metadata[name], other)
 
     # ------------------------------------------------------------------ properties
 

@@ -306,7 +306,10 @@ def parse_gyro_dynamics(ctx: Ctx, data: Any, path: str) -> tuple:
 def parse_fault(ctx: Ctx, data: Any, path: str, duration: float,
                 plant_bodies: dict[str, tuple[Actuators | None, Sensors | None]], t: float | None = None) -> Fault:
     """One fault table (``[[control.faults]]``, or the ``fault`` control verb's arguments,
-    which carry no ``t``: pass the time it begins as ``t``)."""
+    which carry no ``t``: pass the time it begins as ``t``).  A ``sensor_dropout``'s
+    ``duration`` (s) is at most :data:`astrodyn.scenario.MAX_DURATION_S` (250 years, the
+    longest scenario; the plant counts it in output steps, at most 1 kHz, so that count
+    stays an exact integer); without one the dropout lasts to the end (``math.inf``)."""
     tb = Table(ctx, data, path, ("body", "fault", "value", "sensor", "wheel", "duration") if t is not None else
                ("t", "body", "fault", "value", "sensor", "wheel", "duration"))
     if t is None:
@@ -332,9 +335,13 @@ def parse_fault(ctx: Ctx, data: Any, path: str, duration: float,
     elif fault == "sensor_dropout":
         present = [s.kind for s in sens.present()] if sens is not None else []
         sensor = choice(ctx, tb.get("sensor"), tuple(present) or ("(no sensors on this body)",), f"{path}.sensor")
-        if tb.has("duration"):
+        if tb.has("duration"):  # bounded: the plant counts it in output steps (<= 250 years x 1 kHz < 2**53)
+            from astrodyn.scenario import MAX_DURATION_S  # (the package imports this module)
+
             length = quantity(ctx, tb.get("duration"), "time", f"{path}.duration")
-            check(ctx, length > 0, f"{path}.duration", "duration > 0", tb.get("duration"))
+            check(ctx, 0 < length <= MAX_DURATION_S, f"{path}.duration",
+                  f"0 < duration <= 250 yr ({MAX_DURATION_S:g} s; omit it for a dropout to the end)",
+                  tb.get("duration"))
     elif fault in ("wheel_failed", "wheel_stuck"):
         n = len(act.wheels) if act is not None else 0
         if n == 0:

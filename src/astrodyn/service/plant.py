@@ -332,6 +332,10 @@ class CommandRecording:
     applied: int
     #: the last output step with an actuator state (the recording's last step of the loop; -1: none)
     last_step: int
+    #: the first output step with an actuator state (-1: none): 0 for a recording of a run from
+    #: its start; more for a later part of a rolled series, whose steps before are in the
+    #: earlier parts (``astrodyn run`` refuses it: :func:`astrodyn.service.runner.check_command_recording`)
+    first_step: int
     #: of ``applied``, those applied at a step at or after the scenario's ``n_steps`` (a served
     #: run goes past the config's duration): a re-simulation of the config never reaches them
     after_end: int
@@ -372,6 +376,7 @@ def read_command_recording(path: str | Path, scenario, keep: bool = True) -> Com
     commands: dict[str, tuple[dict | bytes, float, str, int]] = {}
     applied: list[tuple[int, str, list[str], str, int]] = []
     last_step = -1
+    first_state_step = -1  # the first output step with an actuator state
     prefix = f"{messages.PREFIX}/{name}/"
     with open_stream(path) as s:
         for m in s.messages():
@@ -396,6 +401,7 @@ def read_command_recording(path: str | Path, scenario, keep: bool = True) -> Com
                                      f"different contents (first at {first[2]} at log time {first[3]} ns)")
             else:
                 last_step = max(last_step, msg["seq"])
+                first_state_step = msg["seq"] if first_state_step < 0 else min(first_state_step, msg["seq"])
                 if msg.get("applied"):
                     applied.append((msg["seq"], body, msg["applied"], m.topic, m.log_time))
         damage = "" if not s.truncated and not s.corrupt_chunks else s.report()
@@ -414,8 +420,8 @@ def read_command_recording(path: str | Path, scenario, keep: bool = True) -> Com
             first_step.setdefault(key, (k, topic, log_time))
             cmd = commands.get(key)
             if cmd is None:
-                raise ValueError(f"--commands {path}: actuator state of {body} at step {k} names command {cid}, "
-                                 f"which the recording does not hold")
+                raise ValueError(f"{where}: actuator state of {body} at step {k} names command {cid}, which the "
+                                 f"recording does not hold")
             if rate is not None and cmd[1] > (k + 1) / rate * (1 + 1e-12):
                 raise ValueError(f"{cmd[2]} at log time {cmd[3]} ns: command {cid} has t = {cmd[1]!r} s, after the end "
                                  f"of step {k} (t = {k / rate:g} s) where {where} says it was applied")
@@ -423,7 +429,7 @@ def read_command_recording(path: str | Path, scenario, keep: bool = True) -> Com
             after_end += k >= n_steps
             if keep:
                 out.setdefault(k, []).append((body, cmd[0]))
-    return CommandRecording(out, count, last_step, after_end, damage)
+    return CommandRecording(out, count, last_step, first_state_step, after_end, damage)
 
 
 def recorded_faults(path: str | Path, scenario) -> list:

@@ -45,7 +45,7 @@ from astrodyn import auth, bus
 from astrodyn.files import regular_file_problem
 from astrodyn.jit import kernels_uncached
 from astrodyn.progress import Progress
-from astrodyn.recording.writer import partial_path, standby_path
+from astrodyn.recording.writer import part_path, partial_path, standby_path
 from astrodyn.scenario import Scenario, ScenarioError, load, plan as make_plan
 from astrodyn.scenario.recorded import DURATION_PATHS, config_difference
 from astrodyn.service.children import (
@@ -1082,13 +1082,20 @@ def check_closed_loop_arguments(scenario: Scenario, controllers: list[str], comm
 
 def check_command_recording(scenario: Scenario, path: Path, out: Path) -> dict:
     """``--commands REC``: refuse (ScenarioError naming the flag and what is wrong) a file
-    that is not a recording of this scenario and config
-    (:func:`astrodyn.scenario.recorded.config_difference`;
-    the duration may differ), holds no applied command (saying when the file is cut short or
-    damaged), or that the plant could not re-simulate (:func:`read_command_recording`'s
-    checks).  Returns what the run says about it (:func:`command_recording_notes`): where
-    the recording ends against the config's last step, and what it holds past the config's
-    duration.  The commands are checked without being kept (the plant reads them again)."""
+    that is not a regular file (a FIFO, a device, a directory: as ``--resume`` says it), not
+    a recording of this scenario and config
+    (:func:`astrodyn.scenario.recorded.config_difference`; the duration may differ), one
+    whose ``scenario`` metadata records differ (:func:`recorded_config_conflict`), a later
+    part of a rolled series (part k >= 1 of its ``recording`` record, even one whose first
+    step is 0: the part before may hold commands and fault events of that step; the
+    refusal names the part and points to ``astrodyn merge``), one that does not start at
+    step 0 (its first actuator state is at a later step), one that holds no applied command
+    (saying when the file is cut short or damaged, or is the first part of a series that
+    goes on: :func:`series_goes_on`), or one the plant could not re-simulate
+    (:func:`read_command_recording`'s checks).  Returns what the run says about it
+    (:func:`command_recording_notes`): where the recording ends against the config's last
+    step, and what it holds past the config's duration.  The commands are checked without
+    being kept (the plant reads them again)."""
     from astrodyn.recording import RecordingError
     from astrodyn.recording.stream import open_stream
     from astrodyn.service.plant import read_command_recording, recorded_faults
@@ -1096,30 +1103,48 @@ def check_command_recording(scenario: Scenario, path: Path, out: Path) -> dict:
     shown = str(path)[:200]
     if path.resolve() == out.resolve():
         raise ScenarioError(f"--commands {shown}: expected a recording other than --out")
-    if not path.is_file():
-        raise ScenarioError(f"--commands {shown}: expected an MCAP recording of this scenario, no such file")
+    if problem := regular_file_problem(path):  # (open_stream reads a regular file only, and says so too)
+        raise ScenarioError(f"--commands {shown}: cannot open: {problem}")
+
+    def refused(exc: Exception) -> ScenarioError:  # the reader's words, without the path they start with
+        why = str(exc).removeprefix(f"{path}: ")
+        return ScenarioError(f"--commands {shown}: expected an MCAP recording of scenario {scenario.name!r}: {why}")
+
     try:  # read here, so a foreign, damaged or empty file is refused before anything starts
         with open_stream(path) as stream:  # (its index: the metadata records come first)
-            recorded = stream.metadata.get("scenario")
+            recorded, metadata, cut = stream.metadata.get("scenario"), dict(stream.metadata), stream.truncated
+            conflict = recorded_config_conflict(stream, scenario)
+        if conflict is not None:
+            raise ScenarioError(f"--commands {shown}: {conflict}")
         problem = config_difference(recorded, scenario, ignore=DURATION_PATHS)
         if problem is not None and recorded is not None:  # another config's commands would not fit this one
             raise ScenarioError(f"--commands {shown}: expected a recording of this scenario and config "
                                 f"({scenario.name!r}; its duration may differ), got {problem}")
+        part = recorded_part(metadata)
+        if part:  # the part before holds its run's start: its first steps, or commands and faults before them
+            raise ScenarioError(f"--commands {shown}: expected a recording from the run's start (step 0, where the "
+                                f"re-simulation starts), got part {part} of a rolled recording (its `recording` "
+                                f"metadata record): the run's start is in the earlier parts; {merge_advice(path, part)}")
         found = read_command_recording(path, scenario, keep=False)
         faults = recorded_faults(path, scenario)
     except (RecordingError, OSError) as exc:
-        raise ScenarioError(f"--commands {shown}: expected an MCAP recording of scenario {scenario.name!r}: "
-                            f"{exc}") from None
+        raise refused(exc) from None
     except ValueError as exc:
         if isinstance(exc, ScenarioError):
             raise
-        raise ScenarioError(f"--commands {shown}: expected an MCAP recording of scenario {scenario.name!r}: "
-                            f"{exc}") from None
+        raise refused(exc) from None
+    if found.first_step > 0:  # steps 0 .. first_step - 1 would run without their commands
+        raise ScenarioError(f"--commands {shown}: expected a recording from the run's start (step 0, where the "
+                            f"re-simulation starts), got one whose first actuator state is at step {found.first_step} "
+                            f"(t = {found.first_step / scenario.rate:.6g} s): a later part of a rolled recording, or "
+                            f"a file that lost its start; {merge_advice(path, part)}")
+    series = series_goes_on(path, metadata, cut)
     if not found.applied:
         damaged = (f"; the file is cut short or damaged ({found.damage[:300]}): what it holds past that cannot be "
                    f"read (`astrodyn recover {shown}` saves what can be)") if found.damage else ""
+        rest = f"; {series}: {merge_advice(path, part)}" if series else ""
         raise ScenarioError(f"--commands {shown}: expected applied commands of scenario {scenario.name!r} "
-                            f"(actuator states naming them), found none: nothing to re-simulate{damaged}")
+                            f"(actuator states naming them), found none: nothing to re-simulate{damaged}{rest}")
     if problem is not None:  # commands, but no scenario metadata to check them against
         raise ScenarioError(f"--commands {shown}: expected a recording of this scenario and config "
                             f"({scenario.name!r}), got {problem}")
@@ -1128,24 +1153,90 @@ def check_command_recording(scenario: Scenario, path: Path, out: Path) -> dict:
             "t_last": found.last_step / scenario.rate, "config_last_step": end,
             "held_after": found.last_step < end, "commands_after_end": found.after_end,
             "faults_after_end": sum(1 for f in faults if f.t > end / scenario.rate * (1 + 1e-12)),
-            "damage": found.damage}
+            "damage": found.damage, "series_goes_on": series,
+            "series_advice": merge_advice(path, part) if series else None}
+
+
+def recorded_config_conflict(stream, scenario: Scenario) -> str | None:
+    """What to say (after the flag and the file) of a recording (an open
+    :class:`astrodyn.recording.stream.McapStream`) whose ``scenario`` metadata records
+    differ, naming both, each against ``scenario``; None when it holds at most one (or
+    copies of one).  ``--commands`` and ``--resume`` refuse such a file: which record tells
+    the config it was made with cannot be told (readers differ: serve's
+    :func:`astrodyn.recording.reader.recorded_metadata` takes the first,
+    :func:`astrodyn.recording.load` the last), and astrodyn writes one per file."""
+    both = stream.metadata_conflict("scenario")
+    if both is None:
+        return None
+    named = [config_difference(record, scenario) or "this config" for record in both]
+    return (f"expected one `scenario` metadata record (the config the recording was made with), got records that "
+            f"differ: the first is ({named[0]}), another is ({named[1]}); which one the recording was made with "
+            f"cannot be told")
+
+
+def recorded_part(metadata: dict) -> int | None:
+    """The part number a file's ``recording`` metadata record gives (0 for a run's first or
+    only file, k for ``NAME-000k.mcap`` of a rolled series), None when it has none, or is a
+    merge of several files (``merged_from``: its ``recording`` record is one input's)."""
+    raw = metadata.get("recording", {}).get("part")
+    if "merged_from" in metadata or raw is None or not (raw.isascii() and raw.isdigit()) or len(raw) > 9:
+        return None
+    return int(raw)
+
+
+def series_goes_on(path: Path, metadata: dict, cut: bool) -> str | None:
+    """Why the recording ``path`` (its metadata records, ``cut``: it has no footer) is a part
+    of a rolled series that goes on in another file, or None: a finished logger's file
+    (``recording`` record) without the ``end`` record the logger writes into the part it
+    stops in, and neither a merge's nor ``astrodyn recover``'s output (a killed run's file
+    also lacks ``end``)."""
+    part = recorded_part(metadata)
+    if part is None or cut or "end" in metadata or "recovery" in metadata:
+        return None
+    first = series_first_file(path, part)
+    following = f" in {Path(part_path(first, part + 1)).name[:200]}" if first is not None else ""
+    return (f"it is part {part} of a rolled recording that goes on{following} (it has no `end` record, which the "
+            f"logger writes into the part it stops in)")
+
+
+def series_first_file(path: Path, part: int | None) -> str | None:
+    """The first file of the rolled series whose part ``part`` (:func:`recorded_part`) is
+    ``path``: ``NAME.mcap`` for ``NAME-000k.mcap`` (:func:`astrodyn.recording.writer.part_path`),
+    ``path`` itself for part 0; None when the part or the name does not tell it."""
+    if part is None:
+        return None
+    root, ext = os.path.splitext(str(path))
+    tail = f"-{part:04d}" if part else ""
+    return root.removesuffix(tail) + (ext or ".mcap") if root.endswith(tail) else None
+
+
+def merge_advice(path: Path, part: int | None) -> str:
+    """How to re-simulate the whole rolled series of which ``path`` is part ``part`` (None:
+    not known): ``astrodyn merge`` of its parts, then ``--commands`` the merged file."""
+    first = series_first_file(path, part)
+    files = ("NAME.mcap NAME-0001.mcap ..." if first is None else
+             f"{shlex.quote(first[:200])} {shlex.quote(part_path(first, 1)[:200])} ...")
+    return (f"merge all the parts (`astrodyn merge --out MERGED.mcap {files}`, every part from the first) and give "
+            f"--commands the merged file")
 
 
 def command_recording_notes(info: dict, scenario: Scenario) -> list[str]:
     """The lines ``run`` prints at the start about its ``--commands`` recording ``info``
     (:func:`check_command_recording`): a recording that ends before the config's last step
-    (a killed or stopped run: from there on the re-simulation holds the commands last
-    applied), and recorded commands and faults past the config's duration (a served run
-    goes past it), which are not applied."""
+    (a killed or stopped run, or the first part of a rolled series that goes on: from there
+    on the re-simulation holds the commands last applied), and recorded commands and faults
+    past the config's duration (a served run goes past it), which are not applied."""
     rate, shown = scenario.rate, info["file"][:200]
     end_t = info["config_last_step"] / rate
     notes = []
     if info["held_after"]:
         cut = f" (the file is cut short: {info['damage'][:200]})" if info["damage"] else ""
+        series = (f"; {info['series_goes_on']}: {info['series_advice']} to re-simulate all of it"
+                  if info.get("series_goes_on") else "")
         notes.append(f"--commands {shown}: the recording ends at step {info['last_step']} (t = {info['t_last']:.6g} s), "
                      f"before this config's last step {info['config_last_step']} (t = {end_t:.6g} s){cut}: after it "
                      f"the commands last applied stay held; the states from step {info['last_step'] + 1} on are not "
-                     f"a re-simulation of the recording")
+                     f"a re-simulation of the recording{series}")
     if info["commands_after_end"] or info["faults_after_end"]:
         what = " and ".join(f"{n} {kind}{'s' if n != 1 else ''}" for n, kind in
                             ((info["commands_after_end"], "recorded command"), (info["faults_after_end"], "fault"))
@@ -1161,16 +1252,22 @@ def resume_plan(path: Path, scenario: Scenario, out: Path, work: Path) -> dict:
     state channel holds steps 0 .. k-1), the logger's prefill arguments and each
     propagator's ``--start-step`` / ``--resume-state``.  ScenarioError naming the file for
     anything that cannot be resumed (not MCAP, another scenario or config, nothing or
-    everything recorded, ``--out`` the same file)."""
+    everything recorded, ``--out`` the same file, ``scenario`` metadata records that differ:
+    :func:`recorded_config_conflict`)."""
     from astrodyn.recording import RecordingError, load as load_run
+    from astrodyn.recording.stream import open_stream
     from astrodyn.service.resume import contiguous_steps, propagator_resume_args, state_topics
 
     if path.resolve() == out.resolve():
         raise ScenarioError(f"--out {out}: expected a new file, not the --resume file itself")
     try:
         run = load_run(path)
-    except RecordingError as exc:
+        with open_stream(path) as stream:  # (its index only)
+            conflict = recorded_config_conflict(stream, scenario)
+    except (RecordingError, OSError) as exc:
         raise ScenarioError(f"--resume {exc}") from None
+    if conflict is not None:
+        raise ScenarioError(f"--resume {path}: {conflict}")
     problem = config_difference(run.scenario, scenario)
     if problem:
         raise ScenarioError(f"--resume {path}: expected a recording of this scenario and config ({scenario.name!r}), "
