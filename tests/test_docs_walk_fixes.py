@@ -410,3 +410,46 @@ def test_analyze_of_a_missing_file_says_only_that_it_is_missing(tmp_path, capsys
     assert main(["analyze", str(tmp_path / "nope.mcap")]) == 1
     err = capsys.readouterr().err
     assert "No such file" in err and "reading" not in err and "MB" not in err, err
+
+
+def test_a_lockstep_run_names_the_controllers_it_waits_for_that_it_did_not_start():
+    """Probe B (session 20): ``astrodyn demo --config configs/hohmann.toml`` (no --controller)
+    waited 10 s and failed without saying a controller was expected; the run now says whom it
+    waits for, and how long."""
+    from types import SimpleNamespace
+
+    from astrodyn.scenario import load
+    from astrodyn.service.runner import ScenarioRun
+
+    scenario = load(str(Path(__file__).resolve().parents[1] / "configs" / "hohmann.toml"))
+    expected = list(scenario.control.controllers)
+    waits = ScenarioRun.absent_controllers
+    assert waits(SimpleNamespace(scenario=scenario, commands=None, controllers={})) == expected
+    assert waits(SimpleNamespace(scenario=scenario, commands=None, controllers=dict.fromkeys(expected))) == []
+    assert waits(SimpleNamespace(scenario=scenario, commands="rec.mcap", controllers={})) == []  # re-simulation
+
+
+def test_demo_names_itself_in_its_messages(tmp_path, capsys):
+    """Probe B (session 20): two demos at once, the second said ``astrodyn run: ...``."""
+    from astrodyn.service import runner
+
+    assert runner.main([str(tmp_path / "missing.toml")], prog="astrodyn demo") == 2
+    err = capsys.readouterr().err
+    assert err.startswith("astrodyn demo: ") and "astrodyn run" not in err, err
+
+
+@pytest.mark.parametrize("complete, stopped_early, ended, to_the_end", [
+    (True, {}, {"attitude": 11162, "orbit": 16743}, True),  # every process ended at the end, every state in the file
+    (True, {"orbit": {"last_step": -1, "reason": "SIGTERM", "t": 0.0}}, {"attitude": 11162, "orbit": 0}, False),
+    (False, {}, {"attitude": 11162, "orbit": 16743}, False),  # a state missing
+    (True, {}, {}, False),  # no process ended: nothing says the run reached its end
+])
+def test_an_interrupted_run_counts_as_complete_only_when_recorded_to_its_end(complete, stopped_early, ended, to_the_end):
+    """Probe B (session 20): a Ctrl-C while the logger took a finished run's last states said
+    ``FAILED: interrupted ... at sim t 120 s of 120 s`` and left ``NAME.partial.mcap``,
+    although every state was in the file.  The logger's summary (the shape of its ``end``
+    record: ``complete``, ``stopped_early``, ``ended``) decides."""
+    from astrodyn.service.runner import recorded_to_the_end
+
+    log = {"complete": complete, "stopped_early": stopped_early, "ended": ended}
+    assert recorded_to_the_end(log) is to_the_end

@@ -59,8 +59,10 @@ def test_an_interrupted_run_says_which_process_stopped_early_and_the_sim_time_al
                 last_t[channel.topic] = max(last_t.get(channel.topic, 0.0), json.loads(message.data)["t"])
     reached = re.search(r"sim t reached (\S+) s of 100000 s", stdout)
     assert reached, stdout
-    assert float(reached.group(1)) == pytest.approx(min(last_t.values()), abs=1e-6 * min(last_t.values())), \
-        (stdout, last_t)
+    # every state channel of the scene counts: one with no state yet (its propagator was still loading its
+    # kernels on a busy machine when the signal came) has reached nothing
+    all_reached = min(last_t.get(f"astrodyn/cut/sat/{kind}", 0.0) for kind in ("orbit", "attitude"))
+    assert float(reached.group(1)) == pytest.approx(all_reached, abs=1e-6 * all_reached), (stdout, last_t)
     assert "attitude stopped early at sim t" in stdout and "(SIGTERM)" in stdout, stdout
     with open(partial, "rb") as f:  # the file's own end record says it too
         end = next(m for m in make_reader(f).iter_metadata() if m.name == "end")

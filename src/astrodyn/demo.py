@@ -22,7 +22,7 @@ def main(argv: list[str] | None = None) -> int:
     config = Path(args.config) if args.config else config_path("demo")
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    rc = runner.main([str(config), "--out", str(out), "--cross-check"])
+    rc = runner.main([str(config), "--out", str(out), "--cross-check"], prog="astrodyn demo")
     if rc == 0:
         print(f"\nRecorded {out}. Next: `astrodyn analyze {out}` for a report with plots, "
               f"`astrodyn replay {out}` to republish it on Zenoh, or open it in Foxglove.")

@@ -155,6 +155,12 @@ def run_scenario(scenario: Scenario, out: Path, *, cross_check: bool = False,
 #: propagators are stopped (it ends once it holds their end-of-run events); then, or at a
 #: second stop signal, it is told to finish the file with what it holds (SIGTERM).
 INTERRUPTED_LOGGER_WAIT_S = 10.0
+#: Wall seconds the logger of an interrupted run is given, once every propagator has exited,
+#: to take what they published last (already on its way: a drain of the logger's queues is
+#: milliseconds) before it is told to finish: a propagator stopped while it loaded its
+#: kernels sends no end-of-run event, and the logger would wait for it the whole
+#: :data:`INTERRUPTED_LOGGER_WAIT_S`.
+INTERRUPTED_DRAIN_S = 1.0
 
 
 #: A propagator that ends with the same error this many times in a row, each time restarted at
@@ -304,6 +310,9 @@ class ScenarioRun:
         if why and reached is not None and (result.get("failure") or "").startswith(f"interrupted by {why} at sim t"):
             # how far the recording got (the heartbeats the watch saw may be seconds old, or from start-up)
             result["failure"] = f"interrupted by {why} at sim t {reached:.6g} s of {self.scenario.duration:.6g} s"
+            if recorded_to_the_end(log):  # the signal came while the logger took the last states: nothing is missing
+                del result["failure"]
+                result["complete_before_signal"] = True
         lost = log.get("missing", 0)
         if not result.get("failure") and lost:
             result["failure"] = f"{lost} messages missing in the recording"
@@ -342,6 +351,15 @@ class ScenarioRun:
             argv += [k, str(v)]
         children[kind] = Child(kind if not n else f"{kind}-r{n}", argv, self.tmpd, env=self.child_env)
         children[kind].name = kind
+
+    def absent_controllers(self) -> list[str]:
+        """The controllers a lockstep run waits for that it did not start (``--controller``
+        gives fewer than ``control.controllers`` names): outside ones, started by hand; none
+        when the commands come from a recording (``--commands``)."""
+        control = self.scenario.control
+        if control is None or control.mode != "lockstep" or self.commands is not None:
+            return []
+        return [name for name in control.controllers if name not in self.controllers]
 
     def start_controllers(self) -> str | None:
         scenario = self.scenario
@@ -436,6 +454,13 @@ class ScenarioRun:
         failure = self.start_controllers()
         if self.controllers:
             self.say("  controllers " + ", ".join(f"{n} (pid {c.pid})" for n, c in self.controllers.items()))
+        if (absent := self.absent_controllers()):
+            control = scenario.control
+            self.say(f"  waiting for controller{'s' if len(absent) > 1 else ''} {', '.join(map(repr, absent))} "
+                     f"(control.controllers; none started with --controller): start "
+                     f"{'each' if len(absent) > 1 else 'it'} by hand with the control token, or give "
+                     f"--controller CMD; without an answer the run stops after control.timeout = "
+                     f"{control.timeout:g} s (docs/control.md)")
         self.say("  started " + ", ".join(f"{n} (pid {c.pid})" for n, c in self.children.items()))
         return failure or _watch(scenario, self.plan, self.children, beats, alive, self.progress, self.timeout_s,
                                  self.interrupted, on_death=self.restart, controllers=self.controllers,
@@ -574,6 +599,8 @@ class ScenarioRun:
                 count = self.interrupted["count"]
                 deadline = time.monotonic() + INTERRUPTED_LOGGER_WAIT_S
                 while logger.poll() is None and time.monotonic() < deadline and self.interrupted["count"] == count:
+                    if all(children[k].poll() is not None for k in self.propagators if k in children):
+                        deadline = min(deadline, time.monotonic() + INTERRUPTED_DRAIN_S)  # all gone: drain, finish
                     time.sleep(0.05)
             logger.stop(signal.SIGTERM, timeout=30)  # it finishes the file with what it holds
         else:
@@ -591,6 +618,13 @@ class ScenarioRun:
         if logger.poll() not in (0, None) and not failure:
             failure = f"logger exited with status {logger.poll()}: {logger.last_words(5)}"
         return failure
+
+
+def recorded_to_the_end(log: dict) -> bool:
+    """Whether the logger's summary ``log`` says the run is recorded to its end: every
+    expected state is in the file (``complete``) and every process ended at the end of the
+    scene, none stopped early (an interrupted run whose propagators had finished)."""
+    return log.get("complete") is True and not log.get("stopped_early") and bool(log.get("ended"))
 
 
 def _fail(result: dict, why: str) -> None:
@@ -774,8 +808,9 @@ def _watch(scenario: Scenario, p, children: dict, beats, alive, progress: bool, 
         time.sleep(0.05)
 
 
-def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="astrodyn run", description="Run a scenario headless into an MCAP file.")
+def main(argv: list[str] | None = None, prog: str = "astrodyn run") -> int:
+    """``astrodyn run`` (``prog``: the command the user typed, in its messages: ``astrodyn demo`` runs through here)."""
+    ap = argparse.ArgumentParser(prog=prog, description="Run a scenario headless into an MCAP file.")
     ap.add_argument("config", help="scenario TOML file (see configs/)")
     ap.add_argument("--out", help="MCAP file to write (default: the config's [output] path, else <scenario>.mcap)")
     ap.add_argument("--cross-check", action="store_true", help="run REBOUND IAS15 alongside every orbit; report the difference")
@@ -828,20 +863,20 @@ def main(argv: list[str] | None = None) -> int:
             replayed = check_closed_loop_arguments(scenario, args.controller or [], args.commands, out)
             check_scenario_free(scenario.name, args.connect, zenoh_config)
         except ScenarioError as exc:
-            print(f"astrodyn run: {exc}", file=sys.stderr)
+            print(f"{prog}: {exc}", file=sys.stderr)
             return 2
         the_plan = make_plan(scenario, cross_check_all=args.cross_check)
         for w in filter(None, [*the_plan.warnings, zenoh_config and zenoh_config.warning()]):
-            print(f"astrodyn run: warning: {w}", file=sys.stderr)
+            print(f"{prog}: warning: {w}", file=sys.stderr)
         free = shutil.disk_usage(out.resolve().parent).free
         if the_plan.estimated_file_bytes > free and not args.force:
-            print(f"astrodyn run: the recording needs about {the_plan.estimated_file_bytes / 1e6:.4g} MB and "
+            print(f"{prog}: the recording needs about {the_plan.estimated_file_bytes / 1e6:.4g} MB and "
                   f"{out.resolve().parent} has {free / 1e6:.4g} MB free; shorten the run, lower the rate, choose "
                   f"another --out, or pass --force", file=sys.stderr)
             return 2
         print(the_plan.text(), file=sys.stderr)
         for note in command_recording_notes(replayed, scenario) if replayed else ():
-            print(f"astrodyn run: {note}", file=sys.stderr)
+            print(f"{prog}: {note}", file=sys.stderr)
         if resume:
             print(f"  resuming from {args.resume} at step {resume['step']} (t = {resume['t']:.6g} s)", file=sys.stderr)
         try:
@@ -851,19 +886,19 @@ def main(argv: list[str] | None = None) -> int:
                                   controllers=args.controller, commands=Path(args.commands) if args.commands else None,
                                   loggers=args.loggers, stall_s=args.stall_timeout or None)
         except (StartError, bus.BusError) as exc:  # nothing was started (the hub's session did not open)
-            print(f"astrodyn run: error: {exc}", file=sys.stderr)
+            print(f"{prog}: error: {exc}", file=sys.stderr)
             return 1
     print("", file=sys.stderr)
     rows = None
     recording = result.get("file")
     if recording and Path(recording).exists():  # the summary measures what the file holds, not what was sent
         if Path(recording) != out:
-            print(f"astrodyn run: the recording stays at {recording} (the run did not succeed, so {out} is not "
+            print(f"{prog}: the recording stays at {recording} (the run did not succeed, so {out} is not "
                   f"replaced); `astrodyn recover {recording}` gives it its name", file=sys.stderr)
         try:
             rows = file_summary(Path(recording), scenario)
         except Exception as exc:  # the file is still there; say why the summary is missing
-            print(f"astrodyn run: could not read back {recording} for the summary: {exc}", file=sys.stderr)
+            print(f"{prog}: could not read back {recording} for the summary: {exc}", file=sys.stderr)
     if rows is None:
         rows = propagator_rows(result, scenario)
     rows = rows or []
@@ -874,7 +909,7 @@ def main(argv: list[str] | None = None) -> int:
     # the summary's header names the file that holds the recording (NAME.partial.mcap of a failed run), not --out
     print_summary({**result, "out": recording} if recording and Path(recording).exists() else result, rows, scenario)
     for warning in result.get("warnings", []):
-        print(f"astrodyn run: warning: {warning}", file=sys.stderr)
+        print(f"{prog}: warning: {warning}", file=sys.stderr)
     for name, standby in (result.get("standbys") or {}).items():
         if standby.get("exit") == 0:
             print(f"  standby {name}: {standby['file']}", file=sys.stderr)
@@ -884,22 +919,26 @@ def main(argv: list[str] | None = None) -> int:
         except OSError as exc:
             with contextlib.suppress(OSError):  # not a cut JSON file
                 Path(args.json).unlink()
-            print(f"astrodyn run: --json {args.json}: cannot write: {exc.strerror or exc} (the run's recording: "
+            print(f"{prog}: --json {args.json}: cannot write: {exc.strerror or exc} (the run's recording: "
                   f"{result.get('file')})", file=sys.stderr)
             return 1
     plant = (result.get("processes", {}).get("plant") or {}).get("summary") or {}
     if plant:  # also when the run failed: a refused command may be why
-        print(f"astrodyn run: {closed_loop_line(plant, replayed)}", file=sys.stderr)
+        print(f"{prog}: {closed_loop_line(plant, replayed)}", file=sys.stderr)
     if result.get("failure"):
-        print(f"astrodyn run: FAILED: {result['failure']}", file=sys.stderr)
+        print(f"{prog}: FAILED: {result['failure']}", file=sys.stderr)
         if result.get("interrupted"):  # shell convention: 128 + signal number
             return 128 + int(signal.Signals[result["interrupted"]])
         return 1
     attack = attack_report(result.get("logger"), plant)
     if attack:
-        print(f"astrodyn run: ATTACKED: {attack}", file=sys.stderr)
+        print(f"{prog}: ATTACKED: {attack}", file=sys.stderr)
         if not args.tolerate_rejected:
             return EXIT_REJECTED
+    if result.get("complete_before_signal"):  # finished as a run that succeeded; the exit still says the signal
+        print(f"{prog}: {result['interrupted']} came after every state was recorded: the recording is complete "
+              f"({result.get('file')})", file=sys.stderr)
+        return 128 + int(signal.Signals[result["interrupted"]])
     return 0
 
 
