@@ -68,13 +68,15 @@ class Pacer:
     sim time the pause would have covered.
     """
 
-    def __init__(self, factor: float = math.inf, anchor: tuple[float, float] | None = None):
+    def __init__(self, factor: float = math.inf, anchor: tuple[float, float] | None = None, paused: bool = False):
         """``anchor = (wall, t_sim)``: the schedule to keep, ``t_sim`` due at ``wall``
         (``time.monotonic()``, which is system-wide on Linux, so a supervisor can hand it to
         a restarted process: the new process runs as fast as it can until it is back on the
-        schedule, then paces).  Default: anchored at the first instant published."""
+        schedule, then paces).  Default: anchored at the first instant published.
+        ``paused``: start paused (a process restarted while its supervisor is paused): no
+        instant is due until :meth:`resume`."""
         self.factor = float(factor)
-        self.paused = False
+        self.paused = bool(paused)
         self._anchor_wall = time.monotonic() if anchor is None else float(anchor[0])
         self._anchor_sim: float | None = None if anchor is None else float(anchor[1])
         self._suspended_at_anchor = suspended_s()
@@ -139,6 +141,7 @@ class PropagatorOptions:
     resume_state: tuple[int, float, dict] | None = None  # (step, t, states) the integrated bodies continue from
     first_event_seq: int = 0  # a restarted process continues its predecessor's event numbering
     pace_anchor: tuple[float, float] | None = None  # (monotonic wall, t_sim) of the run's schedule (serve restarts)
+    start_paused: bool = False  # publish nothing until a resume command (serve restarts it while paused)
 
 
 class _Stop(Exception):
@@ -264,7 +267,7 @@ def run_propagator(scenario: Scenario, session, opts: PropagatorOptions, log=pri
     engine_t = float(opts.resume_state[1]) if opts.resume_state is not None else 0.0
     cross_t = 0.0  # REBOUND's time (a restarted process integrates it again from 0)
 
-    pacer = Pacer(opts.real_time_factor, opts.pace_anchor)
+    pacer = Pacer(opts.real_time_factor, opts.pace_anchor, paused=opts.start_paused)
     stopping = {"why": None}
     conservation = _Conservation(opts.kind, scenario, engine)
     catch_stop_signals(lambda why: stopping.update(why=why))
@@ -735,6 +738,9 @@ def service_main(kind: str, argv: list[str] | None = None) -> int:
     ap.add_argument("--pace-anchor", type=float, nargs=2, default=None, metavar=("WALL", "T"),
                     help="keep the schedule on which sim time T was due at monotonic wall time WALL (a restarted "
                          "process catches up with the run instead of starting a new schedule)")
+    ap.add_argument("--paused", action="store_true",
+                    help="start paused: publish nothing until the supervisor's resume (serve restarts a process "
+                         "while it is paused)")
     ap.add_argument("--max-steps", type=int, default=None, help="publish at most this many steps")
     ap.add_argument("--batch", choices=("auto", "always", "never"), default="auto",
                     help=f"publish one envelope per step instead of per-body samples (auto: above {BATCH_THRESHOLD} bodies)")
@@ -774,7 +780,8 @@ def service_main(kind: str, argv: list[str] | None = None) -> int:
                              cross_check=args.cross_check, wait_logger_s=args.wait_logger,
                              start_step=args.start_step, max_steps=args.max_steps, endless=args.endless,
                              resume_state=resume_state, first_event_seq=args.first_event_seq,
-                             pace_anchor=None if args.pace_anchor is None else tuple(args.pace_anchor))
+                             pace_anchor=None if args.pace_anchor is None else tuple(args.pace_anchor),
+                             start_paused=args.paused)
     try:
         with bus.session_from_args(args) as session:
             summary = run_propagator(scenario, session, opts)

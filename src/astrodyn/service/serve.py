@@ -78,7 +78,7 @@ from astrodyn import auth, bus
 from astrodyn.recording.recover import finished_name
 from astrodyn.recording.writer import standby_path
 from astrodyn.scenario import ScenarioError, load, plan as make_plan
-from astrodyn.scenario.fields import QUANTITY_KINDS, parse_quantity_string
+from astrodyn.scenario.fields import QUANTITY_KINDS, jsonable, parse_quantity_string
 from astrodyn.service.children import (
     DISK_FULL_EXIT,
     MODEL_ENDED_EXIT,
@@ -129,8 +129,18 @@ __all__ = ["main", "Supervisor", "roll_settings", "check_serve_flags", "ROLL_INT
 
 
 #: Wall seconds serve waits for its propagators to say they paused, when a rate change from
-#: ``inf`` brings them to one schedule (their heartbeats come every 0.5 s).
+#: ``inf``, or from a rate they did not keep, brings them to one schedule (their heartbeats
+#: come every 0.5 s).
 PAUSE_HEARD_S = 2.0
+#: Wall seconds a propagator's heartbeat may show it behind serve's schedule and still count
+#: as keeping it (:meth:`Supervisor.keeps_schedule`): a pacing process publishes each step
+#: when it is due (sleeping at most 50 ms at a time), so only scheduling delays of a loaded
+#: machine lag it; one judged wrongly off the schedule costs a pause of half a second.
+SCHEDULE_LAG_S = 0.1
+#: Wall seconds after serve set a schedule before a heartbeat can show a process keeping it:
+#: one heartbeat period, five times :data:`SCHEDULE_LAG_S`, so one that reaches less than
+#: 80 % of the rate (at ``rate 1e6`` a light scene reaches about x1500) is off it by then.
+SCHEDULE_JUDGED_AFTER_S = bus.HEARTBEAT_PERIOD_S
 
 
 class Supervisor:
@@ -240,6 +250,8 @@ class Supervisor:
                                                           token_file)
         self.commands = session.declare_publisher(command_key(scenario.name))
         self.beats = bus.HeartbeatMonitor(session, scenario.name, verifier=auth.Verifier(secret))
+        # each propagator's last two heartbeats heard (poll_beats): the pace it showed between them
+        self.beat_pairs: dict[str, tuple[dict | None, dict]] = {}
         self.alive = bus.AliveWatcher(session, scenario.name)
         self.events = bus.EventPublisher(session, scenario.name, "serve", signer=self.signer)
         self.state = "running"
@@ -283,7 +295,7 @@ class Supervisor:
         """The ``status`` reply.  ``state``: serve's (``running``, ``paused``, ...), except
         ``degraded`` while it runs with a process that died and is not restarted: that
         process's entry gives why (``not_restarted``), as ``failures`` does."""
-        self.beats.poll()
+        self.poll_beats()
         procs = {}
         for name, ch in self.children.items():
             hb = self.beats.last.get(name, {})
@@ -300,33 +312,113 @@ class Supervisor:
                 "t": min(ts) if ts else 0.0, "wall_s": round(time.monotonic() - self.started, 3),
                 "processes": procs, "failures": list(self.failures), "restarts": list(self.restarts)}
 
+    def poll_beats(self) -> None:
+        """Take the heartbeats that arrived, keeping each propagator's last two
+        (``beat_pairs``, :meth:`measured_pace`)."""
+        self.beats.poll()
+        for k in self.propagators:
+            hb = self.beats.last.get(k)
+            if hb is not None and (pair := self.beat_pairs.get(k)) is not None and pair[1] is hb:
+                continue
+            if hb is not None:
+                self.beat_pairs[k] = (pair[1] if pair is not None else None, hb)
+
+    def measured_pace(self, name: str) -> float:
+        """Sim seconds per wall second process ``name`` advanced between its last two
+        heartbeats heard (at most two heartbeat periods apart, both publishing at one stated
+        rate, from one process: a restarted one counts its heartbeats from 1 again); 0.0 when
+        they show none (too far apart, paused, a rate change or a restart between them)."""
+        a, b = self.beat_pairs.get(name, (None, None))
+        if a is None or b is None:
+            return 0.0
+        try:
+            dt_s = (b["time_ns"] - a["time_ns"]) / 1e9
+            if not (0.0 < dt_s <= 2 * bus.HEARTBEAT_PERIOD_S and b["n"] > a["n"] and a.get("rate") == b.get("rate")
+                    and all(hb.get("paused") is False and not hb.get("waiting") and not hb.get("preparing")
+                            and not hb.get("done") for hb in (a, b))):
+                return 0.0
+            pace = (float(b["t"]) - float(a["t"])) / dt_s
+        except (KeyError, TypeError, ValueError, OverflowError):  # a field missing or of another type
+            return 0.0
+        return pace if math.isfinite(pace) and pace > 0 else 0.0
+
+    @staticmethod
+    def heartbeat_age_s(hb: dict) -> float | None:
+        """Wall seconds since heartbeat ``hb`` was sent (its ``time_ns``: serve's children run
+        on its host), or None when it has no valid ``time_ns``."""
+        sent_ns = hb.get("time_ns")
+        if isinstance(sent_ns, bool) or not isinstance(sent_ns, int):
+            return None
+        return (time.time_ns() - sent_ns) / 1e9
+
+    def keeps_schedule(self, hb: dict) -> bool:
+        """Whether heartbeat ``hb`` shows its process pacing on serve's schedule
+        (``self.schedule``, at ``self.rate``, finite): it publishes (not paused, waiting for a
+        controller, preparing or done), states serve's rate, was sent at least
+        :data:`SCHEDULE_JUDGED_AFTER_S` after the schedule was set and at most two heartbeat
+        periods ago, and its ``t`` is at most one output step plus :data:`SCHEDULE_LAG_S` of
+        wall time at the rate behind the sim time the schedule had due when it was sent.
+        False for one that runs as fast as it can (``inf``, or a rate it cannot keep), one
+        that has not heard serve's last rate, and one not heard since the schedule was set."""
+        t, rate, age_s = hb.get("t"), hb.get("rate"), self.heartbeat_age_s(hb)
+        if (self.schedule is None or not math.isfinite(self.rate) or age_s is None
+                or not -0.1 <= age_s <= 2 * bus.HEARTBEAT_PERIOD_S
+                or hb.get("paused") is not False or hb.get("waiting") or hb.get("preparing") or hb.get("done")
+                or isinstance(t, bool) or not isinstance(t, (int, float)) or not math.isfinite(t)
+                or isinstance(rate, bool) or rate != self.rate):
+            return False
+        sent = time.monotonic() - max(0.0, age_s)
+        wall0, t0 = self.schedule
+        if sent - wall0 < SCHEDULE_JUDGED_AFTER_S:  # too early to tell (or of an earlier schedule)
+            return False
+        due = t0 + (sent - wall0) * self.rate
+        return t >= due - (1.0 / self.scenario.rate + SCHEDULE_LAG_S * self.rate)
+
+    def runs_off_schedule(self) -> list[str]:
+        """The running propagators whose last heartbeat shows them publishing but not on
+        serve's schedule (:meth:`keeps_schedule`): where they are now is known only once they
+        stand still.  One paused, waiting, preparing, done or not heard yet is not among them:
+        it is where its heartbeat says."""
+        self.poll_beats()
+        off = []
+        for k in self.propagators:
+            hb = self.beats.last.get(k)
+            if self.children[k].poll() is not None or not hb or hb.get("t") is None:
+                continue
+            if (hb.get("paused") is False and not hb.get("waiting") and not hb.get("preparing")
+                    and not hb.get("done") and not self.keeps_schedule(hb)):
+                off.append(k)
+        return off
+
     def sim_time_now(self, name: str) -> float:
-        """Serve's best estimate of the sim time process ``name`` is at now, s: the ``t`` of its
-        last heartbeat, advanced at the real-time factor that heartbeat states (``rate``) for
-        the wall time since it was sent (its ``time_ns``: serve's children run on its host), at
-        most one heartbeat period (:data:`astrodyn.bus.HEARTBEAT_PERIOD_S`: it beats that often
-        while it paces).  Not advanced when it does not pace at a finite rate: paused, waiting
-        for a controller (a lockstep plant), preparing, done, or ``inf``.  0.0 before its first
-        heartbeat.  Heartbeats are up to a period old, so at ``--rate 10`` the last one's ``t``
-        alone lags by up to 5 s of sim time (closedloop probe F13)."""
+        """Serve's best estimate of the sim time process ``name`` is at now, s, never beyond
+        what was measured: the ``t`` of its last heartbeat, advanced for the wall time since it
+        was sent (at most one heartbeat period, :data:`astrodyn.bus.HEARTBEAT_PERIOD_S`: it
+        beats that often while it publishes) at the rate that heartbeat states or the pace it
+        showed since the one before (:meth:`measured_pace`), whichever is lower.  Not advanced
+        when it shows none: paused, waiting for a controller (a lockstep plant), preparing,
+        done, or a rate change or restart just before.  It used to be advanced at the stated
+        rate alone: after ``rate 1e6``, which a light scene runs at about x1500, up to 500,000
+        sim s that no process reached, and ``rate 10`` then anchored every process there
+        (session 20 probe A, F1).  0.0 before its first heartbeat.  Heartbeats are up to a
+        period old, so at ``--rate 10`` the last one's ``t`` alone lags by up to 5 s of sim time
+        (closedloop probe F13)."""
         hb = self.beats.last.get(name, {})
         t = hb.get("t")
         if isinstance(t, bool) or not isinstance(t, (int, float)) or not math.isfinite(t):
             return 0.0
-        rate, sent_ns = hb.get("rate"), hb.get("time_ns")
-        if (hb.get("paused") is not False or hb.get("waiting") or hb.get("preparing") or hb.get("done")
-                or isinstance(rate, bool) or not isinstance(rate, (int, float)) or not math.isfinite(rate)
-                or isinstance(sent_ns, bool) or not isinstance(sent_ns, int)):
-            return float(t)
-        age_s = min(max(0.0, (time.time_ns() - sent_ns) / 1e9), bus.HEARTBEAT_PERIOD_S)
-        return float(t) + age_s * float(rate)
+        rate, age_s = hb.get("rate"), self.heartbeat_age_s(hb)
+        if isinstance(rate, bool) or not isinstance(rate, (int, float)) or not math.isfinite(rate) or age_s is None:
+            rate = 0.0  # "inf" (as before: not advanced), or not a number
+        pace = min(float(rate), self.measured_pace(name))
+        return float(t) + min(max(0.0, age_s or 0.0), bus.HEARTBEAT_PERIOD_S) * pace
 
     def wait_paused(self, timeout_s: float) -> None:
         """Wait (at most ``timeout_s``) until every running propagator's heartbeat says it is
         paused: its ``t`` is then where it stopped, not where it was up to half a second ago."""
         deadline = time.monotonic() + timeout_s
         while time.monotonic() < deadline:
-            self.beats.poll()
+            self.poll_beats()
             if all(self.beats.last.get(k, {}).get("paused") is True or self.children[k].poll() is not None
                    for k in self.propagators):
                 return
@@ -335,10 +427,12 @@ class Supervisor:
     def lead_schedule(self) -> tuple[float, float]:
         """``(monotonic wall now, sim t)`` for a rate change or a resume: the sim time of the
         propagator furthest on (:meth:`sim_time_now`), the one schedule every process paces to
-        from now on (``Pacer``'s anchor).  At ``rate inf`` each ran as fast as it could, so
-        orbit and attitude drifted apart (hours of sim time in seconds); paced each from its
-        own time, they stayed apart for good (svc probe F5): now those behind catch up."""
-        self.beats.poll()
+        from now on (``Pacer``'s anchor); never ahead of where that propagator is (a schedule
+        ahead of every process made them race to it: session 20 probe A, F1).  At ``rate inf``
+        each ran as fast as it could, so orbit and attitude drifted apart (hours of sim time in
+        seconds); paced each from its own time, they stayed apart for good (svc probe F5): now
+        those behind catch up."""
+        self.poll_beats()
         ts = [self.sim_time_now(k) for k in self.propagators if self.beats.last.get(k, {}).get("t") is not None]
         return time.monotonic(), max(ts, default=0.0)
 
@@ -363,14 +457,18 @@ class Supervisor:
             except ValueError as exc:
                 request.error(str(exc))
                 return False
-            from_inf = math.isinf(self.rate) and not math.isinf(factor) and self.state == "running"
-            self.rate = factor
-            if from_inf:  # they ran apart: hold them where they are, so the schedule starts from the one furthest on
+            # from inf, or from a rate they did not keep (each ran as fast as it could, so they ran
+            # apart and no estimate from their heartbeats is sure), or not yet on the last
+            # schedule: hold them where they are, so the schedule starts from the one furthest on
+            # as it really is (session 20 probe A, F1: `rate 1e6`, then `rate 10`, raced for a minute)
+            hold = self.state == "running" and not math.isinf(factor) and bool(self.runs_off_schedule())
+            if hold:
                 self.command("pause")
                 self.wait_paused(PAUSE_HEARD_S)
-            self.schedule = self.lead_schedule()
+            self.schedule = self.lead_schedule()  # judged at the rate they kept until now
+            self.rate = factor
             self.command("rate", factor=factor, anchor=list(self.schedule))
-            if from_inf:
+            if hold:
                 self.command("resume", anchor=list(self.schedule))
             request.reply(self.status())
         elif verb == "fault" and "plant" in self.propagators:
@@ -383,7 +481,7 @@ class Supervisor:
                 request.error(str(exc).removeprefix("fault: "))
                 return False
             self.command("fault", fault=request.args)
-            self.beats.poll()
+            self.poll_beats()
             heard = self.beats.last.get("plant", {}).get("t")
             self.events.emit("fault_requested", self.sim_time_now("plant"), json.dumps(
                 {"body": f.body, "fault": f.fault, "plant_t_heard": heard if isinstance(heard, (int, float)) else None,
@@ -419,7 +517,7 @@ class Supervisor:
 
     def check_children(self) -> None:
         """Notice dead processes (exit status or lost liveliness token); restart propagators."""
-        self.beats.poll()  # the sim times a failure message names are the latest
+        self.poll_beats()  # the sim times a failure message names are the latest
         now = time.monotonic()
         self.check_output_directory(now)
         for name in (*self.propagators, "logger"):
@@ -685,9 +783,13 @@ class Supervisor:
               + ", ".join(f"{k} step {v}" for k, v in steps.items()), file=sys.stderr, flush=True)
 
     def pace_args(self) -> list[str]:
-        """``--pace-anchor`` for a restarted propagator: the run's schedule, so the new process
-        catches up with it instead of starting a new one behind (none while paused or at
-        rate inf)."""
+        """How a restarted propagator paces: ``--paused`` while serve is paused (it holds
+        before its first step until ``resume``; it used to run on until the pause was sent
+        again, about 3 s of sim time at x10 past where the others stood: session 20 probe A,
+        F11); else ``--pace-anchor``, the run's schedule, so the new process catches
+        up with it instead of starting a new one behind (none at rate inf)."""
+        if self.state == "paused":
+            return ["--paused"]
         if self.schedule is None or math.isinf(self.rate):
             return []
         return ["--pace-anchor", repr(self.schedule[0]), repr(self.schedule[1])]
@@ -1062,11 +1164,15 @@ def main(argv: list[str] | None = None) -> int:
             except (bus.BusError, OSError) as exc:  # the logger could not start: nothing else was started
                 print(f"astrodyn serve: {exc}", file=sys.stderr)
                 return 1
-            print(json.dumps({"serving": scenario.name, "hub": hub, "control": f"astrodyn/{scenario.name}/@control/<verb>",
-                              "verbs": list(sup.verbs),
-                              "out": str(out), "real_time_factor": rate, "roll_size": roll_size,
-                              "roll_interval_s": roll_interval, "foxglove": sup.viewer_url, "control_token": token,
-                              "control_token_file": None if token_file is None else str(token_file)}), flush=True)
+            # strict JSON, as the status reply: a float that is not finite is its word ("inf", as
+            # status says), never the Infinity / NaN jq and JSON.parse refuse (session 20 probe A, F5)
+            print(json.dumps(jsonable({"serving": scenario.name, "hub": hub,
+                                       "control": f"astrodyn/{scenario.name}/@control/<verb>", "verbs": list(sup.verbs),
+                                       "out": str(out), "real_time_factor": rate, "roll_size": roll_size,
+                                       "roll_interval_s": roll_interval, "foxglove": sup.viewer_url,
+                                       "control_token": token,
+                                       "control_token_file": None if token_file is None else str(token_file)})),
+                  flush=True)
             stop_requests: list[bus.ControlRequest] = []
             try:
                 with bus.ControlServer(session, scenario.name, sup.verbs, token=token) as control:
@@ -1094,7 +1200,7 @@ def main(argv: list[str] | None = None) -> int:
     except (StartError, bus.BusError) as exc:  # nothing was started (the hub's session did not open)
         print(f"astrodyn serve: error: {exc}", file=sys.stderr)
         return 1
-    print(json.dumps(summary, default=str), flush=True)
+    print(json.dumps(jsonable(summary), default=str), flush=True)  # strict JSON, as the first line
     if summary.get("plant"):  # as run's end line: applied, refused, late, waiting, controllers' errors
         print(f"astrodyn serve: {closed_loop_line(summary['plant'])}", file=sys.stderr, flush=True)
     if summary["failures"]:
