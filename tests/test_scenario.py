@@ -535,6 +535,9 @@ ERROR_CASES = [
     ("output.path", "http://example.com/x.mcap", 'output.path: expected a file path (resolved relative to the config file), not a URL, got "http://example.com/x.mcap"'),
     ("output.path", "file:///tmp/x.mcap", 'output.path: expected a file path (resolved relative to the config file), not a URL, got "file:///tmp/x.mcap"'),
     ("output.roll_size", "10 kB", 'output.roll_size: expected 1 MiB <= roll_size <= 1 PiB, got "10 kB"'),
+    # probe C (session 20): a body named as the scene's frame was its own parent in the 3D views
+    ("bodies.0.name", "GCRF", "bodies[0].name: expected a body name other than the scene's frame 'GCRF' (a body's "
+                              'frame in the live view and the Foxglove export would be its own parent), got "GCRF"'),
     # b is bit, B is byte: "256 mb" was read as millibits (4 bytes) and "256 Mb" as megabits (32 MB), never what was meant
     ("output.roll_size", "256 mb", 'output.roll_size: expected a size, e.g. "256 MB" (unit mbit counts bits, not bytes: b is '
                                    'bit, B is byte, and unit symbols are case-sensitive; accepted: byte, kB, MB, GB, KiB, MiB, '

@@ -1079,6 +1079,9 @@ def load_dict(data: dict[str, Any], source: str = "<dict>", base_dir: str | Path
         b = _body(ctx, item, f"bodies[{k}]", cb, rate, control_every)
         if b.name in seen:  # at once: a file of 60,000 copies of one body is refused without reading them all
             raise ctx.error(f"bodies[{k}].name", f"a unique body name (also bodies[{seen[b.name]}])", b.name)
+        if b.name == frame:  # the views draw each body as a frame whose parent is the scene's frame
+            raise ctx.error(f"bodies[{k}].name", f"a body name other than the scene's frame {frame!r} (a body's frame "
+                            f"in the live view and the Foxglove export would be its own parent)", b.name)
         seen[b.name] = k
         channels += _channels(b)
         if channels > max_state_channels:
@@ -1099,6 +1102,8 @@ def load_dict(data: dict[str, Any], source: str = "<dict>", base_dir: str | Path
         where = "walker.prefix"
         if b.name in seen:
             raise ctx.error(where, f"a unique body name (also bodies[{seen[b.name]}])", b.name)
+        if b.name == frame:
+            raise ctx.error(where, f"body names other than the scene's frame {frame!r}", b.name)
         seen[b.name] = k
     control = None
     if top.has("control"):
