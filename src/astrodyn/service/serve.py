@@ -916,6 +916,9 @@ class Supervisor:
             summary["file"] = next((p for p in self._parts() if ".partial" in os.path.basename(p)), None)
         if moved is not None:  # its files are where the directory went (the failure says where), not at --out
             summary["file"] = None
+        if isinstance(summary.get("logger"), dict) and "file" in summary["logger"]:
+            # the file the logger wrote, under the name serve gave it: one path for one recording
+            summary["logger"]["file_written"] = summary["logger"].pop("file")
         summary["failures"] = list(self.failures)
         self.outdir.close()
         self.own.close()
