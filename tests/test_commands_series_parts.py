@@ -237,3 +237,26 @@ def test_a_served_series_parts_are_refused_and_merged_they_re_simulate_bit_for_b
     assert len(recorded["astrodyn/detumble/sc/actuators"]) > 20
     for key, payloads in recorded.items():
         assert resimulated[key][:len(payloads)] == payloads, key
+
+
+def test_resume_from_a_later_part_names_it_and_merge(tmp_path):
+    """``run --resume PART`` of a later part of a rolled series said only "found none" (its
+    states start after step 0): it now names the part and the merge to resume from."""
+    from _recordings import one_satellite_scene
+
+    scenario = loads(one_satellite_scene("rp", "10 s", "1 Hz"))
+    base = tmp_path / "rp.mcap"
+    rec = McapRecorder(base, scenario.to_metadata(), epoch_ns=scenario.epoch_unix_ns, first_part=1)
+    with rec:
+        for k in range(4, 8):  # part 1 holds steps 4 .. 7: 0 .. 3 are in part 0
+            rec.write("astrodyn/rp/sat/orbit", messages.orbit_message(float(k), k, "kepler", [7e6, 0, 0],
+                                                                      [0, 7.5e3, 0], 3.986004418e14))
+            rec.write("astrodyn/rp/sat/attitude", messages.attitude_message(float(k), k, "torque_free",
+                                                                            [1, 0, 0, 0], [0.01, 0.2, 0.01]))
+    part = Path(rec.paths[-1])
+    assert part.name == "rp-0001.mcap"
+    with pytest.raises(ScenarioError) as err:
+        resume_plan(part, scenario, tmp_path / "out.mcap", tmp_path)
+    said = str(err.value)
+    assert "found none" in said and "part 1 of a rolled recording" in said, said
+    assert "astrodyn merge" in said and "give --resume the merged file" in said, said

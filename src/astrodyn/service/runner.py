@@ -1249,14 +1249,15 @@ def series_first_file(path: Path, part: int | None) -> str | None:
     return root.removesuffix(tail) + (ext or ".mcap") if root.endswith(tail) else None
 
 
-def merge_advice(path: Path, part: int | None) -> str:
-    """How to re-simulate the whole rolled series of which ``path`` is part ``part`` (None:
-    not known): ``astrodyn merge`` of its parts, then ``--commands`` the merged file."""
+def merge_advice(path: Path, part: int | None, flag: str = "--commands") -> str:
+    """How to re-simulate (or, ``flag`` ``--resume``, continue) the whole rolled series of
+    which ``path`` is part ``part`` (None: not known): ``astrodyn merge`` of its parts, then
+    ``flag`` the merged file."""
     first = series_first_file(path, part)
     files = ("NAME.mcap NAME-0001.mcap ..." if first is None else
              f"{shlex.quote(first[:200])} {shlex.quote(part_path(first, 1)[:200])} ...")
     return (f"merge all the parts (`astrodyn merge --out MERGED.mcap {files}`, every part from the first) and give "
-            f"--commands the merged file")
+            f"{flag} the merged file")
 
 
 def command_recording_notes(info: dict, scenario: Scenario) -> list[str]:
@@ -1316,7 +1317,11 @@ def resume_plan(path: Path, scenario: Scenario, out: Path, work: Path) -> dict:
     topics = [t for kind in kinds for t in state_topics(scenario, kind).values()]
     k = contiguous_steps(run, topics)
     if k == 0:
-        raise ScenarioError(f"--resume {path}: expected at least one complete step (every body's states), found none")
+        part = recorded_part(run.metadata)
+        later = (f"; it is part {part} of a rolled recording (its `recording` metadata record): the steps from 0 "
+                 f"are in the earlier parts; {merge_advice(path, part, '--resume')}") if part else ""
+        raise ScenarioError(f"--resume {path}: expected at least one complete step (every body's states, from step "
+                            f"0), found none{later}")
     if k >= scenario.n_steps:
         raise ScenarioError(f"--resume {path}: the recording already holds all {scenario.n_steps} steps; nothing to resume")
     extra = {kind: propagator_resume_args(run, scenario, kind, k - 1, work) for kind in kinds}
