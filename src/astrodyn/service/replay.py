@@ -70,7 +70,7 @@ from astrodyn.service.viewer import add_foxglove_argument, viewer_command
 from astrodyn.signals import StopFlag, suspended_s
 
 __all__ = ["Replayer", "main", "build_parser", "open_recording", "start_viewer", "play", "LiveView", "REPLAY_VERBS",
-           "check_control_scenario"]
+           "check_control_scenario", "data_scenario_of"]
 
 REPLAY_VERBS = (*bus.CONTROL_VERBS, "seek")
 _BATCH_PROCESS = {"orbit": "orbit", "crosscheck": "orbit", "attitude": "attitude"}
@@ -114,6 +114,19 @@ def scenario_of(stream: McapStream) -> str:
     raise RecordingError(f"{stream.path}: no astrodyn topic and no scenario metadata; give --control-scenario")
 
 
+def data_scenario_of(stream: McapStream, fallback: str) -> str:
+    """The scenario of the recording's data keys (``astrodyn/<scenario>/...``, what the live
+    view subscribes to): its first astrodyn topic's, ``fallback`` when none parses (the
+    metadata's name can differ from the topics', and ``--control-scenario`` changes only the
+    control keys)."""
+    for topic in stream.topics():
+        try:
+            return messages.parse_key(topic)[0]
+        except messages.MessageError:
+            continue
+    return fallback
+
+
 def check_control_scenario(name, path: str, given: bool) -> str:
     """``name`` if it can be the scenario of the control keys, else MessageError naming where
     it came from: ``--control-scenario`` when ``given``, else the recording ``path``'s
@@ -138,8 +151,9 @@ class Replayer:
     """
 
     def __init__(self, session, stream: McapStream, *, rate: float = 1.0, start_t: float | None = None,
-                 end_t: float | None = None, topics=None, batch: bool = False):
+                 end_t: float | None = None, topics=None, batch: bool = False, signer: auth.Signer | None = None):
         self.session = session
+        self.signer = signer  # signs each put for the live view (--foxglove), which drops what it did not sign
         self.stream = stream
         self.rate = parse_rate(rate)
         self.topics = topics
@@ -235,8 +249,7 @@ class Replayer:
     def _flush_batches(self) -> None:
         for key, items in self._pending.items():
             if items:
-                pub = self._publisher(key)
-                pub.put(messages.encode_batch(items))
+                bus.signed_put(self._publisher(key), key, messages.encode_batch(items), self.signer)
         self._pending.clear()
         self._pending_ns = None
 
@@ -253,7 +266,7 @@ class Replayer:
             pub = self._publisher(msg.topic)
             if pub is None:
                 return
-            pub.put(msg.data)
+            bus.signed_put(pub, msg.topic, msg.data, self.signer)
         self.published += 1
         self.last_ns = msg.log_time
 
@@ -540,10 +553,14 @@ def main(argv: list[str] | None = None) -> int:
         except (RecordingError, messages.MessageError, bus.BusError, StartError) as exc:
             print(f"astrodyn replay: error: {exc}", file=sys.stderr)
             return 1
+        # the live view trusts only what this replay signed (a local process can put on its bus):
+        # a secret of this replay, handed to the view the way serve hands the run secret
+        view_secret = None if args.foxglove is None else auth.RunSecret.generate()
         with session:
             try:
                 rep = Replayer(session, stream, rate=rate, start_t=args.start, end_t=args.end,
-                               topics=args.topics, batch=args.batch)
+                               topics=args.topics, batch=args.batch,
+                               signer=None if view_secret is None else auth.Signer(view_secret, "replay"))
             except (ValueError, RecordingError) as exc:
                 print(f"astrodyn replay: error: {exc}", file=sys.stderr)
                 return 2
@@ -563,8 +580,11 @@ def main(argv: list[str] | None = None) -> int:
                             auth.write_private_file(token_dir / "control-token", b"")
                         playback = (token_dir / "control-token", rep.lo, rep.hi)
                     endpoints = listen or args.connect or []
-                    viewer = LiveView(lambda: start_viewer(stream, scenario, port, endpoints, token_dir, playback,
-                                                           zenoh_config_copy))
+                    data_scenario = data_scenario_of(stream, scenario_of(stream))
+                    secret_file = view_secret.save(token_dir, "view.secret")
+                    viewer = LiveView(lambda: start_viewer(stream, data_scenario, port, endpoints, token_dir, playback,
+                                                           zenoh_config_copy, control_scenario=scenario,
+                                                           secret_file=secret_file))
                     viewer_url = f"ws://127.0.0.1:{port}"
                 print(json.dumps({"replaying": stream.path, "scenario": scenario, "listen": listen,
                                   "connect": args.connect, "foxglove": viewer_url,
@@ -587,19 +607,26 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def start_viewer(stream: McapStream, scenario: str, port: int, endpoints: list[str], work: Path,
-                 playback: tuple[Path, int, int] | None = None, zenoh_config: Path | None = None) -> Child:
-    """The live view (``--foxglove``): a child process subscribing to what the replay publishes;
-    ``playback`` = (token file, first ns, last ns) wires Foxglove's playback bar to the replay;
-    ``zenoh_config``: the replay's copy of its ``--zenoh-config`` (TLS, access control), the
-    viewer's too (a restarted viewer loads that copy, not the user's file as it is by then)."""
+                 playback: tuple[Path, int, int] | None = None, zenoh_config: Path | None = None,
+                 control_scenario: str | None = None, secret_file: Path | None = None) -> Child:
+    """The live view (``--foxglove``): a child process subscribing to what the replay publishes
+    on the data keys of ``scenario`` (the recorded one, :func:`data_scenario_of`), its
+    services and playback bar on the control keys of ``control_scenario`` (default
+    ``scenario``); ``playback`` = (token file, first ns, last ns) wires Foxglove's playback
+    bar to the replay; ``zenoh_config``: the replay's copy of its ``--zenoh-config`` (TLS,
+    access control), the viewer's too (a restarted viewer loads that copy, not the user's
+    file as it is by then); ``secret_file``: the replay's secret (0600) the view checks
+    every sample against (:data:`astrodyn.auth.SECRET_ENV`), so it drops what another
+    process put on the replay's bus."""
     meta = work / "scenario.json"
     meta.write_text(json.dumps(stream.metadata.get("scenario", {})))
     bar = [] if playback is None else ["--playback-token-file", str(playback[0]),
                                        "--playback-range", f"{playback[1]},{playback[2]}"]
     return Child("viewer", [*viewer_command(), "--scenario", scenario, "--port", str(port), "--metadata", str(meta),
+                            *(["--control-scenario", control_scenario] if control_scenario else []),
                             "--services", ",".join(REPLAY_VERBS), *bar, *sum((["--connect", e] for e in endpoints), []),
                             *(["--zenoh-config", str(zenoh_config)] if zenoh_config else [])],
-                 work)
+                 work, env=None if secret_file is None else {auth.SECRET_ENV: str(secret_file)})
 
 
 class LiveView:

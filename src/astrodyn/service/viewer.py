@@ -11,7 +11,10 @@ for the newest sample of every state key (one envelope, signed by the logger), s
 carries nothing extra at the simulation's rate (a full-rate subscriber cost
 constellation-1000 13 % of its speed: docs/benchmarks.md).  Under ``replay`` it subscribes,
 and its Zenoh callback keeps only the newest sample of each key (a dictionary store,
-nothing else), so the bus never waits on the viewer.  The viewer
+nothing else), so the bus never waits on the viewer; ``replay`` signs what it puts with a
+secret of its own, handed to the viewer as ``serve`` hands the run secret, so a state
+another process puts on the replay's bus is dropped.  A state of a key earlier than the
+one shown (a replay's seek back) is shown: the view follows its source back.  The viewer
 runs at a lower CPU priority (nice 10), so on a busy machine the simulation goes first;
 its work per second is bounded (transforms, trail points and raw messages per second); every
 ``1 / rate`` s of wall time (30 Hz by default) the viewer takes those samples, checks them
@@ -23,8 +26,10 @@ client cannot take.
 Clients that misbehave (docs/foxglove.md): what foxglove-sdk 0.30 does not bound, the
 viewer does from outside it (:class:`ConnectionGuard`, every second, from the process's own
 sockets): a client that reads nothing for 15 s while data waits for it, a connection
-without a WebSocket handshake after 10 s, one that sends more than 4 MiB a second and the
-newest beyond 16 connections are cut (``--client-stall-timeout``, ``--handshake-timeout``,
+without a WebSocket handshake after 10 s, one that sends more than 4 MiB a second are
+cut, and beyond 16 connections those still in their handshake, then idle ones (sent less
+than 1 kB/s: subscribed to nothing), then the newest (:meth:`ConnectionGuard.cut_order`;
+``--client-stall-timeout``, ``--handshake-timeout``,
 ``--max-clients``, or ``ASTRODYN_VIEWER_STALL_S`` / ``_HANDSHAKE_S`` / ``_MAX_CLIENTS``); a
 server whose accept loop died (out of descriptors) is restarted on the same port; the
 SDK's log lines about clients (one per bad message) are limited to 20 a minute; a client's
@@ -46,7 +51,8 @@ the server also broadcasts that time):
                       frames, at most 2000 points per body and 20,000 in all), each body's
                       axes (x red, y green, z blue).
 ``astrodyn/<scenario>/<body>/orbit`` ... the raw state channels as recorded (JSON, the
-                      message schemas), at most ``--raw-rate`` messages per second in all,
+                      message schemas): the newest state of each key at each view frame,
+                      each state once, at most ``--raw-rate`` messages per second in all,
                       shared round-robin between the channels.
 
 Control from the view (``--services VERBS``, given by ``serve`` and ``replay``): each control
@@ -125,8 +131,17 @@ SCENE_REQUEST_MIN_S = 1.0
 # What the view allows a WebSocket client (:class:`ConnectionGuard`, docs/foxglove.md,
 # "Clients that misbehave"); the first three can be changed with the viewer's options or
 # the environment variables named there.
-#: Most connections at a time: the newest beyond are cut (a live view has a few clients).
+#: Most connections at a time (a live view has a few clients); beyond, connections are cut
+#: in the order of :meth:`ConnectionGuard.cut_order`: those still in their handshake, then the
+#: idle ones, then the newest.
 MAX_CLIENTS = 16
+#: A connection younger than this is not cut as idle: time to subscribe after its handshake, s
+#: (the Foxglove app subscribes within a second).
+NEWCOMER_GRACE_S = 5.0
+#: A connection sent less than this many bytes a second by the view is idle: one subscribed
+#: to nothing gets only the time (about 11 bytes 30 times a second, 330 B/s); one subscribed
+#: to the transforms of even one body gets about 6 kB/s.
+IDLE_BYTES_PER_S = 1024.0
 #: A client that reads nothing for this long while data waits for it is cut, s.
 CLIENT_STALL_S = 15.0
 #: A connection that has not completed its WebSocket handshake after this long is cut, s.
@@ -415,12 +430,21 @@ class LiveScene:
             has_orbit = None if self.orbit_bodies is None else name in self.orbit_bodies
             body = self.bodies[name] = _Body(name, len(self.bodies), has_orbit)
             self.changed = True
+        # The newest state taken for a key is what its source shows now, in either direction:
+        # one earlier than the state shown means the source went back in time (a replay's
+        # seek, from the bus, a Foxglove service or the playback bar), so that body's trail
+        # (or recent attitudes) starts over and the view's time follows it back.
+        went_back = False
         if kind == "orbit":  # plain floats: this runs for every body at every view frame
             r = msg["r"]
             r_km = (r[0] / 1e3, r[1] / 1e3, r[2] / 1e3)
             self.changed |= body.r_km is None
-            if log_time >= body.r_time:
-                body.r_km, body.r_time = r_km, log_time
+            if body.r_km is not None and log_time < body.r_time:
+                went_back = True
+                body.trail = TrailRing(MAX_LINE_POINTS)
+                body.samples = 0
+                self.changed = True  # the scene's trail of that body is redrawn at the next frame
+            body.r_km, body.r_time = r_km, log_time
             body.frame = msg["frame"]
             body.trail.append(r_km)
             body.samples += 1
@@ -429,10 +453,12 @@ class LiveScene:
             q = msg["q"]
             xyzw = (q[1], q[2], q[3], q[0])  # Foxglove order (astrodyn.rotation.quat_to_scalar_last)
             self.changed |= body.xyzw is None
-            if log_time >= body.q_time:
-                body.xyzw, body.q_time = xyzw, log_time
+            if body.xyzw is not None and log_time < body.q_time:
+                went_back = True
+                body.recent_attitudes = RecentAttitudes()
+            body.xyzw, body.q_time = xyzw, log_time
             body.recent_attitudes.put(log_time, xyzw)
-        self.t = max(self.t, t)
+        self.t = t if went_back else max(self.t, t)
         return log_time
 
     def transforms(self) -> dict:
@@ -528,8 +554,9 @@ class _View:
         return ch
 
     def forward(self, dt: float) -> int:
-        """Send pending raw states, at most ``raw_rate * dt`` of them, oldest keys first
-        (round-robin: a key sent goes to the back)."""
+        """Send pending raw states, at most ``raw_rate * dt`` of them, the keys that have
+        waited longest first (round robin: a key sent leaves the queue and goes to the back
+        with its next new state), each state once."""
         n = int(self.raw_budget * dt) or 1
         sent = 0
         while self.pending and sent < n:
@@ -666,12 +693,13 @@ def route_sdk_log(budget: LineBudget) -> logging.Handler:
 
 
 class _Conn:
-    __slots__ = ("first", "acked", "progress", "received", "checked", "peer", "cut")
+    __slots__ = ("first", "acked", "progress", "received", "checked", "peer", "cut", "sent_rate")
 
     def __init__(self, now: float, acked: int, received: int, peer: str):
         self.first = self.progress = self.checked = now
         self.acked, self.received, self.peer = acked, received, peer
         self.cut = False
+        self.sent_rate = 0.0  # bytes a second the client acknowledged over the last check (what the view sent it)
 
 
 def _tcp_counters(sk: socket.socket) -> tuple[int, int, int, int]:
@@ -702,7 +730,8 @@ class ConnectionGuard:
       messages (a 200-body scene: 60 KB transforms, 1.8 MB scenes);
     - a client that sends more than ``max_input_per_s`` bytes a second (the SDK buffers
       up to 64 MiB of one message before refusing it);
-    - the newest connections beyond ``max_clients``.
+    - beyond ``max_clients`` connections, the first of :meth:`cut_order` (in their
+      handshake, then idle, then the newest).
 
     It also watches the listening socket: the SDK ends its accept loop at the first failed
     ``accept`` (e.g. out of file descriptors), after which the port refused every client
@@ -825,9 +854,42 @@ class ConnectionGuard:
         if self.listener is not None and not listener_seen:
             self.listener_lost = (f"the Foxglove server stopped accepting connections on port {self.port} "
                                   f"({len(present)} sockets open, descriptor limit {_nofile_limit()})")
-        over = sorted(live, key=lambda item: (item[2].first, item[1]))[self.max_clients:]
-        for fd, inode, conn in over:
-            self._cut(fd, inode, conn, "too_many", f"more than {self.max_clients} connections")
+        if len(live) > self.max_clients:
+            order = self.cut_order([conn for _, _, conn in live], now)
+            rank = {id(conn): k for k, conn in enumerate(order)}
+            over = sorted(live, key=lambda item: rank[id(item[2])])[:len(live) - self.max_clients]
+            for fd, inode, conn in over:
+                self._cut(fd, inode, conn, "too_many", f"more than {self.max_clients} connections (cut: "
+                                                        f"{self.kind_of(conn, now)})")
+
+    @staticmethod
+    def kind_of(conn: _Conn, now: float) -> str:
+        """Why a connection goes where it goes in :meth:`cut_order`."""
+        if conn.acked == 0:
+            return "in its handshake"
+        if now - conn.first < NEWCOMER_GRACE_S:
+            return "the newest"
+        return "idle" if conn.sent_rate < IDLE_BYTES_PER_S else "the newest"
+
+    @staticmethod
+    def cut_order(conns: list[_Conn], now: float) -> list[_Conn]:
+        """The connections in the order they are cut when more than ``max_clients`` are
+        open, first cut first: those that have not completed their WebSocket handshake
+        (oldest first); those past :data:`NEWCOMER_GRACE_S` the view sent less than
+        :data:`IDLE_BYTES_PER_S` over the last check (subscribed to nothing: oldest
+        first); then all others, newest first.  So connections that only hold a place
+        (half-open, or reading nothing but the time) never keep a newcomer out, and a
+        client that receives the view keeps its place against newcomers (it was the
+        oldest 16 kept, whatever they did: 16 idle connections kept every later client out).
+        A process that opens connections which subscribe and read the view still takes
+        places like any client (docs/foxglove.md)."""
+        def key(conn: _Conn):
+            if conn.acked == 0:
+                return (0, conn.first)
+            if now - conn.first >= NEWCOMER_GRACE_S and conn.sent_rate < IDLE_BYTES_PER_S:
+                return (1, conn.first)
+            return (2, -conn.first)
+        return sorted(conns, key=key)
 
     def _look(self, fd: int, inode: int, now: float):
         """None (not the view's port, or gone), "listener", or (fd, inode, conn) of a live
@@ -857,7 +919,9 @@ class ConnectionGuard:
             return None
         if outq == 0 or acked > conn.acked:
             conn.progress = now
-        rate = (received - conn.received) / max(now - conn.checked, GUARD_PERIOD_S)
+        elapsed = max(now - conn.checked, GUARD_PERIOD_S)
+        rate = (received - conn.received) / elapsed
+        conn.sent_rate = (acked - conn.acked) / elapsed
         conn.acked, conn.received, conn.checked = acked, received, now
         if acked == 0 and now - conn.first >= self.handshake_s:
             self._cut(fd, inode, conn, "no_handshake", f"no WebSocket handshake within {self.handshake_s:g} s")
@@ -947,29 +1011,74 @@ def expendable_under_memory_pressure() -> None:
         pass
 
 
-#: Seconds a playback request that comes before the viewer's bus session is open waits for it.
-SESSION_WAIT_S = 20.0
-
-
 class PlaybackBar:
     """Foxglove's playback bar (play, pause, speed, seek) wired to a replay's control verbs
-    (``replay --foxglove PORT --foxglove-playback``): each PlaybackControlRequest becomes
+    (``replay --foxglove PORT --foxglove-playback``): a PlaybackControlRequest becomes
     ``seek`` (when the bar was dragged), ``rate`` (when the speed changed), then ``resume`` or
     ``pause``, sent with the replay's control token, which this viewer holds for it; the
-    answer is the replay's state after them.  ``time_range``: the recording's span in ns
-    since the Unix epoch; ``epoch_ns`` the scenario epoch (``t`` = (ns - epoch_ns) / 1e9)."""
+    replay's state after them is broadcast to the clients (a PlaybackState with the
+    request's id).  ``time_range``: the recording's span in ns since the Unix epoch;
+    ``epoch_ns`` the scenario epoch (``t`` = (ns - epoch_ns) / 1e9); ``scenario``: the
+    replay's control scenario.
 
-    def __init__(self, scenario: str, token: str, time_range: tuple[int, int], epoch_ns: int):
+    The SDK's callback (:meth:`handle`) never waits: it leaves the request for the bar's own
+    thread and returns.  That thread sends one request's verbs at a time (each a bus round
+    trip of tens of ms); requests that come meanwhile replace each other, so only the newest
+    is sent next and the others, superseded, get no answer of their own (the newest's answer
+    is the state).  A burst of requests from one client (a dragged bar sends a stream of
+    seeks) therefore costs the replay a few round trips and never holds up the view's frames
+    for the other clients (it stopped them for 4.75 s per 100 requests when the callback
+    sent the verbs itself).  A refused request (a speed out of the replay's range) is
+    answered with the replay's state as ``status`` then gives it, or the last state known;
+    the reason goes to stderr through ``log`` (a :class:`LineBudget`)."""
+
+    def __init__(self, scenario: str, token: str, time_range: tuple[int, int], epoch_ns: int,
+                 log: LineBudget | None = None):
         self.scenario, self.token, self.time_range, self.epoch_ns = scenario, token, time_range, epoch_ns
+        self.log = log or LineBudget()
         self.session = None  # set once the bus session is open (open_on)
-        self.opened = threading.Event()
+        self.publish = None  # broadcasts a PlaybackState to every client (open_on)
         self.speed = 1.0
+        self.last_reply: dict = {}  # the replay's newest status reply seen
+        self.superseded = 0  # requests replaced by a newer one before they were sent
+        self.handled = 0
+        self._wake = threading.Condition()
+        self._newest: tuple | None = None  # (play, speed, seek ns or None, request id) not yet sent
 
-    def open_on(self, session) -> None:
-        """The bus session the requests go out on: the WebSocket server starts first, so a
-        request that comes before it waits for it (:data:`SESSION_WAIT_S`), not refused."""
-        self.session = session
-        self.opened.set()
+    def open_on(self, session, publish) -> None:
+        """Start sending requests on the bus ``session``; ``publish(state)`` broadcasts each
+        answer.  The WebSocket server starts first: a request that came before is kept (the
+        newest) and sent now."""
+        self.session, self.publish = session, publish
+        threading.Thread(target=self._run, name="view-playback", daemon=True).start()
+
+    def handle(self, request) -> None:
+        """The SDK's callback for a PlaybackControlRequest: keep it as the newest and return
+        at once (no answer now: the bar's thread broadcasts it)."""
+        from foxglove.websocket import PlaybackCommand
+
+        seek = request.seek_time
+        item = (request.playback_command == PlaybackCommand.Play, float(request.playback_speed),
+                None if seek is None else int(seek), str(request.request_id))
+        with self._wake:
+            if self._newest is not None:
+                self.superseded += 1
+            self._newest = item
+            self._wake.notify()
+        return None
+
+    def _run(self) -> None:
+        while True:
+            with self._wake:
+                while self._newest is None:
+                    self._wake.wait()
+                item, self._newest = self._newest, None
+            try:
+                state = self.apply(*item)
+                self.publish(state)
+            except Exception as exc:  # the bar must never take the view down
+                self.log.say(f"playback request failed: {type(exc).__name__}: {exc}")
+            self.handled += 1
 
     def _send(self, verb: str, args: dict | None = None) -> dict:
         # require_reply: a replay that has ended answers nothing, which is not a success
@@ -978,39 +1087,46 @@ class PlaybackBar:
         reply = next((r for r in replies if isinstance(r, dict)), {})
         if "error" in reply:
             raise ValueError(str(reply["error"]))
+        self.last_reply = reply
         return reply
 
-    def handle(self, request):
-        """The PlaybackState after ``request`` (a foxglove PlaybackControlRequest)."""
-        from foxglove.websocket import PlaybackCommand, PlaybackState, PlaybackStatus
+    def apply(self, play: bool, speed: float, seek_ns: int | None, request_id: str):
+        """Send one request's verbs; the PlaybackState after them (module docstring)."""
+        from foxglove.websocket import PlaybackState, PlaybackStatus
 
-        did_seek = request.seek_time is not None
-        reply: dict = {}
-        try:
-            if not self.opened.wait(SESSION_WAIT_S):
-                raise ValueError(f"the viewer's bus session did not open within {SESSION_WAIT_S:g} s")
-            if did_seek:
-                reply = self._send("seek", {"t": (int(request.seek_time) - self.epoch_ns) / 1e9})
-            speed = float(request.playback_speed)
-            if math.isfinite(speed) and speed > 0 and speed != self.speed:
-                reply = self._send("rate", {"factor": speed})
-                self.speed = speed
-            verb = "resume" if request.playback_command == PlaybackCommand.Play else "pause"
-            reply = self._send(verb)
-        except (ValueError, bus.BusError) as exc:  # the bar shows the state it had; the reason goes to stderr
-            print(f"astrodyn viewer: playback request refused: {exc}", file=sys.stderr, flush=True)
-            did_seek = False
-        state = reply.get("state")
-        status = {"running": PlaybackStatus.Playing, "paused": PlaybackStatus.Paused,
-                  "finished": PlaybackStatus.Ended, "stopped": PlaybackStatus.Ended}.get(state, PlaybackStatus.Paused)
+        steps = [("seek", {"t": (seek_ns - self.epoch_ns) / 1e9})] if seek_ns is not None else []
+        if math.isfinite(speed) and speed > 0 and speed != self.speed:
+            steps.append(("rate", {"factor": speed}))
+        steps.append(("resume" if play else "pause", None))
+        did_seek = refused = False
+        for verb, args in steps:  # each part on its own: a refused speed still plays or pauses
+            try:
+                self._send(verb, args)
+            except (ValueError, bus.BusError) as exc:  # the bar shows the replay's state; the reason goes to stderr
+                self.log.say(f"playback request refused: {exc}")
+                refused = True
+                continue
+            did_seek |= verb == "seek"
+        if refused:  # the state after what went through (the last reply may predate a refused step)
+            try:
+                self._send("status")
+            except (ValueError, bus.BusError):
+                pass  # the last state known
+        reply = self.last_reply
+        status = {"running": PlaybackStatus.Playing, "waiting": PlaybackStatus.Playing, "paused": PlaybackStatus.Paused,
+                  "finished": PlaybackStatus.Ended, "stopped": PlaybackStatus.Ended}.get(reply.get("state"),
+                                                                                         PlaybackStatus.Paused)
+        factor = reply.get("real_time_factor")
+        if isinstance(factor, (int, float)) and math.isfinite(factor) and factor > 0:
+            self.speed = float(factor)
         t = reply.get("t")
         now = self.epoch_ns + int(round(float(t) * 1e9)) if isinstance(t, (int, float)) and math.isfinite(t) \
             else self.time_range[0]
         return PlaybackState(status=status, current_time=max(self.time_range[0], min(self.time_range[1], now)),
-                             playback_speed=self.speed, did_seek=did_seek, request_id=request.request_id)
+                             playback_speed=self.speed, did_seek=did_seek, request_id=request_id)
 
 
-def playback_bar(args, epoch_ns: int) -> PlaybackBar | None:
+def playback_bar(args, epoch_ns: int, log: LineBudget | None = None) -> PlaybackBar | None:
     """The :class:`PlaybackBar` of ``--playback-token-file`` and ``--playback-range``, or None."""
     if args.playback_token_file is None:
         return None
@@ -1021,12 +1137,19 @@ def playback_bar(args, epoch_ns: int) -> PlaybackBar | None:
         raise ValueError(f"--playback-range: expected START_NS,END_NS, got {args.playback_range!r}") from None
     if not 0 <= lo <= hi:
         raise ValueError(f"--playback-range: expected 0 <= START_NS <= END_NS, got {args.playback_range!r}")
-    return PlaybackBar(args.scenario, token, (lo, hi), epoch_ns)
+    return PlaybackBar(control_scenario(args), token, (lo, hi), epoch_ns, log)
+
+
+def control_scenario(args: argparse.Namespace) -> str:
+    """The scenario of the control keys the services and the playback bar use (``--control-scenario``,
+    by default ``--scenario``: a replay under ``--control-scenario`` keeps its recorded data keys)."""
+    return args.control_scenario or args.scenario
 
 
 #: The arguments each control verb takes besides the token (docs/clients.md).
 _CONTROL_ARGS = {
-    "rate": {"factor": {"type": "number", "description": "real-time factor (inf: as fast as possible)"}},
+    "rate": {"factor": {"type": ["number", "string"],
+                        "description": 'real-time factor, or "inf": as fast as possible'}},
     "seek": {"t": {"type": "number", "description": "simulated time to continue from, s since the scenario epoch"}},
 }
 
@@ -1117,7 +1240,7 @@ def main(argv: list[str] | None = None) -> int:
     samples = ViewerSamples(args.scenario, args.from_logger, auth.Verifier(secret) if secret is not None else None)
     scene = LiveScene(epoch_ns, central, orbiting)
     try:
-        playback = playback_bar(args, epoch_ns)
+        playback = playback_bar(args, epoch_ns, budget)
     except (ValueError, OSError) as exc:
         print(f"astrodyn viewer: error: {exc}", file=sys.stderr)
         return 2
@@ -1139,10 +1262,11 @@ def main(argv: list[str] | None = None) -> int:
             subs = [] if args.from_logger else [session.declare_subscriber(key, samples.latest)
                                                 for key in (f"{base}/**", f"{base}/@batch/*")]
             if verbs:
-                view.add_control_services(session, args.scenario, verbs)
+                view.add_control_services(session, control_scenario(args), verbs)
             if playback is not None:
-                playback.open_on(session)
+                playback.open_on(session, lambda state: view.server.broadcast_playback_state(state))
             print(json.dumps({"foxglove": f"ws://{args.host}:{view.port}", "scenario": args.scenario,
+                              "control_scenario": control_scenario(args),
                               "authenticated": samples.verifier is not None}), flush=True)
             failure = run_view_frames(session, 1.0 / args.rate, stop, samples, scene, view, guard)
             for sub in subs:
@@ -1173,7 +1297,9 @@ def _env_default(name: str, fallback: float) -> str:
 def parse_viewer_arguments(argv: list[str] | None) -> argparse.Namespace:
     """The viewer's command line (``--scenario``, ``--port``, ``--rate`` ..., and the bus options)."""
     ap = argparse.ArgumentParser(prog="astrodyn.service.viewer", description=__doc__.splitlines()[0])
-    ap.add_argument("--scenario", required=True, help="scenario name (the keys astrodyn/<scenario>/...)")
+    ap.add_argument("--scenario", required=True, help="scenario name of the data keys (astrodyn/<scenario>/...)")
+    ap.add_argument("--control-scenario", default=None,
+                    help="scenario name of the control keys the services and the playback bar use (default: --scenario)")
     ap.add_argument("--port", type=int, default=8765, help="Foxglove WebSocket port on 127.0.0.1 (0: a free one)")
     ap.add_argument("--host", default="127.0.0.1", help="address to listen on (default loopback only)")
     ap.add_argument("--metadata", default=None, help="scenario metadata JSON (epoch, central body)")
@@ -1211,6 +1337,8 @@ def checked_viewer_arguments(args: argparse.Namespace) -> tuple[int, dict, set[s
     option otherwise: ``--rate`` in (0, 1000], ``--raw-rate`` in (0, 100000], ``--port``
     0..65535, ``--services`` verbs of the run."""
     messages.check_name(args.scenario, "--scenario")
+    if args.control_scenario is not None:
+        messages.check_name(args.control_scenario, "--control-scenario")
     for name in ("rate", "raw_rate"):
         value = getattr(args, name)
         if not (math.isfinite(value) and 0 < value <= 1000 * (100 if name == "raw_rate" else 1)):
@@ -1245,9 +1373,12 @@ class ViewerSamples:
         self.latest = LatestSamples()
         self.latest_key = messages.latest_key(scenario)
         self.rejected = 0
+        self._shown: dict[str, bytes] = {}  # from_logger: key -> the payload taken last (the logger's keys)
 
     def newest(self, session) -> dict[str, tuple[bytes, bytes | None]]:
-        """key -> (payload, attachment) of the samples to show at this view frame."""
+        """key -> (payload, attachment) of the samples to show at this view frame: those
+        new since the last frame (the logger answers every key's newest at each query;
+        one it already answered is not taken again, so each state is sent once)."""
         if not self.from_logger:
             return self.latest.take()
         out: dict[str, tuple[bytes, bytes | None]] = {}
@@ -1266,6 +1397,11 @@ class ViewerSamples:
                 out.update((k, (p, None)) for k, p in messages.decode_batch(payload))
             except messages.MessageError:
                 continue
+        shown = self._shown
+        out = {k: item for k, item in out.items() if shown.get(k) != item[0]}
+        if len(shown) + len(out) > MAX_KEYS_CACHED:  # a logger of more keys than any scene: start over
+            shown.clear()
+        shown.update((k, item[0]) for k, item in out.items())
         self.latest.received += len(out)
         return out
 
@@ -1313,7 +1449,9 @@ def run_view_frames(session, period: float, stop: StopFlag, samples: ViewerSampl
 def take_samples(newest: dict[str, tuple[bytes, bytes | None]], samples: ViewerSamples, scene: LiveScene,
                  view: _View) -> None:
     """The accepted, valid states of ``newest`` into ``scene``, and every state or closed-loop
-    sample into the raw channels waiting to be sent (``view.pending``, newest last)."""
+    sample into the raw channels waiting to be sent (``view.pending``: the newest unsent
+    state of each key, in the order the keys first waited, so :meth:`_View.forward` serves
+    them round robin; a new state of a waiting key replaces its older one in place)."""
     for key, (payload, attachment) in newest.items():
         if not samples.accepted(key, payload, attachment):
             continue
@@ -1325,9 +1463,8 @@ def take_samples(newest: dict[str, tuple[bytes, bytes | None]], samples: ViewerS
             log_time = scene.update(k, p)
             if log_time is None:  # the closed loop's channels: for the Plot panel only
                 log_time = closed_loop_log_time(k, p, scene.epoch_ns)
-            if log_time is not None:
+            if log_time is not None:  # a key already waiting keeps its place in the round robin
                 view.pending[k] = (p, log_time)
-                view.pending.move_to_end(k)
 
 
 def send_view_frame(scene: LiveScene, view: _View, frame_period: float, now: float, next_scene: float) -> float:
