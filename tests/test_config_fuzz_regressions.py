@@ -20,6 +20,7 @@ import pytest
 from _config_text import assert_config_error, edited
 from astrodyn import sweep
 from astrodyn.scenario import ScenarioError, load_dict, loads
+from astrodyn.scenario.fields import flag_quantity
 from astrodyn.service import runner, serve
 
 CONFIGS = Path(__file__).resolve().parent.parent / "configs"
@@ -307,9 +308,9 @@ def test_analyze_bad_body_and_figure_flags_are_clear(tmp_path, capsys, args, err
     ("1.5e6", "2.5", 1_500_000, 2.5),
 ])
 def test_serve_roll_flags_take_the_configs_quantities(size_text, interval_text, size, interval):
-    got_size = serve.flag_quantity("bytes", "bytes")(size_text)
+    got_size = flag_quantity("bytes", "bytes")(size_text)
     assert got_size == size and type(got_size) is int  # the logger's --roll-size is an int
-    assert serve.flag_quantity("time", "seconds")(interval_text) == interval
+    assert flag_quantity("time", "seconds")(interval_text) == interval
 
 
 @pytest.mark.parametrize("argv,says", [

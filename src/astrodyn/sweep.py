@@ -1589,7 +1589,7 @@ def _parser() -> argparse.ArgumentParser:
 def case_memory_argument(text: str) -> int:
     """``--case-memory``: a size (``"4 GiB"``, ``"500 MB"``, units of the config's sizes) or a
     number of bytes, at least 1 byte (argparse's error naming the flag otherwise)."""
-    from astrodyn.service.serve import flag_quantity
+    from astrodyn.scenario.fields import flag_quantity
 
     size = flag_quantity("bytes", "bytes")(text)
     if not (isinstance(size, int) and size >= 1):

@@ -10,6 +10,7 @@ overflows float64 (docs/architecture.md, section 5).
 
 from __future__ import annotations
 
+import argparse
 import contextlib
 import contextvars
 import datetime as _dt
@@ -18,7 +19,7 @@ import functools
 import json
 import math
 import re
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from typing import Any
 
 import numpy as np
@@ -27,7 +28,7 @@ from astrodyn.messages import NAME_PATTERN
 
 __all__ = ["QUAT_TOL", "unit_quaternion", "ScenarioError", "Ctx", "Table", "MISSING", "MAX_STRING", "MAGNITUDE_MAX", "MAGNITUDE_MIN", "QUANTITY_KINDS",
            "jsonable", "show", "short_key", "MAX_SHOWN_DEPTH", "did_you_mean", "units", "KIND_UNITS", "UNIT_WORDS", "unit_text", "unknown_unit",
-           "scaled_unit_number", "parse_quantity_string", "quantity", "quantities_read", "vector", "check",
+           "scaled_unit_number", "parse_quantity_string", "flag_quantity", "quantity", "quantities_read", "vector", "check",
            "field_name", "choice", "boolean", "integer", "string"]
 
 MAX_STRING = 256  #: longest accepted quantity / epoch string
@@ -392,6 +393,26 @@ def _not_bytes(unit: Any) -> str | None:
     if unit.to(units().byte) < 1:
         return f"unit {name} is a fraction of a byte; accepted: {', '.join(KIND_UNITS['bytes'])}"
     return None
+
+
+def flag_quantity(kind: str, plain: str) -> Callable[[str], float]:
+    """An argparse ``type`` for a command-line flag that takes what the config's field of that
+    ``kind`` takes: a quantity string (``"1 h"``, ``"256 MB"``; :func:`parse_quantity_string`)
+    or a plain number of ``plain`` (SI: ``"seconds"``, ``"bytes"``); bytes come out as an int
+    (rounded).  Ranges are the caller's to judge (``serve --roll-size``, ``sweep
+    --case-memory``)."""
+    example = QUANTITY_KINDS[kind][1]
+
+    def parse(text: str) -> float:
+        try:
+            x = float(text)
+        except ValueError:
+            x = parse_quantity_string(text.strip(), kind)
+        if isinstance(x, str):  # the reason it is not one
+            raise argparse.ArgumentTypeError(f"expected {example}, or a number of {plain}; got {text!r} ({x})")
+        return round(x) if kind == "bytes" and math.isfinite(x) else x
+
+    return parse
 
 
 def quantity(ctx: Ctx, value: Any, kind: str, path: str) -> float:

@@ -78,7 +78,7 @@ from astrodyn import auth, bus
 from astrodyn.recording.recover import finished_name
 from astrodyn.recording.writer import standby_path
 from astrodyn.scenario import ScenarioError, load, plan as make_plan
-from astrodyn.scenario.fields import QUANTITY_KINDS, jsonable, parse_quantity_string
+from astrodyn.scenario.fields import flag_quantity, jsonable
 from astrodyn.service.children import (
     DISK_FULL_EXIT,
     MODEL_ENDED_EXIT,
@@ -1030,25 +1030,6 @@ def control_token(out: Path, open_control: bool) -> Iterator[tuple[str | None, P
             st = os.lstat(path)
             if written and (st.st_dev, st.st_ino) == written[0]:  # ours: never another serve's
                 path.unlink()
-
-
-def flag_quantity(kind: str, plain: str) -> Callable[[str], float]:
-    """An argparse ``type`` for a flag that takes what the config's field of that ``kind``
-    takes: a quantity string (``"1 h"``, ``"256 MB"``, units of astrodyn.scenario) or a
-    plain number of ``plain`` (SI: ``"seconds"``, ``"bytes"``); bytes come out as an int
-    (rounded), ranges are judged by :func:`check_serve_flags`."""
-    example = QUANTITY_KINDS[kind][1]
-
-    def parse(text: str) -> float:
-        try:
-            x = float(text)
-        except ValueError:
-            x = parse_quantity_string(text.strip(), kind)
-        if isinstance(x, str):  # the reason it is not one
-            raise argparse.ArgumentTypeError(f"expected {example}, or a number of {plain}; got {text!r} ({x})")
-        return round(x) if kind == "bytes" and math.isfinite(x) else x
-
-    return parse
 
 
 def check_serve_flags(args: argparse.Namespace) -> bus.ZenohConfigText | None:
