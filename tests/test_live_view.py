@@ -373,9 +373,9 @@ def test_replay_playback_bar_drives_the_replay(tmp_path):
             status = bus.send_control(s, "pb", "status", token=hello["control_token"])[0]
     finally:
         stop_process(replay)
-    log = replay.stderr.read()[-3000:]
+    # (no check of the replay's stderr for "refused": the view logs to its own file; that every request was
+    # taken is what the three states below say)
     assert "playbackControl" in got["server"]["capabilities"]
-    assert "refused" not in log, log
     paused, seeked, playing = got["states"]
     assert paused[0] == 1 and paused[4] == "req-0"
     assert seeked[0] == 1 and seeked[3] == 1 and seeked[2] == pytest.approx(4.0)
