@@ -453,3 +453,22 @@ def test_an_interrupted_run_counts_as_complete_only_when_recorded_to_its_end(com
 
     log = {"complete": complete, "stopped_early": stopped_early, "ended": ended}
     assert recorded_to_the_end(log) is to_the_end
+
+
+def test_a_replays_live_view_given_up_does_not_speak_of_a_recording(capsys):
+    """Probe C (session 20, F8): replay's view, dead 5 times (its port taken by another
+    replay), was given up with serve's words "the recording so far is kept"."""
+    from types import SimpleNamespace
+
+    from astrodyn.service.replay import LiveView
+
+    def dead_view():
+        return SimpleNamespace(pid=4242, poll=lambda: 1, how=lambda rc: f"exited with status {rc}",
+                               last_words=lambda n: "viewer: port 8765 is in use", close=lambda: None)
+
+    view = LiveView(dead_view)
+    for k in range(6):
+        view.check(now=1000.0 + k)
+    err = capsys.readouterr().err
+    assert view.child is None and "the replay goes on without it" in err, err
+    assert "recording" not in err, err

@@ -659,7 +659,7 @@ class LiveView:
             print(f"astrodyn replay: {why}; restarted it (pid {self.child.pid})", file=sys.stderr, flush=True)
         else:
             self.child = None
-            print(f"astrodyn replay: warning: {why}; {self.budget.refusal()}; the replay goes on without it",
+            print(f"astrodyn replay: warning: {why}; {self.budget.refusal(recording=False)}; the replay goes on without it",
                   file=sys.stderr, flush=True)
 
     def close(self) -> None:

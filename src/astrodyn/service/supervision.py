@@ -319,9 +319,11 @@ class RestartBudget:
         self.deaths = [t for t in self.deaths if now - t < self.window_s] + [now]
         return len(self.deaths) < self.limit
 
-    def refusal(self) -> str:
-        return (f"process {self.name} died {len(self.deaths)} times within {self.window_s:g} s; not restarted again "
-                f"(the recording so far is kept)")
+    def refusal(self, recording: bool = True) -> str:
+        """Why it is not restarted; ``recording``: the process is one of a run that records
+        (not ``replay``'s live view), so the message says the recording so far is kept."""
+        return (f"process {self.name} died {len(self.deaths)} times within {self.window_s:g} s; not restarted again"
+                + (" (the recording so far is kept)" if recording else ""))
 
 
 @dataclass
