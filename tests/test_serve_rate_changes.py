@@ -37,7 +37,7 @@ CONFIG = f"""\
 [scenario]
 name = "{SCENARIO}"
 epoch = "2026-03-20T12:00:00 TDB"
-duration = "600 s"
+duration = "100000 s"
 rate = "{OUTPUT_HZ:g} Hz"
 real_time_factor = 10.0
 [[bodies]]
@@ -100,8 +100,9 @@ def _reject_constant(name: str):
 
 def test_serve_from_rate_inf_then_1e6_then_10_prints_strict_json_and_goes_on_at_x10_with_orbit_and_attitude_together(
         tmp_path):
-    """One serve for F5 and F1 (CI time): started at ``--rate inf``, its first and last
-    lines are strict JSON; ``rate 1e6``, then ``rate 10``: x10 from then on."""
+    """One serve for F5, F1 and D1 (CI time): started at ``--rate inf``, its first and last
+    lines are strict JSON; pause, resume and at once ``rate 10``: together; ``rate 1e6``,
+    then ``rate 10``: x10 from then on."""
     rate = 10.0
     serve, first = _start_serve(tmp_path, "--rate", "inf")
     try:
@@ -111,6 +112,16 @@ def test_serve_from_rate_inf_then_1e6_then_10_prints_strict_json_and_goes_on_at_
         with bus.open_session(connect=[hello["hub"]]) as s:
             assert _status(s, token)["real_time_factor"] == "inf"
             _wait("the propagators never ran", 60, lambda: all((t or 0) > 1.0 for t in _times(s, token).values()))
+            together = rate * (bus.HEARTBEAT_PERIOD_S + DELIVERY_S) + 1.0 / OUTPUT_HZ
+            # probe D, D1: a rate change within half a second of a resume (the heartbeats still
+            # say paused) anchored to those stale times and left the two on two schedules
+            bus.send_control(s, SCENARIO, "pause", token=token, timeout_s=10, require_reply=True)
+            time.sleep(2 * bus.HEARTBEAT_PERIOD_S)  # their heartbeats say paused
+            bus.send_control(s, SCENARIO, "resume", token=token, timeout_s=10, require_reply=True)  # at inf again
+            time.sleep(0.3)  # within a heartbeat period: the last heartbeats still say paused
+            bus.send_control(s, SCENARIO, "rate", {"factor": rate}, token=token, timeout_s=10, require_reply=True)
+            _wait("orbit and attitude did not come together after resume, rate 10", 30,
+                  lambda: abs((t := _times(s, token))["orbit"] - t["attitude"]) <= together)
             bus.send_control(s, SCENARIO, "rate", {"factor": 1e6}, token=token, timeout_s=10, require_reply=True)
             # more than a heartbeat period: each propagator has beaten at 1e6 (what the old
             # estimate advanced by its age times 1e6)
@@ -119,7 +130,6 @@ def test_serve_from_rate_inf_then_1e6_then_10_prints_strict_json_and_goes_on_at_
             wall0, t0 = time.monotonic(), _times(s, token)
             # the one behind (1e6 drove them apart) catches up as fast as it can, then stays with
             # the other: the two agree to what the age of two heartbeats allows
-            together = rate * (bus.HEARTBEAT_PERIOD_S + DELIVERY_S) + 1.0 / OUTPUT_HZ
             _wait("orbit and attitude did not come together", 30,
                   lambda: abs((t := _times(s, token))["orbit"] - t["attitude"]) <= together)
             time.sleep(max(0.0, wall0 + 3.0 - time.monotonic()))

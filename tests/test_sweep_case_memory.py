@@ -13,6 +13,7 @@ machine's memory is replaced by a small number.
 
 from __future__ import annotations
 
+import argparse
 import csv
 import math
 import os
@@ -221,3 +222,12 @@ def test_units_without_a_number_still_work(tiny, vary, read, expected):
     spec = make_spec(tiny, [vary])
     got = [read(load_dict(spec.case_config(k)[0], source="x", base_dir=str(tiny.parent))) for k in range(2)]
     np.testing.assert_allclose(got, expected, rtol=1e-14)
+
+
+@pytest.mark.parametrize("text", ["0", "-1 GB", "1e30 B", "2 mb", "4 kg"])
+def test_a_case_memory_that_is_no_budget_is_refused_naming_the_flag(text):
+    """``--case-memory "1e30 B"`` was taken and turned the guard off (probe D, D6); a size in
+    bits, of another kind or below 1 byte is refused too."""
+    with pytest.raises(argparse.ArgumentTypeError):
+        sweep.case_memory_argument(text)
+    assert sweep.case_memory_argument("4 GiB") == 4 * 2**30

@@ -1592,9 +1592,15 @@ def case_memory_argument(text: str) -> int:
     from astrodyn.scenario.fields import flag_quantity
 
     size = flag_quantity("bytes", "bytes")(text)
-    if not (isinstance(size, int) and size >= 1):
-        raise argparse.ArgumentTypeError(f'expected a size of at least 1 byte, e.g. "4 GiB", got {text!r}')
+    if not (isinstance(size, int) and 1 <= size <= MAX_CASE_MEMORY):  # 1e30 B would turn the guard off
+        raise argparse.ArgumentTypeError(f'expected a size of 1 byte .. {MAX_CASE_MEMORY} bytes (1 PiB), e.g. "4 GiB", '
+                                         f"got {text!r}")
     return size
+
+
+#: Largest ``--case-memory``: more than any machine or Dask worker has (a larger value would
+#: turn the memory guard off without saying so).
+MAX_CASE_MEMORY = 2**50
 
 
 def check_chunk(chunk: Any) -> None:

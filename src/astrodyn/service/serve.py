@@ -377,15 +377,20 @@ class Supervisor:
     def runs_off_schedule(self) -> list[str]:
         """The running propagators whose last heartbeat shows them publishing but not on
         serve's schedule (:meth:`keeps_schedule`): where they are now is known only once they
-        stand still.  One paused, waiting, preparing, done or not heard yet is not among them:
-        it is where its heartbeat says."""
+        stand still.  One waiting, preparing, done or not heard yet is not among them: it is
+        where its heartbeat says; nor one paused while serve is paused.  One whose heartbeat
+        says paused while serve runs is: that heartbeat predates a ``resume`` (a rate change
+        within half a second of a resume anchored to such stale times and left orbit and
+        attitude on two schedules, hundreds of sim seconds apart: session 20 probe D, D1)."""
         self.poll_beats()
         off = []
         for k in self.propagators:
             hb = self.beats.last.get(k)
             if self.children[k].poll() is not None or not hb or hb.get("t") is None:
                 continue
-            if (hb.get("paused") is False and not hb.get("waiting") and not hb.get("preparing")
+            if hb.get("paused") is True and self.state == "running":
+                off.append(k)
+            elif (hb.get("paused") is False and not hb.get("waiting") and not hb.get("preparing")
                     and not hb.get("done") and not self.keeps_schedule(hb)):
                 off.append(k)
         return off
@@ -413,14 +418,21 @@ class Supervisor:
         pace = min(float(rate), self.measured_pace(name))
         return float(t) + min(max(0.0, age_s or 0.0), bus.HEARTBEAT_PERIOD_S) * pace
 
-    def wait_paused(self, timeout_s: float) -> None:
+    def wait_paused(self, timeout_s: float, since_ns: int | None = None) -> None:
         """Wait (at most ``timeout_s``) until every running propagator's heartbeat says it is
-        paused: its ``t`` is then where it stopped, not where it was up to half a second ago."""
+        paused: its ``t`` is then where it stopped, not where it was up to half a second ago.
+        ``since_ns`` (``time.time_ns()`` of the pause command): only a heartbeat sent after it
+        counts (one that said "paused" before a resume is stale: session 20 probe D, D1)."""
         deadline = time.monotonic() + timeout_s
+
+        def paused(k: str) -> bool:
+            hb = self.beats.last.get(k, {})
+            sent = hb.get("time_ns")
+            return hb.get("paused") is True and (since_ns is None or (isinstance(sent, int) and sent >= since_ns))
+
         while time.monotonic() < deadline:
             self.poll_beats()
-            if all(self.beats.last.get(k, {}).get("paused") is True or self.children[k].poll() is not None
-                   for k in self.propagators):
+            if all(paused(k) or self.children[k].poll() is not None for k in self.propagators):
                 return
             time.sleep(0.02)
 
@@ -463,8 +475,9 @@ class Supervisor:
             # as it really is (session 20 probe A, F1: `rate 1e6`, then `rate 10`, raced for a minute)
             hold = self.state == "running" and not math.isinf(factor) and bool(self.runs_off_schedule())
             if hold:
+                paused_at_ns = time.time_ns()
                 self.command("pause")
-                self.wait_paused(PAUSE_HEARD_S)
+                self.wait_paused(PAUSE_HEARD_S, since_ns=paused_at_ns)
             self.schedule = self.lead_schedule()  # judged at the rate they kept until now
             self.rate = factor
             self.command("rate", factor=factor, anchor=list(self.schedule))
@@ -916,9 +929,10 @@ class Supervisor:
             summary["file"] = next((p for p in self._parts() if ".partial" in os.path.basename(p)), None)
         if moved is not None:  # its files are where the directory went (the failure says where), not at --out
             summary["file"] = None
-        if isinstance(summary.get("logger"), dict) and "file" in summary["logger"]:
-            # the file the logger wrote, under the name serve gave it: one path for one recording
-            summary["logger"]["file_written"] = summary["logger"].pop("file")
+        if isinstance(summary.get("logger"), dict):
+            # one path for one recording: the top-level "file" (the logger's own names the file
+            # under its partial name, which is gone once serve has named it)
+            summary["logger"].pop("file", None)
         summary["failures"] = list(self.failures)
         self.outdir.close()
         self.own.close()
