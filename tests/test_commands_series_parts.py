@@ -62,7 +62,7 @@ def _scenario(duration: str = "3 s", faults: str = ""):
     return loads(_config_text(duration, faults))
 
 
-def _write_part(base: Path, part: int, steps: range, *, end: bool, scenario=None, commands: bool = True,
+def _write_part(base: Path, part: int, steps: range | list[int], *, end: bool, scenario=None, commands: bool = True,
                 applied: bool = True, extra_scenario=None) -> Path:
     """Part ``part`` of the recording ``base`` (``base`` itself for 0, ``NAME-000k.mcap``
     after), by the recorder a logger uses: at each output step k of ``steps`` the command
@@ -260,3 +260,15 @@ def test_resume_from_a_later_part_names_it_and_merge(tmp_path):
     said = str(err.value)
     assert "found none" in said and "part 1 of a rolled recording" in said, said
     assert "astrodyn merge" in said and "give --resume the merged file" in said, said
+
+
+def test_a_recording_with_steps_cut_out_of_its_middle_is_refused_naming_them(tmp_path):
+    """Probe D (D2): a merged recording with steps 3000-3499 removed re-simulated them without
+    their commands, exit 0; the plant records an actuator state at every step, so a hole in
+    them is named."""
+    scenario = _scenario()
+    holed = _write_part(tmp_path / "holed.mcap", 0, [*range(0, 10), *range(15, 31)], end=True)
+    err = _refusal(scenario, holed, tmp_path)
+    assert "actuator states of steps 10 .. 14 are missing" in err, err
+    whole = _write_part(tmp_path / "whole.mcap", 0, range(0, 31), end=True)
+    assert check_command_recording(scenario, whole, tmp_path / "out.mcap")["applied"] == 31

@@ -377,6 +377,11 @@ def read_command_recording(path: str | Path, scenario, keep: bool = True) -> Com
     applied: list[tuple[int, str, list[str], str, int]] = []
     last_step = -1
     first_state_step = -1  # the first output step with an actuator state
+    # the plant records every actuated body's actuator state at every output step: per
+    # channel, the last seq read and the first hole (a file with steps cut out of its middle
+    # would re-simulate them without their commands: session 20 probe D, D2)
+    previous: dict[str, int] = {}
+    hole: tuple[str, int, int, int] | None = None
     prefix = f"{messages.PREFIX}/{name}/"
     with open_stream(path) as s:
         for m in s.messages():
@@ -402,6 +407,11 @@ def read_command_recording(path: str | Path, scenario, keep: bool = True) -> Com
             else:
                 last_step = max(last_step, msg["seq"])
                 first_state_step = msg["seq"] if first_state_step < 0 else min(first_state_step, msg["seq"])
+                before = previous.get(m.topic)
+                if before is not None and msg["seq"] > before + 1 and hole is None:
+                    hole = (m.topic, before + 1, msg["seq"] - 1, m.log_time)
+                if before is None or msg["seq"] > before:
+                    previous[m.topic] = msg["seq"]
                 if msg.get("applied"):
                     applied.append((msg["seq"], body, msg["applied"], m.topic, m.log_time))
         damage = "" if not s.truncated and not s.corrupt_chunks else s.report()
@@ -429,6 +439,11 @@ def read_command_recording(path: str | Path, scenario, keep: bool = True) -> Com
             after_end += k >= n_steps
             if keep:
                 out.setdefault(k, []).append((body, cmd[0]))
+    if hole is not None:  # (after the checks above: what they name is the more specific error)
+        topic, a, b, log_time = hole
+        raise ValueError(f"{topic} at log time {log_time} ns: the actuator states of steps {a} .. {b} are missing (the "
+                         f"plant records one at every step): those steps would be re-simulated without their "
+                         f"commands")
     return CommandRecording(out, count, last_step, first_state_step, after_end, damage)
 
 
