@@ -135,3 +135,13 @@ def test_the_wrong_kind_is_named(text, kind, got):
 def test_an_unknown_word_among_known_ones_is_still_an_unknown_unit():
     reason = parse_quantity_string("1 per minutes per secx", "frequency")
     assert reason.startswith('unknown unit "secx"'), reason
+
+
+@pytest.mark.parametrize("text, kind, number", [("10 1/60 s", "frequency", "60"), ("5 m / 2 s", "speed", "2")])
+def test_a_number_inside_the_unit_is_named_not_called_an_unknown_unit(text, kind, number):
+    """Probe D (D7): ``"10 1/60 s"`` was refused as 'unknown unit "1/60 s"', though every word
+    of it is a unit: the number inside is what astropy's grammar does not take."""
+    from astrodyn.scenario.fields import parse_quantity_string
+
+    why = parse_quantity_string(text, kind)
+    assert isinstance(why, str) and why.startswith(f'a number inside the unit ("{number}"'), why

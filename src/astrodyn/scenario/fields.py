@@ -301,6 +301,9 @@ def unknown_unit(text: str, kind: str) -> str:
 _NUMBER_FIRST = re.compile(r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?")
 _ONE_OVER = re.compile(r"1\s*/")
 _DIGIT_GROUP = re.compile(r"\d+(?:\.\d*)?")
+#: A number standing alone inside a unit (``60`` of ``1/60 s``), not an exponent (``m3``,
+#: ``s-1``, ``s^2``, ``s**2``).
+_NUMBER_IN_UNIT = re.compile(r"(?<![A-Za-z0-9.\-^*])\d+(?:\.\d+)?(?![A-Za-z0-9.])")
 
 
 def scaled_unit_number(unit: str) -> str | None:
@@ -369,6 +372,10 @@ def parse_quantity_string(text: str, kind: str) -> float | str:
         divided = _divided_unit(rest)
         if divided is not None and not divided.is_equivalent(unit):  # every word known: the wrong kind
             return f"a quantity in {_si_dimension(divided)}"
+        inside = [m for m in _NUMBER_IN_UNIT.finditer(rest) if not _ONE_OVER.match(rest, m.start())]
+        if inside:  # "10 1/60 s", "5 m / 2 s": a scale inside the unit, which astropy's grammar does not take
+            return (f'a number inside the unit ("{inside[0].group()}" in "{rest.strip()}"); write the value as one '
+                    f'number, then the unit alone')
         return unknown_unit(text, kind)
     try:
         with np.errstate(over="ignore", invalid="ignore"):  # an overflow is reported as "not finite" by the caller
