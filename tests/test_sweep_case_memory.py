@@ -120,16 +120,21 @@ def test_an_oversized_case_fails_alone_and_the_others_complete(tiny, tmp_path, c
         assert (float(ok[key]) == value) if isinstance(value, float) else (ok[key] == str(value)), key
 
 
+def _traced_peak(call):
+    """``(call(), peak bytes tracemalloc saw while it ran)``."""
+    tracemalloc.start()
+    try:
+        result = call()
+        return result, tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+
+
 def test_the_oversized_case_is_refused_before_it_allocates(tiny):
     spec = make_spec(tiny, [GRID])
     spec.case_memory = 2**20
     assert run_case(0, spec)["status"] == "ok"  # warm up: numba kernels, astropy units
-    tracemalloc.start()
-    try:
-        row = run_case(1, spec)
-        peak = tracemalloc.get_traced_memory()[1]
-    finally:
-        tracemalloc.stop()
+    row, peak = _traced_peak(lambda: run_case(1, spec))
     assert row["status"] == "failed" and "needs about" in row["error"], row
     assert "traceback" not in row
     assert peak < 2**20, peak  # far below the 10.4 MB the run's arrays would take
@@ -182,12 +187,7 @@ model = "j2"
     short = make_spec(config, ["scenario.duration=10 s"], n=1)
     short.case_memory = 2**40
     assert run_case(0, short)["status"] == "ok"  # warm up
-    tracemalloc.start()
-    try:
-        row = run_case(0, spec)
-        peak = tracemalloc.get_traced_memory()[1]
-    finally:
-        tracemalloc.stop()
+    row, peak = _traced_peak(lambda: run_case(0, spec))
     assert row["status"] == "ok", row
     scenario = load_dict(spec.case_config(0)[0], source="x", base_dir=str(tmp_path))
     need = sweep.case_memory_need(scenario)
