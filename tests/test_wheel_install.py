@@ -1,6 +1,7 @@
 """A plain (non-editable) install runs every command: the wheel in a fresh venv.
 
-The wheel is built from a copy of the sources (pyproject.toml, README.md, src/) and
+The wheel is built from a copy of the sources (pyproject.toml, setup.py, README.md, src/;
+setup.py compiles the one C module, ``astrodyn.messages.floatlayout``) and
 installed with ``pip install --no-deps`` into a new virtual environment, whose only other
 path is the test venv's site-packages for the dependencies (a ``.pth`` line: that folder's
 own ``.pth`` files, the editable install's among them, are not processed, so the package
@@ -38,9 +39,9 @@ def wheel_venv(tmp_path_factory) -> Path:
     tmp = tmp_path_factory.mktemp("wheel")
     src = tmp / "src-copy"
     src.mkdir()
-    for name in ("pyproject.toml", "README.md"):
+    for name in ("pyproject.toml", "setup.py", "README.md"):
         shutil.copy2(ROOT / name, src / name)
-    shutil.copytree(ROOT / "src", src / "src", ignore=shutil.ignore_patterns("__pycache__", "*.egg-info", "*.nbi", "*.nbc"))
+    shutil.copytree(ROOT / "src", src / "src", ignore=shutil.ignore_patterns("__pycache__", "*.egg-info", "*.nbi", "*.nbc", "*.so"))
     build = subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "--no-build-isolation", "-q",
                             "-w", str(tmp / "dist"), str(src)], capture_output=True, text=True, timeout=300)
     assert build.returncode == 0, build.stderr[-3000:]
@@ -61,10 +62,11 @@ def _env() -> dict:
     return {**os.environ, "NUMBA_DISABLE_JIT": "1"}
 
 
-def test_the_installed_package_is_the_wheel_not_the_source_tree(wheel_venv, tmp_path):
-    out = subprocess.run([str(wheel_venv / "bin" / "python"), "-c", "import astrodyn; print(astrodyn.__file__)"],
-                         capture_output=True, text=True, cwd=tmp_path, check=True).stdout.strip()
-    assert out.startswith(str(wheel_venv)) and not out.startswith(str(ROOT))
+def test_the_installed_package_and_its_compiled_module_are_the_wheels(wheel_venv, tmp_path):
+    code = "import astrodyn, astrodyn.messages.floatlayout as c; print(astrodyn.__file__); print(c.__file__)"
+    out = subprocess.run([str(wheel_venv / "bin" / "python"), "-c", code],
+                         capture_output=True, text=True, cwd=tmp_path, check=True).stdout.split()
+    assert all(path.startswith(str(wheel_venv)) and not path.startswith(str(ROOT)) for path in out)
 
 
 def test_run_from_the_wheel(wheel_venv, tmp_path):

@@ -29,7 +29,7 @@ import numpy as np
 from astrodyn import messages as m
 from astrodyn.bench import best_seconds_per_call, call_in_tree, cpu_model
 from astrodyn.bench.flags import int_in, source_tree
-from astrodyn.messages import shortest
+from astrodyn.messages import codec, shortest
 
 MU_EARTH = 3.986004418e14
 
@@ -156,7 +156,8 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
 
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
-    print(f"# encode benchmark on {cpu_model()}, load average {os.getloadavg()[0]:.1f} (best of {args.repeat})")
+    print(f"# encode benchmark on {cpu_model()}, load average {os.getloadavg()[0]:.1f} (best of {args.repeat}); "
+          f"float layout pass {'compiled' if codec.LAYOUT_COMPILED else 'NOT compiled (Python path)'}")
     print("\n| values | compiled ns/float | repr ns/float | ratio |\n|---|---|---|---|")
     for name, compiled, python in float_rows(args.repeat):
         print(f"| {name} | {compiled:.1f} | {python:.1f} | {python / compiled:.1f}x |")
