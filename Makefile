@@ -6,7 +6,7 @@ STAMP  := $(VENV)/.installed-stamp
 
 .PHONY: install test test-all demo bench clean
 
-$(STAMP): pyproject.toml
+$(STAMP): pyproject.toml setup.py src/astrodyn/messages/floatlayout.c
 	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install -q --upgrade pip
 	$(PY) -m pip install -q -e '.[test,plot]'
