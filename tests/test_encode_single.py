@@ -130,6 +130,40 @@ def test_state_messages_equal_the_compiled_batch_payloads_over_hard_floats():
             assert m.encode(m.attitude_message(t, 3, "torque_free", q[i], w[i]), "attitude") == attitude[i]
 
 
+def test_a_few_bodies_encoded_one_by_one_give_the_compiled_pass_bytes_and_errors():
+    """Fewer than FEW_BODIES bodies go through the builder and encode; more through the
+    compiled pass.  The first k < FEW_BODIES rows give the first k payloads of a large
+    batch, over hard floats; a bad row gives the compiled pass's error."""
+    x = hard_floats(3000, 5)
+    x = x[np.isfinite(x)]
+    x = x[: x.size // 7 * 7].reshape(-1, 7)
+    rng = np.random.default_rng(6)
+    q = rng.normal(size=(x.shape[0], 4))
+    q /= np.linalg.norm(q, axis=1)[:, None]
+    seqs = rng.integers(0, 2**53, size=x.shape[0])
+    orbit = m.encode_orbit_batch(2.5e-05, seqs, "kepler", x[:, :3], x[:, 3:6], 3.986004418e14)
+    attitude = m.encode_attitude_batch(1e16, 7, "torque_free", q, x[:, 4:7])
+    assert x.shape[0] > m.FEW_BODIES
+    for start in range(0, x.shape[0] - m.FEW_BODIES, m.FEW_BODIES):
+        for k in range(1, m.FEW_BODIES):
+            rows = slice(start, start + k)
+            assert m.encode_orbit_batch(2.5e-05, seqs[rows], "kepler", x[rows, :3], x[rows, 3:6],
+                                        3.986004418e14) == orbit[rows]
+            assert m.encode_attitude_batch(1e16, 7, "torque_free", q[rows], x[rows, 4:7].tolist()) == attitude[rows]
+    bad_q = np.array([[1.0, 0.0, 0.0, 0.0]] * m.FEW_BODIES)
+    bad_q[1, 0] = 1.1
+    errors = []
+    for n in (2, m.FEW_BODIES):
+        with pytest.raises(m.MessageError) as exc:
+            m.encode_attitude_batch(1.0, 1, "torque_free", bad_q[:n], np.zeros((n, 3)))
+        errors.append(str(exc.value))
+    assert errors[0] == errors[1] and "attitude.q[1]" in errors[0]
+    with pytest.raises(m.MessageError, match="same N"):
+        m.encode_orbit_batch(1.0, 1, "kepler", np.ones((2, 3)), np.ones((3, 3)), 1.0)
+    with pytest.raises(m.MessageError, match="orbit.model"):
+        m.encode_orbit_batch(1.0, 1, "nope", np.ones((1, 3)), np.ones((1, 3)), 1.0)
+
+
 @pytest.mark.parametrize("where", ["t", "r", "v", "mu", "q", "w"])
 @pytest.mark.parametrize("bad", [float("nan"), float("inf"), float("-inf")])
 def test_nan_and_infinity_are_refused_with_the_same_text(where, bad):

@@ -306,15 +306,18 @@ def test_encode_stamped_is_messages_encode_byte_for_byte():
     t = 12.300000000000002
     seqs = list(range(len(values)))
     extra = [{"applied": ["pd#3"]}, {"clipped": [0, 2], "applied": ["a#1", "b.c-d_e#2"]}, {}, {"applied": ['q"x#1']}] * 11
-    for rest in (None, extra[:len(values)]):
-        got = encode_stamped(t, seqs, {"w": values, "speeds": values[:, :2]}, rest)
-        for i, p in enumerate(got):
-            msg = {"t": t, "seq": seqs[i], "w": values[i], "speeds": values[i, :2], **(rest[i] if rest else {})}
-            assert p == messages.encode(msg), (p, messages.encode(msg))
+    for n in (1, 2, 3, len(values)):  # fewer than FEW one by one, the rest in one compiled pass
+        for rest in (None, extra[:n]):
+            got = encode_stamped(t, seqs[:n], {"w": values[:n], "speeds": values[:n, :2]}, rest)
+            assert len(got) == n
+            for i, p in enumerate(got):
+                msg = {"t": t, "seq": seqs[i], "w": values[i], "speeds": values[i, :2], **(rest[i] if rest else {})}
+                assert p == messages.encode(msg), (p, messages.encode(msg))
     bad = values.copy()
-    bad[3, 1] = np.nan
-    with pytest.raises(messages.MessageError, match="w"):
-        encode_stamped(t, 0, {"w": bad})
+    bad[1, 1] = np.nan
+    for n in (2, len(values)):
+        with pytest.raises(messages.MessageError, match="w"):
+            encode_stamped(t, 0, {"w": bad[:n]})
 
 
 def test_encode_commands_is_messages_encode_byte_for_byte():

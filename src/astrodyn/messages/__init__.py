@@ -96,6 +96,7 @@ from __future__ import annotations
 
 from astrodyn.messages.batch import (
     BATCH_MAGIC,
+    FEW_BODIES,
     BatchKeys,
     batch_envelope,
     decode_batch,
@@ -266,6 +267,7 @@ __all__ = [
     "status_message",
     "encode_orbit_batch",
     "encode_attitude_batch",
+    "FEW_BODIES",
     "BatchKeys",
     "frame_orbit_batch",
     "frame_attitude_batch",

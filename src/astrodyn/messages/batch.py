@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 
-from astrodyn.messages.codec import checked_float
+from astrodyn.messages.codec import attitude_message, checked_float, encode, orbit_message
 from astrodyn.messages.errors import MessageError, show_value
 from astrodyn.messages.keys import ATTITUDE_MODELS, MAX_SEQ, NAME_FULL_RE, NAME_PATTERN, ORBIT_MODELS, QUAT_NORM_TOL
 
@@ -142,24 +142,50 @@ def _split(data: bytes, offsets: np.ndarray) -> list[bytes]:
     return [data[o[i]:o[i + 1]] for i in range(len(o) - 1)]
 
 
+#: Fewer bodies than this are encoded message by message (the builder and :func:`encode`:
+#: about 2.3 us each) instead of in one compiled pass, whose set-up alone costs 9-13 us
+#: (numba's dispatch of a dozen arrays); the bytes are the same (tests/test_batch_encode.py).
+FEW_BODIES = 6
+
+
+def _one_by_one(build: Any, seqs: Any, rows: tuple) -> list[bytes] | None:
+    """``[encode(build(seq_i, *row_i)), ...]`` for 1 to ``FEW_BODIES - 1`` bodies (``rows``:
+    one sequence per array argument, a row per body); None for more or for anything the
+    builder refuses (the compiled path then gives its own verdict and error)."""
+    try:
+        n = len(rows[0])
+        if not 0 < n < FEW_BODIES or any(len(a) != n for a in rows):
+            return None
+        seq_list = [seqs] * n if type(seqs) is int else list(seqs)
+        if len(seq_list) != n:
+            return None
+        return [encode(build(seq, *row)) for seq, *row in zip(seq_list, *rows)]
+    except (MessageError, TypeError, ValueError):
+        return None
+
+
 def encode_orbit_batch(t: float, seqs: Any, model: str, r: Any, v: Any, mu: float, frame: str = "GCRF") -> list[bytes]:
     """Encode N orbit states at one time ``t``: one JSON payload per body, in order.
 
     ``seqs`` is one integer (the same for every body) or N integers; ``r``, ``v`` shape
     (N, 3) in m and m/s. The bytes equal ``encode(orbit_message(...))`` for each body
     (tested): every float is written by a compiled shortest round-trip formatter that
-    gives ``repr``'s bytes (:mod:`astrodyn.messages.shortest`), all N payloads in one pass.
+    gives ``repr``'s bytes (:mod:`astrodyn.messages.shortest`), all N payloads in one pass
+    (fewer than :data:`FEW_BODIES`: one by one, the same bytes).
     """
-    return _split(*_orbit_records(t, seqs, model, r, v, mu, frame, None))
+    few = _one_by_one(lambda seq, ri, vi: orbit_message(t, seq, model, ri, vi, mu, frame), seqs, (r, v))
+    return few if few is not None else _split(*_orbit_records(t, seqs, model, r, v, mu, frame, None))
 
 
 def encode_attitude_batch(t: float, seqs: Any, model: str, q: Any, w: Any) -> list[bytes]:
     """Encode N attitude states at one time ``t``: one JSON payload per body, in order.
 
     ``q`` shape (N, 4) scalar first, unit norm (checked to :data:`QUAT_NORM_TOL`); ``w``
-    shape (N, 3) rad/s body axes. Bytes equal ``encode(attitude_message(...))`` per body.
+    shape (N, 3) rad/s body axes. Bytes equal ``encode(attitude_message(...))`` per body
+    (fewer than :data:`FEW_BODIES`: one by one).
     """
-    return _split(*_attitude_records(t, seqs, model, q, w, None))
+    few = _one_by_one(lambda seq, qi, wi: attitude_message(t, seq, model, qi, wi), seqs, (q, w))
+    return few if few is not None else _split(*_attitude_records(t, seqs, model, q, w, None))
 
 
 def frame_orbit_batch(keys: Sequence[str] | BatchKeys, t: float, seqs: Any, model: str, r: Any, v: Any, mu: float,

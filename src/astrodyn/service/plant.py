@@ -976,7 +976,8 @@ def encode_stamped(t: float, seqs, fields: dict[str, np.ndarray], rest: list[dic
     n = len(fields[names[0]])
     if n < FEW:  # the encoder, message by message, costs less than the set-up of one pass
         seq_list = [int(seqs)] * n if np.ndim(seqs) == 0 else [int(x) for x in seqs]
-        return [messages.encode({"t": t, "seq": seq_list[i], **{f: fields[f][i] for f in names}, **(rest[i] if rest else {})})
+        rows = {f: np.asarray(fields[f], dtype=np.float64).tolist() for f in names}  # plain floats: msgspec's path
+        return [messages.encode({"t": t, "seq": seq_list[i], **{f: rows[f][i] for f in names}, **(rest[i] if rest else {})})
                 for i in range(n)]
     values = np.concatenate([np.asarray(fields[f], dtype=np.float64) for f in names], axis=1)
     seq_arr = np.broadcast_to(np.asarray(seqs, dtype=np.int64), (n,))
