@@ -24,7 +24,18 @@ and renames the finished file to ``NAME.mcap``): ``astrodyn recover NAME.partial
 replaced) and removes the partial file.  The work directories a killed supervisor left
 in that directory (``.astrodyn-run-*``: its children's logs and the run secret) are
 removed too, and so are the temporary files of killed ``merge`` / ``recover`` runs there
-(``*.<pid>-<random>[.mcap].merging`` / ``.recover-tmp`` whose process is gone).
+(``*.<pid>-<random>[.mcap].merging`` / ``.recover-tmp`` whose process is gone), and the
+control token files of killed serves (``.NAME.mcap.control-token``) that no live serve can
+own (:func:`stale_control_tokens`).
+
+Given a recording's name (``NAME.mcap``), the partial files of its rolled series are
+finished only when they are of that series (:func:`series_strangers`): each one's
+``recording`` metadata record gives the part its name says (``NAME-0012.partial.mcap``:
+part 12) and its ``scenario`` record is the series' (that of its first complete part).
+Any other file named like one of its partial parts (a cut copy of another recording, or of
+one of its own parts) is left as it is and named; ``recover`` of that file by its own name
+finishes it.  ``--out`` is refused for a series with a rolled partial part
+(``NAME-000k.partial.mcap``): it would write that one part under another name.
 
 For any other file, without ``--out`` the file is rewritten in place; either way the new file is first
 written beside the target as ``<root>.<pid>-<random><ext>.recover-tmp`` (a name of its own,
@@ -35,11 +46,13 @@ A new file takes its name only while the name is still free: when another ``reco
 one line; this run removes no partial file).  The temporary files of the target left by
 killed tools are removed by the next recover writing that target.
 
-Exit status: 0 recovered; 1 unreadable input or write failure (or both ``NAME.mcap`` and
+Exit status: 0 recovered (files left as not of the series are named on stderr, and do not
+change it); 1 unreadable input or write failure (or both ``NAME.mcap`` and
 ``NAME.recovered.mcap`` exist: give ``--out``; or another process wrote the target
 meanwhile); 2 bad arguments, judged before any input is read: a ``--chunk-size`` out of
 range, an ``--out`` that exists (other than the input itself), is not a file path (a
-directory, a FIFO, a device) or is in a missing or unwritable directory.
+directory, a FIFO, a device) or is in a missing or unwritable directory, or ``--out`` with
+more than one partial file or with a series' rolled partial part.
 """
 
 from __future__ import annotations
@@ -50,6 +63,7 @@ import json
 import os
 import re
 import shutil
+import stat
 import sys
 import time
 
@@ -58,6 +72,7 @@ from mcap.records import Channel, Chunk, Message, Metadata, Schema
 from astrodyn import __version__
 from astrodyn.files import output_path_problem, path_argument
 from astrodyn.recording.chunked_writer import ChunkedWriter
+from astrodyn.recording.merge import recorded_parts
 from astrodyn.recording.outputs import OutputTaken, stale_temporaries, write_atomically
 from astrodyn.recording.reader import (
     MAX_CHUNK_BYTES,
@@ -66,12 +81,13 @@ from astrodyn.recording.reader import (
     open_recording,
     parse_record,
     read_records,
+    recorded_metadata,
 )
-from astrodyn.recording.writer import RecordingError, being_written
+from astrodyn.recording.writer import RecordingError, being_written, part_path
 from astrodyn.signals import interruptible
 
 __all__ = ["recover", "write_atomically", "main", "finished_name", "find_partials", "partials_of", "nothing_to_recover",
-           "stale_work_dirs"]
+           "stale_work_dirs", "series_part_number", "series_strangers", "stale_control_tokens"]
 
 
 class _Copier:
@@ -262,6 +278,79 @@ def series_partials(recording: str) -> list[str]:
                   if _PARTIAL.match(f) and part.match(os.path.basename(finished_name(f) or "")))
 
 
+def names_series(target: str) -> bool:
+    """Whether ``recover TARGET`` takes TARGET as a recording's name whose rolled series'
+    partial files it finishes (:func:`find_partials`): not a directory, not a partial file's name."""
+    return not os.path.isdir(target) and finished_name(target) is None
+
+
+def series_part_number(recording: str, path: str) -> int | None:
+    """The part of the rolled series of ``recording`` (``NAME.mcap``) that the file name of
+    ``path`` is (:func:`astrodyn.recording.writer.part_path`): 0 for ``NAME.mcap``, k for
+    ``NAME-000k.mcap``; None for any other name (only the base names are compared)."""
+    root, ext = os.path.splitext(os.path.basename(recording))
+    m = re.fullmatch(re.escape(root) + r"(?:-(\d{4,}))?" + re.escape(ext or ".mcap"), os.path.basename(path))
+    if m is None:
+        return None
+    k = int(m[1]) if m[1] else 0
+    return k if os.path.basename(part_path(os.path.basename(recording), k)) == os.path.basename(path) else None
+
+
+def _recorded_part_and_scenario(path: str) -> tuple[int | None, dict | None]:
+    """``(part, scenario record)`` of the file ``path``: its ``recording`` record's part
+    number and its ``scenario`` record, each None when absent or when the file cannot be
+    read (read from its head: a cut file has them there)."""
+    try:
+        meta = recorded_metadata(path, ("scenario", "recording"))
+    except (RecordingError, OSError):
+        return None, None
+    parts = recorded_parts({"recording": meta.get("recording", {})})
+    return (parts[0][0] if parts else None), meta.get("scenario")
+
+
+def series_strangers(recording: str, partials: list[str]) -> dict[str, str]:
+    """The files among ``partials`` (partial files named as parts of the rolled series of
+    ``recording``, :func:`series_partials`) that their own metadata records show not to be
+    of that series, each with why: one whose ``recording`` record gives another part than
+    its name says (``NAME-0012.partial.mcap`` holding part 5: a copy of another part, or of
+    another recording's), or whose ``scenario`` record is not the series' (that of its
+    lowest complete part whose ``recording`` record gives its name's part; without one, of
+    its lowest such partial file).  A file that does not say (no such record, or not
+    readable: ``recover`` names what is wrong with it) is not listed.  Only the files'
+    heads are read (:func:`astrodyn.recording.reader.recorded_metadata`)."""
+    strangers: dict[str, str] = {}
+    members: list[tuple[int, str, dict | None, bool]] = []  # (its name's part, path, scenario, says that part)
+    for path in partials:
+        named = series_part_number(recording, finished_name(path) or path)
+        part, scenario = _recorded_part_and_scenario(path)
+        if named is not None and part is not None and part != named:
+            strangers[path] = (f"its `recording` metadata record says part {part}, its name part {named}: it is not "
+                               f"that part of the series (a copy of another file?)")
+        else:
+            members.append((named if named is not None else -1, path, scenario, part is not None))
+    folder = os.path.dirname(recording) or "."
+    try:
+        names = os.listdir(folder)
+    except OSError:
+        names = []
+    complete = sorted((k, os.path.join(folder, f)) for f in names
+                      if (k := series_part_number(recording, f)) is not None and is_complete(os.path.join(folder, f)))
+    reference = next(((path, scenario) for k, path in complete
+                      for part, scenario in [_recorded_part_and_scenario(path)] if part == k and scenario is not None),
+                     None)
+    if reference is None:
+        reference = next(((path, scenario) for k, path, scenario, says in sorted(members, key=lambda x: x[0])
+                          if k >= 0 and says and scenario is not None), None)
+    for _, path, scenario, _ in members:
+        if reference is not None and scenario is not None and scenario != reference[1]:
+            name, ref_name = scenario.get("name"), reference[1].get("name")
+            what = (f"scenario {name!r}, not {ref_name!r} as" if name != ref_name
+                    else f"another config of scenario {name!r} than")
+            strangers[path] = (f"its `scenario` metadata record is of {what} in {os.path.basename(reference[0])}, "
+                               f"a part of this series: it is not of this series")
+    return strangers
+
+
 def is_complete(path: str) -> bool:
     """Whether the file at ``path`` ends as a finished MCAP file does: a footer record
     followed by the closing magic (what a writer that finished leaves; ``recover`` of it has
@@ -308,29 +397,112 @@ def stale_work_dirs(folder: str) -> list[str]:
     """Work directories (``.astrodyn-run-*``, ``.astrodyn-serve-*``) in ``folder`` whose
     supervisor is gone: a killed supervisor cannot remove its own (children's logs, the
     run secret); ``recover`` removes them."""
-    out = []
+    return [path for path in _work_dirs(folder, (".astrodyn-run-", ".astrodyn-serve-")) if _supervisor_gone(path)]
+
+
+def _work_dirs(folder: str, prefixes: tuple[str, ...]) -> list[str]:
     try:
         names = os.listdir(folder)
     except OSError:
-        return out
-    for name in names:
-        if not (name.startswith(".astrodyn-run-") or name.startswith(".astrodyn-serve-")):
+        return []
+    return sorted(os.path.join(folder, name) for name in names if name.startswith(prefixes))
+
+
+def _supervisor_gone(work: str) -> bool:
+    """Whether the supervisor of the work directory ``work`` is gone: its ``supervisor.pid``
+    names no running process; without a pid file (a start-up under way: the pid is written
+    just after the directory is made) or with a damaged one, when the directory is older
+    than :data:`STARTING_WORK_DIR_S`.  A pid file that cannot be read for want of permission
+    (another user's directory), or a process of another user's under that pid, is not gone."""
+    try:
+        with open(os.path.join(work, "supervisor.pid")) as f:
+            pid = int(f.read().strip())
+        if not 0 < pid < 2**31:  # (0 or -N would ask about a process group)
+            raise ValueError(pid)
+    except PermissionError:
+        return False
+    except (OSError, ValueError):
+        try:
+            return time.time() - os.stat(work).st_mtime >= STARTING_WORK_DIR_S
+        except OSError:
+            return False  # (removed meanwhile)
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return True
+    except OSError:  # EPERM: a process runs under that pid, as another user
+        return False
+    return False
+
+
+#: ``serve``'s control token file for its recording ``NAME``: ``.NAME.control-token`` beside it
+#: (:func:`astrodyn.service.serve.control_token_path`); group ``recording`` the recording's file name.
+_CONTROL_TOKEN = re.compile(r"^\.(?P<recording>.+)\.control-token$")
+#: The report of the files a serve's loggers created, in its work directory (one JSON line
+#: ``{"file", "dev", "ino"}`` each: the logger's ``--own-files``, ``astrodyn.service.supervision.LoggerFiles``).
+_OWN_FILES = "own-files.jsonl"
+
+
+def _serve_recordings(work: str) -> list[str] | None:
+    """The base names of the files the loggers of the serve whose work directory is ``work``
+    created (its ``own-files.jsonl``); None when it names none (a serve starting: its logger
+    has not created its first file yet) or cannot be read."""
+    try:
+        with open(os.path.join(work, _OWN_FILES), "rb") as f:
+            data = f.read(1 << 24)
+    except OSError:
+        return None
+    names = []
+    for line in data.splitlines():
+        try:
+            rec = json.loads(line)
+        except (ValueError, RecursionError):
+            continue
+        if isinstance(rec, dict) and isinstance(rec.get("file"), str):
+            names.append(os.path.basename(rec["file"]))
+    return names or None
+
+
+def stale_control_tokens(folder: str) -> list[tuple[str, os.stat_result]]:
+    """Control token files in ``folder`` (``.NAME.control-token``, this user's regular files)
+    whose serve is gone, for ``recover`` to remove (a killed serve cannot), each with its
+    ``lstat`` taken before the serves were looked at (remove it only while it is still that
+    file: a serve started meanwhile writes a new one).  A serve writes its
+    token only while its work directory (``.astrodyn-serve-*``, beside its recording, with its
+    pid) exists, so the token of ``NAME`` is the dead serve's when no serve whose supervisor
+    runs (:func:`stale_work_dirs`' rule) may record ``NAME``: every live serve's loggers
+    created files of another recording (its ``own-files.jsonl``; one that names none yet may
+    be ``NAME``'s), and no partial file of ``NAME``'s series is being written.  A token whose
+    ``NAME`` is a symbolic link is left (its serve's work directory may be elsewhere)."""
+    try:
+        names = os.listdir(folder)
+    except OSError:
+        return []
+    tokens = []
+    for name in sorted(names):
+        if (m := _CONTROL_TOKEN.match(name)) is None:
             continue
         path = os.path.join(folder, name)
         try:
-            with open(os.path.join(path, "supervisor.pid")) as f:
-                pid = int(f.read().strip())
-            os.kill(pid, 0)
-            continue  # its supervisor still runs
-        except ProcessLookupError:
-            pass
-        except (OSError, ValueError):  # no readable pid file: a start-up under way (the pid is written just
-            try:                       # after the directory is made), or damaged: only an old one is stale
-                if time.time() - os.stat(path).st_mtime < STARTING_WORK_DIR_S:
-                    continue
-            except OSError:
-                continue  # (removed meanwhile)
-        out.append(path)
+            st = os.lstat(path)
+        except OSError:
+            continue
+        if stat.S_ISREG(st.st_mode) and st.st_uid == os.getuid():
+            tokens.append((path, os.path.join(folder, m["recording"]), st))
+    if not tokens:
+        return []
+    # (after the lstat: a serve that starts later and writes its token makes another file)
+    live = [_serve_recordings(work) for work in _work_dirs(folder, (".astrodyn-serve-",)) if not _supervisor_gone(work)]
+    out = []
+    for path, recording, st in tokens:
+        if os.path.islink(recording):
+            continue
+        if any(names_of is None or any(series_part_number(recording, finished_name(f) or f) is not None
+                                       for f in names_of) for names_of in live):
+            continue  # a live serve records it, or may (it has created no file yet)
+        if any(being_written(p) for p in series_partials(recording)):
+            continue
+        out.append((path, st))
     return out
 
 
@@ -371,11 +543,13 @@ def _main(argv: list[str] | None) -> int:
                                  description="Rewrite a crashed writer's MCAP file with a proper summary and index.")
     ap.add_argument("file", type=path_argument, help="MCAP file (typically cut by a killed logger): a NAME.partial.mcap left by a killed "
                     "run, the --out path of that run or serve (the partial files of its series are found: "
-                    "NAME.partial.mcap, NAME-000k.partial.mcap), or a directory (every partial file in it); a "
+                    "NAME.partial.mcap, NAME-000k.partial.mcap; one whose metadata says it is another part or "
+                    "another scenario is left and named), or a directory (every partial file in it); a "
                     "complete file is left as it is unless --out is given")
     ap.add_argument("--out", default=None, type=path_argument, help="write the recovered file here (default: NAME.mcap for "
                     "NAME.partial.mcap when no NAME.mcap exists, NAME.recovered.mcap when it does; other files "
-                    "are rewritten in place)")
+                    "are rewritten in place); one file only: refused for several partial files and for a rolled "
+                    "series' partial part NAME-000k.partial.mcap found from NAME.mcap (give that file itself)")
     ap.add_argument("--chunk-size", type=int, default=1 << 20,
                     help=f"uncompressed bytes per zstd chunk of the new file (1 .. {MAX_CHUNK_SIZE}, default 1 MiB)")
     args = ap.parse_args(argv)
@@ -392,6 +566,14 @@ def _main(argv: list[str] | None) -> int:
     elif not sources:
         print(f"astrodyn recover: error: {nothing_to_recover(args.file)}", file=sys.stderr)
         return 1
+    rolled = [src for src in sources if src != args.file and series_part_number(args.file, finished_name(src) or src)
+              != 0] if names_series(args.file) else []
+    if args.out is not None and rolled:  # judged by name alone, before any input is read
+        print(f"astrodyn recover: --out: {args.file} is a rolled recording whose partial part {rolled[0]} finishes as "
+              f"{finished_name(rolled[0])}, beside its other parts; --out would write that one part under another "
+              f"name: give no --out to finish every partial part of the series under its part's name, or name the "
+              f"partial file to write it elsewhere (`astrodyn recover {rolled[0]} --out {args.out}`)", file=sys.stderr)
+        return 2
     if args.out is not None and len(sources) > 1:
         print(f"astrodyn recover: --out: {len(sources)} partial files found ({', '.join(sources)}); recover them one "
               f"at a time to choose each --out", file=sys.stderr)
@@ -401,7 +583,15 @@ def _main(argv: list[str] | None) -> int:
               f"is overwritten; only the input itself is rewritten in place)", file=sys.stderr)
         return 2
     status = 0
+    strangers = series_strangers(args.file, [src for src in sources if src != args.file]) \
+        if names_series(args.file) else {}
+    for src, why in strangers.items():  # named like a part of the series, but not one: left as it is
+        print(json.dumps({"source": src, "left": why}), flush=True)
+        print(f"astrodyn recover: warning: {src} was left as it is: {why}; it is not finished as a part of "
+              f"{args.file} (`astrodyn recover {src} --out FILE.mcap` finishes it by itself)", file=sys.stderr)
     for src in sources:
+        if src in strangers:
+            continue
         dst, remove_source = args.out, False
         final = finished_name(src)
         if dst is None and final is None and is_complete(src):  # in place, and nothing to finish
@@ -433,9 +623,16 @@ def _main(argv: list[str] | None) -> int:
                 summary["removed"] = src
         print(json.dumps(summary, separators=(",", ":")), flush=True)
     folder = args.file if os.path.isdir(args.file) else (os.path.dirname(args.file) or ".")
+    tokens = stale_control_tokens(folder)  # (judged before the work directories go)
     for work in stale_work_dirs(folder):
         shutil.rmtree(work, ignore_errors=True)
         print(json.dumps({"removed_work_directory": work}), flush=True)
+    for path, read in tokens:  # a killed serve's: no live serve can own it (its owner's work directory is gone)
+        with contextlib.suppress(OSError):
+            now = os.lstat(path)
+            if (now.st_dev, now.st_ino) == (read.st_dev, read.st_ino):  # not a new serve's, written meanwhile
+                os.unlink(path)
+                print(json.dumps({"removed_control_token": path}), flush=True)
     for tmp in stale_temporaries(folder):  # what a killed merge or recover left
         with contextlib.suppress(FileNotFoundError):
             os.unlink(tmp)

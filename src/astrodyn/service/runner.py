@@ -1127,8 +1127,12 @@ def check_command_recording(scenario: Scenario, path: Path, out: Path) -> dict:
     whose ``scenario`` metadata records differ (:func:`recorded_config_conflict`), a later
     part of a rolled series (part k >= 1 of its ``recording`` record, even one whose first
     step is 0: the part before may hold commands and fault events of that step; the
-    refusal names the part and points to ``astrodyn merge``), one that does not start at
-    step 0 (its first actuator state is at a later step), one that holds no applied command
+    refusal names the part and points to ``astrodyn merge``), a merge that leaves a part
+    out (:func:`merged_missing_parts`), one that does not start at
+    step 0 (its first actuator state is at a later step: a merge of later parts, which
+    names them, :func:`merged_later_parts`; this is judged before the commands are, so such
+    a file is refused for what it is, not for a command of the part before it, which an
+    actuator state names), one that holds no applied command
     (saying when the file is cut short or damaged, or is the first part of a series that
     goes on: :func:`series_goes_on`), or one the plant could not re-simulate
     (:func:`read_command_recording`'s checks).  Returns what the run says about it
@@ -1149,6 +1153,13 @@ def check_command_recording(scenario: Scenario, path: Path, out: Path) -> dict:
         why = str(exc).removeprefix(f"{path}: ")
         return ScenarioError(f"--commands {shown}: expected an MCAP recording of scenario {scenario.name!r}: {why}")
 
+    def late_start(step: int) -> ScenarioError:  # steps 0 .. step - 1 would run without their commands
+        merged = merged_later_parts(path, metadata)
+        what = (f"{merged}" if merged else "a later part of a rolled recording, or a file that lost its start")
+        return ScenarioError(f"--commands {shown}: expected a recording from the run's start (step 0, where the "
+                             f"re-simulation starts), got one whose first actuator state is at step {step} "
+                             f"(t = {step / scenario.rate:.6g} s): {what}; {series_merge_advice(path, metadata)}")
+
     try:  # read here, so a foreign, damaged or empty file is refused before anything starts
         with open_stream(path) as stream:  # (its index: the metadata records come first)
             recorded, metadata, cut = stream.metadata.get("scenario"), dict(stream.metadata), stream.truncated
@@ -1164,6 +1175,14 @@ def check_command_recording(scenario: Scenario, path: Path, out: Path) -> dict:
             raise ScenarioError(f"--commands {shown}: expected a recording from the run's start (step 0, where the "
                                 f"re-simulation starts), got part {part} of a rolled recording (its `recording` "
                                 f"metadata record): the run's start is in the earlier parts; {merge_advice(path, part)}")
+        # a later start first: the reader would name an actuator state of it whose command is
+        # in the part before
+        if (first := first_actuator_step(path, scenario)) is not None and first > 0:
+            raise late_start(first)
+        if gap := merged_missing_parts(metadata):  # (merge --allow-missing-parts): the same, within
+            raise ScenarioError(f"--commands {shown}: expected a whole recording of the run, got {gap}: the steps "
+                                f"recorded there would be re-simulated without their commands; "
+                                f"{series_merge_advice(path, metadata)}")
         found = read_command_recording(path, scenario, keep=False)
         faults = recorded_faults(path, scenario)
     except (RecordingError, OSError) as exc:
@@ -1173,10 +1192,7 @@ def check_command_recording(scenario: Scenario, path: Path, out: Path) -> dict:
             raise
         raise refused(exc) from None
     if found.first_step > 0:  # steps 0 .. first_step - 1 would run without their commands
-        raise ScenarioError(f"--commands {shown}: expected a recording from the run's start (step 0, where the "
-                            f"re-simulation starts), got one whose first actuator state is at step {found.first_step} "
-                            f"(t = {found.first_step / scenario.rate:.6g} s): a later part of a rolled recording, or "
-                            f"a file that lost its start; {merge_advice(path, part)}")
+        raise late_start(found.first_step)
     series = series_goes_on(path, metadata, cut)
     if not found.applied:
         damaged = (f"; the file is cut short or damaged ({found.damage[:300]}): what it holds past that cannot be "
@@ -1216,11 +1232,104 @@ def recorded_config_conflict(stream, scenario: Scenario) -> str | None:
 def recorded_part(metadata: dict) -> int | None:
     """The part number a file's ``recording`` metadata record gives (0 for a run's first or
     only file, k for ``NAME-000k.mcap`` of a rolled series), None when it has none, or is a
-    merge of several files (``merged_from``: its ``recording`` record is one input's)."""
-    raw = metadata.get("recording", {}).get("part")
-    if "merged_from" in metadata or raw is None or not (raw.isascii() and raw.isdigit()) or len(raw) > 9:
+    merge of several files (``merged_from``: its ``recording`` record is one input's; the
+    parts it holds: :func:`merged_later_parts`)."""
+    from astrodyn.recording.merge import recorded_parts
+
+    parts = [] if "merged_from" in metadata else recorded_parts(metadata)
+    return parts[0][0] if parts else None
+
+
+def merged_later_parts(path: Path, metadata: dict) -> str | None:
+    """What the merged recording ``path`` (its metadata records) is when it does not start
+    at part 0 of its rolled series: ``a merge of parts 2-3 of a rolled recording (its
+    `merged_from` metadata record; its first input, d-0002.mcap, is part 2): the steps from 0
+    are in parts 0 .. 1``; None for any other file (not a merge, a merge from part 0, or one
+    that does not say: made before merges listed their parts)."""
+    from astrodyn.recording.merge import recorded_parts
+
+    if "merged_from" not in metadata:
         return None
-    return int(raw)
+    parts = recorded_parts(metadata)
+    if not parts or parts[0][0] == 0:
+        return None
+    source = merged_first_input(metadata)
+    first = f"; its first input, {Path(source[0]).name[:200]}, is part {source[1]}" if source else ""
+    listed = metadata["merged_from"].get("parts", "")
+    return (f"a merge of parts {listed[:200]} of a rolled recording (its `merged_from` metadata record{first}): the "
+            f"steps from 0 are in parts 0 .. {parts[0][0] - 1}")
+
+
+def merged_missing_parts(metadata: dict) -> str | None:
+    """What a merged recording (its metadata records) is when its ``merged_from`` record
+    lists parts with some left out (``merge --allow-missing-parts``): ``a merge of parts
+    0-1,3 of a rolled recording, without part 2 ...``; None for any other file."""
+    from astrodyn.recording.merge import format_parts, missing_parts, parts_named, recorded_parts
+
+    if "merged_from" not in metadata or not (missing := missing_parts(recorded_parts(metadata))):
+        return None
+    listed = metadata["merged_from"].get("parts", "")
+    return (f"a merge of parts {listed[:200]} of a rolled recording, without {parts_named(format_parts(missing))[:200]} "
+            f"(its `merged_from` metadata record)")
+
+
+def merged_first_input(metadata: dict) -> tuple[str, int] | None:
+    """``(file, part)``: the first input of a merged recording (its ``merged_from`` record's
+    ``files``) and that input's part number, from the ``recording`` record the merge took from
+    it (the first input's record is the one a merge keeps); None when either is unknown."""
+    from astrodyn.recording.merge import recorded_parts
+
+    files = metadata.get("merged_from", {}).get("files", "")
+    parts = recorded_parts({"recording": metadata.get("recording", {})})
+    if not files or not parts:
+        return None
+    return files.split(";", 1)[0], parts[0][0]
+
+
+def series_merge_advice(path: Path, metadata: dict, flag: str = "--commands") -> str:
+    """:func:`merge_advice` for the recording ``path`` (its metadata records): its own part, or
+    for a merge, its first input's (which names the series' files)."""
+    if "merged_from" in metadata and (source := merged_first_input(metadata)) is not None:
+        return merge_advice(Path(source[0]), source[1], flag)
+    return merge_advice(path, recorded_part(metadata), flag)
+
+
+def series_position(path: Path, metadata: dict, cut: bool, flag: str) -> str | None:
+    """Why the recording ``path`` (its metadata records; ``cut``: it has no footer) may lack
+    steps its rolled series holds in other files, with the merge to make, for a refusal that
+    found nothing to start from: a later part (:func:`recorded_part`), a merge of later parts
+    (:func:`merged_later_parts`) or the first part of a series that goes on
+    (:func:`series_goes_on`); None for any other file."""
+    part = recorded_part(metadata)
+    if part:
+        return (f"it is part {part} of a rolled recording (its `recording` metadata record): the steps from 0 are in "
+                f"the earlier parts; {merge_advice(path, part, flag)}")
+    if merged := merged_later_parts(path, metadata):
+        return f"it is {merged}; {series_merge_advice(path, metadata, flag)}"
+    if series := series_goes_on(path, metadata, cut):
+        return f"{series}: {merge_advice(path, part, flag)}"
+    return None
+
+
+def first_actuator_step(path: Path, scenario: Scenario) -> int | None:
+    """The step (``seq``) of the first actuator state of ``scenario``'s plant bodies in the
+    recording ``path``, in log-time order; None when it holds none or its payload is not one
+    (:func:`astrodyn.service.plant.read_command_recording` names that).  Reads up to that
+    message (a recording of the run's start has it in its first chunk)."""
+    from astrodyn import messages
+    from astrodyn.recording.stream import open_stream
+    from astrodyn.scenario.control import plant_bodies
+
+    topics = [messages.body_key(scenario.name, body, "actuators") for body in plant_bodies(scenario)]
+    if not topics:
+        return None
+    with open_stream(path) as stream:
+        for m in stream.messages(topics):
+            try:
+                return messages.decode(m.data, "actuators")["seq"]
+            except messages.MessageError:
+                return None
+    return None
 
 
 def series_goes_on(path: Path, metadata: dict, cut: bool) -> str | None:
@@ -1229,6 +1338,8 @@ def series_goes_on(path: Path, metadata: dict, cut: bool) -> str | None:
     (``recording`` record) without the ``end`` record the logger writes into the part it
     stops in, and neither a merge's nor ``astrodyn recover``'s output (a killed run's file
     also lacks ``end``)."""
+    from astrodyn.recording.merge import series_first_file
+
     part = recorded_part(metadata)
     if part is None or cut or "end" in metadata or "recovery" in metadata:
         return None
@@ -1238,21 +1349,12 @@ def series_goes_on(path: Path, metadata: dict, cut: bool) -> str | None:
             f"logger writes into the part it stops in)")
 
 
-def series_first_file(path: Path, part: int | None) -> str | None:
-    """The first file of the rolled series whose part ``part`` (:func:`recorded_part`) is
-    ``path``: ``NAME.mcap`` for ``NAME-000k.mcap`` (:func:`astrodyn.recording.writer.part_path`),
-    ``path`` itself for part 0; None when the part or the name does not tell it."""
-    if part is None:
-        return None
-    root, ext = os.path.splitext(str(path))
-    tail = f"-{part:04d}" if part else ""
-    return root.removesuffix(tail) + (ext or ".mcap") if root.endswith(tail) else None
-
-
 def merge_advice(path: Path, part: int | None, flag: str = "--commands") -> str:
     """How to re-simulate (or, ``flag`` ``--resume``, continue) the whole rolled series of
     which ``path`` is part ``part`` (None: not known): ``astrodyn merge`` of its parts, then
     ``flag`` the merged file."""
+    from astrodyn.recording.merge import series_first_file
+
     first = series_first_file(path, part)
     files = ("NAME.mcap NAME-0001.mcap ..." if first is None else
              f"{shlex.quote(first[:200])} {shlex.quote(part_path(first, 1)[:200])} ...")
@@ -1303,7 +1405,7 @@ def resume_plan(path: Path, scenario: Scenario, out: Path, work: Path) -> dict:
     try:
         run = load_run(path)
         with open_stream(path) as stream:  # (its index only)
-            conflict = recorded_config_conflict(stream, scenario)
+            conflict, metadata, cut = recorded_config_conflict(stream, scenario), dict(stream.metadata), stream.truncated
     except (RecordingError, OSError) as exc:
         raise ScenarioError(f"--resume {exc}") from None
     if conflict is not None:
@@ -1316,10 +1418,8 @@ def resume_plan(path: Path, scenario: Scenario, out: Path, work: Path) -> dict:
     kinds = [k for k in p.processes if k != "logger"]
     topics = [t for kind in kinds for t in state_topics(scenario, kind).values()]
     k = contiguous_steps(run, topics)
-    if k == 0:
-        part = recorded_part(run.metadata)
-        later = (f"; it is part {part} of a rolled recording (its `recording` metadata record): the steps from 0 "
-                 f"are in the earlier parts; {merge_advice(path, part, '--resume')}") if part else ""
+    if k == 0:  # a later part, a merge of later parts, the first part of a series that goes on: say so
+        later = f"; {where}" if (where := series_position(path, metadata, cut, "--resume")) else ""
         raise ScenarioError(f"--resume {path}: expected at least one complete step (every body's states, from step "
                             f"0), found none{later}")
     if k >= scenario.n_steps:
