@@ -197,3 +197,16 @@ def test_recover_after_a_killed_serve_removes_its_control_token_and_finishes_its
         with contextlib.suppress(ProcessLookupError):
             os.killpg(proc.pid, signal.SIGKILL)  # (the serve's group: its children, if any are left)
         proc.stdout.close()
+
+
+def test_partials_of_a_name_without_a_folder_are_found(tmp_path, monkeypatch):
+    """``recover x.partial.mcap`` run in x's folder names x's other partial files: "x.mcap"
+    and "./x.mcap" are one file (the listing joins "." to the names)."""
+    from astrodyn.recording.recover import nothing_to_recover, partials_of
+
+    for name in ("x.partial.mcap", "x.partial-1.mcap", "y.partial.mcap"):
+        (tmp_path / name).write_bytes(b"")
+    monkeypatch.chdir(tmp_path)
+    assert [os.path.basename(p) for p in partials_of("x.mcap")] == ["x.partial-1.mcap", "x.partial.mcap"]
+    said = nothing_to_recover("x.partial-2.mcap")
+    assert "x.partial.mcap" in said and "x.partial-1.mcap" in said and "y.partial" not in said

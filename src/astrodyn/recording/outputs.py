@@ -48,7 +48,7 @@ from astrodyn.recording.writer import RecordingError, fsync_directory, link_new
 from astrodyn.signals import deferred_interrupts
 
 __all__ = ["written_atomically", "write_atomically", "staging_directory", "OutputTaken", "temporary_name",
-           "stale_temporaries", "warn_incomplete_input"]
+           "stale_temporaries", "warn_incomplete_input", "process_may_run"]
 
 
 class OutputTaken(RecordingError):
@@ -91,7 +91,7 @@ def stale_temporaries(folder: str | os.PathLike, pattern: re.Pattern = _TOOL_TEM
     for entry in entries:
         m = pattern.match(entry.name)
         try:
-            if m and entry.is_file(follow_symlinks=False) and not _alive(int(m.group(1))):
+            if m and entry.is_file(follow_symlinks=False) and not process_may_run(int(m.group(1))):
                 out.append(entry.path)
         except OSError:
             continue
@@ -105,8 +105,10 @@ def _remove_stale_temporaries(dst: str, suffix: str, hidden: bool) -> None:
             os.unlink(path)
 
 
-def _alive(pid: int) -> bool:
-    """Whether process ``pid`` may still run (True when that cannot be told)."""
+def process_may_run(pid: int) -> bool:
+    """Whether process ``pid`` may still run: True unless ``kill(pid, 0)`` says there is no
+    such process (another user's process, or a number this system has no pid for: True, so
+    that what it may own is left alone)."""
     try:
         os.kill(pid, 0)
     except ProcessLookupError:
@@ -240,5 +242,5 @@ def _remove_stale(out: Path, prefix: str) -> None:
     pattern = re.compile(rf"^\.{re.escape(prefix)}-(\d+)-")
     for entry in os.scandir(out):
         m = pattern.match(entry.name)
-        if m and entry.is_dir(follow_symlinks=False) and not _alive(int(m.group(1))):
+        if m and entry.is_dir(follow_symlinks=False) and not process_may_run(int(m.group(1))):
             shutil.rmtree(entry.path, ignore_errors=True)

@@ -73,7 +73,7 @@ from astrodyn import __version__
 from astrodyn.files import output_path_problem, path_argument
 from astrodyn.recording.chunked_writer import ChunkedWriter
 from astrodyn.recording.merge import recorded_parts
-from astrodyn.recording.outputs import OutputTaken, stale_temporaries, write_atomically
+from astrodyn.recording.outputs import OutputTaken, process_may_run, stale_temporaries, write_atomically
 from astrodyn.recording.reader import (
     MAX_CHUNK_BYTES,
     MCAP_MAGIC,
@@ -378,8 +378,10 @@ def partials_of(recording: str) -> list[str]:
         names = os.listdir(folder)
     except OSError:
         return []
+    target = os.path.normpath(recording)  # "x.mcap" and "./x.mcap" name one file
     return sorted(os.path.join(folder, f) for f in names
-                  if f.startswith(stem) and _PARTIAL.match(f) and finished_name(os.path.join(folder, f)) == recording)
+                  if f.startswith(stem) and _PARTIAL.match(f)
+                  and os.path.normpath(finished_name(os.path.join(folder, f)) or "") == target)
 
 
 def nothing_to_recover(target: str) -> str:
@@ -389,7 +391,7 @@ def nothing_to_recover(target: str) -> str:
     final = finished_name(target)
     if final is None:
         return f"{target}: no such file, and no partial recording of it ({os.path.splitext(target)[0]}.partial*.mcap)"
-    others = [p for p in partials_of(final) if p != target]
+    others = [p for p in partials_of(final) if os.path.normpath(p) != os.path.normpath(target)]
     return f"{target}: no such file" + (f"; other partial recordings of {final}: {', '.join(others)}" if others else "")
 
 
@@ -426,13 +428,7 @@ def _supervisor_gone(work: str) -> bool:
             return time.time() - os.stat(work).st_mtime >= STARTING_WORK_DIR_S
         except OSError:
             return False  # (removed meanwhile)
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return True
-    except OSError:  # EPERM: a process runs under that pid, as another user
-        return False
-    return False
+    return not process_may_run(pid)
 
 
 #: ``serve``'s control token file for its recording ``NAME``: ``.NAME.control-token`` beside it
