@@ -9,6 +9,7 @@ under test: the plain ``mcap`` readers for the files, the numeric core for the s
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import re
@@ -288,11 +289,14 @@ def test_resume_rejects_what_it_cannot_continue(full_run, tmp_path, capsys):
 # ----------------------------------------------------------------------------- serve restarts
 
 
-@pytest.mark.parametrize("fault", ["SIGKILL", "SIGSTOP"])
+@pytest.mark.parametrize("fault", ["SIGKILL", "SIGSTOP", "SIGTERM"])
 def test_serve_restarts_a_killed_or_hung_propagator_from_the_last_state(tmp_path, fault):
     """SIGKILL: seen through the liveliness token within a second.  SIGSTOP (hung: alive,
     token kept for zenoh's lease, no heartbeat): killed after ``--stall-timeout`` (3 s
-    here) and restarted the same way; the stopped process is gone (checked by PID)."""
+    here) and restarted the same way; the stopped process is gone (checked by PID).
+    SIGTERM from someone else (``kill PID``): the propagator stops cleanly with exit 0, which
+    serve did not ask for: restarted the same way (before: never restarted, status
+    ``running``, serve's exit 0)."""
     port = bus.free_port()
     out = tmp_path / "serve.mcap"
     cfg = _config(tmp_path, "30 d")
@@ -317,7 +321,7 @@ def test_serve_restarts_a_killed_or_hung_propagator_from_the_last_state(tmp_path
             old = status()["processes"]["orbit"]["pid"]
             os.kill(old, getattr(signal, fault))
             killed = time.monotonic()
-            if fault == "SIGKILL":
+            if fault == "SIGKILL":  # (a SIGTERMed one says goodbye first: its token goes when it exits)
                 while "orbit" in alive.alive and time.monotonic() - killed < 5:
                     alive.poll()
                     time.sleep(0.005)
@@ -327,10 +331,11 @@ def test_serve_restarts_a_killed_or_hung_propagator_from_the_last_state(tmp_path
             wait_until(lambda: status()["restarts"], 60, "no restart reported", poll_s=0.1)
             st = status()
             restart = st["restarts"][0]
-            why = "killed by signal 9" if fault == "SIGKILL" else "stalled (no heartbeat for "
+            why = {"SIGKILL": "killed by signal 9", "SIGSTOP": "stalled (no heartbeat for ",
+                   "SIGTERM": "stopped on a SIGTERM its supervisor did not send"}[fault]
             assert restart["process"] == "orbit" and restart["old_pid"] == old and why in restart["why"], restart
             # not before the stall timeout (3 s) from its last heartbeat, sent at most 0.5 s before the stop
-            assert time.monotonic() - killed > (0 if fault == "SIGKILL" else 3.0 - 0.5)
+            assert time.monotonic() - killed > (3.0 - 0.5 if fault == "SIGSTOP" else 0)
             wait_until(lambda: not Path(f"/proc/{old}").exists(), 10, f"pid {old} still there")
             assert st["processes"]["orbit"]["pid"] == restart["new_pid"] != old and not st["failures"]
             # status t comes from heartbeats (rate-limited: at x300 it lags the published states
@@ -547,3 +552,46 @@ def test_rogue_publisher_during_a_run_and_loopback_only_sockets(tmp_path):
     track = run.bodies["iss"].orbit  # untouched by the garbage on its key
     np.testing.assert_array_equal(track.seq, np.arange(scn.n_steps))
     np.testing.assert_array_equal(track.r, propagate_one(engine, engine.names.index("iss"), track.t))
+
+
+# ----------------------------------------------------------------------------- a stop signal from elsewhere
+
+
+@pytest.mark.parametrize("victim", ["orbit", pytest.param("logger", marks=pytest.mark.slow)])  # CI time (~10 s
+def test_a_child_stopped_by_someone_elses_sigterm_fails_the_run_and_keeps_the_earlier_file(tmp_path, victim):  # each)
+    """``kill PID`` (SIGTERM) of a child by someone else than ``run``: the child stops
+    cleanly with exit 0 before the end, which the run did not ask for.  The run fails (exit
+    1) naming it; its recording keeps the partial name, and the earlier ``--out`` stays byte
+    for byte.  Before: the run took the exit 0 as the child's end, exited 0, and renamed a
+    file missing every state after the signal over the earlier recording (probe E, E3/E4).
+    The logger only stops once the bus is quiet (it drains first), so the propagators are
+    held (SIGSTOP) around its signal, as a loaded machine's hiccup would."""
+    out = tmp_path / "t.mcap"
+    earlier = Path(__file__).parent / "fixtures" / "legacy-v0.mcap"
+    shutil.copyfile(earlier, out)
+    proc, pids = _start_run(_config(tmp_path, "8 h"), out)
+    held = [pids[k] for k in ("orbit", "attitude")] if victim == "logger" else []
+    try:
+        _wait_states(out, 300)
+        for pid in held:
+            os.kill(pid, signal.SIGSTOP)
+        os.kill(pids[victim], signal.SIGTERM)
+        if held:
+            wait_until(lambda: not Path(f"/proc/{pids[victim]}").exists()
+                       or Path(f"/proc/{pids[victim]}/stat").read_text().split()[2] == "Z", 30, "the logger did not stop")
+            for pid in held:
+                os.kill(pid, signal.SIGCONT)
+        stdout, stderr = proc.communicate(timeout=180)
+    finally:
+        for pid in held:  # only the processes this test stopped
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(pid, signal.SIGCONT)
+        _stop(proc)
+    assert proc.returncode == 1, stderr[-3000:]
+    assert f"{victim} (pid {pids[victim]}) stopped on a SIGTERM its supervisor did not send" in stderr, stderr[-3000:]
+    assert out.read_bytes() == earlier.read_bytes()  # the earlier recording is not replaced
+    partial = Path(partial_path(out))
+    assert str(partial) in stderr
+    run = load(partial)
+    n_steps = load_scenario(_config(tmp_path, "8 h")).n_steps
+    assert min(len(b.orbit) for b in run.bodies.values()) < n_steps  # (it did stop before the end)

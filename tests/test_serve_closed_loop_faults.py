@@ -51,8 +51,12 @@ def _gone(pid: int) -> bool:
         return True
 
 
-@pytest.mark.parametrize("victim", ["logger", "plant"])
-def test_a_killed_plant_or_logger_ends_a_closed_loop_serve_at_once_naming_it(tmp_path, victim):
+@pytest.mark.parametrize("victim, sig", [("logger", signal.SIGKILL), ("plant", signal.SIGKILL),
+                                         ("plant", signal.SIGTERM)])  # SIGTERM: kill PID by someone else than serve
+def test_a_killed_plant_or_logger_ends_a_closed_loop_serve_at_once_naming_it(tmp_path, victim, sig):
+    """The plant or logger of a closed loop dies: serve ends at once (exit 1) naming it.  A
+    SIGTERM from someone else stops the plant cleanly with exit 0, its controller leaving
+    after it: serve names the plant (before: it blamed the controller, probe E, E5)."""
     text = (ROOT / "configs" / "slew.toml").read_text().replace('duration = "180 s"', 'duration = "100000 s"')
     cfg = tmp_path / "slew.toml"
     cfg.write_text(text)
@@ -70,7 +74,7 @@ def test_a_killed_plant_or_logger_ends_a_closed_loop_serve_at_once_naming_it(tmp
         marker = "astrodyn.service.logger" if victim == "logger" else "astrodyn.service.plant"
         [target] = [pid for pid, cmd in children.items() if marker in cmd]
         killed_at = time.monotonic()
-        os.kill(target, signal.SIGKILL)
+        os.kill(target, sig)
         stdout, stderr = serve.communicate(timeout=60)
         ended_after = time.monotonic() - killed_at
     finally:
@@ -82,7 +86,8 @@ def test_a_killed_plant_or_logger_ends_a_closed_loop_serve_at_once_naming_it(tmp
     summary = json.loads(stdout.strip().splitlines()[-1])
     assert summary["restarts"] == [], summary
     assert summary["failures"] == [summary["failures"][0]] and \
-        summary["failures"][0].startswith(f"process {victim} (pid {target}) killed by signal 9"), summary
+        summary["failures"][0].startswith(f"process {victim} (pid {target}) " + (
+            "killed by signal 9" if sig == signal.SIGKILL else "stopped on a SIGTERM its supervisor did not send")), summary
     assert "not restarted" in summary["failures"][0], summary
     assert "unrecognized arguments" not in stderr, stderr  # nothing restarted with a propagator's flags
     assert summary["file"] == str(partial) and f"the recording stays at {partial}" in stderr, stderr

@@ -455,6 +455,38 @@ def test_a_logger_killed_while_serve_starts_is_replaced(tmp_path, processes):
     assert states and all(sorted(per) == list(range(len(per))) and len(per) > 10 for per in states.values())
 
 
+@pytest.mark.slow  # CI time (~20 s): the same "stop signal serve did not send" rule runs by default in
+# test_reliability (a propagator) and test_serve_closed_loop_faults (the plant)
+def test_a_logger_stopped_by_someone_elses_sigterm_under_serve_is_replaced_and_no_state_is_lost(tmp_path, processes):
+    """``kill PID`` of serve's logger: it drains, finishes its file and exits 0, which serve
+    did not ask for; serve replaces it like a killed one (before: never replaced, nothing
+    recorded from then on, ``status`` running and exit 0: probe E, E2).  The parts together
+    hold each state channel's 0 .. N-1 once."""
+    sup, out = _serve_long(tmp_path, processes, "termed")
+    hello = json.loads(sup.stdout.readline() or "{}")
+    assert hello.get("serving") == "longrun", hello
+    deadline = time.monotonic() + 60
+    while time.monotonic() < deadline and not any(p.stat().st_size > 100_000 for p in tmp_path.glob("termed.partial*.mcap")):
+        time.sleep(0.1)
+    first = _logger_of(sup.pid)
+    os.kill(first, signal.SIGTERM)
+    deadline = time.monotonic() + 60  # it drains first (at most its 10 s drain time), then serve starts another
+    while time.monotonic() < deadline and _logger_of(sup.pid) in (None, first):
+        time.sleep(0.1)
+    assert _logger_of(sup.pid) not in (None, first), "the logger was not replaced"
+    time.sleep(2)  # the new logger records
+    os.kill(sup.pid, signal.SIGTERM)
+    out_text, err = sup.communicate(timeout=120)
+    assert sup.returncode == 0, err[-3000:]
+    summary = json.loads(out_text.strip().splitlines()[-1])
+    assert [r["old_pid"] for r in summary["restarts"]] == [first], summary["restarts"]
+    assert "stopped on a SIGTERM its supervisor did not send" in summary["restarts"][0]["why"]
+    parts = sorted(tmp_path.glob("termed*.mcap"))
+    assert len(parts) == 2 and not list(tmp_path.glob("*.partial*.mcap")), parts
+    for topic, per in _states_of_parts(parts).items():
+        assert sorted(per) == list(range(len(per))) and len(per) > 100, topic
+
+
 # ----------------------------------------------------------------------------- random faults
 
 def _random_fault_trial(tmp_path: Path, processes, rng, reference_states: dict, cfg: Path, k: int) -> dict:

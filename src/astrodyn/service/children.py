@@ -43,7 +43,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from astrodyn import auth, bus, messages
-from astrodyn.signals import catch_job_control, suspended_s
+from astrodyn.signals import STOP_SIGNAL_NAMES, catch_job_control, suspended_s
 
 if TYPE_CHECKING:
     from astrodyn.scenario import Scenario
@@ -604,9 +604,27 @@ class Child:
         self._hole: tuple[int, float] | None = None  # (first missing step, listening_s when first reported)
         self._heard_since: float | None = None  # listening_s since which the supervisor hears it without a break
         self.refill_from: int | None = None  # the first step the logger misses, when that is why it was killed
+        self.asked_to_stop = False  # set by stop(): its supervisor signalled it (a stop signal's exit is then wanted)
+        self._exit_reason: str | None = None  # the reason its summary gives, once it exited 0
+
+    def outside_stop_signal(self, rc: int | None) -> str | None:
+        """The stop signal (``"SIGTERM"``, ``"SIGINT"``, ``"SIGHUP"``) a child that exited 0
+        says it stopped on (the ``reason`` of its summary line), when its supervisor did not
+        ask it to stop (:meth:`stop`): someone else signalled it (``kill PID``, a cgroup or
+        OOM manager), so it ended before its work was done and is handled as a crash
+        (restarted, or the run fails naming it).  None otherwise: still running, any other
+        exit, or its own end (its scenario's end, a ``stop`` from its supervisor, its model
+        ended)."""
+        if rc != 0 or self.asked_to_stop:
+            return None
+        if self._exit_reason is None:  # read once: it exited, its summary is written
+            self._exit_reason = str((self.summary() or {}).get("reason", ""))
+        return self._exit_reason if self._exit_reason in STOP_SIGNAL_NAMES else None
 
     def how(self, rc: int) -> str:
         """How it ended, for a failure message."""
+        if (sig := self.outside_stop_signal(rc)) is not None:
+            return f"stopped on a {sig} its supervisor did not send (exit status 0: `kill {self.pid}`?)"
         if self.stalled_s is not None:
             return f"stalled (no heartbeat for {self.stalled_s:.0f} s) and was killed"
         if self.lost_to_logger is not None:
@@ -722,6 +740,7 @@ class Child:
         """Signal this child by PID, wait, SIGKILL if it does not go.  A foreign child (a
         controller: a shell line may start more programs) is stopped with everything it
         started in its session (:func:`stop_process_group`), even after it ended itself."""
+        self.asked_to_stop = True
         if self.foreign:
             return stop_process_group(self.proc, sig, timeout)
         return stop_process(self.proc, sig, timeout)

@@ -743,13 +743,23 @@ def _watch(scenario: Scenario, p, children: dict, beats, alive, progress: bool, 
         for name, ch in list(children.items()):
             rc = ch.poll()
             ended = name in propagators and rc == MODEL_ENDED_EXIT  # not restarted: it would end there again
-            if rc not in (None, 0) and on_death is not None and not ended and not (interrupted and interrupted["signal"]):
+            # exit 0 on a stop signal the run did not send (kill PID: the process stopped cleanly before
+            # the end) fails the run, which keeps its partial file (--resume goes on); not a logger
+            # that held every expected message by then (it finished its file whole)
+            if (ch.outside_stop_signal(rc) is not None and not (interrupted and interrupted["signal"])
+                    and not (name == "logger" and (ch.summary() or {}).get("complete") is True)):
+                how_far = beats.last.get(name, {}).get("t")
+                where = f" at sim t {how_far:.6g} s of {duration:.6g} s" if how_far is not None else ""
+                return (f"process {name} (pid {ch.pid}) {ch.how(rc)}{where}: a process stopped before the end of the "
+                        f"run stops the run (`astrodyn run --resume` goes on from the recording)")
+            died = rc not in (None, 0)
+            if died and on_death is not None and not ended and not (interrupted and interrupted["signal"]):
                 failure = on_death(name, rc)
                 if failure:
                     return failure
                 break  # children were replaced: look again
-            if rc is not None and (name == "logger" or rc != 0):
-                if name == "logger" and rc == 0:
+            if rc is not None and (name == "logger" or died):
+                if name == "logger" and not died:
                     # the logger ends by itself once it holds everything: give the
                     # propagators time to exit after their end-of-run event (a propagator
                     # waits up to LOGGED_WAIT_S for the logger's receipt; on loaded cores

@@ -560,7 +560,8 @@ class Supervisor:
                     # (never wait long on that: anyone can toggle one); its exit or its silence
                     # (kill_if_stalled) tells on a later check
                     continue
-            if rc is None or rc == 0 or getattr(ch, "reported", False):
+            # exit 0 is an end serve asked for, unless it was a stop signal from elsewhere (a crash)
+            if rc is None or rc == 0 and ch.outside_stop_signal(rc) is None or getattr(ch, "reported", False):
                 continue
             ch.reported = True
             hb = self.beats.last.get(name, {})
@@ -636,10 +637,13 @@ class Supervisor:
         """A ``--controller`` that ended is not restarted (its state is its own): in lockstep
         the plant cannot go on without its answers, so serve fails now, naming it, instead of
         after ``control.timeout``; in free mode the plant goes on, and serve says so once."""
+        plant_ending = self.beats.last.get("plant", {}).get("done")  # its last heartbeat: it is on its way out
         for name, ch in self.controllers.items():
             rc = ch.poll()
             if rc is None or getattr(ch, "reported", False) or self.state not in ("running", "paused"):
                 continue
+            if self.scenario.control.mode == "lockstep" and plant_ending:
+                continue  # a controller leaves when the plant stops: the plant's exit says why (check_children)
             ch.reported = True
             msg = f"controller {name} (pid {ch.pid}) {ch.how(rc)} at {sim_time(self.beats.last.get('plant', {}).get('t'))}: " \
                   f"{ch.last_words(3)}"
