@@ -24,9 +24,23 @@ Definitions of every number: :mod:`astrodyn.analysis.metrics`.  An orbit that bu
 its energy and angular momentum judged between burns: drifts over each coast arc
 (``energy_coast_drift_max``, the rows ``... between burns``), the burns' changes listed
 in its closed-loop section.  A cut or damaged file is
-analysed up to what is complete and the report says so at the top; so does a channel with
-duplicated or missing sequence numbers (count, channel, the missing seqs;
-:func:`sequence_issues`), which ``astrodyn analyze`` also prints as a warning.
+analysed up to what is complete and the report says so at the top (with the first invalid
+message and its reason); so does a channel with duplicated or missing sequence numbers
+(count, channel, the missing seqs) or whose ``t`` does not increase with seq (the first
+place; :func:`sequence_issues`, the check ``export`` makes too), which ``astrodyn analyze``
+also prints as a warning.  A file with no valid state of any (chosen) body is nothing to
+analyse: :class:`~astrodyn.recording.RecordingError` (:func:`nothing_to_analyse`; exit 1,
+as ``export`` of a file with nothing to export), no report written.
+
+What each number is: the orbit table's ``E`` and ``h`` are the two-body ones whatever the
+model (the rows say so, and a note when the model does not conserve them, as a J2 orbit);
+the quantities the model conserves are the "conserved quantities" rows, and the
+``orbit-drift`` figure draws those (``E (with J2)`` and ``h_z`` for a J2 orbit).  The
+attitude table's ``T`` and ``H_i`` are the rigid body's, computed as the conserved rows'
+(:func:`astrodyn.analysis.metrics.inertial_from_body`).  Recorded values that are finite
+but whose squares or products exceed float64 (an ``r`` of 1e308 m) give numbers that are
+not: numpy's overflow warnings are silenced and the body's section "non-finite numbers"
+names them and the largest recorded value of each of its channels.
 """
 
 from __future__ import annotations
@@ -47,11 +61,12 @@ from astrodyn.analysis.closed_loop import CLOSED_LOOP_FIGURES, OrbitActuation, c
 from astrodyn.analysis.pointing import POINTING_FIGURES, pointing_section
 from astrodyn.files import output_path_problem, path_argument
 from astrodyn.progress import Progress
-from astrodyn.recording import RecordingError, load
+from astrodyn.recording import RecordingError, Track, load
 from astrodyn.recording.outputs import staging_directory, warn_incomplete_input
+from astrodyn.recording.reader import SEQ_NOT_COUNTED, sequence_issues, sequence_note
 from astrodyn.signals import deferred_interrupts, interruptible
 
-__all__ = ["analyze", "main", "FIGURES", "orbit_arc_starts", "SEQ_NOT_COUNTED", "sequence_issues", "sequence_note", "check_report_options",
+__all__ = ["analyze", "main", "FIGURES", "nothing_to_analyse", "orbit_arc_starts", "SEQ_NOT_COUNTED", "sequence_issues", "sequence_note", "check_report_options",
            "ReportOptionError"]
 
 #: figure name -> what it shows (report captions)
@@ -59,13 +74,14 @@ FIGURES = {
     "orbit3d": "orbit in 3D (inertial frame, km)",
     "groundtrack": "ground track",
     "elements": "osculating orbital elements",
-    "orbit-drift": "specific energy and angular momentum drift",
+    "orbit-drift": "drift of the energy and angular momentum its model conserves (E and h two-body, or with J2: E "
+                   "with the zonal potential and h_z)",
     "crosscheck": "difference to the REBOUND cross-check",
     "euler": "Euler angles",
     "quaternion": "Euler parameters",
     "rates": "body angular velocity",
     "polhode": "polhode on the momentum sphere",
-    "attitude-drift": "kinetic energy and inertial angular momentum drift",
+    "attitude-drift": "rigid-body kinetic energy and inertial angular momentum drift",
     "top-angles": "precession and nutation",
     "appendages": "tip displacement of each flexible appendage",
     "flexible-drift": "energy, angular momentum drift and nutation of a flexible spacecraft",
@@ -147,49 +163,6 @@ def select_bodies(names, patterns: Sequence[str] | None) -> list[str]:
     return [n for n in names if n in chosen]
 
 
-#: Kinds whose seq is not a count of their channel's messages: a command channel's seq counts
-#: each sender's commands over every body (docs/control.md), so repeats and jumps are normal.
-SEQ_NOT_COUNTED = ("command",)
-
-
-def sequence_issues(run) -> dict[str, dict]:
-    """The seq accounting of ``run`` (``load(path)``: its per-channel gap report) for every
-    channel whose seq counts its messages (per process on the event channel,
-    ``<topic>#<process>``) and has duplicates or missing seqs: ``{"duplicates": messages
-    repeating a seq already present, "missing": seqs absent below the largest, "gap_count",
-    "gaps": the first 5 [first, last] ranges}``."""
-    issues = {}
-    for key, report in run.gaps.items():
-        track = run.channels.get(key.split("#", 1)[0])
-        if track is not None and track.kind in SEQ_NOT_COUNTED:
-            continue
-        if report.get("duplicates") or report.get("missing"):
-            gaps = report.get("gaps", [])
-            issues[key] = {"duplicates": int(report.get("duplicates", 0)), "missing": int(report.get("missing", 0)),
-                           "gap_count": len(gaps), "gaps": [list(g) for g in gaps[:5]]}
-    return issues
-
-
-def sequence_note(issues: dict[str, dict], channels: int = 5) -> str:
-    """One line for the report and the warning: per channel of :func:`sequence_issues`
-    (the first ``channels``) its duplicated and missing seqs."""
-    parts = []
-    for key, issue in list(issues.items())[:channels]:
-        said = []
-        n = issue["duplicates"]
-        if n:
-            said.append(f"{n} duplicated sequence number{'' if n == 1 else 's'} (a message repeating a seq already "
-                        f"recorded)")
-        n = issue["missing"]
-        if n:
-            ranges = ", ".join(f"{a}" if a == b else f"{a}-{b}" for a, b in issue["gaps"])
-            ranges += ", ..." if issue["gap_count"] > len(issue["gaps"]) else ""
-            said.append(f"{n} missing sequence number{'' if n == 1 else 's'} (seq {ranges})")
-        parts.append(f"{key}: {' and '.join(said)}")
-    more = len(issues) - channels
-    return "; ".join(parts) + (f"; and {more} more channels (report.json, \"sequence\")" if more > 0 else "")
-
-
 def analyze(path: str | os.PathLike, out: str | os.PathLike | None = None, seq: str = "321",
             bodies: Sequence[str] | None = None, figures_for: int = FIGURE_BODIES,
             progress: Progress | None = None) -> dict:
@@ -210,6 +183,8 @@ def analyze(path: str | os.PathLike, out: str | os.PathLike | None = None, seq: 
         progress.done(f"analyze: reading {os.fspath(path)} ({os.path.getsize(path) / 1e6:.1f} MB)")
     run = load(path)
     names = select_bodies(run.bodies, bodies)
+    if not any(_has_states(run.bodies[name]) for name in names):
+        raise RecordingError(nothing_to_analyse(run, names, bodies is not None))
     if progress is not None:
         progress.done(f"analyze: {run.messages} messages read in {time.monotonic() - started:.1f} s; "
                       f"{counted(len(names), 'body', 'bodies')} to report, figures for {min(figures_for, len(names))}")
@@ -224,6 +199,54 @@ def analyze(path: str | os.PathLike, out: str | os.PathLike | None = None, seq: 
     if progress is not None:
         progress.done(f"analyze: {counted(len(names), 'body', 'bodies')} reported in {time.monotonic() - started:.1f} s")
     return report
+
+
+def _has_states(body) -> bool:
+    """Whether a body of ``load(path).bodies`` holds a state on any of its channels."""
+    return any(isinstance(track, Track) and len(track) for track in vars(body).values())
+
+
+def nothing_to_analyse(run, names: list[str], chosen: bool) -> str:
+    """Why ``run`` gives no report (none of the bodies ``names`` holds a state; ``chosen``:
+    they are those ``bodies`` selected): which channels it has instead, or that every
+    state message was invalid, and the reader's account of the file (the cut, the first
+    invalid message and its reason).  The error :func:`analyze` raises (exit 1)."""
+    if not run.bodies:
+        topics = list(run.channels)
+        shown = ", ".join(topics[:5]) + (f", and {len(topics) - 5} more" if len(topics) > 5 else "")
+        what = (f"no astrodyn state channel (<scenario>/<body>/orbit, attitude, ...) among its {len(topics)} "
+                f"channel{'' if len(topics) == 1 else 's'} ({shown})" if topics else "no channel")
+    else:
+        shown = ", ".join(names[:5]) + (f", and {len(names) - 5} more" if len(names) > 5 else "")
+        what = f"no valid state of {'the bodies chosen by --bodies' if chosen else 'any body'} ({shown})"
+    why = run.incomplete_reason
+    return f"{run.path}: nothing to analyse: {what}" + (f"; {why}" if why else "")
+
+
+def _non_finite(numbers: dict, body) -> dict:
+    """The section "non-finite numbers" of a body whose numbers include NaN or infinity
+    (finite recorded states whose squares or products exceed float64: an |r| of 1e308 m
+    makes ``h = r x v`` overflow): which numbers, and the largest recorded value of each of
+    the body's state channels with its seq, so the report says why ({} when all are finite)."""
+    found = [f"{section}: {label}" for section, values in numbers.items() if isinstance(values, dict)
+             for label, value in _rows({k: v for k, v in values.items() if isinstance(v, float) and not np.isfinite(v)})]
+    if not found:
+        return {}
+    largest = []
+    for kind, track in vars(body).items():
+        if not isinstance(track, Track) or not len(track):
+            continue
+        fields = {k: np.abs(a).reshape(len(track), -1) for k, a in track.fields.items()
+                  if a.dtype.kind == "f" and k != "t"}
+        if fields:
+            field, a = max(fields.items(), key=lambda kv: float(np.max(kv[1])))
+            k = int(np.argmax(np.max(a, axis=1)))
+            largest.append((float(np.max(a[k])), f"{kind} {field} = {_fmt(float(np.max(a[k])))} at seq {int(track.seq[k])}"))
+    shown = "; ".join(found[:5]) + (f"; and {len(found) - 5} more" if len(found) > 5 else "")
+    return {"non-finite numbers": {
+        "numbers": shown,
+        "why": "the recorded states are finite but their squares or products exceed float64 (about 1.8e308)",
+        "largest recorded values": "; ".join(text for _, text in sorted(largest, reverse=True))}}
 
 
 def _write_report(run, names: list[str], out: Path, seq: str, figures_for: int, progress: Progress | None) -> dict:
@@ -243,9 +266,12 @@ def _write_report(run, names: list[str], out: Path, seq: str, figures_for: int, 
     for i, name in enumerate(names):
         if progress is not None:
             progress.show(lambda i=i, name=name: f"analyze: body {i + 1} of {len(names)}: {name}")
-        with fg.drawing(i < figures_for):
-            report["bodies"][name], report["figures"][name] = _body_report(run, name, run.bodies[name], out / name, seq,
-                                                                           central, inertias, earth)
+        # hostile but finite states (1e308 m) overflow the formulas: numpy's warnings are silenced
+        # and the report names the numbers that are not finite and the values behind them
+        with fg.drawing(i < figures_for), np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+            numbers, report["figures"][name] = _body_report(run, name, run.bodies[name], out / name, seq,
+                                                            central, inertias, earth)
+        report["bodies"][name] = {**numbers, **_non_finite(numbers, run.bodies[name])}
     _write_markdown(report, out / "report.md")
     _write_html(report, out / "report.html")
     (out / "report.json").write_text(json.dumps(report, indent=1, default=str))
@@ -271,8 +297,16 @@ def _body_report(run, name: str, body, stem: Path, seq: str, central: dict, iner
             lon, lat = mt.ground_track(tr.r, tr.log_time)
             figs.append(("groundtrack", fg.ground_track(name, lon, lat, Path(f"{stem}-groundtrack.png"))))
         figs.append(("elements", fg.elements(name, tr.t, om["elements"], Path(f"{stem}-elements.png"))))
-        figs.append(("orbit-drift", fg.orbit_drift(name, tr.t, om["energy_drift"], om["h_drift"], Path(f"{stem}-orbit-drift.png"),
-                                                     between_burns=arc_starts is not None)))
+        models = sorted(set(tr.model))
+        quantities = _orbit_quantities(run, name, tr)
+        two_body = quantities.energy_name == "E (two-body)" if quantities is not None else models == ["kepler"]
+        if not two_body:  # the orbit table's E and h are two-body (metrics): say what they are here
+            own = (f"{quantities.energy_name} and {quantities.momentum_name}, under \"conserved quantities\""
+                   if quantities is not None else "none: a third body moves")
+            numbers["orbit"]["two_body_note"] = (f"E and h above are the two-body quantities, which {', '.join(models)} "
+                                                 f"does not conserve (their change is the perturbation's effect); the "
+                                                 f"ones it conserves: {own}")
+        figs.append(("orbit-drift", _orbit_drift_figure(name, tr, om, quantities, arc_starts, two_body, models, stem)))
     if body.crosscheck is not None and len(body.crosscheck) > 0:
         cc = body.crosscheck
         numbers["crosscheck"] = {"dr_max_m": float(np.max(cc.dr_norm)), "dv_max_m_s": float(np.max(cc.dv_norm)),
@@ -314,6 +348,38 @@ def _body_report(run, name: str, body, stem: Path, seq: str, central: dict, iner
     numbers.update(section)
     figs += more
     return numbers, {kind: p.name for kind, p in figs if p is not None}
+
+
+def _orbit_quantities(run, name: str, tr):
+    """The energy and momentum body ``name``'s orbit model conserves, per recorded state
+    (:func:`astrodyn.analysis.invariants.recorded_orbit_quantities`: those of its
+    "conserved quantities" rows), or None (a third body; no constants recorded)."""
+    from astrodyn.analysis.invariants import recorded_orbit_quantities
+
+    try:
+        return recorded_orbit_quantities(run.scenario, name, str(tr.model[-1]), tr.r, tr.v)
+    except ValueError:  # the metadata's constants do not fit the model: its rows are two-body as well
+        return None
+
+
+def _orbit_drift_figure(name: str, tr, om: dict, quantities, arc_starts: np.ndarray | None, two_body: bool,
+                        models: list[str], stem: Path) -> Path | None:
+    """The orbit-drift figure: the drift of the energy and angular momentum the orbit's
+    model conserves (``quantities``, :func:`_orbit_quantities`: E with J2 and h_z for a J2
+    orbit), over each coast arc for an orbit that burns moved; for a model that conserves
+    none (a third body), the two-body drift, titled so (``two_body`` False)."""
+    from astrodyn.analysis import figures as fg, metrics as mt
+
+    path = Path(f"{stem}-orbit-drift.png")
+    between_burns = arc_starts is not None
+    if quantities is None:
+        note = "" if two_body else f"(two-body E and h: {', '.join(models)} conserves neither)"
+        return fg.orbit_drift(name, tr.t, om["energy_drift"], om["h_drift"], path, between_burns=between_burns,
+                              note=note)
+    energy_drift = mt.relative_drift_over_arcs(quantities.energy, arc_starts, quantities.energy_scale)
+    momentum_drift = mt.relative_drift_over_arcs(quantities.momentum, arc_starts, quantities.momentum_scale)
+    return fg.orbit_drift(name, tr.t, energy_drift, momentum_drift, path, between_burns=between_burns,
+                          energy=quantities.energy_name, momentum=quantities.momentum_name)
 
 
 def _flexible_section(run, name: str, body, stem: Path) -> tuple[dict, list[tuple[str, Path]]]:
@@ -451,24 +517,31 @@ def _conserved(scenario: dict, name: str, body, orbit_arc_starts: np.ndarray | N
 
 
 _LABELS = {
-    "states": "states", "t_span_s": "time span (s)", "energy_drift_max": "max |E - E0| / |E0|",
-    "h_drift_max": "max |h - h0| / |h0|",
+    "states": "states", "t_span_s": "time span (s), max t - min t",
+    # the orbit table's E and h are the two-body ones whatever the model (metrics.orbit_metrics);
+    # the model's own are the "conserved quantities" rows
+    "energy_drift_max": "max |E - E0| / |E0|, two-body E = |v|^2/2 - mu/|r|",
+    "h_drift_max": "max |h - h0| / |h0|, two-body h = r x v", "two_body_note": "note",
     # an orbit that burns moved: the drift over each coast arc, from its first state (E0, h0)
     "coast_arcs": "coast arcs between burns (2 states or more)",
-    "energy_coast_drift_max": "max |E - E0| / |E0| over each coast arc (burns change E by design)",
-    "h_coast_drift_max": "max |h - h0| / |h0| over each coast arc (burns change h by design)",
-    "energy_coast_drift_max_abs": "max |E - E0| over each coast arc (J/kg; an arc with E0 = 0, so absolute)",
-    "h_coast_drift_max_abs": "max |h - h0| over each coast arc (m^2/s; an arc with h0 = 0, so absolute)",
+    "energy_coast_drift_max": "max |E - E0| / |E0| over each coast arc, two-body E (burns change E by design)",
+    "h_coast_drift_max": "max |h - h0| / |h0| over each coast arc, two-body h (burns change h by design)",
+    "energy_coast_drift_max_abs": "max |E - E0| over each coast arc, two-body E (J/kg; an arc with E0 = 0, so "
+                                  "absolute)",
+    "h_coast_drift_max_abs": "max |h - h0| over each coast arc, two-body h (m^2/s; an arc with h0 = 0, so absolute)",
     "r_min_m": "min radius (m)", "r_max_m": "max radius (m)",
     "models": "models", "frame": "frame", "dr_max_m": "max |dr| to REBOUND (m)", "dv_max_m_s": "max |dv| to REBOUND (m/s)",
     "reference": "reference", "quat_norm_error_max": "max ||q| - 1|", "rate_max_rad_s": "max |w| (rad/s)",
-    "kinetic_energy_drift_max": "max |T - T0| / |T0|", "h_inertial_drift_max": "max |Hi - Hi0| / |Hi0|",
+    # the rigid body's T and H_i (metrics.attitude_metrics; a gyrostat's conserved H_i adds its
+    # rotors': the "conserved quantities" rows)
+    "kinetic_energy_drift_max": "max |T - T0| / |T0|, rigid-body T = w.Iw/2",
+    "h_inertial_drift_max": "max |Hi - Hi0| / |Hi0|, rigid-body Hi = C(q)^T I w",
     "nutation_min_deg": "min nutation (deg)", "nutation_max_deg": "max nutation (deg)",
     # a quantity that starts at 0 (a body at rest, a parabola): its absolute drift, in its unit
-    "energy_drift_max_abs": "max |E - E0| (J/kg; E0 = 0, so absolute)",
-    "h_drift_max_abs": "max |h - h0| (m^2/s; h0 = 0, so absolute)",
-    "kinetic_energy_drift_max_abs": "max |T - T0| (J; T0 = 0, so absolute)",
-    "h_inertial_drift_max_abs": "max |Hi - Hi0| (N m s; Hi0 = 0, so absolute)",
+    "energy_drift_max_abs": "max |E - E0|, two-body E (J/kg; E0 = 0, so absolute)",
+    "h_drift_max_abs": "max |h - h0|, two-body h (m^2/s; h0 = 0, so absolute)",
+    "kinetic_energy_drift_max_abs": "max |T - T0|, rigid-body T (J; T0 = 0, so absolute)",
+    "h_inertial_drift_max_abs": "max |Hi - Hi0|, rigid-body Hi (N m s; Hi0 = 0, so absolute)",
 }
 
 
@@ -491,9 +564,13 @@ def at_a_glance(report: dict) -> list[str]:
                 parts.append(f"{kind} ({', '.join(sec.get('models', []))}): {sec.get('states', '?')} states over "
                              f"{_fmt(float(sec.get('t_span_s', 0.0)))} s")
         conserved = {k: v for k, v in numbers.get("conserved quantities", {}).items() if isinstance(v, float)}
-        if conserved:
-            worst = max(conserved, key=lambda k: conserved[k])
-            parts.append(f"largest drift of a conserved quantity {conserved[worst]:.2g} ({worst.split(',')[0]})")
+        if conserved:  # a drift that is not finite (NaN, inf: "non-finite numbers") is the worst
+            worst = max(conserved, key=lambda k: (not np.isfinite(conserved[k]),
+                                                  conserved[k] if np.isfinite(conserved[k]) else 0.0))
+            value = conserved[worst]
+            parts.append(f"largest drift of a conserved quantity {value:.2g} ({worst.split(',')[0]})" if np.isfinite(value)
+                         else f"a conserved quantity's drift is not finite ({worst.split(',')[0]}: see "
+                              f"\"non-finite numbers\")")
         cc = numbers.get("crosscheck")
         if cc:
             parts.append(f"differs from {cc.get('reference', 'REBOUND')} by at most {cc['dr_max_m']:.2g} m")
@@ -567,7 +644,8 @@ def main(argv: list[str] | None = None) -> int:
 def _main(argv: list[str] | None) -> int:
     ap = argparse.ArgumentParser(prog="astrodyn analyze", description="Report (Markdown, HTML, PNG) from an MCAP recording.",
                                  epilog="Exit status: 0 written; 1 the input cannot be analysed or the report not "
-                                        "written (a --bodies pattern matching no body of this recording included); "
+                                        "written (a file with nothing to analyse, no valid state of any body, and a "
+                                        "--bodies pattern matching no body of this recording included); "
                                         "2 a bad flag value or an --out that is not a directory that can be made; "
                                         "128 + the signal when interrupted.")
     ap.add_argument("file", type=path_argument,
@@ -624,5 +702,11 @@ def _main(argv: list[str] | None) -> int:
         warn_incomplete_input("analyze", args.file, report["file_report"], "analysed what is complete")
     if report["sequence"]:
         print(f"astrodyn analyze: warning: {args.file}: {sequence_note(report['sequence'])}", file=sys.stderr)
+    overflowed = [name for name, numbers in report["bodies"].items() if "non-finite numbers" in numbers]
+    if overflowed:
+        first = report["bodies"][overflowed[0]]["non-finite numbers"]
+        print(f"astrodyn analyze: warning: {args.file}: numbers not finite for {len(overflowed)} "
+              f"bod{'y' if len(overflowed) == 1 else 'ies'} ({overflowed[0]}: {first['numbers']}; largest recorded "
+              f"values: {first['largest recorded values']}): see \"non-finite numbers\" in the report", file=sys.stderr)
     print(out / "report.html")
     return 0

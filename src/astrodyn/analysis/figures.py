@@ -167,16 +167,22 @@ def elements(name: str, t: np.ndarray, el, path: Path) -> Path:
     return _stacked(t, series, labels, f"{name}: osculating elements", path, dots=(5,))
 
 
-def orbit_drift(name: str, t: np.ndarray, energy_drift, h_drift, path: Path, between_burns: bool = False) -> Path:
-    """Relative energy and angular-momentum drift (dimensionless); ``between_burns``: the
-    drifts were taken over each coast arc from its own first state (E0, h0), as
-    :func:`astrodyn.analysis.metrics.orbit_metrics` does for an orbit that burns moved, and
-    the labels say so."""
+def orbit_drift(name: str, t: np.ndarray, energy_drift, h_drift, path: Path, between_burns: bool = False,
+                energy: str = "E (two-body)", momentum: str = "h", note: str = "") -> Path:
+    """Relative drift (dimensionless) of an orbit's energy and angular momentum: those its
+    model conserves (``energy`` and ``momentum`` name them, as the report's "conserved
+    quantities" rows: ``E (two-body)`` and ``h``, or ``E (with J2)`` and ``h_z``, which
+    drifts relative to ``|h0|``), or, for a model that conserves none, the two-body ones
+    with a ``note`` that says so.  ``between_burns``: the drifts were taken over each coast
+    arc from its own first state (E0, h0), as for an orbit that burns moved, and the
+    labels say so."""
     arcs = "; {} at each coast arc's start" if between_burns else ""
+    m = momentum.split()[0]
     return _stacked(t, [energy_drift, h_drift],
-                    [f"|E - E0| / |E0| (-{arcs.format('E0')})", f"|h - h0| / |h0| (-{arcs.format('h0')})"],
-                    f"{name}: specific energy and angular momentum drift{' between burns' if between_burns else ''} "
-                    f"(log scale)", path, log=True)
+                    [f"{energy}:\n|E - E0| / |E0| (-{arcs.format('E0')})",
+                     f"{momentum}:\n|{m} - {m}0| / |h0| (-{arcs.format('h0')})"],
+                    f"{name}: drift of {energy} and {momentum}{' between burns' if between_burns else ''} "
+                    f"(log scale){chr(10) + note if note else ''}", path, log=True)
 
 
 def crosscheck(name: str, t: np.ndarray, dr_norm, dv_norm, path: Path) -> Path:

@@ -58,11 +58,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from astrodyn.analysis.metrics import drift_against, drift_over_arcs
+from astrodyn.analysis.metrics import drift_against, drift_over_arcs, inertial_from_body
 from astrodyn.orbit import zonal_potential
 from astrodyn.rotation import dcm_from_quat
 
-__all__ = ["Invariant", "BETWEEN_BURNS", "orbit_invariants", "attitude_invariants", "flexible_invariants", "rolling_invariants",
+__all__ = ["Invariant", "BETWEEN_BURNS", "OrbitQuantities", "orbit_quantities", "recorded_orbit_quantities",
+           "energy_scale", "orbit_invariants", "attitude_invariants", "flexible_invariants", "rolling_invariants",
            "recorded_invariants", "appendage_arrays", "own_state_arrays", "recorded_spacecraft", "recorded_rolling_disk",
            "flexible_states"]
 
@@ -109,13 +110,19 @@ def _energy_row(name: str, energy: np.ndarray, mu: float, r0: float) -> Invarian
 BETWEEN_BURNS = "between burns"
 
 
+def energy_scale(energy: np.ndarray, mu: float, rn: np.ndarray) -> np.ndarray:
+    """Per state, the scale an orbit energy's drift from that state is relative to: ``|E|``,
+    or ``mu/|r|`` where ``|E| < 1e-6 mu/|r|`` (near parabolic: the size of the terms)."""
+    terms = mu / rn
+    return np.where(np.abs(energy) < 1e-6 * terms, terms, np.abs(energy))
+
+
 def _arc_rows(energy_name: str, energy: np.ndarray, momentum_name: str, momentum: np.ndarray, h_norm: np.ndarray,
               rn: np.ndarray, mu: float, arc_starts: np.ndarray) -> list[Invariant]:
     """The energy and momentum rows of an actuated orbit: each drift over every coast arc
     from its first state (:func:`~astrodyn.analysis.metrics.drift_over_arcs`), relative to
     that state's ``|E|`` (``mu/|r|`` where ``|E| < 1e-6 mu/|r|``, near parabolic) and ``|h|``."""
-    terms = mu / rn
-    e_scale = np.where(np.abs(energy) < 1e-6 * terms, terms, np.abs(energy))
+    e_scale = energy_scale(energy, mu, rn)
     rows = []
     for name, unit, x, initial, scales, scale_name in (
             (energy_name, "J/kg", energy, float(energy[0]), e_scale, "|E0| of its coast arc"),
@@ -142,28 +149,54 @@ def orbit_invariants(model: str, r: np.ndarray, v: np.ndarray, mu: float, *, rad
     v = np.asarray(v, dtype=np.float64)
     if r.ndim != 2 or r.shape[-1] != 3 or r.shape != v.shape or r.shape[0] == 0:
         raise ValueError(f"r, v: expected matching (n, 3) arrays with n >= 1, got {r.shape} and {v.shape}")
-    rn = np.linalg.norm(r, axis=-1)
-    kinetic = 0.5 * np.einsum("ij,ij->i", v, v)
-    h = np.cross(r, v)
     if third_body or model == "third_body":
         return [Invariant("none (a third body moves: no orbit invariant)", "-", float("nan"), float("nan"), "-",
                           conserved=False)]
-    if arc_starts is not None and np.shape(arc_starts) != rn.shape:
-        raise ValueError(f"arc_starts: expected one flag per state, shape {rn.shape}, got {np.shape(arc_starts)}")
+    if arc_starts is not None and np.shape(arc_starts) != r.shape[:1]:
+        raise ValueError(f"arc_starts: expected one flag per state, shape {r.shape[:1]}, got {np.shape(arc_starts)}")
+    quantities = orbit_quantities(model, r, v, mu, radius=radius, j=j, degree=degree)
+    rn = np.linalg.norm(r, axis=-1)
+    h_norm = np.linalg.norm(np.cross(r, v), axis=-1)
+    if arc_starts is not None:
+        return _arc_rows(quantities.energy_name, quantities.energy, quantities.momentum_name, quantities.momentum,
+                         h_norm, rn, mu, arc_starts)
+    momentum = quantities.momentum
+    initial = _norm0(momentum) if momentum.ndim > 1 else float(momentum[0])
+    return [_energy_row(quantities.energy_name, quantities.energy, mu, float(rn[0])),
+            _row(quantities.momentum_name, "m^2/s", initial, momentum, float(h_norm[0]), "|h0|")]
+
+
+@dataclass(frozen=True)
+class OrbitQuantities:
+    """The energy and angular momentum an orbit model conserves, per state (module docstring)."""
+
+    energy_name: str  #: "E (two-body)", "E (with J2)", "E (with J2..Jn)"
+    energy: np.ndarray  #: (n,) J/kg
+    energy_scale: np.ndarray  #: (n,) J/kg: what a drift from each state is relative to (:func:`energy_scale`)
+    momentum_name: str  #: "h" (the vector r x v) or "h_z" (its polar component)
+    momentum: np.ndarray  #: (n, 3) or (n,) m^2/s
+    momentum_scale: np.ndarray  #: (n,) m^2/s: |h| of each state, what a drift from it is relative to
+
+
+def orbit_quantities(model: str, r: np.ndarray, v: np.ndarray, mu: float, *, radius: float | None = None,
+                     j: tuple[float, ...] | list[float] = (), degree: int = 0) -> OrbitQuantities:
+    """The conserved quantities of orbit ``model`` (not ``third_body``: none) at each state
+    ``r`` (m), ``v`` (m/s), shape (n, 3): for ``kepler`` or ``degree < 2`` the two-body
+    ``E = |v|^2/2 - mu/|r|`` and ``h = r x v``; for a zonal field of ``degree`` >= 2
+    (``radius`` m, ``j`` = J2, J3, ...) ``E = |v|^2/2 - mu/|r| - V_zonal(r)`` and ``h_z``.
+    The rows of :func:`orbit_invariants` and the curves of the report's orbit-drift figure."""
+    rn = np.linalg.norm(r, axis=-1)
+    kinetic = 0.5 * np.einsum("ij,ij->i", v, v)
+    h = np.cross(r, v)
+    h_norm = np.linalg.norm(h, axis=-1)
     if model == "kepler" or degree < 2:
-        if arc_starts is not None:
-            return _arc_rows("E (two-body)", kinetic - mu / rn, "h", h, np.linalg.norm(h, axis=-1), rn, mu, arc_starts)
-        return [_energy_row("E (two-body)", kinetic - mu / rn, mu, float(rn[0])),
-                _row("h", "m^2/s", _norm0(h), h, _norm0(h), "|h0|")]
+        energy = kinetic - mu / rn
+        return OrbitQuantities("E (two-body)", energy, energy_scale(energy, mu, rn), "h", h, h_norm)
     if radius is None or len(j) < degree - 1:
         raise ValueError(f"orbit_invariants({model!r}): expected radius and J2..J{degree}, got radius={radius}, j={j}")
-    potential = mu / rn + zonal_potential(r, mu, radius, tuple(j[: degree - 1]))
-    energy_name = f"E (with J2..J{degree})" if degree > 2 else "E (with J2)"
-    if arc_starts is not None:
-        return _arc_rows(energy_name, kinetic - potential, "h_z", h[:, 2], np.linalg.norm(h, axis=-1), rn, mu,
-                         arc_starts)
-    return [_energy_row(energy_name, kinetic - potential, mu, float(rn[0])),
-            _row("h_z", "m^2/s", float(h[0, 2]), h[:, 2], _norm0(h), "|h0|")]
+    energy = kinetic - (mu / rn + zonal_potential(r, mu, radius, tuple(j[: degree - 1])))
+    return OrbitQuantities(f"E (with J2..J{degree})" if degree > 2 else "E (with J2)", energy,
+                           energy_scale(energy, mu, rn), "h_z", h[:, 2], h_norm)
 
 
 def attitude_invariants(model: str, q: np.ndarray, w: np.ndarray, inertia: np.ndarray | None, *,
@@ -186,7 +219,7 @@ def attitude_invariants(model: str, q: np.ndarray, w: np.ndarray, inertia: np.nd
         c = dcm_from_quat(q / qn[:, None])
         if model == "gyrostat" and rotor_momentum is not None:
             hb = hb + np.asarray(rotor_momentum, dtype=np.float64)
-        hi = np.einsum("kji,kj->ki", c, hb)  # C^T H_b
+        hi = inertial_from_body(q, hb)  # C^T H_b, as the report's attitude table
         if model == "heavy_top":
             m, l, gg = float(mass or 0.0), float(cm or 0.0), float(g or 0.0)
             height = c[:, 2, 2]  # (C^T e3)_z: the vertical component of body axis 3
@@ -311,15 +344,9 @@ def recorded_invariants(scenario: dict, body: str, *, orbit: tuple | None = None
     out: dict[str, list[Invariant]] = {}
     if orbit is not None:
         model, r, v = orbit
-        om = bm.get("orbit") if isinstance(bm.get("orbit"), dict) else {}
-        mu = central.get("mu")
-        if isinstance(mu, (int, float)) and mu > 0:
-            degree = int(om.get("degree") or (2 if model == "j2" else 0))
-            j = central.get("j") or ()
-            if degree >= 2 and (central.get("radius") is None or len(j) < degree - 1):
-                degree = 0  # constants not recorded: two-body rows only
-            out["orbit"] = orbit_invariants(model, r, v, float(mu), radius=central.get("radius"), j=j, degree=degree,
-                                            third_body=bool(om.get("perturbers")), arc_starts=orbit_arc_starts)
+        constants = _orbit_constants(scenario, body, model)
+        if constants is not None:
+            out["orbit"] = orbit_invariants(model, r, v, **constants, arc_starts=orbit_arc_starts)
     if attitude is not None:
         model, q, w = attitude
         am = bm.get("attitude") if isinstance(bm.get("attitude"), dict) else {}
@@ -345,6 +372,40 @@ def recorded_invariants(scenario: dict, body: str, *, orbit: tuple | None = None
             out["attitude"] = attitude_invariants(model, q, w, inertia, rotor_momentum=h, mass=am.get("mass"),
                                                   cm=am.get("cm"), g=am.get("g"))
     return out
+
+
+def _orbit_constants(scenario: dict, body: str, model: str) -> dict | None:
+    """The keyword arguments of :func:`orbit_invariants` for ``body``'s orbit of ``model``
+    from a recording's scenario metadata (``mu``, ``radius``, ``j``, ``degree``,
+    ``third_body``); None without a positive ``mu``.  Zonal constants not recorded: two-body."""
+    text = scenario.get("json") or "{}"
+    central, bodies = _recorded_constants(text if isinstance(text, str) else "{}")
+    bm = bodies.get(body, {})
+    om = bm.get("orbit") if isinstance(bm.get("orbit"), dict) else {}
+    mu = central.get("mu")
+    if not isinstance(mu, (int, float)) or isinstance(mu, bool) or not mu > 0:
+        return None
+    try:
+        degree = int(om.get("degree") or (2 if model == "j2" else 0))
+    except (TypeError, ValueError, OverflowError):
+        degree = 0
+    j = central.get("j") or ()
+    if degree >= 2 and (central.get("radius") is None or not isinstance(j, list) or len(j) < degree - 1):
+        degree = 0  # constants not recorded: two-body rows only
+    return {"mu": float(mu), "radius": central.get("radius"), "j": j, "degree": degree,
+            "third_body": bool(om.get("perturbers"))}
+
+
+def recorded_orbit_quantities(scenario: dict, body: str, model: str, r: np.ndarray,
+                              v: np.ndarray) -> OrbitQuantities | None:
+    """:func:`orbit_quantities` of ``body``'s recorded orbit states, its constants from the
+    recording's ``scenario`` metadata as :func:`recorded_invariants` takes them (so the
+    report's orbit-drift figure draws the quantities of its "conserved quantities" rows);
+    None when the model conserves none (a third body) or the metadata give no ``mu``."""
+    constants = _orbit_constants(scenario, body, model)
+    if constants is None or constants.pop("third_body") or model == "third_body":
+        return None
+    return orbit_quantities(model, np.asarray(r, dtype=np.float64), np.asarray(v, dtype=np.float64), **constants)
 
 
 def appendage_arrays(track) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:

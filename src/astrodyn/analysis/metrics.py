@@ -1,6 +1,8 @@
 """Numbers of the analysis report, computed from the recorded arrays (no plotting here).
 
-Orbit (two-body invariants, Vallado 4th ed. sec. 1.3 / 2.2): specific energy
+Orbit (two-body quantities, whatever the orbit's model, Vallado 4th ed. sec. 1.3 / 2.2; the
+quantities each model conserves, with J2 for a J2 orbit, are
+:mod:`astrodyn.analysis.invariants`): specific energy
 ``E = |v|^2 / 2 - mu / |r|`` (J/kg) and specific angular momentum ``h = r x v`` (m^2/s);
 their drifts are ``max_k |E_k - E_0| / |E_0|`` and ``max_k |h_k - h_0| / |h_0|``
 (exact constants for a Kepler orbit; for a perturbed orbit the drift *is* the
@@ -10,7 +12,10 @@ parabola, ``T_0 = H_0 = 0`` for a body at rest) has its drift reported as the ab
 Elements: :func:`astrodyn.orbit.elements_from_state`.
 
 Attitude (Baruh ch. 7-8): kinetic energy ``T = w . I w / 2`` (J), body angular momentum
-``H_b = I w`` (kg m^2/s), inertial ``H_i = C(q)^T H_b`` (``v_body = C(q) v_inertial``);
+``H_b = I w`` (kg m^2/s), inertial ``H_i = C(q)^T H_b`` (``v_body = C(q) v_inertial``,
+:func:`inertial_from_body`); these are the rigid body's ``T`` and ``H_i``,
+which the report labels so (a gyrostat's conserved ``H_i`` adds its rotors' momentum: the
+report's "conserved quantities", :mod:`astrodyn.analysis.invariants`);
 for torque-free motion ``T`` and ``H_i`` are constants and their drifts are relative
 like the orbit's.  ``|q| - 1`` is reported as the largest absolute deviation.  Tops
 (body axis 3 the symmetry axis, gravity along -Z inertial): the 3-1-3 Euler angles of
@@ -36,7 +41,7 @@ from astrodyn.rotation import dcm_from_quat, euler_from_quat
 
 __all__ = [
     "relative_drift", "drift_against", "drift_summary", "coast_arc_first", "drift_over_arcs", "relative_drift_over_arcs",
-    "orbit_metrics", "attitude_metrics", "gmst_rad",
+    "radius_of", "time_span", "inertial_from_body", "orbit_metrics", "attitude_metrics", "gmst_rad",
     "ground_track", "BodyInertia", "inertia_from_scenario", "central_body_from_scenario",
 ]
 
@@ -114,17 +119,44 @@ def drift_over_arcs(x: np.ndarray, arc_starts: np.ndarray, scales: np.ndarray | 
     return float(np.max(dev / scale)), True
 
 
-def relative_drift_over_arcs(x: np.ndarray, arc_starts: np.ndarray) -> np.ndarray:
+def relative_drift_over_arcs(x: np.ndarray, arc_starts: np.ndarray | None, scales: np.ndarray | None = None) -> np.ndarray:
     """:func:`relative_drift` per sample with ``x_0`` the first sample of its coast arc
-    (:func:`coast_arc_first`): ``|x_k - x_a(k)| / |x_a(k)|``, 0/0 -> 0, inf where x moved
-    from 0."""
+    (:func:`coast_arc_first`; ``arc_starts`` None: one arc, from the first sample):
+    ``|x_k - x_a(k)| / s_a(k)``, 0/0 -> 0, inf where x moved from ``s = 0``.  The scale
+    ``s`` is ``|x|`` or, given, ``scales`` (one per sample, read at each arc's first
+    sample: an energy near 0 drifts relative to ``mu/|r|``, ``h_z`` relative to ``|h|``)."""
     x = np.asarray(x, dtype=np.float64)
-    first = coast_arc_first(arc_starts)
+    first = coast_arc_first(np.zeros(x.shape[0], dtype=bool) if arc_starts is None else arc_starts)
     d = x - x[first]
     num = np.linalg.norm(d, axis=-1) if x.ndim > 1 else np.abs(d)
-    den = (np.linalg.norm(x, axis=-1) if x.ndim > 1 else np.abs(x))[first]
+    den = ((np.linalg.norm(x, axis=-1) if x.ndim > 1 else np.abs(x)) if scales is None
+           else np.asarray(scales, dtype=np.float64))[first]
     with np.errstate(divide="ignore", invalid="ignore"):
         return np.where(den == 0, np.where(num == 0, 0.0, np.inf), num / np.where(den == 0, 1.0, den))
+
+
+def radius_of(r: np.ndarray) -> np.ndarray:
+    """``|r|`` of each row of ``r`` (n, 3), without overflow: a finite ``r`` of 1e308 m has
+    the finite norm 1.7e308 m (``np.linalg.norm`` squares it to inf)."""
+    r = np.asarray(r, dtype=np.float64)
+    return np.hypot(np.hypot(r[..., 0], r[..., 1]), r[..., 2])
+
+
+def time_span(t: np.ndarray) -> float:
+    """The span of the times ``t`` (s): ``max - min`` (0 for none), the extent of the
+    report's time axes; ``t[-1] - t[0]`` when t increases with seq, as the recording's
+    contract says (a channel that breaks it is named by
+    :func:`astrodyn.recording.reader.time_order`)."""
+    return float(np.max(t) - np.min(t)) if np.size(t) else 0.0
+
+
+def inertial_from_body(q: np.ndarray, x_body: np.ndarray) -> np.ndarray:
+    """Body-axis vectors ``x_body`` (n, 3) in inertial axes, ``C(q)^T x_body``, ``q`` (n, 4)
+    Euler parameters, scalar first (:func:`astrodyn.rotation.dcm_from_quat`: a proper
+    rotation for any nonzero q, a recorded ``|q|`` being 1 within 1e-9).  The one
+    ``H_i = C^T H_b`` of the report's attitude table and of its conserved quantities, so
+    both give one value for one drift (they differed in the last digits)."""
+    return np.einsum("kji,kj->ki", dcm_from_quat(q), np.asarray(x_body, dtype=np.float64))
 
 
 def orbit_metrics(t: np.ndarray, r: np.ndarray, v: np.ndarray, mu: float, arc_starts: np.ndarray | None = None) -> dict:
@@ -137,7 +169,7 @@ def orbit_metrics(t: np.ndarray, r: np.ndarray, v: np.ndarray, mu: float, arc_st
     ``_abs`` variants when an arc starts at 0), with the number of ``coast_arcs`` of two
     states or more (a state alone is at or inside a burn): the changes the burns make are
     not drift."""
-    rn = np.linalg.norm(r, axis=-1)
+    rn = radius_of(r)
     energy = 0.5 * np.einsum("ij,ij->i", v, v) - mu / rn
     h = np.cross(r, v)
     el = elements_from_state(r, v, mu)
@@ -159,7 +191,7 @@ def orbit_metrics(t: np.ndarray, r: np.ndarray, v: np.ndarray, mu: float, arc_st
         "radius": rn,
         "summary": {
             "states": int(t.size),
-            "t_span_s": float(t[-1] - t[0]) if t.size else 0.0,
+            "t_span_s": time_span(t),
             **drifts,
             "r_min_m": float(rn.min()) if t.size else 0.0,
             "r_max_m": float(rn.max()) if t.size else 0.0,
@@ -220,14 +252,14 @@ def attitude_metrics(t: np.ndarray, q: np.ndarray, w: np.ndarray, seq: str,
     out = {"t": t, "euler": angles, "seq": seq}
     summary = {
         "states": int(t.size),
-        "t_span_s": float(t[-1] - t[0]) if t.size else 0.0,
+        "t_span_s": time_span(t),
         "quat_norm_error_max": float(np.max(np.abs(np.linalg.norm(q, axis=-1) - 1.0))) if t.size else 0.0,
         "rate_max_rad_s": float(np.max(np.linalg.norm(w, axis=-1))) if t.size else 0.0,
     }
     if body is not None:
         hb = w @ body.inertia.T
         energy = 0.5 * np.einsum("ij,ij->i", w, hb)
-        hi = np.einsum("kji,kj->ki", dcm_from_quat(q), hb)  # C^T H_b
+        hi = inertial_from_body(q, hb)
         out.update(kinetic_energy=energy, h_body=hb, h_inertial=hi,
                    energy_drift=relative_drift(energy), h_inertial_drift=relative_drift(hi))
         if t.size:

@@ -108,7 +108,7 @@ from astrodyn.recording.foxglove_scene import (
     stamp,
 )
 from astrodyn.recording.outputs import staging_directory, warn_incomplete_input
-from astrodyn.recording.reader import Run, Track, load
+from astrodyn.recording.reader import Run, Track, load, sequence_issues, sequence_note, time_order
 from astrodyn.recording.writer import McapRecorder, RecordingError
 from astrodyn.rotation import quat_to_scalar_last
 from astrodyn.signals import deferred_interrupts, interruptible
@@ -117,6 +117,7 @@ __all__ = [
     "FORMATS", "FIELD_UNITS", "INDICATED_UNITS", "channel_file_stems", "column_units", "channel_units", "channel_header", "ExportError", "export", "write_csv", "write_parquet", "write_oem", "write_aem", "write_aem_v1",
     "write_foxglove", "ccsds_epochs", "parse_ccsds_epoch", "FRAME_TRANSFORM_SCHEMA", "SCENE_UPDATE_SCHEMA",
     "SCENE_TOPIC", "FOXGLOVE_TOPICS", "MAX_LINE_POINTS", "MAX_SCENE_POINTS", "scene_updates", "line_indices", "main",
+    "rejected_channels",
 ]
 
 FORMATS = ("csv", "parquet", "oem", "aem", "aem1", "foxglove")
@@ -470,6 +471,19 @@ def _cells(values: Any, absent: np.ndarray | None) -> list[str]:
     return cells
 
 
+def rejected_channels(run: Run) -> list[str]:
+    """The topics of ``run`` whose every message was rejected as invalid (none valid, some
+    invalid): nothing of them to export, so the CSV and Parquet exports write no file for
+    them (a header without rows would read as a channel recorded empty) and say so."""
+    return [topic for topic, track in run.channels.items() if not len(track) and run.invalid_by_channel.get(topic)]
+
+
+def _exported_channels(run: Run) -> dict[str, Track]:
+    """The channels the CSV and Parquet exports write a file for: all but :func:`rejected_channels`."""
+    rejected = set(rejected_channels(run))
+    return {topic: track for topic, track in run.channels.items() if topic not in rejected}
+
+
 def write_csv(run: Run, out: Path) -> list[Path]:
     """One CSV per channel (see the module docstring); returns the files written.
 
@@ -477,10 +491,11 @@ def write_csv(run: Run, out: Path) -> list[Path]:
     time scale, frame, quaternion order, empty cells, JSON columns, units), then the column
     names, then one row per message.  ``pandas.read_csv(path, comment="#")`` reads it; so
     does any CSV reader told to skip lines starting with ``#``.  The columns are those of
-    :func:`_columns`, formatted and written :data:`_CHUNK_ROWS` rows at a time."""
+    :func:`_columns`, formatted and written :data:`_CHUNK_ROWS` rows at a time.  A channel
+    whose every message was rejected gets no file (:func:`rejected_channels`)."""
     written = []
     stems = channel_file_stems(run.channels)
-    for topic, track in run.channels.items():
+    for topic, track in _exported_channels(run).items():
         names, groups, kept = _columns(track)
         path = out / f"{stems[topic]}.csv"
         with open(path, "w", newline="") as f:
@@ -498,7 +513,8 @@ def write_parquet(run: Run, out: Path) -> list[Path]:
     """One Parquet file per channel (needs pyarrow), the CSV's columns: floats float64,
     integers int64 / uint64, text and JSON text strings, a field the message does not carry
     null.  The :func:`channel_header` entries are the file's key-value metadata (keys
-    prefixed ``astrodyn.``) and each column's unit is its field metadata ``unit``."""
+    prefixed ``astrodyn.``) and each column's unit is its field metadata ``unit``.  A channel
+    whose every message was rejected gets no file (:func:`rejected_channels`)."""
     try:
         import pyarrow as pa
         import pyarrow.parquet as pq
@@ -506,7 +522,7 @@ def write_parquet(run: Run, out: Path) -> list[Path]:
         raise ExportError("--format parquet needs the optional package pyarrow: pip install 'astrodyn[parquet]'") from None
     written = []
     stems = channel_file_stems(run.channels)
-    for topic, track in run.channels.items():
+    for topic, track in _exported_channels(run).items():
         names, groups, kept = _columns(track)
         units = channel_units(run, topic, names)
         fields, arrays = [], []
@@ -667,16 +683,29 @@ def _ccsds_tracks(run: Run, kind: str) -> list[tuple[str, object, Track, _Epochs
         times, system = _epoch_times(run)
         epochs = _Epochs(tr, times)
         _check_epochs(run, tr, epochs)
-        t = tr.t
-        for a, b in _chunks(0, len(tr)):  # OEM and AEM data lines: epochs in increasing order
-            steps = np.diff(np.asarray(t[a:b + 1], dtype=np.float64))
-            if steps.size and not np.all(steps > 0):
-                k = a + int(np.argmin(steps > 0))
-                raise ExportError(f"{run.path}: {tr.topic}: seq {int(tr.seq[k + 1])}: t = {float(t[k + 1]):g} s after "
-                                  f"t = {float(t[k]):g} s (seq {int(tr.seq[k])}): expected times that increase with "
-                                  f"seq (CCSDS data lines are in time order)")
+        _check_time_order(run, tr)
         tracks.append((name, body, tr, epochs, system))
     return tracks
+
+
+def _check_time_order(run: Run, tr: Track) -> None:
+    """ExportError unless ``tr`` holds one state per seq and its ``t`` increases with seq
+    (the recording's contract, checked by :func:`astrodyn.recording.reader.time_order`, the
+    check every reader makes): a CCSDS ephemeris has one data line per epoch, in time order.
+    A duplicated seq is named as such, with the ``merge`` that keeps the first of each."""
+    order = time_order(tr)
+    if order["first_duplicate"] is not None:
+        n = order["duplicates"]
+        raise ExportError(f"{run.path}: {tr.topic}: seq {order['first_duplicate']}: a duplicated sequence number (a "
+                          f"message repeating a seq already recorded; {n} in the channel): expected one state per seq "
+                          f"(CCSDS data lines are one per epoch); `astrodyn merge {run.path} --out NEW.mcap` keeps the "
+                          f"first of each")
+    if order["first_not_increasing"] is not None:
+        seq, t, before, t_before = order["first_not_increasing"]
+        n = order["not_increasing"]
+        raise ExportError(f"{run.path}: {tr.topic}: seq {seq}: t = {t:g} s after t = {t_before:g} s (seq {before}): "
+                          f"expected times that increase with seq (CCSDS data lines are in time order)"
+                          + (f"; {n} such steps in the channel" if n > 1 else ""))
 
 
 def _check_epochs(run: Run, tr: Track, epochs: _Epochs) -> None:
@@ -1007,9 +1036,26 @@ def export(path: str | os.PathLike, fmt: str, out: str | os.PathLike) -> list[Pa
     if fmt not in _WRITERS:
         raise ExportError(f"format: expected one of {', '.join(FORMATS)}, got {fmt!r}")
     run = load(path)
+    if run.messages == 0:  # an empty file, a cut one, one whose every message was rejected: nothing to export
+        why = run.incomplete_reason or (f"its {len(run.channels)} channel{'' if len(run.channels) == 1 else 's'} "
+                                        f"hold no message" if run.channels else "it holds no channel")
+        raise ExportError(f"{run.path}: nothing to export as {fmt}: no valid message; {why}")
     if not run.complete:
-        warn_incomplete_input("export", run.path, run.truncation or "invalid messages skipped",
-                              f"exporting the {run.messages} complete, valid messages")
+        rejected = rejected_channels(run) if fmt in ("csv", "parquet") else []
+        left_out = (f" (no file for the {len(rejected)} channel{'' if len(rejected) == 1 else 's'} whose every message "
+                    f"was rejected: {', '.join(rejected[:5])}{', ...' if len(rejected) > 5 else ''})" if rejected else "")
+        warn_incomplete_input("export", run.path, run.incomplete_reason,
+                              f"exporting the {run.messages} complete, valid messages{left_out}")
+    # the seq account analyze gives, as a warning, for the channels the format exports; a CCSDS
+    # file's channel with a duplicated seq or a time that goes back is refused instead
+    # (_check_time_order), not warned about
+    ccsds_kind = {"oem": "orbit", "aem": "attitude", "aem1": "attitude"}.get(fmt)
+    issues = {key: issue for key, issue in sequence_issues(run).items()
+              if ccsds_kind is None or (run.channels[key.split("#", 1)[0]].kind == ccsds_kind
+                                        and not (issue["duplicates"] or issue.get("t_not_increasing")))}
+    if issues:
+        print(f"astrodyn export: warning: {run.path}: {sequence_note(issues)}; exported as recorded, in seq order",
+              file=sys.stderr)
     out = Path(out)
     # every file is written in a work directory inside --out and moved into place only when
     # all of them are complete: a failed or interrupted export leaves the files already in

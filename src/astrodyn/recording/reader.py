@@ -47,7 +47,8 @@ from astrodyn.recording.chunked_writer import MAGIC
 from astrodyn.recording.writer import RecordingError
 
 __all__ = ["recorded_metadata", "load", "load_blocks", "chunk_records", "chunk_limits", "parse_chunk_data", "ChunkError",
-           "MAX_CHUNK_BYTES", "MAX_CHUNK_RATIO", "Run", "BodyTracks", "Body", "Track", "gap_report", "MCAP_MAGIC", "read_records", "scan_records", "open_recording"]
+           "MAX_CHUNK_BYTES", "MAX_CHUNK_RATIO", "Run", "BodyTracks", "Body", "Track", "gap_report", "time_order", "SEQ_NOT_COUNTED",
+           "sequence_issues", "sequence_note", "MCAP_MAGIC", "read_records", "scan_records", "open_recording"]
 
 MCAP_MAGIC = MAGIC  #: the 8 bytes that open (and end) every MCAP file
 _HEADER = struct.Struct("<BQ")
@@ -69,6 +70,104 @@ def gap_report(seqs: np.ndarray) -> dict:
     gaps = [[int(starts[i] + 1), int(starts[i + 1] - 1)] for i in jumps]
     missing = int(u[-1] + 1 - u.size)
     return {"count": int(s.size), "missing": missing, "gaps": gaps, "duplicates": int(s.size - u.size), "last_seq": int(u[-1])}
+
+
+#: Rows :func:`time_order` compares at a time: its temporaries stay small whatever the length of the channel.
+_ORDER_ROWS = 65_536
+
+
+def time_order(track: Track) -> dict:
+    """How a state channel keeps the recording's contract (docs/architecture.md, "Messages
+    and MCAP"): ``seq`` is the output step index, so one message per seq, and ``t`` (s since
+    the epoch) increases with it.  The one check of this for every reader: ``analyze``
+    reports it (:func:`sequence_issues`), the CSV / Parquet / Foxglove exports warn and
+    write the rows as recorded, the OEM / AEM exports refuse the channel (a CCSDS ephemeris
+    holds one state per epoch, in time order).
+
+    ``track`` sorted by seq (as :func:`load` gives it); returns ``{"duplicates": rows
+    repeating the seq of the row before (gap_report's count), "first_duplicate": the first
+    such seq or None, "not_increasing": steps from one seq to the next whose t does not
+    increase (a NaN t included), "first_not_increasing": [seq, t, previous seq, previous t]
+    of the first or None}``.  Channels other than the state kinds
+    (:data:`astrodyn.messages.STATE_KINDS`: a command's seq counts its sender's commands,
+    an event's its process's) and channels without ``t`` give zeros."""
+    out: dict[str, Any] = {"duplicates": 0, "first_duplicate": None, "not_increasing": 0, "first_not_increasing": None}
+    t = track.fields.get("t") if track.kind in messages.STATE_KINDS else None
+    n = len(track)
+    if t is None or n < 2:
+        return out
+    for a in range(0, n - 1, _ORDER_ROWS):
+        b = min(n, a + _ORDER_ROWS + 1)  # one row of overlap: the step from the chunk before
+        seq, times = track.seq[a:b], np.asarray(t[a:b], dtype=np.float64)
+        same = seq[1:] == seq[:-1]
+        back = ~same & ~(times[1:] > times[:-1])
+        if same.any():
+            out["duplicates"] += int(np.count_nonzero(same))
+            if out["first_duplicate"] is None:
+                out["first_duplicate"] = int(seq[1 + int(np.argmax(same))])
+        if back.any():
+            out["not_increasing"] += int(np.count_nonzero(back))
+            if out["first_not_increasing"] is None:
+                k = int(np.argmax(back))
+                out["first_not_increasing"] = [int(seq[k + 1]), float(times[k + 1]), int(seq[k]), float(times[k])]
+    return out
+
+
+#: Kinds whose seq is not a count of their channel's messages: a command channel's seq counts
+#: each sender's commands over every body (docs/control.md), so repeats and jumps are normal.
+SEQ_NOT_COUNTED = ("command",)
+
+
+def sequence_issues(run: Run) -> dict[str, dict]:
+    """The seq accounting of ``run`` (``load(path)``) for every channel that breaks it: per
+    channel whose seq counts its messages (per process on the event channel,
+    ``<topic>#<process>``; its :func:`gap_report`) with duplicated or missing seqs, and per
+    state channel whose ``t`` does not increase with seq (:func:`time_order`).  ``{key:
+    {"duplicates": messages repeating a seq already present, "missing": seqs absent below
+    the largest, "gap_count", "gaps": the first 5 [first, last] ranges}}``, and where t does
+    not increase ``"t_not_increasing"``: the steps, ``"t_first_not_increasing"``: [seq, t,
+    previous seq, previous t] of the first.  The one account ``analyze`` and ``export``
+    print (:func:`sequence_note`)."""
+    issues = {}
+    for key, report in run.gaps.items():
+        track = run.channels.get(key.split("#", 1)[0])
+        if track is not None and track.kind in SEQ_NOT_COUNTED:
+            continue
+        order = time_order(track) if track is not None else {}  # zeros but on a state channel
+        if report.get("duplicates") or report.get("missing") or order.get("not_increasing"):
+            gaps = report.get("gaps", [])
+            issues[key] = {"duplicates": int(report.get("duplicates", 0)), "missing": int(report.get("missing", 0)),
+                           "gap_count": len(gaps), "gaps": [list(g) for g in gaps[:5]]}
+            if order.get("not_increasing"):
+                issues[key].update(t_not_increasing=order["not_increasing"],
+                                   t_first_not_increasing=order["first_not_increasing"])
+    return issues
+
+
+def sequence_note(issues: dict[str, dict], channels: int = 5) -> str:
+    """One line for a report and a warning: per channel of :func:`sequence_issues` (the
+    first ``channels``, then how many more) its duplicated and missing seqs and where its
+    ``t`` does not increase with seq."""
+    parts = []
+    for key, issue in list(issues.items())[:channels]:
+        said = []
+        n = issue["duplicates"]
+        if n:
+            said.append(f"{n} duplicated sequence number{'' if n == 1 else 's'} (a message repeating a seq already "
+                        f"recorded)")
+        n = issue["missing"]
+        if n:
+            ranges = ", ".join(f"{a}" if a == b else f"{a}-{b}" for a, b in issue["gaps"])
+            ranges += ", ..." if issue["gap_count"] > len(issue["gaps"]) else ""
+            said.append(f"{n} missing sequence number{'' if n == 1 else 's'} (seq {ranges})")
+        n = issue.get("t_not_increasing", 0)
+        if n:
+            seq, t, before, t_before = issue["t_first_not_increasing"]
+            said.append(f"t does not increase with seq at {n} step{'' if n == 1 else 's'} (the first: seq {seq}: "
+                        f"t = {t:g} s after t = {t_before:g} s (seq {before}))")
+        parts.append(f"{key}: {' and '.join(said)}")
+    more = len(issues) - channels
+    return "; ".join(parts) + (f"; and {more} more channel{'' if more == 1 else 's'}" if more > 0 else "")
 
 
 class Track:
@@ -145,6 +244,8 @@ class Run:
     #: invalid messages per channel topic (not JSON, or violating astrodyn's message
     #: definition on astrodyn keys, or the stored JSON Schema's field types elsewhere)
     invalid_by_channel: dict[str, int] = field(default_factory=dict)
+    #: invalid messages rejected for the reason of the first one (``invalid_examples[0]``)
+    invalid_first_reason_count: int = 0
 
     @property
     def complete(self) -> bool:
@@ -159,10 +260,26 @@ class Run:
         if self.truncated and not self.truncation:
             parts.append("the file has no footer (its writer did not finish)")
         if self.invalid:
-            shown = ", ".join(f"{n} on {topic}" for topic, n in sorted(self.invalid_by_channel.items())[:5])
-            parts.append(f"{self.invalid} invalid messages skipped ({shown})" if shown else
-                         f"{self.invalid} invalid messages skipped")
+            parts.append(self.invalid_note())
         return "; ".join(parts)
+
+    def invalid_note(self, channels: int = 5) -> str:
+        """The invalid messages in one line: how many, on which channels (the first
+        ``channels`` by name, then how many more), and why the first was rejected, with the
+        number of messages rejected for that same reason ("" when there is none)."""
+        if not self.invalid:
+            return ""
+        counts = sorted(self.invalid_by_channel.items())
+        shown = ", ".join(f"{n} on {topic}" for topic, n in counts[:channels])
+        more = len(counts) - channels
+        shown += f", and {more} more channel{'' if more == 1 else 's'}" if more > 0 else ""
+        text = f"{self.invalid} invalid messages skipped" + (f" ({shown})" if shown else "")
+        if self.invalid_examples:
+            first = self.invalid_examples[0]
+            first = first if len(first) <= 300 else first[:297] + "..."
+            n = self.invalid_first_reason_count
+            text += f"; the first: {first}" + (f" ({n} messages rejected for this reason)" if n > 1 else "")
+        return text
 
     def __repr__(self) -> str:
         """One line: file, scenario, bodies, channels, span of t, messages, state.  The
@@ -613,13 +730,14 @@ class RecordingScan:
     each Message is decoded and appended to its channel's builder (:meth:`read_message`);
     :meth:`run` turns the builders into a :class:`Run` and :meth:`start_next_block` empties
     them for the next block of :func:`load_blocks`.  Damage is counted, never raised:
-    ``counters`` holds ``messages`` (valid ones appended), ``invalid``, ``corrupt`` (damaged
-    records and chunks) and ``orphans`` (messages on a channel never defined); ``notes``
+    ``counters`` holds ``messages`` (valid ones appended), ``invalid`` (``first_reason``: of
+    them, those rejected for the first one's reason), ``corrupt`` (damaged records and
+    chunks) and ``orphans`` (messages on a channel never defined); ``notes``
     the lines that become :attr:`Run.truncation`; ``state`` is filled by
     :func:`scan_records` (``truncation``, ``complete``)."""
 
     __slots__ = ("path", "state", "schemas", "channel_info", "builders", "metadata", "events", "notes",
-                 "counters", "examples", "invalid_by_channel", "handlers", "limits")
+                 "counters", "examples", "first_reason", "invalid_by_channel", "handlers", "limits")
 
     def __init__(self, path: str):
         self.path = path
@@ -630,8 +748,9 @@ class RecordingScan:
         self.metadata: dict[str, dict[str, str]] = {}
         self.events: list[dict] = []
         self.notes: list[str] = []
-        self.counters = {"messages": 0, "invalid": 0, "corrupt": 0, "orphans": 0}
+        self.counters = {"messages": 0, "invalid": 0, "corrupt": 0, "orphans": 0, "first_reason": 0}
         self.examples: list[str] = []
+        self.first_reason = ""  # why the first invalid message of the block was rejected
         self.invalid_by_channel: dict[str, int] = {}
         self.handlers = {Schema: self.read_schema, Channel: self.read_channel, Message: self.read_message}
         self.limits = chunk_limits()
@@ -698,9 +817,14 @@ class RecordingScan:
         self.channel_info[rec.id] = (rec.topic, kind if rec.message_encoding == "json" else None, b)
 
     def count_invalid(self, topic: str, sequence: int, why: str) -> None:
-        """Count one invalid message of ``topic`` (the first :data:`_MAX_EXAMPLES` kept as examples)."""
+        """Count one invalid message of ``topic`` (the first :data:`_MAX_EXAMPLES` kept as
+        examples; those rejected for the first one's reason counted)."""
         self.counters["invalid"] += 1
         self.invalid_by_channel[topic] = self.invalid_by_channel.get(topic, 0) + 1
+        if not self.examples:
+            self.first_reason = why
+        if why == self.first_reason:
+            self.counters["first_reason"] += 1
         if len(self.examples) < _MAX_EXAMPLES:
             self.examples.append(f"{topic} seq {sequence}: {why}")
 
@@ -766,6 +890,7 @@ class RecordingScan:
             invalid=counters["invalid"],
             invalid_examples=list(self.examples),
             invalid_by_channel=dict(self.invalid_by_channel),
+            invalid_first_reason_count=counters["first_reason"],
         )
 
     def start_next_block(self) -> None:
@@ -777,7 +902,7 @@ class RecordingScan:
         for cid, (t, k, old) in self.channel_info.items():
             self.channel_info[cid] = (t, k, fresh[id(old)])
         self.events.clear()
-        self.counters.update(messages=0, invalid=0, corrupt=0)
+        self.counters.update(messages=0, invalid=0, corrupt=0, first_reason=0)
         self.examples.clear()
         self.invalid_by_channel.clear()
 
