@@ -1100,6 +1100,20 @@ def local_cluster(workers: int):
         os.environ.update(environ)
 
 
+def close_dask(part) -> None:
+    """Close ``part``, a Dask ``Client`` or ``LocalCluster``, its event loop's error reports
+    dropped from then on.  A close cuts what the loop was doing (a stop signal arrives while
+    the spec is scattered to the workers: the scheduler, in this process, then replicates it
+    to workers the close has removed), and asyncio printed the task's error when the task
+    was collected, a 15-line "Task exception was never retrieved" traceback before the
+    sweep's one line (Dask's own log lines are silenced by :func:`local_cluster`, asyncio's
+    are not).  Nothing the loop reports after a close asked for by the sweep is news."""
+    loop = getattr(getattr(part, "loop", None), "asyncio_loop", None)
+    if loop is not None:
+        loop.set_exception_handler(lambda loop, context: None)
+    part.close()
+
+
 def run_chunk(ks: list[int], spec: SweepSpec, numba_threads: int | None = None) -> list[dict[str, Any]]:
     """Rows of several cases run one after the other (one Dask task: less per-task overhead).
 
@@ -1240,9 +1254,9 @@ def run_cases(spec: SweepSpec, cases: Iterable[int], workers: int = 2, scheduler
             raise
     finally:
         if client is not None:
-            client.close()
+            close_dask(client)
         if cluster is not None:
-            cluster.close()
+            close_dask(cluster)
             if spec.mcap_dir:  # what a worker stopped by the close was writing (write_case_mcap)
                 for tmp in Path(spec.mcap_dir).glob("case-*.mcap.tmp"):
                     tmp.unlink(missing_ok=True)
@@ -1283,7 +1297,7 @@ def start_local_cluster(workers: int):
     except BaseException:
         done.wait()
         if "cluster" in started:
-            started["cluster"].close()
+            close_dask(started["cluster"])
         raise
     if "error" in started:
         raise started["error"]
@@ -1373,9 +1387,58 @@ def _write_csv(path: Path, columns: list[str], rows: list[dict]) -> None:
     _written(path, write)
 
 
-def _draw_path(column: str) -> str:
-    """The key path of a draw column: ``bodies.sat1.attitude.w[2] [deg/s]`` -> ``bodies.sat1.attitude.w``."""
-    return re.sub(r"\[\d+\]$", "", re.sub(r" \[[^\[\]]*\]$", "", column))
+def _draw_key(column: str, spec: SweepSpec) -> tuple[str, str] | None:
+    """``(path, element)`` of a draw column: its ``--vary`` / ``--cases`` key path and ``"[i]"``
+    for an element of a drawn vector (else ""); None for a metric column.
+    ``bodies.sat1.attitude.w[2] [deg/s]`` -> ``("bodies.sat1.attitude.w", "[2]")``; a vector
+    element drawn alone, ``bodies.sat1.attitude.w[0]``, is its own path (it was taken for
+    an element of ``...attitude.w`` and left out of failures.csv and of the units)."""
+    name = re.sub(r" \[[^\[\]]*\]$", "", column)
+    if name in spec.resolved:
+        return name, ""
+    if (m := re.fullmatch(r"(.*)(\[\d+\])", name)) and m.group(1) in spec.resolved:
+        return m.group(1), m.group(2)
+    return None
+
+
+#: a body's name in a key path of the scenario loader: ``bodies[0] (iss).orbit.e``
+_LOADER_BODY_NAME = re.compile(r"\] \([^)]*\)")
+
+
+def draw_units(spec: SweepSpec, columns: list[str], rows: list[dict]) -> dict[str, str]:
+    """The unit of each draw column of ``columns`` (``sweep.json`` "columns"): the ``--vary``'s
+    unit, in the column's name (``[km]``); else the SI unit in which the scenario loader reads
+    that key (a draw without a unit is in SI, like a bare number in the config), found by
+    loading case 0's config (the nominal one if case 0's fails) under
+    :func:`astrodyn.scenario.fields.quantities_read`: ``m``, ``rad``, ``rad/s``, ``kg m2``, and
+    ``1`` for a dimensionless quantity (``e``; a metric's ``e_final`` is ``1`` too).  ""
+    for a key that is no quantity (a model name, a count) and for a ``--cases`` column whose
+    cells carry their own units (``"7000 km"``).  Before, every such column said ``SI``."""
+    from astrodyn.scenario import load_dict
+    from astrodyn.scenario.fields import QUANTITY_KINDS, quantities_read
+
+    kinds: dict[str, str] = {}
+    for config in (lambda: spec.case_config(0)[0], lambda: spec.config):
+        with quantities_read() as read:
+            try:
+                load_dict(config(), source=spec.source, base_dir=spec.base_dir)
+            except Exception:  # a config that fails: its case's row says why
+                continue
+        kinds = {_LOADER_BODY_NAME.sub("]", key): values[0][0] for key, values in read.items()}
+        break
+    units: dict[str, str] = {}
+    for c in columns:
+        if (key := _draw_key(c, spec)) is None:
+            continue
+        if m := re.search(r" \[([^\[\]]+)\]$", c):
+            units[c] = m.group(1)
+        elif any(isinstance(r.get(c), str) for r in rows):
+            units[c] = ""
+        else:
+            path, element = key
+            kind = kinds.get(_join(spec.resolved[path]) + element)
+            units[c] = "" if kind is None else (QUANTITY_KINDS[kind][0].replace(" / ", "/") or "1")
+    return units
 
 
 def _typed(value: Any) -> Any:
@@ -1410,7 +1473,7 @@ def write_tables(out: Path, rows: list[dict], spec: SweepSpec, extra: dict | Non
     paths = {"summary": out / "summary.csv", "failures": out / "failures.csv", "spec": out / "sweep.json"}
     _write_csv(paths["summary"], columns, rows)
     failed = [r for r in rows if r.get("status") != "ok"]
-    draw_cols = [c for c in columns if _draw_path(c) in spec.resolved]
+    draw_cols = [c for c in columns if _draw_key(c, spec) is not None]
     _write_csv(paths["failures"], ["case", "error", *draw_cols], failed)
     for r in failed:
         if r.get("traceback"):
@@ -1433,13 +1496,8 @@ def write_tables(out: Path, rows: list[dict], spec: SweepSpec, extra: dict | Non
         else:
             _written(out / "summary.parquet", lambda fh: pq.write_table(table, fh), "wb")
             paths["parquet"] = out / "summary.parquet"
-    units = {}
-    for c in columns:
-        m = re.search(r" \[([^\[\]]+)\]$", c)
-        if _draw_path(c) in spec.resolved:
-            units[c] = m.group(1) if m else "SI"
-        else:
-            units[c] = METRIC_UNITS.get(c.rsplit(".", 1)[-1], "")
+    drawn = draw_units(spec, columns, rows)
+    units = {c: drawn[c] if c in drawn else METRIC_UNITS.get(c.rsplit(".", 1)[-1], "") for c in columns}
     done = {int(r["case"]) for r in rows}
     doc = spec.to_json() | {"columns": units, "cases_run": len(rows), "failed": len(failed),
                             "complete": len(done) == spec.n} | (extra or {})
@@ -1863,26 +1921,25 @@ def _sweep(args: argparse.Namespace, spec: SweepSpec, cases: list[int], out: Pat
         if removed and not args.quiet:
             print(f"astrodyn sweep: --overwrite: removed the {len(removed)} result files of the earlier sweep in {out}",
                   file=sys.stderr)
-    started_spec = None
-    if not rerun:  # the spec first: a sweep killed later can be completed (--resume)
-        started_spec = out / "sweep.json"
-        try:
-            _write_spec(started_spec, spec.to_json() | {"cases_run": 0, "complete": False, "running": True})
-        except OSError as exc:
-            print(f"astrodyn sweep: --out {out}: cannot write sweep.json ({exc.strerror or exc}); nothing was run",
-                  file=sys.stderr)
-            return 1
+    started_spec = None if rerun else out / "sweep.json"
     workers, scheduler = (0, None) if args.case is not None else (args.workers, args.scheduler)
     where = "serially in this process" if workers == 0 and scheduler is None else (
         f"on the Dask scheduler {scheduler}" if scheduler else f"on a Dask LocalCluster of {workers} worker processes")
-    if not args.quiet:
-        print(f"astrodyn sweep: {len(cases)} case(s) of {spec.source} {where}, seed {spec.seed}", file=sys.stderr)
     progress = CaseProgress(len(cases), enabled=not args.quiet)
     journal = _Journal(out)
     rows: list[dict] = []
     started = time.monotonic()
     interrupted = 0
-    try:
+    try:  # from the spec's writing on: a stop signal at any moment ends the sweep below (nothing left behind)
+        if started_spec is not None:  # the spec first: a sweep killed later can be completed (--resume)
+            try:
+                _write_spec(started_spec, spec.to_json() | {"cases_run": 0, "complete": False, "running": True})
+            except OSError as exc:
+                print(f"astrodyn sweep: --out {out}: cannot write sweep.json ({exc.strerror or exc}); nothing was run",
+                      file=sys.stderr)
+                return 1
+        if not args.quiet:
+            print(f"astrodyn sweep: {len(cases)} case(s) of {spec.source} {where}, seed {spec.seed}", file=sys.stderr)
         for row in run_cases(spec, cases, workers=workers, scheduler=scheduler, chunk=args.chunk):
             rows.append(row)
             journal.append(row)

@@ -526,7 +526,8 @@ def _as_rows(inertia, w0, q0):
     w0 = real_array(w0, "w0", "torque_free")
     q0 = real_array(q0, "q0", "torque_free")
     if inertia.ndim < 1 or inertia.shape[-1] != 3:
-        raise ValueError(f"inertia: expected principal moments of shape (..., 3), got shape {inertia.shape}")
+        raise ValueError(f"inertia: expected principal moments of shape (..., 3), three per body (kg m^2; not an "
+                         f"inertia tensor), got shape {inertia.shape}")
     if w0.ndim < 1 or w0.shape[-1] != 3:
         raise ValueError(f"w0: expected body rates of shape (..., 3) rad/s, got shape {w0.shape}")
     if q0.ndim < 1 or q0.shape[-1] != 4:
@@ -536,7 +537,20 @@ def _as_rows(inertia, w0, q0):
 
 
 def _check_inertia(inertia):
-    check_principal_moments(inertia, "inertia")
+    """:func:`~astrodyn.attitude.euler.check_principal_moments`; for several rows the error says
+    that they are read as several bodies: a ``(3, 3)`` inertia tensor passed here is taken as
+    three bodies' principal moments, and its off-diagonal zeros were reported as a moment
+    "not positive" with nothing saying why."""
+    try:
+        check_principal_moments(inertia, "inertia")
+    except ValueError as exc:
+        if inertia.ndim < 2:
+            raise
+        bodies = " x ".join(str(n) for n in inertia.shape[:-1])
+        raise ValueError(f"{exc}; inertia of shape {inertia.shape} is read as the principal moments of {bodies} "
+                         f"bodies, one row of 3 each: torque_free takes no inertia tensor (for a (3, 3) tensor, "
+                         f"astrodyn.attitude.principal_axes gives its principal moments and axes; express w0 "
+                         f"and q0 in those axes)") from None
 
 
 def _times(t):
@@ -588,6 +602,12 @@ def torque_free(inertia, w0, q0, t):
     inertia : array_like, shape (..., 3)
         Principal moments of inertia (kg m^2), any order, finite, positive and
         satisfying the triangle inequality (a rigid body's; else ``ValueError``).
+        The last axis holds the three moments of one body, every leading axis is a
+        batch of bodies: a ``(3, 3)`` array is **three bodies**, not an inertia
+        tensor (which :func:`~astrodyn.attitude.integrators.propagate_attitude` also
+        takes).  For a tensor, :func:`astrodyn.attitude.principal_axes` gives its
+        principal moments and axes ``P``; the rates and attitude here are then those
+        of the principal-axis frame (``w0_principal = P.T @ w0_body``).
     w0 : array_like, shape (..., 3)
         Body angular velocity at ``t = 0`` (rad/s, body principal axes).
     q0 : array_like, shape (..., 4)

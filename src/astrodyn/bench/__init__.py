@@ -54,6 +54,13 @@ QUICK_ARGS: dict[str, list[str]] = {
 }
 
 
+#: What ``astrodyn bench all --quick`` prints first and last: its figures are a smoke test's.
+QUICK_NOTE = ("astrodyn bench all --quick: a smoke run (each suite in a small form): the figures are not "
+              "representative and not comparable with docs/benchmarks.md (control's 50 steps are mostly start-up, "
+              "view's one 1-s pair mostly noise, attitude's exact method unchecked); run a suite without --quick "
+              "to measure")
+
+
 def cpu_model() -> str:
     """The CPU model name from /proc/cpuinfo (``platform.processor()`` elsewhere)."""
     try:
@@ -166,9 +173,13 @@ def main(argv: list[str] | None = None) -> int:
     runs = suite_args(rest, own.quick)
     for n, args in runs.items():  # every suite's options checked before the first runs (an error exits 2 here, not an hour in)
         importlib.import_module(SUITES[n]).parse_args(args)
+    if own.quick:
+        print(QUICK_NOTE, flush=True)
     rc = 0
     for n, args in runs.items():
         rc |= int(importlib.import_module(SUITES[n]).main(args) or 0)
+    if own.quick:
+        print(f"\n{QUICK_NOTE}")
     return rc
 
 

@@ -9,10 +9,10 @@ Classical elements
 ------------------
 :func:`elements_from_state` returns an :class:`Elements` with
 ``p`` (semi-latus rectum, m), ``a`` (semi-major axis, m; negative for a
-hyperbola; ``inf`` only when the computed ``e`` is exactly 1: a parabolic state
-usually comes out with ``e`` a few ulps off 1, and then a huge finite ``a``
-of either sign, as the conditioning of ``p / (1 - e^2)`` there allows), ``e``,
-``i`` in [0, pi],
+hyperbola; for a state with angular momentum, ``inf`` only when the computed ``e``
+is exactly 1: a parabolic state usually comes out with ``e`` a few ulps off 1, and
+then a huge finite ``a`` of either sign, as the conditioning of ``p / (1 - e^2)``
+there allows; a radial state: below), ``e``, ``i`` in [0, pi],
 ``raan``, ``argp`` and ``nu`` in [0, 2 pi).  :func:`state_from_elements`
 is the inverse, from ``(p, e, i, raan, argp, nu)`` (``p`` rather than ``a`` so
 that the parabola is an ordinary case).
@@ -49,9 +49,18 @@ sits well above that noise; conversely, snapping ``e`` or ``sin i`` below the
 threshold to 0 moves the reconstructed state by at most ``64 eps |r|``, inside
 the conditioning-limited round-trip tolerance (about 100 ulp).
 
-Degenerate input: rectilinear motion (``h = 0``) gives ``p = 0``, ``e = 1``
-and a finite ``a`` from the energy; it cannot be inverted by
-``state_from_elements`` (which needs ``p > 0``).  NaN inputs give NaN outputs.
+Degenerate input: **rectilinear (radial) motion**, ``h = 0`` or ``|h| <=
+SINGULAR_TOLERANCE |r| |v|`` (``r`` and ``v`` parallel to rounding, as ``v = s r / |r|``
+computed in floating point gives), is the degenerate conic of ``e = 1``: ``p = 0``,
+``e = 1`` exactly and ``a = -mu / (2 E)`` from the energy ``E = |v|^2 / 2 - mu / |r|``
+(vis-viva), finite: ``a > 0`` for a bound radial orbit (a fall from rest at ``r`` has
+``a = |r| / 2``), ``a < 0`` for an escaping one, ``inf`` only at ``E = 0`` exactly (the
+radial parabola); the orientation angles of a straight line are not defined (they come
+out finite: ``i``, ``raan`` from the rounding-size ``h``, or the equatorial convention
+when ``h = 0``).  It cannot be inverted by ``state_from_elements`` (which needs
+``p > 0``).  ``r = 0`` (a body at the centre of attraction: no conic) gives every
+element NaN, like NaN or infinite inputs (NaN in, NaN out, no numpy warning;
+docs/architecture.md, "Bad numbers").
 
 Modified equinoctial elements
 -----------------------------
@@ -202,8 +211,10 @@ class Elements:
     """Classical orbital elements (SI units, radians), arrays of the leading shape.
 
     ``p`` semi-latus rectum (m); ``a`` semi-major axis (m; negative for a
-    hyperbola, ``inf`` when the computed ``e`` is exactly 1, a huge finite value of
-    either sign for a parabolic state whose ``e`` comes out a few ulps off 1); ``e`` eccentricity; ``i``
+    hyperbola, ``inf`` when the computed ``e`` of a state with angular momentum is exactly
+    1, a huge finite value of either sign for a parabolic state whose ``e`` comes out a few
+    ulps off 1; a radial state, ``p = 0`` and ``e = 1``, has ``a = -mu / (2 E)``, finite
+    unless its energy ``E`` is exactly 0); ``e`` eccentricity; ``i``
     inclination in [0, pi]; ``raan`` right ascension of the ascending node,
     ``argp`` argument of periapsis, ``nu`` true anomaly, each in [0, 2 pi).
     See the module docstring for the circular/equatorial conventions."""
@@ -223,7 +234,9 @@ def elements_from_state(r, v, mu) -> Elements:
     Parameters: ``r`` position (m) and ``v`` velocity (m/s), shape ``(..., 3)``,
     in any inertial frame whose xy plane is the reference plane; ``mu``
     gravitational parameter (m^3/s^2), scalar or broadcastable to the leading
-    shape.  Returns :class:`Elements`.
+    shape.  Returns :class:`Elements`.  A radial state (``r`` parallel to ``v``, or
+    ``v = 0``) gives ``p = 0``, ``e = 1`` and ``a = -mu / (2 E)``; ``r = 0`` gives NaN
+    elements (see the module docstring, "Degenerate input").
 
     Algorithm: Vallado (4th ed.) Algorithm 9 RV2COE, with every angle from
     atan2 and the singular cases of the module docstring.
@@ -232,14 +245,24 @@ def elements_from_state(r, v, mu) -> Elements:
     v = _vector(v, "v", "elements_from_state")
     mu = _positive_mu(mu, "elements_from_state")
     _state_lead(r, v, mu, "elements_from_state")
+    # NaN / inf in, NaN out without numpy's warnings (docs/architecture.md, "Bad numbers")
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return _classical_elements(r, v, mu)
 
+
+def _classical_elements(r, v, mu) -> Elements:
+    """The body of :func:`elements_from_state`, on checked arrays."""
     h = np.cross(r, v)
     hnorm = _norm(h)
     rnorm = _norm(r)
-    p = hnorm * hnorm / mu
+    at_centre = rnorm == 0.0  # no conic: every element NaN (below)
+    # Rectilinear (radial) motion: h = 0, or h of rounding size (r and v parallel to within
+    # SINGULAR_TOLERANCE rad, e.g. v = s * r / |r| computed in floating point).
+    rectilinear = hnorm <= SINGULAR_TOLERANCE * rnorm * _norm(v)
+    p = np.where(rectilinear, 0.0, hnorm * hnorm / mu)
 
     e_vec = np.cross(v, h) / mu[..., None] - r / rnorm[..., None]
-    e = _norm(e_vec)
+    e = np.where(rectilinear, 1.0, _norm(e_vec))
 
     h_xy = np.hypot(h[..., 0], h[..., 1])
     equatorial = h_xy <= SINGULAR_TOLERANCE * hnorm
@@ -262,14 +285,17 @@ def elements_from_state(r, v, mu) -> Elements:
     nu = _wrap_2pi(_angle_about(origin, r, h, hnorm))
 
     # a = p / (1 - e^2), factored to avoid forming e^2; inf for e == 1.
-    # Rectilinear motion (p == 0, e == 1) has a finite a from the energy.
+    # Rectilinear motion (p == 0, e == 1) has a = -mu / (2 energy) (vis-viva): finite unless
+    # the energy is exactly 0 (p / (1 - e^2) is 0 / 0 there, or rounding noise).
     one_minus_e2 = (1.0 - e) * (1.0 + e)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        a = np.where(one_minus_e2 == 0.0, np.inf, p / one_minus_e2)
-        energy_a = 1.0 / (2.0 / rnorm - _dot(v, v) / mu)
-    a = np.where(p == 0.0, energy_a, a)
+    a = np.where(one_minus_e2 == 0.0, np.inf, p / one_minus_e2)
+    energy_a = 1.0 / (2.0 / rnorm - _dot(v, v) / mu)
+    a = np.where(rectilinear, energy_a, a)
 
-    return Elements(*(_out(x) for x in (p, a, e, i, raan, argp, nu)))
+    elements = (p, a, e, i, raan, argp, nu)
+    if np.any(at_centre):
+        elements = tuple(np.where(at_centre, np.nan, x) for x in elements)
+    return Elements(*(_out(x) for x in elements))
 
 
 def _perifocal_basis(i, raan, argp):
