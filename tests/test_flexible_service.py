@@ -341,6 +341,7 @@ def _nutation(sc, q, w, eta, eta_dot):
 
 
 @pytest.mark.network
+@pytest.mark.slow  # CI time (10 s): the energy sink's physics (engine tests above) and a flexible run stay in make test
 def test_explorer_1_run_drifts_to_a_flat_spin_and_the_oblate_twin_stays_put(tmp_path):
     out, res = tmp_path / "explorer.mcap", tmp_path / "result.json"
     proc = subprocess.run([*ASTRODYN, "run", str(ROOT / "configs" / "explorer-1.toml"), "--out", str(out), "--json",

@@ -14,6 +14,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 CONFIGS = Path(__file__).resolve().parent.parent / "configs"
 
 _MEASURE = """
@@ -34,6 +36,7 @@ def _peak_rss_kib(tmp_path: Path, duration_s: int) -> int:
     return int(rss)
 
 
+@pytest.mark.slow  # CI time (15 s): the bounded memory of hostile files, exports and sweep cases stays in make test
 def test_peak_rss_is_flat_in_duration(tmp_path):
     short = _peak_rss_kib(tmp_path, 500)  # 5,001 steps
     long = _peak_rss_kib(tmp_path, 5000)  # 50,001 steps

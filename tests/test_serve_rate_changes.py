@@ -98,6 +98,7 @@ def _reject_constant(name: str):
     raise ValueError(f"not JSON: {name}")
 
 
+@pytest.mark.slow  # CI time (8-11 s): test_serve_rate_sync keeps rate inf then a finite rate in make test
 def test_serve_from_rate_inf_then_1e6_then_10_prints_strict_json_and_goes_on_at_x10_with_orbit_and_attitude_together(
         tmp_path):
     """One serve for F5, F1 and D1 (CI time): started at ``--rate inf``, its first and last

@@ -545,6 +545,8 @@ def _random_faults(tmp_path, processes, reference, trials: int, seed: int, trial
     return [trial(tmp_path, processes, rng, reference_states, cfg, k) for k in range(trials)]
 
 
+@pytest.mark.slow  # CI time (21 s with its reference run): each child's SIGKILL under run and serve, and a killed
+# supervisor, stay in make test one by one (test_supervision, test_reliability, test_stopped_supervisor)
 def test_random_faults_fast_subset(tmp_path, processes, reference):
     """One seeded random trial (the series below has twenty; CI time)."""
     records = _random_faults(tmp_path, processes, reference, trials=1, seed=20261125)

@@ -81,6 +81,7 @@ def test_run_from_the_wheel(wheel_venv, tmp_path):
     assert topics == ["astrodyn/wheel/@event", "astrodyn/wheel/sat/attitude", "astrodyn/wheel/sat/orbit"]
 
 
+@pytest.mark.slow  # CI time (8 s): run from the wheel, which starts its processes the same way, stays in make test
 def test_serve_from_the_wheel(wheel_venv, tmp_path):
     config = tmp_path / "wheel.toml"
     config.write_text(SCENE)
