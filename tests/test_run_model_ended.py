@@ -18,11 +18,16 @@ TAIL = "attitude: model ended: coin: the rolling disk lies flat (|lean| = 90 deg
 class FakeChild:
     how = Child.how  # the real wording of an exit
     kill_if_stalled = Child.kill_if_stalled
+    outside_stop_signal = Child.outside_stop_signal  # (from its summary line: these print none)
 
     def __init__(self, pid: int, rc: int | None):
         self.pid, self.rc = pid, rc
         self.stalled_s = None
         self.lost_to_logger = None
+        self.asked_to_stop, self._exit_reason = False, None
+
+    def summary(self) -> dict | None:
+        return None
 
     def poll(self) -> int | None:
         return self.rc

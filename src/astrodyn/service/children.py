@@ -404,10 +404,10 @@ class CappedOutput:
     (astrodyn's own processes, which print little): the child writes the file itself,
     appending (``O_APPEND``), so it leaves its last words there even when its supervisor is
     gone; a thread of the supervisor looks at its size every :data:`OUTPUT_POLL_S` and, past
-    ``cap / 2``, moves the newest ``cap / 2`` bytes to ``path.1``, with what the child wrote
-    during the move, and empties ``path`` (what the child writes in the few microseconds
-    between the last look and the emptying is lost; the files may pass ``cap / 2`` by what
-    the child writes in :data:`OUTPUT_POLL_S`).
+    ``cap / 2``, moves the newest ``cap / 2`` bytes to ``path.1`` (what the child wrote
+    during the move included) and empties ``path`` (what the child writes in the few
+    microseconds between the last look and the emptying is lost; ``path`` may pass ``cap /
+    2`` by what the child writes in :data:`OUTPUT_POLL_S`, ``path.1`` never does).
 
     Call :meth:`start` with the child's process once it is started, and :meth:`close` when
     done with it."""
@@ -522,17 +522,17 @@ class CappedOutput:
                 size = os.fstat(f.fileno()).st_size
                 f.seek(size - self.half)
                 tail = f.read(self.half)
+                done = size  # what the child wrote meanwhile follows, up to the moment the file is emptied
+                while (end := os.fstat(f.fileno()).st_size) > done:
+                    f.seek(done)
+                    tail += f.read(end - done)
+                    done = end
+                f.truncate(0)
+                kept = tail[-self.half:]  # the newest cap / 2 bytes, however much came during the move
                 tmp = self.older.with_name(self.older.name + ".tmp")
-                tmp.write_bytes(tail)
+                tmp.write_bytes(kept)
                 os.replace(tmp, self.older)
-                with open(self.older, "ab") as older:  # what the child wrote meanwhile follows it there,
-                    done = size                       # up to the moment the file is emptied (a few us)
-                    while (end := os.fstat(f.fileno()).st_size) > done:
-                        f.seek(done)
-                        older.write(f.read(end - done))
-                        done = end
-                    f.truncate(0)
-            self.dropped += size - len(tail)
+            self.dropped += done - len(kept)
         except OSError:
             pass
 
