@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from _recordings import one_satellite_scene
 from astrodyn.attitude import torque_free
 from astrodyn.orbit import elements_from_state
 
@@ -124,23 +125,7 @@ def test_a_three_by_three_inertia_is_three_bodies_each_as_alone():
 
 # --------------------------------------------------------------------------- F2.3 a sweep's units
 
-SWEEP_CONFIG = """
-[scenario]
-name = "units"
-epoch = "2026-03-20T12:00:00 TDB"
-duration = "60 s"
-rate = "0.1 Hz"
-
-[[bodies]]
-name = "sat"
-[bodies.orbit]
-a = "7000 km"
-e = 0.01
-i = "51.6 deg"
-[bodies.attitude]
-w = [0.01, 0.0, 0.02]
-inertia = [10, 12, 8]
-"""
+SWEEP_CONFIG = one_satellite_scene("units", "60 s", "0.1 Hz")  # orbit a, e; attitude w, inertia
 
 
 def test_a_sweeps_draw_columns_say_their_si_unit(tmp_path, capsys):

@@ -25,22 +25,10 @@ from pathlib import Path
 
 import pytest
 
+from _recordings import one_satellite_scene
 from test_tool_interrupts import _group, _wait_for  # a process group's PIDs (/proc); wait for a moment, bounded
 
-CONFIG = """
-[scenario]
-name = "interrupt-startup"
-epoch = "2026-03-20T12:00:00 TDB"
-duration = "600 s"
-rate = "0.1 Hz"
-
-[[bodies]]
-name = "sat"
-[bodies.orbit]
-a = "7000 km"
-e = 0.01
-i = "51.6 deg"
-"""
+CONFIG = one_satellite_scene("interrupt-startup", "600 s", "0.1 Hz")
 
 #: The sweep's command in a child whose SIGINT is at its default (or ignored: ``SIGINT_IGNORED``
 #: set, as a background job of a non-interactive shell has it), optionally with the scatter
