@@ -17,10 +17,14 @@ Real processes and real signals; every process is signalled by its PID, loops ar
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
+import queue
 import signal
+import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -31,6 +35,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _recordings import children_by_kind, one_satellite_scene, run_while
 from _serve_control import serve_demo, stop_serve, wait_until
 from astrodyn import bus
+from astrodyn.recording import load
 from astrodyn.service.children import stop_process
 
 pytestmark = pytest.mark.network
@@ -77,6 +82,38 @@ def test_ctrl_z_pauses_every_process_of_a_run_and_fg_continues_it(tmp_path):
     assert run["restarts"] == [], run["restarts"]
     log = run["logger"]
     assert log["missing"] == 0 and log["duplicates"] == 0 and log["states"] == 2 * STEPS, log
+
+
+def test_a_run_killed_while_paused_leaves_no_stopped_child_behind(tmp_path):
+    """``kill -9`` of a run stopped by Ctrl-Z: its children, stopped too, got the supervisor's
+    death signal (``PR_SET_PDEATHSIG`` SIGTERM) but a stopped process does not act on it,
+    so before they stayed stopped for good (two propagators of a test run were found stopped,
+    parent PID 1, 78 min later).  Now the pause guard continues them and they end as if the
+    supervisor had been killed while running; the logger's file keeps what it holds."""
+    config = tmp_path / "killed.toml"
+    config.write_text(one_satellite_scene("killed", "6000 s", "10 Hz"))
+    out, partial = tmp_path / "killed.mcap", tmp_path / "killed.partial.mcap"
+    children: dict[int, str] = {}
+
+    def ctrl_z_then_kill(supervisor: int) -> None:
+        children.update(children_by_kind(supervisor))
+        os.kill(supervisor, signal.SIGTSTP)
+        wait_until(lambda: set(_states([supervisor, *children])) == {psutil.STATUS_STOPPED}, 10,
+                   f"not every process stopped: {_states([supervisor, *children])}", poll_s=0.05)
+        os.kill(supervisor, signal.SIGKILL)
+
+    rc, _ = run_while([str(config), "--out", str(out), "--quiet"], partial, 1_000_000, ctrl_z_then_kill)
+    assert rc == -signal.SIGKILL
+    try:
+        wait_until(lambda: set(_states(children)) == {"gone"} or
+                   set(_states(children)) <= {"gone", psutil.STATUS_ZOMBIE}, 15,
+                   f"children left behind: {dict(zip(children.values(), _states(children)))}", poll_s=0.1)
+    finally:
+        for pid in children:  # only the processes this run started
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(pid, signal.SIGKILL)
+    run = load(partial)  # the logger finished its file (it stopped as on SIGTERM)
+    assert min(len(b.orbit) for b in run.bodies.values()) > 0
 
 
 # slow (13 s; CI time): Ctrl-Z of a run above covers the job control serve shares
@@ -141,3 +178,59 @@ def test_a_lockstep_plant_does_not_time_out_a_controller_paused_with_it(tmp_path
     assert rc == 0, err
     run = json.loads(result.read_text())
     assert run["logger"]["missing"] == 0, run["logger"]
+
+
+def _line(lines: queue.Queue, timeout_s: float) -> str:
+    try:
+        return lines.get(timeout=timeout_s)
+    except queue.Empty:
+        raise AssertionError(f"no line from the child in {timeout_s} s (is it stopped?)") from None
+
+
+_HELD_CHILD = """
+import hashlib, sys, time
+from astrodyn.signals import catch_job_control, suspended_s
+catch_job_control()
+print("ready", flush=True)
+hashlib.pbkdf2_hmac("sha256", b"x", b"y", 8_000_000)  # ~1.6 s in one compiled call: no handler runs in it
+print("back", flush=True)
+for _ in range(30):  # then Python code, where a pending handler runs
+    time.sleep(0.01)
+print(f"done {suspended_s()}", flush=True)
+"""
+
+
+def test_a_sigtstp_pending_across_a_sigstop_and_sigcont_does_not_stop_the_process_again(tmp_path):
+    """A child whose main thread is held in a compiled call (a numeric kernel, a ``put``
+    blocked by a full queue) cannot run its SIGTSTP handler; after ``JOB_STOP_WAIT_S`` the
+    supervisor stops it with SIGSTOP, and on ``fg`` continues it with SIGCONT.  The handler,
+    pending all along, then ran and stopped the process again, this time with no one to
+    continue it: a CI run's propagator stayed stopped until serve killed it as stalled, and
+    one whose supervisor was gone stayed stopped for good.  Now a SIGTSTP handled right after
+    the SIGCONT that ended an outside stop is dropped (``astrodyn.signals.catch_job_control``)."""
+    child = psutil.Popen([sys.executable, "-c", _HELD_CHILD], stdout=subprocess.PIPE, text=True, cwd=tmp_path)
+    try:
+        lines: queue.Queue[str] = queue.Queue()
+        threading.Thread(target=lambda: [lines.put(line.strip()) for line in child.stdout], daemon=True).start()
+        assert _line(lines, 60) == "ready"
+        os.kill(child.pid, signal.SIGTSTP)  # pending: the main thread is in the compiled call
+        time.sleep(0.2)
+        assert child.status() != psutil.STATUS_STOPPED
+        os.kill(child.pid, signal.SIGSTOP)  # the supervisor's fallback
+        wait_until(lambda: child.status() == psutil.STATUS_STOPPED, 10, "SIGSTOP did not stop it", poll_s=0.01)
+        os.kill(child.pid, signal.SIGCONT)  # fg
+        assert _line(lines, 30) == "back"
+        deadline, stopped_since = time.monotonic() + 30, None
+        while child.poll() is None:
+            now = time.monotonic()
+            with contextlib.suppress(psutil.NoSuchProcess):
+                stopped_since = (stopped_since or now) if child.status() == psutil.STATUS_STOPPED else None
+            assert stopped_since is None or now - stopped_since < 2.0, "it stopped itself again after fg"
+            assert now < deadline, "it did not end"
+            time.sleep(0.05)
+        assert child.returncode == 0
+        assert _line(lines, 5).startswith("done ")
+    finally:
+        if child.poll() is None:  # only the process this test started
+            child.kill()
+            child.wait()

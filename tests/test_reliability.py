@@ -75,6 +75,14 @@ def _start_run(cfg: Path, out: Path, *extra: str) -> tuple[subprocess.Popen, dic
     return proc, pids
 
 
+def _still_running(pid: int) -> bool:
+    """The process ``pid`` is there and not a zombie (it has not ended)."""
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
+    except (FileNotFoundError, ProcessLookupError):
+        return False
+
+
 def _wait_states(out: Path, n: int, timeout_s: float = 90.0) -> None:
     deadline = time.monotonic() + timeout_s
     while _orbit_states(out) < n:
@@ -572,10 +580,14 @@ def test_a_child_stopped_by_someone_elses_sigterm_fails_the_run_and_keeps_the_ea
     out = tmp_path / "t.mcap"
     earlier = Path(__file__).parent / "fixtures" / "legacy-v0.mcap"
     shutil.copyfile(earlier, out)
-    proc, pids = _start_run(_config(tmp_path, "8 h"), out)
+    # 30 days at 1 Hz cannot end before the signal: with "8 h" the propagators of a CI run had
+    # sent all 28,800 states by the time 300 were flushed, so the signal met a child that had
+    # ended normally and the run rightly exited 0.
+    proc, pids = _start_run(_config(tmp_path, "30 d"), out)
     held = [pids[k] for k in ("orbit", "attitude")] if victim == "logger" else []
     try:
         _wait_states(out, 300)
+        assert proc.poll() is None and _still_running(pids[victim]), "the child ended before the signal"
         for pid in held:
             os.kill(pid, signal.SIGSTOP)
         os.kill(pids[victim], signal.SIGTERM)
@@ -596,5 +608,5 @@ def test_a_child_stopped_by_someone_elses_sigterm_fails_the_run_and_keeps_the_ea
     partial = Path(partial_path(out))
     assert str(partial) in stderr
     run = load(partial)
-    n_steps = load_scenario(_config(tmp_path, "8 h")).n_steps
+    n_steps = load_scenario(_config(tmp_path, "30 d")).n_steps
     assert min(len(b.orbit) for b in run.bodies.values()) < n_steps  # (it did stop before the end)

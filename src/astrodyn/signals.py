@@ -185,6 +185,12 @@ def deferred_interrupts() -> Iterator[None]:
 class _Suspension:
     total_s = 0.0  # time spent stopped by handled SIGTSTPs, s
     since: float | None = None  # monotonic time of the current stop
+    continued_from_outside_at: float | None = None  # monotonic time of the last SIGCONT of a stop not ours
+
+
+#: A SIGTSTP whose handler runs within this many seconds after that of a SIGCONT ending a stop
+#: this process did not make is stale, and is dropped (:func:`catch_job_control`).
+STALE_STOP_S = 0.05
 
 
 def suspended_s() -> float:
@@ -201,12 +207,23 @@ def catch_job_control(before_stop: Callable[[], None] | None = None,
     where the kernel discards SIGTSTP's own stop); on the SIGCONT that continues it add the
     time stopped to :func:`suspended_s` and call ``after_continue(seconds)``.  Returns a
     function that puts the previous handlers back.  Main thread only (elsewhere nothing is
-    installed); a SIGTSTP this process was made to ignore stays ignored."""
+    installed); a SIGTSTP this process was made to ignore stays ignored.
+
+    Python runs a handler only when the main thread is back in Python code, pending ones in
+    increasing signal number (SIGCONT, 18, before SIGTSTP, 20).  A process whose main thread
+    was held in a compiled call or a blocked ``put`` past its supervisor's wait is stopped
+    by the supervisor with SIGSTOP (:class:`astrodyn.service.children.JobControl`); once
+    continued, its SIGTSTP handler, pending all along, would stop it again, with no one left
+    to continue it.  So a SIGTSTP handled right after (:data:`STALE_STOP_S`) a SIGCONT that
+    ended a stop not of its own is dropped: that pause is over."""
     if threading.current_thread() is not threading.main_thread() or \
             signal.getsignal(signal.SIGTSTP) is signal.SIG_IGN:
         return lambda: None
 
     def on_stop(signum, frame) -> None:
+        outside = _Suspension.continued_from_outside_at
+        if outside is not None and time.monotonic() - outside < STALE_STOP_S:
+            return  # pending since before a SIGSTOP from outside, which the SIGCONT just ended
         if before_stop is not None:
             before_stop()
         _Suspension.since = time.monotonic()
@@ -214,6 +231,7 @@ def catch_job_control(before_stop: Callable[[], None] | None = None,
 
     def on_continue(signum, frame) -> None:
         if _Suspension.since is None:  # not a stop of ours (a SIGSTOP from outside): nothing to count
+            _Suspension.continued_from_outside_at = time.monotonic()
             return
         seconds = time.monotonic() - _Suspension.since
         _Suspension.total_s += seconds

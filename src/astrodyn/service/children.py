@@ -646,16 +646,22 @@ class Child:
         VM) it heard nothing, and a healthy child must not be killed for that."""
         if not limit_s or self.stalled_s is not None or self.proc.poll() is not None:
             return False
-        self.listened_since_start(beats, now)
-        heard_since_start = beats.seen.get(self.name, 0.0) > self.started  # not its predecessor's
-        since = beats.heard[self.name] if heard_since_start else self.started_listening
-        silent_s = beats.listening_s - since
-        preparing = heard_since_start and beats.last.get(self.name, {}).get("preparing")
+        silent_s, preparing = self.silence(beats, now)
         if silent_s <= (10 * limit_s if preparing else limit_s):
             return False
         self.stalled_s = silent_s
         self.proc.kill()
         return True
+
+    def silence(self, beats, now: float) -> tuple[float, bool]:
+        """``(seconds, preparing)``: how long, on the supervisor's listening clock, this child
+        has sent no heartbeat on ``beats`` (since its last one, or since it started), and
+        whether its last heartbeat said ``preparing`` (:meth:`kill_if_stalled`)."""
+        self.listened_since_start(beats, now)
+        heard_since_start = beats.seen.get(self.name, 0.0) > self.started  # not its predecessor's
+        since = beats.heard[self.name] if heard_since_start else self.started_listening
+        preparing = bool(heard_since_start and beats.last.get(self.name, {}).get("preparing"))
+        return beats.listening_s - since, preparing
 
     def listened_since_start(self, beats, now: float) -> float:
         """Seconds of the supervisor's listening clock (``beats.listening_s``) since this child
@@ -809,6 +815,25 @@ def is_stopped(pid: int) -> bool:
 JOB_STOP_WAIT_S = 2.0
 
 
+#: The program of a pause guard (:class:`JobControl`): argv ``SUPERVISOR_PID PGID...``.  It
+#: waits while its parent is the supervisor; once the supervisor is gone (killed while the run
+#: was paused) it continues every stopped child's group, so that each acts on the SIGTERM its
+#: supervisor's death sent (``PR_SET_PDEATHSIG``) instead of staying stopped for good.
+PAUSE_GUARD_PROGRAM = """
+import os, signal, sys, time
+for s in (signal.SIGTSTP, signal.SIGINT, signal.SIGHUP, signal.SIGTTOU, signal.SIGTTIN):
+    signal.signal(s, signal.SIG_IGN)
+supervisor = int(sys.argv[1])
+while os.getppid() == supervisor:
+    time.sleep(0.1)
+for group in sys.argv[2:]:
+    try:
+        os.killpg(int(group), signal.SIGCONT)
+    except OSError:
+        pass
+"""
+
+
 class JobControl:
     """Ctrl-Z pauses a whole run (``astrodyn run``, ``astrodyn serve``), not its supervisor alone.
 
@@ -816,8 +841,9 @@ class JobControl:
     supervisor.  Made in the supervisor's main thread, this object handles it
     (:func:`astrodyn.signals.catch_job_control`): it sends SIGTSTP to each child this
     process started that still runs and handles it (the propagators and the plant count the
-    time stopped and keep their real-time schedule after it: ``Pacer``), SIGSTOP to the
-    process group of every other (the logger, a controller with the programs it started),
+    time stopped and keep their real-time schedule after it: ``Pacer``), waits for those to
+    stop (at most ``JOB_STOP_WAIT_S``), then SIGSTOP to the process group of every other
+    (the logger, a controller with the programs it started, one that did not stop in time),
     waits until all are stopped, then stops itself.  SIGCONT (``fg``, ``bg``, ``kill
     -CONT``) continues them.  Deadlines that judge another process are measured on
     listening clocks (:class:`astrodyn.bus.ListeningClock`), so the pause counts against
@@ -828,11 +854,18 @@ class JobControl:
     --timeout`` leave it out); :meth:`take_resumed` gives the length of the last pause once
     after each continue (``serve`` moves its schedule on by as much).  A SIGSTOP, which
     cannot be caught, stops the supervisor alone; its children go on.
+
+    A stopped process does not act on a signal but SIGKILL and SIGCONT, so the SIGTERM a killed
+    supervisor's children get (``PR_SET_PDEATHSIG``) would wait for good.  So while the run is
+    paused a small guard process (:data:`PAUSE_GUARD_PROGRAM`, in a session of its own, not
+    stopped) watches the supervisor and continues every child's group if it dies: a run killed
+    while paused (``kill -9`` of a stopped job) ends like one killed while running.
     """
 
     def __init__(self) -> None:
         self._stopped: list[Child] = []
         self._resumed_s: float | None = None
+        self._guard: subprocess.Popen | None = None
         self.restore = catch_job_control(self._stop_children, self._continue_children)
 
     @property
@@ -841,22 +874,50 @@ class JobControl:
 
     def _stop_children(self) -> None:
         self._stopped = [child for child in list(_STARTED) if child.poll() is None]
-        for child in self._stopped:  # unreaped, so the PID is still this child's
+        # Those that stop themselves first, then the rest: a logger stopped first fills up and
+        # blocks the propagators' puts (congestion control BLOCK), so that they could not run
+        # their SIGTSTP handler within the wait.
+        catching = [c for c in self._stopped if not c.foreign and catches_signal(c.pid, signal.SIGTSTP)]
+        for child in catching:  # unreaped, so the PID is still this child's
             with contextlib.suppress(ProcessLookupError, PermissionError):
-                if not child.foreign and catches_signal(child.pid, signal.SIGTSTP):
-                    os.kill(child.pid, signal.SIGTSTP)
-                else:  # its group: PGID = PID (start_new_session)
+                os.kill(child.pid, signal.SIGTSTP)
+        deadline = time.monotonic() + JOB_STOP_WAIT_S
+        while time.monotonic() < deadline and not all(is_stopped(c.pid) or c.poll() is not None
+                                                       for c in catching):
+            time.sleep(0.01)
+        for child in self._stopped:  # the rest, and any that did not stop in time: their group
+            if child.poll() is None and not is_stopped(child.pid):  # (PGID = PID: start_new_session)
+                with contextlib.suppress(ProcessLookupError, PermissionError):
                     os.killpg(child.pid, signal.SIGSTOP)
         deadline = time.monotonic() + JOB_STOP_WAIT_S
         while time.monotonic() < deadline and not all(is_stopped(c.pid) or c.poll() is not None
                                                        for c in self._stopped):
             time.sleep(0.01)
-        for child in self._stopped:
-            if child.poll() is None and not is_stopped(child.pid):
-                with contextlib.suppress(ProcessLookupError, PermissionError):
-                    os.killpg(child.pid, signal.SIGSTOP)
+        self._start_guard()
+
+    def _start_guard(self) -> None:
+        """Start the pause guard (class docstring) over the groups just stopped."""
+        if not self._stopped:
+            return
+        try:
+            self._guard = subprocess.Popen(
+                [sys.executable, "-I", "-S", "-c", PAUSE_GUARD_PROGRAM, str(os.getpid()),
+                 *(str(c.pid) for c in self._stopped)],
+                stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                start_new_session=True, close_fds=True)
+        except OSError:  # no guard (out of processes): the pause itself still works
+            self._guard = None
+
+    def _stop_guard(self) -> None:
+        guard, self._guard = self._guard, None
+        if guard is not None:
+            with contextlib.suppress(OSError):
+                guard.kill()
+            with contextlib.suppress(subprocess.TimeoutExpired):
+                guard.wait(timeout=1.0)
 
     def _continue_children(self, seconds: float) -> None:
+        self._stop_guard()
         stopped, self._stopped = self._stopped, []
         for child in stopped:
             with contextlib.suppress(ProcessLookupError, PermissionError):
