@@ -70,6 +70,25 @@ def _assert_the_numeric_cores(recorded: dict[str, list[bytes]]) -> tuple[int, in
     ("run", 4.0),  # supervisor and children, past the 2 s lease
 ])
 def test_states_lost_on_a_broken_bus_link_are_published_again(tmp_path, stopped, stopped_s):
+    """Whether Zenoh closes a link after a stop past its lease is a race on the resume (each
+    side's lease check against the first keep-alive); a run whose links all survived has
+    nothing to heal and proves nothing here (one of 20-odd runs), so it is run again with
+    a stop twice as long, and the assertions are on that run."""
+    for attempt, stop_s in enumerate((stopped_s, 2 * stopped_s)):
+        run, out = _stop_a_run(tmp_path / f"attempt{attempt}", stopped, stop_s)
+        if run["restarts"] or run["logger"]["missing"]:
+            break
+    assert run["logger"]["missing"] == 0, run["logger"]
+    assert run["restarts"] and all("cut off from the logger" in r["why"] for r in run["restarts"]), run["restarts"]
+    # every step once, and each payload the one the numeric core gives for that step
+    assert _assert_the_numeric_cores(_recorded_by_seq(out)) == (STEPS, STEPS)
+
+
+def _stop_a_run(tmp_path: Path, stopped: str, stopped_s: float) -> tuple[dict, Path]:
+    """``astrodyn run`` of :data:`SCENE` with short Zenoh times; ``stopped`` ("logger" or "run":
+    the supervisor and its children) stopped for ``stopped_s`` while it records; (its result
+    JSON, its recording)."""
+    tmp_path.mkdir()
     config, zenoh_config = tmp_path / "linkloss.toml", tmp_path / "short.json5"
     config.write_text(SCENE)
     zenoh_config.write_text(SHORT_TIMES)
@@ -89,11 +108,7 @@ def test_states_lost_on_a_broken_bus_link_are_published_again(tmp_path, stopped,
     rc, err = run_while([str(config), "--out", str(out), "--json", str(result), "--quiet", "--zenoh-config",
                          str(zenoh_config)], partial, 300_000, stop_and_continue)
     assert rc == 0, err
-    run = json.loads(result.read_text())
-    assert run["logger"]["missing"] == 0, run["logger"]
-    assert run["restarts"] and all("cut off from the logger" in r["why"] for r in run["restarts"]), run["restarts"]
-    # every step once, and each payload the one the numeric core gives for that step
-    assert _assert_the_numeric_cores(_recorded_by_seq(out)) == (STEPS, STEPS)
+    return json.loads(result.read_text()), out
 
 
 @pytest.mark.slow  # CI time (11 s; a regression of the cut-off detection, which the run-4.0 link-loss test keeps in make test)

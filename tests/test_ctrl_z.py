@@ -188,10 +188,18 @@ def _line(lines: queue.Queue, timeout_s: float) -> str:
 
 
 _HELD_CHILD = """
-import hashlib, sys, time
+import hashlib, sys, threading, time
 from astrodyn.signals import catch_job_control, suspended_s
 catch_job_control()
-print("ready", flush=True)
+main = threading.main_thread().ident
+
+def say_ready():  # once the main thread is in the call (which lets other threads run meanwhile)
+    while sys._current_frames()[main].f_lineno != CALL_LINE:
+        time.sleep(0.001)
+    print("ready", flush=True)
+
+CALL_LINE = sys._getframe().f_lineno + 2
+threading.Thread(target=say_ready, daemon=True).start()
 hashlib.pbkdf2_hmac("sha256", b"x", b"y", 8_000_000)  # ~1.6 s in one compiled call: no handler runs in it
 print("back", flush=True)
 for _ in range(30):  # then Python code, where a pending handler runs
