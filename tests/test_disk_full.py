@@ -102,3 +102,34 @@ def test_run_and_serve_on_a_full_disk_refuse_to_start_in_one_line(small_disk, tm
     assert proc.returncode == 1 and "Traceback" not in proc.stderr, proc.stderr[-2000:]
     assert f"--json {small_disk / 'r.json'}: cannot write: No space left on device" in proc.stderr, proc.stderr[-2000:]
     assert (tmp_path / "h.mcap").exists() and not (small_disk / "r.json").exists()
+
+
+@pytest.mark.network
+def test_serve_says_on_stderr_why_a_killed_logger_was_not_restarted_on_a_full_disk(small_disk):
+    """The disk fills while serve records, then its logger is killed: the restart fails for
+    want of space.  serve says so on stderr when it happens, with the reason; before, stderr
+    said only that the logger was killed and where the recording stays, and the reason
+    (``No space left on device``) was in the final JSON alone (probe E, E8)."""
+    import json
+    import os
+    import signal
+
+    from astrodyn.service.children import children_of
+
+    out = small_disk / "s.mcap"
+    proc = subprocess.Popen([sys.executable, "-m", "astrodyn", "serve", str(ROOT / "configs" / "demo.toml"), "--out",
+                             str(out), "--rate", "50", "--max-wall", "120"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=ROOT)
+    try:
+        assert json.loads(proc.stdout.readline() or "{}").get("serving") == "demo"
+        logger = next(pid for pid, argv in children_of(proc.pid).items() if "astrodyn.service.logger" in argv)
+        _fill(small_disk)
+        os.kill(logger, signal.SIGKILL)  # this test's serve's logger, by its PID
+        _, err = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert proc.returncode == 1 and "Traceback" not in err, err[-3000:]
+    said = [line for line in err.splitlines() if "No space left on device" in line]
+    assert said and "logger" in said[0], err[-3000:]

@@ -589,7 +589,9 @@ class Supervisor:
                 self.state = "failed"
                 continue
             if name == "logger" and rc == DISK_FULL_EXIT:  # a new logger would fail the same way
-                self.failures.append(msg + f" (not restarted: free space beside {self.out}, then `astrodyn recover`)")
+                why = f"not restarted: free space beside {self.out}, then `astrodyn recover`"
+                print(f"astrodyn serve: the logger's disk is full: {why}; serve stops", file=sys.stderr, flush=True)
+                self.failures.append(msg + f" ({why})")
                 self.state = "failed"
                 continue
             if name == "logger" and self.state in ("running", "paused"):
@@ -599,6 +601,8 @@ class Supervisor:
                         continue
                     except Exception as exc:
                         msg += f"; restart failed: {exc}"
+                        print(f"astrodyn serve: the logger could not be restarted: {exc}; serve stops", file=sys.stderr,
+                              flush=True)
                 else:
                     msg = f"{self.budgets['logger'].refusal()}; last: {msg}"
                     print(f"astrodyn serve: {self.budgets['logger'].refusal()}: serve stops", file=sys.stderr, flush=True)
