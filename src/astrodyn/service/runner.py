@@ -46,7 +46,7 @@ from astrodyn.files import regular_file_problem
 from astrodyn.jit import kernels_uncached
 from astrodyn.progress import Progress
 from astrodyn.recording.writer import part_path, partial_path, standby_path
-from astrodyn.scenario import Scenario, ScenarioError, load, plan as make_plan
+from astrodyn.scenario import Scenario, ScenarioError, load, plan as make_plan, resolved_epoch_environment
 from astrodyn.scenario.recorded import DURATION_PATHS, config_difference
 from astrodyn.service.children import (
     DISK_FULL_EXIT,
@@ -269,7 +269,8 @@ class ScenarioRun:
             self.verifier = None
             self.config_path = config_snapshot(scenario, self.tmpd)
             # the run's identity: children sign what they publish (docs/security.md)
-            self.child_env = {auth.SECRET_ENV: str(secret.save(self.tmpd))} if secret is not None else None
+            self.child_env = {**resolved_epoch_environment(scenario),
+                              **({auth.SECRET_ENV: str(secret.save(self.tmpd))} if secret is not None else {})}
             if "plant" in self.propagators and secret is not None:  # outside controllers join with this token
                 self.token_file = auth.write_private_file(self.tmpd / "control.token", auth.new_token().encode())
                 result["control_token_file"] = str(self.token_file)

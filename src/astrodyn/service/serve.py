@@ -77,7 +77,7 @@ from pathlib import Path
 from astrodyn import auth, bus
 from astrodyn.recording.recover import finished_name
 from astrodyn.recording.writer import standby_path
-from astrodyn.scenario import ScenarioError, load, plan as make_plan
+from astrodyn.scenario import ScenarioError, load, plan as make_plan, resolved_epoch_environment
 from astrodyn.scenario.fields import flag_quantity, jsonable
 from astrodyn.service.children import (
     DISK_FULL_EXIT,
@@ -187,7 +187,7 @@ class Supervisor:
         config_path = config_snapshot(scenario, tmp)
         # the run's identity: children sign what they publish, commands are signed by us
         secret = auth.RunSecret.generate()
-        self.child_env = {auth.SECRET_ENV: str(secret.save(tmp))}
+        self.child_env = {auth.SECRET_ENV: str(secret.save(tmp)), **resolved_epoch_environment(scenario)}
         self.signer = auth.Signer(secret, "serve")
         # a logger is ready when it answers signed with the run's secret: a liveliness token in its
         # name is no proof (another run's logger on a shared router has one: docs/reliability.md)
