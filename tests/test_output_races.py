@@ -196,11 +196,17 @@ def test_a_serve_whose_output_directory_is_renamed_fails(tmp_path):
     folder = tmp_path / "d"
     folder.mkdir()
     proc = subprocess.Popen([*ASTRODYN, "serve", str(config), "--out", str(folder / "x.mcap"), "--rate", "100",
-                             "--max-wall", "20"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                             "--max-wall", "60"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         first = json.loads(proc.stdout.readline())
         assert first["serving"] == "moved2"
-        time.sleep(1.0)
+        # renamed while serve records (its propagators past their start-up, states in the
+        # file), as run_while does for run; not after a fixed second, which on a loaded
+        # machine (three xdist workers on two cores) fell within the propagators' start-up
+        partial, deadline = folder / "x.partial.mcap", time.monotonic() + 120
+        while time.monotonic() < deadline and not (partial.exists() and partial.stat().st_size > 60_000):
+            assert proc.poll() is None, proc.stderr.read()[-2000:]
+            time.sleep(0.05)
         folder.rename(tmp_path / "d2")
         moved_at = time.monotonic()
         _, err = proc.communicate(timeout=60)

@@ -586,14 +586,17 @@ def main(argv: list[str] | None = None) -> int:
                                                            zenoh_config_copy, control_scenario=scenario,
                                                            secret_file=secret_file))
                     viewer_url = f"ws://127.0.0.1:{port}"
-                print(json.dumps({"replaying": stream.path, "scenario": scenario, "listen": listen,
-                                  "connect": args.connect, "foxglove": viewer_url,
-                                  "control": f"astrodyn/{scenario}/@control/<verb>", "verbs": list(REPLAY_VERBS),
-                                  "real_time_factor": "inf" if math.isinf(rate) else rate,  # as status says it
-                                  "control_token": token,
-                                  "control_token_file": None if token is None else str(token_dir / "control-token")}),
-                      flush=True)
-                summary = play(rep, session, scenario, token, args, printer, stop_signal, viewer)
+                # the verbs are answered from the first line on: a client that reads it and asks
+                # for status at once gets an answer (before: the queryable came after the line)
+                with bus.ControlServer(session, scenario, verbs=REPLAY_VERBS, token=token) as control:
+                    print(json.dumps({"replaying": stream.path, "scenario": scenario, "listen": listen,
+                                      "connect": args.connect, "foxglove": viewer_url,
+                                      "control": f"astrodyn/{scenario}/@control/<verb>", "verbs": list(REPLAY_VERBS),
+                                      "real_time_factor": "inf" if math.isinf(rate) else rate,  # as status says it
+                                      "control_token": token,
+                                      "control_token_file": None if token is None else str(token_dir / "control-token")}),
+                          flush=True)
+                    summary = play(rep, control, args, printer, stop_signal, viewer)
             finally:
                 rep.close()
                 if viewer is not None:
@@ -669,44 +672,44 @@ class LiveView:
             self.child = None
 
 
-def play(rep: Replayer, session, scenario: str, token: str | None, args: argparse.Namespace,
+def play(rep: Replayer, control: bus.ControlServer, args: argparse.Namespace,
          printer: Progress, stop_signal: StopFlag, view: LiveView | None = None) -> dict:
-    """Publish until the end (or ``stop``, or a signal), answering control verbs on the
-    way (and keeping the live ``view`` up); the final status, also the reply to each ``stop``."""
+    """Publish until the end (or ``stop``, or a signal), answering the verbs that come to
+    ``control`` on the way (and keeping the live ``view`` up); the final status, also the
+    reply to each ``stop``."""
     stop_requests: list[bus.ControlRequest] = []
-    with bus.ControlServer(session, scenario, verbs=REPLAY_VERBS, token=token) as control:
 
-        def keep_up() -> bool:
-            """Answer the control verbs and keep the live view up; False once told to stop."""
-            for req in control.poll():
-                if req.handled_by(rep.handle):
-                    stop_requests.append(req)
-            if view is not None:
-                view.check()
-            return rep.state != "stopped" and not stop_signal.why
+    def keep_up() -> bool:
+        """Answer the control verbs and keep the live view up; False once told to stop."""
+        for req in control.poll():
+            if req.handled_by(rep.handle):
+                stop_requests.append(req)
+        if view is not None:
+            view.check()
+        return rep.state != "stopped" and not stop_signal.why
 
-        def keep_waiting() -> bool:
-            """keep_up, and the progress line (which says "waiting") while no one subscribes."""
-            printer.show(lambda: _progress_line(rep))
-            return keep_up()
+    def keep_waiting() -> bool:
+        """keep_up, and the progress line (which says "waiting") while no one subscribes."""
+        printer.show(lambda: _progress_line(rep))
+        return keep_up()
 
-        rep.wait_for_subscriber(args.wait, keep_waiting)
-        while True:
-            if not keep_up():
-                break
-            more = rep.step()
-            if not more and rep.state == "finished" and not args.hold:
-                break
-            if rep.state != "running":
-                time.sleep(_POLL_S)
-            printer.show(lambda: _progress_line(rep))
-        rep._flush_batches()
-        if stop_signal.why:
-            rep.state = "stopped"
-        summary = rep.status()
-        if not rep.stream.truncated and not rep.stream.corrupt_chunks:
-            summary["file_report"] = "complete"
-        for req in stop_requests:
-            req.reply(summary)
-        time.sleep(0.05)  # let the last puts and replies leave before the session closes
+    rep.wait_for_subscriber(args.wait, keep_waiting)
+    while True:
+        if not keep_up():
+            break
+        more = rep.step()
+        if not more and rep.state == "finished" and not args.hold:
+            break
+        if rep.state != "running":
+            time.sleep(_POLL_S)
+        printer.show(lambda: _progress_line(rep))
+    rep._flush_batches()
+    if stop_signal.why:
+        rep.state = "stopped"
+    summary = rep.status()
+    if not rep.stream.truncated and not rep.stream.corrupt_chunks:
+        summary["file_report"] = "complete"
+    for req in stop_requests:
+        req.reply(summary)
+    time.sleep(0.05)  # let the last puts and replies leave before the session closes
     return summary

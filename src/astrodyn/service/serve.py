@@ -1170,18 +1170,20 @@ def main(argv: list[str] | None = None) -> int:
             except (bus.BusError, OSError) as exc:  # the logger could not start: nothing else was started
                 print(f"astrodyn serve: {exc}", file=sys.stderr)
                 return 1
-            # strict JSON, as the status reply: a float that is not finite is its word ("inf", as
-            # status says), never the Infinity / NaN jq and JSON.parse refuse (session 20 probe A, F5)
-            print(json.dumps(jsonable({"serving": scenario.name, "hub": hub,
-                                       "control": f"astrodyn/{scenario.name}/@control/<verb>", "verbs": list(sup.verbs),
-                                       "out": str(out), "real_time_factor": rate, "roll_size": roll_size,
-                                       "roll_interval_s": roll_interval, "foxglove": sup.viewer_url,
-                                       "control_token": token,
-                                       "control_token_file": None if token_file is None else str(token_file)})),
-                  flush=True)
             stop_requests: list[bus.ControlRequest] = []
             try:
                 with bus.ControlServer(session, scenario.name, sup.verbs, token=token) as control:
+                    # the first line once the verbs are answered: a client that reads it and asks
+                    # for status at once gets an answer (before: the queryable came after the line).
+                    # Strict JSON, as the status reply: a float that is not finite is its word
+                    # ("inf", as status says), never the Infinity / NaN jq and JSON.parse refuse
+                    print(json.dumps(jsonable({"serving": scenario.name, "hub": hub,
+                                               "control": f"astrodyn/{scenario.name}/@control/<verb>",
+                                               "verbs": list(sup.verbs), "out": str(out), "real_time_factor": rate,
+                                               "roll_size": roll_size, "roll_interval_s": roll_interval,
+                                               "foxglove": sup.viewer_url, "control_token": token,
+                                               "control_token_file": None if token_file is None else str(token_file)})),
+                          flush=True)
                     t_end = None if args.max_wall is None else time.monotonic() + args.max_wall
                     while True:
                         stopping = False
