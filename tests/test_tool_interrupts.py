@@ -387,3 +387,38 @@ def test_an_analyze_of_a_sweep_stopped_by_sigterm_keeps_the_earlier_report_whole
     err = _interrupt(proc, signal.SIGTERM)
     assert _tree(out) == before
     _ended_by(proc, signal.SIGTERM, err)
+
+
+_SIGNAL_AS_THE_TEMPORARY_IS_CREATED = """
+import os, signal, sys
+from astrodyn.recording import outputs
+from astrodyn.signals import interruptible
+
+real_close = os.close
+def close_after_a_signal(fd):  # the signal lands just after O_EXCL created the temporary file
+    os.kill(os.getpid(), getattr(signal, sys.argv[2]))
+    real_close(fd)
+
+def run():
+    os.close = close_after_a_signal  # this process only
+    try:
+        outputs.write_atomically(sys.argv[1], lambda s: s.write(b"x"), suffix=".merging", hidden=True, replace=False)
+    finally:
+        os.close = real_close
+    return 0
+
+sys.exit(interruptible("merge", run))
+"""
+
+
+@pytest.mark.parametrize("sig", ["SIGHUP", "SIGTERM"])
+def test_a_signal_as_the_temporary_file_is_created_leaves_no_file(tmp_path, sig):
+    """A signal between the temporary file's creation and the moment its name is kept: the
+    file stayed behind although the tool said no output was left half-written (seen under
+    three xdist workers as a merge's ``.m.*.mcap.merging``).  The signal is sent from
+    inside the creation, every time, in a process of its own."""
+    out = tmp_path / "m.mcap"
+    proc = subprocess.run([sys.executable, "-c", _SIGNAL_AS_THE_TEMPORARY_IS_CREATED, str(out), sig],
+                          capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 128 + getattr(signal, sig), proc.stderr[-2000:]
+    assert list(tmp_path.iterdir()) == []

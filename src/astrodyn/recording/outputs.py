@@ -148,7 +148,8 @@ def written_atomically(dst: str | os.PathLike, suffix: str = ".tmp", *, replace:
     tmp: str | None = None
     try:
         _remove_stale_temporaries(dst, suffix, hidden)
-        tmp = _create_temporary(dst, suffix, hidden)
+        with deferred_interrupts():  # created and its name kept, so that the finally below removes it
+            tmp = _create_temporary(dst, suffix, hidden)
         yield tmp
         with deferred_interrupts():  # named, or not at all: no second name left by a signal
             if replace:
