@@ -321,7 +321,7 @@ def start_controller(name: str, cmd: str, scenario: str, hub: str, log_dir: Path
 
 
 #: A propagator or logger with no heartbeat for this many wall seconds (ten times that while
-#: it prepares) is hung: the supervisor kills it and handles it as a crash (``--stall-timeout``).
+#: it starts or prepares) is hung: the supervisor kills it and handles it as a crash (``--stall-timeout``).
 STALL_S = 120.0
 
 
@@ -636,8 +636,10 @@ class Child:
     def kill_if_stalled(self, beats, limit_s: float | None, now: float) -> bool:
         """SIGKILL this child (by PID) when it runs but is silent: no heartbeat on
         ``beats`` (an :class:`astrodyn.bus.HeartbeatMonitor`, keyed by :attr:`name`) for
-        ``limit_s`` wall seconds since its last one or since it started; ten times that
-        while its last heartbeat says ``preparing`` (the numeric kernels compile).  A hung
+        ``limit_s`` wall seconds since its last one; ten times that before its first one
+        (it starts: imports, its session; on a loaded machine a short ``--stall-timeout``
+        killed healthy children there) and while its last one says ``preparing`` (the
+        numeric kernels compile).  A hung
         process (deadlock, SIGSTOP, an endless loop) thus ends like a crash and takes the
         same path: restarted, or the run fails naming it (:meth:`how`).  None or 0: never.
 
@@ -654,13 +656,14 @@ class Child:
         return True
 
     def silence(self, beats, now: float) -> tuple[float, bool]:
-        """``(seconds, preparing)``: how long, on the supervisor's listening clock, this child
+        """``(seconds, starting)``: how long, on the supervisor's listening clock, this child
         has sent no heartbeat on ``beats`` (since its last one, or since it started), and
-        whether its last heartbeat said ``preparing`` (:meth:`kill_if_stalled`)."""
+        whether it is still starting: no heartbeat yet, or its last one said ``preparing``
+        (:meth:`kill_if_stalled`)."""
         self.listened_since_start(beats, now)
         heard_since_start = beats.seen.get(self.name, 0.0) > self.started  # not its predecessor's
         since = beats.heard[self.name] if heard_since_start else self.started_listening
-        preparing = bool(heard_since_start and beats.last.get(self.name, {}).get("preparing"))
+        preparing = not heard_since_start or bool(beats.last.get(self.name, {}).get("preparing"))
         return beats.listening_s - since, preparing
 
     def listened_since_start(self, beats, now: float) -> float:

@@ -1,0 +1,60 @@
+"""A child that has not sent its first heartbeat yet is starting (imports, its Zenoh session),
+not hung: the supervisor gives it ten times ``--stall-timeout``, as it does while a child
+says it is preparing (docs/reliability.md, hung processes).  Before, the plain limit applied
+from its start, so on a loaded machine a short ``--stall-timeout`` killed healthy children
+still starting (a test run on three xdist workers had two such restarts before its own fault).
+
+A real `astrodyn run`: its orbit propagator is held (SIGSTOP) from the moment it exists, before
+it can send anything, for three times the stall timeout, then let go."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _recordings import one_satellite_scene
+from astrodyn.service.children import children_of
+
+STALL_S = 1.0
+
+
+def test_a_child_held_before_its_first_heartbeat_is_not_killed_as_hung(tmp_path):
+    config, out, result = tmp_path / "start.toml", tmp_path / "start.mcap", tmp_path / "result.json"
+    config.write_text(one_satellite_scene("start", "60 s", "10 Hz"))
+    proc = subprocess.Popen([sys.executable, "-m", "astrodyn", "run", str(config), "--out", str(out), "--json",
+                             str(result), "--quiet", "--stall-timeout", f"{STALL_S:g}"],
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    held = None
+    try:
+        deadline = time.monotonic() + 120
+        while held is None and time.monotonic() < deadline and proc.poll() is None:
+            held = next((pid for pid, argv in children_of(proc.pid).items()
+                         if "astrodyn.service.propagator" in " ".join(argv) and "orbit" in argv), None)
+            time.sleep(0.005)
+        assert held is not None, "the orbit propagator never started"
+        os.kill(held, signal.SIGSTOP)  # within milliseconds of its start: it has sent nothing yet
+        time.sleep(3 * STALL_S)
+        try:
+            os.kill(held, signal.SIGCONT)
+        except ProcessLookupError:  # killed (and reaped) while held
+            pass
+        _, err = proc.communicate(timeout=180)
+    finally:
+        if held is not None:  # only the process this test held
+            try:
+                os.kill(held, signal.SIGCONT)
+            except ProcessLookupError:
+                pass
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert proc.returncode == 0, err[-3000:]
+    run = json.loads(result.read_text())
+    assert run["restarts"] == [], run["restarts"]
+    assert run["logger"]["missing"] == 0 and run["logger"]["states"] == 2 * 601, run["logger"]
