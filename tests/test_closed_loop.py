@@ -309,8 +309,6 @@ def test_commands_on_a_scene_without_control_and_bad_closed_loop_arguments_are_r
     assert not (tmp_path / "x.mcap").exists()
 
 
-# CI time (10-15 s): serve of a closed loop with its controller stays in make test in test_serve_closed_loop_faults
-@pytest.mark.slow
 def test_serve_runs_a_free_closed_loop_with_its_controller_and_stops_cleanly(tmp_path):
     """``serve --controller`` in free mode: real-time pacing (x20), the controller's commands
     applied as they come (late ones counted), and the stop verb ends plant, controller and

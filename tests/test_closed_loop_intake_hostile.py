@@ -114,8 +114,6 @@ def _recorded(path: Path) -> tuple[list[str], list[bytes], dict[int, int]]:
     return applied, states, per_step
 
 
-# CI time (8 s): the intake's hostile path stays in make test (test_closed_loop's flood of forged commands)
-@pytest.mark.slow
 @pytest.mark.network
 def test_retransmitted_commands_lose_nothing_and_two_runs_agree(tmp_path):
     runs = [_run(tmp_path, "retransmit", tag) for tag in ("a", "b")]

@@ -22,8 +22,7 @@ CONFIGS = sorted(p for p in (ROOT / "configs").glob("*.toml") if p.stem != "demo
 # detumble: its controller on this config (cut to 30 s) runs in test_closed_loop, test_docs_walk_fixes and
 # test_live_view (CI time)
 SLOW_CONFIGS = ("constellation-1000", "explorer-1", "flexible-slew", "detumble",  # CI time; the others run
-                "hyperbolic-flyby", "dual-spin")  # (7-8 s each: hyperbolic Kepler and the gyrostat are in the
-# orbit and attitude tests and hard cases)
+                "hyperbolic-flyby")  # (8 s; the hyperbolic Kepler path is in the orbit tests and hard cases)
 
 pytestmark = pytest.mark.network
 

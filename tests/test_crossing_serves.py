@@ -194,8 +194,6 @@ def test_a_rolled_part_whose_name_another_serve_took_is_written_beside_it(tmp_pa
     assert seqs == list(range(len(seqs)))
 
 
-# CI time (8 s): the control token file's rules stay in make test (test_recover_series_identity, test_serve_*)
-@pytest.mark.slow
 def test_serves_of_x_mcap_and_x_MCAP_each_keep_their_own_control_token_file(tmp_path):
     """F3 of the crossing probe: the token file is named after the whole file name of
     ``--out`` (``.x.mcap.control-token``).  Before, both serves used ``.x.control-token``: the

@@ -158,8 +158,6 @@ def _exact_base(inertia, w0, mount):
     return base
 
 
-# CI time (9 s): the gimbal equations against a direct integration stay in make test (the engine tests above)
-@pytest.mark.slow
 @pytest.mark.network
 def test_on_a_tumbling_body_the_gimbals_match_a_direct_integration_on_the_exact_rates(tmp_path):
     run = _run(tmp_path, TUMBLING)

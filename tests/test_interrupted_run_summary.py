@@ -30,7 +30,6 @@ from _recordings import one_satellite_scene
 pytestmark = pytest.mark.network
 
 
-@pytest.mark.slow  # CI time (7 s): test_reliability's SIGTERM to run checks each stop event and "sim t reached"
 def test_an_interrupted_run_says_which_process_stopped_early_and_the_sim_time_all_reached(tmp_path):
     config, out, result = tmp_path / "cut.toml", tmp_path / "cut.mcap", tmp_path / "cut.json"
     config.write_text(one_satellite_scene("cut", "100000 s", "10 Hz"))

@@ -225,8 +225,6 @@ def test_a_vanished_client_changes_nothing(tmp_path):
     assert len(seq) > 1000 and list(seq) == list(range(len(seq)))  # nothing lost while the clients hung and died
 
 
-# CI time (8 s): a live view under serve with a real client stays in make test (test_serve_with_a_live_view_and_a_real_client)
-@pytest.mark.slow
 def test_the_closed_loops_channels_reach_the_view(tmp_path):
     """serve of a closed loop with a controller and a live view: the actuator states (and
     the other closed-loop channels) are advertised with their schemas and reach a client,

@@ -85,8 +85,6 @@ def _router_config(tmp_path, pki) -> str:
     return str(conf)
 
 
-# CI time (11 s): the router's policy (test_router_acl) and TLS settings (test_service) stay in make test
-@pytest.mark.slow
 def test_mtls_router_admits_only_certificates_of_its_ca_and_names_in_its_policy(tmp_path, pki, processes):
     port = bus.free_port()
     endpoint = f"tls/localhost:{port}"

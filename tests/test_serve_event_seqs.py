@@ -28,7 +28,6 @@ import sys
 import time
 from pathlib import Path
 
-import pytest
 from mcap.reader import make_reader
 
 from astrodyn import bus
@@ -61,8 +60,6 @@ def _kill_and_wait_restart(s, token: str, process: str, restarts_before: int, st
                  lambda: len((st := _status(s, token))["restarts"]) > restarts_before and st)
 
 
-# CI time (13-15 s): serve's logger restart stays in make test (test_supervision's standby logger test)
-@pytest.mark.slow
 def test_after_a_logger_restart_the_merged_parts_hold_each_event_seq_once_and_the_restart_event(tmp_path):
     out = tmp_path / "demo.mcap"
     serve = subprocess.Popen([sys.executable, "-m", "astrodyn", "serve", str(ROOT / "configs" / "demo.toml"), "--out",

@@ -54,7 +54,6 @@ def _wait(what, timeout_s: float, ready):
     return value
 
 
-@pytest.mark.slow  # CI time (10 s): a burst past the budget refused and reported stays in make test (test_hostile_queries)
 def test_deaths_spread_wider_than_the_budget_are_each_restarted_and_a_burst_is_refused_and_reported(tmp_path):
     out = tmp_path / "demo.mcap"
     serve = subprocess.Popen([sys.executable, "-m", "astrodyn", "serve", str(ROOT / "configs" / "demo.toml"), "--out",

@@ -617,7 +617,6 @@ def _serve_fault_trial(tmp_path: Path, processes, rng, reference_states: dict, c
     return record
 
 
-@pytest.mark.slow  # CI time (~15 s with its reference): each child's SIGKILL under serve stays in make test
 def test_serve_random_faults_fast_subset(tmp_path, processes, reference):
     """One seeded random trial against `serve` (the series below has twenty; CI time)."""
     records = _random_faults(tmp_path, processes, reference, trials=1, seed=20261126, trial=_serve_fault_trial)

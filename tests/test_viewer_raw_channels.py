@@ -38,7 +38,6 @@ BODIES = 24  # 48 state keys: more than one frame's budget
 
 
 @pytest.mark.network
-@pytest.mark.slow  # CI time (10-18 s): a raw channel under serve reaching a real client stays in make test (test_live_view)
 def test_every_raw_channel_is_served_and_each_state_sent_once_under_serve(tmp_path):
     """48 state keys (24 bodies with orbit and attitude) at 10 states a second each, 480 a
     second in all, under the cap: every key's channel appears within a few frames of the
