@@ -114,7 +114,7 @@ def test_serve_says_on_stderr_why_a_killed_logger_was_not_restarted_on_a_full_di
     import os
     import signal
 
-    from astrodyn.service.children import children_of
+    from _recordings import children_by_kind
 
     out = small_disk / "s.mcap"
     proc = subprocess.Popen([sys.executable, "-m", "astrodyn", "serve", str(ROOT / "configs" / "demo.toml"), "--out",
@@ -122,7 +122,7 @@ def test_serve_says_on_stderr_why_a_killed_logger_was_not_restarted_on_a_full_di
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=ROOT)
     try:
         assert json.loads(proc.stdout.readline() or "{}").get("serving") == "demo"
-        logger = next(pid for pid, argv in children_of(proc.pid).items() if "astrodyn.service.logger" in argv)
+        logger = next(pid for pid, kind in children_by_kind(proc.pid).items() if kind == "logger")
         _fill(small_disk)
         os.kill(logger, signal.SIGKILL)  # this test's serve's logger, by its PID
         _, err = proc.communicate(timeout=120)

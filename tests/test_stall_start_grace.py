@@ -18,8 +18,7 @@ import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _recordings import one_satellite_scene
-from astrodyn.service.children import children_of
+from _recordings import children_by_kind, one_satellite_scene
 
 STALL_S = 1.0
 
@@ -34,8 +33,7 @@ def test_a_child_held_before_its_first_heartbeat_is_not_killed_as_hung(tmp_path)
     try:
         deadline = time.monotonic() + 120
         while held is None and time.monotonic() < deadline and proc.poll() is None:
-            held = next((pid for pid, argv in children_of(proc.pid).items()
-                         if "astrodyn.service.propagator" in " ".join(argv) and "orbit" in argv), None)
+            held = next((pid for pid, kind in children_by_kind(proc.pid).items() if kind == "orbit"), None)
             time.sleep(0.005)
         assert held is not None, "the orbit propagator never started"
         os.kill(held, signal.SIGSTOP)  # within milliseconds of its start: it has sent nothing yet

@@ -648,23 +648,16 @@ class Child:
         VM) it heard nothing, and a healthy child must not be killed for that."""
         if not limit_s or self.stalled_s is not None or self.proc.poll() is not None:
             return False
-        silent_s, preparing = self.silence(beats, now)
-        if silent_s <= (10 * limit_s if preparing else limit_s):
+        self.listened_since_start(beats, now)
+        heard_since_start = beats.seen.get(self.name, 0.0) > self.started  # not its predecessor's
+        since = beats.heard[self.name] if heard_since_start else self.started_listening
+        silent_s = beats.listening_s - since
+        starting = not heard_since_start or beats.last.get(self.name, {}).get("preparing")
+        if silent_s <= (10 * limit_s if starting else limit_s):
             return False
         self.stalled_s = silent_s
         self.proc.kill()
         return True
-
-    def silence(self, beats, now: float) -> tuple[float, bool]:
-        """``(seconds, starting)``: how long, on the supervisor's listening clock, this child
-        has sent no heartbeat on ``beats`` (since its last one, or since it started), and
-        whether it is still starting: no heartbeat yet, or its last one said ``preparing``
-        (:meth:`kill_if_stalled`)."""
-        self.listened_since_start(beats, now)
-        heard_since_start = beats.seen.get(self.name, 0.0) > self.started  # not its predecessor's
-        since = beats.heard[self.name] if heard_since_start else self.started_listening
-        preparing = not heard_since_start or bool(beats.last.get(self.name, {}).get("preparing"))
-        return beats.listening_s - since, preparing
 
     def listened_since_start(self, beats, now: float) -> float:
         """Seconds of the supervisor's listening clock (``beats.listening_s``) since this child
@@ -818,6 +811,13 @@ def is_stopped(pid: int) -> bool:
 JOB_STOP_WAIT_S = 2.0
 
 
+def _wait_until_stopped(children: list[Child]) -> None:
+    """Wait (at most :data:`JOB_STOP_WAIT_S`) until each of ``children`` is stopped or has ended."""
+    deadline = time.monotonic() + JOB_STOP_WAIT_S
+    while time.monotonic() < deadline and not all(is_stopped(c.pid) or c.poll() is not None for c in children):
+        time.sleep(0.01)
+
+
 #: The program of a pause guard (:class:`JobControl`): argv ``SUPERVISOR_PID PGID...``.  It
 #: waits while its parent is the supervisor; once the supervisor is gone (killed while the run
 #: was paused) it continues every stopped child's group, so that each acts on the SIGTERM its
@@ -884,18 +884,12 @@ class JobControl:
         for child in catching:  # unreaped, so the PID is still this child's
             with contextlib.suppress(ProcessLookupError, PermissionError):
                 os.kill(child.pid, signal.SIGTSTP)
-        deadline = time.monotonic() + JOB_STOP_WAIT_S
-        while time.monotonic() < deadline and not all(is_stopped(c.pid) or c.poll() is not None
-                                                       for c in catching):
-            time.sleep(0.01)
+        _wait_until_stopped(catching)
         for child in self._stopped:  # the rest, and any that did not stop in time: their group
             if child.poll() is None and not is_stopped(child.pid):  # (PGID = PID: start_new_session)
                 with contextlib.suppress(ProcessLookupError, PermissionError):
                     os.killpg(child.pid, signal.SIGSTOP)
-        deadline = time.monotonic() + JOB_STOP_WAIT_S
-        while time.monotonic() < deadline and not all(is_stopped(c.pid) or c.poll() is not None
-                                                       for c in self._stopped):
-            time.sleep(0.01)
+        _wait_until_stopped(self._stopped)
         self._start_guard()
 
     def _start_guard(self) -> None:
