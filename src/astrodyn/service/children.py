@@ -877,6 +877,7 @@ class JobControl:
 
     def _stop_children(self) -> None:
         self._stopped = [child for child in list(_STARTED) if child.poll() is None]
+        self._start_guard()  # before any is stopped: a supervisor killed while it stops them leaves none stopped
         # Those that stop themselves first, then the rest: a logger stopped first fills up and
         # blocks the propagators' puts (congestion control BLOCK), so that they could not run
         # their SIGTSTP handler within the wait.
@@ -890,10 +891,9 @@ class JobControl:
                 with contextlib.suppress(ProcessLookupError, PermissionError):
                     os.killpg(child.pid, signal.SIGSTOP)
         _wait_until_stopped(self._stopped)
-        self._start_guard()
 
     def _start_guard(self) -> None:
-        """Start the pause guard (class docstring) over the groups just stopped."""
+        """Start the pause guard (class docstring) over the groups about to be stopped."""
         if not self._stopped:
             return
         try:
