@@ -28,6 +28,7 @@ import threading
 import time
 from pathlib import Path
 
+import numpy as np
 import psutil
 import pytest
 
@@ -112,8 +113,10 @@ def test_a_run_killed_while_paused_leaves_no_stopped_child_behind(tmp_path):
         for pid in children:  # only the processes this run started
             with contextlib.suppress(ProcessLookupError):
                 os.kill(pid, signal.SIGKILL)
-    run = load(partial)  # the logger finished its file (it stopped as on SIGTERM)
-    assert min(len(b.orbit) for b in run.bodies.values()) > 0
+    run = load(partial)  # the logger finished its file (it stopped as on SIGTERM): what it holds is whole
+    states = [c for c in run.channels.values() if c.kind in ("orbit", "attitude")]
+    # (not both kinds: with a cold kernel cache one propagator may still compile when the other has sent 1 MB)
+    assert states and all(np.array_equal(c.seq, np.arange(len(c))) for c in states)
 
 
 # slow (13 s; CI time): Ctrl-Z of a run above covers the job control serve shares
