@@ -5,7 +5,7 @@ from its start, so on a loaded machine a short ``--stall-timeout`` killed health
 still starting (a test run on three xdist workers had two such restarts before its own fault).
 
 A real `astrodyn run`: its orbit propagator is held (SIGSTOP) from the moment it exists, before
-it can send anything, for three times the stall timeout, then let go."""
+it can send anything, for 2.5 times the stall timeout, then let go."""
 
 from __future__ import annotations
 
@@ -17,12 +17,18 @@ import sys
 import time
 from pathlib import Path
 
+import pytest
+
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _recordings import children_by_kind, one_satellite_scene
 
-STALL_S = 1.0
+STALL_S = 3.0  # the limit applies to every child: 1 s killed a busy logger on a loaded machine
 
 
+# make test-all only: with a cold kernel cache (a fresh clone, this file on a worker that has not
+# compiled them) the orbit propagator's first heartbeat came after 10 x 3 s, and a 1 s limit
+# killed a busy logger; it passed warm and failed before the fix (restart of the held orbit)
+@pytest.mark.slow
 def test_a_child_held_before_its_first_heartbeat_is_not_killed_as_hung(tmp_path):
     config, out, result = tmp_path / "start.toml", tmp_path / "start.mcap", tmp_path / "result.json"
     config.write_text(one_satellite_scene("start", "60 s", "10 Hz"))
@@ -37,7 +43,7 @@ def test_a_child_held_before_its_first_heartbeat_is_not_killed_as_hung(tmp_path)
             time.sleep(0.005)
         assert held is not None, "the orbit propagator never started"
         os.kill(held, signal.SIGSTOP)  # within milliseconds of its start: it has sent nothing yet
-        time.sleep(3 * STALL_S)
+        time.sleep(2.5 * STALL_S)
         try:
             os.kill(held, signal.SIGCONT)
         except ProcessLookupError:  # killed (and reaped) while held
