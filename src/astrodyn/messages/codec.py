@@ -286,6 +286,18 @@ def parse_json(data: bytes | bytearray | str, finite: bool = False) -> Any:
         raise ValueError(f"expected JSON text, got {type(data).__name__}") from exc
 
 
+def json_field(data: bytes | bytearray | str, name: str) -> Any:
+    """The value of field ``name`` of the JSON object ``data`` from outside (a payload, a
+    line of a file), or None when ``data`` is not JSON (by :func:`parse_json`'s rules), not
+    an object, or has no such field.  For reading one field of something that may be
+    hostile, where any of these just means "not given"; the caller checks the value."""
+    try:
+        obj = parse_json(data)
+    except ValueError:
+        return None
+    return obj.get(name) if isinstance(obj, dict) else None
+
+
 def decode(data: bytes | bytearray | memoryview, key_or_kind: str) -> dict:
     """Parse a payload and validate it against its message type; return it as a dict (fields
     in definition order; optional fields of a Status only when present).

@@ -55,7 +55,7 @@ from pathlib import Path
 from mcap.writer import CompressionType, Writer
 
 from astrodyn.files import output_path_problem, path_argument
-from astrodyn.messages import STATE_KINDS
+from astrodyn.messages import STATE_KINDS, json_field
 from astrodyn.recording.outputs import OutputTaken, warn_incomplete_input, write_atomically
 from astrodyn.recording.stream import open_stream
 from astrodyn.recording.writer import RecordingError, part_path
@@ -185,11 +185,7 @@ def _is_state(topic: str) -> bool:
 
 def _payload_seq(data: bytes) -> int | None:
     """The ``seq`` of a state payload (a JSON object's non-negative integer ``seq``), or None."""
-    try:
-        msg = json.loads(data)
-    except (ValueError, RecursionError):
-        return None
-    seq = msg.get("seq") if isinstance(msg, dict) else None
+    seq = json_field(data, "seq")
     return seq if isinstance(seq, int) and not isinstance(seq, bool) and seq >= 0 else None
 
 

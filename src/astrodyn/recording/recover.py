@@ -71,6 +71,7 @@ from mcap.records import Channel, Chunk, Message, Metadata, Schema
 
 from astrodyn import __version__
 from astrodyn.files import output_path_problem, path_argument
+from astrodyn.messages import json_field
 from astrodyn.recording.chunked_writer import ChunkedWriter
 from astrodyn.recording.merge import recorded_parts
 from astrodyn.recording.outputs import OutputTaken, process_may_run, stale_temporaries, write_atomically
@@ -450,12 +451,8 @@ def _serve_recordings(work: str) -> list[str] | None:
         return None
     names = []
     for line in data.splitlines():
-        try:
-            rec = json.loads(line)
-        except (ValueError, RecursionError):
-            continue
-        if isinstance(rec, dict) and isinstance(rec.get("file"), str):
-            names.append(os.path.basename(rec["file"]))
+        if isinstance(file := json_field(line, "file"), str):
+            names.append(os.path.basename(file))
     return names or None
 
 

@@ -314,11 +314,7 @@ class Intake:
 
 def _named_sender(payload: bytes) -> str | None:
     """The ``sender`` a rejected command payload names, if it is JSON naming a valid one."""
-    try:
-        msg = json.loads(payload)
-    except (ValueError, RecursionError):
-        return None
-    sender = msg.get("sender") if isinstance(msg, dict) else None
+    sender = messages.json_field(payload, "sender")
     return sender if isinstance(sender, str) and NAME_FULL_RE.fullmatch(sender) else None
 
 
