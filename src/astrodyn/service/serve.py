@@ -514,11 +514,11 @@ class Supervisor:
         self.outdir.close()
         self.own.close()
 
-    def check_output_directory(self, now: float) -> None:
-        """At most once a second: the directory of ``--out`` still where it was?  Renamed or
-        removed, the recording is not at ``--out`` any more: serve fails (nothing renamed or
-        removed), saying where it is when that can be told."""
-        if now - self.outdir_checked < 1.0 or self.state not in ("running", "paused"):
+    def check_output_directory(self, now: float, at_once: bool = False) -> None:
+        """At most once a second (``at_once``: now): the directory of ``--out`` still where it
+        was?  Renamed or removed, the recording is not at ``--out`` any more: serve fails
+        (nothing renamed or removed), saying where it is when that can be told."""
+        if not at_once and now - self.outdir_checked < 1.0 or self.state not in ("running", "paused"):
             return
         self.outdir_checked = now
         if (problem := self.outdir.problem()) is not None:
@@ -567,6 +567,13 @@ class Supervisor:
             hb = self.beats.last.get(name, {})
             msg = f"process {name} (pid {ch.pid}) {ch.how(rc)} at {sim_time(hb.get('t'))}: {ch.last_words(3)}"
             print(f"astrodyn serve: {msg}", file=sys.stderr, flush=True)
+            # a death may be the output directory's move (a process writing into it or reading
+            # its recording back): that is serve's failure, said as such, before any restart
+            # tries the old path and fails with "No such file or directory"
+            self.check_output_directory(now, at_once=True)
+            if self.outdir_failed:
+                self.failures.append(msg)
+                continue
             n = sum(1 for r in self.restarts if r["process"] == name)
             if name == "viewer":  # the view is not the record: restart it, never fail the run for it
                 if self.state in ("running", "paused") and self.budgets["viewer"].allow():
