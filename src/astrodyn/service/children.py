@@ -320,9 +320,15 @@ def start_controller(name: str, cmd: str, scenario: str, hub: str, log_dir: Path
     return Child(f"controller-{name}", controller_argv(cmd), log_dir, env=env, foreign=True)
 
 
-#: A propagator or logger with no heartbeat for this many wall seconds (ten times that while
-#: it starts or prepares) is hung: the supervisor kills it and handles it as a crash (``--stall-timeout``).
+#: A propagator or logger with no heartbeat for this many wall seconds (ten times that, and at
+#: least :data:`PREPARE_GRACE_S`, while it starts or prepares) is hung: the supervisor kills it and handles it as a crash (``--stall-timeout``).
 STALL_S = 120.0
+#: Wall seconds at the least a child is given before it counts as hung while it starts (no
+#: heartbeat yet) or says ``preparing``, whatever ``--stall-timeout``: its numeric kernels
+#: compile then, on a cold cache (a fresh install) 30-55 s each on this project's 2-core
+#: machine and more under load (docs/benchmarks.md).  Ten times ``--stall-timeout`` alone
+#: killed them mid-compile under a short limit (2 s: 20 s), and each restart compiled again.
+PREPARE_GRACE_S = 300.0
 
 
 def wall_seconds(text: str, zero: bool = False) -> float:
@@ -636,10 +642,10 @@ class Child:
     def kill_if_stalled(self, beats, limit_s: float | None, now: float) -> bool:
         """SIGKILL this child (by PID) when it runs but is silent: no heartbeat on
         ``beats`` (an :class:`astrodyn.bus.HeartbeatMonitor`, keyed by :attr:`name`) for
-        ``limit_s`` wall seconds since its last one; ten times that before its first one
-        (it starts: imports, its session; on a loaded machine a short ``--stall-timeout``
-        killed healthy children there) and while its last one says ``preparing`` (the
-        numeric kernels compile).  A hung
+        ``limit_s`` wall seconds since its last one; ten times that, and at least
+        :data:`PREPARE_GRACE_S`, before its first one (it starts: imports, its session; on a
+        loaded machine a short ``--stall-timeout`` killed healthy children there) and while
+        its last one says ``preparing`` (the numeric kernels compile).  A hung
         process (deadlock, SIGSTOP, an endless loop) thus ends like a crash and takes the
         same path: restarted, or the run fails naming it (:meth:`how`).  None or 0: never.
 
@@ -653,7 +659,7 @@ class Child:
         since = beats.heard[self.name] if heard_since_start else self.started_listening
         silent_s = beats.listening_s - since
         starting = not heard_since_start or beats.last.get(self.name, {}).get("preparing")
-        if silent_s <= (10 * limit_s if starting else limit_s):
+        if silent_s <= (max(10 * limit_s, PREPARE_GRACE_S) if starting else limit_s):
             return False
         self.stalled_s = silent_s
         self.proc.kill()
