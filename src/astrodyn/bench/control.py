@@ -8,6 +8,11 @@ per wall second (the plant's steps over its wall time), the round trip as the pl
 it (tick published -> every answer and command in: bus both ways, the controller's work,
 the plant's intake), p50 / p99, and the real-time factor.  Goals (issue 16): >= 5,000
 steps/s for one body (round trip <= 200 us); 1000 bodies at 10 Hz faster than real time.
+
+Two peers in the same run, with no astrodyn code: the bare zenoh-python round trip between
+two processes (the floor of any step), and a lockstep *skeleton* (that round trip plus the
+other puts of a one-body step, with a third process reading them, as the logger does): the
+most steps per second that Python processes exchanging these messages reach on this machine.
 """
 
 from __future__ import annotations
@@ -85,11 +90,34 @@ with zenoh.open(conf) as s:
         pub.put(sample.payload.to_bytes())
 """
 
+_LISTENER = """
+import json, sys, zenoh
+conf = zenoh.Config()
+conf.insert_json5("mode", '"peer"')
+conf.insert_json5("connect/endpoints", json.dumps([sys.argv[1]]))
+conf.insert_json5("scouting/multicast/enabled", "false")
+with zenoh.open(conf) as s:
+    sub = s.declare_subscriber("bench/**", zenoh.handlers.FifoChannel(4096))
+    for sample in sub:
+        sample.payload.to_bytes()
+"""
 
-def zenoh_floor(n: int = 2000) -> dict:
+#: The puts a one-body step of this benchmark's scene makes besides its tick (states, sensor
+#: samples, actuator states; counted in docs/benchmarks.md, "Lockstep, one body: where a
+#: step's time goes").
+SKELETON_SAMPLES = 4
+
+
+def zenoh_floor(n: int = 2000, samples: int = 0, listener: bool = False) -> dict:
     """The bare round trip of zenoh-python on this machine: a 200-byte sample to another
     Python process (a peer on loopback) and back, no astrodyn code on either side; the
-    floor under any lockstep step of a controller in Python."""
+    floor under any lockstep step of a controller in Python.
+
+    ``samples`` > 0 and ``listener``: the *skeleton* of a lockstep step instead: after each
+    ping, ``samples`` more 200-byte puts on keys of their own, with a third Python process
+    subscribed to all of them (a logger that only reads), as a plant with no work of its own
+    would publish a one-body step.  Returns the round trip's p50 / p99 (us) and the steps
+    per wall second."""
     import subprocess
     import time
 
@@ -98,11 +126,14 @@ def zenoh_floor(n: int = 2000) -> dict:
     from astrodyn import bus
 
     endpoint = bus.loopback_endpoint(bus.free_port())
-    pong = subprocess.Popen([sys.executable, "-c", _PONG, endpoint])
+    procs = [subprocess.Popen([sys.executable, "-c", _PONG, endpoint])]
+    if listener:
+        procs.append(subprocess.Popen([sys.executable, "-c", _LISTENER, endpoint]))
     try:
         with bus.open_session(connect=endpoint) as s:
             sub = s.declare_subscriber("bench/pong", zenoh.handlers.FifoChannel(16))
             pub = s.declare_publisher("bench/ping")
+            others = [s.declare_publisher(f"bench/sample/{k}") for k in range(samples)]
             times = []
             deadline = time.monotonic() + 30
             while sub.try_recv() is None:  # until the route is up
@@ -110,18 +141,25 @@ def zenoh_floor(n: int = 2000) -> dict:
                     raise RuntimeError("bench control: the ping-pong peer did not answer within 30 s")
                 pub.put(b"x")
                 time.sleep(0.05)
+            time.sleep(0.5 if listener else 0.0)  # the listener's routes too
             while sub.try_recv() is not None:
                 pass
+            body = b"x" * 200
+            began = time.perf_counter()
             for _ in range(n):
                 t0 = time.perf_counter()
-                pub.put(b"x" * 200)
+                pub.put(body)
+                for other in others:
+                    other.put(body)
                 sub.recv()
                 times.append(time.perf_counter() - t0)
+            wall = time.perf_counter() - began
     finally:
-        pong.terminate()
-        pong.wait(timeout=10)
+        for proc in procs:
+            proc.terminate()
+            proc.wait(timeout=10)
     times.sort()
-    return {"p50_us": 1e6 * times[n // 2], "p99_us": 1e6 * times[int(0.99 * (n - 1))]}
+    return {"p50_us": 1e6 * times[n // 2], "p99_us": 1e6 * times[int(0.99 * (n - 1))], "steps_per_s": n / wall}
 
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
@@ -149,9 +187,13 @@ def main(argv: list[str] | None = None) -> int:
                 print(f"{n} bodies{' + wheels' if wheels else ''}: {r['steps_per_s']:.0f} steps/s, round trip p50 "
                       f"{r['p50_us']:.0f} us", file=sys.stderr, flush=True)
     floor = zenoh_floor()
+    skeleton = zenoh_floor(4000, samples=SKELETON_SAMPLES, listener=True)
     print(f"# closed-loop lockstep on {cpu_model()}: one controller commanding every body each step, 10 Hz\n")
     print(f"floor: bare zenoh-python round trip between two processes (peers, loopback), same run: p50 "
           f"{floor['p50_us']:.0f} us, p99 {floor['p99_us']:.0f} us\n")
+    print(f"skeleton: the same round trip plus {SKELETON_SAMPLES} more puts per step and a third process reading "
+          f"them all (a one-body step with no work of its own, no astrodyn code), same run: "
+          f"{skeleton['steps_per_s']:.0f} steps/s, p50 {skeleton['p50_us']:.0f} us, p99 {skeleton['p99_us']:.0f} us\n")
     print_table(["bodies", "wheels", "steps", "control steps/s", "round trip p50 (us)", "p99 (us)", "p50 / zenoh floor",
                  "real-time factor"],
                 ([r["bodies"], "3" if r["wheels"] else "-", r["steps"], f"{r['steps_per_s']:.0f}", f"{r['p50_us']:.0f}",
