@@ -77,12 +77,17 @@ def one(n_bodies: int, steps: int, work: Path, wheels: bool) -> dict:
             "rtf": sim / plant["wall_s"], "applied": plant["applied"]}
 
 
-_PONG = """
+#: The start of the peer scripts below: a zenoh-python peer on the endpoint ``sys.argv[1]``,
+#: listening on it or connecting to it (``role``), no scouting.
+_PEER = """
 import json, sys, zenoh
 conf = zenoh.Config()
 conf.insert_json5("mode", '"peer"')
-conf.insert_json5("listen/endpoints", json.dumps([sys.argv[1]]))
+conf.insert_json5("{role}/endpoints", json.dumps([sys.argv[1]]))
 conf.insert_json5("scouting/multicast/enabled", "false")
+"""
+
+_PONG = _PEER.format(role="listen") + """
 with zenoh.open(conf) as s:
     pub = s.declare_publisher("bench/pong")
     sub = s.declare_subscriber("bench/ping", zenoh.handlers.FifoChannel(16))  # held: a dropped one is undeclared
@@ -90,12 +95,7 @@ with zenoh.open(conf) as s:
         pub.put(sample.payload.to_bytes())
 """
 
-_LISTENER = """
-import json, sys, zenoh
-conf = zenoh.Config()
-conf.insert_json5("mode", '"peer"')
-conf.insert_json5("connect/endpoints", json.dumps([sys.argv[1]]))
-conf.insert_json5("scouting/multicast/enabled", "false")
+_LISTENER = _PEER.format(role="connect") + """
 with zenoh.open(conf) as s:
     sub = s.declare_subscriber("bench/**", zenoh.handlers.FifoChannel(4096))
     for sample in sub:
