@@ -85,6 +85,35 @@ def leo_recording(path: Path, name: str = "rp", duration: str = "60 s", rate: st
     return record(path, LEO_TWO_BODIES.format(name=name, duration=duration, rate=rate))
 
 
+def copy_recording(src: Path, dst: Path, edit_metadata=None, edit_message=None) -> None:
+    """Copy the MCAP recording ``src`` to ``dst`` record by record with the third-party
+    ``mcap`` reader and writer (its header, schemas, channels, metadata records, and its
+    messages in log-time order, the reader's default), through a test's edits:
+    ``edit_metadata(name, metadata) -> metadata`` of each metadata record and
+    ``edit_message(channel, message) -> data`` of each message (``mcap`` records;
+    unchanged when not given)."""
+    from mcap.reader import make_reader
+    from mcap.writer import Writer
+
+    with open(src, "rb") as f, open(dst, "wb") as g:
+        reader = make_reader(f)
+        header, summary = reader.get_header(), reader.get_summary()
+        writer = Writer(g)
+        writer.start(header.profile, header.library)
+        schemas = {sid: writer.register_schema(s.name, s.encoding, s.data) for sid, s in summary.schemas.items()}
+        channels = {cid: writer.register_channel(c.topic, c.message_encoding, schemas.get(c.schema_id, 0), c.metadata)
+                    for cid, c in summary.channels.items()}
+        for record in reader.iter_metadata():
+            metadata = dict(record.metadata)
+            if edit_metadata is not None:
+                metadata = edit_metadata(record.name, metadata)
+            writer.add_metadata(record.name, metadata)
+        for _, channel, message in reader.iter_messages():
+            data = message.data if edit_message is None else edit_message(channel, message)
+            writer.add_message(channels[channel.id], message.log_time, data, message.publish_time, message.sequence)
+        writer.finish()
+
+
 def one_satellite_scene(name: str, duration: str, rate: str, extra: str = "") -> str:
     """TOML of a scene with one body ``sat`` (Kepler orbit, torque-free attitude), for the
     process tests; ``extra`` is appended (more bodies)."""
@@ -131,21 +160,52 @@ def children_by_kind(pid: int) -> dict[int, str]:
     return out
 
 
+def run_to_end(directory: Path, name: str, toml_text: str, *flags: str,
+               timeout_s: float = 600.0) -> tuple[Path, dict, str]:
+    """``astrodyn run`` of ``toml_text`` (written to ``directory/NAME.toml``) into
+    ``directory/NAME.mcap``, its ``--json`` result to ``directory/result.json``, with the
+    further ``flags``, waited for (at most ``timeout_s`` of wall time); it must exit 0 (else
+    the test fails with the end of its stderr).  Returns (the recording, the result, stdout)."""
+    import json
+    import subprocess
+
+    cfg, out, res = directory / f"{name}.toml", directory / f"{name}.mcap", directory / "result.json"
+    cfg.write_text(toml_text)
+    proc = subprocess.run([sys.executable, "-m", "astrodyn", "run", str(cfg), "--out", str(out), "--json", str(res),
+                           *flags], capture_output=True, text=True, timeout=timeout_s)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    return out, json.loads(res.read_text()), proc.stdout
+
+
+def wait_for_recording(proc, partial: Path, min_bytes: int, timeout_s: float = 120.0, poll_s: float = 0.05) -> None:
+    """Wait until the file ``partial`` (the recording the process ``proc`` makes) holds more
+    than ``min_bytes``, polling every ``poll_s`` s, at most ``timeout_s`` s of wall time (then
+    it returns, and what the test does next tells); the test fails, with the end of
+    ``proc``'s stderr (a pipe), if ``proc`` ends first."""
+    import time
+
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline and not (partial.exists() and partial.stat().st_size > min_bytes):
+        if proc.poll() is not None:
+            said = proc.stderr.read() if proc.stderr is not None else ""
+            said = said.decode(errors="replace") if isinstance(said, bytes) else said
+            raise AssertionError(f"ended (status {proc.returncode}) before {partial} held {min_bytes} bytes: "
+                                 f"{said[-3000:]}")
+        time.sleep(poll_s)
+
+
 def run_while(argv: list[str], partial: Path, min_bytes: int, act, timeout_s: float = 180.0) -> tuple[int, str]:
     """Start ``astrodyn run`` with ``argv``, wait (at most 120 s) until its logger's file
-    ``partial`` holds ``min_bytes`` (the recording is under way), call ``act(pid)`` with the
-    supervisor's PID, and wait for the run to end; returns its exit status and stderr.  A run
-    still alive at the end (a failed assertion in ``act``) is killed by its PID."""
+    ``partial`` holds ``min_bytes`` (the recording is under way: :func:`wait_for_recording`),
+    call ``act(pid)`` with the supervisor's PID, and wait for the run to end; returns its
+    exit status and stderr.  A run still alive at the end (a failed assertion in ``act``) is
+    killed by its PID."""
     import subprocess
-    import time
 
     proc = subprocess.Popen([sys.executable, "-m", "astrodyn", "run", *argv], stdout=subprocess.DEVNULL,
                             stderr=subprocess.PIPE)
     try:
-        deadline = time.monotonic() + 120
-        while time.monotonic() < deadline and not (partial.exists() and partial.stat().st_size > min_bytes):
-            assert proc.poll() is None, proc.stderr.read().decode()
-            time.sleep(0.05)
+        wait_for_recording(proc, partial, min_bytes)
         act(proc.pid)
         _, err = proc.communicate(timeout=timeout_s)
     finally:

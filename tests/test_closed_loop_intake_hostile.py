@@ -16,34 +16,14 @@ from pathlib import Path
 
 import pytest
 
-from _by_hand_controller import CONTROLLER_PRELUDE, DETUMBLE_BODY
+from _by_hand_controller import CONTROLLER_PRELUDE, detumble_scene
 from astrodyn.recording.stream import open_stream
-
-ROOT = Path(__file__).resolve().parents[1]
-
-_CONFIG = """
-[scenario]
-name = "detumble"
-epoch = "2026-03-20T12:00:00 UTC"
-duration = "3 s"
-rate = "10 Hz"
-
-[control]
-period = "0.1 s"
-controllers = ["detumble"]
-timeout = "{timeout}"
-seed = 42
-
-""" + DETUMBLE_BODY.replace("{torque}", "0.05 N m")  # still a format string
 
 _CONTROLLER = CONTROLLER_PRELUDE + r'''
 HOSTILE = os.environ["HOSTILE"]
 ann = open(os.environ["ANNOUNCED"], "w")
-cmd_key = f"{base}/sc/command"
 n = 0
-with zenoh.open(conf) as s:
-    s.declare_subscriber(f"{base}/@tick", on_tick)
-    s.declare_subscriber(f"{base}/@event", on_event)
+with subscribed_session() as s:
     while True:
         try:
             tk = ticks.get(timeout=30)
@@ -70,11 +50,11 @@ with zenoh.open(conf) as s:
         elif HOSTILE == "big" and j == 2:
             sends = [cmd, b'{"t":%r,"seq":%d,"sender":"%s","torque":[0,0,0],"pad":"%s"}'
                      % (tk["t"], n + 1, name.encode(), b"x" * 200_000)]
-            put(s, cmd_key, {**cmd, "seq": 0, "sender": "intruder"}, signer="intruder")
+            put(s, command_key, {**cmd, "seq": 0, "sender": "intruder"}, signer="intruder")
         put(s, f"{base}/@done/{name}", {"t": tk["t"], "seq": j, "sender": name, "commands": count})
         time.sleep(0.01)  # the answer first: the commands come after it
         for m in sends:
-            put(s, cmd_key, raw=m) if isinstance(m, bytes) else put(s, cmd_key, m)
+            put(s, command_key, raw=m) if isinstance(m, bytes) else put(s, command_key, m)
             if not isinstance(m, bytes) and m is not sends[0] and m["seq"] == cmd["seq"]:
                 continue  # a retransmission: same seq
             n = max(n, (m["seq"] + 1) if not isinstance(m, bytes) else n + 1)
@@ -85,7 +65,7 @@ with zenoh.open(conf) as s:
 
 def _run(tmp_path: Path, hostile: str, tag: str = "a", timeout: str = "3 s") -> tuple[subprocess.CompletedProcess, dict, Path, list]:
     cfg = tmp_path / "det.toml"
-    cfg.write_text(_CONFIG.format(timeout=timeout))
+    cfg.write_text(detumble_scene("3 s", timeout=timeout))
     ctl = tmp_path / "ctl.py"
     ctl.write_text(_CONTROLLER)
     out, js, ann = tmp_path / f"{tag}.mcap", tmp_path / f"{tag}.json", tmp_path / f"{tag}.announced.json"

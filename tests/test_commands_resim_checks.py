@@ -18,37 +18,20 @@ from pathlib import Path
 
 import pytest
 
-from _by_hand_controller import DETUMBLE_BODY
+from _by_hand_controller import detumble_scene
 from _recordings import payloads_by_topic
+from _scenes import fault_table
 from astrodyn.recording.stream import open_stream
 
 ROOT = Path(__file__).resolve().parents[1]
 RUN = [sys.executable, "-m", "astrodyn", "run"]
 
-_CONFIG = """
-[scenario]
-name = "detumble"
-epoch = "2026-03-20T12:00:00 UTC"
-duration = "{duration}"
-rate = "{rate}"
-
-[control]
-period = "{period}"
-controllers = ["detumble"]
-seed = {seed}
-
-[[control.faults]]
-t = "1.5 s"
-body = "sc"
-fault = "gyro_bias"
-value = ["2e-4 rad/s", 0, 0]
-
-""" + DETUMBLE_BODY
+_GYRO_BIAS = fault_table("1.5 s", "gyro_bias", value=["2e-4 rad/s", 0, 0])
 _NOMINAL = {"duration": "3 s", "rate": "10 Hz", "period": "0.1 s", "seed": 42, "torque": "0.05 N m"}
 
 
 def _config(path: Path, **changes) -> Path:
-    path.write_text(_CONFIG.format(**{**_NOMINAL, **changes}))
+    path.write_text(detumble_scene(**{**_NOMINAL, **changes}, faults=_GYRO_BIAS))
     return path
 
 

@@ -29,8 +29,9 @@ from pathlib import Path
 
 import pytest
 
-from _by_hand_controller import DETUMBLE_BODY
+from _by_hand_controller import detumble_scene
 from _recordings import payloads_by_topic
+from _scenes import fault_table
 from astrodyn import messages
 from astrodyn.recording import McapRecorder
 from astrodyn.recording.merge import merge
@@ -39,27 +40,8 @@ from astrodyn.service.runner import check_command_recording, command_recording_n
 
 ROOT = Path(__file__).resolve().parents[1]
 
-_CONFIG = """
-[scenario]
-name = "detumble"
-epoch = "2026-03-20T12:00:00 UTC"
-duration = "{duration}"
-rate = "10 Hz"
-
-[control]
-period = "0.1 s"
-controllers = ["detumble"]
-seed = 42
-{faults}
-""" + DETUMBLE_BODY
-
-
-def _config_text(duration: str = "3 s", faults: str = "") -> str:
-    return _CONFIG.format(duration=duration, faults=faults, torque="0.05 N m")
-
-
 def _scenario(duration: str = "3 s", faults: str = ""):
-    return loads(_config_text(duration, faults))
+    return loads(detumble_scene(duration, faults=faults))
 
 
 def _write_part(base: Path, part: int, steps: range | list[int], *, end: bool, scenario=None, commands: bool = True,
@@ -167,8 +149,7 @@ def test_two_scenario_records_that_differ_are_refused_by_commands_and_resume_nam
     from astrodyn.service.supervision import holds_config
 
     this = _scenario()
-    other = loads(_config_text().replace('rate = "10 Hz"', 'rate = "5 Hz"')
-                  .replace('period = "0.1 s"', 'period = "0.2 s"'))
+    other = loads(detumble_scene("3 s", rate="5 Hz", period="0.2 s"))
     path = _write_part(tmp_path / "two.mcap", 0, range(0, 31), end=True, scenario=other, extra_scenario=this)
     err = _refusal(this, path, tmp_path)
     assert "got records that differ" in err and 'scenario.rate is "10 Hz" here, "5 Hz" in the recording' in err, err
@@ -182,20 +163,8 @@ def test_two_scenario_records_that_differ_are_refused_by_commands_and_resume_nam
     assert check_command_recording(this, same, tmp_path / "out.mcap")["applied"] == 31
 
 
-_FAULTS = """
-[[control.faults]]
-t = "1 s"
-body = "sc"
-fault = "gyro_bias"
-value = ["2e-4 rad/s", 0, 0]
-
-[[control.faults]]
-t = "2 s"
-body = "sc"
-fault = "sensor_dropout"
-sensor = "gyro"
-duration = "0.5 s"
-"""
+_FAULTS = (fault_table("1 s", "gyro_bias", value=["2e-4 rad/s", 0, 0])
+           + fault_table("2 s", "sensor_dropout", sensor="gyro", duration="0.5 s"))
 
 
 @pytest.mark.slow
@@ -206,7 +175,7 @@ def test_a_served_series_parts_are_refused_and_merged_they_re_simulate_bit_for_b
     and ``astrodyn merge``; the first is named as the first of a series; ``merge`` of all
     re-simulates every recorded state, sensor sample and actuator state bit for bit."""
     config = tmp_path / "det.toml"
-    config.write_text(_config_text("30 s", _FAULTS))
+    config.write_text(detumble_scene("30 s", faults=_FAULTS))
     base = tmp_path / "d.mcap"
     proc = subprocess.run([sys.executable, "-m", "astrodyn", "serve", str(config), "--out", str(base), "--controller",
                            f"{sys.executable} {ROOT / 'examples' / 'detumble.py'}", "--roll-interval", "1",

@@ -10,19 +10,15 @@ and nothing is done.  ``replay`` uses the same server (its ``seek`` included).
 
 from __future__ import annotations
 
-import json
 import re
-import subprocess
-import sys
 import threading
 import time
-from pathlib import Path
 
 import pytest
 
+from _serve_control import serve_demo
 from astrodyn import bus
 
-ROOT = Path(__file__).resolve().parents[1]
 TOKEN = "t" * 43  # the token the test's server asks for: any string works for ControlServer
 REPLAY_VERBS = (*bus.CONTROL_VERBS, "seek")
 
@@ -84,12 +80,8 @@ def test_a_query_that_names_no_single_verb_gets_one_error_naming_the_verbs_and_n
 def test_serve_answers_its_advertised_control_key_with_an_error_and_keeps_running(tmp_path):
     """A real serve: ``@control/*`` (the key its first line gave as ``control`` before), queried with its token, gets one error
     naming its verbs; serve is still running, not paused, and stops on ``stop`` (exit 0)."""
-    out = tmp_path / "demo.mcap"
-    serve = subprocess.Popen([sys.executable, "-m", "astrodyn", "serve", str(ROOT / "configs" / "demo.toml"), "--out",
-                              str(out), "--rate", "10", "--max-wall", "60"],
-                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    serve, hello = serve_demo(tmp_path / "demo.mcap", "10", max_wall_s=60)
     try:
-        hello = json.loads(serve.stdout.readline())
         token = hello["control_token"]
         with bus.open_session(connect=[hello["hub"]]) as s:
             # the first line names the verbs and the key of each (a template, not a key expression to query)

@@ -30,8 +30,9 @@ from pathlib import Path
 
 import pytest
 from mcap.reader import make_reader
-from mcap.writer import Writer
 
+from _recordings import copy_recording
+from _scenes import RATE_GYRO_DYNAMICS, appendage_table, coin_body, gyro_table, wheel_tables
 from astrodyn.recording.export import export
 
 pytestmark = pytest.mark.network
@@ -65,82 +66,29 @@ i = "51 deg"
 model = "flexible"
 mass = "400 kg"
 inertia = ["300 kg m2", "250 kg m2", "400 kg m2"]
-[[bodies.attitude.appendages]]
-root = ["0 m", "1 m", "0 m"]
-normal = [1, 0, 0]
-length = "5 m"
-mass_per_length = "2 kg/m"
-bending_stiffness = "2000 N m2"
-modes = 1
-[[bodies.attitude.appendages]]
-root = ["0 m", "-1 m", "0 m"]
-normal = [1, 0, 0]
-length = "5 m"
-mass_per_length = "2 kg/m"
-bending_stiffness = "2000 N m2"
-modes = 2
+""" + appendage_table(["0 m", "1 m", "0 m"], [1, 0, 0], "5 m", "2 kg/m", "2000 N m2", 1) \
+    + appendage_table(["0 m", "-1 m", "0 m"], [1, 0, 0], "5 m", "2 kg/m", "2000 N m2", 2) + """
 [bodies.actuators]
 torque = "0.05 N m"
 dv = "100 m/s"
 thrust = "2 N"
 isp = "220 s"
 mass = "500 kg"
-[[bodies.actuators.wheels]]
-axis = [1, 0, 0]
-inertia = "0.1 kg m2"
-max_torque = "0.2 N m"
-max_speed = "6000 rpm"
-[[bodies.actuators.wheels]]
-axis = [0, 1, 0]
-inertia = "0.1 kg m2"
-max_torque = "0.2 N m"
-max_speed = "6000 rpm"
-[[bodies.actuators.wheels]]
-axis = [0, 0, 1]
-inertia = "0.1 kg m2"
-max_torque = "0.2 N m"
-max_speed = "6000 rpm"
+""" + wheel_tables([[1, 0, 0], [0, 1, 0], [0, 0, 1]], "0.1 kg m2", "0.2 N m", "6000 rpm") + """
 [bodies.sensors]
 gyro = { sigma = "1e-6 rad/s" }
 star_tracker = { sigma = "5 arcsec" }
 gps = { sigma_r = "5 m", sigma_v = "0.05 m/s" }
 tachometer = { sigma = "0.1 rad/s" }
 
-[[bodies]]
-name = "coin"
-[bodies.attitude]
-model = "rolling_disk"
-radius = "12.9 mm"
-mass = "8.5 g"
-shape = "disk"
-lean = "20 deg"
-heading_rate = "6 rad/s"
-spin_rate = "steady"
-
+""" + coin_body("coin", 'shape = "disk"\nlean = "20 deg"\nheading_rate = "6 rad/s"\nspin_rate = "steady"\n') + """
 [[bodies]]
 name = "probe"
 [bodies.attitude]
 inertia = ["900 kg m2", "1100 kg m2", "1300 kg m2"]
 w = ["1.5 deg/s", "-0.8 deg/s", "2.5 deg/s"]
-[[bodies.gyros]]
-type = "rate"
-input_axis = [1, 0, 0]
-output_axis = [0, 1, 0]
-spin_inertia = "1e-4 kg m2"
-transverse_inertia = "6e-5 kg m2"
-spin_rate = "24000 rpm"
-natural_frequency = "30 Hz"
-damping_ratio = 0.7
-[[bodies.gyros]]
-type = "rate"
-input_axis = [0, 1, 0]
-output_axis = [0, 0, 1]
-spin_inertia = "1e-4 kg m2"
-transverse_inertia = "6e-5 kg m2"
-spin_rate = "24000 rpm"
-natural_frequency = "30 Hz"
-damping_ratio = 0.7
-"""
+""" + gyro_table("rate", [1, 0, 0], RATE_GYRO_DYNAMICS) \
+    + gyro_table("rate", [0, 1, 0], RATE_GYRO_DYNAMICS, output_axis=[0, 0, 1])
 
 #: Step 0: torque only; step 1: wheel torques beyond max_torque (wheel 0 clipped) and a dv;
 #: step 2: a body-axes thrust and, separately, wheel torques (two commands applied in one step).
@@ -375,28 +323,18 @@ def test_lists_shorter_in_some_messages_leave_empty_cells(recording, tmp_path):
     """A file whose layout changes (valid messages: one appendage and two wheel speeds in
     every third message) makes the columns of the longest list; the shorter ones leave the
     cells they have no element for empty."""
+    def fewer_elements(channel, message) -> bytes:
+        msg = json.loads(message.data)
+        if msg["seq"] % 3 == 1 and channel.topic.endswith("/appendages"):
+            msg["eta"], msg["eta_dot"], msg["tip"] = msg["eta"][:1], msg["eta_dot"][:1], msg["tip"][:1]
+            return json.dumps(msg).encode()
+        if msg["seq"] % 3 == 1 and channel.topic.endswith("/tachometer"):
+            msg["speeds"] = msg["speeds"][:2]
+            return json.dumps(msg).encode()
+        return message.data
+
     changed = tmp_path / "changed.mcap"
-    with open(recording, "rb") as src, open(changed, "wb") as dst:
-        reader = make_reader(src)
-        summary = reader.get_summary()
-        w = Writer(dst)
-        w.start("astrodyn", "")
-        schema_ids = {sid: w.register_schema(s.name, s.encoding, s.data) for sid, s in summary.schemas.items()}
-        channel_ids = {cid: w.register_channel(c.topic, c.message_encoding, schema_ids[c.schema_id])
-                       for cid, c in summary.channels.items()}
-        for rec in reader.iter_metadata():
-            w.add_metadata(rec.name, dict(rec.metadata))
-        for _, channel, message in reader.iter_messages():
-            data = message.data
-            msg = json.loads(data)
-            if msg["seq"] % 3 == 1 and channel.topic.endswith("/appendages"):
-                msg["eta"], msg["eta_dot"], msg["tip"] = msg["eta"][:1], msg["eta_dot"][:1], msg["tip"][:1]
-                data = json.dumps(msg).encode()
-            elif msg["seq"] % 3 == 1 and channel.topic.endswith("/tachometer"):
-                msg["speeds"] = msg["speeds"][:2]
-                data = json.dumps(msg).encode()
-            w.add_message(channel_ids[channel.id], message.log_time, data, message.publish_time, message.sequence)
-        w.finish()
+    copy_recording(recording, changed, edit_message=fewer_elements)
     out = tmp_path / "csv"
     export(changed, "csv", out)
     channels = recorded_channels(changed)

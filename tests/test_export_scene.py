@@ -23,7 +23,7 @@ from astrodyn.recording import load
 from astrodyn.recording.export import export, line_indices, scene_updates
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _recordings import LEO_TWO_BODIES, record
+from _recordings import LEO_TWO_BODIES, record, scenario_head
 from test_export import _rotate_active  # written independently of the exporter
 
 # foxglove-sdk schemas/jsonschema/SceneUpdate.json: the "required" list of each object
@@ -222,13 +222,7 @@ def test_total_point_budget_is_shared_between_bodies(tmp_path):
         scene_updates(run, max_scene_points=0)
 
 
-ATTITUDE_ONLY = """
-[scenario]
-name = "lab"
-epoch = "2026-03-20T12:00:00 UTC"
-duration = "2 s"
-rate = "5 Hz"
-
+ATTITUDE_ONLY = scenario_head("lab", "2 s", "5 Hz") + """
 [[bodies]]
 name = "spinner"
 [bodies.attitude]

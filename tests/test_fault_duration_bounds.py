@@ -12,7 +12,8 @@ import math
 
 import pytest
 
-from _by_hand_controller import DETUMBLE_BODY
+from _by_hand_controller import detumble_scene
+from _scenes import fault_table
 from astrodyn.scenario import ScenarioError, loads
 from astrodyn.scenario.control import parse_fault, plant_bodies
 from astrodyn.scenario.fields import Ctx
@@ -20,28 +21,10 @@ from astrodyn.scenario.fields import Ctx
 #: 250 Julian years in s (365.25 days of 86,400 s): the bound as docs/control.md states it
 YEARS_250_S = 250 * 365.25 * 86400
 
-_CONFIG = """
-[scenario]
-name = "dropout"
-epoch = "2026-03-20T12:00:00 UTC"
-duration = "2 s"
-rate = "1 kHz"
-
-[control]
-controllers = []
-
-[[control.faults]]
-t = "0.5 s"
-body = "sc"
-fault = "sensor_dropout"
-sensor = "gyro"
-duration = "{duration}"
-""" + DETUMBLE_BODY
-
-
 def _config(duration: str) -> str:
     """The scene's TOML with the dropout's ``duration`` (quantity text)."""
-    return _CONFIG.format(duration=duration, torque="0.05 N m")
+    dropout = fault_table("0.5 s", "sensor_dropout", sensor="gyro", duration=duration)
+    return detumble_scene("2 s", rate="1 kHz", period=None, controllers="[]", seed=None, faults=dropout, name="dropout")
 
 
 def test_validate_refuses_a_dropout_longer_than_250_years_naming_the_field_and_the_range(tmp_path, capsys):

@@ -34,6 +34,8 @@ from astrodyn.simulate import AttitudeEngine
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _config_text import assert_config_error, edited
+from _recordings import copy_recording, run_to_end
+from _scenes import appendage_table
 
 ROOT = Path(__file__).resolve().parents[1]
 ASTRODYN = [sys.executable, "-m", "astrodyn"]
@@ -56,28 +58,10 @@ mass = "40 kg"
 inertia = [[8.0, 0.2, 0.0], [0.2, 6.0, 0.1], [0.0, 0.1, 5.0]]
 w = ["0.3 rad/s", "-0.2 rad/s", "2.0 rad/s"]
 q = [0.9, 0.3, 0.3, 0.1]
-[[bodies.attitude.appendages]]
-root = ["0.5 m", "0 m", "0.1 m"]
-axis = [1, 0, 0]
-normal = [0, 1, 0]
-length = "3 m"
-mass_per_length = "0.4 kg/m"
-bending_stiffness = "120 N m2"
-modes = 2
-[[bodies.attitude.appendages]]
-root = ["-0.5 m", "0 m", "0 m"]
-normal = [0, 0, 1]
-length = "2 m"
-mass_per_length = "0.2 kg/m"
-bending_stiffness = "60 N m2"
-modes = 2
-"""
+""" + appendage_table(["0.5 m", "0 m", "0.1 m"], [0, 1, 0], "3 m", "0.4 kg/m", "120 N m2", 2, axis=[1, 0, 0]) \
+    + appendage_table(["-0.5 m", "0 m", "0 m"], [0, 0, 1], "2 m", "0.2 kg/m", "60 N m2", 2)
 # with q given as not quite unit, normalised on load: |(0.9, 0.3, 0.3, 0.1)| = 1.0
 assert abs(math.sqrt(0.81 + 0.09 + 0.09 + 0.01) - 1.0) < 1e-12
-
-
-def _scene(**replace) -> str:
-    return edited(SCENE, **replace)
 
 
 # --------------------------------------------------------------------------- config
@@ -113,14 +97,14 @@ HOSTILE = [
 @pytest.mark.parametrize("old,new,field,says", HOSTILE, ids=[f"{h[2]}:{h[1][:24]}" for h in HOSTILE])
 def test_hostile_flexible_configs_name_the_field(old, new, field, says):
     path = field if field.startswith("attitude.") else f"attitude.{field}"
-    assert_config_error(_scene(**{old: new}), f"bodies[0] (sc).{path}", says)
+    assert_config_error(edited(SCENE, **{old: new}), f"bodies[0] (sc).{path}", says)
 
 
 def test_appendages_only_for_the_flexible_model_and_at_least_one():
     no_apps = SCENE.split("[[bodies.attitude.appendages]]")[0]
     with pytest.raises(ScenarioError, match=r"bodies\[0\] \(sc\)\.attitude\.appendages: expected at least one"):
         loads(no_apps)
-    rigid = _scene(**{'model = "flexible"\nmass = "40 kg"\n': 'model = "torque_free"\n'})
+    rigid = edited(SCENE, **{'model = "flexible"\nmass = "40 kg"\n': 'model = "torque_free"\n'})
     with pytest.raises(ScenarioError, match=r'attitude\.appendages: expected no appendages unless model = "flexible"'):
         loads(rigid)
     too_many = no_apps + "".join(f'[[bodies.attitude.appendages]]\nroot = ["{1 + k} m", 0, 0]\nnormal = [0, 1, 0]\n'
@@ -142,8 +126,9 @@ def test_the_plan_counts_an_appendages_message_per_step():
 # --------------------------------------------------------------------------- the engine
 
 
-def _spacecraft(scn):
-    a = scn.bodies[0].attitude
+def _spacecraft_of(body):
+    """The flexible spacecraft model of a loaded config's ``body``."""
+    a = body.attitude
     return flexible_spacecraft(a.mass, a.inertia, a.appendages, a.stiffening)
 
 
@@ -163,7 +148,7 @@ def _engine_run(scn, blocks):
 
 def test_engine_blocks_conserve_momentum_and_energy_and_agree_with_one_tight_integration():
     scn = loads(SCENE)
-    sc = _spacecraft(scn)
+    sc = _spacecraft_of(scn.bodies[0])
     t, q, w, eta, eta_dot = _engine_run(scn, blocks=7)
     rows = {r.name: r for r in flexible_invariants(sc, q, w, eta, eta_dot)}
     # rtol 1e-10 per step, ~100s of steps: the invariants hold to a few 1e-9 at worst
@@ -185,7 +170,7 @@ def test_engine_resumes_from_a_recorded_state():
     k = 30
     sc_eng = AttitudeEngine(scn)
     assert sc_eng.own_channels()[0][1].last is None
-    layout = fx.state_layout(_spacecraft(scn))
+    layout = fx.state_layout(_spacecraft_of(scn.bodies[0]))
     columns = [slice(s.start - layout["eta"].start, s.stop - layout["eta"].start) for s in layout["eta_k"]]
     per, per_dot = [eta[k][c].tolist() for c in columns], [eta_dot[k][c].tolist() for c in columns]
     taken = sc_eng.resume(float(t[k]), {"sc": {"q": q[k].tolist(), "w": w[k].tolist(), "eta": per, "eta_dot": per_dot}})
@@ -204,13 +189,8 @@ def test_engine_resumes_from_a_recorded_state():
 @pytest.fixture(scope="module")
 def recorded(tmp_path_factory):
     """``astrodyn run`` of SCENE: (scenario, recording path, --json result)."""
-    d = tmp_path_factory.mktemp("flex")
-    cfg, out, res = d / "flexsc.toml", d / "flexsc.mcap", d / "result.json"
-    cfg.write_text(SCENE)
-    proc = subprocess.run([*ASTRODYN, "run", str(cfg), "--out", str(out), "--json", str(res), "--timeout", "300"],
-                          capture_output=True, text=True, timeout=600)
-    assert proc.returncode == 0, proc.stderr[-2000:]
-    return loads(SCENE), out, json.loads(res.read_text()), proc.stdout
+    out, result, stdout = run_to_end(tmp_path_factory.mktemp("flex"), "flexsc", SCENE, "--timeout", "300")
+    return loads(SCENE), out, result, stdout
 
 
 @pytest.mark.network
@@ -227,7 +207,7 @@ def test_run_records_the_hub_and_the_appendages_of_every_step(recorded):
     assert eta.shape == (61, 8) and eta_dot.shape == (61, 8) and tip.shape == (61, 2, 3)
     # tips from the shape functions' values at x = L (an independent evaluation) and the
     # recorded coordinates, plus the foreshortening along the axis (second order)
-    sc = _spacecraft(scn)
+    sc = _spacecraft_of(scn.bodies[0])
     k0 = 0
     for j, app in enumerate(sc.appendages):
         n = app.beam.n_modes
@@ -327,11 +307,6 @@ def test_explorer_1_config_is_the_energy_sink_pair():
         assert math.degrees(math.atan2(composite[0] * w[0], composite[2] * w[2])) == pytest.approx(10.0, abs=1e-3)
 
 
-def _spacecraft_of(body):
-    a = body.attitude
-    return flexible_spacecraft(a.mass, a.inertia, a.appendages, a.stiffening)
-
-
 def _nutation(sc, q, w, eta, eta_dot):
     states = np.stack([fx.make_state(sc, q=q[k], w=w[k], eta=eta[k], eta_dot=eta_dot[k]) for k in range(len(q))])
     _, h = fx.spacecraft_momentum(sc, states)
@@ -397,37 +372,29 @@ def test_hostile_appendage_channels_and_metadata_end_in_notes_not_tracebacks(rec
     """A file whose appendages change layout mid-run (valid messages, inconsistent with the
     config), or whose config metadata does not describe a spacecraft: load, the run summary,
     analyze and export read what they can, say what they could not, and never raise."""
-    from mcap.reader import make_reader
-    from mcap.writer import Writer
-
     from astrodyn.analysis import analyze
     from astrodyn.recording import export
     from astrodyn.service.summary import file_summary
 
     _, out, _, _ = recorded
+
+    def no_spacecraft(name, meta):
+        meta["json"] = json.dumps({"bodies": [{"name": "sc", "attitude": {"appendages": [{"modes": "x"}] * 99}}]})
+        return meta
+
+    def one_appendage_fewer(channel, message):
+        if not (channel.topic.endswith("/appendages") and message.sequence % 7 == 3):
+            return message.data
+        msg = json.loads(message.data)  # one appendage fewer, still a valid AppendageState
+        msg["eta"], msg["eta_dot"], msg["tip"] = msg["eta"][:1], msg["eta_dot"][:1], msg["tip"][:1]
+        return json.dumps(msg, separators=(",", ":")).encode()
+
     for case in ("layout", "metadata"):
         bad = tmp_path / f"{case}.mcap"
-        with open(out, "rb") as src, open(bad, "wb") as dst:
-            reader = make_reader(src)
-            summary = reader.get_summary()
-            w = Writer(dst)
-            w.start("astrodyn", "")
-            schema_ids = {sid: w.register_schema(s.name, s.encoding, s.data) for sid, s in summary.schemas.items()}
-            chan_ids = {cid: w.register_channel(c.topic, c.message_encoding, schema_ids[c.schema_id])
-                        for cid, c in summary.channels.items()}
-            for rec in reader.iter_metadata():
-                meta = dict(rec.metadata)
-                if case == "metadata":
-                    meta["json"] = json.dumps({"bodies": [{"name": "sc", "attitude": {"appendages": [{"modes": "x"}] * 99}}]})
-                w.add_metadata(rec.name, meta)
-            for _, channel, message in reader.iter_messages():
-                data = message.data
-                if case == "layout" and channel.topic.endswith("/appendages") and message.sequence % 7 == 3:
-                    msg = json.loads(data)  # one appendage fewer, still a valid AppendageState
-                    msg["eta"], msg["eta_dot"], msg["tip"] = msg["eta"][:1], msg["eta_dot"][:1], msg["tip"][:1]
-                    data = json.dumps(msg, separators=(",", ":")).encode()
-                w.add_message(chan_ids[channel.id], message.log_time, data, message.publish_time, message.sequence)
-            w.finish()
+        if case == "metadata":
+            copy_recording(out, bad, edit_metadata=no_spacecraft)
+        else:
+            copy_recording(out, bad, edit_message=one_appendage_fewer)
         run = load(bad)
         assert len(run.bodies["sc"].appendages) == 61  # valid messages: all kept
         rows = file_summary(bad, loads(SCENE))
@@ -450,16 +417,14 @@ def test_serve_restarts_a_killed_attitude_propagator_from_the_recorded_elastic_s
     import signal
     import time
 
-    from _serve_control import serve_status, wait_until
+    from _serve_control import serve_status, start_serve, wait_until
     from astrodyn import bus
     from astrodyn.service.children import stop_process
 
     cfg, out = tmp_path / "flexsc.toml", tmp_path / "serve.mcap"
-    cfg.write_text(_scene(**{'duration = "3 s"': 'duration = "100000 s"'}))
-    proc = subprocess.Popen([*ASTRODYN, "serve", str(cfg), "--out", str(out), "--rate", "5", "--max-wall", "120"],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    cfg.write_text(edited(SCENE, **{'duration = "3 s"': 'duration = "100000 s"'}))
+    proc, hello = start_serve(cfg, out, "--rate", "5")
     try:
-        hello = json.loads(proc.stdout.readline())
         token = hello["control_token"]
         with bus.open_session(connect=[hello["hub"]]) as s:
             status = serve_status(s, "flexsc", token)
@@ -485,6 +450,6 @@ def test_serve_restarts_a_killed_attitude_propagator_from_the_recorded_elastic_s
     np.testing.assert_array_equal(body.appendages.seq, np.arange(len(body.appendages)))
     m = min(n, len(body.appendages))
     eta, eta_dot, _ = appendage_arrays(body.appendages)
-    rows = {r.name: r for r in flexible_invariants(_spacecraft(loads(SCENE)), body.attitude.q[:m], body.attitude.w[:m],
-                                                   eta[:m], eta_dot[:m])}
+    rows = {r.name: r for r in flexible_invariants(_spacecraft_of(loads(SCENE).bodies[0]), body.attitude.q[:m],
+                                                   body.attitude.w[:m], eta[:m], eta_dot[:m])}
     assert rows["H_i (hub + appendages)"].drift < 1e-8 and rows["E = T + V"].drift < 1e-8

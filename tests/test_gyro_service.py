@@ -28,28 +28,16 @@ from astrodyn.simulate import AttitudeEngine
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _config_text import assert_config_error, edited
+from _scenes import RATE_GYRO_DYNAMICS, gyro_table
 
 ASTRODYN = [sys.executable, "-m", "astrodyn"]
 C, A, SPIN = 1e-4, 6e-5, 24000 * 2 * math.pi / 60  # rotor kg m^2, kg m^2, rad/s
 H = C * SPIN
 
 
-def _gyro(kind: str, input_axis: str, own_keys: str) -> str:
-    """A ``[[bodies.gyros]]`` entry with the rotor of C, A and SPIN above (output axis y);
-    ``own_keys``: the TOML lines of its type's own keys."""
-    return f"""
-[[bodies.gyros]]
-type = "{kind}"
-input_axis = {input_axis}
-output_axis = [0, 1, 0]
-spin_inertia = "1e-4 kg m2"
-transverse_inertia = "6e-5 kg m2"
-spin_rate = "24000 rpm"
-{own_keys}"""
-
-
-RATE_GYRO = _gyro("rate", "[1, 0, 0]", 'natural_frequency = "30 Hz"\ndamping_ratio = 0.7\n')
-INTEGRATING = _gyro("rate_integrating", "[0, 0, 1]", 'damping = "0.25 N m s/rad"\n')
+#: ``[[bodies.gyros]]`` entries: the rotor of gyro_table is the one of C, A and SPIN above (output axis y)
+RATE_GYRO = gyro_table("rate", [1, 0, 0], RATE_GYRO_DYNAMICS)
+INTEGRATING = gyro_table("rate_integrating", [0, 0, 1], 'damping = "0.25 N m s/rad"\n')
 
 
 def _scene(inertia: str, w: str, duration: str = "2 s", rate: str = "50 Hz", gyros: str = RATE_GYRO + INTEGRATING) -> str:

@@ -24,7 +24,7 @@ from types import SimpleNamespace
 
 import pytest
 
-from _recordings import one_satellite_scene, run_while
+from _recordings import one_satellite_scene, run_while, wait_for_recording
 
 pytestmark = pytest.mark.network
 
@@ -189,32 +189,24 @@ def test_a_run_whose_output_directory_is_renamed_fails_and_says_where_the_record
     assert not (tmp_path / "d2" / "x.mcap").exists()
 
 
-def test_a_serve_whose_output_directory_is_renamed_fails(tmp_path):
+def test_a_serve_whose_output_directory_is_renamed_fails(tmp_path, processes):
     """F4, serve: the directory renamed while serving: serve fails within about a second,
     exit 1, naming where the directory went (before: exit 0, nothing on stderr)."""
     config = _scene(tmp_path, "moved2", "20000 s", "10 Hz")
     folder = tmp_path / "d"
     folder.mkdir()
-    proc = subprocess.Popen([*ASTRODYN, "serve", str(config), "--out", str(folder / "x.mcap"), "--rate", "100",
-                             "--max-wall", "60"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    try:
-        first = json.loads(proc.stdout.readline())
-        assert first["serving"] == "moved2"
-        # renamed while serve records (its propagators past their start-up, states in the
-        # file), as run_while does for run; not after a fixed second, which on a loaded
-        # machine (three xdist workers on two cores) fell within the propagators' start-up
-        partial, deadline = folder / "x.partial.mcap", time.monotonic() + 120
-        while time.monotonic() < deadline and not (partial.exists() and partial.stat().st_size > 60_000):
-            assert proc.poll() is None, proc.stderr.read()[-2000:]
-            time.sleep(0.05)
-        folder.rename(tmp_path / "d2")
-        moved_at = time.monotonic()
-        _, err = proc.communicate(timeout=60)
-        took = time.monotonic() - moved_at
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait()
+    proc = processes([*ASTRODYN, "serve", str(config), "--out", str(folder / "x.mcap"), "--rate", "100",
+                      "--max-wall", "60"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    first = json.loads(proc.stdout.readline())
+    assert first["serving"] == "moved2"
+    # renamed while serve records (its propagators past their start-up, states in the
+    # file), as run_while does for run; not after a fixed second, which on a loaded
+    # machine (three xdist workers on two cores) fell within the propagators' start-up
+    wait_for_recording(proc, folder / "x.partial.mcap", 60_000)
+    folder.rename(tmp_path / "d2")
+    moved_at = time.monotonic()
+    _, err = proc.communicate(timeout=60)
+    took = time.monotonic() - moved_at
     assert proc.returncode == 1, err[-2000:]
     assert f"was moved to {tmp_path / 'd2'}" in err, err[-2000:]
     assert took < 15, took  # not --max-wall

@@ -18,32 +18,15 @@ import os
 import signal
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import pytest
 
-from _by_hand_controller import CONTROLLER_PRELUDE, DETUMBLE_BODY
-from _recordings import children_by_kind, run_while
+from _by_hand_controller import CONTROLLER_PRELUDE, detumble_scene
+from _recordings import children_by_kind, run_while, wait_for_recording
 from astrodyn.recording.stream import open_stream
 
 pytestmark = pytest.mark.network
-ROOT = Path(__file__).resolve().parents[1]
-
-_CONFIG = """
-[scenario]
-name = "detumble"
-epoch = "2026-03-20T12:00:00 UTC"
-duration = "{duration}"
-rate = "10 Hz"
-
-[control]
-period = "0.1 s"
-controllers = {controllers}
-timeout = "5 s"
-seed = 42
-
-""" + DETUMBLE_BODY.replace("{torque}", "0.05 N m")  # still a format string
 
 #: A plain controller (docs/control.md): each tick it commands sc with -5 w as "detumble" and
 #: answers; MODE adds what a test needs.  It writes the ids of its valid, announced
@@ -51,28 +34,26 @@ seed = 42
 _CONTROLLER = CONTROLLER_PRELUDE + r'''
 MODE = os.environ["MODE"]
 sent = open(os.environ["SENT"], "w")
-key = f"{base}/sc/command"
 n = 0
-with zenoh.open(conf) as s:
-    s.declare_subscriber(f"{base}/@tick", on_tick)
-    s.declare_subscriber(f"{base}/@event", on_event)
+with subscribed_session() as s:
     while (tk := ticks.get(timeout=30)) is not None:
         j, t = tk["seq"], tk["t"]
         w = tk["samples"].get("sc/gyro", {}).get("w", [0.0, 0.0, 0.0])
         flood = 10_001 if MODE == "flood" and j == 0 else 0  # a second sender: far-future commands, one more than it may
         for i in range(flood):
-            put(s, key, {"t": 1e9 + i, "seq": i, "sender": "flooder", "torque": [0.0, 0.0, 0.0]}, signer="flooder")
-        put(s, key, {"t": t, "seq": n, "sender": "detumble", "torque": [-5.0 * x for x in w]})
+            put(s, command_key, {"t": 1e9 + i, "seq": i, "sender": "flooder", "torque": [0.0, 0.0, 0.0]},
+                signer="flooder")
+        put(s, command_key, {"t": t, "seq": n, "sender": "detumble", "torque": [-5.0 * x for x in w]})
         sent.write(f"detumble#{n}\n"); sent.flush()
         n, count = n + 1, 1
         if MODE in ("errors", "errors+unsigned") and j == 3:  # a malformed command, announced
-            put(s, key, raw=b'{"t":%r,"seq":%d,"sender":"detumble","torque":[NaN,0,0]}' % (t, n))
+            put(s, command_key, raw=b'{"t":%r,"seq":%d,"sender":"detumble","torque":[NaN,0,0]}' % (t, n))
             n, count = n + 1, 2
         if MODE == "errors+unsigned" and j == 4:  # what did not come from the run: no authenticator
-            put(s, key, {"t": t, "seq": 10**6, "sender": "detumble", "torque": [0.0, 0.0, 0.0]}, sign=False)
+            put(s, command_key, {"t": t, "seq": 10**6, "sender": "detumble", "torque": [0.0, 0.0, 0.0]}, sign=False)
         put(s, f"{base}/@done/detumble", {"t": t, "seq": j, "sender": "detumble", "commands": count})
         if MODE.startswith("errors") and j == 5:  # after the answer, for the step before: late, and for wheels sc lacks
-            put(s, key, {"t": t - 0.1, "seq": n, "sender": "detumble", "wheel_torque": [0.01]})
+            put(s, command_key, {"t": t - 0.1, "seq": n, "sender": "detumble", "wheel_torque": [0.01]})
             n += 1
         if MODE == "flood":
             put(s, f"{base}/@done/flooder", {"t": t, "seq": j, "sender": "flooder", "commands": flood},
@@ -85,7 +66,7 @@ def _run(tmp_path: Path, mode: str, controllers: tuple[str, ...] = ("detumble",)
     """``astrodyn run`` of the scene with ``_CONTROLLER`` in ``mode``; (the process, the
     plant's summary, the recording, the ids of the valid commands the controller announced)."""
     cfg = tmp_path / "det.toml"
-    cfg.write_text(_CONFIG.format(duration="3 s", controllers=json.dumps(list(controllers))))
+    cfg.write_text(detumble_scene("3 s", controllers=json.dumps(list(controllers)), timeout="5 s"))
     ctl = tmp_path / "ctl.py"
     ctl.write_text(_CONTROLLER)
     out, js, sent = tmp_path / "out.mcap", tmp_path / "out.json", tmp_path / "sent.txt"
@@ -144,21 +125,29 @@ def test_a_senders_far_future_flood_does_not_lock_out_the_controller_and_waiting
     assert f"{MAX_PENDING} still waiting for their time at the end" in _end_line(proc.stderr), proc.stderr[-3000:]
 
 
-def test_a_killed_logger_of_a_closed_loop_run_says_its_file_needs_recover(tmp_path, monkeypatch):
+def _long_run(tmp_path: Path, monkeypatch) -> tuple[list[str], Path]:
+    """The ``astrodyn run`` arguments of a 600 s scene with ``_CONTROLLER`` in mode plain (the
+    config and the controller written to ``tmp_path``, its environment set with
+    ``monkeypatch``: the run passes its environment on to the controller), and the partial
+    recording it makes."""
     cfg = tmp_path / "det.toml"
-    cfg.write_text(_CONFIG.format(duration="600 s", controllers='["detumble"]'))
+    cfg.write_text(detumble_scene("600 s", timeout="5 s"))
     ctl = tmp_path / "ctl.py"
     ctl.write_text(_CONTROLLER)
-    out, partial = tmp_path / "out.mcap", tmp_path / "out.partial.mcap"
-    monkeypatch.setenv("MODE", "plain")  # (the run passes its environment on to the controller)
+    monkeypatch.setenv("MODE", "plain")
     monkeypatch.setenv("SENT", str(tmp_path / "sent.txt"))
+    argv = [str(cfg), "--out", str(tmp_path / "out.mcap"), "--quiet", "--controller", f"{sys.executable} {ctl}"]
+    return argv, tmp_path / "out.partial.mcap"
+
+
+def test_a_killed_logger_of_a_closed_loop_run_says_its_file_needs_recover(tmp_path, monkeypatch):
+    argv, partial = _long_run(tmp_path, monkeypatch)
 
     def kill_logger(pid: int) -> None:
         (logger,) = [p for p, kind in children_by_kind(pid).items() if kind == "logger"]
         os.kill(logger, signal.SIGKILL)
 
-    rc, err = run_while([str(cfg), "--out", str(out), "--quiet", "--controller", f"{sys.executable} {ctl}"],
-                        partial, 8000, kill_logger, timeout_s=60)
+    rc, err = run_while(argv, partial, 8000, kill_logger, timeout_s=60)
     assert rc == 1, err[-3000:]
     failed = next(line for line in err.splitlines() if "FAILED" in line)
     with open_stream(partial) as s:
@@ -166,33 +155,18 @@ def test_a_killed_logger_of_a_closed_loop_run_says_its_file_needs_recover(tmp_pa
     assert f"astrodyn recover {partial}" in failed and "holds everything" not in failed, failed
 
 
-def test_an_interrupted_run_says_at_once_it_is_stopping_and_where_the_recording_got(tmp_path, monkeypatch):
+def test_an_interrupted_run_says_at_once_it_is_stopping_and_where_the_recording_got(tmp_path, monkeypatch, processes):
     """Ctrl-C (SIGINT to ``run``): one line at once that it is stopping; the FAILED line's sim
     time is the recording's (it was the last heartbeat's, seconds old or from start-up),
     and the summary names the file that holds the recording, NAME.partial.mcap."""
     import re
 
-    cfg = tmp_path / "det.toml"
-    cfg.write_text(_CONFIG.format(duration="600 s", controllers='["detumble"]'))
-    ctl = tmp_path / "ctl.py"
-    ctl.write_text(_CONTROLLER)
-    out, partial = tmp_path / "out.mcap", tmp_path / "out.partial.mcap"
-    monkeypatch.setenv("MODE", "plain")
-    monkeypatch.setenv("SENT", str(tmp_path / "sent.txt"))
-    proc = subprocess.Popen([sys.executable, "-m", "astrodyn", "run", str(cfg), "--out", str(out), "--quiet",
-                             "--controller", f"{sys.executable} {ctl}"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True)
-    try:
-        deadline = time.monotonic() + 60
-        while time.monotonic() < deadline and not (partial.exists() and partial.stat().st_size > 8000):
-            assert proc.poll() is None
-            time.sleep(0.05)
-        os.kill(proc.pid, signal.SIGINT)
-        stdout, err = proc.communicate(timeout=60)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait()
+    argv, partial = _long_run(tmp_path, monkeypatch)
+    proc = processes([sys.executable, "-m", "astrodyn", "run", *argv], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                     text=True)
+    wait_for_recording(proc, partial, 8000, timeout_s=60)
+    os.kill(proc.pid, signal.SIGINT)
+    stdout, err = proc.communicate(timeout=60)
     assert proc.returncode == 128 + signal.SIGINT, err[-3000:]
     assert "astrodyn run: stopping (SIGINT)" in err, err[-3000:]
     with open_stream(partial) as s:

@@ -23,6 +23,7 @@ import math
 
 import numpy as np
 
+from _scenes import wheel_tables
 from astrodyn.plant import Plant
 from astrodyn.scenario import loads
 
@@ -40,12 +41,7 @@ name = "sc"
 q = [{math.cos(THETA0 / 2)!r}, 0, 0, {math.sin(THETA0 / 2)!r}]
 inertia = [100, 120, {I_Z}]
 [bodies.actuators]
-""" + "".join(f"""[[bodies.actuators.wheels]]
-axis = {axis}
-inertia = {J}
-max_torque = 10
-max_speed = 1e4
-""" for axis in ("[1, 0, 0]", "[0, 1, 0]", "[0, 0, 1]"))
+""" + wheel_tables([[1, 0, 0], [0, 1, 0], [0, 0, 1]], J, 10, 1e4)
 
 
 def _simulate(n: int):

@@ -19,6 +19,8 @@ import math
 import numpy as np
 import pytest
 
+from _recordings import scenario_head
+from _scenes import fault_table, tumbling_sc, wheel_tables
 from astrodyn.orbit.maneuvers import G0, ConstantThrust, RotatingThrust
 from astrodyn.plant import Plant
 from astrodyn.rotation import dcm_from_quat
@@ -119,37 +121,10 @@ def test_an_impulsive_dv_without_isp_keeps_the_mass():
     assert b.mass == 500.0 and b.dv_total == pytest.approx(10.0, rel=1e-15)
 
 
-def _wheel(axis: str, speed: str) -> str:
-    """A ``[[bodies.actuators.wheels]]`` entry: ``axis`` in body components, rotor 0.05 kg m^2, 0.2 N m and
-    600 rad/s at most, the initial ``speed`` (a quantity)."""
-    return f"""[[bodies.actuators.wheels]]
-axis = {axis}
-inertia = 0.05
-max_torque = 0.2
-max_speed = 600
-speed = "{speed}"
-"""
-
-
-WHEELED = """
-[scenario]
-name = "seize"
-epoch = "2026-03-20T12:00:00 UTC"
-duration = "100 s"
-rate = "10 Hz"
-[control]
-[[control.faults]]
-t = "2 s"
-body = "sc"
-fault = "wheel_stuck"
-wheel = 1
-[[bodies]]
-name = "sc"
-[bodies.attitude]
-w = [0.01, -0.02, 0.03]
-inertia = [[120, 2, -1], [2, 100, 0.5], [-1, 0.5, 80]]
-[bodies.actuators]
-""" + _wheel("[1, 0, 0]", "300 rpm") + _wheel("[0, 0.6, 0.8]", "-2000 rpm")
+#: Two wheels (rotor 0.05 kg m^2, 0.2 N m and 600 rad/s at most) turning at 300 and -2000 rpm;
+#: the second seizes at 2 s.
+WHEELED = scenario_head("seize", "100 s", "10 Hz") + "[control]\n" + fault_table("2 s", "wheel_stuck", wheel=1) \
+    + tumbling_sc(wheel_tables([[1, 0, 0], [0, 0.6, 0.8]], 0.05, 0.2, 600, speeds=["300 rpm", "-2000 rpm"]))
 
 
 def test_a_seized_wheel_hands_its_momentum_to_the_body_and_the_total_is_kept():
@@ -236,12 +211,7 @@ w = [0, 0, {wz!r}]
 [bodies.actuators]
 thrust = "{thrust}"
 mass = "{mass}"
-""" + (f'isp = "{isp}"\n' if isp else "") + ("""[[bodies.actuators.wheels]]
-axis = [0, 0, 1]
-inertia = 0.05
-max_torque = 0.2
-max_speed = 600
-""" if wheel else "")
+""" + (f'isp = "{isp}"\n' if isp else "") + (wheel_tables([[0, 0, 1]], 0.05, 0.2, 600) if wheel else "")
     plant = Plant(loads(scene))
     b = plant.bodies["sc"]
     b.apply({"t": 0.0, "seq": 0, "sender": "c", "thrust": [float(thrust.split()[0]), 0.0, 0.0], "frame": "body"})

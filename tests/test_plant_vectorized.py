@@ -23,6 +23,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
+from _scenes import fault_table, wheel_tables
 from astrodyn import messages
 from astrodyn.attitude import ConstantTorque
 from astrodyn.attitude.integrators import HeldInputsBody
@@ -183,11 +184,6 @@ def test_internal_wheel_torques_in_the_batch_conserve_total_momentum():
     assert worst < 1000 * 10 * EPS, worst  # as tests/test_wheels.py: 10 eps per step, linearly
 
 
-def _wheel_tables(axes, inertia, max_torque, max_speed):
-    return "".join(f"[[bodies.actuators.wheels]]\naxis = {list(a)}\ninertia = {inertia}\nmax_torque = {max_torque}\n"
-                   f"max_speed = {max_speed}\n" for a in axes)
-
-
 SCENE_TEMPLATE = """
 [scenario]
 name = "many"
@@ -239,9 +235,10 @@ inertia = [100, 120, 80]
 gyro = { sigma = 1e-6 }
 """
 FAULTS = [("0.3 s", "w3", "wheel_failed", 1), ("0.5 s", "w4", "wheel_stuck", 0)]
-SCENE = SCENE_TEMPLATE.replace("{faults}", "".join(f'[[control.faults]]\nt = "{t}"\nbody = "{b}"\nfault = "{f}"\nwheel = {k}\n'
-                                                   for t, b, f, k in FAULTS)).replace("{wheels3}", _wheel_tables(np.eye(3).tolist(), 0.05, 0.2, 60)).replace(
-    "{wheels2}", _wheel_tables([[0.5**0.5, 0, 0.5**0.5], [0, 0.5**0.5, 0.5**0.5]], 0.02, 0.1, 300))
+SCENE = SCENE_TEMPLATE.replace(
+    "{faults}", "".join(fault_table(t, f, body=b, wheel=k) for t, b, f, k in FAULTS)).replace(
+    "{wheels3}", wheel_tables(np.eye(3).tolist(), 0.05, 0.2, 60)).replace(
+    "{wheels2}", wheel_tables([[0.5**0.5, 0, 0.5**0.5], [0, 0.5**0.5, 0.5**0.5]], 0.02, 0.1, 300))
 
 
 def _commands(k, rng):

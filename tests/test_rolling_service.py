@@ -28,6 +28,8 @@ from astrodyn.simulate import AttitudeEngine, ModelEnded
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _config_text import assert_config_error, edited
+from _recordings import run_to_end
+from _scenes import coin_body
 
 ROOT = Path(__file__).resolve().parents[1]
 ASTRODYN = [sys.executable, "-m", "astrodyn"]
@@ -42,29 +44,10 @@ duration = "4 s"
 rate = "25 Hz"
 real_time_factor = 1000
 
-[[bodies]]
-name = "circle"
-[bodies.attitude]
-model = "rolling_disk"
-radius = "12.9 mm"
-mass = "8.5 g"
-lean = "25 deg"
-heading = "30 deg"
-heading_rate = "5 rad/s"
-spin_rate = "steady"
-
-[[bodies]]
-name = "wobble"
-[bodies.attitude]
-model = "rolling_disk"
-radius = "12.9 mm"
-mass = "8.5 g"
-position = ["0.2 m", "-0.1 m"]
-lean = "10 deg"
-lean_rate = "1 rad/s"
-heading_rate = "2 rad/s"
-spin_rate = "25 rad/s"
-"""
+""" + coin_body("circle", 'lean = "25 deg"\nheading = "30 deg"\nheading_rate = "5 rad/s"\n'
+                         'spin_rate = "steady"\n') + "\n" \
+    + coin_body("wobble", 'position = ["0.2 m", "-0.1 m"]\nlean = "10 deg"\nlean_rate = "1 rad/s"\n'
+                          'heading_rate = "2 rad/s"\nspin_rate = "25 rad/s"\n')
 
 FALLS = """
 [scenario]
@@ -74,18 +57,7 @@ duration = "5 s"
 rate = "50 Hz"
 real_time_factor = 1000
 
-[[bodies]]
-name = "coin"
-[bodies.attitude]
-model = "rolling_disk"
-radius = "12.9 mm"
-mass = "8.5 g"
-lean = "60 deg"
-"""
-
-
-def _scene(**replace) -> str:
-    return edited(SCENE, **replace)
+""" + coin_body("coin", 'lean = "60 deg"\n')
 
 
 HOSTILE = [
@@ -112,15 +84,16 @@ HOSTILE = [
 
 @pytest.mark.parametrize("old,new,field,says", HOSTILE, ids=[f"{h[2]}:{h[1][-20:]}" for h in HOSTILE])
 def test_hostile_rolling_configs_name_the_field(old, new, field, says):
-    assert_config_error(_scene(**{old: new}), field, says)
+    assert_config_error(edited(SCENE, **{old: new}), field, says)
 
 
 def test_rolling_keys_belong_to_the_rolling_disk_and_it_has_no_orbit():
     with pytest.raises(ScenarioError, match=r'attitude\.radius: expected no radius unless model = "rolling_disk"'):
-        loads(_scene(**{'model = "rolling_disk"': 'model = "torque_free"\ninertia = [1, 1, 1]'}))
-    orbiting = _scene(**{'[bodies.attitude]\nmodel = "rolling_disk"\nradius = "12.9 mm"\nmass = "8.5 g"\nlean = "25 deg"':
-                         '[bodies.orbit]\na = "7000 km"\n[bodies.attitude]\nmodel = "rolling_disk"\nradius = "12.9 mm"\n'
-                         'mass = "8.5 g"\nlean = "25 deg"'})
+        loads(edited(SCENE, **{'model = "rolling_disk"': 'model = "torque_free"\ninertia = [1, 1, 1]'}))
+    orbiting = edited(SCENE, **{
+        '[bodies.attitude]\nmodel = "rolling_disk"\nradius = "12.9 mm"\nmass = "8.5 g"\nlean = "25 deg"':
+        '[bodies.orbit]\na = "7000 km"\n[bodies.attitude]\nmodel = "rolling_disk"\nradius = "12.9 mm"\n'
+        'mass = "8.5 g"\nlean = "25 deg"'})
     with pytest.raises(ScenarioError, match=r"circle\)\.orbit: expected no orbit for a rolling_disk body"):
         loads(orbiting)
 
@@ -138,13 +111,8 @@ def test_steady_spin_solves_baruhs_condition_of_circular_rolling():
 
 @pytest.fixture(scope="module")
 def recorded(tmp_path_factory):
-    d = tmp_path_factory.mktemp("coins")
-    cfg, out, res = d / "coins.toml", d / "coins.mcap", d / "result.json"
-    cfg.write_text(SCENE)
-    proc = subprocess.run([*ASTRODYN, "run", str(cfg), "--out", str(out), "--json", str(res), "--timeout", "300"],
-                          capture_output=True, text=True, timeout=600)
-    assert proc.returncode == 0, proc.stderr[-2000:]
-    return loads(SCENE), out, json.loads(res.read_text())
+    out, result, _ = run_to_end(tmp_path_factory.mktemp("coins"), "coins", SCENE, "--timeout", "300")
+    return loads(SCENE), out, result
 
 
 @pytest.mark.network

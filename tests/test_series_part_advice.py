@@ -27,7 +27,7 @@ from pathlib import Path
 
 import pytest
 
-from _by_hand_controller import DETUMBLE_BODY
+from _by_hand_controller import detumble_scene
 from _recordings import one_satellite_scene
 from astrodyn import messages
 from astrodyn.recording import McapRecorder
@@ -36,18 +36,7 @@ from astrodyn.recording.writer import RecordingError
 from astrodyn.scenario import ScenarioError, loads
 from astrodyn.service.runner import check_command_recording, resume_plan
 
-DETUMBLE = loads("""
-[scenario]
-name = "detumble"
-epoch = "2026-03-20T12:00:00 UTC"
-duration = "4 s"
-rate = "10 Hz"
-
-[control]
-period = "0.1 s"
-controllers = ["detumble"]
-seed = 42
-""" + DETUMBLE_BODY.format(torque="0.05 N m"))
+DETUMBLE = loads(detumble_scene("4 s"))
 
 #: the steps each part of the closed-loop series holds (part k: 10 k .. 10 k + 9; the last ends)
 PARTS = {0: range(0, 10), 1: range(10, 20), 2: range(20, 30), 3: range(30, 41)}

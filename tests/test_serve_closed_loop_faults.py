@@ -20,6 +20,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from _recordings import wait_for_recording
 from astrodyn.recording import load
 
 pytestmark = pytest.mark.network
@@ -53,7 +54,7 @@ def _gone(pid: int) -> bool:
 
 @pytest.mark.parametrize("victim, sig", [("logger", signal.SIGKILL), ("plant", signal.SIGKILL),
                                          ("plant", signal.SIGTERM)])  # SIGTERM: kill PID by someone else than serve
-def test_a_killed_plant_or_logger_ends_a_closed_loop_serve_at_once_naming_it(tmp_path, victim, sig):
+def test_a_killed_plant_or_logger_ends_a_closed_loop_serve_at_once_naming_it(tmp_path, processes, victim, sig):
     """The plant or logger of a closed loop dies: serve ends at once (exit 1) naming it.  A
     SIGTERM from someone else stops the plant cleanly with exit 0, its controller leaving
     after it: serve names the plant (before: it blamed the controller, probe E, E5)."""
@@ -61,26 +62,18 @@ def test_a_killed_plant_or_logger_ends_a_closed_loop_serve_at_once_naming_it(tmp
     cfg = tmp_path / "slew.toml"
     cfg.write_text(text)
     out = tmp_path / "served.mcap"
-    serve = subprocess.Popen([sys.executable, "-m", "astrodyn", "serve", str(cfg), "--out", str(out), "--rate", "20",
-                              "--max-wall", "120", "--controller", f"python {ROOT / 'examples' / 'slew_pd.py'}"],
-                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=ROOT)
-    try:
-        partial = tmp_path / "served.partial.mcap"
-        deadline = time.monotonic() + 90
-        while time.monotonic() < deadline and not (partial.exists() and partial.stat().st_size > 30_000):
-            assert serve.poll() is None, serve.communicate()
-            time.sleep(0.2)
-        children = _children(serve.pid)
-        marker = "astrodyn.service.logger" if victim == "logger" else "astrodyn.service.plant"
-        [target] = [pid for pid, cmd in children.items() if marker in cmd]
-        killed_at = time.monotonic()
-        os.kill(target, sig)
-        stdout, stderr = serve.communicate(timeout=60)
-        ended_after = time.monotonic() - killed_at
-    finally:
-        if serve.poll() is None:
-            serve.kill()
-            serve.communicate()
+    serve = processes([sys.executable, "-m", "astrodyn", "serve", str(cfg), "--out", str(out), "--rate", "20",
+                       "--max-wall", "120", "--controller", f"python {ROOT / 'examples' / 'slew_pd.py'}"],
+                      stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=ROOT)
+    partial = tmp_path / "served.partial.mcap"
+    wait_for_recording(serve, partial, 30_000, timeout_s=90, poll_s=0.2)
+    children = _children(serve.pid)
+    marker = "astrodyn.service.logger" if victim == "logger" else "astrodyn.service.plant"
+    [target] = [pid for pid, cmd in children.items() if marker in cmd]
+    killed_at = time.monotonic()
+    os.kill(target, sig)
+    stdout, stderr = serve.communicate(timeout=60)
+    ended_after = time.monotonic() - killed_at
     assert serve.returncode == 1, stderr
     assert ended_after < 15, (ended_after, stderr)  # before: the logger waited 60 s for the plant's last states
     summary = json.loads(stdout.strip().splitlines()[-1])

@@ -26,61 +26,50 @@ import signal
 import subprocess
 import sys
 import time
-from pathlib import Path
 
 from mcap.reader import make_reader
 
+from _serve_control import serve_demo, serve_status, wait_until
 from astrodyn import bus
 
-ROOT = Path(__file__).resolve().parents[1]
 EVENT_TOPIC = "astrodyn/demo/@event"
 
 
-def _status(session, token: str) -> dict:
-    (reply,) = bus.send_control(session, "demo", "status", token=token, timeout_s=10)
-    return reply
-
-
-def _wait(what: str, timeout_s: float, ready):
-    deadline = time.monotonic() + timeout_s
-    while not (value := ready()):
-        assert time.monotonic() < deadline, what
-        time.sleep(0.05)
-    return value
-
-
-def _kill_and_wait_restart(s, token: str, process: str, restarts_before: int, starts: list[str]) -> dict:
-    """Kill ``process`` and wait until serve has restarted it and every propagator it
-    restarted has started again (its ``start`` event heard: ``starts``)."""
+def _kill_and_wait_restart(status, process: str, restarts_before: int, starts: list[str]) -> dict:
+    """Kill ``process`` and wait until serve (asked with ``status``) has restarted it and
+    every propagator it restarted has started again (its ``start`` event heard: ``starts``)."""
     restarted = ("orbit", "attitude") if process == "logger" else (process,)
     before = {p: starts.count(p) for p in restarted}
-    os.kill(_status(s, token)["processes"][process]["pid"], signal.SIGKILL)  # a child of the serve this test started
-    _wait(f"{process} was not restarted", 30, lambda: all(starts.count(p) > before[p] for p in restarted))
-    return _wait(f"{process} was not restarted", 30,
-                 lambda: len((st := _status(s, token))["restarts"]) > restarts_before and st)
+    os.kill(status()["processes"][process]["pid"], signal.SIGKILL)  # a child of the serve this test started
+    # 60 s: a logger's restart restarts both propagators (kernels loaded again); on a loaded CI
+    # machine (two xdist workers and more) that took over 30 s once
+    wait_until(lambda: all(starts.count(p) > before[p] for p in restarted), 60, f"{process} was not restarted",
+               poll_s=0.05)
+    return wait_until(lambda: len((st := status())["restarts"]) > restarts_before and st, 60,
+                      f"{process} was not restarted", poll_s=0.05)
 
 
 def test_after_a_logger_restart_the_merged_parts_hold_each_event_seq_once_and_the_restart_event(tmp_path):
     out = tmp_path / "demo.mcap"
-    serve = subprocess.Popen([sys.executable, "-m", "astrodyn", "serve", str(ROOT / "configs" / "demo.toml"), "--out",
-                              str(out), "--rate", "20", "--max-wall", "90"],
-                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    serve, hello = serve_demo(out, "20", max_wall_s=240)
     try:
-        hello = json.loads(serve.stdout.readline())
         token = hello["control_token"]
         partial = tmp_path / "demo.partial.mcap"
         with bus.open_session(connect=[hello["hub"]]) as s:
+            status = serve_status(s, "demo", token, timeout_s=10)
             starts: list[str] = []  # the process of each start event heard
             s.declare_subscriber(EVENT_TOPIC, lambda sample: starts.extend(
                 [e["process"]] if (e := json.loads(sample.payload.to_bytes()))["kind"] == "start" else []))
             # both propagators have published (their start events are out) and the logger has flushed some
-            _wait("the propagators never ran", 30, lambda: all(
-                (_status(s, token)["processes"][k]["t"] or 0) > 20 for k in ("orbit", "attitude")))
-            _wait("the logger flushed nothing", 30, lambda: partial.exists() and partial.stat().st_size > 20_000)
-            _kill_and_wait_restart(s, token, "orbit", 0, starts)  # the logger records the death: an event of its own
+            wait_until(lambda: all((status()["processes"][k]["t"] or 0) > 20 for k in ("orbit", "attitude")), 30,
+                       "the propagators never ran", poll_s=0.05)
+            wait_until(lambda: partial.exists() and partial.stat().st_size > 20_000, 30, "the logger flushed nothing",
+                       poll_s=0.05)
+            _kill_and_wait_restart(status, "orbit", 0, starts)  # the logger records the death: an event of its own
             time.sleep(1.5)  # flushed (--flush-interval 1 s): a killed logger loses what it had not written
-            _kill_and_wait_restart(s, token, "logger", 1, starts)
-            st = _kill_and_wait_restart(s, token, "orbit", 2, starts)  # the new logger's own event continues its numbering
+            _kill_and_wait_restart(status, "logger", 1, starts)
+            # the new logger's own event continues its numbering
+            st = _kill_and_wait_restart(status, "orbit", 2, starts)
             assert [r["process"] for r in st["restarts"]] == ["orbit", "logger", "orbit"], st["restarts"]
             time.sleep(1.0)  # the new part records the restarted propagators' events and states
             (final,) = bus.send_control(s, "demo", "stop", token=token, timeout_s=60)

@@ -20,14 +20,13 @@ import json
 import os
 import signal
 import subprocess
-import sys
 import time
 from pathlib import Path
 
 import pytest
 
+from _serve_control import start_serve, wait_until
 from astrodyn import bus, messages
-from astrodyn.service.children import stop_process
 
 pytestmark = pytest.mark.network
 
@@ -55,19 +54,13 @@ inertia = ["10 kg m2", "20 kg m2", "30 kg m2"]
 DELIVERY_S = 0.25
 
 
-def _start_serve(tmp_path: Path, *flags: str) -> tuple[subprocess.Popen, dict]:
-    """``astrodyn serve`` of the one-body config above (at most 90 s of wall time: a first
-    run compiles the kernels) and its first stdout line, as text (``(Popen, line)``)."""
+def _start_serve(tmp_path: Path, *flags: str, parse_constant=None) -> tuple[subprocess.Popen, dict]:
+    """:func:`start_serve` of the one-body config above (at most 90 s of wall time: a first
+    run compiles the kernels) in ``tmp_path``: ``(Popen, its start line)``, read by
+    ``json.loads`` with ``parse_constant``."""
     config = tmp_path / "ratechg.toml"
     config.write_text(CONFIG)
-    serve = subprocess.Popen([sys.executable, "-m", "astrodyn", "serve", str(config), "--out",
-                              str(tmp_path / "r.mcap"), "--max-wall", "90", *flags],
-                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=tmp_path)
-    line = serve.stdout.readline()
-    if not line:
-        stop_process(serve)
-        raise AssertionError(serve.stderr.read()[-3000:])
-    return serve, line
+    return start_serve(config, tmp_path / "r.mcap", *flags, max_wall_s=90, parse_constant=parse_constant, cwd=tmp_path)
 
 
 def _stop(serve: subprocess.Popen) -> None:
@@ -86,14 +79,6 @@ def _times(s, token: str) -> dict[str, float | None]:
     return {k: procs[k]["t"] for k in ("orbit", "attitude")}
 
 
-def _wait(what: str, timeout_s: float, ready):
-    deadline = time.monotonic() + timeout_s
-    while not (value := ready()):
-        assert time.monotonic() < deadline, what
-        time.sleep(0.1)
-    return value
-
-
 def _reject_constant(name: str):
     raise ValueError(f"not JSON: {name}")
 
@@ -105,14 +90,14 @@ def test_serve_from_rate_inf_then_1e6_then_10_prints_strict_json_and_goes_on_at_
     lines are strict JSON; pause, resume and at once ``rate 10``: together; ``rate 1e6``,
     then ``rate 10``: x10 from then on."""
     rate = 10.0
-    serve, first = _start_serve(tmp_path, "--rate", "inf")
+    serve, hello = _start_serve(tmp_path, "--rate", "inf", parse_constant=_reject_constant)  # Infinity / NaN refused
     try:
-        hello = json.loads(first, parse_constant=_reject_constant)  # Infinity / NaN are refused
         assert hello["real_time_factor"] == "inf", hello  # as the status reply says
         token = hello["control_token"]
         with bus.open_session(connect=[hello["hub"]]) as s:
             assert _status(s, token)["real_time_factor"] == "inf"
-            _wait("the propagators never ran", 60, lambda: all((t or 0) > 1.0 for t in _times(s, token).values()))
+            wait_until(lambda: all((t or 0) > 1.0 for t in _times(s, token).values()), 60, "the propagators never ran",
+                       poll_s=0.1)
             together = rate * (bus.HEARTBEAT_PERIOD_S + DELIVERY_S) + 1.0 / OUTPUT_HZ
             # probe D, D1: a rate change within half a second of a resume (the heartbeats still
             # say paused) anchored to those stale times and left the two on two schedules
@@ -121,8 +106,8 @@ def test_serve_from_rate_inf_then_1e6_then_10_prints_strict_json_and_goes_on_at_
             bus.send_control(s, SCENARIO, "resume", token=token, timeout_s=10, require_reply=True)  # at inf again
             time.sleep(0.3)  # within a heartbeat period: the last heartbeats still say paused
             bus.send_control(s, SCENARIO, "rate", {"factor": rate}, token=token, timeout_s=10, require_reply=True)
-            _wait("orbit and attitude did not come together after resume, rate 10", 30,
-                  lambda: abs((t := _times(s, token))["orbit"] - t["attitude"]) <= together)
+            wait_until(lambda: abs((t := _times(s, token))["orbit"] - t["attitude"]) <= together, 30,
+                       "orbit and attitude did not come together after resume, rate 10", poll_s=0.1)
             bus.send_control(s, SCENARIO, "rate", {"factor": 1e6}, token=token, timeout_s=10, require_reply=True)
             # more than a heartbeat period: each propagator has beaten at 1e6 (what the old
             # estimate advanced by its age times 1e6)
@@ -131,8 +116,8 @@ def test_serve_from_rate_inf_then_1e6_then_10_prints_strict_json_and_goes_on_at_
             wall0, t0 = time.monotonic(), _times(s, token)
             # the one behind (1e6 drove them apart) catches up as fast as it can, then stays with
             # the other: the two agree to what the age of two heartbeats allows
-            _wait("orbit and attitude did not come together", 30,
-                  lambda: abs((t := _times(s, token))["orbit"] - t["attitude"]) <= together)
+            wait_until(lambda: abs((t := _times(s, token))["orbit"] - t["attitude"]) <= together, 30,
+                       "orbit and attitude did not come together", poll_s=0.1)
             time.sleep(max(0.0, wall0 + 3.0 - time.monotonic()))
             reply = _status(s, token)
             wall1 = time.monotonic()
@@ -155,35 +140,36 @@ def test_serve_from_rate_inf_then_1e6_then_10_prints_strict_json_and_goes_on_at_
 
 @pytest.mark.slow  # CI time (14 s: a serve, a pause, the logger's flush, a restart and its start-up)
 def test_a_propagator_restarted_while_serve_is_paused_publishes_nothing_until_resume(tmp_path):
-    serve, line = _start_serve(tmp_path, "--rate", "100")  # one output step per 1 ms of wall time
+    serve, hello = _start_serve(tmp_path, "--rate", "100")  # one output step per 1 ms of wall time
     orbit_seqs: list[int] = []
     starts: list[str] = []
     try:
-        hello = json.loads(line)
         token = hello["control_token"]
         with bus.open_session(connect=[hello["hub"]]) as s:
             s.declare_subscriber(messages.orbit_key(SCENARIO, "sat1"),
                                  lambda sample: orbit_seqs.append(json.loads(sample.payload.to_bytes())["seq"]))
             s.declare_subscriber(messages.event_key(SCENARIO), lambda sample: starts.extend(
                 [e["process"]] if (e := json.loads(sample.payload.to_bytes()))["kind"] == "start" else []))
-            _wait("the propagators never ran", 60, lambda: all((t or 0) > 5.0 for t in _times(s, token).values()))
+            wait_until(lambda: all((t or 0) > 5.0 for t in _times(s, token).values()), 60, "the propagators never ran",
+                       poll_s=0.1)
             bus.send_control(s, SCENARIO, "pause", token=token, timeout_s=10, require_reply=True)
             # both stand still (two status replies a heartbeat period apart agree), and the
             # logger has flushed (every 1 s) up to there: the restart continues from that step
             held = [_times(s, token)]
-            _wait("the propagators did not pause", 10, lambda: (
-                time.sleep(bus.HEARTBEAT_PERIOD_S + 0.1) or held.append(_times(s, token)) or held[-1] == held[-2]))
+            wait_until(lambda: (time.sleep(bus.HEARTBEAT_PERIOD_S + 0.1) or held.append(_times(s, token))
+                                or held[-1] == held[-2]), 10, "the propagators did not pause", poll_s=0.1)
             time.sleep(1.5)
             paused_seq, orbit_starts = max(orbit_seqs), starts.count("orbit")
             os.kill(_status(s, token)["processes"]["orbit"]["pid"], signal.SIGKILL)  # a child of our serve
-            _wait("orbit was not restarted", 30, lambda: starts.count("orbit") > orbit_starts)
+            wait_until(lambda: starts.count("orbit") > orbit_starts, 30, "orbit was not restarted", poll_s=0.1)
             # the old code published at once and ran until serve's pause, re-sent at most once a
             # second, reached it: two heartbeat periods plus that second cover it
             time.sleep(1.0 + 2 * bus.HEARTBEAT_PERIOD_S)
             after_restart = max(orbit_seqs)
             restarts = _status(s, token)["restarts"]
             bus.send_control(s, SCENARIO, "resume", token=token, timeout_s=10, require_reply=True)
-            _wait("the restarted orbit did not go on after resume", 20, lambda: max(orbit_seqs) > paused_seq + 10)
+            wait_until(lambda: max(orbit_seqs) > paused_seq + 10, 20, "the restarted orbit did not go on after resume",
+                       poll_s=0.1)
             bus.send_control(s, SCENARIO, "stop", token=token, timeout_s=60)
         serve.communicate(timeout=60)
     finally:

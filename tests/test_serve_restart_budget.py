@@ -15,96 +15,89 @@ restart is seen) is refused at the death that makes 5 within the window.
 
 from __future__ import annotations
 
-import json
 import os
 import signal
-import subprocess
-import sys
 import threading
 import time
 from pathlib import Path
 
 import pytest
 
+from _serve_control import serve_demo, serve_status, wait_until
 from astrodyn import bus
 
-ROOT = Path(__file__).resolve().parents[1]
 LIMIT = 5  # deaths within the window: the one that makes this many is not restarted (the spec)
 WINDOW_S = 3.0  # the test's budget window, wall seconds
 SPACING_S = 1.05  # > WINDOW_S / (LIMIT - 1): at most LIMIT - 1 deaths in any window, with 1.2 s to spare
 VICTIM = "attitude"
 
 
-def _status(session, token: str) -> dict:
-    (reply,) = bus.send_control(session, "demo", "status", token=token, timeout_s=10)
-    return reply
-
-
 def _restarts_of(status: dict) -> list[dict]:
     return [r for r in status["restarts"] if r["process"] == VICTIM]
 
 
-def _wait(what, timeout_s: float, ready):
-    """``ready()``'s first true value, polled for at most ``timeout_s``; else fail with ``what``
-    (a string, or a callable giving it then: the stderr lines read by that time)."""
-    deadline = time.monotonic() + timeout_s
-    while not (value := ready()):
-        assert time.monotonic() < deadline, what() if callable(what) else what
-        time.sleep(0.03)
-    return value
-
-
-def test_deaths_spread_wider_than_the_budget_are_each_restarted_and_a_burst_is_refused_and_reported(tmp_path):
-    out = tmp_path / "demo.mcap"
-    serve = subprocess.Popen([sys.executable, "-m", "astrodyn", "serve", str(ROOT / "configs" / "demo.toml"), "--out",
-                              str(out), "--rate", "10", "--max-wall", "90", "--restart-window", str(WINDOW_S)],
-                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+def _serve_reading_stderr(out: Path, *flags: str, **popen_kw) -> tuple:
+    """:func:`serve_demo` at rate 10 (at most 90 s of wall time) with ``flags``; its start
+    line, and the list of its stderr lines, filled by a daemon thread as they come (and
+    that thread): ``(Popen, start line, lines, thread)``."""
+    serve, hello = serve_demo(out, "10", *flags, max_wall_s=90, **popen_kw)
     err_lines: list[str] = []
     reader = threading.Thread(target=lambda: err_lines.extend(iter(serve.stderr.readline, "")), daemon=True)
     reader.start()
+    return serve, hello, err_lines, reader
+
+
+def _wait(ready, timeout_s: float, what):
+    """:func:`wait_until`, polling every 0.03 s (a restart is seen as soon as it is reported)."""
+    return wait_until(ready, timeout_s, what, poll_s=0.03)
+
+
+def test_deaths_spread_wider_than_the_budget_are_each_restarted_and_a_burst_is_refused_and_reported(tmp_path):
+    serve, hello, err_lines, reader = _serve_reading_stderr(tmp_path / "demo.mcap", "--restart-window", str(WINDOW_S))
     try:
-        hello = json.loads(serve.stdout.readline())
         token = hello["control_token"]
         kills: list[float] = []  # monotonic time of each SIGKILL this test sent
         with bus.open_session(connect=[hello["hub"]]) as s:
+            status = serve_status(s, "demo", token, timeout_s=10)
+
             def kill_current() -> None:
-                pid = _status(s, token)["processes"][VICTIM]["pid"]
+                pid = status()["processes"][VICTIM]["pid"]
                 os.kill(pid, signal.SIGKILL)  # a process of the serve this test started, named by its status
                 kills.append(time.monotonic())
 
             def restarted(n: int):
-                st = _status(s, token)
+                st = status()
                 return st if len(_restarts_of(st)) >= n and st["processes"][VICTIM]["running"] else None
 
-            _wait("the victim never ran", 30, lambda: _status(s, token)["processes"][VICTIM]["running"])
+            _wait(lambda: status()["processes"][VICTIM]["running"], 30, "the victim never ran")
             # deaths never LIMIT within a window: each is restarted, the 6th too (the old lifetime limit was 5)
             for k in range(LIMIT + 1):
                 if kills:
                     time.sleep(max(0.0, kills[-1] + SPACING_S - time.monotonic()))
                 kill_current()
-                st = _wait(lambda k=k: f"kill {k + 1} (spaced {SPACING_S} s) was not restarted: {err_lines[-3:]}", 20,
-                           lambda k=k: restarted(k + 1))
+                st = _wait(lambda k=k: restarted(k + 1), 20,
+                           lambda k=k: f"kill {k + 1} (spaced {SPACING_S} s) was not restarted: {err_lines[-3:]}")
                 assert st["state"] == "running" and not st["failures"], st
             assert all(b - a >= SPACING_S for a, b in zip(kills, kills[1:], strict=False))
             # a burst: each restarted process killed at once, until serve refuses one
             burst = 0
             while not any("not restarted" in line for line in err_lines):
                 assert burst < LIMIT, f"{burst} quick kills and still restarted: {err_lines[-5:]}"
-                n = len(_restarts_of(_status(s, token)))
+                n = len(_restarts_of(status()))
                 kill_current()
                 burst += 1
-                _wait("neither restarted nor refused", 20,
-                      lambda n=n: any("not restarted" in line for line in err_lines) or restarted(n + 1))
+                _wait(lambda n=n: any("not restarted" in line for line in err_lines) or restarted(n + 1), 20,
+                      "neither restarted nor refused")
             # refused only at the death that made LIMIT within the window (kill times, 0.3 s for detection)
             assert sum(1 for t in kills if kills[-1] - t < WINDOW_S - 0.3) >= LIMIT, kills
             (said,) = [line for line in err_lines if "not restarted" in line]
             assert f"process {VICTIM} died {LIMIT} times within {WINDOW_S:g} s" in said, said
-            st = _status(s, token)
+            st = status()
             assert st["state"] == "degraded", st
             assert "not restarted" in st["processes"][VICTIM]["not_restarted"] and not st["processes"][VICTIM]["running"]
             assert any("not restarted" in f for f in st["failures"]), st["failures"]
             t_orbit = st["processes"]["orbit"]["t"]  # the others go on
-            _wait("orbit stopped too", 10, lambda: (_status(s, token)["processes"]["orbit"]["t"] or 0) > (t_orbit or 0))
+            _wait(lambda: (status()["processes"]["orbit"]["t"] or 0) > (t_orbit or 0), 10, "orbit stopped too")
             (final,) = bus.send_control(s, "demo", "stop", token=token, timeout_s=60)
         serve.communicate(timeout=60)
         reader.join(timeout=10)
@@ -128,18 +121,14 @@ def test_a_propagator_that_fails_the_same_way_at_the_same_step_is_not_restarted_
     site.mkdir()
     (site / "sitecustomize.py").write_text(BOOM_SITECUSTOMIZE)
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(site), os.environ.get("PYTHONPATH", "")])}
-    serve = subprocess.Popen([sys.executable, "-m", "astrodyn", "serve", str(ROOT / "configs" / "demo.toml"), "--out",
-                              str(tmp_path / "boom.mcap"), "--rate", "10", "--max-wall", "90", "--restart-window", "0.1"],
-                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
-    err_lines: list[str] = []
-    reader = threading.Thread(target=lambda: err_lines.extend(iter(serve.stderr.readline, "")), daemon=True)
-    reader.start()
+    serve, hello, err_lines, reader = _serve_reading_stderr(tmp_path / "boom.mcap", "--restart-window", "0.1", env=env)
     try:
-        hello = json.loads(serve.stdout.readline())
         token = hello["control_token"]
         with bus.open_session(connect=[hello["hub"]]) as s:
-            _wait(lambda: f"never refused: {err_lines[-5:]}", 60, lambda: any("not restarted" in line for line in err_lines))
-            st = _status(s, token)
+            status = serve_status(s, "demo", token, timeout_s=10)
+            _wait(lambda: any("not restarted" in line for line in err_lines), 60,
+                  lambda: f"never refused: {err_lines[-5:]}")
+            st = status()
             assert st["state"] == "degraded" and not st["processes"]["orbit"]["running"], st
             why = st["processes"]["orbit"]["not_restarted"]
             assert "same error 3 times in a row" in why and "a deterministic failure of this model" in why, why

@@ -18,31 +18,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from _recordings import orbiter, scenario_head
 from astrodyn import sweep
 from astrodyn.sweep import SweepError, make_spec, parse_path, parse_value, parse_vary
 
-CONFIG = """
-[scenario]
-name = "sweep-test"
-epoch = "2026-03-20T12:00:00 TDB"
-duration = "600 s"
-rate = "0.1 Hz"
-
-[[bodies]]
-name = "sat1"
-[bodies.orbit]
-a = "7000 km"
-e = 0.01
-i = "51.6 deg"
-
-[[bodies]]
-name = "sat2"
-[bodies.orbit]
-a = "7000 km"
-e = 0.01
-i = "51.6 deg"
-nu = "1 deg"
-"""
+CONFIG = scenario_head("sweep-test", "600 s", "0.1 Hz", "TDB") + "\n" + orbiter("sat1", "7000 km", 0.01, "51.6 deg") \
+    + "\n" + orbiter("sat2", "7000 km", 0.01, "51.6 deg", nu="1 deg")
 
 # e drawn from [-0.05, 0.2): draws below 0 are invalid (the loader wants 0 <= e), so
 # those cases fail with the ScenarioError text and the others run.

@@ -23,21 +23,10 @@ from pathlib import Path
 
 import pytest
 
+from _recordings import orbiter, scenario_head
 from astrodyn import sweep
 
-CONFIG = """
-[scenario]
-name = "hostile2"
-epoch = "2026-03-20T12:00:00 TDB"
-duration = "60 s"
-rate = "0.1 Hz"
-
-[[bodies]]
-name = "sat1"
-[bodies.orbit]
-a = "7000 km"
-e = 0.01
-i = "51.6 deg"
+CONFIG = scenario_head("hostile2", "60 s", "0.1 Hz", "TDB") + "\n" + orbiter("sat1", "7000 km", 0.01, "51.6 deg") + """\
 [bodies.attitude]
 q = [1, 0, 0, 0]
 w = [0.01, 0.001, 0.002]

@@ -17,6 +17,7 @@ from pathlib import Path
 
 import pytest
 
+from _recordings import orbiter, scenario_head
 from astrodyn.scenario import ScenarioError, load, load_dict
 from astrodyn.sweep import SweepError, make_spec
 
@@ -79,20 +80,7 @@ def test_a_misspelled_cases_column_is_refused_up_front(tmp_path):
     assert 'got unknown key "ecc"' in str(info.value)
 
 
-ORBIT = """
-[scenario]
-name = "check"
-epoch = "2026-03-20T12:00:00 TDB"
-duration = "60 s"
-rate = "0.1 Hz"
-
-[[bodies]]
-name = "sat1"
-[bodies.orbit]
-a = "7000 km"
-e = 0.01
-i = "51.6 deg"
-"""
+ORBIT = scenario_head("check", "60 s", "0.1 Hz", "TDB") + "\n" + orbiter("sat1", "7000 km", 0.01, "51.6 deg")
 
 
 @pytest.fixture

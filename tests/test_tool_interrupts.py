@@ -214,12 +214,11 @@ def test_the_work_directory_of_a_killed_export_is_removed_by_the_next_export(tmp
     assert not _hidden_dirs(out, ".export-") and len(list(out.iterdir())) == len(list(out.glob("sat-*.oem"))) == 300
 
 
-def test_an_analyze_stopped_by_sigterm_keeps_the_earlier_report_whole(tmp_path, data, processes):
-    """Before: the figures were written straight into the report directory, so an earlier
-    report there had some figures replaced by the new run's and kept its old pages."""
-    out = tmp_path / "report"
+def _analyze_stopped_by_sigterm_keeps_the_earlier_report(processes, out: Path, earlier: list[str], *argv) -> None:
+    """An earlier report (files ``earlier`` in ``out``); ``astrodyn analyze ARGV --out OUT``
+    stopped by SIGTERM once it writes figures (into ``out`` or its hidden work directory):
+    ``out`` holds the earlier report as it was, and the tool says it was interrupted."""
     out.mkdir()
-    earlier = ["report.md", "report.html", "report.json", "sat-0-00-orbit3d.png", "sat-0-00-elements.png"]
     for name in earlier:
         (out / name).write_text(f"earlier {name}")
     before = _tree(out)
@@ -227,11 +226,20 @@ def test_an_analyze_stopped_by_sigterm_keeps_the_earlier_report_whole(tmp_path, 
     def writing() -> bool:
         return _tree(out) != before or any(any(w.glob("*.png")) for w in _hidden_dirs(out, ".analyze-"))
 
-    proc = _start(processes, "analyze", data / "walker.mcap", "--out", out, "--bodies", "sat-0-00", "--quiet")
+    proc = _start(processes, "analyze", *argv, "--out", out)
     _wait_for(proc, writing)
     err = _interrupt(proc, signal.SIGTERM)
     assert _tree(out) == before
     _ended_by(proc, signal.SIGTERM, err)
+
+
+def test_an_analyze_stopped_by_sigterm_keeps_the_earlier_report_whole(tmp_path, data, processes):
+    """Before: the figures were written straight into the report directory, so an earlier
+    report there had some figures replaced by the new run's and kept its old pages."""
+    _analyze_stopped_by_sigterm_keeps_the_earlier_report(
+        processes, tmp_path / "report",
+        ["report.md", "report.html", "report.json", "sat-0-00-orbit3d.png", "sat-0-00-elements.png"],
+        data / "walker.mcap", "--bodies", "sat-0-00", "--quiet")
 
 
 @pytest.fixture(scope="module")
@@ -372,21 +380,9 @@ def test_an_analyze_of_a_sweep_stopped_by_sigterm_keeps_the_earlier_report_whole
     """``astrodyn analyze SWEEP_DIR`` drew its figures straight into the report directory:
     a SIGTERM while it drew left an earlier report with some figures replaced and its old
     pages.  Now the report is made in a work directory and moved in once complete."""
-    out = tmp_path / "report"
-    out.mkdir()
-    earlier = ["report.md", "report.json", "metrics-hist.png", "metrics-hist-2.png", "scatter-p.png"]
-    for name in earlier:
-        (out / name).write_text(f"earlier {name}")
-    before = _tree(out)
-
-    def drawing() -> bool:
-        return _tree(out) != before or any(any(w.glob("*.png")) for w in _hidden_dirs(out, ".analyze-"))
-
-    proc = _start(processes, "analyze", sweep_table, "--out", out)
-    _wait_for(proc, drawing)
-    err = _interrupt(proc, signal.SIGTERM)
-    assert _tree(out) == before
-    _ended_by(proc, signal.SIGTERM, err)
+    _analyze_stopped_by_sigterm_keeps_the_earlier_report(
+        processes, tmp_path / "report", ["report.md", "report.json", "metrics-hist.png", "metrics-hist-2.png",
+                                         "scatter-p.png"], sweep_table)
 
 
 _SIGNAL_AS_THE_TEMPORARY_IS_CREATED = """

@@ -30,7 +30,7 @@ from astrodyn.recording import load
 from astrodyn.service.children import stop_process
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _recordings import leo_recording
+from _recordings import copy_recording, leo_recording
 from test_live_view_hostile import RawClient, Reader
 
 pytestmark = pytest.mark.network
@@ -277,23 +277,8 @@ def test_states_forged_by_another_process_never_reach_the_replays_view(tmp_path)
 
 def _renamed_in_metadata(src: Path, dst: Path, name: str) -> None:
     """A copy of recording ``src`` whose scenario metadata names scenario ``name``, topics unchanged."""
-    from mcap.reader import make_reader
-    from mcap.writer import Writer
-
-    with open(src, "rb") as f, open(dst, "wb") as g:
-        reader = make_reader(f)
-        writer = Writer(g)
-        writer.start()
-        summary = reader.get_summary()
-        schemas = {sid: writer.register_schema(sc.name, sc.encoding, sc.data) for sid, sc in summary.schemas.items()}
-        channels = {cid: writer.register_channel(ch.topic, ch.message_encoding, schemas.get(ch.schema_id, 0),
-                                                 ch.metadata) for cid, ch in summary.channels.items()}
-        for record in reader.iter_metadata():
-            writer.add_metadata(record.name, {**record.metadata, **({"name": name} if record.name == "scenario" else {})})
-        for _, channel, message in reader.iter_messages():
-            writer.add_message(channels[channel.id], message.log_time, message.data, message.publish_time,
-                               message.sequence)
-        writer.finish()
+    copy_recording(src, dst, edit_metadata=lambda record, metadata: {
+        **metadata, **({"name": name} if record == "scenario" else {})})
 
 
 @pytest.mark.parametrize("renamed", ["control-scenario", "metadata"])

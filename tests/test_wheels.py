@@ -19,6 +19,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from _recordings import scenario_head
+from _scenes import tumbling_sc, wheel_tables
 from astrodyn.attitude import ConstantTorque
 from astrodyn.attitude.wheels import HeldInputsBatch, ReactionWheels, step_with_wheels
 from astrodyn.rotation import dcm_from_quat, quat_from_euler
@@ -201,25 +203,8 @@ def test_saturation_only_ever_reduces_a_command_and_keeps_a_wheel_within_its_lim
             assert np.all(end[inside] <= ms[inside] + slack[inside])
 
 
-WHEELED = """
-[scenario]
-name = "overspeed"
-epoch = "2026-03-20T12:00:00 UTC"
-duration = "10 s"
-rate = "10 Hz"
-[control]
-[[bodies]]
-name = "sc"
-[bodies.attitude]
-w = [0.01, -0.02, 0.03]
-inertia = [[120, 2, -1], [2, 100, 0.5], [-1, 0.5, 80]]
-[bodies.actuators]
-""" + "".join(f"""[[bodies.actuators.wheels]]
-axis = {axis}
-inertia = 0.05
-max_torque = 0.2
-max_speed = 100
-""" for axis in ("[1, 0, 0]", "[0, 1, 0]", "[0, 0, 1]", "[0, 0.6, 0.8]"))
+WHEELED = scenario_head("overspeed", "10 s", "10 Hz") + "[control]\n" + tumbling_sc(
+    wheel_tables([[1, 0, 0], [0, 1, 0], [0, 0, 1], [0, 0.6, 0.8]], 0.05, 0.2, 100))
 
 
 @pytest.mark.parametrize("batched", [False, True])
