@@ -411,6 +411,20 @@ def _product(q2, q1, shape, name2, name1):
     return out.reshape(shape)
 
 
+def _parts_broadcast_with(who: str, q: np.ndarray, v: np.ndarray, name: str):
+    """``(e0, e, v)``: the scalar part ``(..., 1)`` and the vector part ``(..., 3)`` of the
+    quaternions ``q``, the vector part broadcast with the vectors ``v`` ``(..., 3)`` (argument
+    ``name`` of ``who``); a ValueError naming both arguments and their shapes when they do
+    not broadcast."""
+    e0, e = q[..., :1], q[..., 1:]
+    try:
+        e, v = np.broadcast_arrays(e, v)
+    except ValueError:
+        broadcast_named(who, ("q", q, 1), (name, v, 1))  # raises, naming both
+        raise
+    return e0, e, v
+
+
 def quat_rotate(q, v):
     """Inertial -> body component transform ``C(q) @ v`` without forming ``C``.
 
@@ -427,12 +441,7 @@ def quat_rotate(q, v):
     v = _as_vec3(v, "v", "quat_rotate")
     if q.shape == (4,) and v.shape == (3,):
         return _rotate_one(q, v)
-    e0, e = q[..., :1], q[..., 1:]
-    try:
-        e, v = np.broadcast_arrays(e, v)
-    except ValueError:
-        broadcast_named("quat_rotate", ("q", q, 1), ("v", v, 1))  # raises, naming both
-        raise
+    e0, e, v = _parts_broadcast_with("quat_rotate", q, v, "v")
     # the components summed left to right, as _rotate_one does: a row gives the same bits
     # through either path
     q0, q1, q2, q3 = q[..., :1], q[..., 1:2], q[..., 2:3], q[..., 3:]
@@ -763,12 +772,7 @@ def quat_rate(q, w):
     """
     q = _as_quat(q, "quat_rate")
     w = _as_vec3(w, "w", "quat_rate")
-    e0, e = q[..., :1], q[..., 1:]
-    try:
-        e, w = np.broadcast_arrays(e, w)
-    except ValueError:
-        broadcast_named("quat_rate", ("q", q, 1), ("w", w, 1))  # raises, naming both
-        raise
+    e0, e, w = _parts_broadcast_with("quat_rate", q, w, "w")
     d0 = -0.5 * np.sum(e * w, axis=-1, keepdims=True)
     de = 0.5 * (e0 * w + _cross(e, w))
     return np.concatenate([d0, de], axis=-1)

@@ -186,17 +186,20 @@ class NoisySensor:
         _sigma(self.sigma, "sigma")
         _seed_body(self.seed)
 
-
-@dataclass(frozen=True)
-class StarTracker(NoisySensor):
-    """Attitude sensor: ``sigma`` rad per body axis (see the module docstring)."""
-
-    def sample(self, q, step: int):
-        """The measured Euler parameters (4,) for the true ``q`` at sample ``step``."""
+    def sample(self, true, step: int):
+        """This sensor's measurement of the ``true`` value (one row of its subclass's
+        ``samples``: a star tracker's Euler parameters (4,), a tachometer's wheel speeds (n,))
+        at sample ``step``; None while it drops out."""
         if self.dropout:
             return None
         seed, body = _seed_body(self.seed)
-        return StarTracker.samples(seed, [body], step, np.reshape(q, (1, 4)), self.sigma)[0]
+        return self.samples(seed, [body], step, np.asarray(true, dtype=np.float64).reshape(1, -1), self.sigma)[0]
+
+
+@dataclass(frozen=True)
+class StarTracker(NoisySensor):
+    """Attitude sensor: ``sigma`` rad per body axis (see the module docstring); ``sample(q,
+    step)`` gives the measured Euler parameters (4,) for the true ``q``."""
 
     @staticmethod
     def samples(seed: int, bodies, step: int, q, sigma) -> np.ndarray:
@@ -240,15 +243,8 @@ class PositionReceiver:
 
 @dataclass(frozen=True)
 class WheelTachometer(NoisySensor):
-    """Wheel speed sensor: ``sigma`` rad/s per wheel."""
-
-    def sample(self, speeds, step: int):
-        """Measured wheel speeds (n,) rad/s at sample ``step``."""
-        if self.dropout:
-            return None
-        seed, body = _seed_body(self.seed)
-        s = np.asarray(speeds, dtype=np.float64)
-        return WheelTachometer.samples(seed, [body], step, s.reshape(1, -1), self.sigma)[0]
+    """Wheel speed sensor: ``sigma`` rad/s per wheel; ``sample(speeds, step)`` gives the
+    measured wheel speeds (n,) rad/s for the true ``speeds``."""
 
     @staticmethod
     def samples(seed: int, bodies, step: int, speeds, sigma) -> np.ndarray:
