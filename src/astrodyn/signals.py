@@ -25,13 +25,14 @@ stopped, :func:`suspended_s`, and keeps its real-time schedule after ``fg``).
     while not stop.why: ...              # "SIGTERM" / "SIGINT" / "SIGHUP" once one arrived
     stop.restore()                       # the previous handlers back (tests, in-process runs)
 
-    def main(argv=None) -> int:
-        return interruptible("astrodyn export", lambda: _main(argv))
+    @interruptible_main("astrodyn export")    # Ctrl-C, SIGTERM: one line, exit 128 + the signal
+    def main(argv=None) -> int: ...
 """
 
 from __future__ import annotations
 
 import contextlib
+import functools
 import os
 import signal
 import sys
@@ -40,7 +41,7 @@ import time
 from collections.abc import Callable, Iterator
 
 __all__ = ["STOP_SIGNALS", "STOP_SIGNAL_NAMES", "catch_stop_signals", "StopFlag", "Interrupted", "interruptible",
-           "deferred_interrupts", "interrupt_received", "catch_job_control", "suspended_s"]
+           "interruptible_main", "deferred_interrupts", "interrupt_received", "catch_job_control", "suspended_s"]
 
 #: SIGHUP too: without a handler it ended ``serve`` at once, in the middle of a recording
 #: (a partial file, its work directory left), when the terminal that started it closed.
@@ -124,6 +125,20 @@ def _on_unraisable(previous: Callable) -> Callable:
         previous(unraisable)
 
     return hook
+
+
+def interruptible_main(prog: str) -> Callable[[Callable[..., int]], Callable[..., int]]:
+    """Decorator for a command's ``main(argv=None) -> int``: each call runs it under
+    :func:`interruptible` with the command's name ``prog`` (``"astrodyn export"``)."""
+
+    def decorate(main: Callable[..., int]) -> Callable[..., int]:
+        @functools.wraps(main)
+        def run(argv: list[str] | None = None) -> int:
+            return interruptible(prog, lambda: main(argv))
+
+        return run
+
+    return decorate
 
 
 def interruptible(prog: str, run: Callable[[], int]) -> int:

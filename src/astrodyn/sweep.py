@@ -112,7 +112,7 @@ import numpy as np
 
 from astrodyn.files import file_kind, path_argument
 from astrodyn.recording.outputs import written_atomically
-from astrodyn.signals import interruptible
+from astrodyn.signals import interruptible_main
 
 __all__ = [
     "SweepError",
@@ -1841,11 +1841,8 @@ def max_local_workers() -> int:
     return 4 * (os.cpu_count() or 1)
 
 
+@interruptible_main("astrodyn sweep")
 def main(argv: list[str] | None = None) -> int:
-    return interruptible("astrodyn sweep", lambda: _main(argv))
-
-
-def _main(argv: list[str] | None) -> int:
     args = _parser().parse_args(argv)
     from astrodyn.scenario import ScenarioError
 

@@ -64,7 +64,7 @@ from astrodyn.progress import Progress
 from astrodyn.recording import RecordingError, Track, load
 from astrodyn.recording.outputs import staging_directory, warn_incomplete_input
 from astrodyn.recording.reader import SEQ_NOT_COUNTED, sequence_issues, sequence_note
-from astrodyn.signals import deferred_interrupts, interruptible
+from astrodyn.signals import deferred_interrupts, interruptible_main
 
 __all__ = ["analyze", "main", "FIGURES", "nothing_to_analyse", "orbit_arc_starts", "SEQ_NOT_COUNTED", "sequence_issues", "sequence_note", "check_report_options",
            "ReportOptionError"]
@@ -637,11 +637,8 @@ def _write_html(report: dict, path: Path) -> None:
     path.write_text("\n".join(parts))
 
 
+@interruptible_main("astrodyn analyze")
 def main(argv: list[str] | None = None) -> int:
-    return interruptible("astrodyn analyze", lambda: _main(argv))
-
-
-def _main(argv: list[str] | None) -> int:
     ap = argparse.ArgumentParser(prog="astrodyn analyze", description="Report (Markdown, HTML, PNG) from an MCAP recording.",
                                  epilog="Exit status: 0 written; 1 the input cannot be analysed or the report not "
                                         "written (a file with nothing to analyse, no valid state of any body, and a "

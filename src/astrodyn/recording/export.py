@@ -111,7 +111,7 @@ from astrodyn.recording.outputs import staging_directory, warn_incomplete_input
 from astrodyn.recording.reader import Run, Track, load, sequence_issues, sequence_note, time_order
 from astrodyn.recording.writer import McapRecorder, RecordingError
 from astrodyn.rotation import quat_to_scalar_last
-from astrodyn.signals import deferred_interrupts, interruptible
+from astrodyn.signals import deferred_interrupts, interruptible_main
 
 __all__ = [
     "FORMATS", "FIELD_UNITS", "INDICATED_UNITS", "channel_file_stems", "column_units", "channel_units", "channel_header", "ExportError", "export", "write_csv", "write_parquet", "write_oem", "write_aem", "write_aem_v1",
@@ -1087,11 +1087,8 @@ def export(path: str | os.PathLike, fmt: str, out: str | os.PathLike) -> list[Pa
         return placed
 
 
+@interruptible_main("astrodyn export")
 def main(argv: list[str] | None = None) -> int:
-    return interruptible("astrodyn export", lambda: _main(argv))
-
-
-def _main(argv: list[str] | None) -> int:
     ap = argparse.ArgumentParser(prog="astrodyn export", description="Export an MCAP recording to other formats.",
                                  epilog="Exit status: 0 exported; 1 the input cannot be read or has nothing to export, "
                                         "or the files cannot be written; 2 a bad flag value or an --out that is not a "

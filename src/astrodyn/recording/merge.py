@@ -59,7 +59,7 @@ from astrodyn.messages import STATE_KINDS, json_field
 from astrodyn.recording.outputs import OutputTaken, warn_incomplete_input, write_atomically
 from astrodyn.recording.stream import open_stream
 from astrodyn.recording.writer import RecordingError, part_path
-from astrodyn.signals import interruptible
+from astrodyn.signals import interruptible_main
 
 __all__ = ["MergeReport", "merge", "taken_output_problem", "recorded_parts", "missing_parts", "format_parts",
            "parts_named", "series_first_file"]
@@ -342,11 +342,8 @@ def _register(stream, writer: Writer, m, schema_ids: dict) -> int:
                                    dict(channel.metadata) if channel is not None else {})
 
 
+@interruptible_main("astrodyn merge")
 def main(argv: list[str] | None = None) -> int:
-    return interruptible("astrodyn merge", lambda: _main(argv))
-
-
-def _main(argv: list[str] | None) -> int:
     import argparse
     import sys
 

@@ -85,7 +85,7 @@ from astrodyn.recording.reader import (
     recorded_metadata,
 )
 from astrodyn.recording.writer import RecordingError, being_written, part_path
-from astrodyn.signals import interruptible
+from astrodyn.signals import interruptible_main
 
 __all__ = ["recover", "write_atomically", "main", "finished_name", "find_partials", "partials_of", "nothing_to_recover",
            "stale_work_dirs", "series_part_number", "series_strangers", "stale_control_tokens"]
@@ -527,11 +527,8 @@ def _same_file(a: str, b: str) -> bool:
 MAX_CHUNK_SIZE = MAX_CHUNK_BYTES
 
 
+@interruptible_main("astrodyn recover")
 def main(argv: list[str] | None = None) -> int:
-    return interruptible("astrodyn recover", lambda: _main(argv))
-
-
-def _main(argv: list[str] | None) -> int:
     ap = argparse.ArgumentParser(prog="astrodyn recover",
                                  description="Rewrite a crashed writer's MCAP file with a proper summary and index.")
     ap.add_argument("file", type=path_argument, help="MCAP file (typically cut by a killed logger): a NAME.partial.mcap left by a killed "
