@@ -13,7 +13,7 @@ import re
 import sys
 import types
 import typing
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import msgspec
@@ -396,32 +396,37 @@ _FAST_ATTITUDE = re.compile(
 _attitude_rule = MESSAGE_TYPES["attitude"].rule
 
 
-def _fast_orbit(data: bytes) -> tuple[float, int] | None:
-    m = _FAST_ORBIT.fullmatch(data)
-    if m is None:
-        return None
-    t, seq, mu = m.groups()
-    seq = int(seq)
-    if seq > MAX_SEQ or not float(mu) > 0.0:
-        return None
-    return float(t), seq
+def _fast_check(pattern: re.Pattern, rule: Callable[[bytes], bool]) -> Callable[[bytes], tuple[float, int] | None]:
+    """The fast checker of one state kind: ``(t, seq)`` of a payload that ``pattern`` (its
+    canonical layout, groups t, seq and one more) matches whole, with ``seq <= MAX_SEQ`` and
+    ``rule`` true of the third group; None for anything else (:func:`decode` judges it)."""
+    fullmatch = pattern.fullmatch
+
+    def check(data: bytes) -> tuple[float, int] | None:
+        m = fullmatch(data)
+        if m is None:
+            return None
+        t, seq, more = m.groups()
+        seq = int(seq)
+        if seq > MAX_SEQ or not rule(more):
+            return None
+        return float(t), seq
+
+    return check
 
 
-def _fast_attitude(data: bytes) -> tuple[float, int] | None:
-    m = _FAST_ATTITUDE.fullmatch(data)
-    if m is None:
-        return None
-    t, seq, q = m.groups()
-    seq = int(seq)
+def _positive_mu(mu: bytes) -> bool:
+    return float(mu) > 0.0
+
+
+def _unit_q(q: bytes) -> bool:
     # q: four floats (every number of the grammar has a fraction or an exponent), parsed in
     # one call; |q| = 1 by AttitudeState's own rule, so both paths agree to the last bit
-    if seq > MAX_SEQ or _attitude_rule(_DECODE_JSON(q)) is not None:
-        return None
-    return float(t), seq
+    return _attitude_rule(_DECODE_JSON(q)) is None
 
 
 #: kind -> fast checker; kinds without one always take the :func:`decode` path.
-FAST_CHECKS = {"orbit": _fast_orbit, "attitude": _fast_attitude}
+FAST_CHECKS = {"orbit": _fast_check(_FAST_ORBIT, _positive_mu), "attitude": _fast_check(_FAST_ATTITUDE, _unit_q)}
 
 
 def check_state(data: bytes, kind: str) -> tuple[float, int]:
