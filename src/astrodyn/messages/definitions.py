@@ -77,6 +77,16 @@ def _enforce(problem: str | None) -> None:
         raise ValueError(problem)
 
 
+def _unequal_lengths(kind: str, per: str, **fields: list) -> str | None:
+    """The rule of a message whose list ``fields`` hold one entry per item (an appendage, a
+    gyroscope): None when they are all as long, else the error text naming them and ``per``."""
+    lengths = [len(x) for x in fields.values()]
+    if len(set(lengths)) <= 1:
+        return None
+    *first, last = fields
+    return f"{kind}: expected {', '.join(first)} and {last} for the same {per}, got {', '.join(map(str, lengths))}"
+
+
 class Stamped(msgspec.Struct, forbid_unknown_fields=True):
     """The fields every message type starts with: ``t`` (s since the scenario epoch) and
     ``seq`` (the message's number on its channel)."""
@@ -134,9 +144,8 @@ class AppendageState(Stamped, forbid_unknown_fields=True):
     @staticmethod
     def rule(eta: list[list[float]], eta_dot: list[list[float]], tip: list[list[float]]) -> str | None:
         """Rules a JSON Schema cannot state (see the note above :class:`Stamped`)."""
-        if not (len(eta) == len(eta_dot) == len(tip)):
-            return (f"appendages: expected eta, eta_dot and tip for the same number of appendages, got "
-                    f"{len(eta)}, {len(eta_dot)}, {len(tip)}")
+        if problem := _unequal_lengths("appendages", "number of appendages", eta=eta, eta_dot=eta_dot, tip=tip):
+            return problem
         for k, (eta_k, eta_dot_k) in enumerate(zip(eta, eta_dot)):
             if len(eta_k) % 2 or len(eta_dot_k) != len(eta_k):
                 return (f"appendages.eta[{k}]: expected 2 n values (n modes in each bending plane) and as "
@@ -181,10 +190,7 @@ class GimbalState(Stamped, forbid_unknown_fields=True):
     @staticmethod
     def rule(angle: list[float], angle_rate: list[float], indicated: list[float]) -> str | None:
         """A rule a JSON Schema cannot state (see the note above :class:`Stamped`)."""
-        if not (len(angle) == len(angle_rate) == len(indicated)):
-            return (f"gimbals: expected angle, angle_rate and indicated for the same gyroscopes, got "
-                    f"{len(angle)}, {len(angle_rate)}, {len(indicated)}")
-        return None
+        return _unequal_lengths("gimbals", "gyroscopes", angle=angle, angle_rate=angle_rate, indicated=indicated)
 
     def __post_init__(self) -> None:
         _enforce(self.rule(self.angle, self.angle_rate, self.indicated))
