@@ -185,6 +185,8 @@ class Reader(threading.Thread):
         super().__init__(daemon=True)
         self.url, self.topics = url, topics
         self.channels: dict[str, dict] = {}
+        self.advertised_at: dict[str, list[float]] = {}  # topic -> when each advertisement of it came (monotonic s)
+        self.time_frames: list[float] = []  # when each of the server's time messages (one a view frame) came
         self.got: dict[str, list] = {}
         self.server: dict = {}
         self.bytes = 0
@@ -221,6 +223,8 @@ class Reader(threading.Thread):
                         elif msg["op"] == "advertise":
                             new = [ch for ch in msg["channels"] if ch["topic"] in self.topics]
                             self.channels.update((ch["topic"], ch) for ch in msg["channels"])
+                            for ch in msg["channels"]:
+                                self.advertised_at.setdefault(ch["topic"], []).append(time.monotonic())
                             subs = [{"id": len(sub_topic) + i, "channelId": ch["id"]} for i, ch in enumerate(new)]
                             sub_topic.update((s["id"], ch["topic"]) for s, ch in zip(subs, new))
                             if subs:
@@ -230,6 +234,8 @@ class Reader(threading.Thread):
                     elif frame[0] == 1:
                         sub_id, ts = struct.unpack_from("<IQ", frame, 1)
                         self.got.setdefault(sub_topic[sub_id], []).append((time.monotonic(), ts, frame[13:]))
+                    elif frame[0] == 2:  # time (ws-protocol server binary opcode 2)
+                        self.time_frames.append(time.monotonic())
         except Exception as exc:  # reported by the test
             self.error = exc
         finally:
