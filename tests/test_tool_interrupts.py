@@ -385,36 +385,53 @@ def test_an_analyze_of_a_sweep_stopped_by_sigterm_keeps_the_earlier_report_whole
                                          "scatter-p.png"], sweep_table)
 
 
-_SIGNAL_AS_THE_TEMPORARY_IS_CREATED = """
+_SIGNAL_AS_AN_OUTPUT_IS_CREATED = """
 import os, signal, sys
 from astrodyn.recording import outputs
 from astrodyn.signals import interruptible
 
-real_close = os.close
-def close_after_a_signal(fd):  # the signal lands just after O_EXCL created the temporary file
+real_close, real_mkdir = os.close, os.mkdir
+def signal_self():
     os.kill(os.getpid(), getattr(signal, sys.argv[2]))
+
+def close_then_signal(fd):  # the signal lands just after O_EXCL created the temporary file
+    signal_self()
     real_close(fd)
 
+def mkdir_then_signal(path, *args, **kwargs):  # the signal lands just after the work directory is made
+    real_mkdir(path, *args, **kwargs)
+    if os.path.basename(path).startswith(".analyze-"):
+        signal_self()
+
 def run():
-    os.close = close_after_a_signal  # this process only
     try:
-        outputs.write_atomically(sys.argv[1], lambda s: s.write(b"x"), suffix=".merging", hidden=True, replace=False)
+        if sys.argv[3] == "merge":
+            os.close = close_then_signal  # this process only
+            outputs.write_atomically(sys.argv[1], lambda s: s.write(b"x"), suffix=".merging", hidden=True, replace=False)
+        else:
+            os.mkdir = mkdir_then_signal
+            with outputs.staging_directory(sys.argv[1], "analyze") as work:
+                (work / "report.md").write_text("x")
     finally:
-        os.close = real_close
+        os.close, os.mkdir = real_close, real_mkdir
     return 0
 
-sys.exit(interruptible("merge", run))
+sys.exit(interruptible(sys.argv[3], run))
 """
 
 
 @pytest.mark.parametrize("sig", ["SIGHUP", "SIGTERM"])
-def test_a_signal_as_the_temporary_file_is_created_leaves_no_file(tmp_path, sig):
-    """A signal between the temporary file's creation and the moment its name is kept: the
-    file stayed behind although the tool said no output was left half-written (seen under
-    three xdist workers as a merge's ``.m.*.mcap.merging``).  The signal is sent from
-    inside the creation, every time, in a process of its own."""
-    out = tmp_path / "m.mcap"
-    proc = subprocess.run([sys.executable, "-c", _SIGNAL_AS_THE_TEMPORARY_IS_CREATED, str(out), sig],
+@pytest.mark.parametrize(("tool", "out"), [("merge", "m.mcap"), ("analyze", "report")])
+def test_a_signal_as_an_output_is_created_leaves_nothing(tmp_path, tool, out, sig):
+    """A signal between the creation of an output's temporary file (merge: O_EXCL) or work
+    directory (analyze: inside ``tempfile.mkdtemp``) and the moment its name is kept: it
+    stayed behind although the tool said no output was left half-written (seen under three
+    xdist workers as a merge's ``.m.*.mcap.merging``, and once in a fresh-clone run as an
+    ``.analyze-PID-*`` in test_an_analyze_stopped_by_sigterm_keeps_the_earlier_report_whole,
+    whose SIGTERM is sent when the work directory appears).  The signal is sent from inside
+    the creation, every time, in a process of its own; the folder is left empty (analyze:
+    neither the work directory nor the report directory made for it)."""
+    proc = subprocess.run([sys.executable, "-c", _SIGNAL_AS_AN_OUTPUT_IS_CREATED, str(tmp_path / out), sig, tool],
                           capture_output=True, text=True, timeout=60)
     assert proc.returncode == 128 + getattr(signal, sig), proc.stderr[-2000:]
     assert list(tmp_path.iterdir()) == []

@@ -41,7 +41,8 @@ BODIES = 24  # 48 state keys: more than one frame's budget
 def test_every_raw_channel_is_served_and_each_state_sent_once_under_serve(tmp_path):
     """48 state keys (24 bodies with orbit and attitude) at 10 states a second each, 480 a
     second in all, under the cap: every key's channel appears within a few frames of the
-    first (round robin over ceil(48 / 33) = 2 frames), and no (channel, seq) comes twice."""
+    first of its propagator (round robin over ceil(48 / 33) = 2 frames), and no (channel,
+    seq) comes twice."""
     name = "rr"
     cfg = tmp_path / f"{name}.toml"
     cfg.write_text(scenario_head(name, "100000 s", "10 Hz", central_body="earth") + "\n" + "\n".join(
@@ -70,12 +71,15 @@ def test_every_raw_channel_is_served_and_each_state_sent_once_under_serve(tmp_pa
         stop_process(serve)
     missing = keys - set(reader.channels)
     assert not missing, f"{len(missing)} of {len(keys)} raw channels never appeared, e.g. {sorted(missing)[:3]}"
-    # the view's frames between the first channel's advertisement and the last one's, counted
-    # by the time message the server sends with each frame (not wall time: on a loaded machine
-    # the frames come late, and wall time x 30 counted 14-17 "frames" for the same 2)
-    came = [reader.advertised_at[k][0] for k in keys]
-    frames = sum(1 for t in reader.time_frames if min(came) < t < max(came))
-    assert frames <= -(-len(keys) // PER_FRAME) + 10, f"the last channel came {frames} frames after the first"
+    # the view's frames between the first and the last advertisement of one propagator's
+    # channels (its bodies' states arrive together, in one envelope a step), counted by the
+    # time message the server sends with each frame: not wall time (on a loaded machine late
+    # frames read as 14-17 for the same 2), and not across the two propagators, whose first
+    # states can come half a second apart on a loaded machine (16 frames, all round robin)
+    for kind in ("orbit", "attitude"):
+        came = [reader.advertised_at[k][0] for k in keys if k.endswith("/" + kind)]
+        frames = sum(1 for t in reader.time_frames if min(came) < t < max(came))
+        assert frames <= -(-len(keys) // PER_FRAME) + 10, f"the last {kind} channel came {frames} frames after the first"
     sent = collections.Counter((topic, messages.decode(payload, topic)["seq"])
                                for topic, got in reader.got.items() for _, _, payload in got)
     assert sum(sent.values()) > 2 * len(keys)

@@ -224,7 +224,10 @@ def staging_directory(out: str | os.PathLike, prefix: str,
         try:
             out.mkdir(parents=True, exist_ok=True)
             _remove_stale(out, prefix)
-            path = Path(tempfile.mkdtemp(prefix=f".{prefix}-{os.getpid()}-", dir=out))
+            # the directory and its name together: a signal while mkdtemp makes it (after its
+            # mkdir, before ``path`` is set) left it behind, with nothing to remove it
+            with deferred_interrupts():
+                path = Path(tempfile.mkdtemp(prefix=f".{prefix}-{os.getpid()}-", dir=out))
         except OSError as exc:
             if cannot is None:
                 raise
