@@ -246,3 +246,29 @@ def test_envelopes_of_several_layouts_on_one_key_take_the_compiled_path(tmp_path
     fast, ref = _read(fast_rec.paths), _read(ref_rec.paths)
     assert fast == ref and len(fast) == 20 * sum(len(names) for names in layouts)
     assert fast_logger.states == ref_logger.states == len(fast)
+
+
+def test_a_new_layout_in_every_envelope_keeps_the_layout_cache_bounded(tmp_path):
+    """Hostile: a publisher that sends envelopes with new keys every time, on one batch key
+    and on many.  The logger's remembered layouts stay within their bounds (4 per key, 64 in
+    all) and every entry is still recorded as on its own key."""
+    from astrodyn.service import logger as logger_module
+
+    rng = np.random.default_rng(9)
+    fast_logger, fast_rec = _logger(str(tmp_path / "fast.mcap"))
+    ref_logger, ref_rec = _logger(str(tmp_path / "ref.mcap"))
+    for k in range(300):
+        batch_key = m.batch_key("c", "p" if k < 150 else f"p{k}")  # one key, then a new key each time
+        okeys = [m.orbit_key("c", f"b{k}-{i}") for i in range(3)]
+        r, v = rng.normal(size=(3, 3)) * 7e6, rng.normal(size=(3, 3)) * 7e3
+        items = list(zip(okeys, m.encode_orbit_batch(k / 10, 0, "kepler", r, v, 3.986004418e14)))
+        fast_logger._record_batch(batch_key, m.encode_batch(items), EPOCH_NS + k)
+        for key, payload in items:
+            ref_logger._record(key, payload, EPOCH_NS + k)
+        cached = fast_logger._layouts
+        assert all(len(v) <= logger_module._LAYOUTS_PER_KEY for v in cached.values())
+        assert sum(map(len, cached.values())) <= logger_module._MAX_LAYOUTS
+    for logger in (fast_logger, ref_logger):
+        logger.recorder.close()
+    fast, ref = _read(fast_rec.paths), _read(ref_rec.paths)
+    assert fast == ref and len(fast) == 900

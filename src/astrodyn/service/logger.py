@@ -79,7 +79,7 @@ _SCENE_KINDS = frozenset(messages.STATE_KINDS + messages.CONTROL_KINDS + message
 _LATEST_SUFFIXES = tuple(f"/{k}" for k in ("orbit", "attitude", *messages.CONTROL_KINDS, *messages.SENSOR_KINDS))
 _MAX_EXAMPLES = 20
 _MAX_KEY_CACHE = 100_000
-_MAX_LAYOUTS = 64
+_MAX_LAYOUTS = 64  #: envelope layouts remembered in all (memory: each holds its envelope's keys)
 #: Envelope layouts remembered per batch key, the most recent first: one publisher may put
 #: several kinds of envelope on one key in turn (the plant's states and sensor samples, then
 #: its actuator states; a user's own publisher), and with one remembered layout each envelope
@@ -380,10 +380,14 @@ class Logger:
                           if self.scene_keys is None or key in self.scene_keys else ingest.KIND_OTHER
                           for key in keys], dtype=np.int8)
         layout = BatchLayout(keys, kinds)
+        # at most _LAYOUTS_PER_KEY per key and _MAX_LAYOUTS in all (a publisher that sends a
+        # new layout each time only replaces its own oldest one)
+        cached = sum(map(len, self._layouts.values()))
         if known is not None:
             known.insert(0, layout)
-            del known[_LAYOUTS_PER_KEY:]
-        elif len(self._layouts) < _MAX_LAYOUTS:
+            if len(known) > _LAYOUTS_PER_KEY or cached >= _MAX_LAYOUTS:
+                known.pop()
+        elif cached < _MAX_LAYOUTS:
             self._layouts[batch_key] = [layout]
         return layout
 
